@@ -1,0 +1,25 @@
+"""The exceptions difflab raises: every bad input becomes one of these, with a message naming it."""
+
+
+class DifflabError(Exception):
+    """Base class of every error difflab raises on purpose."""
+
+
+class SceneError(DifflabError, ValueError):
+    """A scene file or scene object is invalid; the message names the field, e.g. `objects[2].radius`."""
+
+
+class MeshError(DifflabError, ValueError):
+    """A mesh is missing, unreadable or malformed; the message names the file."""
+
+
+class TextureError(DifflabError, ValueError):
+    """A texture image is missing, unreadable or malformed; the message names the file."""
+
+
+class RenderError(DifflabError, ValueError):
+    """A render request cannot be carried out (bad size, unknown option, device not available)."""
+
+
+class FitError(DifflabError, RuntimeError):
+    """A fit was given bad input, or failed and was asked to raise (`throw=True`)."""
