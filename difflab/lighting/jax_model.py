@@ -1,0 +1,178 @@
+"""The illumination model, JAX half: the same functions as `warp_model.py`, under the same names.
+
+    I = ka * Ia + sum_p  s_p * att_p * spot_p * Ip * (kd * max(N.L_p, 0) + ks * S_p)
+
+(see `warp_model.py` for the terms). Arrays broadcast NumPy-style; vectors have a trailing axis of
+3. Every function has finite values and finite gradients everywhere in the parameter domain: powers
+x^n are taken as exp(n log x) only where x > 0 (0^n is 1 for n = 0, else 0, as C's pow), zero-length
+vectors normalise to zero, and each `where` keeps NaN out of its untaken branch.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+
+from .warp_model import (
+    BECKMANN_MIN_COS,
+    BLINN,
+    DIRECTIONAL,
+    FOG_EXP,
+    FOG_EXP2,
+    FOG_LINEAR,
+    LIGHT_KINDS,
+    PHONG,
+    SPOT,
+)
+
+
+class LightsJ(NamedTuple):
+    """P lights as arrays: kind (P,), position / direction / intensity / attenuation (P, 3),
+    cos_cutoff / exponent (P,). Field names are those of `warp_model.LightW`."""
+
+    kind: jnp.ndarray
+    position: jnp.ndarray
+    direction: jnp.ndarray
+    intensity: jnp.ndarray
+    attenuation: jnp.ndarray
+    cos_cutoff: jnp.ndarray
+    exponent: jnp.ndarray
+
+
+class MaterialJ(NamedTuple):
+    """Local-model coefficients, each broadcastable to the points shaded: ka, kd, ks (..., 3);
+    n, m, f0 (...). Field names are those of `warp_model.MaterialW`."""
+
+    ka: jnp.ndarray
+    kd: jnp.ndarray
+    ks: jnp.ndarray
+    n: jnp.ndarray
+    m: jnp.ndarray
+    f0: jnp.ndarray
+
+
+def dot(a, b):
+    return jnp.sum(a * b, axis=-1)
+
+
+def normalize(x):
+    """x / |x|, and 0 for a zero vector (as wp.normalize), with finite gradients at 0."""
+    sq = dot(x, x)[..., None]
+    positive = sq > 0.0
+    return x * jnp.where(positive, 1.0 / jnp.sqrt(jnp.where(positive, sq, 1.0)), 0.0)
+
+
+def safe_pow(x, n):
+    """x^n for x >= 0 with C's pow at 0 (0^0 = 1, 0^n = 0) and finite gradients in x and n."""
+    positive = x > 0.0
+    powered = jnp.exp(n * jnp.log(jnp.where(positive, x, 1.0)))
+    return jnp.where(positive, powered, jnp.where(n == 0.0, 1.0, 0.0))
+
+
+def light_vector(light: LightsJ, p):
+    """Unit direction from p to the light and the distance to it (inf for directional lights)."""
+    directional = (light.kind == DIRECTIONAL)[..., None]
+    delta = light.position - p
+    l = jnp.where(directional, -light.direction, normalize(delta))
+    d = jnp.where(directional[..., 0], jnp.inf, jnp.sqrt(dot(delta, delta)))
+    return l, d
+
+
+def light_falloff(light: LightsJ, l, d):
+    """att * spot: 1/(kc + kl d + kq d^2) times the spotlight cone factor (both 1 where absent)."""
+    directional = light.kind == DIRECTIONAL
+    d = jnp.where(directional, 0.0, d)  # keep inf out of the untaken branch
+    kc, kl, kq = light.attenuation[..., 0], light.attenuation[..., 1], light.attenuation[..., 2]
+    att = 1.0 / (kc + kl * d + kq * d * d)
+    cos_axis = -dot(l, light.direction)
+    spot = jnp.where(cos_axis < light.cos_cutoff, 0.0, safe_pow(jnp.maximum(cos_axis, 0.0), light.exponent))
+    att = jnp.where(light.kind == SPOT, att * spot, att)
+    return jnp.where(directional, 1.0, att)
+
+
+def specular_factor(model: int, normal, v, l, n, m, f0):
+    """S: the specular lobe of the chosen model (a Python int); 0 where N.L <= 0."""
+    n_dot_l = dot(normal, l)
+    if model == PHONG:
+        r = 2.0 * n_dot_l[..., None] * normal - l
+        lobe = safe_pow(jnp.maximum(dot(r, v), 0.0), n)
+    else:
+        h = normalize(l + v)
+        n_dot_h = jnp.maximum(dot(normal, h), 0.0)
+        if model == BLINN:
+            lobe = safe_pow(n_dot_h, n)
+        else:
+            n_dot_v = dot(normal, v)
+            valid = (n_dot_v > 0.0) & (n_dot_h > BECKMANN_MIN_COS)
+            cos2 = jnp.where(valid, n_dot_h * n_dot_h, 1.0)
+            axis = jnp.cross(normal, h)
+            sin2 = dot(axis, axis)  # not 1 - cos2: that cancels near the peak
+            beckmann = jnp.exp(-sin2 / (cos2 * m * m)) / (math.pi * m * m * cos2 * cos2)
+            fresnel = f0 + (1.0 - f0) * (1.0 - jnp.maximum(dot(v, h), 0.0)) ** 5
+            lobe = jnp.where(valid, fresnel * beckmann / (4.0 * jnp.where(valid, n_dot_v, 1.0)), 0.0)
+    return jnp.where(n_dot_l > 0.0, lobe, 0.0)
+
+
+def light_term(light: LightsJ, mat: MaterialJ, model: int, normal, v, l, d):
+    """att * spot * Ip * (kd max(N.L, 0) + ks S), per channel, for an unshadowed light."""
+    diffuse = jnp.maximum(dot(normal, l), 0.0)
+    spec = specular_factor(model, normal, v, l, mat.n, mat.m, mat.f0)
+    return light_falloff(light, l, d)[..., None] * light.intensity * (
+        mat.kd * diffuse[..., None] + mat.ks * spec[..., None]
+    )
+
+
+def ambient_term(mat: MaterialJ, ambient):
+    """ka * Ia, per channel."""
+    return mat.ka * ambient
+
+
+def fog_factor(mode: int, z, start, end, density):
+    """OpenGL fog blend f in [0, 1] at eye distance z (see `warp_model.fog_factor`)."""
+    if mode == FOG_LINEAR:
+        f = (end - z) / (end - start)
+    elif mode == FOG_EXP:
+        f = jnp.exp(-density * z)
+    elif mode == FOG_EXP2:
+        f = jnp.exp(-((density * z) ** 2))
+    else:
+        f = jnp.ones_like(z)
+    return jnp.clip(f, 0.0, 1.0)
+
+
+def shade(mat: MaterialJ, model: int, normal, v, lights: LightsJ, l, d, visibility, ambient):
+    """The whole local model at points: ka Ia + sum_p s_p light_term_p.
+
+    Arguments:
+        mat: coefficients broadcastable to the points (..., 3) / (...).
+        normal, v: (..., 3) unit shading normal and direction to the viewer.
+        lights: P lights; l (..., P, 3), d (..., P), visibility (..., P): per-light direction,
+            distance and shadow-ray visibility at each point.
+        ambient: (3,) Ia.
+    Returns:
+        (..., 3) linear RGB radiance.
+    """
+    per_light = MaterialJ(*(jnp.expand_dims(jnp.asarray(field), -2 if i < 3 else -1) for i, field in enumerate(mat)))
+    terms = light_term(lights, per_light, model, normal[..., None, :], v[..., None, :], l, d)
+    return ambient_term(mat, ambient) + jnp.sum(visibility[..., None] * terms, axis=-2)
+
+
+def lights_to_jax(lights, dtype=jnp.float32) -> LightsJ:
+    """Scene lights as a `LightsJ` of arrays (P may be 0)."""
+    def column(values, shape):
+        return jnp.asarray(np.asarray(values, dtype=np.float64).reshape(shape), dtype=dtype)
+
+    count = len(lights)
+    return LightsJ(
+        kind=jnp.asarray([LIGHT_KINDS[light.type] for light in lights], dtype=jnp.int32).reshape(count),
+        position=column([light.position or (0.0, 0.0, 0.0) for light in lights], (count, 3)),
+        direction=column([light.direction or (0.0, -1.0, 0.0) for light in lights], (count, 3)),
+        intensity=column([light.intensity for light in lights], (count, 3)),
+        attenuation=column([light.attenuation for light in lights], (count, 3)),
+        cos_cutoff=column([math.cos(math.radians(light.cutoff_deg)) if light.type == "spot" else -2.0
+                           for light in lights], (count,)),
+        exponent=column([light.exponent for light in lights], (count,)),
+    )
