@@ -81,7 +81,8 @@ def box_counts(points_or_image, sizes=None) -> tuple[np.ndarray, np.ndarray]:
             image, 1-D (a row of cells, e.g. `cantor_mask`) or 2-D, whose True cells are the set.
         sizes: box sides, decreasing. Polylines: world units, default 2^-k from a quarter of the
             extent down to twice the median segment length. Images: whole pixels, default
-            1, 2, 4, ... up to a quarter of the smaller side, listed largest first.
+            2^k from a quarter of the smaller side down to 1. Sizes that match the set's own
+            scaling (3^k for the Cantor set) remove the log-periodic wobble of the estimate.
 
     Returns:
         (sizes, counts) as float64 and int64 arrays.

@@ -115,7 +115,8 @@ class TriMesh:
         """
         m = np.asarray(matrix, dtype=np.float64)
         if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-            raise MeshError(f"{self.name}: transform must be a finite 4x4 matrix, got shape {m.shape}")
+            raise MeshError(
+                f"{self.name}: transform must be a finite 4x4 matrix, got shape {m.shape}")
         linear = m[:3, :3]
         det = float(np.linalg.det(linear))
         if not np.isfinite(det) or abs(det) < 1e-300:

@@ -52,7 +52,10 @@ def uv_sphere(radius=1.0, center=(0.0, 0.0, 0.0), n_lat=16, n_lon=32) -> TriMesh
 
     def direction(lat, lon):
         s = np.sin(lat)
-        return np.stack([s * np.cos(lon), -np.cos(lat), -s * np.sin(lon)], axis=-1)
+        cos_lon, sin_lon = np.cos(lon), np.sin(lon)
+        seam = lon == 2.0 * np.pi  # make the duplicated seam bitwise equal to lon = 0
+        cos_lon, sin_lon = np.where(seam, 1.0, cos_lon), np.where(seam, 0.0, sin_lon)
+        return np.stack([s * cos_lon, -np.cos(lat), -s * sin_lon], axis=-1)
 
     # Rings 1 .. n_lat-1 with n_lon + 1 columns (seam duplicated).
     i = np.arange(1, n_lat)

@@ -115,7 +115,8 @@ def teapot(resolution: int = 8, weld_vertices: bool = True) -> TriMesh:
         count_ok = analytic_ok.astype(np.float64)
 
     # Drop triangles with a repeated vertex or (numerically) zero area.
-    keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    keep = ((faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
+            & (faces[:, 0] != faces[:, 2]))
     faces = faces[keep]
     faces = faces[~degenerate_faces(vertices, faces)]
     # Drop vertices no triangle uses any more (collapsed duplicates when not welding).

@@ -1,10 +1,11 @@
 """Newell's Utah teapot: 306 control points and 32 bicubic Bezier patches (the classic data).
 
-The table is the well-known one (Newell 1975, as distributed with Crow's "The origins of the teapot"
-and many renderers): z up, the spout toward +x, the handle toward -x, the bottom at z = 0 and the lid
-knob at z = 3.15. The control points include duplicates (e.g. the bottom rim repeats body points) and
-the lid and bottom patches collapse a whole row of control points to one point (the lid knob centre
-and the bottom centre). The classic listing is 1-based; `TEAPOT_PATCHES_1BASED` keeps it verbatim.
+The table is the well-known one (Newell 1975, as distributed with Crow's "The origins of the
+teapot" and many renderers): z up, the spout toward +x, the handle toward -x, the bottom at z = 0
+and the lid knob at z = 3.15. The control points include duplicates (e.g. the bottom rim repeats
+body points) and the lid and bottom patches collapse a whole row of control points to one point
+(the lid knob centre and the bottom centre). The classic listing is 1-based;
+`TEAPOT_PATCHES_1BASED` keeps it verbatim.
 """
 
 _POINTS = """

@@ -33,7 +33,10 @@ def fail(path: str, message: str):
 
 def show(value) -> str:
     """A short repr of a bad value for messages."""
-    text = repr(value)
+    try:
+        text = repr(value)
+    except RecursionError:
+        return "<a deeply nested value>"
     return text if len(text) <= 60 else text[:57] + "..."
 
 

@@ -120,7 +120,10 @@ class Light(Record):
             fail(p("attenuation"), "must not be all zero (kc + kl*d + kq*d^2 would be 0)")
         cutoff = number(v["cutoff_deg"], p("cutoff_deg"))
         if kind == "spot":
-            cutoff = number(cutoff, p("cutoff_deg"), gt=0, le=90)
+            if cutoff == 180.0:
+                fail(p("cutoff_deg"), "a spot light needs 0 < cutoff_deg <= 90 (180, the default, means "
+                     f"no cone), got {v['cutoff_deg']!r}")
+            cutoff = number(v["cutoff_deg"], p("cutoff_deg"), gt=0, le=90)
         elif cutoff != 180.0:
             fail(p("cutoff_deg"), f"only spot lights have a cone; must be 180 (no cone) for a {kind} "
                  f"light, got {v['cutoff_deg']!r}")

@@ -1,0 +1,29 @@
+"""difflab.geometry: numpy triangle meshes (no Warp, no JAX).
+
+- `TriMesh` (validated, immutable), `concatenate`, `weld`
+- primitives: `uv_sphere`, `quad`, `box`, `cylinder`; the Utah `teapot`
+  (`teapot_control_points`, `teapot_patches`)
+- normals: `face_normals`, `face_areas`, `vertex_normals` (area-weighted by default; vertices
+  without a non-degenerate face get a zero normal), `degenerate_faces`
+- transforms: `transform_matrix` (M = matrix @ T @ Rz @ Ry @ Rx @ S), `rotation_matrix`,
+  `translation_matrix`, `scale_matrix`, `apply_to_points`, `apply_to_normals`
+- files: `load_mesh` (OBJ, PLY via trimesh)
+"""
+
+from .loading import load_mesh
+from .mesh import TriMesh, concatenate, weld
+from .normals import degenerate_faces, face_areas, face_normals, vertex_normals
+from .primitives import box, cylinder, quad, uv_sphere
+from .teapot import teapot, teapot_control_points, teapot_patches
+from .transforms import (apply_to_normals, apply_to_points, rotation_matrix, scale_matrix,
+                         transform_matrix, translation_matrix)
+
+__all__ = [
+    "TriMesh", "concatenate", "weld",
+    "uv_sphere", "quad", "box", "cylinder",
+    "teapot", "teapot_control_points", "teapot_patches",
+    "face_normals", "face_areas", "vertex_normals", "degenerate_faces",
+    "transform_matrix", "rotation_matrix", "translation_matrix", "scale_matrix",
+    "apply_to_points", "apply_to_normals",
+    "load_mesh",
+]

@@ -1,0 +1,152 @@
+"""`load_mesh`: OBJ / PLY (and whatever else trimesh reads) into a validated `TriMesh`.
+
+trimesh is lenient: it may drop faces that index past the vertex list or read a garbage file as an
+empty scene. For OBJ files we therefore scan the raw text first (vertex values, every `f` index,
+at least one face) so each problem is reported, with the path, instead of silently repaired.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+
+import numpy as np
+
+from difflab.errors import MeshError
+
+from .mesh import TriMesh, concatenate
+
+
+def _check_obj_text(path: str) -> None:
+    """Raise MeshError for the problems trimesh would hide in an OBJ file."""
+    try:
+        with open(path, "r", encoding="utf-8", errors="replace") as handle:
+            lines = handle.readlines()
+    except OSError as exc:
+        raise MeshError(f"{path}: cannot read mesh file: {exc}") from None
+    n_vertices = 0
+    n_faces = 0
+    indices: list[tuple[int, int, int]] = []  # (line, index as written, absolute 1-based index)
+    for number, raw in enumerate(lines, start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        parts = line.split()
+        key = parts[0]
+        if key == "v":
+            try:
+                values = [float(x) for x in parts[1:4]]
+            except ValueError:
+                raise MeshError(f"{path}:{number}: cannot parse vertex {line!r}") from None
+            if len(values) < 3:
+                raise MeshError(f"{path}:{number}: vertex needs 3 coordinates: {line!r}")
+            if not all(math.isfinite(x) for x in values):
+                raise MeshError(f"{path}:{number}: vertex {n_vertices + 1} is not finite: {line!r}")
+            n_vertices += 1
+        elif key == "f":
+            corners = parts[1:]
+            if len(corners) < 3:
+                raise MeshError(f"{path}:{number}: face needs at least 3 vertices: {line!r}")
+            for corner in corners:
+                token = corner.split("/", 1)[0]
+                try:
+                    index = int(token)
+                except ValueError:
+                    raise MeshError(
+                        f"{path}:{number}: cannot parse face index {corner!r}") from None
+                if index == 0:
+                    raise MeshError(f"{path}:{number}: face index 0 is invalid (OBJ is 1-based)")
+                indices.append((number, index, index if index > 0 else n_vertices + index + 1))
+            n_faces += 1
+    for number, written, index in indices:
+        if index < 1 or index > n_vertices:
+            raise MeshError(f"{path}:{number}: face index {written} out of range "
+                            f"(file has {n_vertices} vertices)")
+    if n_faces == 0:
+        what = "no vertices and no faces (not an OBJ mesh?)" if n_vertices == 0 else "no faces"
+        raise MeshError(f"{path}: mesh has {what}")
+
+
+def _to_trimesh_list(loaded, path: str) -> list:
+    import trimesh
+
+    if isinstance(loaded, trimesh.Scene):
+        meshes = []
+        for node in loaded.graph.nodes_geometry:
+            transform, geometry_name = loaded.graph[node]
+            geometry = loaded.geometry[geometry_name]
+            meshes.append((geometry, np.asarray(transform, dtype=np.float64)))
+        return meshes
+    return [(loaded, None)]
+
+
+def _convert(geometry, transform, path: str) -> TriMesh:
+    import trimesh
+
+    if not isinstance(geometry, trimesh.Trimesh):
+        raise MeshError(f"{path}: contains a {type(geometry).__name__}, not a triangle mesh "
+                        "(no faces)")
+    vertices = np.asarray(geometry.vertices, dtype=np.float64)
+    faces = np.asarray(geometry.faces)
+    normals = None
+    cache = getattr(geometry, "_cache", None)
+    try:
+        has_file_normals = cache is not None and "vertex_normals" in cache
+    except TypeError:
+        has_file_normals = False
+    if has_file_normals:
+        normals = np.asarray(geometry.vertex_normals, dtype=np.float64)
+        if normals.shape != vertices.shape or not np.all(np.isfinite(normals)):
+            normals = None
+    uvs = None
+    visual = getattr(geometry, "visual", None)
+    uv = getattr(visual, "uv", None) if getattr(visual, "kind", None) == "texture" else None
+    if uv is not None:
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.shape == (len(vertices), 2) and np.all(np.isfinite(uv)):
+            uvs = uv
+    mesh = TriMesh(vertices, faces, normals, uvs, name=path)
+    if transform is not None and not np.allclose(transform, np.eye(4)):
+        mesh = mesh.transformed(transform)
+    return mesh
+
+
+def load_mesh(path) -> TriMesh:
+    """Read a triangle mesh file (OBJ, PLY, or another format trimesh reads) into a `TriMesh`.
+
+    trimesh loads it with `process=False` (and `maintain_order=True`), so vertices keep their file
+    order (an OBJ vertex used with several uvs is split, as any renderer must). uvs are kept when
+    the file has them; normals when the file has them (OBJ `vn`, PLY nx/ny/nz), else None.
+    Polygons are triangulated by trimesh. A scene with several geometries is concatenated with its
+    node transforms applied. Every failure raises `MeshError` naming the path: missing file,
+    unreadable or unparsable file, non-finite vertex, face index out of range, no faces.
+    """
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise MeshError(f"{path}: mesh file not found")
+    if not os.path.isfile(path):
+        raise MeshError(f"{path}: not a file")
+    if path.lower().endswith(".obj"):
+        _check_obj_text(path)
+    try:
+        import trimesh
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            loaded = trimesh.load(path, process=False, maintain_order=True)
+    except MeshError:
+        raise
+    except Exception as exc:  # trimesh raises many kinds on bad input
+        raise MeshError(f"{path}: cannot read mesh: {type(exc).__name__}: {exc}") from None
+    parts = _to_trimesh_list(loaded, path)
+    if not parts:
+        raise MeshError(f"{path}: no mesh geometry found (empty or unparsable file)")
+    try:
+        meshes = [_convert(geometry, transform, path) for geometry, transform in parts]
+    except MeshError as exc:
+        message = str(exc)
+        raise MeshError(message if path in message else f"{path}: {message}") from None
+    if len(meshes) == 1:
+        return meshes[0]
+    return concatenate(meshes, name=path)

@@ -1,0 +1,109 @@
+"""Camera matrices (OpenGL conventions) and the camera as kernels see it.
+
+World space is right-handed, y up; camera space looks down -z. `view_matrix` maps world to camera
+space, `projection_matrix` camera to clip space (OpenGL's glFrustum / glOrtho forms, depth in
+[-1, 1] after division), and the viewport maps NDC to raster coordinates with row 0 at the top:
+x_raster = (x_ndc + 1) W / 2, y_raster = (1 - y_ndc) H / 2. Pixel (i, j) has its centre at
+(j + 0.5, i + 0.5).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import warp as wp
+
+
+@wp.struct
+class CameraW:
+    """What kernels need of the camera. `width`, `height` are of the sample grid (pixels x sqrt(spp))."""
+
+    eye: wp.vec3
+    forward: wp.vec3  # unit view direction (camera -z)
+    view_proj: wp.mat44  # world -> clip
+    inv_view_proj: wp.mat44  # clip -> world
+    perspective: int  # 1 perspective, 0 orthographic
+    width: int
+    height: int
+
+
+def camera_frame(camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(right, up, forward) unit vectors of the camera in world space."""
+    eye, target = np.asarray(camera.eye, float), np.asarray(camera.target, float)
+    forward = target - eye
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(camera.up, float))
+    right /= np.linalg.norm(right)
+    return right, np.cross(right, forward), forward
+
+
+def view_matrix(camera) -> np.ndarray:
+    """World -> camera space (4x4, float64): gluLookAt."""
+    right, up, forward = camera_frame(camera)
+    eye = np.asarray(camera.eye, float)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = right, up, -forward
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m
+
+
+def projection_matrix(camera, width: int | None = None, height: int | None = None) -> np.ndarray:
+    """Camera -> clip space (4x4, float64): gluPerspective with vertical `fov_y`, or glOrtho with a
+    view volume `ortho_height` tall; aspect = width / height."""
+    width = camera.width if width is None else width
+    height = camera.height if height is None else height
+    aspect, near, far = width / height, camera.near, camera.far
+    m = np.zeros((4, 4))
+    if camera.projection == "perspective":
+        f = 1.0 / math.tan(math.radians(camera.fov_y) / 2.0)
+        m[0, 0], m[1, 1] = f / aspect, f
+        m[2, 2], m[2, 3] = (far + near) / (near - far), 2.0 * far * near / (near - far)
+        m[3, 2] = -1.0
+    else:
+        half_h = camera.ortho_height / 2.0
+        m[0, 0], m[1, 1] = 1.0 / (half_h * aspect), 1.0 / half_h
+        m[2, 2], m[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
+        m[3, 3] = 1.0
+    return m
+
+
+def pixel_size_at(camera, distance: float, height: int) -> float:
+    """World-space height of one raster row at `distance` in front of the camera."""
+    if camera.projection == "perspective":
+        return 2.0 * distance * math.tan(math.radians(camera.fov_y) / 2.0) / height
+    return camera.ortho_height / height
+
+
+def camera_struct(camera, width: int, height: int) -> CameraW:
+    """The `CameraW` for a sample grid of width x height."""
+    _, _, forward = camera_frame(camera)
+    view_proj = projection_matrix(camera, width, height) @ view_matrix(camera)
+    out = CameraW()
+    out.eye = wp.vec3(*camera.eye)
+    out.forward = wp.vec3(*forward)
+    out.view_proj = wp.mat44(*view_proj.astype(np.float32).ravel())
+    out.inv_view_proj = wp.mat44(*np.linalg.inv(view_proj).astype(np.float32).ravel())
+    out.perspective = 1 if camera.projection == "perspective" else 0
+    out.width, out.height = int(width), int(height)
+    return out
+
+
+@wp.func
+def view_direction(cam: CameraW, p: wp.vec3):
+    """Unit direction from p to the viewer: to the eye (perspective), or -forward (orthographic)."""
+    if cam.perspective == 1:
+        return wp.normalize(cam.eye - p)
+    return -cam.forward
+
+
+@wp.func
+def primary_ray(cam: CameraW, x: float, y: float):
+    """Origin and unit direction of the ray through raster point (x, y) of the sample grid."""
+    ndc_x = 2.0 * x / float(cam.width) - 1.0
+    ndc_y = 1.0 - 2.0 * y / float(cam.height)
+    near = cam.inv_view_proj * wp.vec4(ndc_x, ndc_y, -1.0, 1.0)
+    far = cam.inv_view_proj * wp.vec4(ndc_x, ndc_y, 1.0, 1.0)
+    p_near = wp.vec3(near[0], near[1], near[2]) / near[3]
+    p_far = wp.vec3(far[0], far[1], far[2]) / far[3]
+    return p_near, wp.normalize(p_far - p_near)

@@ -1,0 +1,222 @@
+"""Scene -> device arrays, once: the triangle soup the rasterizer draws, and the ray-traceable
+geometry (analytic spheres and planes, plus a BVH over the mesh triangles) for shadow and other rays.
+
+The rasterizer tessellates analytic spheres finely enough that the silhouette is within half a
+sample of the true one (with the analytic normals at the vertices), and draws a plane as a grid of
+quads reaching the far plane in every direction, clipped to the view by the pipeline. Rays always
+see the exact spheres and planes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .. import geometry
+from ..errors import MeshError, RenderError
+from ..lighting.warp_model import lights_to_warp, materials_to_warp
+from ..scene import Mesh, Plane, Sphere
+from .camera import camera_frame, pixel_size_at
+from .launch import resolve_device
+from .trace import SceneGeomW
+
+RAY_EPSILON_SCALE = 1e-4  # ray offset = this x the scene's extent (bounding-box diagonal, at least 1)
+MAX_SPHERE_SEGMENTS = 1024
+PLANE_GRID = 16  # quads per side of a rasterized plane
+
+
+@dataclass
+class CompiledScene:
+    """A scene on a device. Raster triangles: world-space `vertices`, per-vertex `normals` (unit) and
+    `uvs`, `faces`, and per face its material id, object id and geometric (winding) normal. The first
+    `n_mesh_faces` faces are the mesh objects' and are also in the BVH; the rest tessellate spheres
+    and planes. Numpy copies are kept beside the device arrays for the G-buffer's users."""
+
+    scene: object
+    device: str
+    vertices: np.ndarray
+    normals: np.ndarray
+    uvs: np.ndarray
+    faces: np.ndarray
+    face_material: np.ndarray
+    face_object: np.ndarray
+    face_normal: np.ndarray
+    n_mesh_faces: int
+    epsilon: float
+    arrays: dict  # name -> wp.array on the device
+    geom: SceneGeomW
+    lights: wp.array
+    materials: wp.array
+    bvh: wp.Mesh | None
+
+
+def object_mesh(obj, base_dir=None) -> geometry.TriMesh:
+    """The world-space triangle mesh of a scene `Mesh` object (smooth or faceted normals)."""
+    if obj.file is not None:
+        mesh = geometry.load_mesh(obj.file)
+    elif obj.builtin == "teapot":
+        mesh = geometry.teapot(obj.resolution)
+    elif obj.builtin == "sphere":
+        mesh = geometry.uv_sphere(1.0, n_lat=max(2, obj.resolution), n_lon=max(3, 2 * obj.resolution))
+    elif obj.builtin == "box":
+        mesh = geometry.box()
+    elif obj.builtin == "cylinder":
+        mesh = geometry.cylinder(segments=max(3, 4 * obj.resolution))
+    else:
+        mesh = geometry.quad()
+    t = obj.transform
+    matrix = None if t.matrix is None else np.asarray(t.matrix, float).reshape(4, 4)
+    mesh = mesh.transformed(geometry.transform_matrix(t.translate, t.rotate_deg, t.scale, matrix))
+    if mesh.normals is None and obj.smooth:
+        mesh = geometry.TriMesh(mesh.vertices, mesh.faces, geometry.vertex_normals(mesh.vertices, mesh.faces),
+                                mesh.uvs)
+    if not obj.smooth:
+        mesh = facet(mesh)
+    return mesh
+
+
+def facet(mesh: geometry.TriMesh) -> geometry.TriMesh:
+    """Unweld a mesh so each face has its own three vertices carrying the face normal."""
+    faces = mesh.faces
+    corners = faces.reshape(-1)
+    normals = np.repeat(geometry.face_normals(mesh.vertices, faces), 3, axis=0)
+    uvs = None if mesh.uvs is None else mesh.uvs[corners]
+    return geometry.TriMesh(mesh.vertices[corners], np.arange(corners.size).reshape(-1, 3), normals, uvs)
+
+
+def sphere_segments(sphere: Sphere, camera, height: int) -> int:
+    """Longitude segments so that the polygon's sagitta r (1 - cos(pi / N)) is under half a sample."""
+    _, _, forward = camera_frame(camera)
+    distance = float(np.dot(np.asarray(sphere.center) - np.asarray(camera.eye), forward)) - sphere.radius
+    if camera.projection == "perspective" and distance <= camera.near:
+        return MAX_SPHERE_SEGMENTS
+    radius_px = sphere.radius / pixel_size_at(camera, max(distance, camera.near), height)
+    if radius_px <= 0.5:
+        return 8
+    step = 2.0 * math.acos(1.0 - 0.5 / radius_px)
+    return int(min(MAX_SPHERE_SEGMENTS, max(8, math.ceil(2.0 * math.pi / step))))
+
+
+def plane_axes(normal) -> tuple[int, int]:
+    """The two world axes spanning a plane's checker and uv: those other than the normal's dominant one."""
+    dominant = int(np.argmax(np.abs(normal)))
+    return {0: (1, 2), 1: (0, 2), 2: (0, 1)}[dominant]
+
+
+def plane_grid(plane: Plane, camera) -> geometry.TriMesh:
+    """A PLANE_GRID^2 grid of quads on the plane, centred under the eye, reaching `far` each way.
+    uv = the plane's two world axes (as the checker uses)."""
+    normal = np.asarray(plane.normal, float)
+    point = np.asarray(plane.point, float)
+    eye = np.asarray(camera.eye, float)
+    centre = eye - np.dot(eye - point, normal) * normal
+    a_axis = np.cross(normal, [0.0, 0.0, 1.0] if abs(normal[2]) < 0.9 else [1.0, 0.0, 0.0])
+    a_axis /= np.linalg.norm(a_axis)
+    b_axis = np.cross(a_axis, normal)
+    s = np.linspace(-1.0, 1.0, PLANE_GRID + 1) * 2.0 * camera.far
+    aa, bb = np.meshgrid(s, s, indexing="ij")
+    vertices = centre + aa[..., None] * a_axis + bb[..., None] * b_axis
+    vertices = vertices.reshape(-1, 3)
+    k = np.arange(PLANE_GRID)
+    i, j = np.meshgrid(k, k, indexing="ij")
+    v00 = (i * (PLANE_GRID + 1) + j).ravel()
+    v10, v01, v11 = v00 + PLANE_GRID + 1, v00 + 1, v00 + PLANE_GRID + 2
+    faces = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)])
+    if np.dot(np.cross(vertices[faces[0, 1]] - vertices[faces[0, 0]], vertices[faces[0, 2]] - vertices[faces[0, 0]]),
+              normal) < 0:
+        faces = faces[:, ::-1]
+    axes = plane_axes(normal)
+    normals = np.repeat(normal[None], len(vertices), axis=0)
+    return geometry.TriMesh(vertices, faces, normals, vertices[:, axes])
+
+
+def compile_scene(scene, device: str = "cpu", sample_height: int | None = None) -> CompiledScene:
+    """Build the device arrays and BVH of `scene` once. `sample_height` (rows of the sample grid)
+    sets how finely spheres are tessellated for the rasterizer."""
+    device = resolve_device(device)
+    camera = scene.camera
+    sample_height = camera.height if sample_height is None else sample_height
+    names = scene.material_names
+    mesh_parts, analytic_parts = [], []
+    spheres, planes = [], []
+    for index, obj in enumerate(scene.objects):
+        material = names.index(obj.material)
+        if isinstance(obj, Mesh):
+            mesh_parts.append((object_mesh(obj), material, index))
+        elif isinstance(obj, Sphere):
+            spheres.append((obj, material, index))
+            n_lon = sphere_segments(obj, camera, sample_height)
+            analytic_parts.append((geometry.uv_sphere(obj.radius, obj.center, max(2, n_lon // 2), n_lon), material, index))
+        elif isinstance(obj, Plane):
+            planes.append((obj, material, index))
+            analytic_parts.append((plane_grid(obj, camera), material, index))
+        else:  # pragma: no cover - the scene validates object types
+            raise RenderError(f"objects[{index}]: cannot render {type(obj).__name__}")
+    parts = mesh_parts + analytic_parts
+    n_mesh_faces = sum(m.faces.shape[0] for m, _, _ in mesh_parts)
+
+    if parts:
+        offsets = np.cumsum([0] + [m.vertices.shape[0] for m, _, _ in parts])
+        vertices = np.concatenate([m.vertices for m, _, _ in parts]).astype(np.float32)
+        faces = np.concatenate([m.faces + o for (m, _, _), o in zip(parts, offsets)]).astype(np.int32)
+        normals = np.concatenate([m.normals if m.normals is not None else
+                                  geometry.vertex_normals(m.vertices, m.faces) for m, _, _ in parts]).astype(np.float32)
+        uvs = np.concatenate([m.uvs if m.uvs is not None else np.zeros((m.vertices.shape[0], 2))
+                              for m, _, _ in parts]).astype(np.float32)
+        face_material = np.concatenate([np.full(m.faces.shape[0], mat, np.int32) for m, mat, _ in parts])
+        face_object = np.concatenate([np.full(m.faces.shape[0], obj, np.int32) for m, _, obj in parts])
+        face_normal = geometry.face_normals(vertices.astype(np.float64), faces).astype(np.float32)
+    else:
+        vertices, normals = np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)
+        uvs, faces = np.zeros((0, 2), np.float32), np.zeros((0, 3), np.int32)
+        face_material = face_object = np.zeros(0, np.int32)
+        face_normal = np.zeros((0, 3), np.float32)
+
+    extent_points = [np.asarray(camera.eye, float)[None]]
+    if n_mesh_faces:
+        extent_points.append(vertices[faces[:n_mesh_faces].ravel()])
+    for sphere, _, _ in spheres:
+        extent_points.append(np.asarray(sphere.center)[None] + np.array([[sphere.radius] * 3, [-sphere.radius] * 3]))
+    points = np.concatenate(extent_points)
+    epsilon = RAY_EPSILON_SCALE * max(1.0, float(np.linalg.norm(points.max(0) - points.min(0))))
+
+    def arr(values, dtype):
+        return wp.array(np.ascontiguousarray(values), dtype=dtype, device=device)
+
+    arrays = {
+        "vertices": arr(vertices, wp.vec3), "normals": arr(normals, wp.vec3), "uvs": arr(uvs, wp.vec2),
+        "faces": arr(faces, wp.int32).reshape((faces.shape[0], 3)) if faces.size else wp.zeros((0, 3), wp.int32, device=device),
+        "face_material": arr(face_material, wp.int32), "face_object": arr(face_object, wp.int32),
+        "face_normal": arr(face_normal, wp.vec3),
+    }
+    bvh = None
+    geom = SceneGeomW()
+    if n_mesh_faces:
+        used = np.unique(faces[:n_mesh_faces])
+        if not np.all(np.isfinite(vertices[used])):
+            raise MeshError("mesh vertices are not finite after transforming")
+        bvh = wp.Mesh(points=arrays["vertices"], indices=arr(faces[:n_mesh_faces].ravel(), wp.int32))
+        geom.mesh = bvh.id
+    else:
+        geom.mesh = wp.uint64(0)
+    geom.face_material, geom.face_object = arrays["face_material"], arrays["face_object"]
+    geom.sphere_center = arr(np.array([s.center for s, _, _ in spheres], np.float32).reshape(-1, 3), wp.vec3)
+    geom.sphere_radius = arr(np.array([s.radius for s, _, _ in spheres], np.float32), float)
+    geom.sphere_material = arr(np.array([m for _, m, _ in spheres], np.int32), wp.int32)
+    geom.sphere_object = arr(np.array([o for _, _, o in spheres], np.int32), wp.int32)
+    geom.plane_point = arr(np.array([p.point for p, _, _ in planes], np.float32).reshape(-1, 3), wp.vec3)
+    geom.plane_normal = arr(np.array([p.normal for p, _, _ in planes], np.float32).reshape(-1, 3), wp.vec3)
+    geom.plane_material = arr(np.array([m for _, m, _ in planes], np.int32), wp.int32)
+    geom.plane_object = arr(np.array([o for _, _, o in planes], np.int32), wp.int32)
+    geom.epsilon = float(epsilon)
+    return CompiledScene(
+        scene=scene, device=device, vertices=vertices, normals=normals, uvs=uvs, faces=faces,
+        face_material=face_material, face_object=face_object, face_normal=face_normal,
+        n_mesh_faces=n_mesh_faces, epsilon=epsilon, arrays=arrays, geom=geom,
+        lights=lights_to_warp(scene.lights, device),
+        materials=materials_to_warp([scene.materials[name] for name in names], device),
+        bvh=bvh,
+    )

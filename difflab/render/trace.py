@@ -1,0 +1,151 @@
+"""Ray queries against a compiled scene: analytic spheres and planes, and triangles through Warp's BVH.
+
+The rasterizer uses these for shadow rays; the ray tracer for everything. A hit records its distance
+t along the unit ray, what was hit (kind, index, object, material), the geometric normal (as stored:
+outward for spheres, the plane's normal, the triangle's winding normal) and the triangle's
+barycentrics (u, v) of vertices 1 and 2.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from ..lighting.warp_model import MaterialW
+
+HIT_NONE, HIT_TRIANGLE, HIT_SPHERE, HIT_PLANE = 0, 1, 2, 3
+MAX_SHADOW_CROSSINGS = 16  # transparent surfaces a shadow ray may pass through before it counts as blocked
+
+
+@wp.struct
+class SceneGeomW:
+    """The scene's ray-traceable geometry. `mesh` is 0 when the scene has no triangle meshes."""
+
+    mesh: wp.uint64
+    face_material: wp.array(dtype=wp.int32)
+    face_object: wp.array(dtype=wp.int32)
+    sphere_center: wp.array(dtype=wp.vec3)
+    sphere_radius: wp.array(dtype=float)
+    sphere_material: wp.array(dtype=wp.int32)
+    sphere_object: wp.array(dtype=wp.int32)
+    plane_point: wp.array(dtype=wp.vec3)
+    plane_normal: wp.array(dtype=wp.vec3)
+    plane_material: wp.array(dtype=wp.int32)
+    plane_object: wp.array(dtype=wp.int32)
+    epsilon: float  # ray offset against self-intersection, in scene units
+
+
+@wp.struct
+class HitW:
+    t: float
+    kind: int
+    index: int
+    object: int
+    material: int
+    normal: wp.vec3  # geometric normal, unit, as stored (not flipped toward the ray)
+    u: float
+    v: float
+
+
+@wp.func
+def ray_sphere(origin: wp.vec3, direction: wp.vec3, center: wp.vec3, radius: float, t_min: float):
+    """Smallest root t > t_min of |o + t d - c| = r for a unit d, or -1. Uses the stable form
+    h = d.(c - o), disc = r^2 - |o + h d - c|^2 (no cancellation for far spheres)."""
+    oc = center - origin
+    h = wp.dot(direction, oc)
+    closest = oc - h * direction
+    disc = radius * radius - wp.dot(closest, closest)
+    if disc < 0.0:
+        return -1.0
+    s = wp.sqrt(disc)
+    t = h - s
+    if t > t_min:
+        return t
+    t = h + s
+    if t > t_min:
+        return t
+    return -1.0
+
+
+@wp.func
+def ray_plane(origin: wp.vec3, direction: wp.vec3, point: wp.vec3, normal: wp.vec3, t_min: float):
+    """t > t_min where the ray meets the plane (p - point).normal = 0, or -1 (parallel or behind)."""
+    denom = wp.dot(direction, normal)
+    if wp.abs(denom) < 1.0e-12:
+        return -1.0
+    t = wp.dot(point - origin, normal) / denom
+    if t > t_min:
+        return t
+    return -1.0
+
+
+@wp.func
+def closest_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: float, t_max: float,
+                ignore_object: int):
+    """The nearest surface with t_min < t < t_max along a unit ray, skipping object `ignore_object`."""
+    hit = HitW()
+    hit.t = t_max
+    hit.kind = HIT_NONE
+    hit.index = -1
+    hit.object = -1
+    hit.material = -1
+    for k in range(geom.sphere_center.shape[0]):
+        if geom.sphere_object[k] != ignore_object:
+            t = ray_sphere(origin, direction, geom.sphere_center[k], geom.sphere_radius[k], t_min)
+            if t > 0.0 and t < hit.t:
+                hit.t = t
+                hit.kind = HIT_SPHERE
+                hit.index = k
+    for k in range(geom.plane_point.shape[0]):
+        if geom.plane_object[k] != ignore_object:
+            t = ray_plane(origin, direction, geom.plane_point[k], geom.plane_normal[k], t_min)
+            if t > 0.0 and t < hit.t:
+                hit.t = t
+                hit.kind = HIT_PLANE
+                hit.index = k
+    if geom.mesh != wp.uint64(0):
+        query = wp.mesh_query_ray(geom.mesh, origin + t_min * direction, direction, hit.t - t_min)
+        if query.result and geom.face_object[query.face] != ignore_object:
+            hit.t = query.t + t_min
+            hit.kind = HIT_TRIANGLE
+            hit.index = query.face
+            hit.u = query.u
+            hit.v = query.v
+            hit.normal = wp.normalize(query.normal)
+    if hit.kind == HIT_SPHERE:
+        hit.object = geom.sphere_object[hit.index]
+        hit.material = geom.sphere_material[hit.index]
+        hit.normal = wp.normalize(origin + hit.t * direction - geom.sphere_center[hit.index])
+    elif hit.kind == HIT_PLANE:
+        hit.object = geom.plane_object[hit.index]
+        hit.material = geom.plane_material[hit.index]
+        hit.normal = geom.plane_normal[hit.index]
+    elif hit.kind == HIT_TRIANGLE:
+        hit.object = geom.face_object[hit.index]
+        hit.material = geom.face_material[hit.index]
+    return hit
+
+
+@wp.func
+def light_visibility(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: wp.vec3, l: wp.vec3,
+                     distance: float, ignore_object: int, transparent: int):
+    """Shadow-ray visibility in [0, 1] of a light at `distance` along unit `l` from p.
+
+    An opaque surface in between gives 0. With `transparent` set, each surface with kt > 0 crossed
+    multiplies the visibility by kt (the ray is not refracted). The caller offsets p off the surface.
+    """
+    visibility = float(1.0)
+    origin = p
+    remaining = distance
+    for crossing in range(MAX_SHADOW_CROSSINGS):
+        hit = closest_hit(geom, origin, l, 0.0, remaining, ignore_object)
+        if hit.kind == HIT_NONE:
+            return visibility
+        kt = materials[hit.material].kt
+        if transparent == 0 or kt <= 0.0:
+            return 0.0
+        visibility = visibility * kt
+        origin = origin + (hit.t + geom.epsilon) * l
+        remaining = remaining - hit.t - geom.epsilon
+        if remaining <= 0.0:
+            return visibility
+    return 0.0
