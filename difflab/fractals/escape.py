@@ -73,15 +73,15 @@ def palette(t: float):
 
 @wp.kernel
 def colour_kernel(row0: int, nu: wp.array2d(dtype=float), image: wp.array3d(dtype=float)):
-    """Interior black; outside, the palette at sqrt(nu) (bands widen gently far from the set),
-    squared so the dark bands fall near the boundary's filaments."""
+    """Interior black; outside, the palette at sqrt(nu) (colour bands widen gently away from the
+    set), squared per channel for contrast."""
     i, j = wp.tid()
     row = row0 + i
     value = nu[row, j]
     rgb = wp.vec3(0.0, 0.0, 0.0)
     if value != INTERIOR:
         base = palette(0.15 * wp.sqrt(wp.max(value, 0.0)) + 0.55)
-        rgb = wp.cw_mul(base, base)  # to linear-ish contrast
+        rgb = wp.cw_mul(base, base)
     image[row, j, 0] = rgb[0]
     image[row, j, 1] = rgb[1]
     image[row, j, 2] = rgb[2]
@@ -120,7 +120,8 @@ def escape_time(width: int, height: int, center=(-0.5, 0.0), scale: float = 3.0,
 
     Arguments:
         width, height: pixels (> 0). Pixel (i, j) samples the complex point at its centre:
-            center + ((j + 0.5 - width/2) + i (height/2 - i - 0.5)) * scale / width.
+            re = center[0] + (j + 0.5 - width/2) * scale / width,
+            im = center[1] + (height/2 - i - 0.5) * scale / width   (row 0 at the top).
         center: (re, im) at the middle of the image.
         scale: width of the view in the complex plane (pixels are square).
         max_iter: iterations before a point counts as inside (1..10^6).

@@ -1,0 +1,69 @@
+"""`render` and `render_frame`: a scene (object, dict or file) in, numpy out."""
+
+from __future__ import annotations
+
+import os
+
+from ..errors import RenderError
+from ..scene import Scene, load_scene
+from .compile import compile_scene
+from .frame import Frame
+
+RENDER_OVERRIDES = ("method", "shading", "specular", "shadows", "max_depth", "spp", "fresnel",
+                    "transparent_shadows", "clamp_vertex_colors", "interpolation", "cull_backfaces",
+                    "adaptive_threshold", "sampling")
+
+
+def as_scene(scene) -> Scene:
+    """A Scene from a Scene, a dict in the file format, or a path to a scene file."""
+    if isinstance(scene, Scene):
+        return scene
+    if isinstance(scene, dict):
+        return Scene.from_dict(scene)
+    if isinstance(scene, (str, os.PathLike)):
+        return load_scene(scene)
+    raise RenderError(f"scene: expected a Scene, a dict or a path, got {type(scene).__name__}")
+
+
+def prepare(scene, width=None, height=None, **overrides) -> Scene:
+    """The scene with the given render settings and image size applied (None leaves a setting as is)."""
+    scene = as_scene(scene)
+    unknown = set(overrides) - set(RENDER_OVERRIDES)
+    if unknown:
+        raise RenderError(f"render: unknown option(s) {sorted(unknown)}; known: {', '.join(RENDER_OVERRIDES)}")
+    render = {k: v for k, v in overrides.items() if v is not None}
+    camera = None
+    if width is not None or height is not None:
+        camera = scene.camera.to_dict()
+        camera["width"] = camera["width"] if width is None else width
+        camera["height"] = camera["height"] if height is None else height
+    if render or camera:
+        scene = scene.with_overrides(camera=camera, render=render or None)
+    return scene
+
+
+def render_frame(scene, method=None, shading=None, specular=None, max_depth=None, spp=None, device="cpu", *,
+                 width=None, height=None, threads=None, compiled=None, **options) -> Frame:
+    """Render a scene and return the `Frame` (image and G-buffer; the ray tree for ray tracing).
+
+    Arguments given override the scene's `render` block (and `width` / `height` its camera).
+    `compiled` reuses device arrays from `compile_scene` for the same scene and device.
+    """
+    scene = prepare(scene, width, height, method=method, shading=shading, specular=specular,
+                    max_depth=max_depth, spp=spp, **options)
+    settings = scene.render
+    from .rasterizer import rasterize, spp_side
+
+    if compiled is None or compiled.scene != scene:
+        side = spp_side(settings.spp) if settings.method == "raster" else 1
+        compiled = compile_scene(scene, device, sample_height=scene.camera.height * side)
+    if settings.method == "raster":
+        return rasterize(compiled, settings, threads)
+    from .raytracer import raytrace
+
+    return raytrace(compiled, settings, threads)
+
+
+def render(scene, method=None, shading=None, specular=None, max_depth=None, spp=None, device="cpu", **kwargs):
+    """Render a scene to a numpy (H, W, 3) float32 linear RGB image (see `render_frame`)."""
+    return render_frame(scene, method, shading, specular, max_depth, spp, device, **kwargs).image

@@ -1,0 +1,102 @@
+"""What a render returns: the image and the G-buffer it was shaded from.
+
+The G-buffer is laid out so that the JAX model can reproduce the image exactly: the illumination
+model is evaluated at *shading points* (every covered sample for Phong shading, every face for flat,
+every vertex twice -- front and back -- for Gouraud), and each sample's colour is a weighted sum of
+three points' colours (`point_index`, `point_weight`), then background and fog, then the spp x spp
+box filter of the sample grid down to pixels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ShadingPoints:
+    """N points where the illumination model is evaluated, and what it saw there (P lights).
+
+    position, normal (unit, facing the viewer), view (unit, to the viewer): (N, 3) float32;
+    material: (N,) int32 (-1: nothing); cell: (N,) int32 checker cell; light_dir: (N, P, 3) unit
+    direction to each light; light_dist: (N, P) (inf for directional lights); visibility: (N, P) in
+    [0, 1] from shadow rays; color: (N, 3) the Warp model's radiance."""
+
+    position: np.ndarray
+    normal: np.ndarray
+    view: np.ndarray
+    material: np.ndarray
+    cell: np.ndarray
+    light_dir: np.ndarray
+    light_dist: np.ndarray
+    visibility: np.ndarray
+    color: np.ndarray
+
+
+@dataclass(frozen=True)
+class GBuffer:
+    """Per-sample buffers on the sample grid (height*spp_side, width*spp_side), row 0 at the top.
+
+    mask: bool, a surface is there; depth: eye-space distance along the view axis (inf where empty);
+    position, normal: (.., 3) world-space surface point and shading normal; uv: (.., 2);
+    material, object, face: int32 ids (-1 where empty); bary: (.., 3) weights of the face's vertices;
+    point_index (.., 3) int32 and point_weight (.., 3): which shading points make the sample's colour.
+    """
+
+    mask: np.ndarray
+    depth: np.ndarray
+    position: np.ndarray
+    normal: np.ndarray
+    uv: np.ndarray
+    material: np.ndarray
+    object: np.ndarray
+    face: np.ndarray
+    bary: np.ndarray
+    point_index: np.ndarray
+    point_weight: np.ndarray
+    points: ShadingPoints
+    shading: str
+    specular: str
+    spp_side: int
+    ambient: np.ndarray
+    background: np.ndarray
+    clamp_vertex_colors: bool
+    fog: tuple  # (mode, color, start, end, density) as `lighting.warp_model.fog_params`
+
+    @property
+    def light_dir(self) -> np.ndarray:
+        """Per-light directions; per sample (H', W', P, 3) for Phong shading, per point otherwise."""
+        return self._per_sample(self.points.light_dir)
+
+    @property
+    def light_dist(self) -> np.ndarray:
+        return self._per_sample(self.points.light_dist)
+
+    @property
+    def visibility(self) -> np.ndarray:
+        return self._per_sample(self.points.visibility)
+
+    def _per_sample(self, values: np.ndarray) -> np.ndarray:
+        if self.shading == "phong":
+            return values.reshape(self.mask.shape + values.shape[1:])
+        return values
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A rendered frame: `image` (H, W, 3) float32 linear RGB, its `gbuffer`, and `stats` (counts,
+    timings, non-finite pixels). The ray tracer adds its recorded `ray_tree`."""
+
+    image: np.ndarray
+    gbuffer: GBuffer | None
+    stats: dict = field(default_factory=dict)
+    ray_tree: object = None
+
+
+def box_downsample(samples: np.ndarray, side: int) -> np.ndarray:
+    """Average side x side blocks of an (H*side, W*side, C) sample grid into (H, W, C) pixels."""
+    if side == 1:
+        return samples
+    h, w = samples.shape[0] // side, samples.shape[1] // side
+    return samples.reshape(h, side, w, side, *samples.shape[2:]).mean(axis=(1, 3), dtype=np.float64).astype(samples.dtype)

@@ -1,0 +1,151 @@
+"""The rasterizer's driver: allocate once per frame, launch the stages of `raster.py`, return a Frame."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import warp as wp
+
+from ..errors import RenderError
+from ..lighting.warp_model import SPECULAR_MODELS, fog_params
+from ..scene import MAX_PIXELS
+from . import raster as rk
+from .camera import camera_struct
+from .frame import Frame, GBuffer, ShadingPoints, box_downsample
+from .launch import launch_rows, parallel_bands
+
+
+def spp_side(spp: int) -> int:
+    """The side of the regular spp = side^2 supersampling grid; spp must be a perfect square."""
+    side = math.isqrt(spp)
+    if spp < 1 or side * side != spp:
+        raise RenderError(f"spp: the rasterizer samples a regular grid, so spp must be a perfect square "
+                          f"(1, 4, 9, 16, ...), got {spp}")
+    return side
+
+
+def empty_points(count: int, device: str) -> rk.PointsW:
+    points = rk.PointsW()
+    for name, dtype in [("position", wp.vec3), ("normal", wp.vec3), ("geo_normal", wp.vec3), ("view", wp.vec3),
+                        ("material", wp.int32), ("cell", wp.int32), ("ignore", wp.int32)]:
+        setattr(points, name, wp.zeros(count, dtype=dtype, device=device))
+    return points
+
+
+def rasterize(compiled, settings, threads: int | None = None) -> Frame:
+    """Render a compiled scene with the rasterizer under `settings` (a scene RenderSettings)."""
+    scene, device = compiled.scene, compiled.device
+    side = spp_side(settings.spp)
+    width, height = scene.camera.width * side, scene.camera.height * side
+    if width * height > MAX_PIXELS:
+        raise RenderError(f"spp: {scene.camera.width}x{scene.camera.height} pixels at spp={settings.spp} is "
+                          f"{width * height} samples, over the budget of {MAX_PIXELS}")
+    shading = rk.SHADING_MODELS[settings.shading]
+    start = time.perf_counter()
+    cam = camera_struct(scene.camera, width, height)
+    arrays = compiled.arrays
+    n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
+    n_samples, n_lights = width * height, len(scene.lights)
+
+    # Stages 1-3: clip space, clipping, z-buffer.
+    clip = wp.empty(n_vertices, dtype=wp.vec4, device=device)
+    screen = wp.empty((2 * n_faces, 3), dtype=wp.vec4, device=device)
+    weight = wp.empty((2 * n_faces, 3), dtype=wp.vec3, device=device)
+    facing = wp.empty(2 * n_faces, dtype=wp.int32, device=device)
+    key = wp.full(n_samples, value=rk.NO_HIT, dtype=wp.int64, device=device)
+    if n_faces:
+        wp.launch(rk.clip_vertices_kernel, dim=n_vertices, inputs=[arrays["vertices"], cam.view_proj, clip],
+                  device=device)
+        wp.launch(rk.assemble_kernel, dim=n_faces,
+                  inputs=[arrays["faces"], clip, int(settings.cull_backfaces), width, height, screen, weight, facing],
+                  device=device)
+
+        def raster_band(begin, end):
+            wp.launch(rk.raster_kernel, dim=2 * n_faces, inputs=[begin, end, screen, facing, width, key], device=device)
+
+        parallel_bands(raster_band, height, device, threads)
+
+    # Stage 4: the per-sample G-buffer.
+    samples = empty_points(n_samples, device)
+    out = {name: wp.empty(n_samples, dtype=dtype, device=device) for name, dtype in
+           [("face", wp.int32), ("bary", wp.vec3), ("depth", float), ("uv", wp.vec2), ("object", wp.int32),
+            ("point_weight", wp.vec3)]}
+    point_index = wp.empty((n_samples, 3), dtype=wp.int32, device=device)
+    launch_rows(rk.resolve_kernel, (height, width), [
+        key, screen, weight, facing, arrays["faces"], arrays["vertices"], arrays["normals"], arrays["uvs"],
+        arrays["face_normal"], arrays["face_material"], arrays["face_object"], compiled.materials, cam,
+        int(settings.interpolation == "perspective"), shading, compiled.n_mesh_faces, n_vertices,
+        out["face"], out["bary"], out["depth"], out["uv"], out["object"], samples, point_index, out["point_weight"],
+    ], device, threads)
+
+    # Stage 5: shading points.
+    if shading == rk.PHONG_SHADING:
+        points, n_points = samples, n_samples
+    elif shading == rk.FLAT:
+        n_points = n_faces
+        points = empty_points(n_points, device)
+        if n_faces:
+            wp.launch(rk.flat_points_kernel, dim=n_faces, inputs=[
+                arrays["faces"], arrays["vertices"], arrays["face_normal"], arrays["face_material"],
+                arrays["face_object"], compiled.materials, cam, compiled.n_mesh_faces, points], device=device)
+    else:
+        n_points = 2 * n_vertices
+        points = empty_points(n_points, device)
+        if n_vertices:
+            vertex_face = np.zeros(n_vertices, np.int64)
+            vertex_face[compiled.faces.ravel()] = np.repeat(np.arange(n_faces), 3)
+            per_vertex = [compiled.face_material[vertex_face], compiled.face_object[vertex_face],
+                          (vertex_face >= compiled.n_mesh_faces).astype(np.int32)]
+            wp.launch(rk.gouraud_points_kernel, dim=(n_vertices, 2), inputs=[
+                arrays["vertices"], arrays["normals"],
+                *[wp.array(a.astype(np.int32), dtype=wp.int32, device=device) for a in per_vertex],
+                compiled.materials, cam, points], device=device)
+
+    # Stage 6: light the points.
+    light_dir = wp.zeros((n_points, n_lights), dtype=wp.vec3, device=device)
+    light_dist = wp.zeros((n_points, n_lights), dtype=float, device=device)
+    visibility = wp.zeros((n_points, n_lights), dtype=float, device=device)
+    color = wp.zeros(max(n_points, 1), dtype=wp.vec3, device=device)
+    ambient = wp.vec3(*scene.ambient)
+
+    def light_band(begin, end):
+        wp.launch(rk.light_points_kernel, dim=end - begin, inputs=[
+            begin, points, compiled.lights, compiled.materials, compiled.geom, SPECULAR_MODELS[settings.specular],
+            ambient, int(settings.shadows), int(settings.transparent_shadows), light_dir, light_dist, visibility,
+            color], device=device)
+
+    parallel_bands(light_band, n_points, device, threads)
+
+    # Stage 7: compose samples, then filter to pixels.
+    fog = fog_params(scene.fog)
+    image = wp.empty(n_samples, dtype=wp.vec3, device=device)
+    launch_rows(rk.compose_kernel, (height, width), [
+        width, samples.material, out["depth"], point_index, out["point_weight"], color,
+        int(settings.clamp_vertex_colors and shading == rk.GOURAUD), wp.vec3(*scene.background), fog[0],
+        wp.vec3(*fog[1]), fog[2], fog[3], fog[4], image], device, threads)
+    sample_image = image.numpy().reshape(height, width, 3)
+    pixels = box_downsample(sample_image, side)
+    seconds = time.perf_counter() - start
+
+    grid = (height, width)
+    material = samples.material.numpy().reshape(grid)
+    gbuffer = GBuffer(
+        mask=material >= 0, depth=out["depth"].numpy().reshape(grid), position=samples.position.numpy().reshape(*grid, 3),
+        normal=samples.normal.numpy().reshape(*grid, 3), uv=out["uv"].numpy().reshape(*grid, 2), material=material,
+        object=out["object"].numpy().reshape(grid), face=out["face"].numpy().reshape(grid),
+        bary=out["bary"].numpy().reshape(*grid, 3), point_index=point_index.numpy().reshape(*grid, 3),
+        point_weight=out["point_weight"].numpy().reshape(*grid, 3),
+        points=ShadingPoints(
+            position=points.position.numpy(), normal=points.normal.numpy(), view=points.view.numpy(),
+            material=points.material.numpy(), cell=points.cell.numpy(), light_dir=light_dir.numpy(),
+            light_dist=light_dist.numpy(), visibility=visibility.numpy(), color=color.numpy()[:n_points]),
+        shading=settings.shading, specular=settings.specular, spp_side=side,
+        ambient=np.asarray(scene.ambient, np.float32), background=np.asarray(scene.background, np.float32),
+        clamp_vertex_colors=bool(settings.clamp_vertex_colors and shading == rk.GOURAUD), fog=fog,
+    )
+    stats = {"method": "raster", "seconds": seconds, "triangles": n_faces, "samples": n_samples,
+             "shading_points": n_points, "covered_samples": int(gbuffer.mask.sum()),
+             "nonfinite_pixels": int(np.count_nonzero(~np.isfinite(pixels).all(axis=-1)))}
+    return Frame(image=pixels, gbuffer=gbuffer, stats=stats)
