@@ -5,7 +5,8 @@
   `staircase_measure`, `x_cos_pi_over_x`
 - measures: `polyline_length`, `box_counts`, `box_counting_dimension`, `variogram`, `variogram_slope`
 - terrain (numpy): `diamond_square`, `midpoint_displacement` height grids; `terrain` (a TriMesh, y up);
-  `terrain_bands`, `terrain_colors`, `terrain_parts` (water / grass / rock / snow)
+  `terrain_bands`, `terrain_colors`, `terrain_parts` (water / grass / rock / snow); `terrain_scene`
+  writes the bands as OBJ files and returns a scene dict for `difflab.render`
 - 2D sets (Warp): `mandelbrot`, `julia` (smoothly coloured images), `escape_time` (raw nu)
 - 3D (Warp): `mandelbulb`, ray marched and lit by the illumination model, with shadows
 
@@ -24,6 +25,7 @@ from .oscillating import x_cos_pi_over_x
 from .space_filling import hilbert, hilbert_cells, peano, peano_cells
 from .terrain import (TERRAIN_BANDS, TERRAIN_COLORS, TERRAIN_LEVELS, terrain, terrain_bands,
                       terrain_colors, terrain_parts)
+from .terrain_scene import terrain_scene
 
 __all__ = [
     "FractalError",
@@ -32,6 +34,6 @@ __all__ = [
     "x_cos_pi_over_x",
     "polyline_length", "box_counts", "box_counting_dimension", "variogram", "variogram_slope",
     "diamond_square", "midpoint_displacement", "terrain", "terrain_bands", "terrain_colors",
-    "terrain_parts", "TERRAIN_BANDS", "TERRAIN_COLORS", "TERRAIN_LEVELS",
+    "terrain_parts", "terrain_scene", "TERRAIN_BANDS", "TERRAIN_COLORS", "TERRAIN_LEVELS",
     "mandelbrot", "julia", "escape_time", "mandelbulb",
 ]

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import warp as wp
+from .._warp import wp
 
 POINT, DIRECTIONAL, SPOT = 0, 1, 2
 LIGHT_KINDS = {"point": POINT, "directional": DIRECTIONAL, "spot": SPOT}

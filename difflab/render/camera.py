@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import warp as wp
+from .._warp import wp
 
 
 @wp.struct

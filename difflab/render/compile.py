@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import warp as wp
+from .._warp import wp
 
 from .. import geometry
 from ..errors import MeshError, RenderError
@@ -25,7 +25,8 @@ from .trace import SceneGeomW
 
 RAY_EPSILON_SCALE = 1e-4  # ray offset = this x the scene's extent (bounding-box diagonal, at least 1)
 MAX_SPHERE_SEGMENTS = 1024
-PLANE_GRID = 16  # quads per side of a rasterized plane
+MIN_SPHERE_SEGMENTS = 128  # keeps interpolated normals within ~1e-3 of the sphere's inside the silhouette
+PLANE_RINGS = 12  # grid lines each side of the eye's foot on a rasterized plane, spaced geometrically
 
 
 @dataclass
@@ -88,16 +89,17 @@ def facet(mesh: geometry.TriMesh) -> geometry.TriMesh:
 
 
 def sphere_segments(sphere: Sphere, camera, height: int) -> int:
-    """Longitude segments so that the polygon's sagitta r (1 - cos(pi / N)) is under half a sample."""
+    """Longitude segments so that the polygon's sagitta r (1 - cos(pi / N)) is under half a sample
+    (and at least MIN_SPHERE_SEGMENTS, for smooth shading)."""
     _, _, forward = camera_frame(camera)
     distance = float(np.dot(np.asarray(sphere.center) - np.asarray(camera.eye), forward)) - sphere.radius
     if camera.projection == "perspective" and distance <= camera.near:
         return MAX_SPHERE_SEGMENTS
     radius_px = sphere.radius / pixel_size_at(camera, max(distance, camera.near), height)
     if radius_px <= 0.5:
-        return 8
+        return MIN_SPHERE_SEGMENTS
     step = 2.0 * math.acos(1.0 - 0.5 / radius_px)
-    return int(min(MAX_SPHERE_SEGMENTS, max(8, math.ceil(2.0 * math.pi / step))))
+    return int(min(MAX_SPHERE_SEGMENTS, max(MIN_SPHERE_SEGMENTS, math.ceil(2.0 * math.pi / step))))
 
 
 def plane_axes(normal) -> tuple[int, int]:
@@ -107,8 +109,10 @@ def plane_axes(normal) -> tuple[int, int]:
 
 
 def plane_grid(plane: Plane, camera) -> geometry.TriMesh:
-    """A PLANE_GRID^2 grid of quads on the plane, centred under the eye, reaching `far` each way.
-    uv = the plane's two world axes (as the checker uses)."""
+    """A grid of quads on the plane centred at the eye's foot, reaching 2 `far` each way, its lines
+    spaced geometrically from a quarter of the eye's height: cells stay small (well-conditioned
+    float32 interpolation) near the viewer and grow with distance. uv = the plane's two world axes
+    (as the checker uses)."""
     normal = np.asarray(plane.normal, float)
     point = np.asarray(plane.point, float)
     eye = np.asarray(camera.eye, float)
@@ -116,14 +120,17 @@ def plane_grid(plane: Plane, camera) -> geometry.TriMesh:
     a_axis = np.cross(normal, [0.0, 0.0, 1.0] if abs(normal[2]) < 0.9 else [1.0, 0.0, 0.0])
     a_axis /= np.linalg.norm(a_axis)
     b_axis = np.cross(a_axis, normal)
-    s = np.linspace(-1.0, 1.0, PLANE_GRID + 1) * 2.0 * camera.far
+    height = abs(float(np.dot(eye - point, normal)))
+    steps = np.geomspace(max(0.25 * height, 0.5 * camera.near), 2.0 * camera.far, PLANE_RINGS)
+    s = np.concatenate([-steps[::-1], [0.0], steps])
+    cells = s.size - 1
     aa, bb = np.meshgrid(s, s, indexing="ij")
     vertices = centre + aa[..., None] * a_axis + bb[..., None] * b_axis
     vertices = vertices.reshape(-1, 3)
-    k = np.arange(PLANE_GRID)
+    k = np.arange(cells)
     i, j = np.meshgrid(k, k, indexing="ij")
-    v00 = (i * (PLANE_GRID + 1) + j).ravel()
-    v10, v01, v11 = v00 + PLANE_GRID + 1, v00 + 1, v00 + PLANE_GRID + 2
+    v00 = (i * (cells + 1) + j).ravel()
+    v10, v01, v11 = v00 + cells + 1, v00 + 1, v00 + cells + 2
     faces = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)])
     if np.dot(np.cross(vertices[faces[0, 1]] - vertices[faces[0, 0]], vertices[faces[0, 2]] - vertices[faces[0, 0]]),
               normal) < 0:

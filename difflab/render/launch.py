@@ -10,11 +10,10 @@ from __future__ import annotations
 import os
 from concurrent.futures import ThreadPoolExecutor
 
-import warp as wp
+from .._warp import wp
 
 from ..errors import RenderError
 
-wp.config.quiet = True
 _initialised = False
 
 

@@ -23,7 +23,7 @@ Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
 
 from __future__ import annotations
 
-import warp as wp
+from .._warp import wp
 
 from ..lighting.warp_model import LightW, MaterialW, ambient_term, checker_cell, fog_factor, light_term, light_vector
 from .camera import CameraW, view_direction
@@ -78,16 +78,18 @@ def near_crossing(ia: int, ib: int, ca: wp.vec4, cb: wp.vec4, wa: wp.vec3, wb: w
 
 @wp.func
 def to_screen(c: wp.vec4, width: int, height: int):
-    """Clip -> (x_raster, y_raster, z_ndc, 1/w), x and y clamped to the guard band."""
-    inv_w = 1.0 / c[3]
-    x = wp.clamp((c[0] * inv_w + 1.0) * 0.5 * float(width), -GUARD, GUARD)
-    y = wp.clamp((1.0 - c[1] * inv_w) * 0.5 * float(height), -GUARD, GUARD)
-    return wp.vec4(x, y, c[2] * inv_w, inv_w)
+    """Clip -> (x_raster, y_raster, z_ndc, 1/w) in float64, x and y clamped to the guard band."""
+    one = wp.float64(1.0)
+    guard = wp.float64(GUARD)
+    inv_w = one / wp.float64(c[3])
+    x = wp.clamp((wp.float64(c[0]) * inv_w + one) * wp.float64(0.5 * float(width)), -guard, guard)
+    y = wp.clamp((one - wp.float64(c[1]) * inv_w) * wp.float64(0.5 * float(height)), -guard, guard)
+    return wp.vec4d(x, y, wp.float64(c[2]) * inv_w, inv_w)
 
 
 @wp.func
-def snap(x: float):
-    return wp.int64(wp.round(x * float(SUBPIXEL)))
+def snap(x: wp.float64):
+    return wp.int64(wp.round(x * wp.float64(SUBPIXEL)))
 
 
 @wp.func
@@ -104,8 +106,8 @@ def owns_edge(ax: wp.int64, ay: wp.int64, bx: wp.int64, by: wp.int64):
 
 
 @wp.func
-def emit(slot: int, s0: wp.vec4, s1: wp.vec4, s2: wp.vec4, w0: wp.vec3, w1: wp.vec3, w2: wp.vec3, cull: int,
-         screen: wp.array2d(dtype=wp.vec4), weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32)):
+def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: wp.vec3, w2: wp.vec3, cull: int,
+         screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32)):
     """Store one screen triangle, wound so its integer area is positive; facing +1 front, -1 back,
     0 not drawn (degenerate, or culled)."""
     area = edge(snap(s0[0]), snap(s0[1]), snap(s1[0]), snap(s1[1]), snap(s2[0]), snap(s2[1]))
@@ -134,7 +136,7 @@ def emit(slot: int, s0: wp.vec4, s1: wp.vec4, s2: wp.vec4, w0: wp.vec3, w1: wp.v
 
 @wp.kernel
 def assemble_kernel(faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4), cull: int, width: int,
-                    height: int, screen: wp.array2d(dtype=wp.vec4), weight: wp.array2d(dtype=wp.vec3),
+                    height: int, screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3),
                     facing: wp.array(dtype=wp.int32)):
     f = wp.tid()
     facing[2 * f] = 0
@@ -208,8 +210,9 @@ def assemble_kernel(faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.v
 
 
 @wp.func
-def screen_barycentrics(screen: wp.array2d(dtype=wp.vec4), slot: int, i: int, j: int):
-    """Edge functions of sample (i, j) against triangle `slot` (exact) and twice its area."""
+def screen_barycentrics(screen: wp.array2d(dtype=wp.vec4d), slot: int, i: int, j: int):
+    """Whether sample (i, j) is inside triangle `slot` (exact integer edge functions) and its
+    screen-space barycentrics (float64)."""
     s0 = screen[slot, 0]
     s1 = screen[slot, 1]
     s2 = screen[slot, 2]
@@ -231,12 +234,21 @@ def screen_barycentrics(screen: wp.array2d(dtype=wp.vec4), slot: int, i: int, j:
         inside = False
     if b2 < wp.int64(0) or (b2 == wp.int64(0) and not owns_edge(x0, y0, x1, y1)):
         inside = False
-    area = float(b0 + b1 + b2)
-    return inside, wp.vec3(float(b0) / area, float(b1) / area, float(b2) / area)
+    # Coverage is decided on the snapped integers; the weights come from the unsnapped float64
+    # vertices, so interpolation carries no snapping error.
+    cx = wp.float64(j) + wp.float64(0.5)
+    cy = wp.float64(i) + wp.float64(0.5)
+    e0 = (s2[0] - s1[0]) * (cy - s1[1]) - (s2[1] - s1[1]) * (cx - s1[0])
+    e1 = (s0[0] - s2[0]) * (cy - s2[1]) - (s0[1] - s2[1]) * (cx - s2[0])
+    e2 = (s1[0] - s0[0]) * (cy - s0[1]) - (s1[1] - s0[1]) * (cx - s0[0])
+    area = e0 + e1 + e2
+    if area == wp.float64(0.0):  # a sliver only the snapped vertices give an area
+        return inside, wp.vec3d(wp.float64(1.0), wp.float64(0.0), wp.float64(0.0))
+    return inside, wp.vec3d(e0 / area, e1 / area, e2 / area)
 
 
 @wp.kernel
-def raster_kernel(row_begin: int, row_end: int, screen: wp.array2d(dtype=wp.vec4), facing: wp.array(dtype=wp.int32),
+def raster_kernel(row_begin: int, row_end: int, screen: wp.array2d(dtype=wp.vec4d), facing: wp.array(dtype=wp.int32),
                   width: int, key: wp.array(dtype=wp.int64)):
     slot = wp.tid()
     if facing[slot] == 0:
@@ -245,15 +257,16 @@ def raster_kernel(row_begin: int, row_end: int, screen: wp.array2d(dtype=wp.vec4
     s1 = screen[slot, 1]
     s2 = screen[slot, 2]
     # Sample (i, j) is centred at (j + 0.5, i + 0.5): the candidates lie in the bounding box.
-    j_lo = wp.max(int(wp.ceil(wp.min(s0[0], wp.min(s1[0], s2[0])) - 0.5)), 0)
-    j_hi = wp.min(int(wp.floor(wp.max(s0[0], wp.max(s1[0], s2[0])) - 0.5)), width - 1)
-    i_lo = wp.max(int(wp.ceil(wp.min(s0[1], wp.min(s1[1], s2[1])) - 0.5)), row_begin)
-    i_hi = wp.min(int(wp.floor(wp.max(s0[1], wp.max(s1[1], s2[1])) - 0.5)), row_end - 1)
+    half = wp.float64(0.5)
+    j_lo = wp.max(int(wp.ceil(wp.min(s0[0], wp.min(s1[0], s2[0])) - half)), 0)
+    j_hi = wp.min(int(wp.floor(wp.max(s0[0], wp.max(s1[0], s2[0])) - half)), width - 1)
+    i_lo = wp.max(int(wp.ceil(wp.min(s0[1], wp.min(s1[1], s2[1])) - half)), row_begin)
+    i_hi = wp.min(int(wp.floor(wp.max(s0[1], wp.max(s1[1], s2[1])) - half)), row_end - 1)
     for i in range(i_lo, i_hi + 1):
         for j in range(j_lo, j_hi + 1):
             inside, b = screen_barycentrics(screen, slot, i, j)
             if inside:
-                z_ndc = b[0] * s0[2] + b[1] * s1[2] + b[2] * s2[2]  # z_ndc is affine in screen space
+                z_ndc = float(b[0] * s0[2] + b[1] * s1[2] + b[2] * s2[2])  # z_ndc is affine in screen space
                 if z_ndc >= -1.0 and z_ndc <= 1.0:
                     depth = wp.int64((z_ndc + 1.0) * 0.5 * DEPTH_LEVELS)
                     wp.atomic_min(key, i * width + j, depth * wp.int64(4294967296) + wp.int64(slot))
@@ -261,7 +274,7 @@ def raster_kernel(row_begin: int, row_end: int, screen: wp.array2d(dtype=wp.vec4
 
 @wp.kernel
 def resolve_kernel(
-    row0: int, key: wp.array(dtype=wp.int64), screen: wp.array2d(dtype=wp.vec4), weight: wp.array2d(dtype=wp.vec3),
+    row0: int, key: wp.array(dtype=wp.int64), screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3),
     facing: wp.array(dtype=wp.int32), faces: wp.array2d(dtype=wp.int32), vertices: wp.array(dtype=wp.vec3),
     normals: wp.array(dtype=wp.vec3), uvs: wp.array(dtype=wp.vec2), face_normal: wp.array(dtype=wp.vec3),
     face_material: wp.array(dtype=wp.int32), face_object: wp.array(dtype=wp.int32),
@@ -286,10 +299,11 @@ def resolve_kernel(
     if k == NO_HIT:
         return
     slot = int(k % wp.int64(4294967296))
-    inside, b = screen_barycentrics(screen, slot, i, j)
+    inside, bd = screen_barycentrics(screen, slot, i, j)
     if perspective_correct == 1:  # b_k / w_k, renormalised
-        b = wp.vec3(b[0] * screen[slot, 0][3], b[1] * screen[slot, 1][3], b[2] * screen[slot, 2][3])
-        b = b / (b[0] + b[1] + b[2])
+        bd = wp.vec3d(bd[0] * screen[slot, 0][3], bd[1] * screen[slot, 1][3], bd[2] * screen[slot, 2][3])
+        bd = bd / (bd[0] + bd[1] + bd[2])
+    b = wp.vec3(float(bd[0]), float(bd[1]), float(bd[2]))
     wb = b[0] * weight[slot, 0] + b[1] * weight[slot, 1] + b[2] * weight[slot, 2]
     f = slot // 2
     v0 = faces[f, 0]

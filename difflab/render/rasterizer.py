@@ -6,7 +6,7 @@ import math
 import time
 
 import numpy as np
-import warp as wp
+from .._warp import wp
 
 from ..errors import RenderError
 from ..lighting.warp_model import SPECULAR_MODELS, fog_params
@@ -51,7 +51,7 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
 
     # Stages 1-3: clip space, clipping, z-buffer.
     clip = wp.empty(n_vertices, dtype=wp.vec4, device=device)
-    screen = wp.empty((2 * n_faces, 3), dtype=wp.vec4, device=device)
+    screen = wp.empty((2 * n_faces, 3), dtype=wp.vec4d, device=device)
     weight = wp.empty((2 * n_faces, 3), dtype=wp.vec3, device=device)
     facing = wp.empty(2 * n_faces, dtype=wp.int32, device=device)
     key = wp.full(n_samples, value=rk.NO_HIT, dtype=wp.int64, device=device)

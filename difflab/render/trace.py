@@ -8,7 +8,7 @@ barycentrics (u, v) of vertices 1 and 2.
 
 from __future__ import annotations
 
-import warp as wp
+from .._warp import wp
 
 from ..lighting.warp_model import MaterialW
 

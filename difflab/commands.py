@@ -1,0 +1,58 @@
+"""Subcommands of the `difflab` command line: each `add_*` registers one and sets its `func`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from .errors import DifflabError
+
+
+def run_render(args) -> int:
+    from .io import save_image
+    from .render.api import render_frame
+
+    frame = render_frame(args.scene, method=args.method, shading=args.shading, specular=args.specular,
+                         max_depth=args.max_depth, spp=args.spp, device=args.device, width=args.width,
+                         height=args.height)
+    out = Path(args.output)
+    if args.linear:
+        save_image(out.with_suffix(".npy"), frame.image)
+    save_image(out, frame.image)
+    stats = frame.stats
+    print(f"wrote {out} ({frame.image.shape[1]}x{frame.image.shape[0]}, {stats['method']}, "
+          f"{stats['seconds']:.3f} s)" + (f" and {out.with_suffix('.npy')}" if args.linear else ""))
+    if stats.get("nonfinite_pixels"):
+        raise DifflabError(f"{stats['nonfinite_pixels']} pixels are not finite")
+    return 0
+
+
+def add_render(sub) -> None:
+    p = sub.add_parser("render", help="render a scene file to an image")
+    p.add_argument("scene", help="scene JSON file")
+    p.add_argument("-o", "--output", required=True, help="output image (.png, 8-bit sRGB; or .npy linear floats)")
+    p.add_argument("--method", choices=["raster", "raytrace"])
+    p.add_argument("--shading", choices=["flat", "gouraud", "phong"])
+    p.add_argument("--specular", choices=["phong", "blinn", "torrance"])
+    p.add_argument("--width", type=int)
+    p.add_argument("--height", type=int)
+    p.add_argument("--spp", type=int, help="samples per pixel")
+    p.add_argument("--max-depth", type=int, help="ray-tree depth (ray tracer)")
+    p.add_argument("--linear", action="store_true", help="also write the linear float image as .npy")
+    p.add_argument("--device", default="cpu", help="cpu (default) or cuda")
+    p.set_defaults(func=run_render)
+
+
+def run_demo(args) -> int:
+    from .demo import run_demo as demo
+
+    demo(Path(args.output), quick=args.quick)
+    return 0
+
+
+def add_demo(sub) -> None:
+    p = sub.add_parser("demo", help="write the lecture's comparison figures to a folder")
+    p.add_argument("-o", "--output", default="difflab-demo", help="folder for the figures (default: ./difflab-demo)")
+    p.add_argument("--quick", action="store_true", help="smaller images")
+    p.set_defaults(func=run_demo)
+
+
+PARSERS = [add_render, add_demo]

@@ -1,0 +1,37 @@
+"""Shared fixtures: small scenes built as dicts in the file format."""
+
+import numpy as np
+import pytest
+
+from difflab.io import save_image
+
+
+def scene_dict(objects, materials, *, camera=None, lights=None, ambient=(0.0, 0.0, 0.0), render=None, **extra):
+    """A scene dict with an orthographic 32x32 camera looking down -z unless `camera` is given."""
+    d = {
+        "camera": camera or {"eye": [0, 0, 5], "target": [0, 0, 0], "projection": "orthographic",
+                             "ortho_height": 2.0, "width": 32, "height": 32, "near": 0.1, "far": 20},
+        "ambient": list(ambient),
+        "lights": lights or [],
+        "materials": materials,
+        "objects": objects,
+        "render": render or {},
+    }
+    d.update(extra)
+    return d
+
+
+@pytest.fixture
+def compare_images(tmp_path):
+    """Assert two images agree within `atol`; on failure write render, reference and difference PNGs."""
+
+    def check(got, want, atol, name="image"):
+        got, want = np.asarray(got), np.asarray(want)
+        err = np.abs(got - want)
+        if not np.all(err <= atol):
+            save_image(tmp_path / f"{name}_render.png", got)
+            save_image(tmp_path / f"{name}_reference.png", want)
+            save_image(tmp_path / f"{name}_difference.png", err / max(float(err.max()), 1e-12))
+            raise AssertionError(f"{name}: max error {err.max():.3g} > {atol}; images written to {tmp_path}")
+
+    return check

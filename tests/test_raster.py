@@ -1,0 +1,261 @@
+"""The rasterizer against closed forms: analytic shading, coverage, clipping, interpolation, shadows."""
+
+import math
+
+import numpy as np
+import pytest
+
+from conftest import scene_dict
+from difflab import RenderError, SceneError, render, render_frame
+from difflab.geometry import rotation_matrix
+
+SHADINGS = ["flat", "gouraud", "phong"]
+
+
+def facing_quad(material="m", size=1.5, z=0.0):
+    return {"type": "mesh", "builtin": "quad", "material": material,
+            "transform": {"rotate_deg": [90, 0, 0], "scale": size, "translate": [0, 0, z]}}
+
+
+def directional(theta_deg, intensity=0.9):
+    t = math.radians(theta_deg)
+    return {"type": "directional", "direction": [-math.sin(t), 0.0, -math.cos(t)], "intensity": [intensity] * 3}
+
+
+def textbook(ka, kd, ks, n, ia, il, theta_deg, specular="phong"):
+    """ka Ia + kd Il cos(theta) + ks Il S for a quad facing +z, viewer along +z (orthographic)."""
+    t = math.radians(theta_deg)
+    normal, l, v = np.array([0, 0, 1.0]), np.array([math.sin(t), 0, math.cos(t)]), np.array([0, 0, 1.0])
+    if normal @ l <= 0:
+        return ka * ia
+    if specular == "phong":
+        lobe = max((2 * normal * (normal @ l) - l) @ v, 0.0) ** n
+    else:
+        h = (l + v) / np.linalg.norm(l + v)
+        lobe = max(normal @ h, 0.0) ** n
+    return ka * ia + il * (kd * (normal @ l) + ks * lobe)
+
+
+@pytest.mark.parametrize("shading", SHADINGS)
+@pytest.mark.parametrize("specular", ["phong", "blinn"])
+@pytest.mark.parametrize("theta, ka, kd, ks", [(30, 0.1, 0.6, 0.4), (0, 0.1, 0.6, 0.4), (50, 0.1, 0.6, 0.0),
+                                               (40, 0.3, 0.0, 0.0), (120, 0.2, 0.6, 0.4)])
+def test_facing_quad_matches_the_textbook_value(shading, specular, theta, ka, kd, ks):
+    n = 8.0
+    material = {"ka": [ka] * 3, "kd": [kd] * 3, "ks": [ks] * 3, "n": n}
+    scene = scene_dict([facing_quad()], {"m": material}, lights=[directional(theta)], ambient=(0.5, 0.5, 0.5))
+    frame = render_frame(scene, shading=shading, specular=specular)
+    mask = frame.gbuffer.mask
+    assert mask.sum() > 0.5 * mask.size
+    want = textbook(ka, kd, ks, n, 0.5, 0.9, theta, specular)
+    np.testing.assert_allclose(frame.image[mask], want, atol=1e-5)
+    assert np.all(frame.image[~mask] == 0.0)
+
+
+def test_lambert_sphere_lit_head_on_has_cosine_falloff():
+    """Orthographic view and light along -z: a unit sphere shows kd cos(theta) = kd sqrt(1 - x^2 - y^2)."""
+    scene = scene_dict([{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "m"}],
+                       {"m": {"kd": [0.8, 0.8, 0.8]}}, lights=[directional(0, intensity=1.0)],
+                       camera={"eye": [0, 0, 5], "target": [0, 0, 0], "projection": "orthographic",
+                               "ortho_height": 2.5, "width": 64, "height": 64})
+    frame = render_frame(scene, shading="phong")
+    centres = (np.arange(64) + 0.5) / 64 * 2.5 - 1.25
+    x, y = np.meshgrid(centres, -centres)
+    r2 = x ** 2 + y ** 2
+    inner = r2 < 0.9 ** 2
+    want = 0.8 * np.sqrt(1 - r2[inner])
+    # The sphere is tessellated to half-pixel silhouette accuracy with analytic vertex normals.
+    np.testing.assert_allclose(frame.image[inner][:, 0], want, atol=2e-3)
+    assert frame.gbuffer.mask[r2 > 1.05 ** 2].sum() == 0
+
+
+def two_triangle_scene(faces, vertices, width=16):
+    return vertices, faces
+
+
+def coverage(tmp_path, vertices, faces, size=16):
+    """Render a mesh of the given triangles, one at a time and together: per-triangle coverage masks."""
+    masks = []
+    for k in range(len(faces)):
+        path = tmp_path / f"tri{k}.obj"
+        lines = [f"v {x} {y} {z}" for x, y, z in vertices] + ["f " + " ".join(str(i + 1) for i in faces[k])]
+        path.write_text("\n".join(lines) + "\n")
+        scene = scene_dict([{"type": "mesh", "file": str(path), "material": "m", "smooth": False}],
+                           {"m": {"ka": [1, 1, 1], "kd": [0, 0, 0]}}, ambient=(1, 1, 1),
+                           camera={"eye": [0, 0, 5], "target": [0, 0, 0], "projection": "orthographic",
+                                   "ortho_height": 2.0, "width": size, "height": size})
+        masks.append(render_frame(scene).gbuffer.mask)
+    return np.array(masks)
+
+
+def test_triangles_sharing_edges_cover_each_pixel_exactly_once(tmp_path):
+    """A fan of 8 triangles around a vertex at a pixel centre, with edges through pixel centres."""
+    c = 1.0 / 16  # half a pixel: (c, c) is the centre of pixel (7, 8)
+    ring = [(c + 0.9 * math.cos(a), c + 0.9 * math.sin(a), 0.0) for a in np.arange(8) * math.pi / 4]
+    vertices = [(c, c, 0.0)] + ring
+    faces = [(0, 1 + k, 1 + (k + 1) % 8) for k in range(8)]
+    masks = coverage(tmp_path, vertices, faces)
+    counts = masks.sum(axis=0)
+    assert counts.max() == 1
+    # the union is the octagon: every sample centre strictly inside it is covered once
+    centres = (np.arange(16) + 0.5) / 16 * 2 - 1
+    x, y = np.meshgrid(centres, -centres)
+    inside = np.hypot(x - c, y - c) < 0.9 * math.cos(math.pi / 8) - 1e-3
+    assert np.all(counts[inside] == 1)
+
+
+def test_back_faces_are_culled_only_on_request():
+    quad = facing_quad()
+    quad["transform"]["rotate_deg"] = [-90, 0, 0]  # now faces -z, away from the camera
+    scene = scene_dict([quad], {"m": {"ka": [1, 1, 1]}}, ambient=(1, 1, 1))
+    assert render_frame(scene).gbuffer.mask.sum() > 0
+    assert render_frame(scene, cull_backfaces=True).gbuffer.mask.sum() == 0
+
+
+def floor_scene(width=48, height=32, **render):
+    return scene_dict([{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "floor"}],
+                      {"floor": {"kd": [0.8, 0.8, 0.8], "checker": {"size": 1.0}}},
+                      camera={"eye": [0.3, 1.0, 2.0], "target": [0, 0.2, -3], "fov_y": 60, "width": width,
+                              "height": height, "near": 0.1, "far": 50},
+                      lights=[directional(30)], render=render)
+
+
+def ray_plane_hits(scene_camera, width, height):
+    """World points where each pixel-centre ray meets y = 0 (NaN where it does not)."""
+    from difflab.render.camera import camera_frame
+
+    class Cam:  # the scene's camera as a plain object
+        pass
+
+    right, up, forward = camera_frame(scene_camera)
+    tan = math.tan(math.radians(scene_camera.fov_y) / 2)
+    j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    ndc_x, ndc_y = 2 * j / width - 1, 1 - 2 * i / height
+    d = forward + ndc_x[..., None] * tan * width / height * right + ndc_y[..., None] * tan * up
+    eye = np.asarray(scene_camera.eye)
+    t = -eye[1] / d[..., 1]
+    return np.where((t > 0)[..., None], eye + t[..., None] * d, np.nan)
+
+
+@pytest.mark.parametrize("interpolation", ["perspective", "affine"])
+def test_receding_plane_positions_are_perspective_correct(interpolation):
+    """The floor crosses the near plane (clipped, not dropped): its G-buffer positions and uvs equal
+    the ray-plane intersections with perspective-correct interpolation, and differ with affine."""
+    frame = render_frame(floor_scene(interpolation=interpolation))
+    from difflab import Scene
+
+    camera = Scene.from_dict(floor_scene()).camera
+    hits = ray_plane_hits(camera, 48, 32)
+    below = ~np.isnan(hits[..., 0]) & (np.linalg.norm(hits - np.array(camera.eye), axis=-1) < 40)
+    g = frame.gbuffer
+    assert np.all(g.mask[below])
+    err = np.linalg.norm(g.position[below] - hits[below], axis=-1) / np.linalg.norm(hits[below] - camera.eye, axis=-1)
+    uv_err = np.abs(g.uv[below] - hits[below][:, [0, 2]]).max()
+    if interpolation == "perspective":
+        assert err.max() < 1e-4
+        assert uv_err < 1e-3
+    else:
+        assert err.max() > 1e-2
+
+
+def test_a_triangle_crossing_the_near_plane_is_clipped_not_dropped():
+    scene = floor_scene()
+    frame = render_frame(scene)
+    # the bottom rows look at floor points nearer than `near` would allow unclipped: still covered
+    assert frame.gbuffer.mask[-1].all()
+    assert np.all(frame.gbuffer.depth[frame.gbuffer.mask] >= 0.1 - 1e-6)
+
+
+def test_shadow_of_a_sphere_is_the_analytic_disk():
+    """Light straight down: the shadow on y = 0 is the disk x^2 + z^2 < r^2 (except one pixel at the edge)."""
+    scene = scene_dict(
+        [{"type": "sphere", "center": [0, 1.5, 0], "radius": 0.6, "material": "m"},
+         {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "m"}],
+        {"m": {"kd": [1, 1, 1]}}, lights=[{"type": "directional", "direction": [0, -1, 0]}],
+        camera={"eye": [0, 2.5, 5], "target": [0, 0, 0], "fov_y": 40, "width": 64, "height": 64})
+    g = render_frame(scene, shading="phong").gbuffer
+    on_floor = g.object == 1
+    radius = np.hypot(g.position[..., 0], g.position[..., 2])
+    vis = g.visibility[..., 0]
+    pixel = 2 * 6.0 * math.tan(math.radians(20)) / 64  # a pixel's footprint at the disk, generously
+    inside, outside = on_floor & (radius < 0.6 - pixel), on_floor & (radius > 0.6 + pixel)
+    assert inside.sum() > 20 and outside.sum() > 1000
+    assert np.all(vis[inside] == 0.0)
+    assert np.all(vis[outside] == 1.0)
+    render_no = render_frame(scene, shading="phong", shadows=False).gbuffer
+    assert np.all(render_no.visibility == 1.0)
+
+
+def test_rigid_motion_of_camera_and_scene_leaves_the_image_unchanged():
+    def scene(rotation):
+        m = np.eye(4)
+        m[:3, :3] = rotation
+        mesh = {"type": "mesh", "builtin": "teapot", "resolution": 3, "material": "m",
+                "transform": {"scale": 0.4, "matrix": m.ravel().tolist()}}
+        eye, light = rotation @ np.array([0.5, 1.5, 4.0]), rotation @ np.array([3.0, 4.0, 2.0])
+        up = rotation @ np.array([0, 1.0, 0])
+        return scene_dict([mesh], {"m": {"ka": [0.1] * 3, "kd": [0.6] * 3, "ks": [0.4] * 3, "n": 20}},
+                          camera={"eye": eye.tolist(), "target": (rotation @ np.array([0, 0.5, 0])).tolist(),
+                                  "up": up.tolist(), "fov_y": 40, "width": 48, "height": 48},
+                          lights=[{"type": "point", "position": light.tolist()}], ambient=(0.3, 0.3, 0.3))
+
+    base = render(scene(np.eye(3)))
+    moved = render(scene(rotation_matrix((1, 2, 3), 37.0)[:3, :3]))
+    differ = np.abs(base - moved).max(axis=-1) > 1e-3
+    assert differ.mean() < 0.01  # only a few edge samples may flip
+    np.testing.assert_allclose(base[~differ], moved[~differ], atol=1e-3)
+
+
+def test_renders_are_deterministic_and_independent_of_threads():
+    scene = floor_scene()
+    a = render(scene, threads=1)
+    b = render(scene, threads=2)
+    c = render(scene, threads=2)
+    assert np.array_equal(a, b) and np.array_equal(b, c)
+
+
+@pytest.mark.parametrize("mode", ["linear", "exp", "exp2"])
+def test_fog_blends_by_eye_depth(mode):
+    fog = {"mode": mode, "color": [0.2, 0.4, 0.6], "start": 1.0, "end": 9.0, "density": 0.15}
+    scene = scene_dict([facing_quad(z=-2.0)], {"m": {"ka": [1, 1, 1], "kd": [0, 0, 0]}}, ambient=(1, 1, 1), fog=fog)
+    frame = render_frame(scene)
+    z = 7.0  # eye at z = 5, quad at z = -2
+    f = {"linear": (9 - z) / 8, "exp": math.exp(-0.15 * z), "exp2": math.exp(-(0.15 * z) ** 2)}[mode]
+    want = f * 1.0 + (1 - f) * np.array([0.2, 0.4, 0.6])
+    np.testing.assert_allclose(frame.image[frame.gbuffer.mask], np.broadcast_to(want, (frame.gbuffer.mask.sum(), 3)),
+                               atol=1e-5)
+
+
+def test_supersampling_averages_a_regular_grid():
+    """A half-plane edge through a pixel column: with spp = 16 the edge pixels hold fractional coverage."""
+    quad = {"type": "mesh", "builtin": "quad", "material": "m",
+            "transform": {"rotate_deg": [90, 0, 0], "scale": 4.0, "translate": [2.0 + 0.3 / 16, 0, 0]}}
+    scene = scene_dict([quad], {"m": {"ka": [1, 1, 1], "kd": [0, 0, 0]}}, ambient=(1, 1, 1),
+                       camera={"eye": [0, 0, 5], "target": [0, 0, 0], "projection": "orthographic",
+                               "ortho_height": 2.0, "width": 16, "height": 16})
+    image = render(scene, spp=16)[..., 0]
+    # the quad covers x > 0.3/16 world units = 0.15 pixel right of the centre line (column 8 starts at x = 0)
+    np.testing.assert_allclose(image[:, 8], 1.0 - 0.15 * 16 / 16 * 1, atol=0.126)  # 4x4 grid: steps of 1/4
+    assert np.all(image[:, 9:] == 1.0) and np.all(image[:, :8] == 0.0)
+
+
+def test_gouraud_clamps_vertex_colours_only_on_request():
+    material = {"ka": [0, 0, 0], "kd": [3.0, 3.0, 3.0]}
+    scene = scene_dict([facing_quad()], {"m": material}, lights=[directional(0, 1.0)])
+    plain = render_frame(scene, shading="gouraud").image
+    clamped = render_frame(scene, shading="gouraud", clamp_vertex_colors=True).image
+    assert plain.max() == pytest.approx(3.0) and clamped.max() == pytest.approx(1.0)
+
+
+def test_bad_requests_raise_clear_errors():
+    scene = scene_dict([facing_quad()], {"m": {}})
+    with pytest.raises(RenderError, match="spp"):
+        render(scene, spp=3)
+    with pytest.raises(RenderError, match="device"):
+        render(scene, device="cuda:7")
+    with pytest.raises(SceneError, match="camera.width"):
+        render(scene, width=0)
+    with pytest.raises(RenderError, match="unknown option"):
+        render(scene, shinyness=3)
+    with pytest.raises(SceneError, match="render.shading"):
+        render(scene, shading="toon")
