@@ -55,4 +55,6 @@ def add_demo(sub) -> None:
     p.set_defaults(func=run_demo)
 
 
-PARSERS = [add_render, add_demo]
+from .fractals.command import add_parser as add_fractal  # noqa: E402
+
+PARSERS = [add_render, add_demo, add_fractal]

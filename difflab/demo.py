@@ -148,7 +148,13 @@ def materials_table(out: Path, size: int) -> list[tuple[Path, str]]:
             (table, "their ambient / diffuse / specular / total at incidence 60, 25 and 0 degrees")]
 
 
-SECTIONS = [shading_models, decomposition, materials_table]
+def fractal_gallery(out: Path, size: int) -> list[tuple[Path, str]]:
+    from .fractals.figures import gallery
+
+    return gallery(out, size)
+
+
+SECTIONS = [shading_models, decomposition, materials_table, fractal_gallery]
 
 
 def run_demo(out: Path, quick: bool = False) -> list[tuple[Path, str]]:

@@ -1,0 +1,92 @@
+"""Fractal pictures for the command line and the demo: curves drawn as figures, sets rendered."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..io import save_image
+from .cantor import cantor_staircase
+from .escape import julia, mandelbrot
+from .koch import koch_snowflake
+from .mandelbulb import mandelbulb
+from .measures import box_counting_dimension, polyline_length
+from .space_filling import hilbert, peano
+from .terrain import terrain
+from .terrain_scene import terrain_scene
+
+CURVES = ("koch", "peano", "hilbert", "cantor")
+IMAGES = ("terrain", "mandelbrot", "julia", "mandelbulb")
+KINDS = CURVES + IMAGES
+
+
+def curve_points(kind: str, order: int) -> tuple[np.ndarray, str]:
+    """The polyline of a curve fractal and a caption with its measures."""
+    if kind == "koch":
+        points = koch_snowflake(order)
+        return points, f"Koch snowflake, n = {order}: perimeter {polyline_length(points):.6g} = 3 (4/3)^{order}"
+    if kind in ("peano", "hilbert"):
+        points = (peano if kind == "peano" else hilbert)(order)
+        return points, f"{kind.capitalize()} curve, order {order}: {len(points)} cells, length {polyline_length(points):.4g}"
+    x = np.linspace(0.0, 1.0, 4097)
+    return np.stack([x, cantor_staircase(x, depth=max(order, 1))], axis=1), \
+        f"Cantor staircase, depth {order}: 1/2 on [1/3, 2/3], steps summing to 1"
+
+
+def draw_curve(kind: str, order: int, path: Path, size: int = 512) -> str:
+    """Draw a curve fractal to `path` (atomically); returns its caption (with a box-counting dimension)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..demo import save_figure
+
+    points, caption = curve_points(kind, order)
+    if kind != "cantor" and len(points) > 16:
+        caption += f", box-counting dimension {box_counting_dimension(points):.3f}"
+    fig, ax = plt.subplots(figsize=(size / 100, size / 100))
+    ax.plot(points[:, 0], points[:, 1], lw=0.8, color="#1f4e79")
+    ax.set_aspect("equal")
+    ax.set_title(caption, fontsize=7)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    save_figure(fig, Path(path))
+    return caption
+
+
+def render_set(kind: str, width: int, height: int, *, order: int = 7, seed: int = 0, hurst: float = 0.8,
+               max_iter: int = 256, device: str = "cpu") -> np.ndarray:
+    """A linear RGB image of a 2D set, the Mandelbulb, or a fractal terrain (rasterized with shadows)."""
+    if kind == "mandelbrot":
+        return mandelbrot(width, height, max_iter=max_iter, device=device)
+    if kind == "julia":
+        return julia(width, height, max_iter=max_iter, device=device)
+    if kind == "mandelbulb":
+        return mandelbulb(width, height, device=device)
+    from ..render.api import render
+
+    mesh = terrain(level=order, hurst=hurst, seed=seed)
+    with tempfile.TemporaryDirectory() as folder:
+        return render(terrain_scene(mesh, folder, width=width, height=height), device=device)
+
+
+def fractal_figure(kind: str, path: Path, width: int, height: int, **options) -> str:
+    """Write one fractal picture to `path`; returns what it shows."""
+    if kind in CURVES:
+        return draw_curve(kind, options.get("order", 4), path, size=max(width, 256))
+    save_image(path, render_set(kind, width, height, **options))
+    return f"{kind} ({width}x{height})"
+
+
+def gallery(out: Path, size: int) -> list[tuple[Path, str]]:
+    """The demo's fractal gallery: one figure per kind."""
+    orders = {"koch": 4, "peano": 3, "hilbert": 5, "cantor": 8, "terrain": 6}
+    written = []
+    for kind in KINDS:
+        path = Path(out) / f"fractal_{kind}.png"
+        caption = fractal_figure(kind, path, size, size * 3 // 4, order=orders.get(kind, 7))
+        written.append((path, caption))
+    return written

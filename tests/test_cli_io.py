@@ -1,0 +1,115 @@
+"""The command line (exit codes, outputs) and the file boundary (sRGB, atomic writes)."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from conftest import scene_dict
+from difflab import DifflabError, load_image, save_image
+from difflab.cli import main
+from difflab.io import linear_to_srgb, srgb_to_linear, write_json_atomic
+
+
+def tiny_scene(tmp_path, **changes):
+    d = scene_dict([{"type": "sphere", "center": [0, 0, 0], "radius": 0.8, "material": "m"}],
+                   {"m": {"ka": [0.1] * 3, "kd": [0.6, 0.3, 0.2], "ks": [0.3] * 3, "n": 10}},
+                   lights=[{"type": "point", "position": [2, 3, 4]}], ambient=(0.2, 0.2, 0.2))
+    d.update(changes)
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(d))
+    return path
+
+
+def test_srgb_round_trip_and_known_values():
+    x = np.linspace(0, 1, 1001)
+    np.testing.assert_allclose(srgb_to_linear(linear_to_srgb(x)), x, atol=1e-12)
+    assert linear_to_srgb(0.0031308) == pytest.approx(12.92 * 0.0031308)
+    assert srgb_to_linear(1.0) == pytest.approx(1.0)
+
+
+def test_png_and_npy_round_trip(tmp_path):
+    image = np.random.default_rng(0).uniform(0, 1, (5, 7, 3)).astype(np.float32)
+    save_image(tmp_path / "a.npy", image)
+    assert np.array_equal(load_image(tmp_path / "a.npy"), image)
+    save_image(tmp_path / "a.png", image)
+    back = load_image(tmp_path / "a.png")
+    assert back.shape == (5, 7, 3)
+    np.testing.assert_allclose(back, image, atol=0.01)  # 8-bit sRGB quantisation
+
+
+def test_non_finite_pixels_are_reported_not_hidden(tmp_path):
+    image = np.zeros((2, 2, 3), np.float32)
+    image[0, 0, 1] = np.nan
+    with pytest.raises(DifflabError, match="1 non-finite"):
+        save_image(tmp_path / "bad.png", image)
+    assert not (tmp_path / "bad.png").exists()
+
+
+def test_a_writer_failing_midway_leaves_the_old_file(tmp_path, monkeypatch):
+    target = tmp_path / "out.png"
+    save_image(target, np.full((4, 4, 3), 0.5, np.float32))
+    before = target.read_bytes()
+
+    def broken_save(self, fp, *args, **kwargs):
+        with open(fp, "wb") as f:
+            f.write(b"half a PNG")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(Image.Image, "save", broken_save)
+    with pytest.raises(OSError, match="disk full"):
+        save_image(target, np.zeros((4, 4, 3), np.float32))
+    assert target.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png"]  # no temporary left behind
+    write_json_atomic(tmp_path / "x.json", {"a": 1})
+    assert json.loads((tmp_path / "x.json").read_text()) == {"a": 1}
+
+
+def test_render_command_writes_png_and_linear_npy(tmp_path, capsys):
+    scene = tiny_scene(tmp_path)
+    out = tmp_path / "out.png"
+    assert main(["render", str(scene), "-o", str(out), "--shading", "gouraud", "--width", "24", "--height", "16",
+                 "--linear"]) == 0
+    image = load_image(tmp_path / "out.npy")
+    assert image.shape == (16, 24, 3) and image.max() > 0.1
+    with Image.open(out) as png:
+        assert png.size == (24, 16)
+    assert "wrote" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"objects": [{"type": "sphere", "center": [0, 0, 0], "radius": -1, "material": "m"}]}, "objects[0].radius"),
+    ({"objects": [{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "nope"}]}, "undefined material"),
+    ({"objects": [{"type": "mesh", "file": "missing.obj", "material": "m"}]}, "missing.obj"),
+])
+def test_bad_scene_exits_2_with_a_one_line_message(tmp_path, capsys, change, message):
+    scene = tiny_scene(tmp_path, **change)
+    assert main(["render", str(scene), "-o", str(tmp_path / "o.png")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_bad_option_exits_2(tmp_path, capsys):
+    assert main(["render", str(tiny_scene(tmp_path)), "-o", str(tmp_path / "o.png"), "--spp", "2"]) == 2
+    assert "spp" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("kind", ["koch", "cantor", "mandelbrot", "terrain"])
+def test_fractal_command(tmp_path, kind):
+    out = tmp_path / f"{kind}.png"
+    assert main(["fractal", kind, "-o", str(out), "--width", "64", "--height", "48", "--order", "3"]) == 0
+    assert out.stat().st_size > 100
+
+
+def test_demo_writes_every_figure(tmp_path):
+    """The README's main job, as a subprocess (the console entry point), at the quick size."""
+    result = subprocess.run([sys.executable, "-m", "difflab.cli", "demo", "--quick", "-o", str(tmp_path)],
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    for name in ["shading_models.png", "decomposition.png", "materials.png", "materials.csv", "fractal_koch.png"]:
+        assert (tmp_path / name).stat().st_size > 100, name
+        assert name in result.stdout
