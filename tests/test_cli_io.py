@@ -64,6 +64,7 @@ def test_a_writer_failing_midway_leaves_the_old_file(tmp_path, monkeypatch):
         save_image(target, np.zeros((4, 4, 3), np.float32))
     assert target.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png"]  # no temporary left behind
+    assert target.stat().st_mode & 0o044  # readable by others, like a plain open() would make it
     write_json_atomic(tmp_path / "x.json", {"a": 1})
     assert json.loads((tmp_path / "x.json").read_text()) == {"a": 1}
 
