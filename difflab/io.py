@@ -17,6 +17,9 @@ from PIL import Image
 
 from .errors import DifflabError
 
+_UMASK = os.umask(0o022)  # read the process umask once (setting it is not thread-safe), then restore it
+os.umask(_UMASK)
+
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     """IEC 61966-2-1 decoding: c/12.92 for c <= 0.04045, else ((c + 0.055)/1.055)^2.4 (c in [0, 1])."""
@@ -40,9 +43,7 @@ def atomic_path(path: str | os.PathLike):
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
     os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
+    os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
     try:
         yield Path(tmp)
         os.replace(tmp, path)

@@ -3,7 +3,7 @@
 The rasterizer uses these for shadow rays; the ray tracer for everything. A hit records its distance
 t along the unit ray, what was hit (kind, index, object, material), the geometric normal (as stored:
 outward for spheres, the plane's normal, the triangle's winding normal) and the triangle's
-barycentrics (u, v) of vertices 1 and 2.
+barycentrics in Warp's `mesh_query_ray` convention: p = u p0 + v p1 + (1 - u - v) p2.
 """
 
 from __future__ import annotations
@@ -11,6 +11,8 @@ from __future__ import annotations
 from .._warp import wp
 
 from ..lighting.warp_model import MaterialW
+
+wp.set_module_options({"enable_backward": False})
 
 HIT_NONE, HIT_TRIANGLE, HIT_SPHERE, HIT_PLANE = 0, 1, 2, 3
 MAX_SHADOW_CROSSINGS = 16  # transparent surfaces a shadow ray may pass through before it counts as blocked
@@ -76,6 +78,24 @@ def ray_plane(origin: wp.vec3, direction: wp.vec3, point: wp.vec3, normal: wp.ve
     if t > t_min:
         return t
     return -1.0
+
+
+@wp.func
+def ray_triangle(origin: wp.vec3, direction: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3):
+    """Moller-Trumbore: (t, b1, b2) with origin + t direction = (1 - b1 - b2) a + b1 b + b2 c, or
+    t = -1 when the ray is parallel to the triangle's plane. The caller tests the barycentrics."""
+    e1 = b - a
+    e2 = c - a
+    pvec = wp.cross(direction, e2)
+    det = wp.dot(e1, pvec)
+    if wp.abs(det) < 1.0e-30:
+        return -1.0, 0.0, 0.0
+    inv_det = 1.0 / det
+    tvec = origin - a
+    b1 = wp.dot(tvec, pvec) * inv_det
+    qvec = wp.cross(tvec, e1)
+    b2 = wp.dot(direction, qvec) * inv_det
+    return wp.dot(e2, qvec) * inv_det, b1, b2
 
 
 @wp.func
