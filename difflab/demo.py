@@ -154,7 +154,14 @@ def fractal_gallery(out: Path, size: int) -> list[tuple[Path, str]]:
     return gallery(out, size)
 
 
-SECTIONS = [shading_models, decomposition, materials_table, fractal_gallery]
+def ray_tracing(out: Path, size: int) -> list[tuple[Path, str]]:
+    """The ray tracer's figures (depth series 1..7, glass with total internal reflection)."""
+    from .render.rt_demo import ray_tracing as section
+
+    return section(out, size)
+
+
+SECTIONS = [shading_models, decomposition, materials_table, fractal_gallery, ray_tracing]
 
 
 def run_demo(out: Path, quick: bool = False) -> list[tuple[Path, str]]:

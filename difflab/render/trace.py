@@ -169,3 +169,24 @@ def light_visibility(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: 
         if remaining <= 0.0:
             return visibility
     return 0.0
+
+
+@wp.func
+def count_shadow_crossings(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: wp.vec3, l: wp.vec3,
+                           distance: float, ignore_object: int, crossings: wp.array3d(dtype=wp.int32), k: int,
+                           q: int):
+    """Walk `light_visibility`'s transparent shadow ray again, adding 1 to crossings[k, q, material] for
+    every transparent surface it crosses, so that its visibility prod(kt) can be re-evaluated for new kt."""
+    origin = p
+    remaining = distance
+    for crossing in range(MAX_SHADOW_CROSSINGS):
+        hit = closest_hit(geom, origin, l, 0.0, remaining, ignore_object)
+        if hit.kind == HIT_NONE:
+            return
+        if materials[hit.material].kt <= 0.0:
+            return
+        crossings[k, q, hit.material] = crossings[k, q, hit.material] + 1
+        origin = origin + (hit.t + geom.epsilon) * l
+        remaining = remaining - hit.t - geom.epsilon
+        if remaining <= 0.0:
+            return

@@ -1,0 +1,245 @@
+"""The Whitted ray tracer's driver: sample points -> ray trees (`rt_kernels`) -> Frame.
+
+    frame = raytrace(compile_scene(scene), scene.render)
+
+Supersampling (`spp` = side^2, a perfect square) places side x side samples in every pixel:
+"grid" at the centres of a regular side x side subdivision, (j + (b + 0.5) / side, i + (a + 0.5) /
+side) for sub-sample (a, b) of pixel (i, j) -- the rasterizer's sample grid; "stratified" one
+sample uniformly inside each of those cells, drawn once from numpy's PCG64 seeded with
+STRATIFIED_SEED (the same pattern on every render). The pixel is the mean of its samples.
+
+The trace runs in two passes when the ray tree is recorded: the first renders the image and counts
+every sample's nodes, the second (sized exactly from those counts) walks the same trees again and
+writes them. Per-pixel launches are split into row bands on all cores (`launch.launch_rows`); every
+output element is written by one thread, so renders are bitwise deterministic.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from ..errors import RenderError
+from ..lighting.warp_model import SPECULAR_MODELS, fog_params
+from ..scene import MAX_PIXELS
+from .camera import camera_struct
+from .frame import Frame, box_downsample
+from .launch import launch_rows
+from .rt_itembuffer import item_buffer, item_struct
+from .rt_kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, MeshDataW, TraceParamsW, \
+    TreeW, whitted_kernel
+from .rt_optics import FRESNEL_MODES
+from .rt_tree import RayTree
+
+STRATIFIED_SEED = 20240917
+MAX_TREE_BYTES = 4 * 1024 ** 3  # recorded trees larger than this are refused (render with record_tree=False)
+
+
+@dataclass(frozen=True)
+class Traced:
+    """What one launch over an array of sample points returns (numpy, on the points' grid)."""
+
+    color: np.ndarray  # (rows, cols, 3) float32
+    fog: np.ndarray  # (rows, cols) float32
+    node_count: np.ndarray  # (rows, cols) int32
+    rays: dict  # primary / shadow / reflection / refraction -> count
+    depth_histogram: list  # rays traced at depth 1, 2, ...
+    tree: RayTree | None
+
+
+def spp_side(spp: int) -> int:
+    """Side of the side x side sample pattern; spp must be a perfect square."""
+    side = math.isqrt(spp) if isinstance(spp, int) and spp >= 1 else 0
+    if side * side != spp or side == 0:
+        raise RenderError(f"spp: the ray tracer samples a side x side pattern per pixel, so spp must be a "
+                          f"perfect square (1, 4, 9, 16, ...), got {spp!r}")
+    return side
+
+
+def sample_points(width: int, height: int, side: int, sampling: str = "grid") -> np.ndarray:
+    """Raster positions (H*side, W*side, 2) float32 (x, y) of the supersampling pattern (see module doc)."""
+    rows, cols = height * side, width * side
+    if sampling == "grid":
+        jx = np.full((rows, cols), 0.5)
+        jy = np.full((rows, cols), 0.5)
+    elif sampling == "stratified":
+        rng = np.random.default_rng(STRATIFIED_SEED)
+        jx, jy = rng.random((rows, cols)), rng.random((rows, cols))
+    else:
+        raise RenderError(f"sampling: expected 'grid' or 'stratified', got {sampling!r}")
+    x = (np.arange(cols)[None, :] + jx) / side
+    y = (np.arange(rows)[:, None] + jy) / side
+    return np.stack([x, y], axis=-1).astype(np.float32)
+
+
+def trace_params(scene, settings, record: bool) -> TraceParamsW:
+    params = TraceParamsW()
+    params.max_depth = int(settings.max_depth)
+    params.shadows = int(settings.shadows)
+    params.transparent = int(settings.transparent_shadows)
+    params.specular = SPECULAR_MODELS[settings.specular]
+    params.fresnel = FRESNEL_MODES[settings.fresnel]
+    params.threshold = float(settings.adaptive_threshold)
+    params.ambient = wp.vec3(*scene.ambient)
+    params.background = wp.vec3(*scene.background)
+    params.far = float(scene.camera.far)
+    fog = fog_params(scene.fog)
+    params.fog_mode, params.fog_color = fog[0], wp.vec3(*fog[1])
+    params.fog_start, params.fog_end, params.fog_density = fog[2], fog[3], fog[4]
+    params.record = int(record)
+    params.count_crossings = int(record and count_crossings(scene, settings))
+    return params
+
+
+def count_crossings(scene, settings) -> bool:
+    """Whether shadow rays can cross transparent surfaces (their kt then enters the visibility)."""
+    return bool(settings.shadows and settings.transparent_shadows and any(m.kt > 0 for m in scene.materials.values()))
+
+
+def mesh_data(compiled) -> MeshDataW:
+    out = MeshDataW()
+    out.normals = compiled.arrays["normals"]
+    out.faces = compiled.arrays["faces"]
+    return out
+
+
+def empty_tree(shape: tuple[int, int], n_nodes: int, n_lights: int, device: str, n_materials: int = 0) -> TreeW:
+    """Device arrays for n_nodes nodes (at least one element each, so that Warp accepts them);
+    `crossings` has a material axis of n_materials (1 when not recorded)."""
+    n, p = max(n_nodes, 1), max(n_lights, 1)
+    tree = TreeW()
+    tree.offset = wp.zeros(shape, dtype=wp.int32, device=device)
+    for name in ("sample", "parent", "kind", "depth", "material", "object", "face", "cell", "medium"):
+        setattr(tree, name, wp.zeros(n, dtype=wp.int32, device=device))
+    for name in ("distance", "fresnel", "fresnel_r", "fresnel_t"):
+        setattr(tree, name, wp.zeros(n, dtype=float, device=device))
+    for name in ("position", "normal", "view", "local"):
+        setattr(tree, name, wp.zeros(n, dtype=wp.vec3, device=device))
+    tree.light_dir = wp.zeros((n, p), dtype=wp.vec3, device=device)
+    tree.light_dist = wp.zeros((n, p), dtype=float, device=device)
+    tree.visibility = wp.zeros((n, p), dtype=float, device=device)
+    tree.crossings = wp.zeros((n, p, n_materials) if n_materials else (1, 1, 1), dtype=wp.int32, device=device)
+    return tree
+
+
+def node_bytes(n_lights: int) -> int:
+    return 9 * 4 + 4 * 4 + 4 * 12 + n_lights * 20
+
+
+def trace_points(compiled, settings, points: np.ndarray, threads: int | None = None, *, record: bool = False,
+                 item=None, pixel_size: tuple[int, int] | None = None) -> Traced:
+    """Trace one ray tree per raster point of `points` (rows, cols, 2), in pixels of the camera's
+    image (or of `pixel_size` = (width, height)). `item`: an `ItemBufferW` on the same grid."""
+    scene, device = compiled.scene, compiled.device
+    rows, cols = points.shape[:2]
+    width, height = pixel_size or (scene.camera.width, scene.camera.height)
+    cam = camera_struct(scene.camera, width, height)
+    n_lights = len(scene.lights)
+    shape = (rows, cols)
+    wp_points = wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec2, device=device)
+    item = item if item is not None else item_struct(compiled)
+    geom, mesh = compiled.geom, mesh_data(compiled)
+
+    def launch(params, tree):
+        color = wp.zeros(shape, dtype=wp.vec3, device=device)
+        fog = wp.zeros(shape, dtype=float, device=device)
+        count = wp.zeros(shape, dtype=wp.int32, device=device)
+        rays = wp.zeros((rows, 4), dtype=wp.int32, device=device)
+        hist = wp.zeros((rows, settings.max_depth), dtype=wp.int32, device=device)
+        launch_rows(whitted_kernel, shape, [wp_points, cam, geom, mesh, compiled.lights, compiled.materials, params,
+                                            item, tree, color, fog, count, rays, hist], device, threads)
+        return color, fog, count, rays, hist
+
+    color, fog, count, rays, hist = launch(trace_params(scene, settings, False), empty_tree(shape, 0, 0, device))
+    counts = count.numpy()
+    ray_counts = rays.numpy().astype(np.int64).sum(axis=0)
+    stats_rays = {"primary": int(ray_counts[COUNT_PRIMARY]), "shadow": int(ray_counts[COUNT_SHADOW]),
+                  "reflection": int(ray_counts[COUNT_REFLECTED]), "refraction": int(ray_counts[COUNT_REFRACTED])}
+    histogram = [int(h) for h in hist.numpy().astype(np.int64).sum(axis=0)]
+    tree = None
+    if record:
+        offsets = np.zeros(rows * cols + 1, np.int64)
+        np.cumsum(counts.ravel(), out=offsets[1:])
+        n_nodes = int(offsets[-1])
+        if n_nodes >= 2 ** 31 or n_nodes * node_bytes(n_lights) > MAX_TREE_BYTES:
+            raise RenderError(f"record_tree: the ray tree has {n_nodes} nodes, over the memory budget of "
+                              f"{MAX_TREE_BYTES // 1024 ** 3} GiB; render with record_tree=False or fewer samples")
+        crossings = count_crossings(scene, settings)
+        wp_tree = empty_tree(shape, n_nodes, n_lights, device, len(scene.materials) if crossings else 0)
+        wp_tree.offset = wp.array(offsets[:-1].reshape(shape).astype(np.int32), dtype=wp.int32, device=device)
+        launch(trace_params(scene, settings, True), wp_tree)
+        tree = tree_to_numpy(wp_tree, n_nodes, n_lights, offsets, fog.numpy(), scene, settings, points.shape[:2],
+                             crossings)
+    return Traced(color=color.numpy(), fog=fog.numpy(), node_count=counts, rays=stats_rays,
+                  depth_histogram=histogram, tree=tree)
+
+
+def tree_to_numpy(wp_tree: TreeW, n_nodes: int, n_lights: int, offsets, fog, scene, settings, grid,
+                  crossings: bool) -> RayTree:
+    def get(name):
+        return getattr(wp_tree, name).numpy()[:n_nodes]
+
+    n_materials = len(scene.materials)
+    if crossings:
+        crossed = get("crossings")[:, :n_lights].astype(np.uint8)  # at most MAX_SHADOW_CROSSINGS each
+    else:
+        crossed = np.zeros((n_nodes, n_lights, n_materials), np.uint8)
+
+    side = grid[0] // scene.camera.height
+    return RayTree(
+        image_shape=(scene.camera.height, scene.camera.width), grid_shape=tuple(grid), spp_side=side,
+        material_names=tuple(scene.material_names), specular=settings.specular, fresnel_mode=settings.fresnel,
+        max_depth=int(settings.max_depth), sample_offset=offsets, sample_fog=fog.ravel().astype(np.float32),
+        fog_color=np.asarray(fog_params(scene.fog)[1], np.float32),
+        **{name: get(name) for name in ("sample", "parent", "kind", "depth", "material", "object", "face", "cell",
+                                        "medium", "distance", "position", "normal", "view", "fresnel", "fresnel_r",
+                                        "fresnel_t", "local")},
+        light_dir=get("light_dir")[:, :n_lights], light_dist=get("light_dist")[:, :n_lights],
+        visibility=get("visibility")[:, :n_lights], crossings=crossed,
+    )
+
+
+def raytrace(compiled, settings, threads: int | None = None, *, record_tree: bool = True,
+             use_item_buffer: bool = False) -> Frame:
+    """Ray-trace a compiled scene under `settings` (a scene `RenderSettings`).
+
+    Arguments:
+        compiled: `compile_scene(scene, device)`.
+        settings: max_depth, spp (a perfect square), sampling, fresnel, shadows, transparent_shadows,
+            specular, adaptive_threshold are used.
+        threads: CPU worker threads (default: all cores, or $DIFFLAB_THREADS).
+        record_tree: also record the ray tree (a second pass over the same trees).
+        use_item_buffer: primary visibility from the rasterizer's z-buffer (`rt_itembuffer`); needs
+            "grid" sampling, whose samples are the rasterizer's.
+
+    Returns: a `Frame` with `image` (H, W, 3) float32 linear RGB, `gbuffer` None, `ray_tree` (a
+    `RayTree` or None) and `stats`: rays traced per kind, `depth_histogram` (rays per depth, from
+    1), `nodes`, `seconds`, `rays_per_second`, `nonfinite_pixels`.
+    """
+    scene = compiled.scene
+    side = spp_side(settings.spp)
+    width, height = scene.camera.width, scene.camera.height
+    if width * height * side * side > MAX_PIXELS:
+        raise RenderError(f"spp: {width}x{height} pixels at spp={settings.spp} is {width * height * side * side} "
+                          f"samples, over the budget of {MAX_PIXELS}")
+    if use_item_buffer and settings.sampling != "grid":
+        raise RenderError(f"sampling: the item buffer holds the rasterizer's regular sample grid; it needs "
+                          f"sampling 'grid', got {settings.sampling!r}")
+    start = time.perf_counter()
+    points = sample_points(width, height, side, settings.sampling)
+    item = item_buffer(compiled, width * side, height * side, threads) if use_item_buffer else None
+    traced = trace_points(compiled, settings, points, threads, record=record_tree, item=item)
+    image = box_downsample(traced.color, side)
+    seconds = time.perf_counter() - start
+    total_rays = sum(traced.rays.values())
+    stats = {"method": "raytrace", "seconds": seconds, "samples": int(points.shape[0] * points.shape[1]),
+             "spp": settings.spp, "sampling": settings.sampling, "max_depth": settings.max_depth,
+             "rays": dict(traced.rays), "total_rays": total_rays, "rays_per_second": total_rays / max(seconds, 1e-9),
+             "depth_histogram": traced.depth_histogram, "nodes": int(traced.node_count.sum()),
+             "item_buffer": bool(use_item_buffer), "recorded_tree": bool(record_tree),
+             "nonfinite_pixels": int(np.count_nonzero(~np.isfinite(image).all(axis=-1)))}
+    return Frame(image=image, gbuffer=None, stats=stats, ray_tree=traced.tree)
