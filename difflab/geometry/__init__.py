@@ -8,6 +8,7 @@
 - transforms: `transform_matrix` (M = matrix @ T @ Rz @ Ry @ Rx @ S), `rotation_matrix`,
   `translation_matrix`, `scale_matrix`, `apply_to_points`, `apply_to_normals`
 - files: `load_mesh` (OBJ, PLY via trimesh)
+- uv projection: `planar_uv`, `spherical_uv`, `cylindrical_uv`, `project_uvs`
 """
 
 from .loading import load_mesh
@@ -15,6 +16,7 @@ from .mesh import TriMesh, concatenate, weld
 from .normals import degenerate_faces, face_areas, face_normals, vertex_normals
 from .primitives import box, cylinder, quad, uv_sphere
 from .teapot import teapot, teapot_control_points, teapot_patches
+from .uv_projection import cylindrical_uv, planar_uv, project_uvs, spherical_uv
 from .transforms import (apply_to_normals, apply_to_points, rotation_matrix, scale_matrix,
                          transform_matrix, translation_matrix)
 
@@ -26,4 +28,5 @@ __all__ = [
     "transform_matrix", "rotation_matrix", "translation_matrix", "scale_matrix",
     "apply_to_points", "apply_to_normals",
     "load_mesh",
+    "planar_uv", "spherical_uv", "cylindrical_uv", "project_uvs",
 ]

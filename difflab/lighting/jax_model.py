@@ -26,6 +26,8 @@ from .warp_model import (
     LIGHT_KINDS,
     PHONG,
     SPOT,
+    TARGET_KA,
+    TARGET_KD,
 )
 
 
@@ -128,6 +130,19 @@ def light_term(light: LightsJ, mat: MaterialJ, model: int, normal, v, l, d):
 def ambient_term(mat: MaterialJ, ambient):
     """ka * Ia, per channel."""
     return mat.ka * ambient
+
+
+def textured_material(mat: MaterialJ, target: int, value) -> MaterialJ:
+    """The material with coefficient `target` (TARGET_KA / KD / KS, a Python int) replaced by
+    `value` (texels, broadcastable to (..., 3))."""
+    name = "ka" if target == TARGET_KA else "kd" if target == TARGET_KD else "ks"
+    return mat._replace(**{name: value})
+
+
+def target_only(mat: MaterialJ, target: int) -> MaterialJ:
+    """The material with every coefficient 0 but `target`, which is 1 (the factor it multiplies)."""
+    zero = jnp.zeros_like(jnp.asarray(mat.kd))
+    return textured_material(mat._replace(ka=zero, kd=zero, ks=zero), target, jnp.ones_like(zero))
 
 
 def fog_factor(mode: int, z, start, end, density):

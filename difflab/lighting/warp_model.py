@@ -30,6 +30,11 @@ PHONG, BLINN, TORRANCE = 0, 1, 2
 SPECULAR_MODELS = {"phong": PHONG, "blinn": BLINN, "torrance": TORRANCE}
 FOG_NONE, FOG_LINEAR, FOG_EXP, FOG_EXP2 = 0, 1, 2, 3
 FOG_MODES = {"none": FOG_NONE, "linear": FOG_LINEAR, "exp": FOG_EXP, "exp2": FOG_EXP2}
+# Image textures (render/texture.py samples them): ids of the scene's filter, wrap and target names.
+TEXTURE_FILTER_IDS = {"nearest": 0, "bilinear": 1, "mipmap": 2, "trilinear": 3, "ewa": 4}
+TEXTURE_WRAP_IDS = {"repeat": 0, "clamp": 1, "mirror": 2}
+TARGET_KA, TARGET_KD, TARGET_KS = 0, 1, 2
+TEXTURE_TARGET_IDS = {"ka": TARGET_KA, "kd": TARGET_KD, "ks": TARGET_KS}
 # Below this N.H the Beckmann distribution is exp(-tan^2/m^2) ~ 0; evaluating it would give 0/0.
 BECKMANN_MIN_COS = 1.0e-3
 
@@ -64,6 +69,10 @@ class MaterialW:
     checker_size: float  # 0: no checker
     ka2: wp.vec3
     kd2: wp.vec3
+    texture: int  # index into the scene's textures, -1: none
+    texture_filter: int  # TEXTURE_FILTER_IDS
+    texture_wrap: int  # TEXTURE_WRAP_IDS
+    texture_target: int  # TARGET_KA / TARGET_KD / TARGET_KS: the coefficient the texture replaces
 
 
 @wp.func
@@ -154,6 +163,30 @@ def surface_material(mat: MaterialW, cell: int):
 
 
 @wp.func
+def textured_material(mat: MaterialW, target: int, value: wp.vec3):
+    """The material with coefficient `target` (TARGET_KA / KD / KS) replaced by `value` (a texel)."""
+    out = mat
+    if target == TARGET_KA:
+        out.ka = value
+    elif target == TARGET_KD:
+        out.kd = value
+    else:
+        out.ks = value
+    return out
+
+
+@wp.func
+def target_only(mat: MaterialW, target: int):
+    """The material with every coefficient 0 but `target`, which is 1: lit, it gives the factor the
+    target coefficient multiplies (the model is linear in ka, kd and ks)."""
+    out = mat
+    out.ka = wp.vec3(0.0)
+    out.kd = wp.vec3(0.0)
+    out.ks = wp.vec3(0.0)
+    return textured_material(out, target, wp.vec3(1.0))
+
+
+@wp.func
 def fog_factor(mode: int, z: float, start: float, end: float, density: float):
     """OpenGL fog blend f in [0, 1] at eye distance z: linear (end-z)/(end-start), exp e^(-density z),
     exp2 e^(-(density z)^2); the fogged colour is f C + (1 - f) C_fog."""
@@ -180,8 +213,9 @@ def light_struct(light) -> LightW:
     return out
 
 
-def material_struct(mat) -> MaterialW:
-    """A `MaterialW` from a scene `Material`."""
+def material_struct(mat, texture_id: int = -1) -> MaterialW:
+    """A `MaterialW` from a scene `Material`; `texture_id` indexes the scene's textures (the
+    material's texture is used only when it has one and texture_id >= 0)."""
     out = MaterialW()
     out.ka, out.kd, out.ks = wp.vec3(*mat.ka), wp.vec3(*mat.kd), wp.vec3(*mat.ks)
     out.n, out.m, out.f0 = float(mat.n), float(mat.m), float(mat.f0)
@@ -191,6 +225,10 @@ def material_struct(mat) -> MaterialW:
     out.checker_size = float(checker.size) if checker is not None else 0.0
     out.ka2 = wp.vec3(*(checker.ka2 if checker is not None else mat.ka))
     out.kd2 = wp.vec3(*(checker.kd2 if checker is not None else mat.kd))
+    out.texture = int(texture_id) if getattr(mat, "texture", None) is not None else -1
+    out.texture_filter = TEXTURE_FILTER_IDS[getattr(mat, "filter", "bilinear")]
+    out.texture_wrap = TEXTURE_WRAP_IDS[getattr(mat, "wrap", "repeat")]
+    out.texture_target = TEXTURE_TARGET_IDS[getattr(mat, "texture_target", "kd")]
     return out
 
 
@@ -200,9 +238,12 @@ def lights_to_warp(lights, device: str) -> wp.array:
     return wp.array(structs, dtype=LightW, device=device) if structs else wp.empty(0, dtype=LightW, device=device)
 
 
-def materials_to_warp(materials, device: str) -> wp.array:
-    """Scene materials (in order) as a Warp array of `MaterialW`, indexed by material id."""
-    structs = [material_struct(mat) for mat in materials]
+def materials_to_warp(materials, device: str, texture_ids=None) -> wp.array:
+    """Scene materials (in order) as a Warp array of `MaterialW`, indexed by material id.
+    `texture_ids`: per material its texture's index in the scene's textures (-1 or None: none)."""
+    materials = list(materials)
+    ids = [-1] * len(materials) if texture_ids is None else [(-1 if t is None else t) for t in texture_ids]
+    structs = [material_struct(mat, t) for mat, t in zip(materials, ids)]
     if not structs:
         structs = [MaterialW()]
     return wp.array(structs, dtype=MaterialW, device=device)

@@ -21,6 +21,7 @@ from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Sphere
 from .camera import camera_frame, pixel_size_at
 from .launch import resolve_device
+from .texture_store import TextureStore, scene_textures
 from .trace import SceneGeomW
 
 RAY_EPSILON_SCALE = 1e-4  # ray offset = this x the scene's extent (bounding-box diagonal, at least 1)
@@ -52,6 +53,7 @@ class CompiledScene:
     lights: wp.array
     materials: wp.array
     bvh: wp.Mesh | None
+    textures: TextureStore | None = None  # every material's image texture; `textures.warp` for kernels
 
 
 def object_mesh(obj, base_dir=None) -> geometry.TriMesh:
@@ -219,11 +221,13 @@ def compile_scene(scene, device: str = "cpu", sample_height: int | None = None) 
     geom.plane_material = arr(np.array([m for _, m, _ in planes], np.int32), wp.int32)
     geom.plane_object = arr(np.array([o for _, _, o in planes], np.int32), wp.int32)
     geom.epsilon = float(epsilon)
+    ordered = [scene.materials[name] for name in names]
+    textures, texture_ids = scene_textures(ordered, device)
     return CompiledScene(
         scene=scene, device=device, vertices=vertices, normals=normals, uvs=uvs, faces=faces,
         face_material=face_material, face_object=face_object, face_normal=face_normal,
         n_mesh_faces=n_mesh_faces, epsilon=epsilon, arrays=arrays, geom=geom,
         lights=lights_to_warp(scene.lights, device),
-        materials=materials_to_warp([scene.materials[name] for name in names], device),
-        bvh=bvh,
+        materials=materials_to_warp(ordered, device, texture_ids),
+        bvh=bvh, textures=textures,
     )

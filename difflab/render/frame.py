@@ -21,7 +21,12 @@ class ShadingPoints:
     position, normal (unit, facing the viewer), view (unit, to the viewer): (N, 3) float32;
     material: (N,) int32 (-1: nothing); cell: (N,) int32 checker cell; light_dir: (N, P, 3) unit
     direction to each light; light_dist: (N, P) (inf for directional lights); visibility: (N, P) in
-    [0, 1] from shadow rays; color: (N, 3) the Warp model's radiance."""
+    [0, 1] from shadow rays; color: (N, 3) the Warp model's radiance.
+
+    Textures under flat and Gouraud shading: a textured material's point `color` is lit with the
+    texture's target coefficient set to 0, and `texture_factor` (N, 3) is what that coefficient
+    multiplies (the point lit with it 1 and the other coefficients 0); each sample then adds its own
+    texel times the interpolated factor (see `GBuffer`). Zero elsewhere (and always under Phong)."""
 
     position: np.ndarray
     normal: np.ndarray
@@ -32,6 +37,7 @@ class ShadingPoints:
     light_dist: np.ndarray
     visibility: np.ndarray
     color: np.ndarray
+    texture_factor: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -42,6 +48,15 @@ class GBuffer:
     position, normal: (.., 3) world-space surface point and shading normal; uv: (.., 2);
     material, object, face: int32 ids (-1 where empty); bary: (.., 3) weights of the face's vertices;
     point_index (.., 3) int32 and point_weight (.., 3): which shading points make the sample's colour.
+    duv_dx, duv_dy (.., 2): the exact screen-space derivatives of the interpolated uv per sample step
+    (the Jacobian columns texture filtering uses); texture (.., 3): the filtered texel at each sample
+    of a textured material (0 elsewhere).
+
+    A sample of a textured material (texture replacing its `texture_target` coefficient) is
+    - Phong: shaded with the coefficient replaced by `texture` at that sample (its own point);
+    - flat / Gouraud (OpenGL-style per-fragment texturing): sum_k w_k color_k + texture *
+      sum_k w_k texture_factor_k (each term clamped to [0, 1] first when `clamp_vertex_colors`),
+      i.e. the target term's lighting is interpolated and the texture modulates it per sample.
     """
 
     mask: np.ndarray
@@ -63,6 +78,9 @@ class GBuffer:
     background: np.ndarray
     clamp_vertex_colors: bool
     fog: tuple  # (mode, color, start, end, density) as `lighting.warp_model.fog_params`
+    duv_dx: np.ndarray | None = None
+    duv_dy: np.ndarray | None = None
+    texture: np.ndarray | None = None
 
     @property
     def light_dir(self) -> np.ndarray:

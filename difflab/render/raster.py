@@ -25,8 +25,10 @@ from __future__ import annotations
 
 from .._warp import wp
 
-from ..lighting.warp_model import LightW, MaterialW, ambient_term, checker_cell, fog_factor, light_term, light_vector
+from ..lighting.warp_model import (LightW, MaterialW, ambient_term, checker_cell, fog_factor, light_term, light_vector,
+                                   target_only, textured_material)
 from .camera import CameraW, view_direction
+from .texture import TexturesW, sample_texture
 from .trace import SceneGeomW, light_visibility
 
 wp.set_module_options({"enable_backward": False})
@@ -50,6 +52,9 @@ class PointsW:
     material: wp.array(dtype=wp.int32)  # -1: nothing here
     cell: wp.array(dtype=wp.int32)  # checker cell 0 / 1
     ignore: wp.array(dtype=wp.int32)  # object shadow rays skip (convex analytic surfaces), else -1
+    uv: wp.array(dtype=wp.vec2)  # texture coordinates (samples only; zero at flat / Gouraud points)
+    duv_dx: wp.array(dtype=wp.vec2)  # d(uv)/dx, d(uv)/dy per sample of the sample grid (samples only)
+    duv_dy: wp.array(dtype=wp.vec2)
 
 
 @wp.kernel
@@ -247,6 +252,51 @@ def screen_barycentrics(screen: wp.array2d(dtype=wp.vec4d), slot: int, i: int, j
     return inside, wp.vec3d(e0 / area, e1 / area, e2 / area)
 
 
+@wp.func
+def vertex_uv(weight: wp.array2d(dtype=wp.vec3), slot: int, k: int, uv0: wp.vec2, uv1: wp.vec2, uv2: wp.vec2):
+    """uv at corner k of screen triangle `slot` (a clipped corner carries original-triangle weights)."""
+    w = weight[slot, k]
+    return w[0] * uv0 + w[1] * uv1 + w[2] * uv2
+
+
+@wp.func
+def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3), slot: int, i: int, j: int,
+                   perspective_correct: int, uv0: wp.vec2, uv1: wp.vec2, uv2: wp.vec2):
+    """Exact d(uv)/dx and d(uv)/dy at sample (i, j) of the interpolation the resolve stage uses.
+
+    Screen barycentrics b_k are affine in (x, y); perspective-correct ones are B_k = c_k / S with
+    c_k = b_k / w_k and S = sum c_k, so dB_k = (dc_k - B_k dS) / S (quotient rule); uv = sum B_k uv_k."""
+    s0 = screen[slot, 0]
+    s1 = screen[slot, 1]
+    s2 = screen[slot, 2]
+    cx = wp.float64(j) + wp.float64(0.5)
+    cy = wp.float64(i) + wp.float64(0.5)
+    e0 = (s2[0] - s1[0]) * (cy - s1[1]) - (s2[1] - s1[1]) * (cx - s1[0])
+    e1 = (s0[0] - s2[0]) * (cy - s2[1]) - (s0[1] - s2[1]) * (cx - s2[0])
+    e2 = (s1[0] - s0[0]) * (cy - s0[1]) - (s1[1] - s0[1]) * (cx - s0[0])
+    area = e0 + e1 + e2
+    if area == wp.float64(0.0):
+        return wp.vec2(0.0), wp.vec2(0.0)
+    b = wp.vec3d(e0, e1, e2) / area
+    db_dx = wp.vec3d(s1[1] - s2[1], s2[1] - s0[1], s0[1] - s1[1]) / area
+    db_dy = wp.vec3d(s2[0] - s1[0], s0[0] - s2[0], s1[0] - s0[0]) / area
+    if perspective_correct == 1:
+        q = wp.vec3d(s0[3], s1[3], s2[3])  # 1 / w per corner
+        c = wp.cw_mul(b, q)
+        total = c[0] + c[1] + c[2]
+        big_b = c / total
+        dc_dx = wp.cw_mul(db_dx, q)
+        dc_dy = wp.cw_mul(db_dy, q)
+        db_dx = (dc_dx - big_b * (dc_dx[0] + dc_dx[1] + dc_dx[2])) / total
+        db_dy = (dc_dy - big_b * (dc_dy[0] + dc_dy[1] + dc_dy[2])) / total
+    ua = vertex_uv(weight, slot, 0, uv0, uv1, uv2)
+    ub = vertex_uv(weight, slot, 1, uv0, uv1, uv2)
+    uc = vertex_uv(weight, slot, 2, uv0, uv1, uv2)
+    dx = wp.vec3(float(db_dx[0]), float(db_dx[1]), float(db_dx[2]))
+    dy = wp.vec3(float(db_dy[0]), float(db_dy[1]), float(db_dy[2]))
+    return dx[0] * ua + dx[1] * ub + dx[2] * uc, dy[0] * ua + dy[1] * ub + dy[2] * uc
+
+
 @wp.kernel
 def raster_kernel(row_begin: int, row_end: int, screen: wp.array2d(dtype=wp.vec4d), facing: wp.array(dtype=wp.int32),
                   width: int, key: wp.array(dtype=wp.int64)):
@@ -320,7 +370,12 @@ def resolve_kernel(
     out_face[s] = f
     out_bary[s] = wb
     out_depth[s] = wp.dot(p - cam.eye, cam.forward)
-    out_uv[s] = wb[0] * uvs[v0] + wb[1] * uvs[v1] + wb[2] * uvs[v2]
+    uv = wb[0] * uvs[v0] + wb[1] * uvs[v1] + wb[2] * uvs[v2]
+    out_uv[s] = uv
+    duv_dx, duv_dy = uv_derivatives(screen, weight, slot, i, j, perspective_correct, uvs[v0], uvs[v1], uvs[v2])
+    samples.uv[s] = uv
+    samples.duv_dx[s] = duv_dx
+    samples.duv_dy[s] = duv_dy
     out_object[s] = face_object[f]
     samples.position[s] = p
     samples.normal[s] = normal
@@ -402,10 +457,17 @@ def light_points_kernel(
     begin: int, points: PointsW, lights: wp.array(dtype=LightW), materials: wp.array(dtype=MaterialW),
     geom: SceneGeomW, specular: int, ambient: wp.vec3, shadows: int, transparent: int,
     light_dir: wp.array2d(dtype=wp.vec3), light_dist: wp.array2d(dtype=float), visibility: wp.array2d(dtype=float),
-    color: wp.array(dtype=wp.vec3),
+    color: wp.array(dtype=wp.vec3), textures: TexturesW, points_are_samples: int,
+    factor: wp.array(dtype=wp.vec3), texel: wp.array(dtype=wp.vec3),
 ):
-    """ka Ia + sum_p s_p light_term_p at each point, recording L_p, d_p and s_p."""
+    """ka Ia + sum_p s_p light_term_p at each point, recording L_p, d_p and s_p.
+
+    Textured materials: where the points are the samples (Phong) the texture is sampled here and
+    replaces its target coefficient (`texel[k]` records the value). Elsewhere (flat, Gouraud) the
+    point's `color` is lit with the target coefficient 0 and `factor` is what that coefficient
+    multiplies (lit with it 1, the others 0); compose adds texel * factor per sample."""
     k = begin + wp.tid()
+    factor[k] = wp.vec3(0.0)
     mat_id = points.material[k]
     if mat_id < 0:
         color[k] = wp.vec3(0.0)
@@ -415,7 +477,20 @@ def light_points_kernel(
     if points.cell[k] == 1:
         mat.ka = mat.ka2
         mat.kd = mat.kd2
+    split = False
+    unit = mat
+    if mat.texture >= 0:
+        if points_are_samples == 1:
+            value = sample_texture(textures, mat.texture, points.uv[k], points.duv_dx[k], points.duv_dy[k],
+                                   mat.texture_filter, mat.texture_wrap)
+            texel[k] = value
+            mat = textured_material(mat, mat.texture_target, value)
+        else:
+            split = True
+            unit = target_only(mat, mat.texture_target)
+            mat = textured_material(mat, mat.texture_target, wp.vec3(0.0))
     total = ambient_term(mat, ambient)
+    unit_total = ambient_term(unit, ambient)
     for q in range(lights.shape[0]):
         l, d = light_vector(lights[q], p)
         s = float(1.0)
@@ -427,7 +502,17 @@ def light_points_kernel(
         visibility[k, q] = s
         if s > 0.0:
             total = total + s * light_term(lights[q], mat, specular, points.normal[k], points.view[k], l, d)
+            if split:
+                unit_total = unit_total + s * light_term(lights[q], unit, specular, points.normal[k], points.view[k],
+                                                         l, d)
     color[k] = total
+    if split:
+        factor[k] = unit_total
+
+
+@wp.func
+def clamp01(c: wp.vec3):
+    return wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
 
 
 @wp.kernel
@@ -435,10 +520,15 @@ def compose_kernel(row0: int, width: int, mask_material: wp.array(dtype=wp.int32
                    point_index: wp.array2d(dtype=wp.int32), point_weight: wp.array(dtype=wp.vec3),
                    color: wp.array(dtype=wp.vec3), clamp_colors: int, background: wp.vec3, fog_mode: int,
                    fog_color: wp.vec3, fog_start: float, fog_end: float, fog_density: float,
-                   image: wp.array(dtype=wp.vec3)):
+                   image: wp.array(dtype=wp.vec3), materials: wp.array(dtype=MaterialW), textures: TexturesW,
+                   samples: PointsW, per_fragment: int, factor: wp.array(dtype=wp.vec3),
+                   texel: wp.array(dtype=wp.vec3)):
+    """Sample colour = sum_k w_k colour_k (+ texel * sum_k w_k factor_k for a textured material under
+    flat / Gouraud shading, the texture sampled per sample: `per_fragment`), then fog."""
     ii, j = wp.tid()
     s = (row0 + ii) * width + j
-    if mask_material[s] < 0:
+    mat_id = mask_material[s]
+    if mat_id < 0:
         image[s] = background
         return
     w = point_weight[s]
@@ -446,7 +536,19 @@ def compose_kernel(row0: int, width: int, mask_material: wp.array(dtype=wp.int32
     for k in range(3):
         c = color[point_index[s, k]]
         if clamp_colors == 1:
-            c = wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
+            c = clamp01(c)
         out = out + w[k] * c
+    if per_fragment == 1 and materials[mat_id].texture >= 0:
+        mat = materials[mat_id]
+        modulated = wp.vec3(0.0)
+        for k in range(3):
+            c = factor[point_index[s, k]]
+            if clamp_colors == 1:
+                c = clamp01(c)
+            modulated = modulated + w[k] * c
+        value = sample_texture(textures, mat.texture, samples.uv[s], samples.duv_dx[s], samples.duv_dy[s],
+                               mat.texture_filter, mat.texture_wrap)
+        texel[s] = value
+        out = out + wp.cw_mul(value, modulated)
     f = fog_factor(fog_mode, depth[s], fog_start, fog_end, fog_density)
     image[s] = f * out + (1.0 - f) * fog_color

@@ -29,7 +29,8 @@ def spp_side(spp: int) -> int:
 def empty_points(count: int, device: str) -> rk.PointsW:
     points = rk.PointsW()
     for name, dtype in [("position", wp.vec3), ("normal", wp.vec3), ("geo_normal", wp.vec3), ("view", wp.vec3),
-                        ("material", wp.int32), ("cell", wp.int32), ("ignore", wp.int32)]:
+                        ("material", wp.int32), ("cell", wp.int32), ("ignore", wp.int32), ("uv", wp.vec2),
+                        ("duv_dx", wp.vec2), ("duv_dy", wp.vec2)]:
         setattr(points, name, wp.zeros(count, dtype=dtype, device=device))
     return points
 
@@ -108,13 +109,16 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
     light_dist = wp.zeros((n_points, n_lights), dtype=float, device=device)
     visibility = wp.zeros((n_points, n_lights), dtype=float, device=device)
     color = wp.zeros(max(n_points, 1), dtype=wp.vec3, device=device)
+    factor = wp.zeros(max(n_points, 1), dtype=wp.vec3, device=device)  # textures under flat / Gouraud
+    texel = wp.zeros(n_samples, dtype=wp.vec3, device=device)  # the texture value at each sample
+    points_are_samples = int(shading == rk.PHONG_SHADING)
     ambient = wp.vec3(*scene.ambient)
 
     def light_band(begin, end):
         wp.launch(rk.light_points_kernel, dim=end - begin, inputs=[
             begin, points, compiled.lights, compiled.materials, compiled.geom, SPECULAR_MODELS[settings.specular],
             ambient, int(settings.shadows), int(settings.transparent_shadows), light_dir, light_dist, visibility,
-            color], device=device)
+            color, compiled.textures.warp, points_are_samples, factor, texel], device=device)
 
     parallel_bands(light_band, n_points, device, threads)
 
@@ -124,7 +128,8 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
     launch_rows(rk.compose_kernel, (height, width), [
         width, samples.material, out["depth"], point_index, out["point_weight"], color,
         int(settings.clamp_vertex_colors and shading == rk.GOURAUD), wp.vec3(*scene.background), fog[0],
-        wp.vec3(*fog[1]), fog[2], fog[3], fog[4], image], device, threads)
+        wp.vec3(*fog[1]), fog[2], fog[3], fog[4], image, compiled.materials, compiled.textures.warp, samples,
+        1 - points_are_samples, factor, texel], device, threads)
     sample_image = image.numpy().reshape(height, width, 3)
     pixels = box_downsample(sample_image, side)
     seconds = time.perf_counter() - start
@@ -140,10 +145,13 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
         points=ShadingPoints(
             position=points.position.numpy(), normal=points.normal.numpy(), view=points.view.numpy(),
             material=points.material.numpy(), cell=points.cell.numpy(), light_dir=light_dir.numpy(),
-            light_dist=light_dist.numpy(), visibility=visibility.numpy(), color=color.numpy()[:n_points]),
+            light_dist=light_dist.numpy(), visibility=visibility.numpy(), color=color.numpy()[:n_points],
+            texture_factor=factor.numpy()[:n_points]),
         shading=settings.shading, specular=settings.specular, spp_side=side,
         ambient=np.asarray(scene.ambient, np.float32), background=np.asarray(scene.background, np.float32),
         clamp_vertex_colors=bool(settings.clamp_vertex_colors and shading == rk.GOURAUD), fog=fog,
+        duv_dx=samples.duv_dx.numpy().reshape(*grid, 2), duv_dy=samples.duv_dy.numpy().reshape(*grid, 2),
+        texture=texel.numpy().reshape(*grid, 3),
     )
     stats = {"method": "raster", "seconds": seconds, "triangles": n_faces, "samples": n_samples,
              "shading_points": n_points, "covered_samples": int(gbuffer.mask.sum()),

@@ -1,0 +1,370 @@
+"""Textures: mip pyramid, filters, wrap modes, perspective-correct uv and its derivatives, shading."""
+
+import math
+
+import numpy as np
+import pytest
+
+from conftest import scene_dict
+from difflab import TextureError, render, render_frame
+from difflab._warp import wp
+from difflab.io import save_image
+from difflab.render.camera import camera_struct, projection_matrix, view_matrix
+from difflab.render.api import as_scene
+from difflab.render.texture import CameraW, pixel_footprint, plane_uv_derivatives
+from difflab.render.texture_demo import checker_texture, compare_filters
+from difflab.render.texture_store import TextureStore, load_texture, mip_pyramid, sample
+
+FILTERS = ["nearest", "bilinear", "mipmap", "trilinear", "ewa"]
+WRAPS = ["repeat", "clamp", "mirror"]
+
+
+# ---- 1. storage and pyramid ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("shape", [(16, 16), (8, 32), (4, 2)])
+def test_each_mip_level_is_the_exact_box_mean_of_the_one_below(shape):
+    texels = np.random.default_rng(0).random(shape + (3,)).astype(np.float32)
+    levels = mip_pyramid(texels)
+    assert levels[-1].shape[:2] == (1, 1)
+    assert len(levels) == int(math.log2(max(shape))) + 1
+    for below, above in zip(levels[:-1], levels[1:]):
+        h, w = below.shape[:2]
+        if h == 1:
+            below = np.concatenate([below, below])  # a 1-row level pairs its row with itself
+        if w == 1:
+            below = np.concatenate([below, below], axis=1)
+        want = below.astype(np.float64).reshape(above.shape[0], 2, above.shape[1], 2, 3).mean(axis=(1, 3))
+        np.testing.assert_array_equal(above, want.astype(np.float32))
+
+
+def test_odd_sizes_repeat_the_last_row_and_column():
+    texels = np.arange(3 * 5 * 3, dtype=np.float32).reshape(3, 5, 3)
+    level1 = mip_pyramid(texels)[1]
+    assert level1.shape == (2, 3, 3)
+    np.testing.assert_allclose(level1[1, 2], texels[2, 4])  # corner block: one texel repeated
+    np.testing.assert_allclose(level1[0, 2], texels[0:2, 4].mean(axis=0))
+
+
+def test_many_textures_of_different_sizes_share_one_array():
+    a = np.full((5, 7, 3), 0.25, np.float32)
+    b = np.random.default_rng(1).random((8, 4, 3)).astype(np.float32)
+    store = TextureStore.from_images([a, b])
+    levels = store.warp.level.numpy()
+    first = store.warp.first_level.numpy()
+    assert list(first) == [0, len(store.pyramids[0])]
+    assert store.warp.texels.shape[0] == sum(lv.shape[0] * lv.shape[1] for p in store.pyramids for lv in p)
+    assert tuple(levels[first[1]]) == (levels[first[1] - 1][0] + 1, 4, 8)  # after a's 1x1 last level
+    # texel centres of b, nearest: b itself (rows flipped: v = 0 is the image's bottom row)
+    r, c = np.meshgrid(np.arange(8), np.arange(4), indexing="ij")
+    uv = np.stack([(c + 0.5) / 4, (r + 0.5) / 8], -1).reshape(-1, 2)
+    np.testing.assert_array_equal(sample(store, 1, uv, filter="nearest"), np.flipud(b).reshape(-1, 3))
+    np.testing.assert_array_equal(sample(store, 1, uv, filter="bilinear"), np.flipud(b).reshape(-1, 3))
+
+
+# ---- 2. filters and wrap modes ---------------------------------------------------------------
+
+
+def edge_uvs(count=400, seed=2):
+    rng = np.random.default_rng(seed)
+    uv = rng.uniform(-3, 3, (count, 2))
+    special = [[1, 1], [0, 0], [1, 0], [0, 1], [-1e-7, 1 + 1e-7], [-1, -1], [1e30, -1e30], [3e9, 7.5],
+               [np.nan, 0.5], [np.inf, -np.inf]]
+    uv[:len(special)] = special
+    duv = rng.normal(0, 0.2, (count, 2, 2))
+    duv[10:20] = 0.0  # no footprint
+    duv[20:30, 1] = 0.0  # a line footprint
+    duv[30:40] *= 1e4  # bigger than the texture
+    return uv, duv[:, 0], duv[:, 1]
+
+
+@pytest.mark.parametrize("wrap", WRAPS)
+@pytest.mark.parametrize("filter", FILTERS)
+def test_a_constant_texture_samples_to_the_constant(filter, wrap):
+    store = TextureStore.from_images([np.full((6, 10, 3), [0.2, 0.5, 0.7], np.float32)])
+    out = sample(store, 0, *edge_uvs(), filter=filter, wrap=wrap)
+    # Lerps of equal values are exact; EWA divides float32 sums of up to ~2 x 35^2 weighted taps.
+    rtol = 1e-5 if filter == "ewa" else 2e-7
+    np.testing.assert_allclose(out, np.broadcast_to([0.2, 0.5, 0.7], out.shape), rtol=rtol, atol=0)
+
+
+@pytest.mark.parametrize("wrap", WRAPS)
+@pytest.mark.parametrize("filter", FILTERS)
+def test_fetches_stay_in_range_at_the_edges(filter, wrap):
+    """Texels hold their own index: any fetch outside the texture would read a value out of range
+    (or another level); every filter is a convex combination, so results stay in [0, max]."""
+    h, w = 4, 8
+    image = np.arange(h * w, dtype=np.float32).reshape(h, w)[..., None].repeat(3, -1)
+    store = TextureStore.from_images([image, np.full((2, 2, 3), 1e6, np.float32)])  # a poison neighbour
+    out = sample(store, 0, *edge_uvs(), filter=filter, wrap=wrap)
+    assert np.all(np.isfinite(out)) and out.min() >= 0.0 and out.max() <= (h * w - 1) * (1 + 1e-6)
+
+
+@pytest.mark.parametrize("wrap, want", [("repeat", [0, 7, 0, 0]), ("clamp", [7, 0, 7, 7]), ("mirror", [7, 0, 7, 0])])
+def test_u_equal_one_picks_the_documented_texel(wrap, want):
+    """u = 1, just below 0, just above 1, and 2.01 (mirror: [1, 2] is reflected, [2, 3] is not)."""
+    image = np.tile(np.arange(8, dtype=np.float32)[None, :, None], (4, 1, 3))
+    store = TextureStore.from_images([image])
+    out = sample(store, 0, [[1.0, 0.5], [-0.01, 0.5], [1.01, 0.5], [2.01, 0.5]], filter="nearest", wrap=wrap)
+    assert out[:, 0].tolist() == want
+
+
+def test_mipmap_levels_follow_the_footprint():
+    """A footprint of 2^k texels reads level k: the pyramid of a checker of 1-texel cells is 0.5 from
+    level 1 on, while level 0 (magnification) keeps the texels."""
+    image = checker_texture(16, 16, dark=0.0, light=1.0)
+    store = TextureStore.from_images([image])
+    uv = np.array([[0.51 / 16, 0.51 / 16]] * 3)
+    duv = np.array([[0.5 / 16, 0], [2.0 / 16, 0], [8.0 / 16, 0]])
+    for filter in ("mipmap", "trilinear", "ewa"):  # isotropic footprints, 8 texels wide: level 3
+        out = sample(store, 0, uv, duv, duv[:, ::-1], filter=filter)[:, 0]
+        assert abs(out[2] - 0.5) < 1e-6, filter
+    out = sample(store, 0, uv, duv, np.zeros_like(duv), filter="trilinear")[:, 0]
+    assert abs(out[0] - np.flipud(image)[0, 0, 0]) < 0.05 and abs(out[1] - 0.5) < 1e-6  # texel (0, 0); level 1
+
+
+def test_ewa_is_anisotropic_where_trilinear_is_not():
+    """Stripes along v, footprint long along v and one texel across u: EWA keeps the stripes (it
+    averages along them), trilinear's isotropic level blurs them to grey."""
+    image = np.tile(np.array([0.0, 0.0, 1.0, 1.0] * 8, np.float32)[None, :, None], (32, 1, 3))
+    store = TextureStore.from_images([image])
+    uv = np.array([[5.0 / 32, 0.5], [7.0 / 32, 0.5]])  # the middles of a dark and a light stripe
+    dx = np.array([[0.5 / 32, 0.0]] * 2)
+    dy = np.array([[0.0, 8.0 / 32]] * 2)
+    ewa = sample(store, 0, uv, dx, dy, filter="ewa")[:, 0]
+    tri = sample(store, 0, uv, dx, dy, filter="trilinear")[:, 0]
+    assert ewa[1] - ewa[0] > 0.5
+    assert abs(tri[1] - tri[0]) < 1e-6
+
+
+# ---- 3. interpolation against the analytic ray-plane intersection ------------------------------
+
+
+def tilted_plane_scene(texture, filter="nearest", interpolation="perspective", size=64):
+    return {"camera": {"eye": [0.3, 1.2, 2.0], "target": [0, 0, -2], "fov_y": 50, "width": size, "height": size,
+                       "near": 0.1, "far": 40},
+            "ambient": [1, 1, 1],
+            "materials": {"m": {"ka": 1, "kd": 0, "texture": str(texture), "texture_target": "ka",
+                                "filter": filter, "wrap": "repeat"}},
+            "objects": [{"type": "plane", "point": [0, 0, 0], "normal": [0.15, 1.0, 0.35], "material": "m"}],
+            "render": {"interpolation": interpolation, "shadows": False}}
+
+
+def analytic_plane_uv(scene, xs, ys):
+    """uv (compile.py: world x, z for a y-dominant normal) where the rays through raster points
+    (xs, ys) meet the plane, in float64."""
+    scene = as_scene(scene)
+    cam, plane = scene.camera, scene.objects[0]
+    inv = np.linalg.inv(projection_matrix(cam) @ view_matrix(cam))
+    ndc = np.stack([2 * xs / cam.width - 1, 1 - 2 * ys / cam.height], -1)
+
+    def unproject(z):
+        p = np.concatenate([ndc, np.full(ndc.shape[:-1] + (1,), z), np.ones(ndc.shape[:-1] + (1,))], -1) @ inv.T
+        return p[..., :3] / p[..., 3:]
+
+    near, far = unproject(-1.0), unproject(1.0)
+    d = far - near
+    normal, point = np.asarray(plane.normal), np.asarray(plane.point)
+    t = ((point - near) @ normal) / (d @ normal)
+    p = near + t[..., None] * d
+    return p[..., [0, 2]], p
+
+
+@pytest.fixture(scope="module")
+def checker_file(tmp_path_factory):
+    return save_image(tmp_path_factory.mktemp("tex") / "checker.png", checker_texture(64, 8, 0.1, 0.8))
+
+
+def test_perspective_correct_uv_matches_the_ray_plane_uv(checker_file):
+    scene = tilted_plane_scene(checker_file)
+    frame = render_frame(scene)
+    g = frame.gbuffer
+    j, i = np.meshgrid(np.arange(64) + 0.5, np.arange(64) + 0.5)
+    uv, _ = analytic_plane_uv(scene, j, i)
+    mask = g.mask
+    assert mask.mean() > 0.4
+    scale = np.abs(uv[mask]).max()
+    np.testing.assert_allclose(g.uv[mask], uv[mask], atol=2e-6 * max(scale, 1.0))
+    # The image: the nearest texel of the analytic uv, away from the checker's cell edges.
+    cell = uv * 8.0  # 8 cells per unit of uv
+    away = mask & (np.abs(cell - np.round(cell)).min(axis=-1) > 0.02)
+    # Image row 0 is v = 1: the image's cell (row, col) = (7 - floor(8 v), floor(8 u)) is light when
+    # row + col is even, i.e. when floor(8 u) + floor(8 v) is odd.
+    want = np.where((np.floor(cell[..., 0]) + np.floor(cell[..., 1])) % 2 == 1, 0.8, 0.1)
+    # The file is sRGB 8-bit: decode the two stored values the way the loader does.
+    texels = load_texture(checker_file)
+    want = np.where(want > 0.5, texels.max(), texels.min())
+    assert np.abs(frame.image[..., 0][away] - want[away]).max() <= 1 / 255
+
+
+def test_affine_interpolation_differs(checker_file):
+    g = render_frame(tilted_plane_scene(checker_file, interpolation="affine")).gbuffer
+    j, i = np.meshgrid(np.arange(64) + 0.5, np.arange(64) + 0.5)
+    uv, _ = analytic_plane_uv(tilted_plane_scene(checker_file), j, i)
+    assert np.abs(g.uv[g.mask] - uv[g.mask]).max() > 0.05
+
+
+@pytest.mark.parametrize("interpolation", ["perspective", "affine"])
+def test_uv_derivatives_are_those_of_the_interpolation(checker_file, interpolation):
+    """duv_dx, duv_dy against central differences of the perspective map (analytic ray-plane uv at
+    x +- h) and, for affine, of the G-buffer uv itself inside one triangle."""
+    scene = tilted_plane_scene(checker_file, interpolation=interpolation)
+    g = render_frame(scene).gbuffer
+    j, i = np.meshgrid(np.arange(64) + 0.5, np.arange(64) + 0.5)
+    if interpolation == "perspective":
+        h = 1e-3
+        dx = (analytic_plane_uv(scene, j + h, i)[0] - analytic_plane_uv(scene, j - h, i)[0]) / (2 * h)
+        dy = (analytic_plane_uv(scene, j, i + h)[0] - analytic_plane_uv(scene, j, i - h)[0]) / (2 * h)
+        m = g.mask
+        np.testing.assert_allclose(g.duv_dx[m], dx[m], rtol=1e-3, atol=1e-4 * np.abs(dx[m]).max())
+        np.testing.assert_allclose(g.duv_dy[m], dy[m], rtol=1e-3, atol=1e-4 * np.abs(dy[m]).max())
+    else:
+        same = g.mask[:, :-1] & g.mask[:, 1:] & (g.face[:, :-1] == g.face[:, 1:])
+        fd = g.uv[:, 1:] - g.uv[:, :-1]
+        np.testing.assert_allclose(g.duv_dx[:, :-1][same], fd[same], atol=1e-3)
+
+
+@wp.kernel
+def footprint_kernel(cam: CameraW, xs: wp.array(dtype=wp.vec2), ps: wp.array(dtype=wp.vec3), normal: wp.vec3,
+                     out_dx: wp.array(dtype=wp.vec2), out_dy: wp.array(dtype=wp.vec2)):
+    k = wp.tid()
+    dpdx, dpdy = pixel_footprint(cam, xs[k][0], xs[k][1], ps[k], normal)
+    du, dv = plane_uv_derivatives(dpdx, dpdy, normal)
+    out_dx[k] = du
+    out_dy[k] = dv
+
+
+def test_the_ray_tracers_footprint_rule_agrees_with_the_rasterizer(checker_file):
+    """`pixel_footprint` + `plane_uv_derivatives` (what a ray hit uses) give the G-buffer's derivatives
+    to the second-order error of a one-sample central difference."""
+    scene = tilted_plane_scene(checker_file)
+    g = render_frame(scene).gbuffer
+    sc = as_scene(scene)
+    j, i = np.meshgrid(np.arange(64) + 0.5, np.arange(64) + 0.5)
+    _, p = analytic_plane_uv(scene, j, i)
+    m = g.mask
+    normal = np.asarray(sc.objects[0].normal)
+    xs = wp.array(np.stack([j[m], i[m]], -1).astype(np.float32), dtype=wp.vec2)
+    ps = wp.array(p[m].astype(np.float32), dtype=wp.vec3)
+    out_dx = wp.zeros(int(m.sum()), dtype=wp.vec2)
+    out_dy = wp.zeros(int(m.sum()), dtype=wp.vec2)
+    wp.launch(footprint_kernel, dim=int(m.sum()), inputs=[camera_struct(sc.camera, 64, 64), xs, ps,
+                                                           wp.vec3(*normal), out_dx, out_dy])
+    np.testing.assert_allclose(out_dx.numpy(), g.duv_dx[m], rtol=0.02, atol=0.01 * np.abs(g.duv_dx[m]).max())
+    np.testing.assert_allclose(out_dy.numpy(), g.duv_dy[m], rtol=0.02, atol=0.01 * np.abs(g.duv_dy[m]).max())
+
+
+# ---- 4. filtering quality ---------------------------------------------------------------------
+
+
+def test_filter_errors_fall_in_the_order_theory_predicts(tmp_path):
+    texture = save_image(tmp_path / "checker.png", checker_texture())
+    _, table = compare_filters(texture, 96, 72, n_reference=12, repeats=1)
+    rmse = {row["filter"]: row["rmse"] for row in table}
+    assert rmse["ewa"] < 0.8 * rmse["trilinear"]
+    assert rmse["trilinear"] < rmse["mipmap"]
+    assert rmse["mipmap"] < 0.6 * min(rmse["bilinear"], rmse["nearest"])
+    assert abs(rmse["bilinear"] - rmse["nearest"]) < 0.15 * rmse["nearest"]
+
+
+# ---- 5. shading with a texture ----------------------------------------------------------------
+
+
+QUAD = {"type": "mesh", "builtin": "quad", "material": "m",
+        "transform": {"rotate_deg": [90, 0, 0], "scale": 1.5}}
+QUADRANTS = np.array([[[0.9, 0.2, 0.1], [0.1, 0.7, 0.3]],
+                      [[0.3, 0.3, 0.8], [0.6, 0.5, 0.05]]], np.float32)  # image orientation: row 0 = top
+
+
+@pytest.mark.parametrize("shading", ["phong", "flat", "gouraud"])
+@pytest.mark.parametrize("target", ["ka", "kd", "ks"])
+def test_a_texture_replaces_its_coefficient_in_the_illumination_model(tmp_path, target, shading):
+    """A facing quad, orthographic, a directional light at 30 degrees: each quadrant of the 2x2 texture
+    (nearest, clamp) shades as the textbook formula with the target coefficient = that texel."""
+    path = tmp_path / "quadrants.npy"
+    np.save(path, QUADRANTS)
+    coeffs = {"ka": 0.2, "kd": 0.5, "ks": 0.4}
+    material = {k: [v] * 3 for k, v in coeffs.items()}
+    material.update(n=6.0, texture=str(path), texture_target=target, filter="nearest", wrap="clamp")
+    t = math.radians(30.0)
+    light = {"type": "directional", "direction": [-math.sin(t), 0.0, -math.cos(t)], "intensity": [0.9] * 3}
+    scene = scene_dict([QUAD], {"m": material}, lights=[light], ambient=(0.5, 0.5, 0.5))
+    frame = render_frame(scene, shading=shading)
+    n_dot_l = math.cos(t)
+    lobe = (2 * n_dot_l * np.array([0, 0, 1.0]) - np.array([math.sin(t), 0, math.cos(t)]))[2] ** 6.0
+    image = frame.image
+    # The quad spans x, y in [-0.75, 0.75] of the [-1, 1] view: pixel centres per quadrant.
+    centres = (np.arange(32) + 0.5) / 32 * 2 - 1
+    x, y = np.meshgrid(centres, -centres)
+    for r, c in np.ndindex(2, 2):
+        inside = ((x - (-0.375 + 0.75 * c)) ** 2 < 0.3 ** 2) & ((y - (0.375 - 0.75 * r)) ** 2 < 0.3 ** 2)
+        k = {name: np.full(3, v) for name, v in coeffs.items()}
+        k[target] = QUADRANTS[r, c]
+        want = k["ka"] * 0.5 + 0.9 * (k["kd"] * n_dot_l + k["ks"] * lobe)
+        np.testing.assert_allclose(image[inside], np.broadcast_to(want, image[inside].shape), atol=1e-5)
+        np.testing.assert_allclose(frame.gbuffer.texture[inside], np.broadcast_to(QUADRANTS[r, c], (inside.sum(), 3)))
+
+
+# ---- 6. faults ---------------------------------------------------------------------------------
+
+
+def test_a_missing_texture_raises_texture_error_naming_the_path(tmp_path):
+    missing = tmp_path / "nowhere" / "brick.png"
+    with pytest.raises(TextureError, match="brick.png"):
+        load_texture(missing)
+    with pytest.raises(TextureError, match="brick.png"):
+        TextureStore.from_paths([missing])
+
+
+def test_a_texture_deleted_after_loading_the_scene_raises_at_render(tmp_path):
+    path = save_image(tmp_path / "gone.png", np.ones((2, 2, 3)))
+    scene = as_scene(scene_dict([QUAD], {"m": {"texture": str(path)}}))
+    path.unlink()
+    with pytest.raises(TextureError, match="gone.png"):
+        render(scene)
+
+
+def test_an_unreadable_texture_raises_texture_error(tmp_path):
+    path = tmp_path / "broken.png"
+    path.write_bytes(b"not a png")
+    with pytest.raises(TextureError, match="broken.png"):
+        load_texture(path)
+
+
+# ---- 7. uv projections and the model's texture helpers ------------------------------------------
+
+
+def test_spherical_projection_reproduces_the_uv_sphere():
+    from difflab.geometry import project_uvs, uv_sphere
+
+    mesh = uv_sphere(2.0, (1, 2, 3), 8, 16)
+    uv = project_uvs(mesh, "spherical", center=(1, 2, 3)).uvs
+    ring = slice(16, 16 + 7 * 17)  # poles and the duplicated seam are the mesh's own choices
+    du = np.abs(uv[ring, 0] - mesh.uvs[ring, 0])
+    assert np.all(np.minimum(du, 1 - du) < 1e-12)
+    np.testing.assert_allclose(uv[ring, 1], mesh.uvs[ring, 1], atol=1e-12)
+
+
+def test_planar_and_cylindrical_projections():
+    from difflab.geometry import cylindrical_uv, planar_uv
+
+    p = np.array([[0.5, 0.0, 0.0], [0.0, 0.0, -0.5], [0.0, 0.3, 0.0]])
+    np.testing.assert_allclose(planar_uv(p), [[1.0, 0.5], [0.5, 1.0], [0.5, 0.5]])  # t = +x, b = -z
+    np.testing.assert_allclose(cylindrical_uv(p[:2], scale=2.0), [[0.0, 0.5], [0.25, 0.5]])
+
+
+def test_textured_material_is_the_same_in_warp_and_jax():
+    import jax.numpy as jnp
+
+    from difflab.lighting import jax_model as jm
+    from difflab.lighting import warp_model as wm
+
+    base = jm.MaterialJ(ka=jnp.array([0.1, 0.2, 0.3]), kd=jnp.array([0.4, 0.5, 0.6]), ks=jnp.array([0.7, 0.8, 0.9]),
+                        n=jnp.array(3.0), m=jnp.array(0.3), f0=jnp.array(0.04))
+    value = jnp.array([0.25, 0.5, 0.75])
+    for name, target in wm.TEXTURE_TARGET_IDS.items():
+        out = jm.textured_material(base, target, value)
+        assert np.allclose(getattr(out, name), value)
+        unit = jm.target_only(base, target)
+        assert [float(jnp.sum(getattr(unit, k))) for k in ("ka", "kd", "ks")] == [3.0 if k == name else 0.0
+                                                                                 for k in ("ka", "kd", "ks")]
