@@ -161,7 +161,14 @@ def ray_tracing(out: Path, size: int) -> list[tuple[Path, str]]:
     return section(out, size)
 
 
-SECTIONS = [shading_models, decomposition, materials_table, fractal_gallery, ray_tracing]
+def texture_mapping(out: Path, size: int) -> list[tuple[Path, str]]:
+    """Texture filtering on a receding checkerboard, and perspective vs affine interpolation."""
+    from .render.texture_demo import texture_figures
+
+    return texture_figures(out, size)
+
+
+SECTIONS = [shading_models, decomposition, materials_table, texture_mapping, ray_tracing, fractal_gallery]
 
 
 def run_demo(out: Path, quick: bool = False) -> list[tuple[Path, str]]:

@@ -14,7 +14,7 @@ views down to a width of ~1e-12 stay sharp.
 from __future__ import annotations
 
 import numpy as np
-import warp as wp
+from .._warp import wp
 
 from ..render.launch import launch_rows, resolve_device
 from ._checks import check_float, check_image_size, check_int, check_vec

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import warp as wp
+from .._warp import wp
 
 from ..lighting.warp_model import (SPECULAR_MODELS, LightW, MaterialW, ambient_term, light_term,
                                    light_vector, lights_to_warp, materials_to_warp)

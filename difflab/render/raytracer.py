@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import warp as wp
+from .._warp import wp
 
 from ..errors import RenderError
 from ..lighting.warp_model import SPECULAR_MODELS, fog_params
@@ -76,7 +76,7 @@ def sample_points(width: int, height: int, side: int, sampling: str = "grid") ->
     return np.stack([x, y], axis=-1).astype(np.float32)
 
 
-def trace_params(scene, settings, record: bool) -> TraceParamsW:
+def trace_params(scene, settings, record: bool, spread: float) -> TraceParamsW:
     params = TraceParamsW()
     params.max_depth = int(settings.max_depth)
     params.shadows = int(settings.shadows)
@@ -92,6 +92,7 @@ def trace_params(scene, settings, record: bool) -> TraceParamsW:
     params.fog_start, params.fog_end, params.fog_density = fog[2], fog[3], fog[4]
     params.record = int(record)
     params.count_crossings = int(record and count_crossings(scene, settings))
+    params.spread = float(spread)
     return params
 
 
@@ -102,7 +103,9 @@ def count_crossings(scene, settings) -> bool:
 
 def mesh_data(compiled) -> MeshDataW:
     out = MeshDataW()
+    out.vertices = compiled.arrays["vertices"]
     out.normals = compiled.arrays["normals"]
+    out.uvs = compiled.arrays["uvs"]
     out.faces = compiled.arrays["faces"]
     return out
 
@@ -117,7 +120,7 @@ def empty_tree(shape: tuple[int, int], n_nodes: int, n_lights: int, device: str,
         setattr(tree, name, wp.zeros(n, dtype=wp.int32, device=device))
     for name in ("distance", "fresnel", "fresnel_r", "fresnel_t"):
         setattr(tree, name, wp.zeros(n, dtype=float, device=device))
-    for name in ("position", "normal", "view", "local"):
+    for name in ("position", "normal", "view", "local", "texel"):
         setattr(tree, name, wp.zeros(n, dtype=wp.vec3, device=device))
     tree.light_dir = wp.zeros((n, p), dtype=wp.vec3, device=device)
     tree.light_dist = wp.zeros((n, p), dtype=float, device=device)
@@ -143,6 +146,9 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
     wp_points = wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec2, device=device)
     item = item if item is not None else item_struct(compiled)
     geom, mesh = compiled.geom, mesh_data(compiled)
+    # a sample's width per unit distance (texture footprints of secondary rays; 0 for orthographic views)
+    spread = 2.0 * math.tan(math.radians(scene.camera.fov_y) / 2.0) / rows if scene.camera.projection == "perspective" \
+        else 0.0
 
     def launch(params, tree):
         color = wp.zeros(shape, dtype=wp.vec3, device=device)
@@ -151,10 +157,11 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
         rays = wp.zeros((rows, 4), dtype=wp.int32, device=device)
         hist = wp.zeros((rows, settings.max_depth), dtype=wp.int32, device=device)
         launch_rows(whitted_kernel, shape, [wp_points, cam, geom, mesh, compiled.lights, compiled.materials, params,
-                                            item, tree, color, fog, count, rays, hist], device, threads)
+                                            item, tree, compiled.textures.warp, color, fog, count, rays, hist],
+                    device, threads)
         return color, fog, count, rays, hist
 
-    color, fog, count, rays, hist = launch(trace_params(scene, settings, False), empty_tree(shape, 0, 0, device))
+    color, fog, count, rays, hist = launch(trace_params(scene, settings, False, spread), empty_tree(shape, 0, 0, device))
     counts = count.numpy()
     ray_counts = rays.numpy().astype(np.int64).sum(axis=0)
     stats_rays = {"primary": int(ray_counts[COUNT_PRIMARY]), "shadow": int(ray_counts[COUNT_SHADOW]),
@@ -171,7 +178,7 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
         crossings = count_crossings(scene, settings)
         wp_tree = empty_tree(shape, n_nodes, n_lights, device, len(scene.materials) if crossings else 0)
         wp_tree.offset = wp.array(offsets[:-1].reshape(shape).astype(np.int32), dtype=wp.int32, device=device)
-        launch(trace_params(scene, settings, True), wp_tree)
+        launch(trace_params(scene, settings, True, spread), wp_tree)
         tree = tree_to_numpy(wp_tree, n_nodes, n_lights, offsets, fog.numpy(), scene, settings, points.shape[:2],
                              crossings)
     return Traced(color=color.numpy(), fog=fog.numpy(), node_count=counts, rays=stats_rays,
@@ -197,7 +204,7 @@ def tree_to_numpy(wp_tree: TreeW, n_nodes: int, n_lights: int, offsets, fog, sce
         fog_color=np.asarray(fog_params(scene.fog)[1], np.float32),
         **{name: get(name) for name in ("sample", "parent", "kind", "depth", "material", "object", "face", "cell",
                                         "medium", "distance", "position", "normal", "view", "fresnel", "fresnel_r",
-                                        "fresnel_t", "local")},
+                                        "fresnel_t", "local", "texel")},
         light_dir=get("light_dir")[:, :n_lights], light_dist=get("light_dist")[:, :n_lights],
         visibility=get("visibility")[:, :n_lights], crossings=crossed,
     )

@@ -14,7 +14,7 @@ tessellation and the exact surface disagree by less than half a sample.
 from __future__ import annotations
 
 import numpy as np
-import warp as wp
+from .._warp import wp
 
 from . import raster as rk
 from .camera import camera_struct

@@ -33,11 +33,13 @@ the recording pass can be allocated exactly.
 
 from __future__ import annotations
 
-import warp as wp
+from .._warp import wp
 
 from ..lighting.warp_model import LightW, MaterialW, ambient_term, checker_cell, fog_factor, light_term, \
-    light_vector, surface_material
+    light_vector, surface_material, textured_material
 from .camera import CameraW, primary_ray
+from .texture import TexturesW, cone_footprint, pixel_footprint, plane_uv, plane_uv_derivatives, sample_texture, \
+    sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
 from .rt_itembuffer import ItemBufferW, hinted_hit
 from .rt_optics import FRESNEL_NONE, beer, fresnel, reflect, refract
 from .trace import HIT_NONE, HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, HitW, SceneGeomW, closest_hit, \
@@ -51,6 +53,7 @@ COUNT_PRIMARY, COUNT_SHADOW, COUNT_REFLECTED, COUNT_REFRACTED = 0, 1, 2, 3
 STACK_SIZE = 64  # = scene.view.MAX_DEPTH_LIMIT: a depth-first walk never holds more pending rays
 StackVec3 = wp.types.matrix(shape=(STACK_SIZE, 3), dtype=wp.float32)  # one row per pending ray
 StackInt = wp.types.matrix(shape=(STACK_SIZE, 5), dtype=wp.int32)  # depth, parent, kind, medium, ignore
+StackFloat = wp.types.vector(length=STACK_SIZE, dtype=wp.float32)  # path length from the eye to the ray's origin
 
 
 @wp.struct
@@ -73,13 +76,16 @@ class TraceParamsW:
     fog_density: float
     record: int
     count_crossings: int  # record the materials transparent shadow rays cross
+    spread: float  # texture footprint: a sample's width per unit path length, 2 tan(fov_y / 2) / rows
 
 
 @wp.struct
 class MeshDataW:
-    """Triangle vertices, unit vertex normals (smooth shading) and faces of the compiled scene."""
+    """Triangle vertices, unit vertex normals (smooth shading), uvs and faces of the compiled scene."""
 
+    vertices: wp.array(dtype=wp.vec3)
     normals: wp.array(dtype=wp.vec3)
+    uvs: wp.array(dtype=wp.vec2)
     faces: wp.array2d(dtype=wp.int32)
 
 
@@ -102,6 +108,7 @@ class TreeW:
     normal: wp.array(dtype=wp.vec3)
     view: wp.array(dtype=wp.vec3)
     local: wp.array(dtype=wp.vec3)
+    texel: wp.array(dtype=wp.vec3)  # the texture value the node's material took (textured materials)
     fresnel: wp.array(dtype=float)
     fresnel_r: wp.array(dtype=float)
     fresnel_t: wp.array(dtype=float)
@@ -123,6 +130,41 @@ def shading_normal(mesh: MeshDataW, hit: HitW):
     if wp.length_sq(blend) == 0.0:  # catch degenerate normals: fall back to the face's own
         return hit.normal
     return wp.normalize(blend)
+
+
+@wp.func
+def hit_texel(tex: TexturesW, mat: MaterialW, mesh: MeshDataW, geom: SceneGeomW, cam: CameraW, hit: HitW,
+              p: wp.vec3, geo: wp.vec3, d: wp.vec3, xy: wp.vec2, primary: int, path: float, spread: float):
+    """The texture value at a hit. uv: interpolated vertex uvs (triangles), the plane's world axes,
+    or the sphere's (lon / 2 pi, lat / pi). Footprint: a primary ray's pixel footprint on the tangent
+    plane (as the rasterizer's derivatives), a secondary ray's cone of width spread x path length
+    from the eye (the pixel cone carried along the path, ignoring curvature)."""
+    dpdx = wp.vec3(0.0)
+    dpdy = wp.vec3(0.0)
+    if primary == 1:
+        dpdx, dpdy = pixel_footprint(cam, xy[0], xy[1], p, geo)
+    else:
+        dpdx, dpdy = cone_footprint(d, geo, spread * path)
+    uv = wp.vec2(0.0)
+    duv_dx = wp.vec2(0.0)
+    duv_dy = wp.vec2(0.0)
+    if hit.kind == HIT_TRIANGLE:
+        f = hit.index
+        i0 = mesh.faces[f, 0]
+        i1 = mesh.faces[f, 1]
+        i2 = mesh.faces[f, 2]
+        uv = hit.u * mesh.uvs[i0] + hit.v * mesh.uvs[i1] + (1.0 - hit.u - hit.v) * mesh.uvs[i2]
+        duv_dx, duv_dy = triangle_uv_derivatives(mesh.vertices[i0], mesh.vertices[i1], mesh.vertices[i2],
+                                                 mesh.uvs[i0], mesh.uvs[i1], mesh.uvs[i2], dpdx, dpdy)
+    elif hit.kind == HIT_PLANE:
+        normal = geom.plane_normal[hit.index]
+        uv = plane_uv(p, normal)
+        duv_dx, duv_dy = plane_uv_derivatives(dpdx, dpdy, normal)
+    else:
+        center = geom.sphere_center[hit.index]
+        uv = sphere_uv(p, center)
+        duv_dx, duv_dy = sphere_uv_derivatives(p, center, dpdx, dpdy)
+    return sample_texture(tex, mat.texture, uv, duv_dx, duv_dy, mat.texture_filter, mat.texture_wrap)
 
 
 @wp.func
@@ -153,7 +195,7 @@ def max3(v: wp.vec3):
 def whitted_kernel(
     row0: int, points: wp.array2d(dtype=wp.vec2), cam: CameraW, geom: SceneGeomW, mesh: MeshDataW,
     lights: wp.array(dtype=LightW), materials: wp.array(dtype=MaterialW), params: TraceParamsW,
-    item: ItemBufferW, tree: TreeW,
+    item: ItemBufferW, tree: TreeW, textures: TexturesW,
     color: wp.array2d(dtype=wp.vec3), fog: wp.array2d(dtype=float), node_count: wp.array2d(dtype=wp.int32),
     rays: wp.array2d(dtype=wp.int32), depth_hist: wp.array2d(dtype=wp.int32),
 ):
@@ -172,6 +214,8 @@ def whitted_kernel(
     stack_dir = StackVec3()
     stack_weight = StackVec3()
     stack_info = StackInt()
+    stack_path = StackFloat()
+    stack_path[0] = 0.0
     stack_origin[0] = origin
     stack_start[0] = origin
     stack_dir[0] = direction
@@ -197,6 +241,7 @@ def whitted_kernel(
         kind = stack_info[sp, 2]
         medium = stack_info[sp, 3]
         skip = stack_info[sp, 4]
+        path = stack_path[sp]
         node = count
         count = count + 1
         wp.atomic_add(depth_hist, i, depth - 1, 1)
@@ -254,6 +299,11 @@ def whitted_kernel(
         if base_mat.checker_size > 0.0:
             cell = checker_cell(p, geo, base_mat.checker_size)
         mat = surface_material(base_mat, cell)
+        texel = wp.vec3(0.0)
+        if mat.texture >= 0:
+            texel = hit_texel(textures, mat, mesh, geom, cam, hit, p, geo, d, xy, int(kind == PRIMARY),
+                              path + hit.t, params.spread)
+            mat = textured_material(mat, mat.texture_target, texel)
         if kind == PRIMARY:
             fog_f = fog_factor(params.fog_mode, wp.dot(p - cam.eye, cam.forward), params.fog_start, params.fog_end,
                                params.fog_density)
@@ -302,6 +352,7 @@ def whitted_kernel(
             tree.normal[k] = normal
             tree.view[k] = view
             tree.local[k] = local
+            tree.texel[k] = texel
             tree.fresnel[k] = f_value
             tree.fresnel_r[k] = f_r
             tree.fresnel_t[k] = f_t
@@ -321,6 +372,7 @@ def whitted_kernel(
                 if entering:
                     stack_info[sp, 3] = hit.material
                 stack_info[sp, 4] = skip_object(geom, hit, t_dir)
+                stack_path[sp] = path + hit.t
                 sp = sp + 1
             w_r = w * (base_mat.kr * f_r)
             if max3(w_r) > 0.0 and max3(w_r) >= params.threshold:
@@ -334,6 +386,7 @@ def whitted_kernel(
                 stack_info[sp, 2] = REFLECTED
                 stack_info[sp, 3] = medium
                 stack_info[sp, 4] = skip_object(geom, hit, r_dir)
+                stack_path[sp] = path + hit.t
                 sp = sp + 1
 
     fog[i, j] = fog_f

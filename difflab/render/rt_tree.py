@@ -18,10 +18,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import warp as wp
 
-from ..lighting.warp_model import LightW, MaterialW, SPECULAR_MODELS, ambient_term, light_term, lights_to_warp, \
-    materials_to_warp, surface_material
+from .._warp import wp
+from ..lighting.warp_model import SPECULAR_MODELS, TEXTURE_TARGET_IDS, LightW, MaterialW, ambient_term, light_term, \
+    lights_to_warp, materials_to_warp, surface_material, textured_material
 from .frame import box_downsample
 from .rt_kernels import PRIMARY, REFLECTED, REFRACTED
 
@@ -64,6 +64,8 @@ class RayTree:
                   node's material): (1, 1) plain, (F, 1 - F) with Fresnel, (1, 0) under total
                   internal reflection.
       local       (N, 3) float32: the node's local colour as rendered (background for misses).
+      texel       (N, 3) float32: the texture value a textured material took at the node (it replaces
+                  the coefficient named by the material's texture_target), else 0.
 
     Per sample: `sample_fog` (S,) float32 fog blend f of the primary hit (1 where none) and
     `fog_color` (3,): the sample is f * sum + (1 - f) * fog_color.
@@ -104,6 +106,7 @@ class RayTree:
     fresnel_r: np.ndarray
     fresnel_t: np.ndarray
     local: np.ndarray
+    texel: np.ndarray
 
     @property
     def n_nodes(self) -> int:
@@ -116,6 +119,7 @@ class RayTree:
 
 @wp.kernel
 def shade_nodes_kernel(material: wp.array(dtype=wp.int32), cell: wp.array(dtype=wp.int32),
+                       texture_target: wp.array(dtype=wp.int32), texel: wp.array(dtype=wp.vec3),
                        normal: wp.array(dtype=wp.vec3), view: wp.array(dtype=wp.vec3),
                        light_dir: wp.array2d(dtype=wp.vec3), light_dist: wp.array2d(dtype=float),
                        visibility: wp.array2d(dtype=float), lights: wp.array(dtype=LightW),
@@ -126,6 +130,8 @@ def shade_nodes_kernel(material: wp.array(dtype=wp.int32), cell: wp.array(dtype=
         local[k] = background
         return
     mat = surface_material(materials[material[k]], cell[k])
+    if texture_target[material[k]] >= 0:
+        mat = textured_material(mat, texture_target[material[k]], texel[k])
     total = ambient_term(mat, ambient)
     for q in range(lights.shape[0]):
         s = visibility[k, q]
@@ -152,6 +158,12 @@ def node_visibility(tree: RayTree, materials) -> np.ndarray:
     return np.where(crossed & (tree.visibility > 0), product, tree.visibility).astype(np.float32)
 
 
+def texture_targets(materials) -> np.ndarray:
+    """Per material: the TARGET_* id its image texture replaces, or -1 without a texture."""
+    return np.array([TEXTURE_TARGET_IDS[m.texture_target] if m.texture is not None else -1 for m in materials],
+                    np.int32)
+
+
 def shade_nodes(tree: RayTree, materials, lights, ambient, background, device: str = "cpu") -> np.ndarray:
     """Local colour (N, 3) float32 of every node under new materials / lights / ambient: the one
     illumination model (its Warp half) evaluated on the recorded hit data, with the shadow rays'
@@ -165,7 +177,9 @@ def shade_nodes(tree: RayTree, materials, lights, ambient, background, device: s
     local = wp.zeros(max(n, 1), dtype=wp.vec3, device=device)
     if n:
         wp.launch(shade_nodes_kernel, dim=n, inputs=[
-            arr(tree.material, wp.int32), arr(tree.cell, wp.int32), arr(tree.normal, wp.vec3), arr(tree.view, wp.vec3),
+            arr(tree.material, wp.int32), arr(tree.cell, wp.int32), arr(texture_targets(ordered_materials(tree, materials)),
+                                                                        wp.int32), arr(tree.texel, wp.vec3),
+            arr(tree.normal, wp.vec3), arr(tree.view, wp.vec3),
             arr(light_dir, wp.vec3), arr(light_dist, float), arr(visibility, float), lights_to_warp(lights, device),
             materials_to_warp(ordered_materials(tree, materials), device), SPECULAR_MODELS[tree.specular],
             wp.vec3(*np.asarray(ambient, np.float32)), wp.vec3(*np.asarray(background, np.float32)), local],
