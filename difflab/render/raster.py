@@ -26,7 +26,7 @@ from __future__ import annotations
 from .._warp import wp
 
 from ..lighting.warp_model import (LightW, MaterialW, ambient_term, checker_cell, fog_factor, light_term, light_vector,
-                                   target_only, textured_material)
+                                   surface_material, target_only, textured_material)
 from .camera import CameraW, view_direction
 from .texture import TexturesW, sample_texture
 from .trace import SceneGeomW, light_visibility
@@ -322,6 +322,23 @@ def raster_kernel(row_begin: int, row_end: int, screen: wp.array2d(dtype=wp.vec4
                     wp.atomic_min(key, i * width + j, depth * wp.int64(4294967296) + wp.int64(slot))
 
 
+@wp.func
+def write_point(points: PointsW, k: int, p: wp.vec3, normal: wp.vec3, geo: wp.vec3, view: wp.vec3, mat: int,
+                materials: wp.array(dtype=MaterialW), obj: int, analytic: bool):
+    """Store shading point k; its checker cell, and the object its shadow rays skip (convex analytic ones)."""
+    points.position[k] = p
+    points.normal[k] = normal
+    points.geo_normal[k] = geo
+    points.view[k] = view
+    points.material[k] = mat
+    points.cell[k] = 0
+    if materials[mat].checker_size > 0.0:
+        points.cell[k] = checker_cell(p, geo, materials[mat].checker_size)
+    points.ignore[k] = -1
+    if analytic:
+        points.ignore[k] = obj
+
+
 @wp.kernel
 def resolve_kernel(
     row0: int, key: wp.array(dtype=wp.int64), screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3),
@@ -377,17 +394,7 @@ def resolve_kernel(
     samples.duv_dx[s] = duv_dx
     samples.duv_dy[s] = duv_dy
     out_object[s] = face_object[f]
-    samples.position[s] = p
-    samples.normal[s] = normal
-    samples.geo_normal[s] = geo
-    samples.view[s] = view
-    samples.material[s] = mat
-    samples.cell[s] = 0
-    if materials[mat].checker_size > 0.0:
-        samples.cell[s] = checker_cell(p, geo, materials[mat].checker_size)
-    samples.ignore[s] = -1
-    if f >= n_mesh_faces:
-        samples.ignore[s] = face_object[f]
+    write_point(samples, s, p, normal, geo, view, mat, materials, face_object[f], f >= n_mesh_faces)
     if shading == PHONG_SHADING:
         point_weight[s] = wp.vec3(1.0, 0.0, 0.0)
     elif shading == FLAT:
@@ -436,22 +443,6 @@ def gouraud_points_kernel(vertices: wp.array(dtype=wp.vec3), normals: wp.array(d
                 materials, vertex_object[k], vertex_analytic[k] == 1)
 
 
-@wp.func
-def write_point(points: PointsW, k: int, p: wp.vec3, normal: wp.vec3, geo: wp.vec3, view: wp.vec3, mat: int,
-                materials: wp.array(dtype=MaterialW), obj: int, analytic: bool):
-    points.position[k] = p
-    points.normal[k] = normal
-    points.geo_normal[k] = geo
-    points.view[k] = view
-    points.material[k] = mat
-    points.cell[k] = 0
-    if materials[mat].checker_size > 0.0:
-        points.cell[k] = checker_cell(p, geo, materials[mat].checker_size)
-    points.ignore[k] = -1
-    if analytic:
-        points.ignore[k] = obj
-
-
 @wp.kernel
 def light_points_kernel(
     begin: int, points: PointsW, lights: wp.array(dtype=LightW), materials: wp.array(dtype=MaterialW),
@@ -473,10 +464,7 @@ def light_points_kernel(
         color[k] = wp.vec3(0.0)
         return
     p = points.position[k]
-    mat = materials[mat_id]
-    if points.cell[k] == 1:
-        mat.ka = mat.ka2
-        mat.kd = mat.kd2
+    mat = surface_material(materials[mat_id], points.cell[k])
     split = False
     unit = mat
     if mat.texture >= 0:
