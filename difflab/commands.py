@@ -55,6 +55,7 @@ def add_demo(sub) -> None:
     p.set_defaults(func=run_demo)
 
 
+from .fit.command import add_parser as add_fit  # noqa: E402
 from .fractals.command import add_parser as add_fractal  # noqa: E402
 
-PARSERS = [add_render, add_demo, add_fractal]
+PARSERS = [add_render, add_demo, add_fit, add_fractal]

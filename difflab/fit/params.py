@@ -78,8 +78,9 @@ def to_unconstrained(param: Param, value) -> np.ndarray:
 
 
 def build_layout(scene, materials, params, per_channel=True, bounded=False) -> tuple[Param, ...]:
-    """The fitted parameters for `materials` (names) and `params` (names; "intensity" means every
-    light's intensity, "lights[i].intensity" one light's). Raises FitError for unknown names."""
+    """The fitted parameters for `materials` (names) and `params` (names: "kd" for every fitted
+    material, "red.kd" for one of them; "intensity" means every light's intensity,
+    "lights[i].intensity" one light's). Raises FitError for unknown names."""
     if isinstance(params, str):
         params = tuple(p.strip() for p in params.split(",") if p.strip())
     params = tuple(params)
@@ -89,13 +90,21 @@ def build_layout(scene, materials, params, per_channel=True, bounded=False) -> t
         raise FitError(f"params: duplicate names in {list(params)}")
     names = scene.material_names
     qualify = len(materials) > 1
-    layout = []
     for name in materials:
         if name not in names:
             raise FitError(f"material: undefined material {name!r} (defined: {', '.join(names) or 'none'})")
+    wanted = []  # (material, kind): "kd" for every fitted material, "red.kd" for one
+    for p in params:
+        head, _, tail = p.rpartition(".")
+        if head in materials and tail in MATERIAL_PARAMS:
+            wanted.append((head, tail))
+        elif p in MATERIAL_PARAMS:
+            wanted.extend((name, p) for name in materials)
+    layout = []
+    for name in materials:
         mat_id = names.index(name)
-        for p in params:
-            if p not in MATERIAL_PARAMS:
+        for p in MATERIAL_PARAMS:
+            if (name, p) not in wanted:
                 continue
             key = f"{name}.{p}" if qualify else p
             if p in COLOR_PARAMS:
@@ -103,7 +112,8 @@ def build_layout(scene, materials, params, per_channel=True, bounded=False) -> t
             else:
                 layout.append(Param(key, p, mat_id, 1, "sigmoid" if p == "f0" else "exp"))
     for p in params:
-        if p in MATERIAL_PARAMS:
+        head, _, tail = p.rpartition(".")
+        if p in MATERIAL_PARAMS or (head in materials and tail in MATERIAL_PARAMS):
             continue
         if p == "intensity":
             indices = range(len(scene.lights))

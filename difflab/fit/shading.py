@@ -75,9 +75,10 @@ class PointsJ(NamedTuple):
 
 
 class ComposeJ(NamedTuple):
-    """Per-sample composition on the (H', W') sample grid: mask (bool), depth (0 where empty),
-    point_index (H', W', 3) int32 (clipped to valid points), point_weight (H', W', 3); background,
-    fog_color (3,); fog_start, fog_end, fog_density scalars."""
+    """How U pixels are composed from S = spp_side^2 samples each: mask (U, S) bool (a surface was
+    hit); depth (U, S) (0 where empty); point_index (U, S, 3) int32 into the points given with it;
+    point_weight (U, S, 3) (0 where empty); background, fog_color (3,); fog_start, fog_end,
+    fog_density scalars."""
 
     mask: jnp.ndarray
     depth: jnp.ndarray
@@ -92,47 +93,63 @@ class ComposeJ(NamedTuple):
 
 class Formation(NamedTuple):
     """The static (hashable) settings of image formation: specular model (int), fog mode (int),
-    spp_side, and whether Gouraud vertex colours are clamped to [0, 1]."""
+    and whether Gouraud vertex colours are clamped to [0, 1]."""
 
     specular: int
     fog_mode: int
-    spp_side: int
     clamp_colors: bool
 
 
-def gbuffer_arrays(gbuffer, dtype=jnp.float32) -> tuple[PointsJ, ComposeJ, Formation]:
-    """Split a `GBuffer` into JAX arrays (points, composition) and its static settings."""
+def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, ComposeJ, Formation, np.ndarray]:
+    """The G-buffer cut down to what `pixels` need, as JAX arrays.
+
+    Arguments:
+        gbuffer: a `GBuffer`.
+        pixels: (U,) flat pixel indices (row * width + column); default: every pixel, in order.
+    Returns:
+        (points, composition, formation, point_ids): only the R shading points the pixels' samples
+        use (point_ids (R,) are their indices in `gbuffer.points`), and the composition of the U
+        pixels with point indices renumbered into them.
+    """
+    side = int(gbuffer.spp_side)
+    height, width = gbuffer.mask.shape[0] // side, gbuffer.mask.shape[1] // side
+    pixels = np.arange(height * width) if pixels is None else np.asarray(pixels, np.int64).reshape(-1)
+    row, col = np.divmod(pixels, width)
+    di, dj = (x.reshape(-1) for x in np.meshgrid(np.arange(side), np.arange(side), indexing="ij"))
+    rows, cols = row[:, None] * side + di, col[:, None] * side + dj  # (U, S) sample coordinates
+    mask = np.asarray(gbuffer.mask, bool)[rows, cols]
+    index = np.where(mask[..., None], gbuffer.point_index[rows, cols], 0)
+    weight = np.where(mask[..., None], gbuffer.point_weight[rows, cols], 0.0)
     pts = gbuffer.points
-    count = max(int(pts.material.shape[0]), 1)
+    point_ids = np.unique(index[mask]) if mask.any() else np.zeros(0, np.int64)
+    point_ids = point_ids[point_ids < pts.material.shape[0]]
+    local = np.searchsorted(point_ids, index).clip(0, max(point_ids.size - 1, 0))
 
     def f(x):
         return jnp.asarray(np.asarray(x, np.float64), dtype=dtype)
 
-    def pad(x, fill):  # a G-buffer with no points still needs one row to gather from
-        x = np.asarray(x)
-        if x.shape[0]:
-            return x
-        return np.full((1,) + x.shape[1:], fill, dtype=x.dtype)
-
-    points = PointsJ(
-        normal=f(pad(pts.normal, 0.0)), view=f(pad(pts.view, 0.0)),
-        material=jnp.asarray(pad(pts.material, -1), jnp.int32), cell=jnp.asarray(pad(pts.cell, 0), jnp.int32),
-        light_dir=f(pad(pts.light_dir, 0.0)),
-        light_dist=f(np.where(np.isfinite(pad(pts.light_dist, 1.0)), pad(pts.light_dist, 1.0), np.inf)),
-        visibility=f(pad(pts.visibility, 0.0)),
-    )
+    if point_ids.size:
+        dist = pts.light_dist[point_ids]
+        points = PointsJ(normal=f(pts.normal[point_ids]), view=f(pts.view[point_ids]),
+                         material=jnp.asarray(pts.material[point_ids], jnp.int32),
+                         cell=jnp.asarray(pts.cell[point_ids], jnp.int32), light_dir=f(pts.light_dir[point_ids]),
+                         light_dist=f(np.where(np.isfinite(dist), dist, np.inf)),
+                         visibility=f(pts.visibility[point_ids]))
+    else:  # nothing hit: one dummy point with no material (colour 0), never used
+        n_lights = pts.light_dir.shape[1] if pts.light_dir.ndim == 3 else 0
+        points = PointsJ(normal=f(np.zeros((1, 3))), view=f(np.zeros((1, 3))), material=jnp.full(1, -1, jnp.int32),
+                         cell=jnp.zeros(1, jnp.int32), light_dir=f(np.zeros((1, n_lights, 3))),
+                         light_dist=f(np.ones((1, n_lights))), visibility=f(np.zeros((1, n_lights))))
     mode, color, start, end, density = gbuffer.fog
-    mask = np.asarray(gbuffer.mask, bool)
-    compose = ComposeJ(
-        mask=jnp.asarray(mask), depth=f(np.where(mask, gbuffer.depth, 0.0)),
-        point_index=jnp.asarray(np.clip(gbuffer.point_index, 0, count - 1), jnp.int32),
-        point_weight=f(np.where(mask[..., None], gbuffer.point_weight, 0.0)),
+    comp = ComposeJ(
+        mask=jnp.asarray(mask), depth=f(np.where(mask, gbuffer.depth[rows, cols], 0.0)),
+        point_index=jnp.asarray(local, jnp.int32), point_weight=f(weight),
         background=f(gbuffer.background), fog_color=f(color), fog_start=f(start), fog_end=f(end),
         fog_density=f(density),
     )
     formation = Formation(specular=SPECULAR_MODELS[gbuffer.specular], fog_mode=int(mode),
-                          spp_side=int(gbuffer.spp_side), clamp_colors=bool(gbuffer.clamp_vertex_colors))
-    return points, compose, formation
+                          clamp_colors=bool(gbuffer.clamp_vertex_colors))
+    return points, comp, formation, point_ids
 
 
 def point_colors(points: PointsJ, table: MaterialTable, lights: LightsJ, ambient, specular: int):
@@ -152,8 +169,10 @@ def point_colors(points: PointsJ, table: MaterialTable, lights: LightsJ, ambient
 
 
 def compose(colors, comp: ComposeJ, formation: Formation):
-    """Samples from point colours (weights, clamp, background, fog), box-filtered to (H, W, 3) pixels."""
-    gathered = colors[comp.point_index]  # (H', W', 3 points, 3 channels)
+    """Pixels (U, 3) from point colours (R, 3): per sample the weighted colours of its points (Gouraud:
+    optionally clamped to [0, 1] first), background where empty, fog; then the mean of each pixel's
+    samples (the box filter)."""
+    gathered = colors[comp.point_index]  # (U, S, 3 points, 3 channels)
     if formation.clamp_colors:
         gathered = jnp.clip(gathered, 0.0, 1.0)
     surface = jnp.sum(comp.point_weight[..., None] * gathered, axis=-2)
@@ -161,11 +180,7 @@ def compose(colors, comp: ComposeJ, formation: Formation):
         f = fog_factor(formation.fog_mode, comp.depth, comp.fog_start, comp.fog_end, comp.fog_density)[..., None]
         surface = f * surface + (1.0 - f) * comp.fog_color
     samples = jnp.where(comp.mask[..., None], surface, comp.background)
-    side = formation.spp_side
-    if side == 1:
-        return samples
-    h, w = samples.shape[0] // side, samples.shape[1] // side
-    return samples.reshape(h, side, w, side, 3).mean(axis=(1, 3))
+    return samples.mean(axis=1)
 
 
 def shade_gbuffer(gbuffer, materials, lights, ambient=None, *, dtype=jnp.float32):
@@ -184,11 +199,13 @@ def shade_gbuffer(gbuffer, materials, lights, ambient=None, *, dtype=jnp.float32
         (H, W, 3) JAX array of linear RGB, equal to `Frame.image` (to float32 rounding) when the
         arguments are the scene's own.
     """
-    points, comp, formation = gbuffer_arrays(gbuffer, dtype)
+    points, comp, formation, _ = pixel_arrays(gbuffer, None, dtype)
     table = materials if isinstance(materials, MaterialTable) else MaterialTable.from_scene(materials, dtype)
     lights = lights if isinstance(lights, LightsJ) else lights_to_jax(tuple(lights), dtype)
     ambient = jnp.asarray(gbuffer.ambient if ambient is None else ambient, dtype)
-    return _shade_jit(points, comp, table, lights, ambient, formation)
+    side = int(gbuffer.spp_side)
+    shape = (gbuffer.mask.shape[0] // side, gbuffer.mask.shape[1] // side, 3)
+    return _shade_jit(points, comp, table, lights, ambient, formation).reshape(shape)
 
 
 @functools.partial(jax.jit, static_argnames="formation")

@@ -1,0 +1,74 @@
+"""`difflab fit`: fit a material to target images and write the fitted scene.
+
+    difflab fit SCENE.json TARGET.png [TARGET2.png ...] --material NAME [--params ka,kd,ks,n]
+                [--solver lm] -o fitted.json
+
+Prints a table of the fitted values with standard errors, writes the fitted scene (and a report of
+the fit beside it) atomically, and exits 0 when the solver converged, 3 when it did not (the files are
+still written, with the status in the report), 2 for invalid input.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..errors import FitError
+
+EXIT_OK, EXIT_NOT_CONVERGED = 0, 3
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the `fit` subcommand to an argparse subparsers object."""
+    from .solve import SOLVERS
+
+    p = subparsers.add_parser("fit", help="fit material coefficients to target images",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("scene", help="scene file (JSON); its values are the starting point")
+    p.add_argument("targets", nargs="+", help="target images (8-bit files are sRGB-decoded; .npy is linear)")
+    p.add_argument("--material", action="append", required=True,
+                   help="material to fit (repeat for several)")
+    p.add_argument("--params", default="ka,kd,ks,n",
+                   help="comma-separated: ka, kd, ks, n, m, f0, intensity, lights[i].intensity (default %(default)s)")
+    p.add_argument("--solver", default="lm", choices=SOLVERS)
+    p.add_argument("-o", "--output", required=True, help="where to write the fitted scene (JSON)")
+    p.add_argument("--report", help="where to write the fit report (JSON; default: OUTPUT with .fit.json)")
+    p.add_argument("--mask", action="append", help="mask image per target (white: counts)")
+    p.add_argument("--grey", action="store_true", help="fit one grey value per coefficient, not RGB")
+    p.add_argument("--bounded", action="store_true", help="keep ka, kd, ks in [0, 1]")
+    p.add_argument("--loss", default="l2", choices=("l2", "huber", "cauchy"))
+    p.add_argument("--max-steps", type=int, default=256)
+    p.add_argument("--float32", action="store_true", help="compute in float32 (default float64)")
+    p.add_argument("--device", default="cpu", help="where Warp renders the G-buffers (cpu | cuda)")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files")
+    p.set_defaults(func=run)
+    return p
+
+
+def run(args) -> int:
+    from ..io import write_json_atomic
+    from ..scene import save_scene
+    from .fit import fit_material
+
+    output = Path(args.output)
+    report = Path(args.report) if args.report else output.with_name(output.stem + ".fit.json")
+    for path in (output, report):
+        if path.exists() and not args.force:
+            raise FitError(f"{path}: exists; use --force to overwrite")
+    if args.max_steps < 1:
+        raise FitError(f"--max-steps: must be >= 1, got {args.max_steps}")
+    masks = args.mask
+    if masks is not None and len(masks) != len(args.targets):
+        raise FitError(f"--mask: give one per target ({len(args.targets)}), got {len(masks)}")
+    material = args.material[0] if len(args.material) == 1 else args.material
+    result = fit_material(args.scene, list(args.targets), material=material, params=args.params, solver=args.solver,
+                          per_channel=not args.grey, bounded=args.bounded, loss=args.loss, masks=masks,
+                          max_steps=args.max_steps, x64=not args.float32, device=args.device)
+    print(result.table())
+    if result.result in ("empty_mask", "nonfinite_target"):
+        raise FitError(f"no fit made: {result.result}")
+    save_scene(result.to_scene(), output)
+    write_json_atomic(report, {"scene": str(args.scene), "targets": [str(t) for t in args.targets],
+                               "material": args.material, **result.to_dict()})
+    print(f"wrote {output} and {report}")
+    return EXIT_OK if result.converged else EXIT_NOT_CONVERGED

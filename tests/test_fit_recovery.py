@@ -1,0 +1,162 @@
+"""fit_material: recovery of known parameters, noise and standard errors, diagnostics, failures."""
+
+import numpy as np
+import pytest
+from test_fit_helpers import TRUTH, make_scene, perturbed, target_of
+
+from difflab.errors import FitError
+from difflab.fit import FitResult, fit_batch, fit_material
+
+START = perturbed(TRUTH)
+
+
+def rel_err(result: FitResult, truth: dict) -> float:
+    return max(float(np.max(np.abs(np.asarray(result.params[k]) - np.asarray(v)) / np.abs(v))) for k, v in truth.items())
+
+
+@pytest.fixture(scope="module")
+def scene_and_target():
+    scene = make_scene(size=32)
+    return scene, target_of(scene)
+
+
+@pytest.mark.parametrize("solver", ["lm", "gauss_newton", "dogleg", "bfgs", "varpro", "adam"])
+def test_noise_free_recovery(scene_and_target, solver):
+    scene, target = scene_and_target
+    result = fit_material(scene, [target], "red", init=START, solver=solver,
+                          max_steps=400 if solver in ("bfgs", "adam") else 100)
+    assert set(result.params) == set(TRUTH) and set(result.stderr) == set(TRUTH)
+    assert result.history and np.isfinite(result.seconds) and result.steps > 0
+    if solver == "adam":  # a gradient method: it need not converge, but must not claim to wrongly
+        assert result.converged == (result.result == "successful")
+        if not result.converged:
+            assert result.result == "nonlinear_max_steps_reached"
+            return
+    assert result.converged, result.result
+    assert rel_err(result, TRUTH) < 1e-4
+    if solver == "lm":
+        assert result.steps <= 40
+        assert result.psnr > 80 and result.poorly_determined == []
+
+
+@pytest.mark.parametrize("options,tol", [({"per_channel": False, "x64": False}, 1e-3), ({"bounded": True}, 1e-4)])
+def test_recovery_float32_grey_and_bounded(options, tol):
+    scene = make_scene(size=32, red={"ka": 0.1, "kd": 0.5, "ks": 0.3})
+    truth = {"ka": [0.1] * 3, "kd": [0.5] * 3, "ks": [0.3] * 3, "n": 24.0}
+    result = fit_material(scene, [target_of(scene)], "red", init={"ka": 0.13, "kd": 0.35, "ks": 0.39, "n": 17.0},
+                          **options)
+    assert result.converged and rel_err(result, truth) < tol
+
+
+def test_varpro_agrees_with_lm(scene_and_target):
+    scene, target = scene_and_target
+    noisy = target + np.random.default_rng(3).normal(0, 0.01, target.shape)
+    lm = fit_material(scene, [noisy], "red", init=START)
+    vp = fit_material(scene, [noisy], "red", init=START, solver="varpro")
+    assert lm.converged and vp.converged
+    for key in TRUTH:
+        np.testing.assert_allclose(vp.params[key], lm.params[key], rtol=1e-5)
+    assert vp.loss == pytest.approx(lm.loss, rel=1e-8)
+
+
+def test_noise_within_three_stderr(scene_and_target):
+    scene, target = scene_and_target
+    hits, total = 0, 0
+    for seed in range(4):
+        noisy = target + np.random.default_rng(seed).normal(0, 0.01, target.shape)
+        result = fit_material(scene, [noisy], "red", init=START)
+        assert result.converged
+        for key, truth in TRUTH.items():
+            err = np.abs(np.asarray(result.params[key]) - truth) / np.asarray(result.stderr[key])
+            hits += int(np.sum(err <= 3.0))
+            total += err.size
+    assert hits / total >= 0.95
+
+
+def test_no_highlight_flags_ks_and_n():
+    scene = make_scene(size=32, red={"ks": [0.0, 0.0, 0.0]})
+    result = fit_material(scene, [target_of(scene)], "red", init={"ks": [0.2, 0.2, 0.2], "n": 10.0})
+    assert "ks" in result.poorly_determined and "n" in result.poorly_determined
+    assert "kd" not in result.poorly_determined
+    well = fit_material(make_scene(size=32), [target_of(make_scene(size=32))], "red", init=START)
+    assert well.poorly_determined == []
+
+
+def test_multi_view_multi_light_and_materials():
+    """Two views (the second with its own camera and its own lights), two materials at once."""
+    scene = make_scene(size=16)
+    other = {"camera": {"eye": [3, 2, 3], "target": [0, 0.6, 0], "fov_y": 40, "width": 16, "height": 16},
+             "lights": [{"type": "directional", "direction": [1, -1, -1], "intensity": [0.8, 0.8, 0.8]},
+                        {"type": "point", "position": [-2, 3, 2], "intensity": [0.5, 0.5, 0.5]}]}
+    views = [target_of(scene), (target_of(scene.with_overrides(**other)), other)]
+    result = fit_material(scene, views, ["red", "floor"], ("red.ka", "red.kd", "red.ks", "red.n", "floor.kd"),
+                          init={"red.kd": [0.5, 0.3, 0.15], "red.n": 18.0, "floor.kd": [0.6, 0.9, 0.7]})
+    assert result.converged
+    assert rel_err(result, {"red.kd": TRUTH["kd"], "red.n": TRUTH["n"], "floor.kd": [0.8] * 3}) < 1e-4
+    fitted = result.to_scene()
+    assert np.allclose(fitted.materials["red"].kd, TRUTH["kd"], rtol=1e-4)
+    assert fitted.materials["floor"].checker == scene.materials["floor"].checker
+
+
+def test_light_intensity():
+    scene = make_scene(size=16)
+    target = target_of(scene.with_overrides(lights=[{"type": "point", "position": [3, 4, 3],
+                                                     "intensity": [0.9, 0.6, 0.3]}]))
+    result = fit_material(scene, [target], "red", ("lights[0].intensity",))
+    assert result.converged
+    np.testing.assert_allclose(result.params["lights[0].intensity"], [0.9, 0.6, 0.3], rtol=1e-4)
+    assert result.to_scene().lights[0].intensity == pytest.approx((0.9, 0.6, 0.3), rel=1e-4)
+
+
+def test_robust_loss_ignores_outliers(scene_and_target):
+    scene, target = scene_and_target
+    spoiled = target.copy()
+    spoiled[5:8, 10:20] = 5.0  # a glint that the model cannot explain
+    l2 = fit_material(scene, [spoiled], "red", init=START)
+    huber = fit_material(scene, [spoiled], "red", init=START, loss="cauchy", loss_scale=0.01)
+    assert rel_err(huber, {"kd": TRUTH["kd"]}) < rel_err(l2, {"kd": TRUTH["kd"]})
+
+
+def test_failures_are_values(scene_and_target):
+    scene, target = scene_and_target
+    empty = fit_material(scene, [target], "red", masks=[np.zeros(target.shape[:2], bool)])
+    assert (empty.converged, empty.result) == (False, "empty_mask")
+    nan = target.copy()
+    nan[16, 16, 0] = np.nan
+    bad = fit_material(scene, [nan], "red")
+    assert (bad.converged, bad.result) == (False, "nonfinite_target")
+    # a NaN where the mask excludes it is not looked at
+    nan = target.copy()
+    nan[0, 0] = np.nan
+    mask = np.ones(target.shape[:2], bool)
+    mask[0, 0] = False
+    assert fit_material(scene, [nan], "red", init=START, masks=[mask]).converged
+    short = fit_material(scene, [target], "red", init=START, max_steps=2)
+    assert (short.converged, short.result, short.steps) == (False, "nonlinear_max_steps_reached", 2)
+    for kwargs in ({"masks": [np.zeros(target.shape[:2], bool)]}, {"max_steps": 2}):
+        with pytest.raises(FitError):
+            fit_material(scene, [target], "red", init=START, throw=True, **kwargs)
+
+
+@pytest.mark.parametrize("kwargs,message", [
+    ({"material": "nope"}, "undefined material"), ({"params": ("kd", "q")}, "unknown parameter"),
+    ({"solver": "newton"}, "unknown solver"), ({"loss": "l1"}, "unknown loss"),
+    ({"init": {"n": -1.0}}, "init"), ({"targets": [np.zeros((4, 4))]}, "expected an (H, W, 3) image"),
+    ({"targets": [(np.zeros((4, 4, 3)), {"fog": {}})]}, "unknown override"),
+])
+def test_bad_input_raises(scene_and_target, kwargs, message):
+    scene, target = scene_and_target
+    args = {"targets": [target], "material": "red", **kwargs}
+    with pytest.raises(FitError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        fit_material(scene, **args)
+
+
+@pytest.mark.parametrize("vmap", [True, False])
+def test_batch(vmap):
+    scene = make_scene(size=16)
+    kds = [[0.6, 0.3, 0.2], [0.3, 0.5, 0.7], [0.9, 0.1, 0.4]]
+    images = np.stack([target_of(make_scene(size=16, red={"kd": kd})) for kd in kds])
+    results = fit_batch(scene, images, "red", ("kd", "n"), vmap=vmap, init={"kd": [0.5, 0.5, 0.5], "n": 18.0})
+    assert [r.converged for r in results] == [True] * 3
+    for r, kd in zip(results, kds):
+        np.testing.assert_allclose(r.params["kd"], kd, rtol=1e-4)

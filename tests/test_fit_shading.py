@@ -1,0 +1,99 @@
+"""JAX image formation against the Warp rasterizer, and gradients of the fit's residuals."""
+
+import itertools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.test_util import check_grads
+from test_fit_helpers import make_scene, target_of
+
+from difflab.fit import Setup, shade_gbuffer
+from difflab.fit.params import values_from_u
+from difflab.render.api import render_frame
+
+LIGHTS = [
+    {"type": "point", "position": [3, 4, 3], "intensity": [1, 0.9, 0.8], "attenuation": [1, 0.1, 0.01]},
+    {"type": "directional", "direction": [-1, -1, -0.5], "intensity": [0.3, 0.2, 0.5]},
+    {"type": "spot", "position": [0, 4, 1], "direction": [0, -1, -0.2], "cutoff_deg": 30, "exponent": 8,
+     "intensity": [1, 1, 1]},
+]
+FOG = {"mode": "linear", "color": [0.5, 0.5, 0.5], "start": 3, "end": 20}
+
+
+@pytest.mark.parametrize("shading,specular", list(itertools.product(["flat", "gouraud", "phong"],
+                                                                    ["phong", "blinn", "torrance"])))
+def test_parity_with_warp(shading, specular):
+    """Checker floor, shadows, point / directional / spot lights, fog: the JAX image equals Warp's."""
+    scene = make_scene(size=24, shading=shading, specular=specular, lights=LIGHTS, fog=FOG)
+    frame = render_frame(scene)
+    image = np.asarray(shade_gbuffer(frame.gbuffer, scene.materials.values(), scene.lights))
+    assert frame.gbuffer.visibility.min() == 0.0  # some shadow is in view
+    np.testing.assert_allclose(image, frame.image, atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("shading,spp,clamp", [("gouraud", 4, True), ("phong", 4, False), ("flat", 4, False),
+                                               ("gouraud", 1, True)])
+def test_parity_supersampled_and_clamped(shading, spp, clamp):
+    bright = [{"type": "point", "position": [2, 3, 3], "intensity": [3, 3, 3], "attenuation": [1, 0, 0]}]
+    scene = make_scene(size=16, shading=shading, spp=spp, clamp=clamp, lights=bright)
+    frame = render_frame(scene)
+    image = np.asarray(shade_gbuffer(frame.gbuffer, scene.materials.values(), scene.lights))
+    if clamp:
+        assert frame.image.max() <= 1.0 + 1e-6 and max(frame.gbuffer.points.color.max(), 0) > 1.0
+    np.testing.assert_allclose(image, frame.image, atol=1e-5, rtol=0)
+
+
+def test_parity_with_other_materials_and_lights():
+    """shade_gbuffer evaluates given materials / lights, not the ones the G-buffer was rendered with."""
+    scene = make_scene(size=16, lights=LIGHTS)
+    other = make_scene(size=16, lights=[dict(LIGHTS[0], intensity=[0.2, 0.5, 2.0])] + LIGHTS[1:],
+                       red={"kd": [0.1, 0.9, 0.3], "n": 5.0})
+    image = np.asarray(shade_gbuffer(render_frame(scene).gbuffer, other.materials.values(), other.lights))
+    np.testing.assert_allclose(image, render_frame(other).image, atol=1e-5, rtol=0)
+
+
+def _setup(params, size=12, **kw):
+    scene = make_scene(size=size, **kw)
+    return Setup(scene, [target_of(scene)], "red", params, x64=True)
+
+
+@pytest.mark.parametrize("specular,params", [("phong", ("ka", "kd", "ks", "n")), ("blinn", ("ks", "n")),
+                                             ("torrance", ("ks", "m", "f0")), ("phong", ("intensity",))])
+def test_check_grads_every_parameter(specular, params):
+    setup = _setup(params, specular=specular, lights=LIGHTS)
+    with jax.enable_x64(True):
+        values = values_from_u(setup.layout, setup.u0)
+        values = {k: v * 0.9 for k, v in values.items()}
+
+        def total(vals):
+            return sum(jnp.sum(r) for r in setup.problem.weighted_residuals(vals))
+
+        check_grads(total, (values,), order=1, modes=("fwd", "rev"), atol=1e-5, rtol=1e-5)
+        check_grads(lambda u: sum(jnp.sum(r) for r in setup.problem.residuals(u)), (setup.u0,), order=1,
+                    modes=("fwd", "rev"), atol=1e-5, rtol=1e-5)
+
+
+@pytest.mark.parametrize("specular", ["phong", "blinn"])
+@pytest.mark.parametrize("n", [1e-6, 1000.0])
+def test_gradient_in_n_is_finite_everywhere(specular, n):
+    """Points with N.L <= 0 and with R.V <= 0 are in view; the gradient in n stays finite."""
+    side = [{"type": "point", "position": [-3, 1, 4], "intensity": [1, 1, 1], "attenuation": [1, 0, 0]}]
+    setup = _setup(("ks", "n"), size=16, specular=specular, lights=side)
+    view = setup.problem.views[0]
+    normal, l_dir = np.asarray(view.points.normal), np.asarray(view.points.light_dir)[:, 0]
+    v_dir = np.asarray(view.points.view)
+    n_dot_l = np.sum(normal * l_dir, axis=-1)
+    r = 2 * n_dot_l[:, None] * normal - l_dir
+    assert (n_dot_l <= 0).any() and ((np.sum(r * v_dir, axis=-1) <= 0) & (n_dot_l > 0)).any()
+    with jax.enable_x64(True):
+        values = {k: jnp.asarray(v) for k, v in values_from_u(setup.layout, setup.u0).items()}
+        values["n"] = jnp.asarray([n])
+        grad = jax.grad(lambda vals: sum(jnp.sum(r ** 2) for r in setup.problem.weighted_residuals(vals)))(values)
+        assert all(np.all(np.isfinite(np.asarray(g))) for g in grad.values())
+        # and through the solver's parameterisation, at the ends of its range
+        for u_n in (-50.0, -12.0, 0.0, 12.0, 50.0):
+            u = dict(setup.u0, n=jnp.asarray([u_n]))
+            g = jax.grad(lambda u: sum(jnp.sum(r ** 2) for r in setup.problem.residuals(u)))(u)
+            assert all(np.all(np.isfinite(np.asarray(x))) for x in g.values())
