@@ -133,16 +133,21 @@ def ambient_term(mat: MaterialJ, ambient):
 
 
 def textured_material(mat: MaterialJ, target: int, value) -> MaterialJ:
-    """The material with coefficient `target` (TARGET_KA / KD / KS, a Python int) replaced by
-    `value` (texels, broadcastable to (..., 3))."""
-    name = "ka" if target == TARGET_KA else "kd" if target == TARGET_KD else "ks"
-    return mat._replace(**{name: value})
+    """The material with coefficient `target` (TARGET_KA / KD / KS, a Python int) modulated by
+    texels `value` (broadcastable to (..., 3)): k -> k * value."""
+    name = _target_name(target)
+    return mat._replace(**{name: getattr(mat, name) * value})
 
 
 def target_only(mat: MaterialJ, target: int) -> MaterialJ:
-    """The material with every coefficient 0 but `target`, which is 1 (the factor it multiplies)."""
+    """The material with every coefficient 0 but `target` (lit: the factor a texel multiplies)."""
     zero = jnp.zeros_like(jnp.asarray(mat.kd))
-    return textured_material(mat._replace(ka=zero, kd=zero, ks=zero), target, jnp.ones_like(zero))
+    name = _target_name(target)
+    return mat._replace(**{k: (getattr(mat, k) if k == name else zero) for k in ("ka", "kd", "ks")})
+
+
+def _target_name(target: int) -> str:
+    return "ka" if target == TARGET_KA else "kd" if target == TARGET_KD else "ks"
 
 
 def fog_factor(mode: int, z, start, end, density):

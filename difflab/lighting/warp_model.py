@@ -72,7 +72,7 @@ class MaterialW:
     texture: int  # index into the scene's textures, -1: none
     texture_filter: int  # TEXTURE_FILTER_IDS
     texture_wrap: int  # TEXTURE_WRAP_IDS
-    texture_target: int  # TARGET_KA / TARGET_KD / TARGET_KS: the coefficient the texture replaces
+    texture_target: int  # TARGET_KA / TARGET_KD / TARGET_KS: the coefficient the texture modulates
 
 
 @wp.func
@@ -164,26 +164,33 @@ def surface_material(mat: MaterialW, cell: int):
 
 @wp.func
 def textured_material(mat: MaterialW, target: int, value: wp.vec3):
-    """The material with coefficient `target` (TARGET_KA / KD / KS) replaced by `value` (a texel)."""
+    """The material with coefficient `target` (TARGET_KA / KD / KS) modulated by a texel:
+    k -> k * value per channel (OpenGL's GL_MODULATE; with k = 1 the texel is the coefficient)."""
     out = mat
     if target == TARGET_KA:
-        out.ka = value
+        out.ka = wp.cw_mul(mat.ka, value)
     elif target == TARGET_KD:
-        out.kd = value
+        out.kd = wp.cw_mul(mat.kd, value)
     else:
-        out.ks = value
+        out.ks = wp.cw_mul(mat.ks, value)
     return out
 
 
 @wp.func
 def target_only(mat: MaterialW, target: int):
-    """The material with every coefficient 0 but `target`, which is 1: lit, it gives the factor the
-    target coefficient multiplies (the model is linear in ka, kd and ks)."""
+    """The material with every coefficient 0 but `target`: lit, it gives the factor a texel
+    multiplies (the model is linear in ka, kd and ks)."""
     out = mat
     out.ka = wp.vec3(0.0)
     out.kd = wp.vec3(0.0)
     out.ks = wp.vec3(0.0)
-    return textured_material(out, target, wp.vec3(1.0))
+    if target == TARGET_KA:
+        out.ka = mat.ka
+    elif target == TARGET_KD:
+        out.kd = mat.kd
+    else:
+        out.ks = mat.ks
+    return out
 
 
 @wp.func

@@ -24,8 +24,8 @@ class ShadingPoints:
     [0, 1] from shadow rays; color: (N, 3) the Warp model's radiance.
 
     Textures under flat and Gouraud shading: a textured material's point `color` is lit with the
-    texture's target coefficient set to 0, and `texture_factor` (N, 3) is what that coefficient
-    multiplies (the point lit with it 1 and the other coefficients 0); each sample then adds its own
+    texture's target coefficient set to 0, and `texture_factor` (N, 3) is what a texel multiplies
+    (the point lit with only that coefficient, the others 0); each sample then adds its own
     texel times the interpolated factor (see `GBuffer`). Zero elsewhere (and always under Phong)."""
 
     position: np.ndarray

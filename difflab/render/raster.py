@@ -454,7 +454,7 @@ def light_points_kernel(
     """ka Ia + sum_p s_p light_term_p at each point, recording L_p, d_p and s_p.
 
     Textured materials: where the points are the samples (Phong) the texture is sampled here and
-    replaces its target coefficient (`texel[k]` records the value). Elsewhere (flat, Gouraud) the
+    modulates its target coefficient (`texel[k]` records the value). Elsewhere (flat, Gouraud) the
     point's `color` is lit with the target coefficient 0 and `factor` is what that coefficient
     multiplies (lit with it 1, the others 0); compose adds texel * factor per sample."""
     k = begin + wp.tid()

@@ -64,7 +64,7 @@ class RayTree:
                   node's material): (1, 1) plain, (F, 1 - F) with Fresnel, (1, 0) under total
                   internal reflection.
       local       (N, 3) float32: the node's local colour as rendered (background for misses).
-      texel       (N, 3) float32: the texture value a textured material took at the node (it replaces
+      texel       (N, 3) float32: the texture value a textured material took at the node (it multiplies
                   the coefficient named by the material's texture_target), else 0.
 
     Per sample: `sample_fog` (S,) float32 fog blend f of the primary hit (1 where none) and
@@ -159,7 +159,7 @@ def node_visibility(tree: RayTree, materials) -> np.ndarray:
 
 
 def texture_targets(materials) -> np.ndarray:
-    """Per material: the TARGET_* id its image texture replaces, or -1 without a texture."""
+    """Per material: the TARGET_* id its image texture modulates, or -1 without a texture."""
     return np.array([TEXTURE_TARGET_IDS[m.texture_target] if m.texture is not None else -1 for m in materials],
                     np.int32)
 

@@ -43,7 +43,8 @@ class Material(Record):
     ior: index of refraction (> 0). absorption: Beer absorption coefficient per scene unit (RGB, >= 0).
     m: Beckmann roughness (> 0) and f0: Schlick reflectance at normal incidence ([0, 1]), used by
     the "torrance" specular model. checker: optional Checker. texture: optional image file (absolute
-    path once loaded) that replaces the `texture_target` coefficient ("ka" | "kd" | "ks"), sampled
+    path once loaded) that modulates (multiplies, per channel) the `texture_target` coefficient
+    ("ka" | "kd" | "ks"; give that coefficient 1 for the texture's own colours), sampled
     with `filter` ("nearest" | "bilinear" | "mipmap" | "trilinear" | "ewa") and `wrap`
     ("repeat" | "clamp" | "mirror").
     """
