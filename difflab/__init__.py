@@ -7,7 +7,7 @@ material coefficients can be fitted to images with optimistix.
 """
 
 from .errors import DifflabError, FitError, MeshError, RenderError, SceneError, TextureError
-from .fit import FitResult, fit_material
+from .fit import FitResult, Identifiability, fit_material, fit_scene, identify
 from .io import load_image, save_image
 from .render.api import render, render_frame
 from .render.frame import Frame, GBuffer, ShadingPoints
@@ -16,7 +16,7 @@ from .scene import Scene, load_scene, save_scene
 __version__ = "0.1.0"
 
 __all__ = [
-    "DifflabError", "FitError", "FitResult", "Frame", "GBuffer", "MeshError", "RenderError", "Scene", "SceneError",
-    "ShadingPoints", "TextureError", "fit_material", "load_image", "load_scene", "render", "render_frame", "save_image",
+    "DifflabError", "FitError", "FitResult", "Frame", "Identifiability", "GBuffer", "MeshError", "RenderError", "Scene", "SceneError",
+    "ShadingPoints", "TextureError", "fit_material", "fit_scene", "identify", "load_image", "load_scene", "render", "render_frame", "save_image",
     "save_scene",
 ]

@@ -13,3 +13,10 @@ from .solve import SOLVERS
 
 __all__ = ["FitResult", "MaterialTable", "Param", "SOLVERS", "Setup", "fit_batch", "fit_material", "shade_gbuffer",
            "solve"]
+
+# Issue 7: fitting through the recorded ray tree (reflections, refractions, several materials at once)
+from .identify import Identifiability, identify  # noqa: E402
+from .raytree import TreeMaterials, evaluate_tree, tree_to_jax  # noqa: E402
+from .scene_fit import SceneSetup, fit_scene  # noqa: E402
+
+__all__ += ["Identifiability", "SceneSetup", "TreeMaterials", "evaluate_tree", "fit_scene", "identify", "tree_to_jax"]
