@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import FitError
-from .fit import DEFAULT_TOL, Setup, _finish
+from .fit import DEFAULT_TOL, Setup, finish
 from .params import initial_values, u_from_values
 from .solve import RECORDER, make_solver, run_solver, run_solver_vmap
 
@@ -110,10 +110,10 @@ def fit_batch(scene, images, material=None, params=("ka", "kd", "ks", "n"), *, o
         element.initial = starts[b]
         hist = [np.asarray(h).reshape(-1)[b if np.asarray(h).size == count else 0] for h, _ in log] if history else []
         if code is not None or nonfinite[b]:
-            results.append(_finish(element, None, code or "nonfinite_target", 0, seconds / count, [], solver,
+            results.append(finish(element, None, code or "nonfinite_target", 0, seconds / count, [], solver,
                                    timings, rel_tol, abs_tol, throw))
             continue
         u, name, steps = raw[b]
-        results.append(_finish(element, element.values(u), name, steps, seconds / count, hist, solver, timings,
+        results.append(finish(element, element.values(u), name, steps, seconds / count, hist, solver, timings,
                                rel_tol, abs_tol, throw))
     return results

@@ -90,8 +90,10 @@ def _loss_of(entry) -> float:
     return float(np.asarray(entry, np.float64).reshape(-1)[0])
 
 
-def _finish(setup: Setup, values: dict | None, result: str, steps: int, seconds: float, history: list,
+def finish(setup: Setup, values: dict | None, result: str, steps: int, seconds: float, history: list,
             solver: str, timings: dict, rel_tol: float, abs_tol: float, throw: bool) -> FitResult:
+    """The FitResult of a solve: values in scene units, standard errors, flags, the result code
+    (raising FitError for a failure when `throw`)."""
     layout = setup.layout
     if values is None:  # no fit was made
         params = {p.key: public_value(p, setup.initial[p.key]) for p in layout}
@@ -208,9 +210,9 @@ def fit_material(scene, targets, material=None, params=("ka", "kd", "ks", "n"), 
     timings = {"setup": time.perf_counter() - start}
     code = setup.precheck()
     if code is not None:
-        return _finish(setup, None, code, 0, 0.0, [], solver, timings, rel_tol, abs_tol, throw)
+        return finish(setup, None, code, 0, 0.0, [], solver, timings, rel_tol, abs_tol, throw)
     values, result, steps, seconds, log = solve(setup, solver, max_steps=max_steps, rtol=rtol, atol=atol,
                                                learning_rate=learning_rate, history=history)
     timings["solve"] = seconds
-    return _finish(setup, values, result, steps, seconds, [loss for loss, _ in log], solver, timings, rel_tol,
+    return finish(setup, values, result, steps, seconds, [loss for loss, _ in log], solver, timings, rel_tol,
                    abs_tol, throw)

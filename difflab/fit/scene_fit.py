@@ -27,13 +27,13 @@ import numpy as np
 from ..errors import DifflabError, FitError
 from ..lighting.jax_model import LightsJ, lights_to_jax
 from ..render.api import as_scene, render_frame
-from .fit import _finish, solve
+from .fit import finish, solve
 from .params import initial_values, u_from_values
 from .problem import LOSSES, robust
 from .result import FitResult
 from .raytree import TreeJ, TreeMaterials, evaluate_tree, tree_image, tree_influence, tree_to_jax
 from .solve import SOLVERS
-from .targets import _mask, _per_view, _weight, load_target, normalise_targets
+from .targets import prepared_targets
 from .tree_params import DEFAULT_PARAMS, ValueMap, apply_init, build_tree_layout, flatten, unflatten
 
 TREE_SOLVERS = tuple(s for s in SOLVERS if s != "varpro")
@@ -136,30 +136,13 @@ def record_views(scene, targets, masks=None, weights=None, *, max_depth=None, sp
                  threads=None) -> list[TreeView]:
     """One `TreeView` per target: its camera / lights override applied at the target's size, ray-traced
     once by Warp with the tree recorded (adaptive_threshold 0, so that no child is cut by weight)."""
-    items = normalise_targets(targets)
-    masks = _per_view(masks, len(items), "masks")
-    weights = _per_view(weights, len(items), "weights")
     render = {"method": "raytrace", "adaptive_threshold": 0.0}
     if max_depth is not None:
         render["max_depth"] = max_depth
     if spp is not None:
         render["spp"] = spp
     views = []
-    for i, ((item, overrides), mask, weight) in enumerate(zip(items, masks, weights)):
-        where = f"targets[{i}]"
-        image, clip = load_target(item, where)
-        height, width = image.shape[:2]
-        try:
-            camera = overrides.get("camera")
-            camera = dict(camera if camera is not None else scene.camera.to_dict(), width=width, height=height)
-            view_scene = scene.with_overrides(camera=camera, lights=overrides.get("lights"), render=render)
-        except DifflabError as exc:
-            raise FitError(f"{where}: {exc}") from None
-        mask = _mask(mask, (height, width), f"masks[{i}]")
-        weight = _weight(weight, (height, width), f"weights[{i}]") * mask[..., None]
-        finite = np.isfinite(image)
-        nonfinite = int(np.count_nonzero(~finite & mask[..., None]))
-        image = np.where(finite & mask[..., None], image, 0.0)
+    for view_scene, image, clip, mask, weight, nonfinite in prepared_targets(scene, targets, masks, weights, render):
         frame = render_frame(view_scene, device=device, threads=threads)
         views.append(TreeView(target=image, mask=mask, weight=weight, clip=clip, nonfinite=nonfinite,
                               tree=frame.ray_tree, scene=view_scene, image=frame.image))
@@ -294,9 +277,9 @@ def fit_scene(scene, targets, materials=None, params=DEFAULT_PARAMS, *, solver="
     timings = {"setup": time.perf_counter() - start}
     code = setup.precheck()
     if code is not None:
-        return _finish(setup, None, code, 0, 0.0, [], solver, timings, rel_tol, abs_tol, throw)
+        return finish(setup, None, code, 0, 0.0, [], solver, timings, rel_tol, abs_tol, throw)
     values, result, steps, seconds, log = solve(setup, solver, max_steps=max_steps, rtol=rtol, atol=atol,
                                                learning_rate=learning_rate, history=history)
     timings["solve"] = seconds
-    return _finish(setup, values, result, steps, seconds, log, solver, timings, rel_tol, abs_tol, throw)
+    return finish(setup, values, result, steps, seconds, log, solver, timings, rel_tol, abs_tol, throw)
 

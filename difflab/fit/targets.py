@@ -77,7 +77,8 @@ def load_target(item, where: str) -> tuple[np.ndarray, bool]:
     return image[..., :3].astype(np.float64), False
 
 
-def _per_view(values, count: int, name: str) -> list:
+def per_view(values, count: int, name: str) -> list:
+    """One value per view: None, a single mask / weight for all views, or a list of `count`."""
     if values is None:
         return [None] * count
     if isinstance(values, np.ndarray) or _is_path(values):
@@ -88,7 +89,8 @@ def _per_view(values, count: int, name: str) -> list:
     return values
 
 
-def _mask(value, shape, where) -> np.ndarray:
+def view_mask(value, shape, where) -> np.ndarray:
+    """A view's boolean mask (H, W) from None (all), an array or an image path."""
     if value is None:
         return np.ones(shape, bool)
     if _is_path(value):
@@ -101,7 +103,8 @@ def _mask(value, shape, where) -> np.ndarray:
     return mask.astype(bool)
 
 
-def _weight(value, shape, where) -> np.ndarray:
+def view_weight(value, shape, where) -> np.ndarray:
+    """A view's non-negative per-pixel weights broadcast to (H, W, 3) (None: all 1)."""
     if value is None:
         return np.ones(shape + (3,))
     weight = np.asarray(value, np.float64)
@@ -116,17 +119,14 @@ def _weight(value, shape, where) -> np.ndarray:
     return weight
 
 
-def load_views(scene, targets, masks=None, weights=None, device="cpu") -> tuple[object, list[View]]:
-    """The scene (validated) and one `View` per target, each with its G-buffer rendered once.
-
-    A view's camera is the scene's (or its override's) with width and height set to the target's."""
-    from ..render.api import render_frame
-
-    scene = as_scene(scene)
+def prepared_targets(scene, targets, masks, weights, render: dict):
+    """For each target: (its view's scene, target image, clip, mask, weight, count of non-finite
+    masked values). A view's scene is `scene` with the target's camera / lights override, the
+    camera resized to the target, and the `render` settings; non-finite target values are zeroed
+    (and counted, so that the fit reports them)."""
     items = normalise_targets(targets)
-    masks = _per_view(masks, len(items), "masks")
-    weights = _per_view(weights, len(items), "weights")
-    views = []
+    masks = per_view(masks, len(items), "masks")
+    weights = per_view(weights, len(items), "weights")
     for i, ((item, overrides), mask, weight) in enumerate(zip(items, masks, weights)):
         where = f"targets[{i}]"
         image, clip = load_target(item, where)
@@ -134,14 +134,26 @@ def load_views(scene, targets, masks=None, weights=None, device="cpu") -> tuple[
         try:
             camera = overrides.get("camera")
             camera = dict(camera if camera is not None else scene.camera.to_dict(), width=width, height=height)
-            view_scene = scene.with_overrides(camera=camera, lights=overrides.get("lights"), render={"method": "raster"})
+            view_scene = scene.with_overrides(camera=camera, lights=overrides.get("lights"), render=render)
         except DifflabError as exc:
             raise FitError(f"{where}: {exc}") from None
-        mask = _mask(mask, (height, width), f"masks[{i}]")
-        weight = _weight(weight, (height, width), f"weights[{i}]") * mask[..., None]
+        mask = view_mask(mask, (height, width), f"masks[{i}]")
+        weight = view_weight(weight, (height, width), f"weights[{i}]") * mask[..., None]
         finite = np.isfinite(image)
         nonfinite = int(np.count_nonzero(~finite & mask[..., None]))
-        image = np.where(finite & mask[..., None], image, 0.0)
+        yield view_scene, np.where(finite & mask[..., None], image, 0.0), clip, mask, weight, nonfinite
+
+
+def load_views(scene, targets, masks=None, weights=None, device="cpu") -> tuple[object, list[View]]:
+    """The scene (validated) and one `View` per target, each with its G-buffer rendered once.
+
+    A view's camera is the scene's (or its override's) with width and height set to the target's."""
+    from ..render.api import render_frame
+
+    scene = as_scene(scene)
+    views = []
+    for view_scene, image, clip, mask, weight, nonfinite in prepared_targets(scene, targets, masks, weights,
+                                                                             {"method": "raster"}):
         gbuffer = render_frame(view_scene, device=device).gbuffer
         views.append(View(target=image, mask=mask, weight=weight, clip=clip, nonfinite=nonfinite,
                           gbuffer=gbuffer, scene=view_scene))

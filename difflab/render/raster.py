@@ -58,8 +58,9 @@ class PointsW:
 
 
 @wp.kernel
-def clip_vertices_kernel(vertices: wp.array(dtype=wp.vec3), view_proj: wp.mat44, clip: wp.array(dtype=wp.vec4)):
-    k = wp.tid()
+def clip_vertices_kernel(begin: int, vertices: wp.array(dtype=wp.vec3), view_proj: wp.mat44,
+                         clip: wp.array(dtype=wp.vec4)):
+    k = begin + wp.tid()
     p = vertices[k]
     clip[k] = view_proj * wp.vec4(p[0], p[1], p[2], 1.0)
 
@@ -112,9 +113,10 @@ def owns_edge(ax: wp.int64, ay: wp.int64, bx: wp.int64, by: wp.int64):
 
 @wp.func
 def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: wp.vec3, w2: wp.vec3, cull: int,
-         screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32)):
+         screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32),
+         rows: wp.array2d(dtype=wp.int32)):
     """Store one screen triangle, wound so its integer area is positive; facing +1 front, -1 back,
-    0 not drawn (degenerate, or culled)."""
+    0 not drawn (degenerate, or culled); and the rows of sample centres it may cover, for binning."""
     area = edge(snap(s0[0]), snap(s0[1]), snap(s1[0]), snap(s1[1]), snap(s2[0]), snap(s2[1]))
     facing[slot] = 0
     if area == wp.int64(0):
@@ -125,6 +127,9 @@ def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: w
     if cull == 1 and side < 0:
         return
     facing[slot] = side
+    half = wp.float64(0.5)
+    rows[slot, 0] = int(wp.ceil(wp.min(s0[1], wp.min(s1[1], s2[1])) - half))
+    rows[slot, 1] = int(wp.floor(wp.max(s0[1], wp.max(s1[1], s2[1])) - half))
     screen[slot, 0] = s0
     weight[slot, 0] = w0
     if side > 0:
@@ -140,12 +145,14 @@ def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: w
 
 
 @wp.kernel
-def assemble_kernel(faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4), cull: int, width: int,
-                    height: int, screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3),
-                    facing: wp.array(dtype=wp.int32)):
-    f = wp.tid()
-    facing[2 * f] = 0
-    facing[2 * f + 1] = 0
+def assemble_kernel(begin: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4), cull: int,
+                    width: int, height: int, screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3),
+                    facing: wp.array(dtype=wp.int32), rows: wp.array2d(dtype=wp.int32)):
+    f = begin + wp.tid()
+    for k in range(2):
+        facing[2 * f + k] = 0
+        rows[2 * f + k, 0] = 1  # empty row range [1, 0]: binned nowhere
+        rows[2 * f + k, 1] = 0
     i0 = faces[f, 0]
     i1 = faces[f, 1]
     i2 = faces[f, 2]
@@ -163,7 +170,7 @@ def assemble_kernel(faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.v
         return
     if count == 3:
         emit(2 * f, to_screen(c0, width, height), to_screen(c1, width, height), to_screen(c2, width, height),
-             e0, e1, e2, cull, screen, weight, facing)
+             e0, e1, e2, cull, screen, weight, facing, rows)
         return
     # Rotate (keeping the winding) so that vertex a is the odd one out: the only vertex inside
     # (count 1) or the only one outside (count 2).
@@ -206,12 +213,12 @@ def assemble_kernel(faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.v
     sab = to_screen(cab, width, height)
     sac = to_screen(cac, width, height)
     if count == 1:  # a inside: triangle (a, ab, ac)
-        emit(2 * f, to_screen(ca, width, height), sab, sac, wa, wab, wac, cull, screen, weight, facing)
+        emit(2 * f, to_screen(ca, width, height), sab, sac, wa, wab, wac, cull, screen, weight, facing, rows)
     else:  # a outside: quad (ab, b, c, ac)
         sb = to_screen(cb, width, height)
         sc = to_screen(cc, width, height)
-        emit(2 * f, sab, sb, sc, wab, wb, wc, cull, screen, weight, facing)
-        emit(2 * f + 1, sab, sc, sac, wab, wc, wac, cull, screen, weight, facing)
+        emit(2 * f, sab, sb, sc, wab, wb, wc, cull, screen, weight, facing, rows)
+        emit(2 * f + 1, sab, sc, sac, wab, wc, wac, cull, screen, weight, facing, rows)
 
 
 @wp.func
@@ -298,11 +305,9 @@ def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=
 
 
 @wp.kernel
-def raster_kernel(row_begin: int, row_end: int, screen: wp.array2d(dtype=wp.vec4d), facing: wp.array(dtype=wp.int32),
+def raster_kernel(row_begin: int, row_end: int, slots: wp.array(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d),
                   width: int, key: wp.array(dtype=wp.int64)):
-    slot = wp.tid()
-    if facing[slot] == 0:
-        return
+    slot = slots[wp.tid()]  # the triangles binned to this band of rows
     s0 = screen[slot, 0]
     s1 = screen[slot, 1]
     s2 = screen[slot, 2]

@@ -35,6 +35,48 @@ def empty_points(count: int, device: str) -> rk.PointsW:
     return points
 
 
+def zbuffer(compiled, cam, cull: int, threads: int | None = None):
+    """Stages 1-3 on the sample grid of `cam`: clip space, near-plane clipping, and the z-buffer.
+
+    Returns the clipped screen triangles (screen, weight, facing: two slots per face) and the
+    visibility key per sample (NO_HIT, or depth << 32 | slot of the nearest triangle). Vertices
+    and faces are transformed in bands on all cores; each band of rows rasterizes only the
+    triangles binned to it (those whose sample-centre rows meet the band)."""
+    device, arrays = compiled.device, compiled.arrays
+    n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
+    width, height = cam.width, cam.height
+    screen = wp.empty((2 * n_faces, 3), dtype=wp.vec4d, device=device)
+    weight = wp.empty((2 * n_faces, 3), dtype=wp.vec3, device=device)
+    facing = wp.empty(2 * n_faces, dtype=wp.int32, device=device)
+    key = wp.full(width * height, value=rk.NO_HIT, dtype=wp.int64, device=device)
+    if not n_faces:
+        return screen, weight, facing, key
+    clip = wp.empty(n_vertices, dtype=wp.vec4, device=device)
+    rows = wp.empty((2 * n_faces, 2), dtype=wp.int32, device=device)
+
+    def clip_band(begin, end):
+        wp.launch(rk.clip_vertices_kernel, dim=end - begin, inputs=[begin, arrays["vertices"], cam.view_proj, clip],
+                  device=device)
+
+    def assemble_band(begin, end):
+        wp.launch(rk.assemble_kernel, dim=end - begin, inputs=[begin, arrays["faces"], clip, cull, width, height,
+                                                               screen, weight, facing, rows], device=device)
+
+    parallel_bands(clip_band, n_vertices, device, threads)
+    parallel_bands(assemble_band, n_faces, device, threads)
+    row_range = rows.numpy()
+    first, last = row_range[:, 0], row_range[:, 1]
+
+    def raster_band(begin, end):
+        slots = np.flatnonzero((last >= begin) & (first < end) & (last >= first)).astype(np.int32)
+        if slots.size:
+            wp.launch(rk.raster_kernel, dim=slots.size, inputs=[
+                begin, end, wp.array(slots, dtype=wp.int32, device=device), screen, width, key], device=device)
+
+    parallel_bands(raster_band, height, device, threads)
+    return screen, weight, facing, key
+
+
 def rasterize(compiled, settings, threads: int | None = None) -> Frame:
     """Render a compiled scene with the rasterizer under `settings` (a scene RenderSettings)."""
     scene, device = compiled.scene, compiled.device
@@ -51,22 +93,7 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
     n_samples, n_lights = width * height, len(scene.lights)
 
     # Stages 1-3: clip space, clipping, z-buffer.
-    clip = wp.empty(n_vertices, dtype=wp.vec4, device=device)
-    screen = wp.empty((2 * n_faces, 3), dtype=wp.vec4d, device=device)
-    weight = wp.empty((2 * n_faces, 3), dtype=wp.vec3, device=device)
-    facing = wp.empty(2 * n_faces, dtype=wp.int32, device=device)
-    key = wp.full(n_samples, value=rk.NO_HIT, dtype=wp.int64, device=device)
-    if n_faces:
-        wp.launch(rk.clip_vertices_kernel, dim=n_vertices, inputs=[arrays["vertices"], cam.view_proj, clip],
-                  device=device)
-        wp.launch(rk.assemble_kernel, dim=n_faces,
-                  inputs=[arrays["faces"], clip, int(settings.cull_backfaces), width, height, screen, weight, facing],
-                  device=device)
-
-        def raster_band(begin, end):
-            wp.launch(rk.raster_kernel, dim=2 * n_faces, inputs=[begin, end, screen, facing, width, key], device=device)
-
-        parallel_bands(raster_band, height, device, threads)
+    screen, weight, facing, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)
 
     # Stage 4: the per-sample G-buffer.
     samples = empty_points(n_samples, device)

@@ -14,11 +14,10 @@ tessellation and the exact surface disagree by less than half a sample.
 from __future__ import annotations
 
 import numpy as np
-from .._warp import wp
 
-from . import raster as rk
+from .._warp import wp
 from .camera import camera_struct
-from .launch import parallel_bands
+from .rasterizer import zbuffer
 from .trace import HIT_NONE, HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, HitW, SceneGeomW, closest_hit, ray_plane, \
     ray_sphere, ray_triangle
 
@@ -95,25 +94,7 @@ def hinted_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.v
 def visible_faces(compiled, width: int, height: int, threads: int | None = None) -> np.ndarray:
     """Nearest face per sample of a width x height grid (-1: empty), from the rasterizer's
     clip / assemble / z-buffer stages (no back-face culling)."""
-    device = compiled.device
-    cam = camera_struct(compiled.scene.camera, width, height)
-    arrays = compiled.arrays
-    n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
-    key = wp.full(width * height, value=rk.NO_HIT, dtype=wp.int64, device=device)
-    if n_faces:
-        clip = wp.empty(n_vertices, dtype=wp.vec4, device=device)
-        screen = wp.empty((2 * n_faces, 3), dtype=wp.vec4d, device=device)
-        weight = wp.empty((2 * n_faces, 3), dtype=wp.vec3, device=device)
-        facing = wp.empty(2 * n_faces, dtype=wp.int32, device=device)
-        wp.launch(rk.clip_vertices_kernel, dim=n_vertices, inputs=[arrays["vertices"], cam.view_proj, clip],
-                  device=device)
-        wp.launch(rk.assemble_kernel, dim=n_faces, inputs=[arrays["faces"], clip, 0, width, height, screen, weight,
-                                                           facing], device=device)
-
-        def raster_band(begin, end):
-            wp.launch(rk.raster_kernel, dim=2 * n_faces, inputs=[begin, end, screen, facing, width, key], device=device)
-
-        parallel_bands(raster_band, height, device, threads)
+    key = zbuffer(compiled, camera_struct(compiled.scene.camera, width, height), 0, threads)[3]
     keys = key.numpy()
     empty = keys == np.iinfo(np.int64).max
     faces = ((keys & 0xFFFFFFFF) // 2).astype(np.int32)  # the key's low 32 bits hold the clipped slot 2f or 2f+1
