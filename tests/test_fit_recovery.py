@@ -160,3 +160,17 @@ def test_batch(vmap):
     assert [r.converged for r in results] == [True] * 3
     for r, kd in zip(results, kds):
         np.testing.assert_allclose(r.params["kd"], kd, rtol=1e-4)
+
+
+def test_a_textured_material_is_refused_with_a_pointer(tmp_path):
+    from test_fit_helpers import scene_dict
+
+    from difflab import Scene, render, save_image
+
+    save_image(tmp_path / "t.png", np.full((4, 4, 3), 0.5, np.float32))
+    d = scene_dict(16)
+    d["materials"]["red"].update(texture=str(tmp_path / "t.png"))
+    scene = Scene.from_dict(d)
+    target = render(scene)
+    with pytest.raises(FitError, match="texture_fit"):
+        fit_material(scene, [target], "red")

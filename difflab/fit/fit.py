@@ -52,6 +52,12 @@ class Setup:
             raise FitError(f"loss_scale: must be a number > 0, got {loss_scale!r}")
         self.scene, self.views = load_views(scene, targets, masks, weights, device)
         self.materials = _materials(self.scene, material)
+        textured = [name for name, mat in self.scene.materials.items() if mat.texture is not None]
+        fits_lights = any(str(p).endswith("intensity") for p in ((params,) if isinstance(params, str) else params))
+        if textured and (fits_lights or set(textured) & set(self.materials)):
+            raise FitError(f"material: {', '.join(textured)} has an image texture, which fit_material's image "
+                           "formation does not model; fit the texture with difflab.fit.texture_fit.fit_texture, "
+                           "or fit through the ray tree with fit_scene")
         self.layout = build_layout(self.scene, self.materials, params, per_channel, bounded)
         self.initial = initial_values(self.scene, self.layout, init)
         self.x64 = bool(x64)
