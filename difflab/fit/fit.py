@@ -81,12 +81,17 @@ class Setup:
             return {k: np.asarray(v, np.float64) for k, v in values_from_u(self.layout, u).items()}
 
     def precheck(self) -> str | None:
-        """A difflab result code when the fit cannot be made, else None."""
-        if self.nonfinite:
-            return "nonfinite_target"
-        if self.used_pixels == 0:
-            return "empty_mask"
-        return None
+        return precheck(self)
+
+
+def precheck(setup) -> str | None:
+    """A difflab result code when a prepared fit cannot be made (non-finite target values under the
+    masks, or no pixel that the fitted parameters affect), else None."""
+    if setup.nonfinite:
+        return "nonfinite_target"
+    if setup.used_pixels == 0:
+        return "empty_mask"
+    return None
 
 
 def _loss_of(entry) -> float:

@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import DifflabError, FitError
 from ..lighting.jax_model import LightsJ, lights_to_jax
 from ..render.api import as_scene, render_frame
-from .fit import finish, solve
+from .fit import finish, precheck, solve
 from .params import initial_values, u_from_values
 from .problem import LOSSES, robust
 from .result import FitResult
@@ -208,12 +208,7 @@ class SceneSetup:
             return {k: np.asarray(v, np.float64) for k, v in values.items()}
 
     def precheck(self) -> str | None:
-        """A difflab result code when the fit cannot be made, else None."""
-        if self.nonfinite:
-            return "nonfinite_target"
-        if self.used_pixels == 0:
-            return "empty_mask"
-        return None
+        return precheck(self)
 
     def render(self, values: dict | None = None) -> list[np.ndarray]:
         """Each view's full image (H, W, 3) float32 from its tree at `values` (scene units; default:

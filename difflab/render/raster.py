@@ -508,6 +508,19 @@ def clamp01(c: wp.vec3):
     return wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
 
 
+@wp.func
+def blend_points(values: wp.array(dtype=wp.vec3), point_index: wp.array2d(dtype=wp.int32), w: wp.vec3, s: int,
+                 clamp_colors: int):
+    """sum_k w_k values[point k of sample s], each value clamped to [0, 1] first when asked (OpenGL)."""
+    out = wp.vec3(0.0)
+    for k in range(3):
+        c = values[point_index[s, k]]
+        if clamp_colors == 1:
+            c = clamp01(c)
+        out = out + w[k] * c
+    return out
+
+
 @wp.kernel
 def compose_kernel(row0: int, width: int, mask_material: wp.array(dtype=wp.int32), depth: wp.array(dtype=float),
                    point_index: wp.array2d(dtype=wp.int32), point_weight: wp.array(dtype=wp.vec3),
@@ -524,21 +537,10 @@ def compose_kernel(row0: int, width: int, mask_material: wp.array(dtype=wp.int32
     if mat_id < 0:
         image[s] = background
         return
-    w = point_weight[s]
-    out = wp.vec3(0.0)
-    for k in range(3):
-        c = color[point_index[s, k]]
-        if clamp_colors == 1:
-            c = clamp01(c)
-        out = out + w[k] * c
+    out = blend_points(color, point_index, point_weight[s], s, clamp_colors)
     if per_fragment == 1 and materials[mat_id].texture >= 0:
         mat = materials[mat_id]
-        modulated = wp.vec3(0.0)
-        for k in range(3):
-            c = factor[point_index[s, k]]
-            if clamp_colors == 1:
-                c = clamp01(c)
-            modulated = modulated + w[k] * c
+        modulated = blend_points(factor, point_index, point_weight[s], s, clamp_colors)
         value = sample_texture(textures, mat.texture, samples.uv[s], samples.duv_dx[s], samples.duv_dy[s],
                                mat.texture_filter, mat.texture_wrap)
         texel[s] = value
