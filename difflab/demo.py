@@ -80,8 +80,8 @@ def shading_models(out: Path, size: int) -> list[tuple[Path, str]]:
     sphere = base_scene([{"type": "mesh", "builtin": "sphere", "resolution": 8, "material": "plastic"}],
                         {"plastic": PLASTIC}, size, size, eye=(0.0, 0.5, 3.6))
     teapot = base_scene([{"type": "mesh", "builtin": "teapot", "resolution": 3, "material": "plastic",
-                          "transform": {"translate": [-0.1, -0.75, 0.0], "scale": 0.5}}],
-                        {"plastic": PLASTIC}, size, size, eye=(0.0, 1.2, 4.0), target=(0.0, 0.0, 0.0))
+                          "transform": {"translate": [-0.1, -0.75, 0.0], "scale": 0.45}}],
+                        {"plastic": PLASTIC}, size, size, eye=(0.0, 1.4, 4.6), target=(0.0, 0.0, 0.0))
     images, titles = [], []
     for name, scene in [("sphere (8 bands)", sphere), ("teapot (res. 3)", teapot)]:
         for shading in ("flat", "gouraud", "phong"):
@@ -135,7 +135,8 @@ def materials_table(out: Path, size: int) -> list[tuple[Path, str]]:
                            lights=[{"type": "point", "position": [4.0, 5.0, 6.0], "intensity": [0.6, 0.6, 0.6]}])
         scene["ambient"] = [0.5, 0.5, 0.5]
         images.append(render(scene))
-        titles.append(f"{name}: ka {m['ambient']}, kd {m['diffuse']}, ks {m['specular']}, n {material['n']:.1f}")
+        titles.append(f"{name}: ka {m['ambient']}, kd {m['diffuse']},\nks {m['specular']}, "
+                      f"shininess {m['shininess']} (n = {material['n']:.1f})")
     figure = image_grid(images, titles, out / "materials.png", columns=2)
     buffer = _io.StringIO()
     rows = lecture_phong_table()
