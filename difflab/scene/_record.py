@@ -40,8 +40,9 @@ class Record:
             object.__setattr__(self, name, value)
 
     @classmethod
-    def _check(cls, values: dict, path: str) -> dict:  # pragma: no cover - abstract
-        raise NotImplementedError
+    def _check(cls, values: dict, path: str) -> dict:
+        """Validated (and normalised) field values; every record type overrides this with its rules."""
+        return values
 
     @classmethod
     def _defaults(cls) -> tuple[dict, tuple[str, ...]]:
