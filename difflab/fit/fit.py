@@ -218,12 +218,19 @@ def fit_material(scene, targets, material=None, params=("ka", "kd", "ks", "n"), 
     start = time.perf_counter()
     setup = Setup(scene, targets, material, params, per_channel=per_channel, bounded=bounded, loss=loss,
                   loss_scale=loss_scale, masks=masks, weights=weights, init=init, x64=x64, device=device)
-    timings = {"setup": time.perf_counter() - start}
+    return run_fit(setup, solver, time.perf_counter() - start, max_steps=max_steps, rtol=rtol, atol=atol,
+                   learning_rate=learning_rate, history=history, rel_tol=rel_tol, abs_tol=abs_tol, throw=throw)
+
+
+def run_fit(setup, solver: str, setup_seconds: float, *, max_steps, rtol, atol, learning_rate, history, rel_tol,
+            abs_tol, throw) -> FitResult:
+    """Solve a prepared fit (a `Setup` or anything with its interface) and report it: the result code
+    of `precheck` without solving when the fit cannot be made, else `solve` then `finish`."""
+    timings = {"setup": setup_seconds}
     code = setup.precheck()
     if code is not None:
         return finish(setup, None, code, 0, 0.0, [], solver, timings, rel_tol, abs_tol, throw)
     values, result, steps, seconds, log = solve(setup, solver, max_steps=max_steps, rtol=rtol, atol=atol,
                                                learning_rate=learning_rate, history=history)
     timings["solve"] = seconds
-    return finish(setup, values, result, steps, seconds, [loss for loss, _ in log], solver, timings, rel_tol,
-                   abs_tol, throw)
+    return finish(setup, values, result, steps, seconds, log, solver, timings, rel_tol, abs_tol, throw)

@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import DifflabError, FitError
 from ..lighting.jax_model import LightsJ, lights_to_jax
 from ..render.api import as_scene, render_frame
-from .fit import finish, precheck, solve
+from .fit import precheck, run_fit
 from .params import initial_values, u_from_values
 from .problem import LOSSES, robust
 from .result import FitResult
@@ -269,12 +269,6 @@ def fit_scene(scene, targets, materials=None, params=DEFAULT_PARAMS, *, solver="
     setup = SceneSetup(scene, targets, materials, params, per_channel=per_channel, loss=loss, loss_scale=loss_scale,
                        masks=masks, weights=weights, init=init, x64=x64, max_depth=max_depth, spp=spp, device=device,
                        threads=threads)
-    timings = {"setup": time.perf_counter() - start}
-    code = setup.precheck()
-    if code is not None:
-        return finish(setup, None, code, 0, 0.0, [], solver, timings, rel_tol, abs_tol, throw)
-    values, result, steps, seconds, log = solve(setup, solver, max_steps=max_steps, rtol=rtol, atol=atol,
-                                               learning_rate=learning_rate, history=history)
-    timings["solve"] = seconds
-    return finish(setup, values, result, steps, seconds, log, solver, timings, rel_tol, abs_tol, throw)
+    return run_fit(setup, solver, time.perf_counter() - start, max_steps=max_steps, rtol=rtol, atol=atol,
+                   learning_rate=learning_rate, history=history, rel_tol=rel_tol, abs_tol=abs_tol, throw=throw)
 

@@ -18,8 +18,8 @@ import numpy as np
 from .._warp import wp
 from .camera import camera_struct
 from .rasterizer import zbuffer
-from .trace import HIT_NONE, HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, HitW, SceneGeomW, closest_hit, ray_plane, \
-    ray_sphere, ray_triangle
+from .trace import (HIT_NONE, HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, SceneGeomW, closest_hit, no_hit, ray_plane,
+                    ray_sphere, ray_triangle, surface_hit)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -44,14 +44,8 @@ def hinted_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.v
     """The primary hit of sample (i, j) from its item-buffer hint; `closest_hit` if the hint misses."""
     kind = item.kind[i, j]
     k = item.index[i, j]
-    hit = HitW()
-    hit.t = t_max
-    hit.kind = HIT_NONE
-    hit.index = -1
-    hit.object = -1
-    hit.material = -1
     if kind == HIT_NONE:
-        return hit
+        return no_hit(t_max)
     if kind == HIT_TRIANGLE:
         a = item.vertices[item.faces[k, 0]]
         b = item.vertices[item.faces[k, 1]]
@@ -59,35 +53,19 @@ def hinted_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.v
         t, b1, b2 = ray_triangle(origin, direction, a, b, c)
         if t > 0.0 and t < t_max and b1 >= -BARY_TOLERANCE and b2 >= -BARY_TOLERANCE \
                 and b1 + b2 <= 1.0 + BARY_TOLERANCE:
-            hit.t = t
-            hit.kind = HIT_TRIANGLE
-            hit.index = k
-            hit.object = geom.face_object[k]
-            hit.material = geom.face_material[k]
+            hit = surface_hit(geom, HIT_TRIANGLE, k, t, origin, direction)
             hit.normal = wp.normalize(wp.cross(b - a, c - a))
             hit.u = 1.0 - b1 - b2  # Warp's mesh_query_ray convention: p = u a + v b + (1 - u - v) c
             hit.v = b1
             return hit
-    elif kind == HIT_SPHERE:
-        t = ray_sphere(origin, direction, geom.sphere_center[k], geom.sphere_radius[k], 0.0)
+    else:
+        t = float(-1.0)
+        if kind == HIT_SPHERE:
+            t = ray_sphere(origin, direction, geom.sphere_center[k], geom.sphere_radius[k], 0.0)
+        else:
+            t = ray_plane(origin, direction, geom.plane_point[k], geom.plane_normal[k], 0.0)
         if t > 0.0 and t < t_max:
-            hit.t = t
-            hit.kind = HIT_SPHERE
-            hit.index = k
-            hit.object = geom.sphere_object[k]
-            hit.material = geom.sphere_material[k]
-            hit.normal = wp.normalize(origin + t * direction - geom.sphere_center[k])
-            return hit
-    elif kind == HIT_PLANE:
-        t = ray_plane(origin, direction, geom.plane_point[k], geom.plane_normal[k], 0.0)
-        if t > 0.0 and t < t_max:
-            hit.t = t
-            hit.kind = HIT_PLANE
-            hit.index = k
-            hit.object = geom.plane_object[k]
-            hit.material = geom.plane_material[k]
-            hit.normal = geom.plane_normal[k]
-            return hit
+            return surface_hit(geom, kind, k, t, origin, direction)
     return closest_hit(geom, origin, direction, 0.0, t_max, -1)
 
 

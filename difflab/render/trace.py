@@ -99,15 +99,43 @@ def ray_triangle(origin: wp.vec3, direction: wp.vec3, a: wp.vec3, b: wp.vec3, c:
 
 
 @wp.func
-def closest_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: float, t_max: float,
-                ignore_object: int):
-    """The nearest surface with t_min < t < t_max along a unit ray, skipping object `ignore_object`."""
+def no_hit(t_max: float):
+    """A miss (nothing before t_max)."""
     hit = HitW()
     hit.t = t_max
     hit.kind = HIT_NONE
     hit.index = -1
     hit.object = -1
     hit.material = -1
+    return hit
+
+
+@wp.func
+def surface_hit(geom: SceneGeomW, kind: int, index: int, t: float, origin: wp.vec3, direction: wp.vec3):
+    """The hit on sphere / plane / triangle `index` at t: its object, material and geometric normal
+    (a triangle's normal, u and v are left for the caller, which has them from its intersection)."""
+    hit = no_hit(t)
+    hit.kind = kind
+    hit.index = index
+    if kind == HIT_SPHERE:
+        hit.object = geom.sphere_object[index]
+        hit.material = geom.sphere_material[index]
+        hit.normal = wp.normalize(origin + t * direction - geom.sphere_center[index])
+    elif kind == HIT_PLANE:
+        hit.object = geom.plane_object[index]
+        hit.material = geom.plane_material[index]
+        hit.normal = geom.plane_normal[index]
+    elif kind == HIT_TRIANGLE:
+        hit.object = geom.face_object[index]
+        hit.material = geom.face_material[index]
+    return hit
+
+
+@wp.func
+def closest_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: float, t_max: float,
+                ignore_object: int):
+    """The nearest surface with t_min < t < t_max along a unit ray, skipping object `ignore_object`."""
+    hit = no_hit(t_max)
     for k in range(geom.sphere_center.shape[0]):
         if geom.sphere_object[k] != ignore_object:
             t = ray_sphere(origin, direction, geom.sphere_center[k], geom.sphere_radius[k], t_min)
@@ -125,24 +153,14 @@ def closest_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: fl
     if geom.mesh != wp.uint64(0):
         query = wp.mesh_query_ray(geom.mesh, origin + t_min * direction, direction, hit.t - t_min)
         if query.result and geom.face_object[query.face] != ignore_object:
-            hit.t = query.t + t_min
-            hit.kind = HIT_TRIANGLE
-            hit.index = query.face
-            hit.u = query.u
-            hit.v = query.v
-            hit.normal = wp.normalize(query.normal)
-    if hit.kind == HIT_SPHERE:
-        hit.object = geom.sphere_object[hit.index]
-        hit.material = geom.sphere_material[hit.index]
-        hit.normal = wp.normalize(origin + hit.t * direction - geom.sphere_center[hit.index])
-    elif hit.kind == HIT_PLANE:
-        hit.object = geom.plane_object[hit.index]
-        hit.material = geom.plane_material[hit.index]
-        hit.normal = geom.plane_normal[hit.index]
-    elif hit.kind == HIT_TRIANGLE:
-        hit.object = geom.face_object[hit.index]
-        hit.material = geom.face_material[hit.index]
-    return hit
+            out = surface_hit(geom, HIT_TRIANGLE, query.face, query.t + t_min, origin, direction)
+            out.u = query.u
+            out.v = query.v
+            out.normal = wp.normalize(query.normal)
+            return out
+    if hit.kind == HIT_NONE:
+        return hit
+    return surface_hit(geom, hit.kind, hit.index, hit.t, origin, direction)
 
 
 @wp.func
