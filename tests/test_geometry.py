@@ -194,7 +194,33 @@ def test_quad_default_is_unit_square_in_xz_and_walls_have_v_up():
     assert np.all(wall.vertices[right, 0] > 0)
 
 
+@pytest.mark.parametrize("d", [1, 2, 5])
+def test_subdivided_quad_and_box_keep_shape_area_volume_and_uv_map(d):
+    q = quad(size=(2.0, 3.0), center=(0.5, -1.0, 2.0), normal=(0, 0, 1), divisions=d)
+    assert q.n_vertices == (d + 1) ** 2 and q.n_faces == 2 * d * d
+    np.testing.assert_allclose(face_normals(q.vertices, q.faces), np.tile([0, 0, 1.0], (2 * d * d, 1)), atol=1e-12)
+    np.testing.assert_allclose(face_areas(q.vertices, q.faces), 6.0 / (2 * d * d), rtol=1e-12)
+    np.testing.assert_allclose(q.bounds(), [[-0.5, -2.5, 2.0], [1.5, 0.5, 2.0]], atol=1e-12)
+    # uv is the affine map of position (u along +x, v along +y for a wall facing +z).
+    np.testing.assert_allclose(q.uvs, (q.vertices[:, :2] - [-0.5, -2.5]) / [2.0, 3.0], atol=1e-12)
+    assert set(np.round(q.uvs[:, 0] * d, 9)) == set(range(d + 1))
+    b = box(size=(1.0, 2.0, 3.0), center=(1, 1, 1), divisions=d)
+    assert b.n_vertices == 6 * (d + 1) ** 2 and b.n_faces == 12 * d * d
+    assert signed_volume(*welded(b)) == pytest.approx(6.0, rel=1e-12)
+    np.testing.assert_allclose(b.normals[b.faces[:, 0]], face_normals(b.vertices, b.faces), atol=1e-12)
+
+
+def test_scene_resolution_subdivides_builtin_quads_and_boxes():
+    from difflab.render.compile import object_mesh
+    from difflab.scene import Mesh
+
+    assert object_mesh(Mesh("m", builtin="quad", resolution=1)).n_faces == 2
+    assert object_mesh(Mesh("m", builtin="quad", resolution=4)).n_faces == 32
+    assert object_mesh(Mesh("m", builtin="box", resolution=3, smooth=False)).n_faces == 12 * 9
+
+
 @pytest.mark.parametrize("call", [
+    lambda: quad(divisions=0), lambda: box(divisions=1.5),
     lambda: uv_sphere(radius=-1), lambda: uv_sphere(n_lat=1), lambda: uv_sphere(n_lon=2),
     lambda: box(size=(1, 0, 1)), lambda: cylinder(segments=2), lambda: cylinder(height=0),
     lambda: quad(normal=(0, 0, 0)), lambda: quad(size=(1, float("nan"))),

@@ -12,7 +12,7 @@ import numpy as np
 
 from difflab.errors import MeshError
 
-from .mesh import TriMesh
+from .mesh import TriMesh, concatenate
 
 
 def _vec(value, n: int, what: str) -> np.ndarray:
@@ -117,48 +117,57 @@ def _tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return t, b, n
 
 
-def quad(size=(1.0, 1.0), center=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0)) -> TriMesh:
+def _grid(divisions: int) -> tuple[np.ndarray, np.ndarray]:
+    """The unit square cut into divisions x divisions cells: uvs ((d+1)^2, 2), row-major in v,
+    and 2 d^2 counter-clockwise triangles (each cell split along its (0,0)-(1,1) diagonal)."""
+    d = divisions
+    u, v = np.meshgrid(np.arange(d + 1) / d, np.arange(d + 1) / d, indexing="xy")
+    uv = np.stack([u.ravel(), v.ravel()], axis=1)
+    i, j = np.meshgrid(np.arange(d), np.arange(d), indexing="xy")
+    v00 = (j * (d + 1) + i).ravel()
+    v10, v01, v11 = v00 + 1, v00 + d + 1, v00 + d + 2
+    faces = np.concatenate([np.stack([v00, v10, v11], axis=1), np.stack([v00, v11, v01], axis=1)])
+    return uv, faces
+
+
+def quad(size=(1.0, 1.0), center=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), divisions=1) -> TriMesh:
     """A rectangle of `size` = (extent along t, extent along b) centred at `center`, facing
-    `normal`, as two triangles. (t, b) is the frame of `_tangent_frame`: for the default normal +y,
-    t = +x and b = -z, so the default is the unit square in the xz plane; for a normal +z (a wall
-    facing the default camera) t = +x and b = +y. uv = (0, 0) at the
-    corner center - t*sx/2 - b*sz/2, u along t, v along b."""
+    `normal`, cut into `divisions` x `divisions` cells of two triangles each ((d+1)^2 vertices,
+    2 d^2 triangles; d = 1 is the plain two-triangle quad). (t, b) is the frame of
+    `_tangent_frame`: for the default normal +y, t = +x and b = -z, so the default is the unit
+    square in the xz plane; for a normal +z (a wall facing the default camera) t = +x and b = +y.
+    uv = (0, 0) at the corner center - t*sx/2 - b*sz/2, u along t, v along b.
+
+    Subdividing changes nothing for flat or Phong shading of a flat quad, but Gouraud shading then
+    samples a point light's falloff at every grid vertex: the lecture's fix of the wall artefact by
+    re-triangulation."""
     sx, sz = (_positive(s, f"size[{k}]") for k, s in enumerate(_vec(size, 2, "size")))
     c = _vec(center, 3, "center")
     n_in = _vec(normal, 3, "normal")
     if np.linalg.norm(n_in) == 0.0:
         raise MeshError("normal must not be the zero vector")
     t, b, n = _tangent_frame(n_in)
-    uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    uv, faces = _grid(_count(divisions, 1, "divisions"))
     vertices = c + (uv[:, :1] - 0.5) * sx * t + (uv[:, 1:] - 0.5) * sz * b
-    faces = np.array([[0, 1, 2], [0, 2, 3]])
-    return TriMesh(vertices, faces, np.tile(n, (4, 1)), uv, name="quad")
+    return TriMesh(vertices, faces, np.tile(n, (len(uv), 1)), uv, name="quad")
 
 
-def box(size=(1.0, 1.0, 1.0), center=(0.0, 0.0, 0.0)) -> TriMesh:
-    """An axis-aligned box: 6 sides x 4 vertices = 24 vertices, 12 triangles, flat outward normals
-    per side, each side's uvs spanning [0, 1]^2 (u, v along the side's `_tangent_frame`)."""
+def box(size=(1.0, 1.0, 1.0), center=(0.0, 0.0, 0.0), divisions=1) -> TriMesh:
+    """An axis-aligned box: 6 sides, each a `quad` grid of `divisions` x `divisions` cells
+    (d = 1: 24 vertices, 12 triangles), flat outward normals per side, each side's uvs spanning
+    [0, 1]^2 (u, v along the side's `_tangent_frame`)."""
     s = np.array([_positive(v, f"size[{k}]") for k, v in enumerate(_vec(size, 3, "size"))])
     c = _vec(center, 3, "center")
-    vertices, normals, uvs, faces = [], [], [], []
-    uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    d = _count(divisions, 1, "divisions")
+    sides = []
     for axis in range(3):
         for sign in (1.0, -1.0):
             n = np.zeros(3)
             n[axis] = sign
             t, b, _ = _tangent_frame(n)
             # The side's extents along t and b (both are axis-aligned unit vectors).
-            et = float(np.abs(t) @ s)
-            eb = float(np.abs(b) @ s)
-            corners = (c + n * s[axis] / 2 + (uv[:, :1] - 0.5) * et * t
-                       + (uv[:, 1:] - 0.5) * eb * b)
-            base = len(vertices) * 4
-            vertices.append(corners)
-            normals.append(np.tile(n, (4, 1)))
-            uvs.append(uv)
-            faces.append(np.array([[0, 1, 2], [0, 2, 3]]) + base)
-    return TriMesh(np.concatenate(vertices), np.concatenate(faces), np.concatenate(normals),
-                   np.concatenate(uvs), name="box")
+            sides.append(quad((float(np.abs(t) @ s), float(np.abs(b) @ s)), c + n * s[axis] / 2, n, d))
+    return concatenate(sides, name="box")
 
 
 def cylinder(radius=0.5, height=1.0, segments=32, caps=True, center=(0.0, 0.0, 0.0)) -> TriMesh:

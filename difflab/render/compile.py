@@ -65,11 +65,11 @@ def object_mesh(obj, base_dir=None) -> geometry.TriMesh:
     elif obj.builtin == "sphere":
         mesh = geometry.uv_sphere(1.0, n_lat=max(2, obj.resolution), n_lon=max(3, 2 * obj.resolution))
     elif obj.builtin == "box":
-        mesh = geometry.box()
+        mesh = geometry.box(divisions=obj.resolution)
     elif obj.builtin == "cylinder":
         mesh = geometry.cylinder(segments=max(3, 4 * obj.resolution))
     else:
-        mesh = geometry.quad()
+        mesh = geometry.quad(divisions=obj.resolution)
     t = obj.transform
     matrix = None if t.matrix is None else np.asarray(t.matrix, float).reshape(4, 4)
     mesh = mesh.transformed(geometry.transform_matrix(t.translate, t.rotate_deg, t.scale, matrix))

@@ -109,7 +109,9 @@ class Plane(Record):
 @dataclass(frozen=True)
 class Mesh(Record):
     """A triangle mesh: exactly one of `file` (OBJ/PLY..., absolute path once loaded) or `builtin`
-    ("teapot" | "sphere" | "box" | "cylinder" | "quad", tessellated at `resolution`, 1..1024).
+    ("teapot" | "sphere" | "box" | "cylinder" | "quad", tessellated at `resolution`, 1..1024: the
+    teapot's steps per patch side, the sphere's latitude bands (2x as many segments), the cylinder's
+    segments / 4, the quad's and each box side's cells per edge).
     smooth: interpolate vertex normals (else faceted). transform: object-to-world Transform."""
 
     material: str
