@@ -42,7 +42,7 @@ def add_render(sub) -> None:
 
 
 def run_demo(args) -> int:
-    from .demo import run_demo as demo
+    from .demos import run_demo as demo
 
     demo(Path(args.output), quick=args.quick)
     return 0
@@ -55,7 +55,38 @@ def add_demo(sub) -> None:
     p.set_defaults(func=run_demo)
 
 
+def run_fractal(args) -> int:
+    from .demos.fractals import CURVES, fractal_figure
+
+    options = {"order": args.order} if args.order is not None else {}
+    if args.kind not in CURVES:
+        options.update(seed=args.seed, hurst=args.hurst, max_iter=args.max_iter, device=args.device)
+        if args.kind in ("mandelbrot", "julia", "mandelbulb"):
+            for key in ("order", "seed", "hurst"):
+                options.pop(key, None)
+        else:
+            options.pop("max_iter")
+    caption = fractal_figure(args.kind, Path(args.output), args.width, args.height, **options)
+    print(f"wrote {args.output}: {caption}")
+    return 0
+
+
+def add_fractal(sub) -> None:
+    from .demos.fractals import KINDS
+
+    p = sub.add_parser("fractal", help="draw a fractal curve or render a fractal set")
+    p.add_argument("kind", choices=KINDS)
+    p.add_argument("-o", "--output", required=True, help="output PNG")
+    p.add_argument("--order", type=int, help="iterations / order / depth / terrain level")
+    p.add_argument("--width", type=int, default=640)
+    p.add_argument("--height", type=int, default=480)
+    p.add_argument("--seed", type=int, default=0, help="terrain seed")
+    p.add_argument("--hurst", type=float, default=0.8, help="terrain roughness (Hurst exponent in (0, 1))")
+    p.add_argument("--max-iter", type=int, default=256, help="escape-time iterations")
+    p.add_argument("--device", default="cpu")
+    p.set_defaults(func=run_fractal)
+
+
 from .fit.command import add_parser as add_fit  # noqa: E402
-from .fractals.command import add_parser as add_fractal  # noqa: E402
 
 PARSERS = [add_render, add_demo, add_fit, add_fractal]

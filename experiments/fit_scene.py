@@ -30,7 +30,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from fit_common import RESULTS, SEED, versions, write_csv  # noqa: E402
 
-SCENE = Path(__file__).resolve().parent / "scenes" / "lecture_teapot.json"
+from difflab.demos import scene_path  # noqa: E402
+
+SCENE = scene_path("lecture_teapot")
 MATERIALS = ("floor", "chrome", "mirror")
 KINDS = ("ka", "kd", "ks", "n", "kr")
 EYES = ([0.6, 1.7, 4.6], [3.2, 2.2, 3.0], [-2.8, 1.4, 3.6])  # the scene's camera, then two more
@@ -130,7 +132,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     fit_size, time_size, depths = ((48, 36), (96, 72), (1, 2, 3)) if args.small else ((160, 120), (320, 240),
                                                                                        (1, 2, 3, 4, 5))
-    from difflab.demo import image_grid
+    from difflab.demos import image_grid
     from difflab.fit.scene_fit import SceneSetup
     from difflab.io import write_json_atomic
     from difflab.scene import load_scene

@@ -2,7 +2,7 @@
 and EWA against a 32x32-supersampled ground truth; and a kd-texture fit at scale.
 
 For each filter: RMSE over the image and over the far region (the rows nearest the horizon), a moire
-measure (RMS error energy above 1/8 cycle per pixel in the far region; `texture_demo.moire`) and the
+measure (RMS error energy above 1/8 cycle per pixel in the far region; `difflab.demos.textures.moire`) and the
 median render time. Theory predicts EWA <= trilinear < nearest-level mip < bilinear ~ nearest.
 The fit part recovers a random kd texture (H_t x W_t x 3 unknowns) from two noise-free Phong renders
 with Levenberg-Marquardt + CG, and reports its size, time and error on visible texels.
@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 
 import difflab
-from difflab.demo import image_grid
+from difflab.demos import image_grid
 from difflab.io import save_image, write_json_atomic, write_text_atomic
-from difflab.render.texture_demo import FILTER_ORDER, FILTER_TITLES, checker_texture, compare_filters
+from difflab.demos.textures import FILTER_ORDER, FILTER_TITLES, checker_texture, compare_filters
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SEED = 0

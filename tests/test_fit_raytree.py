@@ -2,7 +2,6 @@
 against finite differences of Warp renders, recovery of a whole scene, identifiability, faults."""
 
 import dataclasses
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -10,6 +9,7 @@ import numpy as np
 import pytest
 
 from difflab import Scene, load_scene, render_frame
+from difflab.demos import scene_path
 from difflab.errors import FitError
 from difflab.fit.identify import identify
 from difflab.fit.raytree import TreeMaterials, evaluate_tree, tree_image, tree_to_jax
@@ -17,9 +17,8 @@ from difflab.fit.scene_fit import SceneSetup, fit_scene
 from difflab.fit.tree_params import build_tree_layout
 from difflab.lighting.jax_model import lights_to_jax
 
-SCENES = Path(__file__).resolve().parents[1] / "experiments" / "scenes"
-LECTURE = SCENES / "lecture_teapot.json"
-GLASS = SCENES / "glass_sphere.json"
+LECTURE = scene_path("lecture_teapot")
+GLASS = scene_path("glass_sphere")
 W, H = 48, 36
 FITTED = ("floor", "chrome", "mirror")  # the lecture scene's floor, teapot and mirror
 

@@ -12,7 +12,7 @@ from difflab.io import save_image
 from difflab.render.camera import camera_struct, projection_matrix, view_matrix
 from difflab.render.api import as_scene
 from difflab.render.texture import CameraW, pixel_footprint, plane_uv_derivatives
-from difflab.render.texture_demo import checker_texture, compare_filters
+from difflab.demos.textures import checker_texture, compare_filters
 from difflab.render.texture_store import TextureStore, load_texture, mip_pyramid, sample
 
 FILTERS = ["nearest", "bilinear", "mipmap", "trilinear", "ewa"]

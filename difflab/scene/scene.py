@@ -18,6 +18,8 @@ from .objects import Mesh, Plane, SceneObject, Sphere, parse_object
 from .view import Camera, Fog, Light, RenderSettings
 
 SCENE_KEYS = ("camera", "ambient", "background", "lights", "materials", "objects", "fog", "render")
+#: The optional top-level key naming the file's JSON Schema (for editors); checked to be a string, not kept.
+SCHEMA_KEY = "$schema"
 
 
 def _lights(value, path: str) -> tuple[Light, ...]:
@@ -92,7 +94,9 @@ class Scene(Record):
         if base_dir is not None:
             base_dir = os.path.abspath(os.fspath(base_dir))
         d = mapping(d, "scene")
-        check_keys(d, "", SCENE_KEYS, required=("camera", "objects"))
+        check_keys(d, "", (SCHEMA_KEY, *SCENE_KEYS), required=("camera", "objects"))
+        if SCHEMA_KEY in d:
+            string(d[SCHEMA_KEY], SCHEMA_KEY)
         materials = mapping(d.get("materials", {}), "materials")
         fog = d.get("fog")
         return cls(

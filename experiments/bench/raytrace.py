@@ -1,6 +1,6 @@
 """Ray-tracer throughput on the lecture's test scene: rays per second, item buffer, threads.
 
-experiments/scenes/lecture_teapot.json (chrome teapot, mirror, shiny checker floor, shadows, two
+the example scene "lecture_teapot" (difflab/demos/scenes/lecture_teapot.json: chrome teapot, mirror, shiny checker floor, shadows, two
 point lights) at 640x480, max depth 5, with the teapot tessellated to ~10k, ~100k and ~1M
 triangles. For each mesh: the full ray tracer and the item-buffer variant (primary visibility from
 the rasterizer's z-buffer), each on one thread and on all cores; medians over repeats after a
@@ -27,6 +27,7 @@ from pathlib import Path
 import warp
 
 import difflab
+from difflab.demos import scene_path
 from difflab.io import write_json_atomic
 from difflab.render.compile import compile_scene
 from difflab.render.launch import cpu_threads
@@ -34,7 +35,7 @@ from difflab.render.raytracer import raytrace
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results"
-SCENE = ROOT / "scenes" / "lecture_teapot.json"
+SCENE = scene_path("lecture_teapot")
 MESHES = {"10k": 13, "100k": 40, "1M": 125}  # teapot resolution r gives ~64 r^2 triangles
 
 

@@ -14,13 +14,15 @@ import time
 from pathlib import Path
 
 import numpy as np
-from .._warp import wp
 
+from .._warp import wp
 from ..io import save_image
-from .camera import CameraW, camera_struct, primary_ray
-from .launch import launch_rows
-from .texture import TexturesW, plane_uv, sample_bilinear
-from .texture_store import TextureStore
+from ..render.api import as_scene, render, render_frame
+from ..render.camera import CameraW, camera_struct, primary_ray
+from ..render.launch import launch_rows
+from ..render.texture import WRAPS, TexturesW, plane_uv, sample_bilinear
+from ..render.texture_store import TextureStore
+from .figures import image_grid
 
 wp.set_module_options({"enable_backward": False})
 
@@ -79,16 +81,12 @@ def receding_plane_scene(texture_path, filter: str, width: int, height: int, int
 def plane_reference(scene, n: int = 32, device: str = "cpu") -> np.ndarray:
     """The n x n supersampled ground truth of a `receding_plane_scene` (its first plane, material's
     texture bilinear at level 0), as (H, W, 3) float32."""
-    from .api import as_scene
-
     scene = as_scene(scene)
     plane = scene.objects[0]
     material = scene.materials[plane.material]
     camera = scene.camera
     store = TextureStore.from_paths([material.texture], device)
     image = wp.zeros((camera.height, camera.width), dtype=wp.vec3, device=device)
-    from .texture import WRAPS
-
     launch_rows(plane_reference_kernel, (camera.height, camera.width), [
         camera_struct(camera, camera.width, camera.height), float(camera.near), float(camera.far),
         wp.vec3(*plane.point), wp.vec3(*plane.normal), store.warp, WRAPS[material.wrap], int(n),
@@ -120,8 +118,6 @@ def compare_filters(texture_path, width: int, height: int, n_reference: int = 32
     """Render the receding plane with every filter; RMSE (whole image and far region) and moire
     against the n_reference^2-supersampled truth, and the median render time of `repeats`.
     Returns ({"reference": img, filter: img, ...}, rows of the table)."""
-    from .api import render_frame
-
     reference = plane_reference(receding_plane_scene(texture_path, "bilinear", width, height), n_reference, device)
     rows_far = far_rows(reference)
     images, table = {"reference": reference}, []
@@ -142,9 +138,6 @@ def compare_filters(texture_path, width: int, height: int, n_reference: int = 32
 
 def texture_figures(out_dir: Path, size: int) -> list[tuple[Path, str]]:
     """The filtering comparison figure (and the affine-interpolation artefact) for `difflab demo`."""
-    from ..demo import image_grid
-    from .api import render
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     texture = save_image(out_dir / "checker_texture.png", checker_texture())

@@ -7,15 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..fractals import (box_counting_dimension, cantor_staircase, hilbert, julia, koch_snowflake, mandelbrot,
+                        mandelbulb, peano, polyline_length, terrain, terrain_scene)
 from ..io import save_image
-from .cantor import cantor_staircase
-from .escape import julia, mandelbrot
-from .koch import koch_snowflake
-from .mandelbulb import mandelbulb
-from .measures import box_counting_dimension, polyline_length
-from .space_filling import hilbert, peano
-from .terrain import terrain
-from .terrain_scene import terrain_scene
+from ..render.api import render
+from .figures import save_figure
 
 CURVES = ("koch", "peano", "hilbert", "cantor")
 IMAGES = ("terrain", "mandelbrot", "julia", "mandelbulb")
@@ -42,8 +38,6 @@ def draw_curve(kind: str, order: int, path: Path, size: int = 512) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..demo import save_figure
-
     points, caption = curve_points(kind, order)
     if kind != "cantor" and len(points) > 16:
         caption += f", box-counting dimension {box_counting_dimension(points):.3f}"
@@ -66,8 +60,6 @@ def render_set(kind: str, width: int, height: int, *, order: int = 7, seed: int 
         return julia(width, height, max_iter=max_iter, device=device)
     if kind == "mandelbulb":
         return mandelbulb(width, height, device=device)
-    from ..render.api import render
-
     mesh = terrain(level=order, hurst=hurst, seed=seed)
     with tempfile.TemporaryDirectory() as folder:
         return render(terrain_scene(mesh, folder, width=width, height=height), device=device)

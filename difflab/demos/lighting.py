@@ -1,6 +1,7 @@
-"""`difflab demo`: the lecture's comparison figures, written to one folder.
+"""The lighting and shading sections of `difflab demo`: flat / Gouraud / Phong, the illumination
+model term by term, and the lecture's material table.
 
-Each section writes its files and returns (file, what it shows) pairs; the demo prints them.
+Each section writes its files and returns (file, what it shows) pairs.
 """
 
 from __future__ import annotations
@@ -8,13 +9,13 @@ from __future__ import annotations
 import csv
 import io as _io
 import math
-import time
 from pathlib import Path
 
 import numpy as np
 
-from .io import atomic_path, linear_to_srgb, write_text_atomic
-from .render.api import render
+from ..io import write_text_atomic
+from ..render.api import render
+from .figures import image_grid
 
 # The lecture's material table. "shininess" s in [0, 1] maps to the Phong exponent n = 128 s, the
 # range of OpenGL's GL_SHININESS ([0, 128]).
@@ -23,40 +24,6 @@ LECTURE_MATERIALS = {
     "lecture 1": {"ambient": 0.52, "diffuse": 0.00, "specular": 0.82, "shininess": 0.10},
     "lecture 2": {"ambient": 0.39, "diffuse": 0.46, "specular": 0.82, "shininess": 0.75},
 }
-
-
-def save_figure(fig, path: Path) -> Path:
-    """Save a matplotlib figure atomically and close it."""
-    import matplotlib.pyplot as plt
-
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format=path.suffix.lstrip("."), dpi=100, bbox_inches="tight")
-    plt.close(fig)
-    return path
-
-
-def image_grid(images, titles, path: Path, columns: int, row_labels=None) -> Path:
-    """A labelled grid of linear images (sRGB-encoded for display)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rows = math.ceil(len(images) / columns)
-    fig, axes = plt.subplots(rows, columns, figsize=(3 * columns, 3 * rows * images[0].shape[0] / images[0].shape[1]),
-                             squeeze=False)
-    for k, ax in enumerate(axes.flat):
-        ax.set_xticks([])
-        ax.set_yticks([])
-        if k < len(images):
-            ax.imshow(linear_to_srgb(images[k]))
-            ax.set_title(titles[k], fontsize=9)
-        else:
-            ax.axis("off")
-    if row_labels:
-        for r, label in enumerate(row_labels):
-            axes[r, 0].set_ylabel(label)
-    return save_figure(fig, path)
 
 
 def base_scene(objects, materials, width, height, eye=(0.0, 0.6, 4.0), target=(0.0, 0.0, 0.0), lights=None):
@@ -147,43 +114,3 @@ def materials_table(out: Path, size: int) -> list[tuple[Path, str]]:
     write_text_atomic(table, buffer.getvalue())
     return [(figure, "the lecture's two materials (shininess s mapped to n = 128 s, OpenGL's GL_SHININESS range)"),
             (table, "their ambient / diffuse / specular / total at incidence 60, 25 and 0 degrees")]
-
-
-def fractal_gallery(out: Path, size: int) -> list[tuple[Path, str]]:
-    from .fractals.figures import gallery
-
-    return gallery(out, size)
-
-
-def ray_tracing(out: Path, size: int) -> list[tuple[Path, str]]:
-    """The ray tracer's figures (depth series 1..7, glass with total internal reflection)."""
-    from .render.rt_demo import ray_tracing as section
-
-    return section(out, size)
-
-
-def texture_mapping(out: Path, size: int) -> list[tuple[Path, str]]:
-    """Texture filtering on a receding checkerboard, and perspective vs affine interpolation."""
-    from .render.texture_demo import texture_figures
-
-    return texture_figures(out, size)
-
-
-SECTIONS = [shading_models, decomposition, materials_table, texture_mapping, ray_tracing, fractal_gallery]
-
-
-def run_demo(out: Path, quick: bool = False) -> list[tuple[Path, str]]:
-    """Write every section's figures to `out` and print where they are and what each shows."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    size = 96 if quick else 256
-    written = []
-    for section in SECTIONS:
-        start = time.perf_counter()
-        files = section(out, size)
-        written += files
-        print(f"[{section.__name__}] {time.perf_counter() - start:.1f} s", flush=True)
-    print(f"difflab demo: {len(written)} files in {out.resolve()}")
-    for path, description in written:
-        print(f"  {path.name}: {description}")
-    return written

@@ -1,48 +1,27 @@
 """The ray tracer's demo figures: the lecture's "ray tree depth" series and glass with total internal
 reflection. `demo_figures(out_dir)` writes them and returns (path, description) pairs.
 
-The scenes are the JSON files experiments/scenes/lecture_teapot.json and glass_sphere.json of the
-source checkout (the same files `difflab render SCENE --method raytrace` renders).
+The scenes are the example scenes "lecture_teapot" and "glass_sphere" shipped in the package
+(`difflab.example_scene(name)`; the files `difflab.demos.scene_path(name)` that
+`difflab render FILE --method raytrace` renders).
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from ..io import save_image
-from ..scene import Scene
-from .compile import compile_scene
-from .raytracer import raytrace
-
-SCENES = Path(__file__).resolve().parents[2] / "experiments" / "scenes"
-SEPARATOR = 4  # pixels of white between panels
-
-
-def load_demo_scene(name: str, width: int, height: int) -> Scene:
-    """experiments/scenes/<name>.json at width x height."""
-    path = SCENES / f"{name}.json"
-    with open(path, encoding="utf-8") as f:
-        data = json.load(f)
-    data["camera"].update(width=width, height=height)
-    return Scene.from_dict(data)
-
-
-def strip(images: list[np.ndarray]) -> np.ndarray:
-    """Images side by side with white separators (linear RGB)."""
-    h = images[0].shape[0]
-    gap = np.ones((h, SEPARATOR, 3), np.float32)
-    parts = []
-    for k, image in enumerate(images):
-        parts += ([gap] if k else []) + [image]
-    return np.concatenate(parts, axis=1)
+from ..render.compile import compile_scene
+from ..render.raytracer import raytrace
+from .examples import example_scene
+from .figures import strip
 
 
 def depth_series(out: Path, width: int = 240, height: int = 180, depths=range(1, 8)) -> list[tuple[Path, str]]:
     """The chrome teapot and mirror at ray-tree depths 1..7, one strip (left to right)."""
-    scene = load_demo_scene("lecture_teapot", width, height)
+    scene = example_scene("lecture_teapot", width, height)
     compiled = compile_scene(scene)
     images, counts = [], []
     for depth in depths:
@@ -59,7 +38,7 @@ def depth_series(out: Path, width: int = 240, height: int = 180, depths=range(1,
 def glass(out: Path, width: int = 240, height: int = 180) -> list[tuple[Path, str]]:
     """A glass sphere and a glass cube: refraction, Fresnel reflection, Beer absorption, and a map of
     the pixels whose ray tree meets total internal reflection."""
-    scene = load_demo_scene("glass_sphere", width, height)
+    scene = example_scene("glass_sphere", width, height)
     frame = raytrace(compile_scene(scene), scene.render)
     tree = frame.ray_tree
     kt = np.array([scene.materials[name].kt for name in scene.material_names])

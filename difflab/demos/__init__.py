@@ -1,0 +1,59 @@
+"""difflab.demos: the figures of `difflab demo` and the example scenes shipped with the package.
+
+The engine (scene, geometry, lighting, render, fit, fractals) never imports this package; it imports
+them. Sections (each `section(out, size) -> [(path, what it shows), ...]`):
+
+- `lighting`: flat / Gouraud / Phong, the model term by term, the lecture's material table
+- `textures`: texture filters on a receding checkerboard against a supersampled truth
+- `raytracing`: the ray-tree depth series and glass with total internal reflection
+- `fractals`: one figure per fractal kind (also `difflab fractal KIND`)
+
+Figure helpers: `save_figure`, `image_grid`, `strip` (in `figures`). Example scenes:
+`example_scene(name, width=None, height=None)`, `scene_path(name)`, `example_names()`.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from .examples import example_names as example_names
+from .examples import example_scene as example_scene
+from .examples import scene_path as scene_path
+from .figures import image_grid as image_grid
+from .figures import save_figure as save_figure
+
+#: Image size (pixels) of the demo's panels: full, and with `--quick`.
+DEMO_SIZE, QUICK_SIZE = 256, 96
+
+
+def sections() -> list:
+    """The demo's sections in the order they run."""
+    from .fractals import gallery
+    from .lighting import decomposition, materials_table, shading_models
+    from .raytracing import ray_tracing
+    from .textures import texture_figures
+
+    return [shading_models, decomposition, materials_table, texture_figures, ray_tracing, gallery]
+
+
+def run_demo(out, quick: bool = False) -> list[tuple[Path, str]]:
+    """Write every section's figures to the folder `out` (created if needed) and print where they
+    are and what each shows; `quick` uses QUICK_SIZE panels. Returns (path, description) pairs."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    size = QUICK_SIZE if quick else DEMO_SIZE
+    written = []
+    for section in sections():
+        start = time.perf_counter()
+        written += section(out, size)
+        print(f"[{section.__module__.rsplit('.', 1)[-1]}.{section.__name__}] {time.perf_counter() - start:.1f} s",
+              flush=True)
+    print(f"difflab demo: {len(written)} files in {out.resolve()}")
+    for path, description in written:
+        print(f"  {path.name}: {description}")
+    return written
+
+
+__all__ = ["DEMO_SIZE", "QUICK_SIZE", "example_names", "example_scene", "image_grid", "run_demo", "save_figure",
+           "scene_path", "sections"]
