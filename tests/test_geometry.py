@@ -586,3 +586,24 @@ def test_load_mesh_binary_garbage_and_missing_file(tmp_path):
     assert str(missing) in str(info.value)
     with pytest.raises(MeshError, match="not a file"):
         load_mesh(tmp_path)
+
+
+# ----------------------------------------------------------------------------- viewing
+
+def test_look_at_perspective_and_viewport_map_known_points():
+    from difflab.geometry import apply_to_points, look_at, ndc_to_raster, orthographic, perspective
+
+    view = look_at((0, 0, 5), (0, 0, 0))
+    np.testing.assert_allclose(apply_to_points(view, [[0, 0, 0], [1, 2, 0]]), [[0, 0, -5], [1, 2, -5]], atol=1e-12)
+    proj = perspective(90.0, 2.0, 1.0, 11.0)
+    # near plane -> z_ndc -1, far -> +1; at z = -d a point at height d tan(45) = d is on the top edge
+    # (and d * aspect on the right edge); z_ndc(-3) = (11 + 1) / 10 + 2 * 11 / (10 * -3) = 7 / 15.
+    ndc = apply_to_points(proj, [[0, 0, -1], [0, 0, -11], [0, 3, -3], [6, 0, -3]])
+    np.testing.assert_allclose(ndc, [[0, 0, -1], [0, 0, 1], [0, 1, 7 / 15], [1, 0, 7 / 15]], atol=1e-12)
+    np.testing.assert_allclose(ndc_to_raster([[-1, 1], [1, -1], [0, 0]], 40, 20), [[0, 0], [40, 20], [20, 10]])
+    ortho = orthographic(4.0, 1.5, 0.5, 10.5)
+    np.testing.assert_allclose(apply_to_points(ortho, [[3, 2, -0.5], [0, -2, -10.5]]), [[1, 1, -1], [0, -1, 1]], atol=1e-12)
+    for bad in (lambda: perspective(40, 1, 0, 1), lambda: orthographic(1, 1, 2, 1), lambda: look_at((0, 0, 0), (0, 0, 0)),
+                lambda: look_at((0, 0, 0), (0, 1, 0))):
+        with pytest.raises(ValueError):
+            bad()

@@ -93,3 +93,57 @@ def apply_to_normals(matrix, normals) -> np.ndarray:
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3) @ np.linalg.inv(m)
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
+def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """(4, 4) viewing transform, world -> camera space (gluLookAt): the camera at `eye` looks at
+    `target` down its -z axis, x to the right, y up (the part of `up` orthogonal to the view)."""
+    eye, target, up = _vec3(eye, "eye"), _vec3(target, "target"), _vec3(up, "up")
+    forward = target - eye
+    right = np.cross(forward, up)
+    if np.linalg.norm(forward) == 0.0 or np.linalg.norm(right) == 0.0:
+        raise ValueError("look_at: eye must differ from target and up must not be parallel to the view")
+    forward /= np.linalg.norm(forward)
+    right /= np.linalg.norm(right)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = right, np.cross(right, forward), -forward
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m
+
+
+def perspective(fov_y: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """(4, 4) perspective projection, camera -> clip space (gluPerspective): vertical field of view
+    `fov_y` in degrees, aspect = width / height, 0 < near < far. After the divide by w = -z_camera,
+    the view volume is the cube [-1, 1]^3, with z_ndc = (far + near) / (far - near)
+    + 2 far near / ((far - near) z_camera): -1 at the near plane, +1 at the far plane."""
+    _check_depth_range(near, far, perspective=True)
+    f = 1.0 / np.tan(np.radians(float(fov_y)) / 2.0)
+    m = np.zeros((4, 4))
+    m[0, 0], m[1, 1] = f / aspect, f
+    m[2, 2], m[2, 3] = (far + near) / (near - far), 2.0 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+def orthographic(height: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """(4, 4) orthographic projection, camera -> clip space (glOrtho) of a view volume `height`
+    tall and `height * aspect` wide, centred on the view axis, depth from near to far."""
+    _check_depth_range(near, far, perspective=False)
+    half_h = float(height) / 2.0
+    m = np.zeros((4, 4))
+    m[0, 0], m[1, 1] = 1.0 / (half_h * aspect), 1.0 / half_h
+    m[2, 2], m[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
+    m[3, 3] = 1.0
+    return m
+
+
+def ndc_to_raster(ndc, width: int, height: int) -> np.ndarray:
+    """(N, 2) raster coordinates (x right, y down, pixel (i, j) centred at (j + 0.5, i + 0.5)) of
+    (N, >=2) normalised device coordinates: x = (x_ndc + 1) W / 2, y = (1 - y_ndc) H / 2."""
+    ndc = np.asarray(ndc, dtype=np.float64).reshape(len(ndc), -1)
+    return np.stack([(ndc[:, 0] + 1.0) * width / 2.0, (1.0 - ndc[:, 1]) * height / 2.0], axis=1)
+
+
+def _check_depth_range(near: float, far: float, perspective: bool) -> None:
+    if not (np.isfinite(near) and np.isfinite(far) and far > near and (near > 0.0 or not perspective)):
+        raise ValueError(f"need {'0 < ' if perspective else ''}near < far, got near={near}, far={far}")

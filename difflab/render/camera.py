@@ -14,6 +14,8 @@ import math
 import numpy as np
 from .._warp import wp
 
+from ..geometry import look_at, orthographic, perspective
+
 
 @wp.struct
 class CameraW:
@@ -29,43 +31,25 @@ class CameraW:
 
 
 def camera_frame(camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(right, up, forward) unit vectors of the camera in world space."""
-    eye, target = np.asarray(camera.eye, float), np.asarray(camera.target, float)
-    forward = target - eye
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, np.asarray(camera.up, float))
-    right /= np.linalg.norm(right)
-    return right, np.cross(right, forward), forward
+    """(right, up, forward) unit vectors of the camera in world space (rows of the view matrix)."""
+    m = view_matrix(camera)
+    return m[0, :3], m[1, :3], -m[2, :3]
 
 
 def view_matrix(camera) -> np.ndarray:
-    """World -> camera space (4x4, float64): gluLookAt."""
-    right, up, forward = camera_frame(camera)
-    eye = np.asarray(camera.eye, float)
-    m = np.eye(4)
-    m[0, :3], m[1, :3], m[2, :3] = right, up, -forward
-    m[:3, 3] = -m[:3, :3] @ eye
-    return m
+    """World -> camera space (4x4, float64): gluLookAt (`geometry.look_at`)."""
+    return look_at(camera.eye, camera.target, camera.up)
 
 
 def projection_matrix(camera, width: int | None = None, height: int | None = None) -> np.ndarray:
     """Camera -> clip space (4x4, float64): gluPerspective with vertical `fov_y`, or glOrtho with a
-    view volume `ortho_height` tall; aspect = width / height."""
+    view volume `ortho_height` tall (`geometry.perspective` / `geometry.orthographic`);
+    aspect = width / height."""
     width = camera.width if width is None else width
     height = camera.height if height is None else height
-    aspect, near, far = width / height, camera.near, camera.far
-    m = np.zeros((4, 4))
     if camera.projection == "perspective":
-        f = 1.0 / math.tan(math.radians(camera.fov_y) / 2.0)
-        m[0, 0], m[1, 1] = f / aspect, f
-        m[2, 2], m[2, 3] = (far + near) / (near - far), 2.0 * far * near / (near - far)
-        m[3, 2] = -1.0
-    else:
-        half_h = camera.ortho_height / 2.0
-        m[0, 0], m[1, 1] = 1.0 / (half_h * aspect), 1.0 / half_h
-        m[2, 2], m[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
-        m[3, 3] = 1.0
-    return m
+        return perspective(camera.fov_y, width / height, camera.near, camera.far)
+    return orthographic(camera.ortho_height, width / height, camera.near, camera.far)
 
 
 def pixel_size_at(camera, distance: float, height: int) -> float:
