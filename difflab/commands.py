@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 from pathlib import Path
+
 from .errors import DifflabError
+from .vocabulary import MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS, SPECULAR_MODELS
 
 
 def run_render(args) -> int:
@@ -29,13 +31,13 @@ def add_render(sub) -> None:
     p = sub.add_parser("render", help="render a scene file to an image")
     p.add_argument("scene", help="scene JSON file")
     p.add_argument("-o", "--output", required=True, help="output image (.png, 8-bit sRGB; or .npy linear floats)")
-    p.add_argument("--method", choices=["raster", "raytrace"])
-    p.add_argument("--shading", choices=["flat", "gouraud", "phong"])
-    p.add_argument("--specular", choices=["phong", "blinn", "torrance"])
+    p.add_argument("--method", choices=METHODS)
+    p.add_argument("--shading", choices=tuple(SHADING_MODELS), help="shading model (rasterizer)")
+    p.add_argument("--specular", choices=tuple(SPECULAR_MODELS))
     p.add_argument("--width", type=int)
     p.add_argument("--height", type=int)
-    p.add_argument("--spp", type=int, help="samples per pixel")
-    p.add_argument("--max-depth", type=int, help="ray-tree depth (ray tracer)")
+    p.add_argument("--spp", type=int, help="samples per pixel, a perfect square (1, 4, 9, ...)")
+    p.add_argument("--max-depth", type=int, help=f"ray-tree depth, 1..{MAX_DEPTH_LIMIT} (ray tracer)")
     p.add_argument("--linear", action="store_true", help="also write the linear float image as .npy")
     p.add_argument("--device", default="cpu", help="cpu (default) or cuda")
     p.set_defaults(func=run_render)

@@ -98,7 +98,8 @@ RULES = [
     (("render", "renderers"), ("fit", "demos", "jax", "optimistix", "equinox", "lineax")),
     (("fit",), ("demos",)),
     (("fractals",), ("fit", "demos", "jax", "optimistix")),
-    (("vocabulary",), ("warp", "jax", "difflab._warp")),
+    (("vocabulary",), ("warp", "jax", "numpy", "difflab._warp")),
+    (("lighting.jax_model",), ("warp", "difflab._warp", "lighting.warp_model")),
 ]
 
 

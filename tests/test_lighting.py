@@ -12,9 +12,10 @@ import warp as wp
 from difflab.lighting import jax_model as jm
 from difflab.lighting import warp_model as wm
 from difflab.render.launch import init
+from difflab.vocabulary import BLINN, PHONG, SPECULAR_MODELS, TORRANCE
 
 init()
-MODELS = {"phong": wm.PHONG, "blinn": wm.BLINN, "torrance": wm.TORRANCE}
+MODELS = SPECULAR_MODELS
 
 
 def make_light(kind, position=(0, 0, 0), direction=(0, -1, 0), intensity=(1, 1, 1), attenuation=(1, 0, 0),
@@ -131,7 +132,7 @@ def test_single_light_matches_textbook_formula(theta, view):
     v = jnp.array([math.sin(a), 0.0, math.cos(a)])
     lights = jm.lights_to_jax([light])
     l, d = jm.light_vector(lights, jnp.zeros(3))
-    got = jm.shade(mat, wm.PHONG, normal, v, lights, l, d, jnp.ones(1), jnp.full(3, 0.5))
+    got = jm.shade(mat, PHONG, normal, v, lights, l, d, jnp.ones(1), jnp.full(3, 0.5))
     want = lambert_phong_reference(theta, view, 0.2, 0.5, 0.4, 20.0, 0.5, 0.9)
     np.testing.assert_allclose(np.asarray(got), np.full(3, want), atol=1e-6)
 
@@ -151,7 +152,7 @@ def test_attenuation_spot_and_blinn_closed_forms():
     normal = jnp.array([0.0, 0.0, 1.0])
     l = jnp.array([math.sin(0.4), 0.0, math.cos(0.4)])
     v = jnp.array([0.0, 0.0, 1.0])
-    np.testing.assert_allclose(float(jm.specular_factor(wm.BLINN, normal, v, l, 10.0, 0.3, 0.04)), math.cos(0.2) ** 10,
+    np.testing.assert_allclose(float(jm.specular_factor(BLINN, normal, v, l, 10.0, 0.3, 0.04)), math.cos(0.2) ** 10,
                                rtol=1e-6)
 
 
@@ -165,7 +166,7 @@ def test_torrance_is_fresnel_times_beckmann_over_four_n_dot_v():
     beckmann = math.exp(-(1 - c * c) / (c * c) / m ** 2) / (math.pi * m * m * c ** 4)
     fresnel = f0 + (1 - f0) * (1 - float(np.dot(np.asarray(v), h))) ** 5
     want = fresnel * beckmann / (4 * math.cos(0.3))
-    got = float(jm.specular_factor(wm.TORRANCE, normal, v, l, 1.0, m, f0))
+    got = float(jm.specular_factor(TORRANCE, normal, v, l, 1.0, m, f0))
     np.testing.assert_allclose(got, want, rtol=1e-6)
 
 

@@ -249,7 +249,7 @@ def test_gouraud_clamps_vertex_colours_only_on_request():
 
 def test_bad_requests_raise_clear_errors():
     scene = scene_dict([facing_quad()], {"m": {}})
-    with pytest.raises(RenderError, match="spp"):
+    with pytest.raises(SceneError, match=r"render.spp: must be a perfect square .* got 3"):
         render(scene, spp=3)
     with pytest.raises(RenderError, match="device"):
         render(scene, device="cuda:7")

@@ -378,7 +378,7 @@ def test_adaptive_supersampling_refines_edges_only():
 
 def test_bad_requests_raise_clear_errors():
     scene = mixed_scene()
-    with pytest.raises(RenderError, match="spp"):
+    with pytest.raises(SceneError, match=r"render.spp: must be a perfect square .* got 3"):
         render(scene, method="raytrace", spp=3)
     with pytest.raises(SceneError, match="render.max_depth"):
         render(scene, method="raytrace", max_depth=0)

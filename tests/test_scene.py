@@ -303,6 +303,9 @@ BAD = [
     (("render", "specular"), "cook", r"render\.specular: must be one of 'phong', 'blinn', 'torrance'"),
     (("render", "max_depth"), 0, r"render\.max_depth: must be >= 1, got 0"),
     (("render", "spp"), 0, r"render\.spp: must be >= 1, got 0"),
+    (("render", "spp"), 8, r"render\.spp: must be a perfect square \(1, 4, 9, 16, \.\.\.\).*got 8"),
+    (("render", "spp"), 5000, r"render\.spp: must be <= 4096, got 5000"),
+    (("$schema",), 5, r"\$schema: expected a string, got 5"),
     (("render", "shadows"), "yes", r"render\.shadows: expected true or false, got 'yes'"),
     (("render", "fresnel"), "full", r"render\.fresnel: must be one of 'none', 'schlick', 'exact'"),
     (("render", "adaptive_threshold"), -0.1, r"render\.adaptive_threshold: must be >= 0"),
@@ -319,6 +322,22 @@ def test_bad_input_names_the_field(example, path, value, message):
     _set(d, path, value)
     with pytest.raises(SceneError, match="^" + message):
         Scene.from_dict(d, base_dir=folder)
+
+
+def test_schema_key_is_accepted_and_not_kept(example):
+    d, folder = example
+    scene = Scene.from_dict({"$schema": "scene.schema.json", **d}, base_dir=folder)
+    assert scene == Scene.from_dict(d, base_dir=folder) and "$schema" not in scene.to_dict()
+
+
+def test_supersampled_grid_is_held_to_the_pixel_budget():
+    camera = {"eye": [0, 0, 5], "target": [0, 0, 0], "width": 4096, "height": 2048}
+    assert Scene.from_dict(minimal(camera=camera, render={"spp": 4})).render.spp_side == 2  # 32 M samples
+    with pytest.raises(SceneError, match=r"^render\.spp: 4096 x 2048 pixels at spp 9 is 75497472 samples, over"):
+        Scene.from_dict(minimal(camera=camera, render={"spp": 9}))
+    small = Scene.from_dict(minimal(render={"spp": 16}))
+    with pytest.raises(SceneError, match=r"^render\.spp: 10000 x 1000 pixels at spp 16"):
+        small.with_overrides(camera={"eye": [0, 0, 5], "target": [0, 0, 0], "width": 10000, "height": 1000})
 
 
 def test_not_an_object():

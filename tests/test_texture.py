@@ -357,12 +357,12 @@ def test_textured_material_is_the_same_in_warp_and_jax():
     import jax.numpy as jnp
 
     from difflab.lighting import jax_model as jm
-    from difflab.lighting import warp_model as wm
+    from difflab.vocabulary import TEXTURE_TARGET_IDS
 
     base = jm.MaterialJ(ka=jnp.array([0.1, 0.2, 0.3]), kd=jnp.array([0.4, 0.5, 0.6]), ks=jnp.array([0.7, 0.8, 0.9]),
                         n=jnp.array(3.0), m=jnp.array(0.3), f0=jnp.array(0.04))
     value = jnp.array([0.25, 0.5, 0.75])
-    for name, target in wm.TEXTURE_TARGET_IDS.items():
+    for name, target in TEXTURE_TARGET_IDS.items():
         out = jm.textured_material(base, target, value)
         assert np.allclose(getattr(out, name), getattr(base, name) * value)
         unit = jm.target_only(base, target)

@@ -1,5 +1,5 @@
-"""The one illumination model: `warp_model` (for kernels) and `jax_model` (for fitting), same names."""
+"""The one illumination model: `warp_model` (for kernels) and `jax_model` (for fitting), same names.
 
-from .warp_model import FOG_MODES, LIGHT_KINDS, SPECULAR_MODELS
-
-__all__ = ["FOG_MODES", "LIGHT_KINDS", "SPECULAR_MODELS"]
+The names and integer ids they switch on (specular models, light types, fog modes, texture targets)
+come from `difflab.vocabulary`; this package imports neither half, so `jax_model` loads without Warp.
+"""

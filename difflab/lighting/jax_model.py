@@ -16,19 +16,8 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from .warp_model import (
-    BECKMANN_MIN_COS,
-    BLINN,
-    DIRECTIONAL,
-    FOG_EXP,
-    FOG_EXP2,
-    FOG_LINEAR,
-    LIGHT_KINDS,
-    PHONG,
-    SPOT,
-    TARGET_KA,
-    TARGET_KD,
-)
+from ..vocabulary import (BECKMANN_MIN_COS, BLINN, DIRECTIONAL, FOG_EXP, FOG_EXP2, FOG_LINEAR, LIGHT_TYPES, PHONG,
+                          SPOT, TARGET_KA, TARGET_KD)
 
 
 class LightsJ(NamedTuple):
@@ -187,7 +176,7 @@ def lights_to_jax(lights, dtype=jnp.float32) -> LightsJ:
 
     count = len(lights)
     return LightsJ(
-        kind=jnp.asarray([LIGHT_KINDS[light.type] for light in lights], dtype=jnp.int32).reshape(count),
+        kind=jnp.asarray([LIGHT_TYPES[light.type] for light in lights], dtype=jnp.int32).reshape(count),
         position=column([light.position or (0.0, 0.0, 0.0) for light in lights], (count, 3)),
         direction=column([light.direction or (0.0, -1.0, 0.0) for light in lights], (count, 3)),
         intensity=column([light.intensity for light in lights], (count, 3)),

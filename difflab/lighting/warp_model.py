@@ -23,20 +23,11 @@ import math
 
 import numpy as np
 from .._warp import wp
-
-POINT, DIRECTIONAL, SPOT = 0, 1, 2
-LIGHT_KINDS = {"point": POINT, "directional": DIRECTIONAL, "spot": SPOT}
-PHONG, BLINN, TORRANCE = 0, 1, 2
-SPECULAR_MODELS = {"phong": PHONG, "blinn": BLINN, "torrance": TORRANCE}
-FOG_NONE, FOG_LINEAR, FOG_EXP, FOG_EXP2 = 0, 1, 2, 3
-FOG_MODES = {"none": FOG_NONE, "linear": FOG_LINEAR, "exp": FOG_EXP, "exp2": FOG_EXP2}
-# Image textures (render/texture.py samples them): ids of the scene's filter, wrap and target names.
-TEXTURE_FILTER_IDS = {"nearest": 0, "bilinear": 1, "mipmap": 2, "trilinear": 3, "ewa": 4}
-TEXTURE_WRAP_IDS = {"repeat": 0, "clamp": 1, "mirror": 2}
-TARGET_KA, TARGET_KD, TARGET_KS = 0, 1, 2
-TEXTURE_TARGET_IDS = {"ka": TARGET_KA, "kd": TARGET_KD, "ks": TARGET_KS}
-# Below this N.H the Beckmann distribution is exp(-tan^2/m^2) ~ 0; evaluating it would give 0/0.
-BECKMANN_MIN_COS = 1.0e-3
+# The ids kernels switch on, from the one vocabulary (SPECULAR_MODELS, FOG_NONE and the TEXTURE_*_IDS
+# tables are also imported from here by the renderers and the fit).
+from ..vocabulary import (BECKMANN_MIN_COS, BLINN, DIRECTIONAL, FOG_EXP, FOG_EXP2, FOG_LINEAR, FOG_MODES, FOG_NONE,
+                          LIGHT_TYPES, PHONG, SPECULAR_MODELS, SPOT, TARGET_KA, TARGET_KD, TEXTURE_FILTER_IDS,
+                          TEXTURE_TARGET_IDS, TEXTURE_WRAP_IDS)
 
 
 @wp.struct
@@ -210,7 +201,7 @@ def fog_factor(mode: int, z: float, start: float, end: float, density: float):
 def light_struct(light) -> LightW:
     """A `LightW` from a scene `Light`."""
     out = LightW()
-    out.kind = LIGHT_KINDS[light.type]
+    out.kind = LIGHT_TYPES[light.type]
     out.position = wp.vec3(*(light.position or (0.0, 0.0, 0.0)))
     out.direction = wp.vec3(*(light.direction or (0.0, -1.0, 0.0)))
     out.intensity = wp.vec3(*light.intensity)

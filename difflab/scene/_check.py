@@ -112,8 +112,9 @@ def string(value, path: str) -> str:
     return value
 
 
-def choice(value, path: str, options: tuple[str, ...]) -> str:
-    """One of `options`, exactly."""
+def choice(value, path: str, options) -> str:
+    """One of `options` (names, or a vocabulary table name -> id), exactly."""
+    options = tuple(options)
     if not isinstance(value, str) or value not in options:
         allowed = ", ".join(repr(o) for o in options)
         fail(path, f"must be one of {allowed}, got {show(value)}{suggestion(value, options)}")

@@ -5,12 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+from ..vocabulary import TEXTURE_FILTER_IDS, TEXTURE_TARGET_IDS, TEXTURE_WRAP_IDS
 from ._check import Vec3, choice, existing_file, fail, join, number, vec3
 from ._record import Record
 
-TEXTURE_FILTERS = ("nearest", "bilinear", "mipmap", "trilinear", "ewa")
-TEXTURE_WRAPS = ("repeat", "clamp", "mirror")
-TEXTURE_TARGETS = ("ka", "kd", "ks")
+TEXTURE_FILTERS = tuple(TEXTURE_FILTER_IDS)
+TEXTURE_WRAPS = tuple(TEXTURE_WRAP_IDS)
+TEXTURE_TARGETS = tuple(TEXTURE_TARGET_IDS)
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from ._check import Vec3, check_keys, fail, join, mapping, sequence, string, vec
 from ._record import FrozenDict, Record, plain
 from .material import Material
 from .objects import Mesh, Plane, SceneObject, Sphere, parse_object
-from .view import Camera, Fog, Light, RenderSettings
+from .view import MAX_PIXELS, Camera, Fog, Light, RenderSettings
 
 SCENE_KEYS = ("camera", "ambient", "background", "lights", "materials", "objects", "fog", "render")
 #: The optional top-level key naming the file's JSON Schema (for editors); checked to be a string, not kept.
@@ -74,6 +74,10 @@ class Scene(Record):
             fail("fog", f"expected a Fog or None, got {v['fog']!r:.60}")
         if not isinstance(v["render"], RenderSettings):
             fail("render", f"expected RenderSettings, got {v['render']!r:.60}")
+        camera, spp = v["camera"], v["render"].spp
+        if camera.width * camera.height * spp > MAX_PIXELS:
+            fail("render.spp", f"{camera.width} x {camera.height} pixels at spp {spp} is "
+                 f"{camera.width * camera.height * spp} samples, over the budget of {MAX_PIXELS} (64 megapixels)")
         base_dir = v["base_dir"]
         if base_dir is not None:
             base_dir = os.path.abspath(os.fspath(base_dir))

@@ -6,24 +6,14 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar
 
+from ..vocabulary import (FOG_MODES, FRESNEL_MODES, INTERPOLATIONS, LIGHT_TYPES, MAX_DEPTH_LIMIT, MAX_SPP, METHODS,
+                          PROJECTIONS, SAMPLINGS, SHADING_MODELS, SPECULAR_MODELS)
 from ._check import Vec3, boolean, choice, fail, integer, join, normalised, number, unit3, vec3
 from ._record import Record
 
 #: Largest image (width * height) a scene may ask for: 64 megapixels, the memory budget of a frame
-#: and its G-buffer.
+#: and its G-buffer. A supersampled render's sample grid (width * height * spp) is held to it too.
 MAX_PIXELS = 64 * 1024 * 1024
-PROJECTIONS = ("perspective", "orthographic")
-LIGHT_TYPES = ("point", "directional", "spot")
-FOG_MODES = ("linear", "exp", "exp2")
-METHODS = ("raster", "raytrace")
-SHADINGS = ("flat", "gouraud", "phong")
-SPECULARS = ("phong", "blinn", "torrance")
-FRESNELS = ("none", "schlick", "exact")
-INTERPOLATIONS = ("perspective", "affine")
-SAMPLINGS = ("grid", "stratified")
-#: Upper bounds that keep a render's work and the kernels' integers in range.
-MAX_DEPTH_LIMIT = 64
-MAX_SPP = 4096
 
 
 @dataclass(frozen=True)
@@ -164,13 +154,23 @@ class Fog(Record):
         )
 
 
+def _spp(value, path: str) -> int:
+    """Samples per pixel: a perfect square side^2 in 1..MAX_SPP (both renderers sample side x side)."""
+    spp = integer(value, path, ge=1, le=MAX_SPP)
+    if math.isqrt(spp) ** 2 != spp:
+        fail(path, f"must be a perfect square (1, 4, 9, 16, ...): both renderers take a side x side pattern of "
+             f"samples per pixel, got {spp}")
+    return spp
+
+
 @dataclass(frozen=True)
 class RenderSettings(Record):
     """How to render: the scene file's "render" block; `difflab.render(...)` arguments override it.
 
     method "raster" | "raytrace"; shading "flat" | "gouraud" | "phong" (raster); specular "phong" |
     "blinn" | "torrance"; shadows: cast shadow rays; max_depth: ray-tree depth, the primary ray counts
-    as 1 (1..64); spp: samples per pixel (1..4096) in the `sampling` pattern "grid" | "stratified";
+    as 1 (1..64); spp: samples per pixel, a perfect square side^2 (1, 4, 9, ..., 4096) taken as a
+    side x side pattern in each pixel, "grid" (regular) or "stratified" (`sampling`);
     fresnel "none" | "schlick" | "exact"; transparent_shadows: shadow rays are multiplied by kt at
     each transparent surface; clamp_vertex_colors: clamp Gouraud vertex colours to [0, 1];
     interpolation "perspective" | "affine"; cull_backfaces (raster); adaptive_threshold: Hall's
@@ -198,12 +198,12 @@ class RenderSettings(Record):
         p = lambda name: join(path, name)  # noqa: E731
         return dict(
             method=choice(v["method"], p("method"), METHODS),
-            shading=choice(v["shading"], p("shading"), SHADINGS),
-            specular=choice(v["specular"], p("specular"), SPECULARS),
+            shading=choice(v["shading"], p("shading"), SHADING_MODELS),
+            specular=choice(v["specular"], p("specular"), SPECULAR_MODELS),
             shadows=boolean(v["shadows"], p("shadows")),
             max_depth=integer(v["max_depth"], p("max_depth"), ge=1, le=MAX_DEPTH_LIMIT),
-            spp=integer(v["spp"], p("spp"), ge=1, le=MAX_SPP),
-            fresnel=choice(v["fresnel"], p("fresnel"), FRESNELS),
+            spp=_spp(v["spp"], p("spp")),
+            fresnel=choice(v["fresnel"], p("fresnel"), FRESNEL_MODES),
             transparent_shadows=boolean(v["transparent_shadows"], p("transparent_shadows")),
             clamp_vertex_colors=boolean(v["clamp_vertex_colors"], p("clamp_vertex_colors")),
             interpolation=choice(v["interpolation"], p("interpolation"), INTERPOLATIONS),
@@ -211,3 +211,8 @@ class RenderSettings(Record):
             adaptive_threshold=number(v["adaptive_threshold"], p("adaptive_threshold"), ge=0),
             sampling=choice(v["sampling"], p("sampling"), SAMPLINGS),
         )
+
+    @property
+    def spp_side(self) -> int:
+        """The side of the side x side pattern of samples in each pixel (spp = side^2)."""
+        return math.isqrt(self.spp)
