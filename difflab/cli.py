@@ -4,18 +4,48 @@ that did not converge (results still written)."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import traceback
 
 from .errors import DifflabError
+from .limits import short_path
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INVALID, EXIT_NOT_CONVERGED = 0, 1, 2, 3
+
+
+#: Arguments naming files a command writes; checked before any work (a folder, a missing folder, a
+#: file used as a folder are invalid input). A command whose `output_is_folder` is set writes a folder.
+OUTPUT_ARGUMENTS = {"output": "-o/--output", "report": "--report"}
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: `difflab: error: ...` and exit code 2 (no usage block)."""
+
+    def error(self, message):
+        self.exit(EXIT_INVALID, f"difflab: error: {self.prog.removeprefix('difflab ')}: {message}\n")
+
+
+def check_outputs(args) -> None:
+    """Raise DifflabError for an output path that cannot be written (see OUTPUT_ARGUMENTS)."""
+    from .io import check_output_path
+
+    for name, flag in OUTPUT_ARGUMENTS.items():
+        value = getattr(args, name, None)
+        if value is None:
+            continue
+        if getattr(args, "output_is_folder", False):
+            if os.path.exists(value) and not os.path.isdir(value):
+                raise DifflabError(f"{flag}: {short_path(value)} is a file, not a folder")
+            check_output_path(os.path.join(value, "x"), flag, create_parent=True)
+        else:
+            check_output_path(value, flag)
 
 
 def build_parser() -> argparse.ArgumentParser:
     from . import commands
 
-    parser = argparse.ArgumentParser(prog="difflab", description="A differentiable shading lab.")
+    parser = Parser(prog="difflab", description="A differentiable shading lab.")
     parser.add_argument("--version", action="version", version="difflab 0.1.0")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add_parser in commands.PARSERS:
@@ -27,9 +57,10 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        check_outputs(args)
         return int(args.func(args) or EXIT_OK)
     except DifflabError as exc:
-        print(f"difflab: error: {exc}", file=sys.stderr)
+        print(f"difflab: error: {' '.join(str(exc).split())}", file=sys.stderr)  # one line
         return EXIT_INVALID
     except KeyboardInterrupt:
         print("difflab: interrupted", file=sys.stderr)

@@ -54,7 +54,7 @@ def add_demo(sub) -> None:
     p = sub.add_parser("demo", help="write the lecture's comparison figures to a folder")
     p.add_argument("-o", "--output", default="difflab-demo", help="folder for the figures (default: ./difflab-demo)")
     p.add_argument("--quick", action="store_true", help="smaller images")
-    p.set_defaults(func=run_demo)
+    p.set_defaults(func=run_demo, output_is_folder=True)
 
 
 def run_fractal(args) -> int:

@@ -2,7 +2,19 @@
 
 
 class DifflabError(Exception):
-    """Base class of every error difflab raises on purpose."""
+    """Base class of every error difflab raises on purpose.
+
+    Messages longer than MAX_MESSAGE characters (a user's 10,000-character key or path repeated in
+    them) keep their start (the field) and end (the file), with the middle elided."""
+
+    MAX_MESSAGE = 400
+
+    def __init__(self, message="", *args):
+        message = str(message)
+        if len(message) > self.MAX_MESSAGE:
+            head = self.MAX_MESSAGE * 2 // 3
+            message = f"{message[:head]} [...] {message[len(message) - (self.MAX_MESSAGE - head - 7):]}"
+        super().__init__(message, *args)
 
 
 class SceneError(DifflabError, ValueError):

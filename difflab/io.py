@@ -7,15 +7,22 @@ sRGB encoding happens only here, when an 8-bit file is written or read.
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
 import os
+import signal
+import stat
 import tempfile
+import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
+from . import limits
 from .errors import DifflabError
+from .limits import short_path, shorten
 
 _UMASK = os.umask(0o022)  # read the process umask once (setting it is not thread-safe), then restore it
 os.umask(_UMASK)
@@ -33,23 +40,131 @@ def linear_to_srgb(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1.0 / 2.4) - 0.055)
 
 
+TMP_MARK = ".tmp"  # a temporary is .<name>.<pid>.<random><TMP_MARK><suffix>, beside its target
+_LIVE: set[str] = set()  # temporaries this process is writing now
+_PREVIOUS: dict = {}  # signal -> the handler before ours
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+def remove_stale_temps(path: str | os.PathLike) -> int:
+    """Remove the temporaries that killed writers of `path` left behind (their process is gone);
+    returns how many were removed."""
+    path = Path(path)
+    removed = 0
+    for stale in path.parent.glob(f".{glob.escape(path.name)}.*{TMP_MARK}{glob.escape(path.suffix)}"):
+        pid = stale.name[len(path.name) + 2:].split(".", 1)[0]
+        if not pid.isdigit() or str(stale) in _LIVE or (int(pid) != os.getpid() and _pid_alive(int(pid))):
+            continue
+        with contextlib.suppress(OSError):
+            stale.unlink()
+            removed += 1
+    return removed
+
+
+def _remove_live_and_die(signum, frame):
+    """On SIGTERM / SIGHUP: delete this process's temporaries, then die of the signal as before."""
+    for name in list(_LIVE):
+        with contextlib.suppress(OSError):
+            os.remove(name)
+    signal.signal(signum, _PREVIOUS[signum])
+    os.kill(os.getpid(), signum)
+
+
+def _install_signal_cleanup() -> None:
+    """Remove temporaries on SIGTERM and SIGHUP where nobody else handles them (SIGKILL cannot be
+    caught: the next write of the same path removes what it leaves)."""
+    if _PREVIOUS or threading.current_thread() is not threading.main_thread():
+        return
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        previous = signal.getsignal(signum)
+        _PREVIOUS[signum] = previous
+        if previous == signal.SIG_DFL:
+            signal.signal(signum, _remove_live_and_die)
+
+
+def check_output_path(path: str | os.PathLike, what: str = "output", create_parent: bool = False) -> Path:
+    """`path` as a file to write: not an existing folder; its parent a folder (made when
+    `create_parent`, else it must exist), no file used as a folder on the way. Raises DifflabError
+    naming `what` and the path, before any work is done."""
+    path = Path(path)
+    if not path.name or path.is_dir():
+        raise DifflabError(f"{what}: {short_path(path)} is a folder; give a file name")
+    parent = path.parent
+    for folder in (parent, *parent.parents):
+        if folder.exists() or folder.is_symlink():
+            if not folder.is_dir():
+                raise DifflabError(f"{what}: {short_path(folder)} is a file, not a folder")
+            break
+    if not parent.is_dir():
+        if not create_parent:
+            raise DifflabError(f"{what}: folder {short_path(parent)} does not exist")
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise DifflabError(f"{what}: cannot make folder {short_path(parent)} ({exc.strerror})") from None
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise DifflabError(f"{what}: folder {short_path(parent)} is not writable")
+    return path
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike):
-    """Yield a temporary path in the folder of `path`; rename it onto `path` only if the block succeeds.
+    """Yield a temporary path in the folder of `path` (made if missing); rename it onto `path` only
+    if the block succeeds.
 
-    A writer that fails midway leaves the old file (if any) untouched and no temporary file behind.
+    A writer that fails midway leaves the old file (if any) untouched and no temporary behind; one
+    killed by SIGTERM / SIGHUP removes its temporary; one killed by SIGKILL leaves it, and the next
+    write of the same path removes it.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent)
-    os.close(fd)
-    os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
+    path = check_output_path(path, create_parent=True)
+    remove_stale_temps(path)
+    _install_signal_cleanup()
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=TMP_MARK + path.suffix, dir=path.parent)
+    _LIVE.add(tmp)
     try:
+        os.close(fd)
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
         yield Path(tmp)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
+        _LIVE.discard(tmp)
+
+
+def read_regular_file(path: str | os.PathLike, max_bytes: int, error: type[DifflabError] = DifflabError,
+                      what: str = "file") -> bytes:
+    """The bytes of `path`, which must be a regular file of at most `max_bytes` (devices such as
+    /dev/zero, FIFOs and folders are refused at once, without blocking). Raises `error` naming it."""
+    name = short_path(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except FileNotFoundError:
+        raise error(f"{name}: {what} not found") from None
+    except (OSError, ValueError) as exc:
+        raise error(f"{name}: cannot open ({getattr(exc, 'strerror', None) or exc})") from None
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode) or info.st_size > max_bytes:
+        os.close(fd)
+        raise error(f"{name}: {what} is not a regular file" if not stat.S_ISREG(info.st_mode) else
+                    f"{name}: file is {info.st_size} bytes, over the limit of {max_bytes}")
+    with os.fdopen(fd, "rb") as f:
+        try:
+            data = f.read(max_bytes + 1)
+        except OSError as exc:
+            raise error(f"{name}: cannot read ({exc.strerror})") from None
+    if len(data) > max_bytes:
+        raise error(f"{name}: file is over the limit of {max_bytes} bytes")
+    return data
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
@@ -64,7 +179,11 @@ def write_json_atomic(path: str | os.PathLike, data) -> None:
 
 
 def _as_image(image) -> np.ndarray:
-    image = np.asarray(image, dtype=np.float32)
+    """A float32 (H, W, 3 or 4) array from a 2-D or 3-D array of real numbers; DifflabError otherwise."""
+    array = image if isinstance(image, np.ndarray) else np.asarray(image)
+    if array.dtype.kind not in IMAGE_DTYPE_KINDS:
+        raise DifflabError(f"image: must hold real numbers (bool, int, uint or float), got dtype {array.dtype}")
+    image = array.astype(np.float32)
     if image.ndim == 2:
         image = image[..., None].repeat(3, axis=-1)
     if image.ndim != 3 or image.shape[-1] not in (3, 4):
@@ -95,16 +214,74 @@ def save_image(path: str | os.PathLike, image, srgb: bool = True) -> Path:
     return path
 
 
-def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
-    """Read an image as linear float32 (H, W, 3); 8-bit files are sRGB-decoded when `srgb` is true."""
-    path = Path(path)
-    if not path.is_file():
-        raise DifflabError(f"{path}: image file not found")
-    if path.suffix.lower() == ".npy":
-        return _as_image(np.load(path))[..., :3].copy()
+def _why(exc: Exception) -> str:
+    """'Kind: message' of a library's exception, cut to one short line."""
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())[:120]}"
+
+
+#: numpy dtype kinds an image file may hold: bool, signed and unsigned integers, real floats.
+IMAGE_DTYPE_KINDS = "biuf"
+
+
+def _read_npy(path: Path) -> np.ndarray:
+    """An image array from a .npy file: header checked (numeric real dtype, image shape, size within
+    the memory budget, file long enough) before the data is read; pickles are never loaded."""
     try:
-        with Image.open(path) as im:
-            pixels = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
-    except OSError as exc:
-        raise DifflabError(f"{path}: cannot read image ({exc})") from None
-    return (srgb_to_linear(pixels) if srgb else pixels).astype(np.float32)
+        with open(path, "rb") as f:
+            version = np.lib.format.read_magic(f)
+            read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
+                np.lib.format.read_array_header_2_0
+            shape, _, dtype = read_header(f)
+            data_start = f.tell()
+    except Exception as exc:  # numpy raises ValueError, OSError, EOFError, SyntaxError on bad headers
+        raise DifflabError(f"{path}: not a valid .npy file ({_why(exc)})") from None
+    if dtype.hasobject or dtype.kind not in IMAGE_DTYPE_KINDS or dtype.fields is not None or dtype.subdtype:
+        raise DifflabError(f"{path}: image array must hold real numbers (bool, int, uint or float), got dtype {dtype}")
+    if len(shape) not in (2, 3) or (len(shape) == 3 and shape[-1] not in (3, 4)) or 0 in shape:
+        raise DifflabError(f"{path}: expected an image array of shape (H, W), (H, W, 3) or (H, W, 4), got {shape}")
+    limits.require_image(shape[1], shape[0], str(path), limits.IMAGE_LOAD_BYTES)
+    needed = data_start + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    if path.stat().st_size < needed:
+        raise DifflabError(f"{path}: .npy file is truncated ({path.stat().st_size} of {needed} bytes)")
+    try:
+        return np.load(path, allow_pickle=False)
+    except Exception as exc:
+        raise DifflabError(f"{path}: cannot read .npy file ({_why(exc)})") from None
+
+
+def _read_picture(path: Path) -> np.ndarray:
+    """8-bit RGB pixels of an image file Pillow reads; its size (from the header, read lazily by
+    Image.open) is checked against the memory budget before anything is decoded."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # our budget decides instead
+            with Image.open(path) as im:
+                limits.require_image(im.width, im.height, str(path), limits.IMAGE_LOAD_BYTES)
+                return np.asarray(im.convert("RGB"))
+    except DifflabError:
+        raise
+    except Exception as exc:  # Pillow raises OSError, ValueError, SyntaxError, DecompressionBombError, ...
+        raise DifflabError(f"{path}: cannot read image ({_why(exc)})") from None
+
+
+def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
+    """Read an image as linear float32 (H, W, 3); 8-bit files are sRGB-decoded when `srgb` is true.
+
+    `.npy` files hold linear values (bool / int / uint / float dtypes; an alpha channel is dropped);
+    other files are whatever Pillow reads. Every failure -- missing or not a regular file, bad
+    header, truncated data, a pickled or string array, an image over the memory budget (checked from
+    the header before decoding) -- raises DifflabError naming the path.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise DifflabError(f"{short_path(path)}: image file not found")
+    if not path.is_file():
+        raise DifflabError(f"{short_path(path)}: not a regular file")
+    if path.suffix.lower() == ".npy":
+        return _as_image(_read_npy(path))[..., :3].copy()
+    pixels = _read_picture(path)
+    return (_SRGB_DECODE if srgb else _LINEAR_DECODE)[pixels]  # a 256-entry table: 15 bytes per pixel
+
+
+_LINEAR_DECODE = (np.arange(256) / 255.0).astype(np.float32)
+_SRGB_DECODE = srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)

@@ -18,6 +18,12 @@ from ..errors import SceneError
 #: Largest magnitude accepted for any number: the float32 range that the renderers compute in.
 FLOAT32_MAX = 3.4028234663852886e38
 
+#: Largest magnitude of a world-space coordinate or size (scene units). The renderers compute in
+#: float32: squared distances (ray-sphere tests, attenuation) must stay far below 3.4e38, and the
+#: camera's matrices stop being invertible in float64 beyond ~1e16 (measured: eye at 1e17 gives a
+#: singular view-projection matrix).
+MAX_COORD = 1e12
+
 Vec3 = tuple[float, float, float]
 
 
@@ -134,6 +140,19 @@ def vec3(value, path: str, *, grey: bool = False, ge=None) -> Vec3:
     if items is None or len(items) != 3:
         fail(path, f"expected 3 numbers, got {show(value)}")
     return tuple(number(x, f"{path}[{i}]", ge=ge) for i, x in enumerate(items))
+
+
+def coordinate(value, path: str, **bounds) -> float:
+    """A number that is a world-space coordinate or size: |x| <= MAX_COORD (see there)."""
+    x = number(value, path, **bounds)
+    if abs(x) > MAX_COORD:
+        fail(path, f"must be within +-1e12 scene units (float32 rendering overflows beyond), got {show(value)}")
+    return x
+
+
+def point3(value, path: str) -> Vec3:
+    """Three coordinates (a world-space point or offset), each within +-MAX_COORD."""
+    return tuple(coordinate(x, f"{path}[{i}]") for i, x in enumerate(vec3(value, path)))
 
 
 def normalised(v: Vec3, path: str) -> Vec3:

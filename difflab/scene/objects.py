@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar, Union
 
-from ._check import (Vec3, boolean, choice, existing_file, fail, integer, join, mapping,
-                     number, show, string, unit3, vec3)
+from ._check import (Vec3, boolean, choice, coordinate, existing_file, fail, integer, join, mapping,
+                     number, point3, show, string, unit3, vec3)
 from ._record import Record
 
 BUILTIN_MESHES = ("teapot", "sphere", "box", "cylinder", "quad")
@@ -52,8 +52,9 @@ class Transform(Record):
         for i, s in enumerate(scale):
             if s == 0.0:
                 fail(f"{join(path, 'scale')}[{i}]", "must not be zero")
+            coordinate(s, f"{join(path, 'scale')}[{i}]")
         return dict(
-            translate=vec3(v["translate"], join(path, "translate")),
+            translate=point3(v["translate"], join(path, "translate")),
             rotate_deg=vec3(v["rotate_deg"], join(path, "rotate_deg")),
             scale=scale,
             matrix=None if v["matrix"] is None else _matrix(v["matrix"], join(path, "matrix")),
@@ -74,8 +75,8 @@ class Sphere(Record):
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:
         return dict(
-            center=vec3(v["center"], join(path, "center")),
-            radius=number(v["radius"], join(path, "radius"), gt=0),
+            center=point3(v["center"], join(path, "center")),
+            radius=coordinate(v["radius"], join(path, "radius"), gt=0),
             material=string(v["material"], join(path, "material")),
         )
 
@@ -97,7 +98,7 @@ class Plane(Record):
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:
         return dict(
-            point=vec3(v["point"], join(path, "point")),
+            point=point3(v["point"], join(path, "point")),
             normal=unit3(v["normal"], join(path, "normal")),
             material=string(v["material"], join(path, "material")),
         )

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import ClassVar
 
 from ..errors import SceneError
-from ._check import Vec3, check_keys, fail, join, mapping, sequence, string, vec3
+from ._check import Vec3, check_keys, fail, join, mapping, sequence, show, string, vec3
 from ._record import FrozenDict, Record, plain
 from .material import Material
 from .objects import Mesh, Plane, SceneObject, Sphere, parse_object
@@ -157,31 +157,47 @@ def _no_duplicates(path):
         out = {}
         for key, value in pairs:
             if key in out:
-                raise SceneError(f"{path}: duplicate key {key!r} in a JSON object")
+                raise SceneError(f"{path}: duplicate key {show(key)} in a JSON object")
             out[key] = value
         return out
     return hook
 
 
+#: Largest scene file read (bytes): scene files are small; anything bigger is not one.
+MAX_SCENE_BYTES = 64 * 1024 * 1024
+#: Integer literals longer than this many digits are read as floats (so that a 5,000-digit number
+#: becomes inf and its field reports "must be finite" instead of Python's int-conversion limit).
+MAX_INT_DIGITS = 40
+
+
+def _parse_int(text: str):
+    return int(text) if len(text) <= MAX_INT_DIGITS else float(text)
+
+
 def load_scene(path: str | os.PathLike) -> Scene:
     """Read and validate a scene file (JSON). Relative paths inside resolve against the file's folder.
 
-    Raises SceneError: for bad JSON with the file, line and column; for invalid content with the
-    field path first and the file appended.
+    Only a regular file of at most MAX_SCENE_BYTES is read (a device, FIFO or folder is refused at
+    once). Raises SceneError: for bad JSON with the file, line and column; for invalid content with
+    the field path first and the file appended.
     """
+    from ..io import read_regular_file
+    from ..limits import short_path
+
+    if not isinstance(path, (str, os.PathLike)):
+        raise SceneError(f"scene: expected a path, got {type(path).__name__}")
     path = Path(path)
+    data = read_regular_file(path, MAX_SCENE_BYTES, SceneError, "scene file")
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SceneError(f"{path}: scene file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(f"{path}: cannot read scene file ({exc})") from None
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{short_path(path)}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     try:
-        data = json.loads(text, object_pairs_hook=_no_duplicates(path))
+        data = json.loads(text, object_pairs_hook=_no_duplicates(path), parse_int=_parse_int)
     except json.JSONDecodeError as exc:
         raise SceneError(f"{path}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
-    except RecursionError:
-        raise SceneError(f"{path}: invalid JSON: nested too deeply") from None
+    except (RecursionError, ValueError) as exc:
+        raise SceneError(f"{path}: invalid JSON: {'nested too deeply' if isinstance(exc, RecursionError) else exc}") from None
     try:
         return Scene.from_dict(data, base_dir=path.parent.absolute())
     except SceneError as exc:

@@ -8,12 +8,27 @@ from typing import ClassVar
 
 from ..vocabulary import (FOG_MODES, FRESNEL_MODES, INTERPOLATIONS, LIGHT_TYPES, MAX_DEPTH_LIMIT, MAX_SPP, METHODS,
                           PROJECTIONS, SAMPLINGS, SHADING_MODELS, SPECULAR_MODELS)
-from ._check import Vec3, boolean, choice, fail, integer, join, normalised, number, unit3, vec3
+from ._check import (Vec3, boolean, choice, coordinate, fail, integer, join, normalised, number, point3,
+                     show, unit3, vec3)
 from ._record import Record
 
 #: Largest image (width * height) a scene may ask for: 64 megapixels, the memory budget of a frame
 #: and its G-buffer. A supersampled render's sample grid (width * height * spp) is held to it too.
 MAX_PIXELS = 64 * 1024 * 1024
+#: Largest far / near ratio: beyond ~1e7 float32 unprojection of primary rays collapses (measured:
+#: far / near = 1e8 gives a black ray-traced image of a visible sphere).
+MAX_FAR_NEAR = 1e6
+#: Smallest field of view (degrees) and orthographic height (scene units) the camera matrices and
+#: the sphere tessellation stay finite for.
+MIN_FOV_Y = 1e-6
+MIN_ORTHO_HEIGHT = 1e-9
+
+
+def at_least(x: float, smallest: float, path: str) -> float:
+    """x, if x >= smallest (a positive number too small for float32 rendering is an error)."""
+    if x < smallest:
+        fail(path, f"must be >= {smallest:g} (the camera's float32 matrices degenerate below), got {x:g}")
+    return x
 
 
 @dataclass(frozen=True)
@@ -43,7 +58,7 @@ class Camera(Record):
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:
         p = lambda name: join(path, name)  # noqa: E731
-        eye, target, up = vec3(v["eye"], p("eye")), vec3(v["target"], p("target")), vec3(v["up"], p("up"))
+        eye, target, up = point3(v["eye"], p("eye")), point3(v["target"], p("target")), vec3(v["up"], p("up"))
         view = tuple(t - e for t, e in zip(target, eye))
         if math.hypot(*view) == 0.0:
             fail(p("target"), f"must differ from eye, got {list(target)}")
@@ -56,17 +71,21 @@ class Camera(Record):
         if width * height > MAX_PIXELS:
             fail(p("width"), f"{width} x {height} = {width * height} pixels exceeds the memory budget "
                  f"of 64 megapixels ({MAX_PIXELS} pixels)")
-        near = number(v["near"], p("near"), gt=0)
-        far = number(v["far"], p("far"))
+        near = coordinate(v["near"], p("near"), gt=0)
+        far = coordinate(v["far"], p("far"))
         if not far > near:
-            fail(p("far"), f"must be > near ({near}), got {v['far']!r}")
+            fail(p("far"), f"must be > near ({near}), got {show(v['far'])}")
+        if far / near > MAX_FAR_NEAR:
+            fail(p("near"), f"far / near = {far / near:.3g} is over {MAX_FAR_NEAR:.0e} (float32 depth and primary "
+                 f"rays lose all precision); raise near or lower far")
         return dict(
             eye=eye, target=target, up=up,
-            fov_y=number(v["fov_y"], p("fov_y"), gt=0, lt=180),
+            fov_y=at_least(number(v["fov_y"], p("fov_y"), gt=0, lt=180), MIN_FOV_Y, p("fov_y")),
             width=width, height=height,
             projection=choice(v["projection"], p("projection"), PROJECTIONS),
             near=near, far=far,
-            ortho_height=number(v["ortho_height"], p("ortho_height"), gt=0),
+            ortho_height=at_least(coordinate(v["ortho_height"], p("ortho_height"), gt=0), MIN_ORTHO_HEIGHT,
+                                  p("ortho_height")),
         )
 
 
@@ -95,7 +114,7 @@ class Light(Record):
     def _check(cls, v: dict, path: str) -> dict:
         p = lambda name: join(path, name)  # noqa: E731
         kind = choice(v["type"], p("type"), LIGHT_TYPES)
-        position = None if v["position"] is None else vec3(v["position"], p("position"))
+        position = None if v["position"] is None else point3(v["position"], p("position"))
         direction = None if v["direction"] is None else unit3(v["direction"], p("direction"))
         if kind in ("point", "spot") and position is None:
             fail(p("position"), f"required for a {kind} light")
@@ -112,11 +131,11 @@ class Light(Record):
         if kind == "spot":
             if cutoff == 180.0:
                 fail(p("cutoff_deg"), "a spot light needs 0 < cutoff_deg <= 90 (180, the default, means "
-                     f"no cone), got {v['cutoff_deg']!r}")
+                     f"no cone), got {show(v['cutoff_deg'])}")
             cutoff = number(v["cutoff_deg"], p("cutoff_deg"), gt=0, le=90)
         elif cutoff != 180.0:
             fail(p("cutoff_deg"), f"only spot lights have a cone; must be 180 (no cone) for a {kind} "
-                 f"light, got {v['cutoff_deg']!r}")
+                 f"light, got {show(v['cutoff_deg'])}")
         return dict(
             type=kind, position=position, direction=direction,
             intensity=vec3(v["intensity"], p("intensity"), grey=True, ge=0),
@@ -145,9 +164,9 @@ class Fog(Record):
     def _check(cls, v: dict, path: str) -> dict:
         p = lambda name: join(path, name)  # noqa: E731
         mode = choice(v["mode"], p("mode"), FOG_MODES)
-        start, end = number(v["start"], p("start")), number(v["end"], p("end"))
+        start, end = coordinate(v["start"], p("start")), coordinate(v["end"], p("end"))
         if mode == "linear" and not start < end:
-            fail(p("end"), f"must be > start ({start}) for linear fog, got {v['end']!r}")
+            fail(p("end"), f"must be > start ({start}) for linear fog, got {show(v['end'])}")
         return dict(
             mode=mode, color=vec3(v["color"], p("color"), grey=True, ge=0), start=start, end=end,
             density=number(v["density"], p("density"), ge=0),

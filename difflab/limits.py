@@ -1,0 +1,221 @@
+"""Memory and work budgets: estimate what a request will cost before allocating it, refuse it if too big.
+
+Every large allocation in difflab grows with a count we know up front: image samples, triangles of a
+tessellation, texels of a texture pyramid, nodes of a ray tree, residuals x parameters of a fit. The
+per-unit costs below were MEASURED (peak resident memory above a warmed-up baseline, the slope
+between two sizes) by `python experiments/bench/memory.py`, which prints them again with the
+estimate beside each measurement; rerun it after a change to a renderer's buffers.
+
+The budget is `DIFFLAB_MEMORY_BUDGET` (bytes, or with a K/M/G/T suffix: "8G") when set, else
+BUDGET_FRACTION of the memory this process can still get: the least of the system's available memory
+(MemAvailable), the cgroup limit (v2 `memory.max` or v1 `memory.limit_in_bytes`) less its usage, and
+the RLIMIT_AS / RLIMIT_DATA address-space limits less what the process has mapped already.
+
+Work (rays traced) has its own budget, MAX_RAYS, raised by `DIFFLAB_MAX_RAYS`: a ray tree that
+doubles at every bounce can need more rays than any machine traces, in bounded memory; it is refused
+up front instead of running for hours. This module imports no Warp and no JAX.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import resource
+
+from .errors import DifflabError
+
+#: Fraction of the memory still available that one request may take (the rest is for the caller,
+#: the interpreter and the estimate's error).
+BUDGET_FRACTION = 0.5
+#: Largest number of rays one render may trace (worst case, before adaptive cut-off), ~10 min on 2 cores.
+MAX_RAYS = 2 ** 32
+#: Largest count of anything one kernel indexes (Warp indexes with 32-bit ints).
+MAX_INDEX = 2 ** 31 - 1
+
+# -- measured costs (bytes; experiments/bench/memory.py, slopes between two sizes, 2026-11-29) --------
+# Each is the measured slope rounded up by about 10%; the measurement is in the comment.
+#: Rasterizer, per sample of the sample grid (G-buffer, shading points, colour, the numpy copies in
+#: the Frame; measured 200 with Phong shading) plus per light and shading point (measured 20).
+RASTER_SAMPLE_BYTES = 220
+RASTER_LIGHT_POINT_BYTES = 24
+#: Ray tracer, per sample (colour, fog, counts, sample points; measured ~76) and per recorded
+#: ray-tree node (device arrays and numpy copies; measured ~132 with one light, of which ~40 per light).
+RAYTRACE_SAMPLE_BYTES = 90
+TREE_NODE_BYTES = 110
+TREE_NODE_LIGHT_BYTES = 40
+#: One triangle of a tessellated mesh through compile and a raster frame (float64 mesh arrays,
+#: float32 device arrays, normals, uvs, BVH, per-face clip buffers; measured 488 on the teapot).
+TRIANGLE_BYTES = 540
+#: One texel of a texture through load, mip pyramid and packing (measured 108).
+TEXEL_BYTES = 120
+#: One pixel of an 8-bit image file being read (decode, table lookup to float32; measured 26.5).
+IMAGE_LOAD_BYTES = 30
+#: One float64 element of a fit's Jacobian-sized arrays (residuals x parameters), with the solver's
+#: copies (Jacobian, J^T J work space, a factorisation): an estimate, 4 copies of 8 bytes.
+FIT_ELEMENT_BYTES = 4 * 8
+
+_SUFFIX = {"": 1, "K": 2 ** 10, "M": 2 ** 20, "G": 2 ** 30, "T": 2 ** 40}
+
+
+def parse_bytes(text: str, name: str) -> int:
+    """'123', '512M', '8G', '1.5T' -> bytes (binary multiples). DifflabError naming `name` if not."""
+    raw = str(text).strip().upper().removesuffix("B").removesuffix("I")
+    unit = raw[-1:] if raw[-1:] in _SUFFIX and raw[-1:] else ""
+    try:
+        value = float(raw[: len(raw) - len(unit)]) * _SUFFIX[unit]
+    except ValueError:
+        value = float("nan")
+    if not math.isfinite(value) or value <= 0:
+        raise DifflabError(f"{name}: expected a positive size in bytes such as 8G or 512M, got {shorten(text)}")
+    return int(value)
+
+
+def shorten(value, limit: int = 60) -> str:
+    """repr(value), cut to `limit` characters: user strings in messages stay short."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def short_path(path, limit: int = 200) -> str:
+    """A path for messages: whole if short, else '...' and its last `limit` characters (the file name)."""
+    text = os.fspath(path) if isinstance(path, (str, os.PathLike)) else str(path)
+    return text if len(text) <= limit else "..." + text[-limit:]
+
+
+def _read_int(path: str) -> int | None:
+    try:
+        with open(path) as f:
+            text = f.read().strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None
+
+
+def _meminfo(key: str) -> int | None:
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith(key + ":"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def _vm_size() -> int:
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+def available_bytes() -> int:
+    """Memory this process can still allocate (bytes): see the module doc. Unknown limits are ignored."""
+    candidates = [_meminfo("MemAvailable")]
+    for limit_path, usage_path in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+                                   ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                                    "/sys/fs/cgroup/memory/memory.usage_in_bytes")):
+        limit = _read_int(limit_path)
+        if limit is not None and limit < 2 ** 60:
+            candidates.append(limit - (_read_int(usage_path) or 0))
+    for which in (resource.RLIMIT_AS, resource.RLIMIT_DATA):
+        soft = resource.getrlimit(which)[0]
+        if soft != resource.RLIM_INFINITY:
+            candidates.append(soft - _vm_size())
+    known = [c for c in candidates if c is not None]
+    return max(0, min(known)) if known else 2 ** 40
+
+
+def memory_budget() -> int:
+    """Bytes one request may use: $DIFFLAB_MEMORY_BUDGET, else BUDGET_FRACTION x `available_bytes()`."""
+    value = os.environ.get("DIFFLAB_MEMORY_BUDGET")
+    if value:
+        return parse_bytes(value, "DIFFLAB_MEMORY_BUDGET")
+    return int(BUDGET_FRACTION * available_bytes())
+
+
+def ray_budget() -> int:
+    """Rays one render may trace: $DIFFLAB_MAX_RAYS, else MAX_RAYS."""
+    value = os.environ.get("DIFFLAB_MAX_RAYS")
+    if not value:
+        return MAX_RAYS
+    if not value.strip().isdigit() or int(value) < 1:
+        raise DifflabError(f"DIFFLAB_MAX_RAYS: expected a positive integer, got {shorten(value)}")
+    return int(value)
+
+
+def gib(nbytes: float) -> str:
+    """Bytes as '1.23 GiB' (or MiB below 1 GiB)."""
+    return f"{nbytes / 2 ** 30:.2f} GiB" if nbytes >= 2 ** 30 else f"{nbytes / 2 ** 20:.1f} MiB"
+
+
+def require_memory(nbytes: float, what: str, error: type[DifflabError] = DifflabError, hint: str = "") -> None:
+    """Raise `error("what: needs about X, over the memory budget of Y ...")` if `nbytes` > the budget."""
+    budget = memory_budget()
+    if nbytes > budget:
+        raise error(f"{what}: needs about {gib(nbytes)}, over the memory budget of {gib(budget)} "
+                    f"({'DIFFLAB_MEMORY_BUDGET' if os.environ.get('DIFFLAB_MEMORY_BUDGET') else 'half the available memory'}"
+                    f"; set DIFFLAB_MEMORY_BUDGET to raise it){'; ' + hint if hint else ''}")
+
+
+def require_count(count: int, what: str, error: type[DifflabError] = DifflabError, limit: int = MAX_INDEX) -> None:
+    """Raise `error` if `count` exceeds what a kernel can index (`limit`)."""
+    if count > limit:
+        raise error(f"{what}: {count} is over the limit of {limit} (32-bit indices)")
+
+
+# -- estimates ----------------------------------------------------------------------------------------------
+
+def raster_frame_bytes(samples: int, n_points: int, n_lights: int, n_faces: int) -> int:
+    """Peak bytes of one rasterized frame: samples x RASTER_SAMPLE_BYTES + shading points x lights x
+    RASTER_LIGHT_POINT_BYTES + faces x TRIANGLE_BYTES."""
+    return samples * RASTER_SAMPLE_BYTES + n_points * n_lights * RASTER_LIGHT_POINT_BYTES + n_faces * TRIANGLE_BYTES
+
+
+def ray_tree_nodes(max_depth: int, branching: int, weight: float = 1.0, threshold: float = 0.0) -> int:
+    """Upper bound on the nodes of one sample's ray tree: 1 + b + b^2 + ... over the levels a ray can
+    reach. b = rays a hit can spawn (0, 1: reflection or refraction, 2: both). With Hall's adaptive
+    control (threshold > 0) and every spawned ray's weight at most `weight` (< 1) times its parent's,
+    a ray at level k has weight <= weight^(k-1), so levels stop at 1 + log(threshold) / log(weight)."""
+    levels = int(max_depth)
+    if threshold > 0.0 and 0.0 <= weight < 1.0:
+        cut = 1 if weight == 0.0 else 1 + math.floor(math.log(threshold) / math.log(weight)) + 1
+        levels = max(1, min(levels, cut))
+    if branching <= 1:
+        return levels if branching == 1 else 1
+    return min(2 ** 62, branching ** levels - 1)
+
+
+def raytrace_bytes(samples: int, nodes: int, n_lights: int, record: bool) -> int:
+    """Peak bytes of a ray-traced frame: samples x RAYTRACE_SAMPLE_BYTES, plus the recorded tree."""
+    tree = nodes * (TREE_NODE_BYTES + n_lights * TREE_NODE_LIGHT_BYTES) if record else 0
+    return samples * RAYTRACE_SAMPLE_BYTES + tree
+
+
+def check_rays(samples: int, nodes_per_sample: int, n_lights: int, what: str,
+               error: type[DifflabError] = DifflabError) -> None:
+    """Refuse a render whose worst-case ray count (samples x nodes x (1 + lights)) is over the ray budget."""
+    rays = samples * nodes_per_sample * (1 + n_lights)
+    budget = ray_budget()
+    if rays > budget:
+        raise error(f"{what}: up to {rays:.3g} rays ({samples} samples x {nodes_per_sample:.3g} ray-tree nodes x "
+                    f"{1 + n_lights} rays per node) is over the budget of {budget:.3g} rays (set DIFFLAB_MAX_RAYS to "
+                    "raise it); lower max_depth, kr / kt, spp or the image size, or set render.adaptive_threshold")
+
+
+def require_triangles(n_triangles: int, what: str, error: type[DifflabError] = DifflabError) -> None:
+    """Refuse a tessellation of `n_triangles` over the memory budget (TRIANGLE_BYTES each) or int32 range."""
+    require_count(n_triangles, what, error)
+    require_memory(n_triangles * TRIANGLE_BYTES, f"{what} ({n_triangles} triangles)", error)
+
+
+def require_image(width: int, height: int, what: str, per_pixel: int = IMAGE_LOAD_BYTES,
+                  error: type[DifflabError] = DifflabError) -> None:
+    """Refuse reading or building a width x height image over the memory budget."""
+    require_memory(width * height * per_pixel, f"{what} ({width} x {height} pixels)", error)
+
+
+def fit_bytes(n_residuals: int, n_params: int) -> int:
+    """Peak bytes of a least-squares fit: residuals x parameters x FIT_ELEMENT_BYTES."""
+    return n_residuals * max(1, n_params) * FIT_ELEMENT_BYTES
