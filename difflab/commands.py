@@ -10,7 +10,7 @@ from .vocabulary import MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS, SPECULAR_MODEL
 
 def run_render(args) -> int:
     from .io import save_image
-    from .render.api import render_frame
+    from .renderers.api import render_frame
 
     frame = render_frame(args.scene, method=args.method, shading=args.shading, specular=args.specular,
                          max_depth=args.max_depth, spp=args.spp, device=args.device, width=args.width,

@@ -50,7 +50,7 @@ def main(argv=None) -> int:
 
     from difflab.fit import Setup, solve
     from difflab.io import write_json_atomic
-    from difflab.render.api import render_frame
+    from difflab.renderers.api import render_frame
     from difflab.scene import Scene
 
     rng = np.random.default_rng(SEED)

@@ -63,7 +63,7 @@ def truth_of(scene, key) -> np.ndarray:
 
 def view_targets(scene, n_views, width, height, noise, rng):
     """(targets for fit_scene, noise-free images) for the first n_views cameras."""
-    from difflab.render.api import render_frame
+    from difflab.renderers.api import render_frame
 
     targets, clean = [], []
     for eye in EYES[:n_views]:
@@ -100,7 +100,7 @@ def step_cost(scene, keys, start, width, height, depths, steps=4, repeats=3) -> 
     """Median seconds per LM step (compiled; the first call compiles) at each max_depth."""
     from difflab.fit.fit import solve
     from difflab.fit.scene_fit import SceneSetup
-    from difflab.render.api import render_frame
+    from difflab.renderers.api import render_frame
 
     rows = []
     for depth in depths:

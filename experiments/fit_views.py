@@ -41,7 +41,7 @@ def light(angle_deg):
 
 def fit_row(scene, views, rng, sweep, count):
     from difflab.fit import fit_material
-    from difflab.render.api import render_frame
+    from difflab.renderers.api import render_frame
 
     targets = []
     for overrides in views:

@@ -37,7 +37,7 @@ SEED = 0
 def texture_fit_run(size: int, pixels: int, folder: Path) -> dict:
     """Fit a random (size x size x 3) kd texture from two views of a textured quad."""
     from difflab.fit.texture_fit import fit_texture, texture_view
-    from difflab.render.api import as_scene
+    from difflab.renderers.api import as_scene
 
     truth = np.random.default_rng(SEED).uniform(0.1, 0.9, (size, size, 3)).astype(np.float32)
     path = folder / "truth.npy"

@@ -61,7 +61,7 @@ def in_layer(module: str, *layers: str) -> bool:
 
 def test_graph_is_read():
     """The parser sees the known edges (a guard against a test that checks an empty graph)."""
-    assert "difflab.scene" in GRAPH["difflab.render.api"]
+    assert "difflab.scene" in GRAPH["difflab.renderers.api"]
     assert "warp" in GRAPH["difflab._warp"]
     assert "jax" in GRAPH["difflab.lighting.jax_model"]
     assert "difflab.demos.examples" in GRAPH["difflab.demos"]

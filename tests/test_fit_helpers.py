@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from difflab.render.api import render_frame
+from difflab.renderers.api import render_frame
 from difflab.scene import Scene
 
 TRUTH = {"ka": [0.1, 0.05, 0.02], "kd": [0.7, 0.2, 0.1], "ks": [0.5, 0.4, 0.3], "n": 24.0}

@@ -11,7 +11,7 @@ from test_fit_helpers import make_scene, target_of
 
 from difflab.fit import Setup, shade_gbuffer
 from difflab.fit.params import values_from_u
-from difflab.render.api import render_frame
+from difflab.renderers.api import render_frame
 
 LIGHTS = [
     {"type": "point", "position": [3, 4, 3], "intensity": [1, 0.9, 0.8], "attenuation": [1, 0.1, 0.01]},

@@ -211,7 +211,7 @@ def test_subdivided_quad_and_box_keep_shape_area_volume_and_uv_map(d):
 
 
 def test_scene_resolution_subdivides_builtin_quads_and_boxes():
-    from difflab.render.compile import object_mesh
+    from difflab.renderers.compile import object_mesh
     from difflab.scene import Mesh
 
     assert object_mesh(Mesh("m", builtin="quad", resolution=1)).n_faces == 2

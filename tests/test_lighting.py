@@ -11,7 +11,7 @@ import warp as wp
 
 from difflab.lighting import jax_model as jm
 from difflab.lighting import warp_model as wm
-from difflab.render.launch import init
+from difflab.renderers.launch import init
 from difflab.vocabulary import BLINN, PHONG, SPECULAR_MODELS, TORRANCE
 
 init()

@@ -21,8 +21,8 @@ except (ImportError, AttributeError, Exception) as exc:  # pragma: no cover - de
     pytest.skip(f"OSMesa is not available ({exc})", allow_module_level=True)
 
 from difflab import Scene, render
-from difflab.render.camera import projection_matrix, view_matrix
-from difflab.render.compile import object_mesh
+from difflab.renderers.camera import projection_matrix, view_matrix
+from difflab.renderers.compile import object_mesh
 
 SIZE = 256
 SCENE = {

@@ -122,7 +122,7 @@ def floor_scene(width=48, height=32, **render):
 
 def ray_plane_hits(scene_camera, width, height):
     """World points where each pixel-centre ray meets y = 0 (NaN where it does not)."""
-    from difflab.render.camera import camera_frame
+    from difflab.renderers.camera import camera_frame
 
     class Cam:  # the scene's camera as a plain object
         pass

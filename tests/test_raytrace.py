@@ -8,13 +8,13 @@ import warp as wp
 
 from conftest import scene_dict
 from difflab import RenderError, Scene, SceneError, render, render_frame
-from difflab.render.camera import projection_matrix, view_matrix
-from difflab.render.compile import compile_scene
-from difflab.render.raytracer import raytrace, sample_points
-from difflab.render.rt_adaptive import raytrace_adaptive
-from difflab.render.rt_optics import FRESNEL_EXACT, FRESNEL_SCHLICK, fresnel, refract
-from difflab.render.rt_tree import evaluate_ray_tree
-from difflab.render.trace import ray_plane, ray_sphere
+from difflab.renderers.camera import projection_matrix, view_matrix
+from difflab.renderers.compile import compile_scene
+from difflab.renderers.raytrace.driver import raytrace, sample_points
+from difflab.renderers.raytrace.adaptive import raytrace_adaptive
+from difflab.renderers.raytrace.optics import FRESNEL_EXACT, FRESNEL_SCHLICK, fresnel, refract
+from difflab.renderers.raytrace.tree import evaluate_ray_tree
+from difflab.renderers.trace import ray_plane, ray_sphere
 
 wp.set_module_options({"enable_backward": False})
 ORTHO = {"eye": [0, 0, 5], "target": [0, 0, 0], "projection": "orthographic", "ortho_height": 2.4,

@@ -4,7 +4,7 @@ import numpy as np
 
 from conftest import scene_dict
 from difflab import Scene, render, render_frame, save_image
-from difflab.render.rt_tree import evaluate_ray_tree
+from difflab.renderers.raytrace.tree import evaluate_ray_tree
 
 
 def textured_scene(tmp_path, filter="bilinear", target="kd"):

@@ -9,11 +9,11 @@ from conftest import scene_dict
 from difflab import TextureError, render, render_frame
 from difflab._warp import wp
 from difflab.io import save_image
-from difflab.render.camera import camera_struct, projection_matrix, view_matrix
-from difflab.render.api import as_scene
-from difflab.render.texture import CameraW, pixel_footprint, plane_uv_derivatives
+from difflab.renderers.camera import camera_struct, projection_matrix, view_matrix
+from difflab.renderers.api import as_scene
+from difflab.renderers.texture.sampling import CameraW, pixel_footprint, plane_uv_derivatives
 from difflab.demos.textures import checker_texture, compare_filters
-from difflab.render.texture_store import TextureStore, load_texture, mip_pyramid, sample
+from difflab.renderers.texture.store import TextureStore, load_texture, mip_pyramid, sample
 
 FILTERS = ["nearest", "bilinear", "mipmap", "trilinear", "ewa"]
 WRAPS = ["repeat", "clamp", "mirror"]

@@ -5,7 +5,7 @@ import pytest
 
 from difflab import FitError, render_frame
 from difflab.fit.texture_fit import fit_texture, texture_taps, texture_view
-from difflab.render.api import as_scene
+from difflab.renderers.api import as_scene
 
 
 def quad_scene(texture_path, eye=(0, 0, 3), size=72, filter="bilinear"):
@@ -91,7 +91,7 @@ def test_bad_inputs_raise_fit_error(truth):
 
 
 def test_taps_match_the_warp_bilinear_filter():
-    from difflab.render.texture_store import TextureStore, sample
+    from difflab.renderers.texture.store import TextureStore, sample
 
     rng = np.random.default_rng(4)
     image = rng.random((5, 9, 3)).astype(np.float32)

@@ -10,7 +10,7 @@ import numpy as np
 from ..fractals import (box_counting_dimension, cantor_staircase, hilbert, julia, koch_snowflake, mandelbrot,
                         mandelbulb, peano, polyline_length, terrain, terrain_scene)
 from ..io import save_image
-from ..render.api import render
+from ..renderers.api import render
 from .figures import save_figure
 
 CURVES = ("koch", "peano", "hilbert", "cantor")

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import write_text_atomic
-from ..render.api import render
+from ..renderers.api import render
 from .figures import image_grid
 
 # The lecture's material table. "shininess" s in [0, 1] maps to the Phong exponent n = 128 s, the

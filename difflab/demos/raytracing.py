@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from ..io import save_image
-from ..render.compile import compile_scene
-from ..render.raytracer import raytrace
+from ..renderers.compile import compile_scene
+from ..renderers.raytrace.driver import raytrace
 from .examples import example_scene
 from .figures import strip
 

@@ -17,11 +17,11 @@ import numpy as np
 
 from .._warp import wp
 from ..io import save_image
-from ..render.api import as_scene, render, render_frame
-from ..render.camera import CameraW, camera_struct, primary_ray
-from ..render.launch import launch_rows
-from ..render.texture import WRAPS, TexturesW, plane_uv, sample_bilinear
-from ..render.texture_store import TextureStore
+from ..renderers.api import as_scene, render, render_frame
+from ..renderers.camera import CameraW, camera_struct, primary_ray
+from ..renderers.launch import launch_rows
+from ..renderers.texture.sampling import WRAPS, TexturesW, plane_uv, sample_bilinear
+from ..renderers.texture.store import TextureStore
 from .figures import image_grid
 
 wp.set_module_options({"enable_backward": False})

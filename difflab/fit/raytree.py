@@ -1,7 +1,7 @@
 """The ray-traced image in JAX from a recorded ray tree: differentiable in every material's ka, kd, ks,
 n (m, f0), kr, kt and absorption, with the tree -- where every ray goes and what it hits -- fixed.
 
-The Whitted ray tracer records every node of every sample's tree (`render.rt_tree.RayTree`). A
+The Whitted ray tracer records every node of every sample's tree (`renderers.raytrace.tree.RayTree`). A
 sample is the weighted sum of its nodes' local colours:
 
     sample = f * sum_nodes weight(node) * local(node) + (1 - f) * fog_color
@@ -13,7 +13,7 @@ sample is the weighted sum of its nodes' local colours:
     local = the one illumination model (`lighting.jax_model.shade`; a texture modulates its target)
             with the shadow rays' visibility prod_m kt_m ^ crossings_m; background where nothing was hit
 
-which is `render.rt_tree.evaluate_ray_tree` (the NumPy reference) in `jax.numpy`. Nodes are put in
+which is `renderers.raytrace.tree.evaluate_ray_tree` (the NumPy reference) in `jax.numpy`. Nodes are put in
 level order (by depth, then sample, then their recorded order), so each level's weights are one
 gather from the level above and no scatter is needed on the way down; a level's radiance goes to its
 samples with one sorted segment sum.
@@ -35,7 +35,7 @@ import numpy as np
 
 from ..lighting.jax_model import LightsJ, MaterialJ, lights_to_jax, safe_pow, shade, textured_material
 from ..lighting.warp_model import SPECULAR_MODELS, TEXTURE_TARGET_IDS
-from ..render.rt_kernels import REFLECTED
+from ..renderers.raytrace.kernels import REFLECTED
 from .shading import MaterialTable, PointsJ
 
 __all__ = ["TreeMaterials", "TreeJ", "tree_to_jax", "tree_pixels", "tree_image", "evaluate_tree",
@@ -135,7 +135,7 @@ def tree_to_jax(tree, pixels=None, dtype=jnp.float32) -> TreeJ:
     """The nodes that `pixels` need, in level order, as a `TreeJ`.
 
     Arguments:
-        tree: a `render.rt_tree.RayTree`.
+        tree: a `renderers.raytrace.tree.RayTree`.
         pixels: (U,) flat pixel indices (row * width + column); default: every pixel, in order.
         dtype: float dtype of the arrays (float64 needs x64 enabled).
     Returns:

@@ -1,6 +1,6 @@
 """`fit_scene`: several materials of one scene at once, through reflections and refractions.
 
-Warp ray-traces each view once and records its ray tree (`render.rt_tree.RayTree`); JAX re-forms the
+Warp ray-traces each view once and records its ray tree (`renderers.raytrace.tree.RayTree`); JAX re-forms the
 image from the tree (`raytree.py`) as often as the solver asks, so the lecture's whole Whitted model
 
     I = ka Ia + sum_p s_p att_p spot_p Ip (kd N.L + ks S) + kr F_r I_r e^(-alpha d) + kt F_t I_t e^(-alpha d)
@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import DifflabError, FitError
 from ..lighting.jax_model import LightsJ, lights_to_jax
-from ..render.api import as_scene, render_frame
+from ..renderers.api import as_scene, render_frame
 from .fit import precheck, run_fit
 from .params import initial_values, u_from_values
 from .problem import LOSSES, robust

@@ -58,7 +58,7 @@ class MaterialTable(NamedTuple):
 
 
 class PointsJ(NamedTuple):
-    """Shading points as JAX arrays (see `render.frame.ShadingPoints`): normal, view (N, 3); material,
+    """Shading points as JAX arrays (see `renderers.frame.ShadingPoints`): normal, view (N, 3); material,
     cell (N,) int32; light_dir (N, P, 3); light_dist, visibility (N, P)."""
 
     normal: jnp.ndarray
@@ -189,7 +189,7 @@ def shade_gbuffer(gbuffer, materials, lights, ambient=None, *, dtype=jnp.float32
         pixel = box_filter( fog( sum_k w_k * shade(point_k) ) )   (background where nothing was hit)
 
     Arguments:
-        gbuffer: a `render.frame.GBuffer` (from `render_frame(...).gbuffer`).
+        gbuffer: a `renderers.frame.GBuffer` (from `render_frame(...).gbuffer`).
         materials: a `MaterialTable`, or scene `Material`s in material-id order (e.g.
             `scene.materials.values()`).
         lights: a `LightsJ`, or scene `Light`s (their directions / distances / visibility are the

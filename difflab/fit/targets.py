@@ -10,8 +10,8 @@ import numpy as np
 
 from ..errors import DifflabError, FitError
 from ..io import load_image
-from ..render.api import as_scene
-from ..render.frame import GBuffer
+from ..renderers.api import as_scene
+from ..renderers.frame import GBuffer
 
 OVERRIDE_KEYS = ("camera", "lights")
 EIGHT_BIT = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -148,7 +148,7 @@ def load_views(scene, targets, masks=None, weights=None, device="cpu") -> tuple[
     """The scene (validated) and one `View` per target, each with its G-buffer rendered once.
 
     A view's camera is the scene's (or its override's) with width and height set to the target's."""
-    from ..render.api import render_frame
+    from ..renderers.api import render_frame
 
     scene = as_scene(scene)
     views = []

@@ -79,7 +79,7 @@ class TextureFitResult:
 
 def texture_taps(uv: np.ndarray, shape: tuple[int, int], filter: str, wrap: str) -> tuple[np.ndarray, np.ndarray]:
     """Texel indices and weights (N, K) of `filter` at level 0 of an (H_t, W_t) texture for uv (N, 2),
-    with the Warp kernel's conventions (`render.texture`: texel centres at half-integers, wrap on
+    with the Warp kernel's conventions (`renderers.texture.sampling`: texel centres at half-integers, wrap on
     the integer index)."""
     h, w = shape
     uv = np.asarray(uv, np.float32)
@@ -101,7 +101,7 @@ def texture_taps(uv: np.ndarray, shape: tuple[int, int], filter: str, wrap: str)
 
 
 def wrap_np(i: np.ndarray, n: int, wrap: str) -> np.ndarray:
-    """`render.texture.wrap_index` in numpy: integer-valued float indices -> [0, n - 1]."""
+    """`renderers.texture.sampling.wrap_index` in numpy: integer-valued float indices -> [0, n - 1]."""
     i = np.where(np.isfinite(i), i, 0.0).astype(np.float64)
     if wrap == "clamp":
         i = np.clip(i, 0, n - 1)

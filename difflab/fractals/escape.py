@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from .._warp import wp
 
-from ..render.launch import launch_rows, resolve_device
+from ..renderers.launch import launch_rows, resolve_device
 from ._checks import check_float, check_image_size, check_int, check_vec
 
 wp.set_module_options({"enable_backward": False})

@@ -21,8 +21,8 @@ from .._warp import wp
 
 from ..lighting.warp_model import (LightW, MaterialW, ambient_term, light_term,
                                    light_vector, lights_to_warp, materials_to_warp)
-from ..render.camera import CameraW, camera_struct, primary_ray
-from ..render.launch import launch_rows, resolve_device
+from ..renderers.camera import CameraW, camera_struct, primary_ray
+from ..renderers.launch import launch_rows, resolve_device
 from ..vocabulary import SPECULAR_MODELS
 from ..scene import Camera, Light, Material
 from ._checks import FractalError, check_float, check_image_size, check_int, check_vec

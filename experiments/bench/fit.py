@@ -88,7 +88,7 @@ def mitsuba_diffuse_loop(size: int, iterations: int) -> dict:
 def difflab_diffuse_fit(size: int) -> dict:
     """difflab's LM on the matching problem: kd of a Lambert sphere (ks = 0) from one exact target."""
     from difflab.fit import fit_material
-    from difflab.render.api import render_frame
+    from difflab.renderers.api import render_frame
     from difflab.scene import Scene
 
     scene = Scene.from_dict(scene_dict(size, red={"kd": DIFFUSE_TRUTH, "ks": [0.0] * 3}))
@@ -116,7 +116,7 @@ def main(argv=None) -> int:
 
     from difflab.fit import Setup, fit_batch, solve
     from difflab.io import write_json_atomic
-    from difflab.render.api import render_frame
+    from difflab.renderers.api import render_frame
     from difflab.scene import Scene
 
     rng = np.random.default_rng(SEED)

@@ -1,7 +1,7 @@
 """Benchmark: the Mandelbrot set at 1920x1080 on one CPU thread versus all cores.
 
 Warp runs one CPU launch on one thread; difflab splits a launch into row bands on a thread pool
-(difflab.render.launch). This measures what that buys on this machine: the median wall time of
+(difflab.renderers.launch). This measures what that buys on this machine: the median wall time of
 `difflab.fractals.mandelbrot` (escape-time kernel + colouring kernel + copy to numpy) over repeats,
 with threads=1 and with every core, and their ratio. Kernels are compiled (and warmed) first.
 
@@ -26,7 +26,7 @@ import warp as wp
 
 from difflab.fractals import mandelbrot
 from difflab.io import write_json_atomic
-from difflab.render.launch import cpu_threads
+from difflab.renderers.launch import cpu_threads
 
 RESULTS = Path(__file__).resolve().parents[1] / "results" / "bench_fractals.json"
 

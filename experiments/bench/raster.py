@@ -24,9 +24,9 @@ import warp
 
 import difflab
 from difflab.io import write_json_atomic
-from difflab.render.compile import compile_scene
-from difflab.render.launch import cpu_threads
-from difflab.render.rasterizer import rasterize
+from difflab.renderers.compile import compile_scene
+from difflab.renderers.launch import cpu_threads
+from difflab.renderers.raster.driver import rasterize
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 
@@ -54,7 +54,7 @@ def time_render(compiled, threads: int, repeats: int) -> float:
 def peak_memory_mib(resolution: int, width: int, height: int) -> float:
     """Peak RSS of a fresh process that compiles the scene and renders one frame."""
     code = (f"import resource, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import raster as b; "
-            f"from difflab.render.compile import compile_scene; from difflab.render.rasterizer import rasterize; "
+            f"from difflab.renderers.compile import compile_scene; from difflab.renderers.raster.driver import rasterize; "
             f"c = compile_scene(b.teapot_scene({resolution}, {width}, {height})); rasterize(c, c.scene.render); "
             f"print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -29,9 +29,9 @@ import warp
 import difflab
 from difflab.demos import scene_path
 from difflab.io import write_json_atomic
-from difflab.render.compile import compile_scene
-from difflab.render.launch import cpu_threads
-from difflab.render.raytracer import raytrace
+from difflab.renderers.compile import compile_scene
+from difflab.renderers.launch import cpu_threads
+from difflab.renderers.raytrace.driver import raytrace
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results"

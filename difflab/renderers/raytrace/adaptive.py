@@ -13,9 +13,9 @@ import time
 
 import numpy as np
 
-from ..errors import RenderError
-from .frame import Frame
-from .raytracer import trace_points
+from ...errors import RenderError
+from ..frame import Frame
+from .driver import trace_points
 
 
 def raytrace_adaptive(compiled, settings, threshold: float = 0.05, refine: int = 4,

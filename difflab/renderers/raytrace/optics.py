@@ -18,7 +18,7 @@ of the refractive indices on the incoming and the outgoing side.
 
 from __future__ import annotations
 
-from .._warp import wp
+from ..._warp import wp
 
 wp.set_module_options({"enable_backward": False})
 

@@ -21,7 +21,7 @@ from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Sphere
 from .camera import camera_frame, pixel_size_at
 from .launch import resolve_device
-from .texture_store import TextureStore, scene_textures
+from .texture.store import TextureStore, scene_textures
 from .trace import SceneGeomW
 
 RAY_EPSILON_SCALE = 1e-4  # ray offset = this x the scene's extent (bounding-box diagonal, at least 1)

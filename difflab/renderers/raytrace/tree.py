@@ -19,11 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._warp import wp
-from ..lighting.warp_model import SPECULAR_MODELS, TEXTURE_TARGET_IDS, LightW, MaterialW, ambient_term, light_term, \
+from ..._warp import wp
+from ...lighting.warp_model import SPECULAR_MODELS, TEXTURE_TARGET_IDS, LightW, MaterialW, ambient_term, light_term, \
     lights_to_warp, materials_to_warp, surface_material, textured_material
-from .frame import box_downsample
-from .rt_kernels import PRIMARY, REFLECTED, REFRACTED
+from ..frame import box_downsample
+from .kernels import PRIMARY, REFLECTED, REFRACTED
 
 wp.set_module_options({"enable_backward": False})
 

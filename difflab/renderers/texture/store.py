@@ -17,11 +17,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from .._warp import wp
+from ..._warp import wp
 
-from ..errors import DifflabError, TextureError
-from ..io import load_image
-from .texture import TexturesW
+from ...errors import DifflabError, TextureError
+from ...io import load_image
+from .sampling import TexturesW
 
 MAX_TEXELS = 64 * 1024 * 1024  # all levels of all textures of a scene
 
@@ -123,7 +123,7 @@ def scene_textures(materials, device: str = "cpu") -> tuple[TextureStore, list[i
 def sample(store: TextureStore, tex_id: int, uv, duv_dx=None, duv_dy=None, filter: str = "bilinear",
            wrap: str = "repeat", device: str = "cpu") -> np.ndarray:
     """`texture.sample_texture` at N points: uv, duv_dx, duv_dy (N, 2) -> (N, 3) float32."""
-    from .texture import FILTERS, WRAPS, sample_texture_kernel
+    from .sampling import FILTERS, WRAPS, sample_texture_kernel
 
     uv = np.asarray(uv, np.float32).reshape(-1, 2)
     zeros = np.zeros_like(uv)

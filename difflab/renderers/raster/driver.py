@@ -6,15 +6,15 @@ import math
 import time
 
 import numpy as np
-from .._warp import wp
+from ..._warp import wp
 
-from ..errors import RenderError
-from ..lighting.warp_model import SPECULAR_MODELS, fog_params
-from ..scene import MAX_PIXELS
-from . import raster as rk
-from .camera import camera_struct
-from .frame import Frame, GBuffer, ShadingPoints, box_downsample
-from .launch import launch_rows, parallel_bands
+from ...errors import RenderError
+from ...lighting.warp_model import SPECULAR_MODELS, fog_params
+from ...scene import MAX_PIXELS
+from . import stages as rk
+from ..camera import camera_struct
+from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
+from ..launch import launch_rows, parallel_bands
 
 
 def spp_side(spp: int) -> int:

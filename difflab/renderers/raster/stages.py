@@ -23,13 +23,13 @@ Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
 
 from __future__ import annotations
 
-from .._warp import wp
+from ..._warp import wp
 
-from ..lighting.warp_model import (LightW, MaterialW, ambient_term, checker_cell, fog_factor, light_term, light_vector,
+from ...lighting.warp_model import (LightW, MaterialW, ambient_term, checker_cell, fog_factor, light_term, light_vector,
                                    surface_material, target_only, textured_material)
-from .camera import CameraW, view_direction
-from .texture import TexturesW, sample_texture
-from .trace import SceneGeomW, light_visibility
+from ..camera import CameraW, view_direction
+from ..texture.sampling import TexturesW, sample_texture
+from ..trace import SceneGeomW, light_visibility
 
 wp.set_module_options({"enable_backward": False})
 

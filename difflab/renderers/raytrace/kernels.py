@@ -33,16 +33,16 @@ the recording pass can be allocated exactly.
 
 from __future__ import annotations
 
-from .._warp import wp
+from ..._warp import wp
 
-from ..lighting.warp_model import LightW, MaterialW, ambient_term, checker_cell, fog_factor, light_term, \
+from ...lighting.warp_model import LightW, MaterialW, ambient_term, checker_cell, fog_factor, light_term, \
     light_vector, surface_material, textured_material
-from .camera import CameraW, primary_ray
-from .texture import TexturesW, cone_footprint, pixel_footprint, plane_uv, plane_uv_derivatives, sample_texture, \
+from ..camera import CameraW, primary_ray
+from ..texture.sampling import TexturesW, cone_footprint, pixel_footprint, plane_uv, plane_uv_derivatives, sample_texture, \
     sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
-from .rt_itembuffer import ItemBufferW, hinted_hit
-from .rt_optics import FRESNEL_NONE, beer, fresnel, reflect, refract
-from .trace import HIT_NONE, HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, HitW, SceneGeomW, closest_hit, \
+from .itembuffer import ItemBufferW, hinted_hit
+from .optics import FRESNEL_NONE, beer, fresnel, reflect, refract
+from ..trace import HIT_NONE, HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, HitW, SceneGeomW, closest_hit, \
     count_shadow_crossings, light_visibility
 
 wp.set_module_options({"enable_backward": False})

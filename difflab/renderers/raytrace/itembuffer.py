@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._warp import wp
-from .camera import camera_struct
-from .rasterizer import zbuffer
-from .trace import (HIT_NONE, HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, SceneGeomW, closest_hit, no_hit, ray_plane,
+from ..._warp import wp
+from ..camera import camera_struct
+from ..raster.driver import zbuffer
+from ..trace import (HIT_NONE, HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, SceneGeomW, closest_hit, no_hit, ray_plane,
                     ray_sphere, ray_triangle, surface_hit)
 
 wp.set_module_options({"enable_backward": False})

@@ -52,14 +52,14 @@ def render_frame(scene, method=None, shading=None, specular=None, max_depth=None
     scene = prepare(scene, width, height, method=method, shading=shading, specular=specular,
                     max_depth=max_depth, spp=spp, **options)
     settings = scene.render
-    from .rasterizer import rasterize, spp_side
+    from .raster.driver import rasterize, spp_side
 
     if compiled is None or compiled.scene != scene:
         side = spp_side(settings.spp) if settings.method == "raster" else 1
         compiled = compile_scene(scene, device, sample_height=scene.camera.height * side)
     if settings.method == "raster":
         return rasterize(compiled, settings, threads)
-    from .raytracer import raytrace
+    from .raytrace.driver import raytrace
 
     return raytrace(compiled, settings, threads)
 

@@ -21,19 +21,19 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from .._warp import wp
+from ..._warp import wp
 
-from ..errors import RenderError
-from ..lighting.warp_model import SPECULAR_MODELS, fog_params
-from ..scene import MAX_PIXELS
-from .camera import camera_struct
-from .frame import Frame, box_downsample
-from .launch import launch_rows
-from .rt_itembuffer import item_buffer, item_struct
-from .rt_kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, MeshDataW, TraceParamsW, \
+from ...errors import RenderError
+from ...lighting.warp_model import SPECULAR_MODELS, fog_params
+from ...scene import MAX_PIXELS
+from ..camera import camera_struct
+from ..frame import Frame, box_downsample
+from ..launch import launch_rows
+from .itembuffer import item_buffer, item_struct
+from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, MeshDataW, TraceParamsW, \
     TreeW, whitted_kernel
-from .rt_optics import FRESNEL_MODES
-from .rt_tree import RayTree
+from .optics import FRESNEL_MODES
+from .tree import RayTree
 
 STRATIFIED_SEED = 20240917
 MAX_TREE_BYTES = 4 * 1024 ** 3  # recorded trees larger than this are refused (render with record_tree=False)

@@ -43,10 +43,10 @@ spheres with the uv conventions of `compile.py` and `geometry.uv_sphere`.
 
 from __future__ import annotations
 
-from .._warp import wp
+from ..._warp import wp
 
-from ..lighting.warp_model import TEXTURE_FILTER_IDS, TEXTURE_WRAP_IDS
-from .camera import CameraW, primary_ray
+from ...lighting.warp_model import TEXTURE_FILTER_IDS, TEXTURE_WRAP_IDS
+from ..camera import CameraW, primary_ray
 
 wp.set_module_options({"enable_backward": False})
 
