@@ -388,3 +388,27 @@ def test_bad_requests_raise_clear_errors():
     with pytest.raises(RenderError, match="sampling"):
         raytrace(compile_scene(s), s.render, use_item_buffer=True)
     assert math.isfinite(render(scene, method="raytrace", width=8, height=8).sum())
+
+
+def test_settings_the_chosen_renderer_does_not_use_are_errors_not_ignored():
+    """shading / interpolation / culling belong to the rasterizer, max_depth / fresnel / sampling to the
+    ray tracer: given to the other one (with a value other than what it does anyway) they raise."""
+    scene = mixed_scene()
+    for method, name, value in [("raytrace", "shading", "gouraud"), ("raytrace", "interpolation", "affine"),
+                                ("raytrace", "cull_backfaces", True), ("raster", "max_depth", 3),
+                                ("raster", "fresnel", "exact"), ("raster", "sampling", "stratified")]:
+        with pytest.raises(RenderError, match=rf"^{name}: .* does not apply to method='{method}'"):
+            render(scene, method=method, width=4, height=4, **{name: value})
+    # the values that describe what the renderer does anyway are accepted
+    traced = render(scene, method="raytrace", shading="phong", max_depth=1, width=8, height=8)
+    assert np.array_equal(traced, render(scene, method="raytrace", max_depth=1, width=8, height=8))
+    rastered = render(scene, method="raster", max_depth=1, sampling="grid", width=8, height=8)
+    assert np.array_equal(rastered, render(scene, method="raster", width=8, height=8))
+
+
+def test_a_ray_traced_frame_says_it_has_no_gbuffer():
+    frame = render_frame(mixed_scene(), method="raytrace", width=8, height=8)
+    assert frame.ray_tree.primary().shape == (8, 8)
+    with pytest.raises(RenderError, match="gbuffer: a raytrace frame has no G-buffer.*method='raster'"):
+        frame.gbuffer
+    assert render_frame(mixed_scene(), method="raster", width=8, height=8).gbuffer.mask.shape == (8, 8)

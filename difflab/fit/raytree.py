@@ -35,7 +35,7 @@ import numpy as np
 
 from ..lighting.jax_model import LightsJ, MaterialJ, lights_to_jax, safe_pow, shade, textured_material
 from ..lighting.warp_model import SPECULAR_MODELS, TEXTURE_TARGET_IDS
-from ..renderers.raytrace.kernels import REFLECTED
+from ..renderers.raytrace.tree import REFLECTED
 from .shading import MaterialTable, PointsJ
 
 __all__ = ["TreeMaterials", "TreeJ", "tree_to_jax", "tree_pixels", "tree_image", "evaluate_tree",

@@ -198,6 +198,32 @@ def fog_factor(mode: int, z: float, start: float, end: float, density: float):
     return wp.clamp(f, 0.0, 1.0)
 
 
+@wp.struct
+class FogW:
+    """OpenGL fog as kernels see it: `mode` a FOG_MODES id, `color` linear RGB, `start` / `end` eye
+    distances (scene units, linear fog), `density` per scene unit (exp, exp2)."""
+
+    mode: int
+    color: wp.vec3
+    start: float
+    end: float
+    density: float
+
+
+@wp.func
+def fog_blend(fog: FogW, z: float):
+    """`fog_factor` of `fog` at eye distance z."""
+    return fog_factor(fog.mode, z, fog.start, fog.end, fog.density)
+
+
+def fog_struct(fog) -> FogW:
+    """A `FogW` from a scene `Fog` (or None: no fog), through `fog_params`."""
+    out = FogW()
+    mode, color, out.start, out.end, out.density = fog_params(fog)
+    out.mode, out.color = mode, wp.vec3(*color)
+    return out
+
+
 def light_struct(light) -> LightW:
     """A `LightW` from a scene `Light`."""
     out = LightW()

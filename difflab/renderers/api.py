@@ -12,6 +12,15 @@ from .frame import Frame
 RENDER_OVERRIDES = ("method", "shading", "specular", "shadows", "max_depth", "spp", "fresnel",
                     "transparent_shadows", "clamp_vertex_colors", "interpolation", "cull_backfaces",
                     "adaptive_threshold", "sampling")
+# Per renderer, the settings it does not use, each with the one value that describes what it does
+# anyway; given as an argument with any other value, such a setting is an error rather than ignored.
+NOT_USED = {
+    "raster": ({"max_depth": 1, "fresnel": "none", "adaptive_threshold": 0.0, "sampling": "grid"},
+               "the rasterizer draws primary visibility on a regular sample grid; use method='raytrace'"),
+    "raytrace": ({"shading": "phong", "clamp_vertex_colors": False, "interpolation": "perspective",
+                  "cull_backfaces": False},
+                 "the ray tracer shades every hit with interpolated normals; use method='raster'"),
+}
 
 
 def as_scene(scene) -> Scene:
@@ -42,16 +51,28 @@ def prepare(scene, width=None, height=None, **overrides) -> Scene:
     return scene
 
 
+def check_applies(method: str, given: dict) -> None:
+    """Raise RenderError for an argument the renderer of `method` would ignore (see NOT_USED)."""
+    unused, why = NOT_USED[method]
+    for name, value in given.items():
+        if name in unused and value is not None and value != unused[name]:
+            raise RenderError(f"{name}: {value!r} does not apply to method={method!r} ({why})")
+
+
 def render_frame(scene, method=None, shading=None, specular=None, max_depth=None, spp=None, device="cpu", *,
                  width=None, height=None, threads=None, compiled=None, **options) -> Frame:
     """Render a scene and return the `Frame` (image and G-buffer; the ray tree for ray tracing).
 
-    Arguments given override the scene's `render` block (and `width` / `height` its camera).
+    Arguments given override the scene's `render` block (and `width` / `height` its camera); one
+    the chosen method does not use (`shading` for the ray tracer, `max_depth` for the rasterizer, ...)
+    raises RenderError. A ray-traced frame has no G-buffer (`frame.gbuffer` raises) but its
+    recorded `ray_tree`, whose root nodes are the primary hits.
     `compiled` reuses device arrays from `compile_scene` for the same scene and device.
     """
     scene = prepare(scene, width, height, method=method, shading=shading, specular=specular,
                     max_depth=max_depth, spp=spp, **options)
     settings = scene.render
+    check_applies(settings.method, dict(options, shading=shading, max_depth=max_depth))
     from .raster.driver import rasterize, spp_side
 
     if compiled is None or compiled.scene != scene:

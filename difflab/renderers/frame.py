@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import RenderError
+
 
 @dataclass(frozen=True)
 class ShadingPoints:
@@ -103,13 +105,23 @@ class GBuffer:
 
 @dataclass(frozen=True)
 class Frame:
-    """A rendered frame: `image` (H, W, 3) float32 linear RGB, its `gbuffer`, and `stats` (counts,
-    timings, non-finite pixels). The ray tracer adds its recorded `ray_tree`."""
+    """A rendered frame: `image` (H, W, 3) float32 linear RGB, its `gbuffer` (rasterizer), and `stats`
+    (counts, timings, non-finite pixels). The ray tracer gives its recorded `ray_tree` instead of a
+    G-buffer: `gbuffer` then raises RenderError saying so (rather than returning None)."""
 
     image: np.ndarray
-    gbuffer: GBuffer | None
+    buffers: GBuffer | None
     stats: dict = field(default_factory=dict)
     ray_tree: object = None
+
+    @property
+    def gbuffer(self) -> GBuffer:
+        if self.buffers is None:
+            method = self.stats.get("method", "raytrace")
+            raise RenderError(f"gbuffer: a {method} frame has no G-buffer; the ray tracer records its ray tree "
+                              f"(frame.ray_tree, whose root nodes are the primary hits) -- render with "
+                              f"method='raster' for a G-buffer")
+        return self.buffers
 
 
 def box_downsample(samples: np.ndarray, side: int) -> np.ndarray:

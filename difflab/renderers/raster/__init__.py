@@ -1,4 +1,25 @@
-"""The rasterizer: vertices -> clip space -> near-plane clipping -> z-buffer -> G-buffer -> shaded image.
+"""The rasterizer: vertices -> clip space -> near-plane clipping -> z-buffer -> shading points -> image.
 
-`driver.rasterize(compiled, settings)` launches the stages; each stage is a kernel module.
+`driver.rasterize(compiled, settings)` allocates once per frame and launches the stages, kernels in
+`clip` (1-2), `coverage` (3), `resolve` (4-5) and `shade` (6-7).
+
+Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
+1. `clip_vertices_kernel`  world -> clip space.
+2. `assemble_kernel`       clip each triangle against the near plane (z_clip >= -w_clip) into at most
+                           two triangles, divide by w, map to raster space, snap to 1/256 sample
+                           (fixed point), drop degenerate ones, cull back faces on request.
+3. `raster_kernel`         for every sample centre inside a triangle (exact integer edge functions with
+                           a top-left-style fill rule: a shared edge's samples go to exactly one
+                           triangle) write min(depth, triangle) into a 64-bit visibility key: the
+                           z-buffer test and a deterministic tie-break in one atomic.
+4. `resolve_kernel`        per sample: barycentrics of the winning triangle, perspective-correct
+                           (b_k / w_k renormalised) or affine, the original triangle's weights, and the
+                           surface there (position, normal, uv, material, depth) — the G-buffer.
+5. shading points          phong: every covered sample; flat: every face (lit at its centroid with the
+                           face normal); gouraud: every vertex, twice (front and back normal, OpenGL's
+                           two-sided lighting).
+6. `light_points_kernel`   per point and light: direction, distance, shadow-ray visibility, and the
+                           colour from the one illumination model.
+7. `compose_kernel`        per sample: the weighted colours of its points (gouraud: the vertex colours
+                           interpolated, optionally clamped to [0, 1] first), background, fog.
 """

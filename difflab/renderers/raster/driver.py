@@ -1,4 +1,4 @@
-"""The rasterizer's driver: allocate once per frame, launch the stages of `raster.py`, return a Frame."""
+"""The rasterizer's driver: allocate once per frame, launch the stages (see the package doc), return a Frame."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import numpy as np
 from ..._warp import wp
 
 from ...errors import RenderError
-from ...lighting.warp_model import SPECULAR_MODELS, fog_params
+from ...lighting.warp_model import SPECULAR_MODELS, fog_params, fog_struct
 from ...scene import MAX_PIXELS
-from . import stages as rk
+from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
 from ..launch import launch_rows, parallel_bands
@@ -26,8 +26,8 @@ def spp_side(spp: int) -> int:
     return side
 
 
-def empty_points(count: int, device: str) -> rk.PointsW:
-    points = rk.PointsW()
+def empty_points(count: int, device: str) -> resolve.PointsW:
+    points = resolve.PointsW()
     for name, dtype in [("position", wp.vec3), ("normal", wp.vec3), ("geo_normal", wp.vec3), ("view", wp.vec3),
                         ("material", wp.int32), ("cell", wp.int32), ("ignore", wp.int32), ("uv", wp.vec2),
                         ("duv_dx", wp.vec2), ("duv_dy", wp.vec2)]:
@@ -48,18 +48,18 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None):
     screen = wp.empty((2 * n_faces, 3), dtype=wp.vec4d, device=device)
     weight = wp.empty((2 * n_faces, 3), dtype=wp.vec3, device=device)
     facing = wp.empty(2 * n_faces, dtype=wp.int32, device=device)
-    key = wp.full(width * height, value=rk.NO_HIT, dtype=wp.int64, device=device)
+    key = wp.full(width * height, value=coverage.NO_HIT, dtype=wp.int64, device=device)
     if not n_faces:
         return screen, weight, facing, key
-    clip = wp.empty(n_vertices, dtype=wp.vec4, device=device)
+    p_clip = wp.empty(n_vertices, dtype=wp.vec4, device=device)
     rows = wp.empty((2 * n_faces, 2), dtype=wp.int32, device=device)
 
     def clip_band(begin, end):
-        wp.launch(rk.clip_vertices_kernel, dim=end - begin, inputs=[begin, arrays["vertices"], cam.view_proj, clip],
+        wp.launch(clip.clip_vertices_kernel, dim=end - begin, inputs=[begin, arrays["vertices"], cam.view_proj, p_clip],
                   device=device)
 
     def assemble_band(begin, end):
-        wp.launch(rk.assemble_kernel, dim=end - begin, inputs=[begin, arrays["faces"], clip, cull, width, height,
+        wp.launch(clip.assemble_kernel, dim=end - begin, inputs=[begin, arrays["faces"], p_clip, cull, width, height,
                                                                screen, weight, facing, rows], device=device)
 
     parallel_bands(clip_band, n_vertices, device, threads)
@@ -70,7 +70,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None):
     def raster_band(begin, end):
         slots = np.flatnonzero((last >= begin) & (first < end) & (last >= first)).astype(np.int32)
         if slots.size:
-            wp.launch(rk.raster_kernel, dim=slots.size, inputs=[
+            wp.launch(coverage.raster_kernel, dim=slots.size, inputs=[
                 begin, end, wp.array(slots, dtype=wp.int32, device=device), screen, width, key], device=device)
 
     parallel_bands(raster_band, height, device, threads)
@@ -85,7 +85,7 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
     if width * height > MAX_PIXELS:
         raise RenderError(f"spp: {scene.camera.width}x{scene.camera.height} pixels at spp={settings.spp} is "
                           f"{width * height} samples, over the budget of {MAX_PIXELS}")
-    shading = rk.SHADING_MODELS[settings.shading]
+    shading = resolve.SHADING_MODELS[settings.shading]
     start = time.perf_counter()
     cam = camera_struct(scene.camera, width, height)
     arrays = compiled.arrays
@@ -101,7 +101,7 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
            [("face", wp.int32), ("bary", wp.vec3), ("depth", float), ("uv", wp.vec2), ("object", wp.int32),
             ("point_weight", wp.vec3)]}
     point_index = wp.empty((n_samples, 3), dtype=wp.int32, device=device)
-    launch_rows(rk.resolve_kernel, (height, width), [
+    launch_rows(resolve.resolve_kernel, (height, width), [
         key, screen, weight, facing, arrays["faces"], arrays["vertices"], arrays["normals"], arrays["uvs"],
         arrays["face_normal"], arrays["face_material"], arrays["face_object"], compiled.materials, cam,
         int(settings.interpolation == "perspective"), shading, compiled.n_mesh_faces, n_vertices,
@@ -109,13 +109,13 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
     ], device, threads)
 
     # Stage 5: shading points.
-    if shading == rk.PHONG_SHADING:
+    if shading == resolve.PHONG_SHADING:
         points, n_points = samples, n_samples
-    elif shading == rk.FLAT:
+    elif shading == resolve.FLAT:
         n_points = n_faces
         points = empty_points(n_points, device)
         if n_faces:
-            wp.launch(rk.flat_points_kernel, dim=n_faces, inputs=[
+            wp.launch(resolve.flat_points_kernel, dim=n_faces, inputs=[
                 arrays["faces"], arrays["vertices"], arrays["face_normal"], arrays["face_material"],
                 arrays["face_object"], compiled.materials, cam, compiled.n_mesh_faces, points], device=device)
     else:
@@ -126,7 +126,7 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
             vertex_face[compiled.faces.ravel()] = np.repeat(np.arange(n_faces), 3)
             per_vertex = [compiled.face_material[vertex_face], compiled.face_object[vertex_face],
                           (vertex_face >= compiled.n_mesh_faces).astype(np.int32)]
-            wp.launch(rk.gouraud_points_kernel, dim=(n_vertices, 2), inputs=[
+            wp.launch(resolve.gouraud_points_kernel, dim=(n_vertices, 2), inputs=[
                 arrays["vertices"], arrays["normals"],
                 *[wp.array(a.astype(np.int32), dtype=wp.int32, device=device) for a in per_vertex],
                 compiled.materials, cam, points], device=device)
@@ -138,11 +138,11 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
     color = wp.zeros(max(n_points, 1), dtype=wp.vec3, device=device)
     factor = wp.zeros(max(n_points, 1), dtype=wp.vec3, device=device)  # textures under flat / Gouraud
     texel = wp.zeros(n_samples, dtype=wp.vec3, device=device)  # the texture value at each sample
-    points_are_samples = int(shading == rk.PHONG_SHADING)
+    points_are_samples = int(shading == resolve.PHONG_SHADING)
     ambient = wp.vec3(*scene.ambient)
 
     def light_band(begin, end):
-        wp.launch(rk.light_points_kernel, dim=end - begin, inputs=[
+        wp.launch(shade.light_points_kernel, dim=end - begin, inputs=[
             begin, points, compiled.lights, compiled.materials, compiled.geom, SPECULAR_MODELS[settings.specular],
             ambient, int(settings.shadows), int(settings.transparent_shadows), light_dir, light_dist, visibility,
             color, compiled.textures.warp, points_are_samples, factor, texel], device=device)
@@ -152,10 +152,10 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
     # Stage 7: compose samples, then filter to pixels.
     fog = fog_params(scene.fog)
     image = wp.empty(n_samples, dtype=wp.vec3, device=device)
-    launch_rows(rk.compose_kernel, (height, width), [
+    launch_rows(shade.compose_kernel, (height, width), [
         width, samples.material, out["depth"], point_index, out["point_weight"], color,
-        int(settings.clamp_vertex_colors and shading == rk.GOURAUD), wp.vec3(*scene.background), fog[0],
-        wp.vec3(*fog[1]), fog[2], fog[3], fog[4], image, compiled.materials, compiled.textures.warp, samples,
+        int(settings.clamp_vertex_colors and shading == resolve.GOURAUD), wp.vec3(*scene.background),
+        fog_struct(scene.fog), image, compiled.materials, compiled.textures.warp, samples,
         1 - points_are_samples, factor, texel], device, threads)
     sample_image = image.numpy().reshape(height, width, 3)
     pixels = box_downsample(sample_image, side)
@@ -176,11 +176,11 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
             texture_factor=factor.numpy()[:n_points]),
         shading=settings.shading, specular=settings.specular, spp_side=side,
         ambient=np.asarray(scene.ambient, np.float32), background=np.asarray(scene.background, np.float32),
-        clamp_vertex_colors=bool(settings.clamp_vertex_colors and shading == rk.GOURAUD), fog=fog,
+        clamp_vertex_colors=bool(settings.clamp_vertex_colors and shading == resolve.GOURAUD), fog=fog,
         duv_dx=samples.duv_dx.numpy().reshape(*grid, 2), duv_dy=samples.duv_dy.numpy().reshape(*grid, 2),
         texture=texel.numpy().reshape(*grid, 3),
     )
     stats = {"method": "raster", "seconds": seconds, "triangles": n_faces, "samples": n_samples,
              "shading_points": n_points, "covered_samples": int(gbuffer.mask.sum()),
              "nonfinite_pixels": int(np.count_nonzero(~np.isfinite(pixels).all(axis=-1)))}
-    return Frame(image=pixels, gbuffer=gbuffer, stats=stats)
+    return Frame(image=pixels, buffers=gbuffer, stats=stats)

@@ -59,4 +59,4 @@ def raytrace_adaptive(compiled, settings, threshold: float = 0.05, refine: int =
              "seconds": seconds, "rays": rays, "total_rays": total, "rays_per_second": total / max(seconds, 1e-9),
              "refined_pixels": int(mask.sum()), "refined_fraction": float(mask.mean()), "refine_mask": mask,
              "nonfinite_pixels": int(np.count_nonzero(~np.isfinite(image).all(axis=-1)))}
-    return Frame(image=image, gbuffer=None, stats=stats, ray_tree=None)
+    return Frame(image=image, buffers=None, stats=stats, ray_tree=None)

@@ -24,19 +24,20 @@ import numpy as np
 from ..._warp import wp
 
 from ...errors import RenderError
-from ...lighting.warp_model import SPECULAR_MODELS, fog_params
+from ...lighting.warp_model import SPECULAR_MODELS, fog_struct
 from ...scene import MAX_PIXELS
 from ..camera import camera_struct
 from ..frame import Frame, box_downsample
 from ..launch import launch_rows
 from .itembuffer import item_buffer, item_struct
-from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, MeshDataW, TraceParamsW, \
-    TreeW, whitted_kernel
+from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, TraceOutW, TraceParamsW, \
+    whitted_kernel
 from .optics import FRESNEL_MODES
+from .record import empty_tree, sized_tree, tree_to_numpy
+from .surface import MeshDataW, SceneW
 from .tree import RayTree
 
 STRATIFIED_SEED = 20240917
-MAX_TREE_BYTES = 4 * 1024 ** 3  # recorded trees larger than this are refused (render with record_tree=False)
 
 
 @dataclass(frozen=True)
@@ -87,9 +88,7 @@ def trace_params(scene, settings, record: bool, spread: float) -> TraceParamsW:
     params.ambient = wp.vec3(*scene.ambient)
     params.background = wp.vec3(*scene.background)
     params.far = float(scene.camera.far)
-    fog = fog_params(scene.fog)
-    params.fog_mode, params.fog_color = fog[0], wp.vec3(*fog[1])
-    params.fog_start, params.fog_end, params.fog_density = fog[2], fog[3], fog[4]
+    params.fog = fog_struct(scene.fog)
     params.record = int(record)
     params.count_crossings = int(record and count_crossings(scene, settings))
     params.spread = float(spread)
@@ -101,36 +100,17 @@ def count_crossings(scene, settings) -> bool:
     return bool(settings.shadows and settings.transparent_shadows and any(m.kt > 0 for m in scene.materials.values()))
 
 
-def mesh_data(compiled) -> MeshDataW:
-    out = MeshDataW()
-    out.vertices = compiled.arrays["vertices"]
-    out.normals = compiled.arrays["normals"]
-    out.uvs = compiled.arrays["uvs"]
-    out.faces = compiled.arrays["faces"]
+def scene_struct(compiled) -> SceneW:
+    """The compiled scene as the kernel's `SceneW`."""
+    mesh = MeshDataW()
+    mesh.vertices = compiled.arrays["vertices"]
+    mesh.normals = compiled.arrays["normals"]
+    mesh.uvs = compiled.arrays["uvs"]
+    mesh.faces = compiled.arrays["faces"]
+    out = SceneW()
+    out.geom, out.mesh, out.lights, out.materials = compiled.geom, mesh, compiled.lights, compiled.materials
+    out.textures = compiled.textures.warp
     return out
-
-
-def empty_tree(shape: tuple[int, int], n_nodes: int, n_lights: int, device: str, n_materials: int = 0) -> TreeW:
-    """Device arrays for n_nodes nodes (at least one element each, so that Warp accepts them);
-    `crossings` has a material axis of n_materials (1 when not recorded)."""
-    n, p = max(n_nodes, 1), max(n_lights, 1)
-    tree = TreeW()
-    tree.offset = wp.zeros(shape, dtype=wp.int32, device=device)
-    for name in ("sample", "parent", "kind", "depth", "material", "object", "face", "cell", "medium"):
-        setattr(tree, name, wp.zeros(n, dtype=wp.int32, device=device))
-    for name in ("distance", "fresnel", "fresnel_r", "fresnel_t"):
-        setattr(tree, name, wp.zeros(n, dtype=float, device=device))
-    for name in ("position", "normal", "view", "local", "texel"):
-        setattr(tree, name, wp.zeros(n, dtype=wp.vec3, device=device))
-    tree.light_dir = wp.zeros((n, p), dtype=wp.vec3, device=device)
-    tree.light_dist = wp.zeros((n, p), dtype=float, device=device)
-    tree.visibility = wp.zeros((n, p), dtype=float, device=device)
-    tree.crossings = wp.zeros((n, p, n_materials) if n_materials else (1, 1, 1), dtype=wp.int32, device=device)
-    return tree
-
-
-def node_bytes(n_lights: int) -> int:
-    return 9 * 4 + 4 * 4 + 4 * 12 + n_lights * 20
 
 
 def trace_points(compiled, settings, points: np.ndarray, threads: int | None = None, *, record: bool = False,
@@ -145,69 +125,36 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
     shape = (rows, cols)
     wp_points = wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec2, device=device)
     item = item if item is not None else item_struct(compiled)
-    geom, mesh = compiled.geom, mesh_data(compiled)
+    scene_w = scene_struct(compiled)
     # a sample's width per unit distance (texture footprints of secondary rays; 0 for orthographic views)
     spread = 2.0 * math.tan(math.radians(scene.camera.fov_y) / 2.0) / rows if scene.camera.projection == "perspective" \
         else 0.0
 
-    def launch(params, tree):
-        color = wp.zeros(shape, dtype=wp.vec3, device=device)
-        fog = wp.zeros(shape, dtype=float, device=device)
-        count = wp.zeros(shape, dtype=wp.int32, device=device)
-        rays = wp.zeros((rows, 4), dtype=wp.int32, device=device)
-        hist = wp.zeros((rows, settings.max_depth), dtype=wp.int32, device=device)
-        launch_rows(whitted_kernel, shape, [wp_points, cam, geom, mesh, compiled.lights, compiled.materials, params,
-                                            item, tree, compiled.textures.warp, color, fog, count, rays, hist],
-                    device, threads)
-        return color, fog, count, rays, hist
+    def launch(params, tree) -> TraceOutW:
+        out = TraceOutW()
+        out.color = wp.zeros(shape, dtype=wp.vec3, device=device)
+        out.fog = wp.zeros(shape, dtype=float, device=device)
+        out.node_count = wp.zeros(shape, dtype=wp.int32, device=device)
+        out.rays = wp.zeros((rows, 4), dtype=wp.int32, device=device)
+        out.depth_hist = wp.zeros((rows, settings.max_depth), dtype=wp.int32, device=device)
+        launch_rows(whitted_kernel, shape, [wp_points, cam, scene_w, params, item, tree, out], device, threads)
+        return out
 
-    color, fog, count, rays, hist = launch(trace_params(scene, settings, False, spread), empty_tree(shape, 0, 0, device))
-    counts = count.numpy()
-    ray_counts = rays.numpy().astype(np.int64).sum(axis=0)
+    out = launch(trace_params(scene, settings, False, spread), empty_tree(shape, 0, 0, device))
+    counts = out.node_count.numpy()
+    ray_counts = out.rays.numpy().astype(np.int64).sum(axis=0)
     stats_rays = {"primary": int(ray_counts[COUNT_PRIMARY]), "shadow": int(ray_counts[COUNT_SHADOW]),
                   "reflection": int(ray_counts[COUNT_REFLECTED]), "refraction": int(ray_counts[COUNT_REFRACTED])}
-    histogram = [int(h) for h in hist.numpy().astype(np.int64).sum(axis=0)]
+    histogram = [int(h) for h in out.depth_hist.numpy().astype(np.int64).sum(axis=0)]
+    fog = out.fog.numpy()
     tree = None
     if record:
-        offsets = np.zeros(rows * cols + 1, np.int64)
-        np.cumsum(counts.ravel(), out=offsets[1:])
-        n_nodes = int(offsets[-1])
-        if n_nodes >= 2 ** 31 or n_nodes * node_bytes(n_lights) > MAX_TREE_BYTES:
-            raise RenderError(f"record_tree: the ray tree has {n_nodes} nodes, over the memory budget of "
-                              f"{MAX_TREE_BYTES // 1024 ** 3} GiB; render with record_tree=False or fewer samples")
         crossings = count_crossings(scene, settings)
-        wp_tree = empty_tree(shape, n_nodes, n_lights, device, len(scene.materials) if crossings else 0)
-        wp_tree.offset = wp.array(offsets[:-1].reshape(shape).astype(np.int32), dtype=wp.int32, device=device)
+        wp_tree, offsets = sized_tree(counts, n_lights, len(scene.materials) if crossings else 0, device)
         launch(trace_params(scene, settings, True, spread), wp_tree)
-        tree = tree_to_numpy(wp_tree, n_nodes, n_lights, offsets, fog.numpy(), scene, settings, points.shape[:2],
-                             crossings)
-    return Traced(color=color.numpy(), fog=fog.numpy(), node_count=counts, rays=stats_rays,
+        tree = tree_to_numpy(wp_tree, offsets, n_lights, fog, scene, settings, points.shape[:2], crossings)
+    return Traced(color=out.color.numpy(), fog=fog, node_count=counts, rays=stats_rays,
                   depth_histogram=histogram, tree=tree)
-
-
-def tree_to_numpy(wp_tree: TreeW, n_nodes: int, n_lights: int, offsets, fog, scene, settings, grid,
-                  crossings: bool) -> RayTree:
-    def get(name):
-        return getattr(wp_tree, name).numpy()[:n_nodes]
-
-    n_materials = len(scene.materials)
-    if crossings:
-        crossed = get("crossings")[:, :n_lights].astype(np.uint8)  # at most MAX_SHADOW_CROSSINGS each
-    else:
-        crossed = np.zeros((n_nodes, n_lights, n_materials), np.uint8)
-
-    side = grid[0] // scene.camera.height
-    return RayTree(
-        image_shape=(scene.camera.height, scene.camera.width), grid_shape=tuple(grid), spp_side=side,
-        material_names=tuple(scene.material_names), specular=settings.specular, fresnel_mode=settings.fresnel,
-        max_depth=int(settings.max_depth), sample_offset=offsets, sample_fog=fog.ravel().astype(np.float32),
-        fog_color=np.asarray(fog_params(scene.fog)[1], np.float32),
-        **{name: get(name) for name in ("sample", "parent", "kind", "depth", "material", "object", "face", "cell",
-                                        "medium", "distance", "position", "normal", "view", "fresnel", "fresnel_r",
-                                        "fresnel_t", "local", "texel")},
-        light_dir=get("light_dir")[:, :n_lights], light_dist=get("light_dist")[:, :n_lights],
-        visibility=get("visibility")[:, :n_lights], crossings=crossed,
-    )
 
 
 def raytrace(compiled, settings, threads: int | None = None, *, record_tree: bool = True,
@@ -223,7 +170,7 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
         use_item_buffer: primary visibility from the rasterizer's z-buffer (`rt_itembuffer`); needs
             "grid" sampling, whose samples are the rasterizer's.
 
-    Returns: a `Frame` with `image` (H, W, 3) float32 linear RGB, `gbuffer` None, `ray_tree` (a
+    Returns: a `Frame` with `image` (H, W, 3) float32 linear RGB, no G-buffer, `ray_tree` (a
     `RayTree` or None) and `stats`: rays traced per kind, `depth_histogram` (rays per depth, from
     1), `nodes`, `seconds`, `rays_per_second`, `nonfinite_pixels`.
     """
@@ -249,4 +196,4 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
              "depth_histogram": traced.depth_histogram, "nodes": int(traced.node_count.sum()),
              "item_buffer": bool(use_item_buffer), "recorded_tree": bool(record_tree),
              "nonfinite_pixels": int(np.count_nonzero(~np.isfinite(image).all(axis=-1)))}
-    return Frame(image=image, gbuffer=None, stats=stats, ray_tree=traced.tree)
+    return Frame(image=image, buffers=None, stats=stats, ray_tree=traced.tree)

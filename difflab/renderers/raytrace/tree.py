@@ -23,9 +23,10 @@ from ..._warp import wp
 from ...lighting.warp_model import SPECULAR_MODELS, TEXTURE_TARGET_IDS, LightW, MaterialW, ambient_term, light_term, \
     lights_to_warp, materials_to_warp, surface_material, textured_material
 from ..frame import box_downsample
-from .kernels import PRIMARY, REFLECTED, REFRACTED
 
 wp.set_module_options({"enable_backward": False})
+
+PRIMARY, REFLECTED, REFRACTED = 0, 1, 2  # a node's kind: how its parent spawned it
 
 __all__ = ["PRIMARY", "REFLECTED", "REFRACTED", "RayTree", "evaluate_ray_tree", "node_visibility", "shade_nodes"]
 

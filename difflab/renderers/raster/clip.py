@@ -1,0 +1,180 @@
+"""Rasterizer stages 1-2: world -> clip space, and primitive assembly (near-plane clipping, the
+perspective divide, raster space, fixed-point snapping, degenerate and back-face rejection).
+
+A face becomes at most two screen triangles (its two *slots*, 2 f and 2 f + 1). Every slot carries its
+three corners (x_raster, y_raster, z_ndc, 1/w) in float64, their weights over the original face's
+vertices (a clipped corner lies on an edge), its facing, and the rows of sample centres it may cover.
+"""
+
+from __future__ import annotations
+
+from ..._warp import wp
+
+wp.set_module_options({"enable_backward": False})
+
+SUBPIXEL = 256  # fixed-point steps per sample
+GUARD = 4194304.0  # |raster coordinate| clamp (samples) keeping int64 edge products exact
+
+
+@wp.kernel
+def clip_vertices_kernel(begin: int, vertices: wp.array(dtype=wp.vec3), view_proj: wp.mat44,
+                         clip: wp.array(dtype=wp.vec4)):
+    k = begin + wp.tid()
+    p = vertices[k]
+    clip[k] = view_proj * wp.vec4(p[0], p[1], p[2], 1.0)
+
+
+@wp.func
+def near_crossing(ia: int, ib: int, ca: wp.vec4, cb: wp.vec4, wa: wp.vec3, wb: wp.vec3):
+    """Where edge a-b meets z = -w, computed from the lower vertex index so both triangles sharing
+    the edge get bitwise the same point. Returns (clip position, original barycentric weights)."""
+    if ia > ib:
+        tmp_c = ca
+        ca = cb
+        cb = tmp_c
+        tmp_w = wa
+        wa = wb
+        wb = tmp_w
+    da = ca[2] + ca[3]
+    db = cb[2] + cb[3]
+    t = da / (da - db)
+    return ca + t * (cb - ca), wa + t * (wb - wa)
+
+
+@wp.func
+def to_screen(c: wp.vec4, width: int, height: int):
+    """Clip -> (x_raster, y_raster, z_ndc, 1/w) in float64, x and y clamped to the guard band."""
+    one = wp.float64(1.0)
+    guard = wp.float64(GUARD)
+    inv_w = one / wp.float64(c[3])
+    x = wp.clamp((wp.float64(c[0]) * inv_w + one) * wp.float64(0.5 * float(width)), -guard, guard)
+    y = wp.clamp((one - wp.float64(c[1]) * inv_w) * wp.float64(0.5 * float(height)), -guard, guard)
+    return wp.vec4d(x, y, wp.float64(c[2]) * inv_w, inv_w)
+
+
+@wp.func
+def snap(x: wp.float64):
+    return wp.int64(wp.round(x * wp.float64(SUBPIXEL)))
+
+
+@wp.func
+def edge(ax: wp.int64, ay: wp.int64, bx: wp.int64, by: wp.int64, px: wp.int64, py: wp.int64):
+    """Twice the signed area of (a, b, p), exact in 64-bit integers."""
+    return (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+
+
+@wp.func
+def owns_edge(ax: wp.int64, ay: wp.int64, bx: wp.int64, by: wp.int64):
+    """Fill rule for samples exactly on edge a->b: the edge's direction lies in a fixed half-plane,
+    so of two triangles sharing the edge (traversing it in opposite directions) exactly one owns it."""
+    return (by > ay) or (by == ay and bx < ax)
+
+
+@wp.func
+def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: wp.vec3, w2: wp.vec3, cull: int,
+         screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32),
+         rows: wp.array2d(dtype=wp.int32)):
+    """Store one screen triangle, wound so its integer area is positive; facing +1 front, -1 back,
+    0 not drawn (degenerate, or culled); and the rows of sample centres it may cover, for binning."""
+    area = edge(snap(s0[0]), snap(s0[1]), snap(s1[0]), snap(s1[1]), snap(s2[0]), snap(s2[1]))
+    facing[slot] = 0
+    if area == wp.int64(0):
+        return
+    side = 1  # counter-clockwise in NDC (y up) is clockwise in raster space (y down): area < 0
+    if area > wp.int64(0):
+        side = -1
+    if cull == 1 and side < 0:
+        return
+    facing[slot] = side
+    half = wp.float64(0.5)
+    rows[slot, 0] = int(wp.ceil(wp.min(s0[1], wp.min(s1[1], s2[1])) - half))
+    rows[slot, 1] = int(wp.floor(wp.max(s0[1], wp.max(s1[1], s2[1])) - half))
+    screen[slot, 0] = s0
+    weight[slot, 0] = w0
+    if side > 0:
+        screen[slot, 1] = s2
+        screen[slot, 2] = s1
+        weight[slot, 1] = w2
+        weight[slot, 2] = w1
+    else:
+        screen[slot, 1] = s1
+        screen[slot, 2] = s2
+        weight[slot, 1] = w1
+        weight[slot, 2] = w2
+
+
+@wp.kernel
+def assemble_kernel(begin: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4), cull: int,
+                    width: int, height: int, screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3),
+                    facing: wp.array(dtype=wp.int32), rows: wp.array2d(dtype=wp.int32)):
+    f = begin + wp.tid()
+    for k in range(2):
+        facing[2 * f + k] = 0
+        rows[2 * f + k, 0] = 1  # empty row range [1, 0]: binned nowhere
+        rows[2 * f + k, 1] = 0
+    i0 = faces[f, 0]
+    i1 = faces[f, 1]
+    i2 = faces[f, 2]
+    c0 = clip[i0]
+    c1 = clip[i1]
+    c2 = clip[i2]
+    e0 = wp.vec3(1.0, 0.0, 0.0)
+    e1 = wp.vec3(0.0, 1.0, 0.0)
+    e2 = wp.vec3(0.0, 0.0, 1.0)
+    in0 = c0[2] + c0[3] >= 0.0
+    in1 = c1[2] + c1[3] >= 0.0
+    in2 = c2[2] + c2[3] >= 0.0
+    count = int(in0) + int(in1) + int(in2)
+    if count == 0:
+        return
+    if count == 3:
+        emit(2 * f, to_screen(c0, width, height), to_screen(c1, width, height), to_screen(c2, width, height),
+             e0, e1, e2, cull, screen, weight, facing, rows)
+        return
+    # Rotate (keeping the winding) so that vertex a is the odd one out: the only vertex inside
+    # (count 1) or the only one outside (count 2).
+    ia = i0
+    ib = i1
+    ic = i2
+    ca = c0
+    cb = c1
+    cc = c2
+    wa = e0
+    wb = e1
+    wc = e2
+    odd1 = in1
+    odd2 = in2
+    if count == 2:
+        odd1 = not in1
+        odd2 = not in2
+    if odd1:
+        ia = i1
+        ib = i2
+        ic = i0
+        ca = c1
+        cb = c2
+        cc = c0
+        wa = e1
+        wb = e2
+        wc = e0
+    elif odd2:
+        ia = i2
+        ib = i0
+        ic = i1
+        ca = c2
+        cb = c0
+        cc = c1
+        wa = e2
+        wb = e0
+        wc = e1
+    cab, wab = near_crossing(ia, ib, ca, cb, wa, wb)
+    cac, wac = near_crossing(ia, ic, ca, cc, wa, wc)
+    sab = to_screen(cab, width, height)
+    sac = to_screen(cac, width, height)
+    if count == 1:  # a inside: triangle (a, ab, ac)
+        emit(2 * f, to_screen(ca, width, height), sab, sac, wa, wab, wac, cull, screen, weight, facing, rows)
+    else:  # a outside: quad (ab, b, c, ac)
+        sb = to_screen(cb, width, height)
+        sc = to_screen(cc, width, height)
+        emit(2 * f, sab, sb, sc, wab, wb, wc, cull, screen, weight, facing, rows)
+        emit(2 * f + 1, sab, sc, sac, wab, wc, wac, cull, screen, weight, facing, rows)

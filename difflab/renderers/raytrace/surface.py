@@ -1,0 +1,227 @@
+"""Where a ray meets a surface: the pending ray, the surface as shading sees it, and the Fresnel split.
+
+Surfaces are two-sided: the geometric and shading normals are flipped to face the incoming ray
+(so inside a refracting object they point inwards). A ray hitting the side its geometric normal
+points to is *entering* (eta = 1 / ior); from the other side it is *leaving* (eta = ior).
+New rays start `epsilon` (scene units, from `compile_scene`) off the surface along the geometric
+normal on the side they travel to; a ray leaving a sphere outwards, and every ray leaving a plane,
+also skips that object (it cannot meet it again).
+
+The split between the reflected and the refracted child is (F_r, F_t) = (1, 1) without Fresnel
+weighting (or at opaque surfaces, kt = 0) and (F, 1 - F) with it; total internal reflection leaves
+no refracted ray (F_t = 0, F = 1).
+"""
+
+from __future__ import annotations
+
+from ..._warp import wp
+
+from ...lighting.warp_model import LightW, MaterialW, checker_cell, surface_material, textured_material
+from ..camera import CameraW
+from ..texture.sampling import TexturesW, cone_footprint, pixel_footprint, plane_uv, plane_uv_derivatives, \
+    sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
+from ..trace import HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, HitW, SceneGeomW
+from .optics import FRESNEL_NONE, fresnel, refract
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class MeshDataW:
+    """Triangle vertices, unit vertex normals (smooth shading), uvs and faces of the compiled scene."""
+
+    vertices: wp.array(dtype=wp.vec3)
+    normals: wp.array(dtype=wp.vec3)
+    uvs: wp.array(dtype=wp.vec2)
+    faces: wp.array2d(dtype=wp.int32)
+
+
+@wp.struct
+class SceneW:
+    """The compiled scene as the ray tracer's kernels see it."""
+
+    geom: SceneGeomW
+    mesh: MeshDataW
+    lights: wp.array(dtype=LightW)
+    materials: wp.array(dtype=MaterialW)
+    textures: TexturesW
+
+
+@wp.struct
+class RayW:
+    """A ray waiting on the walk's stack."""
+
+    origin: wp.vec3  # where it starts: `start` moved epsilon off the surface
+    start: wp.vec3  # the surface point it leaves (the eye for the primary ray)
+    direction: wp.vec3  # unit
+    weight: wp.vec3  # path weight, before this ray's own absorption
+    path: float  # path length from the eye to `start` (texture footprints)
+    depth: int  # 1 for the primary ray
+    parent: int  # the parent's node index within the sample (-1: the primary ray)
+    kind: int  # tree.PRIMARY / REFLECTED / REFRACTED
+    medium: int  # material id of the object the ray travels inside, -1 outside
+    skip: int  # the object it cannot meet again, -1: none
+
+
+@wp.struct
+class SurfaceW:
+    """A hit as shading sees it: two-sided, checker cell and texture applied to the material."""
+
+    p: wp.vec3  # the hit point
+    geo: wp.vec3  # unit geometric normal, facing the incoming ray
+    normal: wp.vec3  # unit shading normal, facing the incoming ray
+    view: wp.vec3  # unit direction back along the incoming ray
+    entering: int  # 1 where the ray hit the side the stored normal points to
+    cell: int  # checker cell 0 / 1
+    texel: wp.vec3  # the texture value a textured material took, else 0
+    mat: MaterialW
+
+
+@wp.struct
+class SplitW:
+    """How a hit divides its ray between the reflected and the refracted child."""
+
+    refracts: int  # 0 under total internal reflection
+    t_dir: wp.vec3  # the refracted direction (where refracts = 1)
+    fresnel: float  # F (0 where Fresnel weighting is off or the surface is opaque; 1 under TIR)
+    f_r: float  # the reflected child's weight is weight * kr * f_r
+    f_t: float  # the refracted child's weight is weight * kt * f_t
+
+
+@wp.func
+def new_ray(start: wp.vec3, origin: wp.vec3, direction: wp.vec3, weight: wp.vec3, path: float, depth: int,
+            parent: int, kind: int, medium: int, skip: int):
+    ray = RayW()
+    ray.origin = origin
+    ray.start = start
+    ray.direction = direction
+    ray.weight = weight
+    ray.path = path
+    ray.depth = depth
+    ray.parent = parent
+    ray.kind = kind
+    ray.medium = medium
+    ray.skip = skip
+    return ray
+
+
+@wp.func
+def shading_normal(mesh: MeshDataW, hit: HitW):
+    """Unit shading normal at a hit: interpolated vertex normals on triangles, else the geometric one."""
+    if hit.kind != HIT_TRIANGLE:
+        return hit.normal
+    f = hit.index
+    w2 = 1.0 - hit.u - hit.v
+    blend = hit.u * mesh.normals[mesh.faces[f, 0]] + hit.v * mesh.normals[mesh.faces[f, 1]] \
+        + w2 * mesh.normals[mesh.faces[f, 2]]
+    if wp.length_sq(blend) == 0.0:  # catch degenerate normals: fall back to the face's own
+        return hit.normal
+    return wp.normalize(blend)
+
+
+@wp.func
+def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3, geo: wp.vec3, d: wp.vec3,
+              xy: wp.vec2, primary: int, path: float, spread: float):
+    """The texture value at a hit. uv: interpolated vertex uvs (triangles), the plane's world axes,
+    or the sphere's (lon / 2 pi, lat / pi). Footprint: a primary ray's pixel footprint on the tangent
+    plane (as the rasterizer's derivatives), a secondary ray's cone of width spread x path length
+    from the eye (the pixel cone carried along the path, ignoring curvature)."""
+    dpdx = wp.vec3(0.0)
+    dpdy = wp.vec3(0.0)
+    if primary == 1:
+        dpdx, dpdy = pixel_footprint(cam, xy[0], xy[1], p, geo)
+    else:
+        dpdx, dpdy = cone_footprint(d, geo, spread * path)
+    uv = wp.vec2(0.0)
+    duv_dx = wp.vec2(0.0)
+    duv_dy = wp.vec2(0.0)
+    mesh = scene.mesh
+    if hit.kind == HIT_TRIANGLE:
+        f = hit.index
+        i0 = mesh.faces[f, 0]
+        i1 = mesh.faces[f, 1]
+        i2 = mesh.faces[f, 2]
+        uv = hit.u * mesh.uvs[i0] + hit.v * mesh.uvs[i1] + (1.0 - hit.u - hit.v) * mesh.uvs[i2]
+        duv_dx, duv_dy = triangle_uv_derivatives(mesh.vertices[i0], mesh.vertices[i1], mesh.vertices[i2],
+                                                 mesh.uvs[i0], mesh.uvs[i1], mesh.uvs[i2], dpdx, dpdy)
+    elif hit.kind == HIT_PLANE:
+        normal = scene.geom.plane_normal[hit.index]
+        uv = plane_uv(p, normal)
+        duv_dx, duv_dy = plane_uv_derivatives(dpdx, dpdy, normal)
+    else:
+        center = scene.geom.sphere_center[hit.index]
+        uv = sphere_uv(p, center)
+        duv_dx, duv_dy = sphere_uv_derivatives(p, center, dpdx, dpdy)
+    return sample_texture(scene.textures, mat.texture, uv, duv_dx, duv_dy, mat.texture_filter, mat.texture_wrap)
+
+
+@wp.func
+def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, xy: wp.vec2, primary: int, spread: float):
+    """The surface `ray` meets at `hit` (not a miss): two-sided normals, checker cell, texture."""
+    surf = SurfaceW()
+    d = ray.direction
+    surf.p = ray.origin + hit.t * d
+    surf.geo = hit.normal
+    surf.normal = shading_normal(scene.mesh, hit)
+    surf.entering = int(wp.dot(d, surf.geo) < 0.0)
+    if surf.entering == 0:
+        surf.geo = -surf.geo
+        surf.normal = -surf.normal
+    surf.view = -d
+    base = scene.materials[hit.material]
+    surf.cell = int(0)
+    if base.checker_size > 0.0:
+        surf.cell = checker_cell(surf.p, surf.geo, base.checker_size)
+    surf.mat = surface_material(base, surf.cell)
+    surf.texel = wp.vec3(0.0)
+    if surf.mat.texture >= 0:
+        surf.texel = hit_texel(scene, surf.mat, cam, hit, surf.p, surf.geo, d, xy, primary, ray.path + hit.t, spread)
+        surf.mat = textured_material(surf.mat, surf.mat.texture_target, surf.texel)
+    return surf
+
+
+@wp.func
+def fresnel_split(d: wp.vec3, surf: SurfaceW, mode: int):
+    """The Fresnel split of a ray arriving along `d` (see the module doc)."""
+    split = SplitW()
+    eta = surf.mat.ior
+    if surf.entering == 1:
+        eta = 1.0 / surf.mat.ior
+    refracts, t_dir = refract(d, surf.normal, eta)
+    split.refracts = refracts
+    split.t_dir = t_dir
+    split.fresnel = 0.0
+    split.f_r = 1.0
+    split.f_t = 1.0
+    if surf.mat.kt > 0.0:
+        if mode != FRESNEL_NONE:
+            split.fresnel = fresnel(mode, wp.clamp(-wp.dot(d, surf.normal), 0.0, 1.0), eta)
+            split.f_r = split.fresnel
+            split.f_t = 1.0 - split.fresnel
+        if split.refracts == 0:  # total internal reflection
+            split.fresnel = 1.0
+            split.f_r = 1.0
+            split.f_t = 0.0
+    return split
+
+
+@wp.func
+def skip_object(geom: SceneGeomW, hit: HitW, direction: wp.vec3):
+    """The object a ray leaving this hit in `direction` cannot meet again (-1: none): a plane always,
+    a sphere when the ray leaves outwards (hit.normal is the sphere's outward normal)."""
+    if hit.kind == HIT_PLANE:
+        return hit.object
+    if hit.kind == HIT_SPHERE and wp.dot(direction, hit.normal) > 0.0:
+        return hit.object
+    return -1
+
+
+@wp.func
+def child_ray(geom: SceneGeomW, parent: RayW, node: int, hit: HitW, surf: SurfaceW, direction: wp.vec3,
+              weight: wp.vec3, kind: int, medium: int):
+    """The ray a hit spawns in `direction`: started epsilon off the surface on the side it leaves to."""
+    origin = surf.p - geom.epsilon * surf.geo
+    if wp.dot(direction, surf.geo) >= 0.0:
+        origin = surf.p + geom.epsilon * surf.geo
+    return new_ray(surf.p, origin, direction, weight, parent.path + hit.t, parent.depth + 1, node, kind, medium,
+                   skip_object(geom, hit, direction))
