@@ -142,75 +142,73 @@ def plane_grid(plane: Plane, camera) -> geometry.TriMesh:
     return geometry.TriMesh(vertices, faces, normals, vertices[:, axes])
 
 
-def compile_scene(scene, device: str = "cpu", sample_height: int | None = None) -> CompiledScene:
-    """Build the device arrays and BVH of `scene` once. `sample_height` (rows of the sample grid)
-    sets how finely spheres are tessellated for the rasterizer."""
-    device = resolve_device(device)
-    camera = scene.camera
-    sample_height = camera.height if sample_height is None else sample_height
+def scene_parts(scene, sample_height: int):
+    """Per object its raster triangles as (TriMesh, material id, object index): the mesh objects'
+    first, then the analytic ones' tessellations; and the analytic spheres and planes themselves."""
     names = scene.material_names
-    mesh_parts, analytic_parts = [], []
-    spheres, planes = [], []
+    mesh_parts, analytic_parts, spheres, planes = [], [], [], []
     for index, obj in enumerate(scene.objects):
         material = names.index(obj.material)
         if isinstance(obj, Mesh):
             mesh_parts.append((object_mesh(obj), material, index))
         elif isinstance(obj, Sphere):
             spheres.append((obj, material, index))
-            n_lon = sphere_segments(obj, camera, sample_height)
+            n_lon = sphere_segments(obj, scene.camera, sample_height)
             analytic_parts.append((geometry.uv_sphere(obj.radius, obj.center, max(2, n_lon // 2), n_lon), material, index))
         elif isinstance(obj, Plane):
             planes.append((obj, material, index))
-            analytic_parts.append((plane_grid(obj, camera), material, index))
+            analytic_parts.append((plane_grid(obj, scene.camera), material, index))
         else:  # pragma: no cover - the scene validates object types
             raise RenderError(f"objects[{index}]: cannot render {type(obj).__name__}")
-    parts = mesh_parts + analytic_parts
-    n_mesh_faces = sum(m.faces.shape[0] for m, _, _ in mesh_parts)
+    return mesh_parts, analytic_parts, spheres, planes
 
-    if parts:
-        offsets = np.cumsum([0] + [m.vertices.shape[0] for m, _, _ in parts])
-        vertices = np.concatenate([m.vertices for m, _, _ in parts]).astype(np.float32)
-        faces = np.concatenate([m.faces + o for (m, _, _), o in zip(parts, offsets)]).astype(np.int32)
-        normals = np.concatenate([m.normals if m.normals is not None else
-                                  geometry.vertex_normals(m.vertices, m.faces) for m, _, _ in parts]).astype(np.float32)
-        uvs = np.concatenate([m.uvs if m.uvs is not None else np.zeros((m.vertices.shape[0], 2))
-                              for m, _, _ in parts]).astype(np.float32)
-        face_material = np.concatenate([np.full(m.faces.shape[0], mat, np.int32) for m, mat, _ in parts])
-        face_object = np.concatenate([np.full(m.faces.shape[0], obj, np.int32) for m, _, obj in parts])
-        face_normal = geometry.face_normals(vertices.astype(np.float64), faces).astype(np.float32)
-    else:
-        vertices, normals = np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)
-        uvs, faces = np.zeros((0, 2), np.float32), np.zeros((0, 3), np.int32)
-        face_material = face_object = np.zeros(0, np.int32)
-        face_normal = np.zeros((0, 3), np.float32)
 
-    extent_points = [np.asarray(camera.eye, float)[None]]
-    if n_mesh_faces:
-        extent_points.append(vertices[faces[:n_mesh_faces].ravel()])
+def triangle_soup(parts) -> dict:
+    """The parts' triangles in one set of float32 / int32 arrays (vertices, normals, uvs, faces,
+    and per face its material, object and geometric normal)."""
+    if not parts:
+        return {"vertices": np.zeros((0, 3), np.float32), "normals": np.zeros((0, 3), np.float32),
+                "uvs": np.zeros((0, 2), np.float32), "faces": np.zeros((0, 3), np.int32),
+                "face_material": np.zeros(0, np.int32), "face_object": np.zeros(0, np.int32),
+                "face_normal": np.zeros((0, 3), np.float32)}
+    offsets = np.cumsum([0] + [m.vertices.shape[0] for m, _, _ in parts])
+    vertices = np.concatenate([m.vertices for m, _, _ in parts]).astype(np.float32)
+    faces = np.concatenate([m.faces + o for (m, _, _), o in zip(parts, offsets)]).astype(np.int32)
+    return {
+        "vertices": vertices, "faces": faces,
+        "normals": np.concatenate([m.normals if m.normals is not None else geometry.vertex_normals(m.vertices, m.faces)
+                                   for m, _, _ in parts]).astype(np.float32),
+        "uvs": np.concatenate([m.uvs if m.uvs is not None else np.zeros((m.vertices.shape[0], 2))
+                               for m, _, _ in parts]).astype(np.float32),
+        "face_material": np.concatenate([np.full(m.faces.shape[0], mat, np.int32) for m, mat, _ in parts]),
+        "face_object": np.concatenate([np.full(m.faces.shape[0], obj, np.int32) for m, _, obj in parts]),
+        "face_normal": geometry.face_normals(vertices.astype(np.float64), faces).astype(np.float32),
+    }
+
+
+def ray_epsilon(camera, mesh_vertices: np.ndarray, spheres) -> float:
+    """RAY_EPSILON_SCALE x the diagonal (at least 1) of the box around the eye, the meshes and spheres."""
+    extent_points = [np.asarray(camera.eye, float)[None], mesh_vertices.reshape(-1, 3)]
     for sphere, _, _ in spheres:
         extent_points.append(np.asarray(sphere.center)[None] + np.array([[sphere.radius] * 3, [-sphere.radius] * 3]))
     points = np.concatenate(extent_points)
-    epsilon = RAY_EPSILON_SCALE * max(1.0, float(np.linalg.norm(points.max(0) - points.min(0))))
+    return RAY_EPSILON_SCALE * max(1.0, float(np.linalg.norm(points.max(0) - points.min(0))))
 
+
+def ray_geometry(arrays: dict, soup: dict, n_mesh_faces: int, spheres, planes, epsilon: float, device: str):
+    """The ray-traceable scene: a BVH over the mesh faces (None without any), spheres and planes."""
     def arr(values, dtype):
         return wp.array(np.ascontiguousarray(values), dtype=dtype, device=device)
 
-    arrays = {
-        "vertices": arr(vertices, wp.vec3), "normals": arr(normals, wp.vec3), "uvs": arr(uvs, wp.vec2),
-        "faces": arr(faces, wp.int32).reshape((faces.shape[0], 3)) if faces.size else wp.zeros((0, 3), wp.int32, device=device),
-        "face_material": arr(face_material, wp.int32), "face_object": arr(face_object, wp.int32),
-        "face_normal": arr(face_normal, wp.vec3),
-    }
     bvh = None
     geom = SceneGeomW()
+    geom.mesh = wp.uint64(0)
     if n_mesh_faces:
-        used = np.unique(faces[:n_mesh_faces])
-        if not np.all(np.isfinite(vertices[used])):
+        mesh_faces = soup["faces"][:n_mesh_faces]
+        if not np.all(np.isfinite(soup["vertices"][np.unique(mesh_faces)])):
             raise MeshError("mesh vertices are not finite after transforming")
-        bvh = wp.Mesh(points=arrays["vertices"], indices=arr(faces[:n_mesh_faces].ravel(), wp.int32))
+        bvh = wp.Mesh(points=arrays["vertices"], indices=arr(mesh_faces.ravel(), wp.int32))
         geom.mesh = bvh.id
-    else:
-        geom.mesh = wp.uint64(0)
     geom.face_material, geom.face_object = arrays["face_material"], arrays["face_object"]
     geom.sphere_center = arr(np.array([s.center for s, _, _ in spheres], np.float32).reshape(-1, 3), wp.vec3)
     geom.sphere_radius = arr(np.array([s.radius for s, _, _ in spheres], np.float32), float)
@@ -221,13 +219,29 @@ def compile_scene(scene, device: str = "cpu", sample_height: int | None = None) 
     geom.plane_material = arr(np.array([m for _, m, _ in planes], np.int32), wp.int32)
     geom.plane_object = arr(np.array([o for _, _, o in planes], np.int32), wp.int32)
     geom.epsilon = float(epsilon)
-    ordered = [scene.materials[name] for name in names]
+    return geom, bvh
+
+
+def compile_scene(scene, device: str = "cpu", sample_height: int | None = None) -> CompiledScene:
+    """Build the device arrays and BVH of `scene` once. `sample_height` (rows of the sample grid)
+    sets how finely spheres are tessellated for the rasterizer."""
+    device = resolve_device(device)
+    sample_height = scene.camera.height if sample_height is None else sample_height
+    mesh_parts, analytic_parts, spheres, planes = scene_parts(scene, sample_height)
+    soup = triangle_soup(mesh_parts + analytic_parts)
+    n_mesh_faces = sum(m.faces.shape[0] for m, _, _ in mesh_parts)
+    faces = soup["faces"]
+    epsilon = ray_epsilon(scene.camera, soup["vertices"][faces[:n_mesh_faces].ravel()], spheres)
+    dtypes = {"vertices": wp.vec3, "normals": wp.vec3, "uvs": wp.vec2, "faces": wp.int32, "face_material": wp.int32,
+              "face_object": wp.int32, "face_normal": wp.vec3}
+    arrays = {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device)
+              for name, dtype in dtypes.items()}
+    arrays["faces"] = arrays["faces"].reshape((faces.shape[0], 3))
+    geom, bvh = ray_geometry(arrays, soup, n_mesh_faces, spheres, planes, epsilon, device)
+    ordered = [scene.materials[name] for name in scene.material_names]
     textures, texture_ids = scene_textures(ordered, device)
     return CompiledScene(
-        scene=scene, device=device, vertices=vertices, normals=normals, uvs=uvs, faces=faces,
-        face_material=face_material, face_object=face_object, face_normal=face_normal,
-        n_mesh_faces=n_mesh_faces, epsilon=epsilon, arrays=arrays, geom=geom,
-        lights=lights_to_warp(scene.lights, device),
-        materials=materials_to_warp(ordered, device, texture_ids),
+        scene=scene, device=device, **soup, n_mesh_faces=n_mesh_faces, epsilon=epsilon, arrays=arrays, geom=geom,
+        lights=lights_to_warp(scene.lights, device), materials=materials_to_warp(ordered, device, texture_ids),
         bvh=bvh, textures=textures,
     )
