@@ -12,7 +12,8 @@ from difflab.renderers.camera import projection_matrix, view_matrix
 from difflab.renderers.compile import compile_scene
 from difflab.renderers.raytrace.driver import raytrace, sample_points
 from difflab.renderers.raytrace.adaptive import raytrace_adaptive
-from difflab.renderers.raytrace.optics import FRESNEL_EXACT, FRESNEL_SCHLICK, fresnel, refract
+from difflab.renderers.raytrace.optics import fresnel, refract
+from difflab.vocabulary import FRESNEL_EXACT, FRESNEL_SCHLICK
 from difflab.renderers.raytrace.tree import evaluate_ray_tree
 from difflab.renderers.trace import ray_plane, ray_sphere
 

@@ -73,10 +73,10 @@ def render_frame(scene, method=None, shading=None, specular=None, max_depth=None
                     max_depth=max_depth, spp=spp, **options)
     settings = scene.render
     check_applies(settings.method, dict(options, shading=shading, max_depth=max_depth))
-    from .raster.driver import rasterize, spp_side
+    from .raster.driver import rasterize
 
     if compiled is None or compiled.scene != scene:
-        side = spp_side(settings.spp) if settings.method == "raster" else 1
+        side = settings.spp_side if settings.method == "raster" else 1
         compiled = compile_scene(scene, device, sample_height=scene.camera.height * side)
     if settings.method == "raster":
         return rasterize(compiled, settings, threads)

@@ -2,28 +2,17 @@
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
 from ..._warp import wp
 
-from ...errors import RenderError
-from ...lighting.warp_model import SPECULAR_MODELS, fog_params, fog_struct
-from ...scene import MAX_PIXELS
+from ...lighting.warp_model import fog_params, fog_struct
+from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR_MODELS
 from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
 from ..launch import launch_rows, parallel_bands
-
-
-def spp_side(spp: int) -> int:
-    """The side of the regular spp = side^2 supersampling grid; spp must be a perfect square."""
-    side = math.isqrt(spp)
-    if spp < 1 or side * side != spp:
-        raise RenderError(f"spp: the rasterizer samples a regular grid, so spp must be a perfect square "
-                          f"(1, 4, 9, 16, ...), got {spp}")
-    return side
 
 
 def empty_points(count: int, device: str) -> resolve.PointsW:
@@ -81,9 +70,9 @@ def shading_points(compiled, cam, shading: int, samples):
     """Stage 5: the points where the model is evaluated (`samples` themselves under Phong shading)."""
     device, arrays = compiled.device, compiled.arrays
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
-    if shading == resolve.PHONG_SHADING:
+    if shading == PHONG_SHADING:
         return samples, samples.material.shape[0]
-    if shading == resolve.FLAT:
+    if shading == FLAT:
         points = empty_points(n_faces, device)
         if n_faces:
             wp.launch(resolve.flat_points_kernel, dim=n_faces, inputs=[
@@ -130,13 +119,10 @@ def light_points(compiled, settings, points, n_points: int, n_samples: int, poin
 def rasterize(compiled, settings, threads: int | None = None) -> Frame:
     """Render a compiled scene with the rasterizer under `settings` (a scene RenderSettings)."""
     scene, device = compiled.scene, compiled.device
-    side = spp_side(settings.spp)
+    side = settings.spp_side  # the scene validated spp and the sample budget
     width, height = scene.camera.width * side, scene.camera.height * side
-    if width * height > MAX_PIXELS:
-        raise RenderError(f"spp: {scene.camera.width}x{scene.camera.height} pixels at spp={settings.spp} is "
-                          f"{width * height} samples, over the budget of {MAX_PIXELS}")
-    shading = resolve.SHADING_MODELS[settings.shading]
-    clamp_colors = bool(settings.clamp_vertex_colors and shading == resolve.GOURAUD)
+    shading = SHADING_MODELS[settings.shading]
+    clamp_colors = bool(settings.clamp_vertex_colors and shading == GOURAUD)
     start = time.perf_counter()
     cam = camera_struct(scene.camera, width, height)
     arrays = compiled.arrays
@@ -161,7 +147,7 @@ def rasterize(compiled, settings, threads: int | None = None) -> Frame:
 
     # Stages 5-6: shading points, lit.
     points, n_points = shading_points(compiled, cam, shading, samples)
-    points_are_samples = int(shading == resolve.PHONG_SHADING)
+    points_are_samples = int(shading == PHONG_SHADING)
     lit = light_points(compiled, settings, points, n_points, n_samples, points_are_samples, threads)
 
     # Stage 7: compose samples, then filter to pixels.

@@ -14,13 +14,10 @@ from ..._warp import wp
 
 from ...lighting.warp_model import MaterialW, checker_cell
 from ..camera import CameraW, view_direction
+from ...vocabulary import FLAT, PHONG_SHADING
 from .coverage import NO_HIT, screen_barycentrics
 
 wp.set_module_options({"enable_backward": False})
-
-FLAT, GOURAUD, PHONG_SHADING = 0, 1, 2
-SHADING_MODELS = {"flat": FLAT, "gouraud": GOURAUD, "phong": PHONG_SHADING}
-
 
 @wp.struct
 class PointsW:

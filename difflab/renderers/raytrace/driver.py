@@ -24,15 +24,14 @@ import numpy as np
 from ..._warp import wp
 
 from ...errors import RenderError
-from ...lighting.warp_model import SPECULAR_MODELS, fog_struct
-from ...scene import MAX_PIXELS
+from ...lighting.warp_model import fog_struct
+from ...vocabulary import FRESNEL_MODES, SPECULAR_MODELS
 from ..camera import camera_struct
 from ..frame import Frame, box_downsample
 from ..launch import launch_rows
 from .itembuffer import item_buffer, item_struct
 from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, TraceOutW, TraceParamsW, \
     whitted_kernel
-from .optics import FRESNEL_MODES
 from .record import empty_tree, sized_tree, tree_to_numpy
 from .surface import MeshDataW, SceneW
 from .tree import RayTree
@@ -50,15 +49,6 @@ class Traced:
     rays: dict  # primary / shadow / reflection / refraction -> count
     depth_histogram: list  # rays traced at depth 1, 2, ...
     tree: RayTree | None
-
-
-def spp_side(spp: int) -> int:
-    """Side of the side x side sample pattern; spp must be a perfect square."""
-    side = math.isqrt(spp) if isinstance(spp, int) and spp >= 1 else 0
-    if side * side != spp or side == 0:
-        raise RenderError(f"spp: the ray tracer samples a side x side pattern per pixel, so spp must be a "
-                          f"perfect square (1, 4, 9, 16, ...), got {spp!r}")
-    return side
 
 
 def sample_points(width: int, height: int, side: int, sampling: str = "grid") -> np.ndarray:
@@ -175,11 +165,8 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
     1), `nodes`, `seconds`, `rays_per_second`, `nonfinite_pixels`.
     """
     scene = compiled.scene
-    side = spp_side(settings.spp)
+    side = settings.spp_side  # the scene validated spp and the sample budget
     width, height = scene.camera.width, scene.camera.height
-    if width * height * side * side > MAX_PIXELS:
-        raise RenderError(f"spp: {width}x{height} pixels at spp={settings.spp} is {width * height * side * side} "
-                          f"samples, over the budget of {MAX_PIXELS}")
     if use_item_buffer and settings.sampling != "grid":
         raise RenderError(f"sampling: the item buffer holds the rasterizer's regular sample grid; it needs "
                           f"sampling 'grid', got {settings.sampling!r}")

@@ -30,7 +30,7 @@ from __future__ import annotations
 from ..._warp import wp
 
 from ...lighting.warp_model import FogW, ambient_term, fog_blend, light_term, light_vector
-from ...scene.view import MAX_DEPTH_LIMIT
+from ...vocabulary import MAX_DEPTH_LIMIT
 from ..camera import CameraW, primary_ray
 from ..trace import HIT_NONE, HitW, closest_hit, count_shadow_crossings, light_visibility
 from .itembuffer import ItemBufferW, hinted_hit
@@ -52,8 +52,8 @@ class TraceParamsW:
     max_depth: int
     shadows: int
     transparent: int
-    specular: int  # lighting.warp_model.SPECULAR_MODELS
-    fresnel: int  # optics.FRESNEL_MODES
+    specular: int  # vocabulary.SPECULAR_MODELS
+    fresnel: int  # vocabulary.FRESNEL_MODES
     threshold: float  # Hall's adaptive control (0: off)
     ambient: wp.vec3
     background: wp.vec3

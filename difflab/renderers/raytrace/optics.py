@@ -20,10 +20,9 @@ from __future__ import annotations
 
 from ..._warp import wp
 
-wp.set_module_options({"enable_backward": False})
+from ...vocabulary import FRESNEL_EXACT, FRESNEL_SCHLICK
 
-FRESNEL_NONE, FRESNEL_SCHLICK, FRESNEL_EXACT = 0, 1, 2
-FRESNEL_MODES = {"none": FRESNEL_NONE, "schlick": FRESNEL_SCHLICK, "exact": FRESNEL_EXACT}
+wp.set_module_options({"enable_backward": False})
 
 
 @wp.func

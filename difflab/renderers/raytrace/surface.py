@@ -17,11 +17,12 @@ from __future__ import annotations
 from ..._warp import wp
 
 from ...lighting.warp_model import LightW, MaterialW, checker_cell, surface_material, textured_material
+from ...vocabulary import FRESNEL_NONE
 from ..camera import CameraW
 from ..texture.sampling import TexturesW, cone_footprint, pixel_footprint, plane_uv, plane_uv_derivatives, \
     sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
 from ..trace import HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, HitW, SceneGeomW
-from .optics import FRESNEL_NONE, fresnel, refract
+from .optics import fresnel, refract
 
 wp.set_module_options({"enable_backward": False})
 

@@ -20,8 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..._warp import wp
-from ...lighting.warp_model import SPECULAR_MODELS, TEXTURE_TARGET_IDS, LightW, MaterialW, ambient_term, light_term, \
+from ...lighting.warp_model import LightW, MaterialW, ambient_term, light_term, \
     lights_to_warp, materials_to_warp, surface_material, textured_material
+from ...vocabulary import SPECULAR_MODELS, TEXTURE_TARGET_IDS
 from ..frame import box_downsample
 
 wp.set_module_options({"enable_backward": False})

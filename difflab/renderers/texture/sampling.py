@@ -45,7 +45,7 @@ from __future__ import annotations
 
 from ..._warp import wp
 
-from ...lighting.warp_model import TEXTURE_FILTER_IDS, TEXTURE_WRAP_IDS
+from ...vocabulary import TEXTURE_FILTER_IDS, TEXTURE_WRAP_IDS
 from ..camera import CameraW, primary_ray
 
 wp.set_module_options({"enable_backward": False})
