@@ -1,13 +1,12 @@
-"""`render` and `render_frame`: a scene (object, dict or file) in, numpy out."""
+"""`render` and `render_frame`: a scene (object, dict, file, or `CompiledScene`) in, numpy out."""
 
 from __future__ import annotations
 
-import os
-
 from ..errors import RenderError
-from ..scene import Scene, load_scene
-from .compile import compile_scene
+from ..scene import Scene
+from .compile import CompiledScene, as_scene, compile_scene
 from .frame import Frame
+from .launch import resolve_device
 
 RENDER_OVERRIDES = ("method", "shading", "specular", "shadows", "max_depth", "spp", "fresnel",
                     "transparent_shadows", "clamp_vertex_colors", "interpolation", "cull_backfaces",
@@ -21,17 +20,6 @@ NOT_USED = {
                   "cull_backfaces": False},
                  "the ray tracer shades every hit with interpolated normals; use method='raster'"),
 }
-
-
-def as_scene(scene) -> Scene:
-    """A Scene from a Scene, a dict in the file format, or a path to a scene file."""
-    if isinstance(scene, Scene):
-        return scene
-    if isinstance(scene, dict):
-        return Scene.from_dict(scene)
-    if isinstance(scene, (str, os.PathLike)):
-        return load_scene(scene)
-    raise RenderError(f"scene: expected a Scene, a dict or a path, got {type(scene).__name__}")
 
 
 def prepare(scene, width=None, height=None, **overrides) -> Scene:
@@ -59,32 +47,47 @@ def check_applies(method: str, given: dict) -> None:
             raise RenderError(f"{name}: {value!r} does not apply to method={method!r} ({why})")
 
 
-def render_frame(scene, method=None, shading=None, specular=None, max_depth=None, spp=None, device="cpu", *,
-                 width=None, height=None, threads=None, compiled=None, **options) -> Frame:
+def render_frame(scene, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None, *,
+                 width=None, height=None, threads=None, **options) -> Frame:
     """Render a scene and return the `Frame` (image and G-buffer; the ray tree for ray tracing).
 
-    Arguments given override the scene's `render` block (and `width` / `height` its camera); one
-    the chosen method does not use (`shading` for the ray tracer, `max_depth` for the rasterizer, ...)
-    raises RenderError. A ray-traced frame has no G-buffer (`frame.gbuffer` raises) but its
-    recorded `ray_tree`, whose root nodes are the primary hits.
-    `compiled` reuses device arrays from `compile_scene` for the same scene and device.
-    """
-    scene = prepare(scene, width, height, method=method, shading=shading, specular=specular,
-                    max_depth=max_depth, spp=spp, **options)
-    settings = scene.render
-    check_applies(settings.method, dict(options, shading=shading, max_depth=max_depth))
-    from .raster.driver import rasterize
+    Arguments:
+        scene: a Scene, a dict in the file format, a scene file, or a `CompiledScene` (from
+            `compile_scene`: its device arrays, BVH and textures are reused, nothing is rebuilt).
+        method, shading, specular, max_depth, spp, **options: override the scene's `render` block.
+            One the chosen method does not use (`shading` for the ray tracer, `max_depth` for the
+            rasterizer, ...) raises RenderError rather than being ignored.
+        device: "cpu" (default) or "cuda[:N]"; a CompiledScene renders on its own device.
+        width, height: override the camera's image size (not with a CompiledScene, which is
+            tessellated for its camera: compile the resized scene instead).
+        threads: CPU worker threads (default: all cores, or $DIFFLAB_THREADS).
 
-    if compiled is None or compiled.scene != scene:
-        side = settings.spp_side if settings.method == "raster" else 1
-        compiled = compile_scene(scene, device, sample_height=scene.camera.height * side)
+    Returns: a `Frame`. A ray-traced frame has no G-buffer (`frame.gbuffer` raises) but its
+    recorded `ray_tree`, whose root nodes are the primary hits.
+    """
+    overrides = dict(options, method=method, shading=shading, specular=specular, max_depth=max_depth, spp=spp)
+    if isinstance(scene, CompiledScene):
+        compiled = scene
+        if width is not None or height is not None:
+            raise RenderError(f"width / height: a CompiledScene is built for its camera "
+                              f"({compiled.scene.camera.width}x{compiled.scene.camera.height}); compile the "
+                              f"scene at the new size instead")
+        if device is not None and resolve_device(device) != compiled.device:
+            raise RenderError(f"device: this CompiledScene lives on {compiled.device!r}, not {device!r}")
+        compiled = compiled.with_scene(prepare(compiled.scene, None, None, **overrides))
+    else:
+        compiled = compile_scene(prepare(scene, width, height, **overrides), device or "cpu")
+    settings = compiled.scene.render
+    check_applies(settings.method, overrides)
     if settings.method == "raster":
+        from .raster.driver import rasterize
+
         return rasterize(compiled, settings, threads)
     from .raytrace.driver import raytrace
 
     return raytrace(compiled, settings, threads)
 
 
-def render(scene, method=None, shading=None, specular=None, max_depth=None, spp=None, device="cpu", **kwargs):
-    """Render a scene to a numpy (H, W, 3) float32 linear RGB image (see `render_frame`)."""
+def render(scene, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None, **kwargs):
+    """Render a scene (or a `CompiledScene`) to a numpy (H, W, 3) float32 linear RGB image (see `render_frame`)."""
     return render_frame(scene, method, shading, specular, max_depth, spp, device, **kwargs).image

@@ -10,7 +10,8 @@ see the exact spheres and planes.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, replace
 
 import numpy as np
 from .._warp import wp
@@ -18,7 +19,7 @@ from .._warp import wp
 from .. import geometry
 from ..errors import MeshError, RenderError
 from ..lighting.warp_model import lights_to_warp, materials_to_warp
-from ..scene import Mesh, Plane, Sphere
+from ..scene import Mesh, Plane, Scene, Sphere, load_scene
 from .camera import camera_frame, pixel_size_at
 from .launch import resolve_device
 from .texture.store import TextureStore, scene_textures
@@ -30,9 +31,10 @@ MIN_SPHERE_SEGMENTS = 128  # keeps interpolated normals within ~1e-3 of the sphe
 PLANE_RINGS = 12  # grid lines each side of the eye's foot on a rasterized plane, spaced geometrically
 
 
-@dataclass
+@dataclass(frozen=True)
 class CompiledScene:
-    """A scene on a device. Raster triangles: world-space `vertices`, per-vertex `normals` (unit) and
+    """A scene on a device, built once by `compile_scene` and rendered any number of times by
+    `render` / `render_frame` (with render-setting overrides: nothing is rebuilt). Raster triangles: world-space `vertices`, per-vertex `normals` (unit) and
     `uvs`, `faces`, and per face its material id, object id and geometric (winding) normal. The first
     `n_mesh_faces` faces are the mesh objects' and are also in the BVH; the rest tessellate spheres
     and planes. Numpy copies are kept beside the device arrays for the G-buffer's users."""
@@ -54,6 +56,10 @@ class CompiledScene:
     materials: wp.array
     bvh: wp.Mesh | None
     textures: TextureStore | None = None  # every material's image texture; `textures.warp` for kernels
+
+    def with_scene(self, scene) -> CompiledScene:
+        """The same device data under `scene`: the compiled scene with other render settings."""
+        return replace(self, scene=scene)
 
 
 def object_mesh(obj, base_dir=None) -> geometry.TriMesh:
@@ -222,12 +228,26 @@ def ray_geometry(arrays: dict, soup: dict, n_mesh_faces: int, spheres, planes, e
     return geom, bvh
 
 
-def compile_scene(scene, device: str = "cpu", sample_height: int | None = None) -> CompiledScene:
-    """Build the device arrays and BVH of `scene` once. `sample_height` (rows of the sample grid)
-    sets how finely spheres are tessellated for the rasterizer."""
+def as_scene(scene) -> Scene:
+    """A Scene from a Scene, a dict in the file format, or a path to a scene file."""
+    if isinstance(scene, Scene):
+        return scene
+    if isinstance(scene, dict):
+        return Scene.from_dict(scene)
+    if isinstance(scene, (str, os.PathLike)):
+        return load_scene(scene)
+    raise RenderError(f"scene: expected a Scene, a dict or a path, got {type(scene).__name__}")
+
+
+def compile_scene(scene, device: str = "cpu") -> CompiledScene:
+    """Build the device arrays, BVH and textures of `scene` (a Scene, dict or path) once.
+
+    Analytic spheres are tessellated for the rasterizer finely enough for the scene's camera and
+    spp (silhouette within half a sample); planes as grids around the camera's eye.
+    """
+    scene = as_scene(scene)
     device = resolve_device(device)
-    sample_height = scene.camera.height if sample_height is None else sample_height
-    mesh_parts, analytic_parts, spheres, planes = scene_parts(scene, sample_height)
+    mesh_parts, analytic_parts, spheres, planes = scene_parts(scene, scene.camera.height * scene.render.spp_side)
     soup = triangle_soup(mesh_parts + analytic_parts)
     n_mesh_faces = sum(m.faces.shape[0] for m, _, _ in mesh_parts)
     faces = soup["faces"]

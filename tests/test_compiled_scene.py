@@ -1,0 +1,66 @@
+"""A compiled scene (`difflab.compile_scene`) renders many settings without rebuilding anything."""
+
+import numpy as np
+import pytest
+
+import difflab
+from conftest import scene_dict
+from difflab import CompiledScene, RenderError, compile_scene, render, render_frame
+from difflab.renderers import api
+
+CAMERA = {"eye": [0.5, 1.0, 4.0], "target": [0, 0.2, 0], "fov_y": 40, "width": 24, "height": 18}
+SCENE = scene_dict(
+    [{"type": "sphere", "center": [0, 0.5, 0], "radius": 0.6, "material": "red"},
+     {"type": "mesh", "builtin": "box", "material": "red", "transform": {"translate": [1.0, 0.2, -0.5], "scale": 0.5}},
+     {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "floor"}],
+    {"red": {"ka": [0.2, 0, 0], "kd": [0.7, 0.1, 0.1], "ks": [0.5, 0.5, 0.5], "n": 20, "kr": 0.3},
+     "floor": {"kd": [0.6, 0.6, 0.6], "checker": {"size": 0.5, "kd2": [0.1, 0.1, 0.1]}}},
+    camera=CAMERA, lights=[{"type": "point", "position": [2, 4, 3]}], ambient=(0.1, 0.1, 0.1))
+
+
+@pytest.fixture
+def no_compiling(monkeypatch):
+    """Make any rebuild of device data an error for the rest of the test."""
+    def refuse(*args, **kwargs):
+        raise AssertionError("compile_scene was called")
+
+    monkeypatch.setattr(api, "compile_scene", refuse)
+
+
+def test_compiled_scene_renders_every_setting_as_a_fresh_scene_does(no_compiling):
+    compiled = compile_scene(SCENE)  # the public name; only render's own compiling is refused
+    assert isinstance(compiled, CompiledScene) and difflab.compile_scene is compile_scene
+    cases = [dict(method="raster", shading=s, specular=p) for s in ("flat", "gouraud", "phong")
+             for p in ("phong", "blinn")]
+    cases += [dict(method="raytrace", max_depth=d, shadows=sh) for d in (1, 3) for sh in (True, False)]
+    got = [render(compiled, **case) for case in cases]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(api, "compile_scene", compile_scene)
+        want = [render(SCENE, **case) for case in cases]
+    for case, a, b in zip(cases, got, want):
+        assert np.array_equal(a, b), case
+    assert compiled.scene == difflab.Scene.from_dict(SCENE)  # rendering with overrides leaves it as it was
+
+
+def test_compiled_scene_gives_the_frame_a_fresh_scene_gives(no_compiling):
+    compiled = compile_scene(SCENE)
+    frame = render_frame(compiled, method="raster", shading="phong")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(api, "compile_scene", compile_scene)
+        fresh = render_frame(SCENE, method="raster", shading="phong")
+    assert np.array_equal(frame.gbuffer.depth, fresh.gbuffer.depth)
+    assert np.array_equal(frame.gbuffer.points.color, fresh.gbuffer.points.color)
+    traced = render_frame(compiled, method="raytrace", max_depth=2)
+    assert traced.ray_tree.n_nodes == traced.stats["nodes"] > 18 * 24
+
+
+def test_compiled_scene_refuses_what_it_was_not_built_for(no_compiling):
+    compiled = compile_scene(SCENE)
+    with pytest.raises(RenderError, match=r"^width / height: a CompiledScene is built for its camera \(24x18\)"):
+        render(compiled, width=32)
+    with pytest.raises(RenderError, match="^device: "):
+        render(compiled, device="cuda")
+    with pytest.raises(RenderError, match="^shading: 'flat' does not apply to method='raytrace'"):
+        render(compiled, method="raytrace", shading="flat")
+    with pytest.raises(RenderError, match="^scene: expected a Scene, a dict or a path, got int"):
+        compile_scene(3)
