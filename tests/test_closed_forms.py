@@ -1,0 +1,191 @@
+"""Rendered images against closed forms, one formula per test, so that a wrong exponent, a wrong
+power of the distance or a wrong level of detail turns a test red: Schlick's Fresnel seen from
+both sides of an interface, point-light attenuation in both renderers, fog, mip-map levels and
+sphere uv in the ray tracer. Pixel positions are computed here from the camera, not read back
+from the renderer."""
+
+import math
+
+import numpy as np
+import pytest
+
+from conftest import scene_dict
+from difflab import render
+from difflab.render.texture_store import TextureStore, sample
+
+ORTHO = {"eye": [0, 0, 5], "target": [0, 0, 0], "projection": "orthographic", "ortho_height": 2.0,
+         "width": 16, "height": 16, "near": 0.1, "far": 20}
+
+
+def ortho_pixel_centres(width, height, half_height=1.0):
+    """World (x, y) of the pixel centres of ORTHO-like cameras (eye on +z looking down -z)."""
+    half_width = half_height * width / height
+    x = -half_width + (np.arange(width) + 0.5) * 2 * half_width / width
+    y = half_height - (np.arange(height) + 0.5) * 2 * half_height / height
+    return np.meshgrid(x, y)
+
+
+# ---- Schlick's Fresnel ----------------------------------------------------------------------
+
+
+def schlick(cos_i, eta):
+    """F = R0 + (1 - R0)(1 - c)^5, R0 = ((1 - eta)/(1 + eta))^2, c = cos_i for eta <= 1 and cos_t
+    for eta > 1 (1 under total internal reflection)."""
+    r0 = ((1 - eta) / (1 + eta)) ** 2
+    sin2_t = eta * eta * (1 - cos_i * cos_i)
+    if sin2_t >= 1:
+        return 1.0
+    c = cos_i if eta <= 1 else math.sqrt(1 - sin2_t)
+    return r0 + (1 - r0) * (1 - c) ** 5
+
+
+@pytest.mark.parametrize("side, angle_deg", [("above", 30), ("above", 60), ("above", 80),
+                                             ("below", 20), ("below", 35), ("below", 40), ("below", 60)])
+def test_schlick_fresnel_weights_reflection_and_refraction_at_oblique_angles(side, angle_deg):
+    """A dark interface y = 0 (ior 1.5, kr = 1, kt = 1/2) under a white background, seen at angle
+    theta from its normal by an orthographic camera: every pixel is kr F + kt (1 - F), both
+    children meeting the background. From above the ray enters the denser side (eta = 1/1.5, c =
+    cos_i); from below it leaves it (eta = 1.5, c = cos_t, and F = 1 past the critical 41.8 deg)."""
+    theta = math.radians(angle_deg)
+    sign = 1.0 if side == "above" else -1.0
+    camera = dict(ORTHO, eye=[5 * math.sin(theta), sign * 5 * math.cos(theta), 0], up=[0, 0, 1], width=4, height=4)
+    glass = {"ka": [0, 0, 0], "kd": [0, 0, 0], "kr": 1.0, "kt": 0.5, "ior": 1.5}
+    scene = scene_dict([{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "glass"}],
+                       {"glass": glass}, camera=camera, background=[1, 1, 1],
+                       render={"max_depth": 2, "fresnel": "schlick"})
+    f = schlick(math.cos(theta), 1 / 1.5 if side == "above" else 1.5)
+    image = render(scene, method="raytrace")
+    np.testing.assert_allclose(image, f + 0.5 * (1 - f), atol=2e-6)
+
+
+# ---- point-light attenuation ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+def test_attenuated_point_light_on_a_plane(method):
+    """A Lambertian plane z = 0 facing the camera, a point light at height h: at pixel (x, y),
+    d = |light - (x, y, 0)| and I = Ip kd (h / d) / (kc + kl d + kq d^2)."""
+    light = np.array([0.3, -0.2, 0.8])
+    kc, kl, kq = 0.5, 0.4, 0.9
+    kd = np.array([1.0, 0.5, 0.25])
+    ip = np.array([1.0, 2.0, 3.0])
+    scene = scene_dict([{"type": "plane", "point": [0, 0, 0], "normal": [0, 0, 1], "material": "m"}],
+                       {"m": {"kd": kd.tolist(), "ks": [0, 0, 0]}}, camera=ORTHO,
+                       lights=[{"type": "point", "position": light.tolist(), "intensity": ip.tolist(),
+                                "attenuation": [kc, kl, kq]}],
+                       render={"shading": "phong", "max_depth": 1})
+    x, y = ortho_pixel_centres(16, 16)
+    d = np.sqrt((light[0] - x) ** 2 + (light[1] - y) ** 2 + light[2] ** 2)
+    want = (ip * kd) * (light[2] / d / (kc + kl * d + kq * d * d))[..., None]
+    np.testing.assert_allclose(render(scene, method=method), want, rtol=2e-5, atol=1e-6)
+
+
+# ---- fog --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+@pytest.mark.parametrize("fog", [{"mode": "linear", "start": 3.5, "end": 7.0},
+                                 {"mode": "exp", "density": 0.15}, {"mode": "exp2", "density": 0.12}])
+def test_fog_blends_by_eye_depth(method, fog):
+    """A tilted plane 0.6 y + 0.8 z = 0 lit only by ambient (colour C = ka) seen by a perspective
+    camera at (0, 0, 5) looking down -z: the ray through the pixel centre with camera-space
+    direction (xc, yc, -1) meets it at eye depth t = 5 b / (b - a yc), and the pixel is
+    f C + (1 - f) C_fog with OpenGL's f(t) clamped to [0, 1]."""
+    w, h, fov = 16, 12, 40.0
+    camera = {"eye": [0, 0, 5], "target": [0, 0, 0], "fov_y": fov, "width": w, "height": h, "near": 0.1, "far": 30}
+    ka = np.array([0.2, 0.4, 0.9])
+    fog_color = np.array([0.7, 0.6, 0.1])
+    scene = scene_dict([{"type": "plane", "point": [0, 0, 0], "normal": [0, 0.6, 0.8], "material": "m"}],
+                       {"m": {"ka": ka.tolist(), "kd": [0, 0, 0]}}, camera=camera, ambient=(1, 1, 1),
+                       fog=dict(fog, color=fog_color.tolist()), render={"max_depth": 1})
+    tan = math.tan(math.radians(fov) / 2)
+    yc = (1 - 2 * (np.arange(h) + 0.5) / h) * tan
+    depth = np.broadcast_to((5 * 0.8 / (0.8 - 0.6 * yc))[:, None], (h, w))
+    if fog["mode"] == "linear":
+        f = (fog["end"] - depth) / (fog["end"] - fog["start"])
+    elif fog["mode"] == "exp":
+        f = np.exp(-fog["density"] * depth)
+    else:
+        f = np.exp(-(fog["density"] * depth) ** 2)
+    f = np.clip(f, 0, 1)[..., None]
+    assert 0.05 < f.min() and f.max() < 0.95 and np.ptp(f) > 0.05  # the fog varies over the image
+    np.testing.assert_allclose(render(scene, method=method), f * ka + (1 - f) * fog_color, rtol=2e-5, atol=1e-6)
+
+
+# ---- mip-map levels ---------------------------------------------------------------------------
+
+
+def bilinear_reference(level, u, v):
+    """Bilinear lookup with repeat wrap in one level stored bottom row first (texel centres at
+    ((c + 0.5) / W, (r + 0.5) / H)), in float64."""
+    h, w = level.shape[:2]
+    x, y = u * w - 0.5, v * h - 0.5
+    x0, y0 = math.floor(x), math.floor(y)
+    fx, fy = x - x0, y - y0
+    t = lambda r, c: level[r % h, c % w].astype(np.float64)  # noqa: E731
+    bottom = (1 - fx) * t(y0, x0) + fx * t(y0, x0 + 1)
+    top = (1 - fx) * t(y0 + 1, x0) + fx * t(y0 + 1, x0 + 1)
+    return (1 - fy) * bottom + fy * top
+
+
+@pytest.mark.parametrize("lod", [0.6, 1.6, 2.3, 3.45])
+def test_mip_levels_follow_the_level_of_detail(lod):
+    """A 32x16 texture whose levels all differ (random texels): a footprint whose longer Jacobian
+    column is rho = 2^lod level-0 texels long (and not along an axis) is read, with mipmap, in level
+    round(lod) and, with trilinear, as the lerp of levels floor(lod) and floor(lod) + 1 by frac(lod)."""
+    image = np.random.default_rng(5).random((16, 32, 3)).astype(np.float32)
+    store = TextureStore.from_images([image])
+    levels = store.pyramids[0]
+    w, h = 32, 16
+    rho = 2.0 ** lod
+    uv = np.array([[0.37, 0.61]])
+    duv_dx = np.array([[rho * 0.6 / w, rho * 0.8 / h]])  # rho texels long
+    duv_dy = np.array([[-rho * 0.4 / w, rho * 0.3 / h]])  # half as long: it must not set the level
+    ref = [bilinear_reference(level, *uv[0]) for level in levels]
+    mipmap = sample(store, 0, uv, duv_dx, duv_dy, filter="mipmap")[0]
+    np.testing.assert_allclose(mipmap, ref[int(math.floor(lod + 0.5))], atol=2e-6)
+    lower, frac = int(math.floor(lod)), lod - math.floor(lod)
+    trilinear = sample(store, 0, uv, duv_dx, duv_dy, filter="trilinear")[0]
+    np.testing.assert_allclose(trilinear, (1 - frac) * ref[lower] + frac * ref[lower + 1], atol=2e-6)
+    # the levels differ by far more than the tolerance, so a neighbouring level would fail
+    assert min(np.abs(a - b).max() for a, b in zip(ref, ref[1:])) > 0.01
+
+
+# ---- sphere uv in the ray tracer ---------------------------------------------------------------
+
+
+def test_sphere_uv_in_the_ray_tracer(tmp_path):
+    """A unit sphere textured with linear ramps (red = u ramp, green = v ramp; bilinear lookup of a
+    ramp is linear in uv), lit by ambient only through ka: each pixel shows the texel at
+    u = lon / 2 pi, lon = atan2(-z, x) in [0, 2 pi), and v = acos(-y) / pi, of its hit point."""
+    tw, th = 64, 32
+    ramp_u = np.arange(tw) / (tw - 1)
+    ramp_v = np.arange(th) / (th - 1)
+    texture = np.zeros((th, tw, 3), np.float32)
+    texture[..., 0] = ramp_u[None, :]
+    texture[..., 1] = ramp_v[::-1, None]  # image row 0 is the top (v = 1)
+    np.save(tmp_path / "ramps.npy", texture)
+    camera = dict(ORTHO, eye=[0.5, 1.0, 5], width=32, height=32, ortho_height=2.4)
+    ball = {"ka": [1, 1, 1], "kd": [0, 0, 0], "texture": str(tmp_path / "ramps.npy"), "texture_target": "ka", "filter": "bilinear"}
+    scene = scene_dict([{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "ball"}], {"ball": ball},
+                       camera=camera, ambient=(1, 1, 1), render={"max_depth": 1})
+    image = render(scene, method="raytrace")
+    # primary rays of the orthographic camera: origin on the image plane, direction toward the target
+    eye = np.array(camera["eye"], float)
+    forward = -eye / np.linalg.norm(eye)
+    right = np.cross(forward, [0, 1, 0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    a, b = ortho_pixel_centres(32, 32, 1.2)
+    origin = eye + a[..., None] * right + b[..., None] * up
+    proj = origin @ forward
+    closest = origin - proj[..., None] * forward
+    r2 = np.sum(closest ** 2, -1)
+    p = closest - np.sqrt(np.maximum(1 - r2, 0))[..., None] * forward  # the near root
+    lon = np.mod(np.arctan2(-p[..., 2], p[..., 0]), 2 * np.pi)
+    u, v = lon / (2 * np.pi), np.arccos(np.clip(-p[..., 1], -1, 1)) / np.pi
+    # away from the silhouette, the seam (u = 0) and the poles, where the ramp wraps or pinches
+    keep = (r2 < 0.9) & (u * tw > 1.0) & (u * tw < tw - 1.0) & (v * th > 1.0) & (v * th < th - 1.0)
+    assert keep.sum() > 300
+    np.testing.assert_allclose(image[keep, 0], ((u * tw - 0.5) / (tw - 1))[keep], atol=2e-5)
+    np.testing.assert_allclose(image[keep, 1], ((v * th - 0.5) / (th - 1))[keep], atol=2e-5)
