@@ -11,7 +11,7 @@ import pytest
 
 from conftest import scene_dict
 from difflab import render
-from difflab.render.texture_store import TextureStore, sample
+from difflab.renderers.texture.store import TextureStore, sample
 
 ORTHO = {"eye": [0, 0, 5], "target": [0, 0, 0], "projection": "orthographic", "ortho_height": 2.0,
          "width": 16, "height": 16, "near": 0.1, "far": 20}

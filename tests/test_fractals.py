@@ -314,7 +314,16 @@ def test_bad_image_sizes_and_devices_raise_render_errors(call):
 def test_bad_camera_raises_scene_error():
     with pytest.raises(SceneError, match="target"):
         fr.mandelbulb(16, 16, eye=(0, 0, 0), target=(0, 0, 0))
-    assert isinstance(Light(type="point", position=(0, 0, 0)), Light)
+
+
+def test_mandelbulb_is_lit_only_by_the_lights_it_is_given():
+    """No ambient and one light of zero intensity: the bulb is exactly black, misses show the background."""
+    background = np.array([0.25, 0.5, 0.75], np.float32)
+    image = fr.mandelbulb(24, 24, lights=[Light(type="point", position=(3, 3, 3), intensity=(0, 0, 0))],
+                          ambient=(0, 0, 0), background=tuple(background), max_steps=64)
+    black = np.all(image == 0.0, axis=-1)
+    assert 0.1 < black.mean() < 0.9
+    assert np.all(image[~black] == background)
 
 
 def test_terrain_scene_writes_loadable_band_meshes(tmp_path):

@@ -3,6 +3,7 @@
 import numpy as np
 
 from conftest import scene_dict
+from test_raytrace import near_edge
 from difflab import Scene, render, render_frame, save_image
 from difflab.renderers.raytrace.tree import evaluate_ray_tree
 
@@ -22,15 +23,25 @@ def textured_scene(tmp_path, filter="bilinear", target="kd"):
         lights=[{"type": "point", "position": [2, 4, 3]}], ambient=(0.3, 0.3, 0.3), render={"shadows": False})
 
 
-def test_primary_texels_agree_with_the_rasterizer(tmp_path):
+def test_primary_texels_agree_with_the_rasterizer(tmp_path, compare_images):
     """Depth 1 (no mirror rays): the ray tracer's textured image equals the rasterizer's Phong image
-    except near silhouettes and where the texture's cell edges fall between the two uv computations."""
+    wherever the texel is unambiguous: off silhouettes (pixels next to a change of object) and more
+    than half a texel from a checker cell edge, where bilinear filtering is the constant cell colour.
+    Nearer an edge the two uv computations (interpolated on the tessellated sphere, analytic in the
+    ray tracer) may pick different sides."""
     scene = textured_scene(tmp_path)
     raster = render_frame(scene, shading="phong")
     traced = render(scene, method="raytrace", max_depth=1)
-    close = np.abs(raster.image - traced).max(axis=-1) < 2e-3
-    assert raster.image.std() > 0.1
-    assert close[raster.gbuffer.mask].mean() > 0.9
+    gbuffer = raster.gbuffer
+    silhouette = np.zeros(gbuffer.mask.shape, bool)
+    for k in np.unique(gbuffer.object):
+        silhouette |= near_edge(gbuffer.object == k)
+    texels = gbuffer.uv * 32  # the checker's cells are 4 texels wide
+    from_cell_edge = np.abs(texels - 4 * np.round(texels / 4)).min(axis=-1)
+    keep = gbuffer.mask & ~silhouette & (from_cell_edge > 0.5)
+    assert raster.image.std() > 0.1 and keep.sum() > 0.4 * gbuffer.mask.sum()
+    # Tolerance: the rasterizer's interpolated normals on the tessellated sphere (3e-4 measured).
+    compare_images(traced[keep], raster.image[keep], atol=1e-3, name="texels")
 
 
 def test_ray_tree_reproduces_a_textured_image_with_new_materials(tmp_path, compare_images):

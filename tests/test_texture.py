@@ -11,6 +11,7 @@ from difflab._warp import wp
 from difflab.io import save_image
 from difflab.renderers.camera import camera_struct, projection_matrix, view_matrix
 from difflab.renderers.api import as_scene
+from difflab.lighting.warp_model import MaterialW, target_only, textured_material
 from difflab.renderers.texture.sampling import CameraW, pixel_footprint, plane_uv_derivatives
 from difflab.demos.textures import checker_texture, compare_filters
 from difflab.renderers.texture.store import TextureStore, load_texture, mip_pyramid, sample
@@ -353,18 +354,44 @@ def test_planar_and_cylindrical_projections():
     np.testing.assert_allclose(cylindrical_uv(p[:2], scale=2.0), [[0.0, 0.5], [0.25, 0.5]])
 
 
+@wp.kernel
+def textured_material_kernel(base: wp.array(dtype=MaterialW), value: wp.vec3, out: wp.array2d(dtype=wp.vec3)):
+    """Row t: ka, kd, ks of textured_material(base, t, value), then of target_only(base, t)."""
+    t = wp.tid()
+    textured = textured_material(base[0], t, value)
+    unit = target_only(base[0], t)
+    out[t, 0] = textured.ka
+    out[t, 1] = textured.kd
+    out[t, 2] = textured.ks
+    out[t, 3] = unit.ka
+    out[t, 4] = unit.kd
+    out[t, 5] = unit.ks
+
+
 def test_textured_material_is_the_same_in_warp_and_jax():
+    """Both halves of the model modulate exactly the target coefficient (k * texel) and, for the
+    texel's factor, keep only it: Warp and JAX equal to the float32 product."""
     import jax.numpy as jnp
 
     from difflab.lighting import jax_model as jm
     from difflab.vocabulary import TEXTURE_TARGET_IDS
 
-    base = jm.MaterialJ(ka=jnp.array([0.1, 0.2, 0.3]), kd=jnp.array([0.4, 0.5, 0.6]), ks=jnp.array([0.7, 0.8, 0.9]),
-                        n=jnp.array(3.0), m=jnp.array(0.3), f0=jnp.array(0.04))
-    value = jnp.array([0.25, 0.5, 0.75])
+    k = {"ka": np.array([0.1, 0.2, 0.3]), "kd": np.array([0.4, 0.5, 0.6]), "ks": np.array([0.7, 0.8, 0.9])}
+    value = np.array([0.25, 0.5, 0.75])
+    base_w = MaterialW()
+    base_w.ka, base_w.kd, base_w.ks = (wp.vec3(*k[name]) for name in ("ka", "kd", "ks"))
+    out = wp.zeros((3, 6), dtype=wp.vec3)
+    wp.launch(textured_material_kernel, dim=3, inputs=[wp.array([base_w], dtype=MaterialW), wp.vec3(*value), out])
+    warp_rows = out.numpy()
+    base_j = jm.MaterialJ(ka=jnp.array(k["ka"]), kd=jnp.array(k["kd"]), ks=jnp.array(k["ks"]), n=jnp.array(3.0),
+                          m=jnp.array(0.3), f0=jnp.array(0.04))
     for name, target in TEXTURE_TARGET_IDS.items():
-        out = jm.textured_material(base, target, value)
-        assert np.allclose(getattr(out, name), getattr(base, name) * value)
-        unit = jm.target_only(base, target)
-        for k in ("ka", "kd", "ks"):
-            assert np.allclose(getattr(unit, k), getattr(base, k) if k == name else 0.0)
+        textured = jm.textured_material(base_j, target, jnp.array(value))
+        unit = jm.target_only(base_j, target)
+        for col, coef in enumerate(("ka", "kd", "ks")):
+            want = k[coef] * value if coef == name else k[coef]
+            np.testing.assert_allclose(warp_rows[target, col], want, rtol=1e-7)
+            np.testing.assert_allclose(np.asarray(getattr(textured, coef)), want, rtol=1e-7)
+            want_unit = k[coef] if coef == name else 0.0
+            np.testing.assert_allclose(warp_rows[target, 3 + col], want_unit, rtol=1e-7)
+            np.testing.assert_allclose(np.asarray(getattr(unit, coef)), want_unit, rtol=1e-7)
