@@ -16,6 +16,7 @@ from .demos.examples import example_scene as example_scene
 from .errors import DifflabError as DifflabError
 from .errors import FitError as FitError
 from .errors import MeshError as MeshError
+from .errors import OutputError as OutputError
 from .errors import RenderError as RenderError
 from .errors import SceneError as SceneError
 from .errors import TextureError as TextureError
@@ -73,5 +74,5 @@ __all__ = [
     # fitting (lazy)
     "fit_material", "fit_scene", "identify", "FitResult", "Identifiability",
     # errors
-    "DifflabError", "SceneError", "MeshError", "TextureError", "RenderError", "FitError",
+    "DifflabError", "SceneError", "MeshError", "TextureError", "RenderError", "FitError", "OutputError",
 ]

@@ -8,14 +8,20 @@ from .errors import DifflabError
 from .vocabulary import MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS, SPECULAR_MODELS
 
 
+def add_force(parser) -> None:
+    """--force: the flag of the one overwrite rule (`io.refuse_overwrite`), the same in every command."""
+    parser.add_argument("--force", action="store_true", help="overwrite existing output files")
+
+
 def run_render(args) -> int:
-    from .io import save_image
+    from .io import refuse_overwrite, save_image
     from .renderers.api import render_frame
 
+    out = Path(args.output)
+    refuse_overwrite(out, *([out.with_suffix(".npy")] if args.linear else []), force=args.force)
     frame = render_frame(args.scene, method=args.method, shading=args.shading, specular=args.specular,
                          max_depth=args.max_depth, spp=args.spp, device=args.device, width=args.width,
                          height=args.height)
-    out = Path(args.output)
     if args.linear:
         save_image(out.with_suffix(".npy"), frame.image)
     save_image(out, frame.image)
@@ -40,12 +46,15 @@ def add_render(sub) -> None:
     p.add_argument("--max-depth", type=int, help=f"ray-tree depth, 1..{MAX_DEPTH_LIMIT} (ray tracer)")
     p.add_argument("--linear", action="store_true", help="also write the linear float image as .npy")
     p.add_argument("--device", default="cpu", help="cpu (default) or cuda")
+    add_force(p)
     p.set_defaults(func=run_render)
 
 
 def run_demo(args) -> int:
     from .demos import run_demo as demo
+    from .io import refuse_overwrite
 
+    refuse_overwrite(args.output, force=args.force)
     demo(Path(args.output), quick=args.quick)
     return 0
 
@@ -54,12 +63,15 @@ def add_demo(sub) -> None:
     p = sub.add_parser("demo", help="write the lecture's comparison figures to a folder")
     p.add_argument("-o", "--output", default="difflab-demo", help="folder for the figures (default: ./difflab-demo)")
     p.add_argument("--quick", action="store_true", help="smaller images")
+    add_force(p)
     p.set_defaults(func=run_demo, output_is_folder=True)
 
 
 def run_fractal(args) -> int:
     from .demos.fractals import CURVES, fractal_figure
+    from .io import refuse_overwrite
 
+    refuse_overwrite(args.output, force=args.force)
     options = {"order": args.order} if args.order is not None else {}
     if args.kind not in CURVES:
         options.update(seed=args.seed, hurst=args.hurst, max_iter=args.max_iter, device=args.device)
@@ -86,6 +98,7 @@ def add_fractal(sub) -> None:
     p.add_argument("--hurst", type=float, default=0.8, help="terrain roughness (Hurst exponent in (0, 1))")
     p.add_argument("--max-iter", type=int, default=256, help="escape-time iterations")
     p.add_argument("--device", default="cpu")
+    add_force(p)
     p.set_defaults(func=run_fractal)
 
 

@@ -33,5 +33,9 @@ class RenderError(DifflabError, ValueError):
     """A render request cannot be carried out (bad size, unknown option, device not available)."""
 
 
+class OutputError(DifflabError, ValueError):
+    """An output would overwrite an existing file (or a non-empty folder) and --force was not given."""
+
+
 class FitError(DifflabError, RuntimeError):
     """A fit was given bad input, or failed and was asked to raise (`throw=True`)."""

@@ -21,7 +21,7 @@ import numpy as np
 from PIL import Image
 
 from . import limits
-from .errors import DifflabError
+from .errors import DifflabError, OutputError
 from .limits import short_path, shorten
 
 _UMASK = os.umask(0o022)  # read the process umask once (setting it is not thread-safe), then restore it
@@ -114,6 +114,16 @@ def check_output_path(path: str | os.PathLike, what: str = "output", create_pare
     if not os.access(parent, os.W_OK | os.X_OK):
         raise DifflabError(f"{what}: folder {short_path(parent)} is not writable")
     return path
+
+
+def refuse_overwrite(*paths, force: bool = False) -> None:
+    """The one rule of every command: an output that exists (a file, or a folder with anything in
+    it) is not overwritten unless `force`. Raises OutputError naming the first such path; call it
+    before any work, so a refused command writes nothing."""
+    for path in map(Path, paths):
+        taken = any(path.iterdir()) if path.is_dir() else path.exists()
+        if taken and not force:
+            raise OutputError(f"{short_path(path)}: exists; use --force to overwrite")
 
 
 @contextlib.contextmanager

@@ -114,3 +114,100 @@ def test_demo_writes_every_figure(tmp_path):
     for name in ["shading_models.png", "decomposition.png", "materials.png", "materials.csv", "fractal_koch.png"]:
         assert (tmp_path / name).stat().st_size > 100, name
         assert name in result.stdout
+
+
+# ---- one overwrite rule for every command, exit codes through the real main ----------------------
+
+
+def overwrite_cases(tmp_path):
+    """(argv, output) of each command at a tiny size, writing to `output`."""
+    scene = tiny_scene(tmp_path)
+    return {
+        "render": (["render", str(scene), "-o", str(tmp_path / "r.png"), "--width", "8", "--height", "8"],
+                   tmp_path / "r.png"),
+        "fractal": (["fractal", "koch", "-o", str(tmp_path / "k.png"), "--width", "32", "--height", "24",
+                     "--order", "2"], tmp_path / "k.png"),
+        "demo": (["demo", "--quick", "-o", str(tmp_path / "demo")], tmp_path / "demo"),
+        "fit": (["fit", str(scene), str(tmp_path / "target.npy"), "--material", "m", "--params", "kd",
+                 "-o", str(tmp_path / "fitted.json")], tmp_path / "fitted.json"),
+    }
+
+
+@pytest.mark.parametrize("command", ["render", "fractal", "demo", "fit"])
+def test_no_command_overwrites_without_force(tmp_path, capsys, command):
+    """An existing output (for demo: a folder with a file in it) is refused with exit 2, one line
+    naming it and the flag, and left as it was; --force overwrites it."""
+    argv, output = overwrite_cases(tmp_path)[command]
+    save_image(tmp_path / "target.npy", np.full((32, 32, 3), 0.2, np.float32))
+    if command == "demo":
+        output.mkdir()
+        (output / "mine.txt").write_text("keep")
+        probe = output / "mine.txt"
+    else:
+        output.write_text("keep")
+        probe = output
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"difflab: error: {output}: exists; use --force to overwrite"
+    assert probe.read_text() == "keep"
+    if command in ("render", "fractal"):  # the demo runs once, in test_demo_writes_every_figure; fits in test_fit_cli
+        assert main([*argv, "--force"]) == 0
+        assert output.stat().st_size > 100 and output.read_bytes() != b"keep"
+
+
+def test_render_refuses_to_overwrite_the_linear_npy(tmp_path, capsys):
+    scene = tiny_scene(tmp_path)
+    (tmp_path / "o.npy").write_text("keep")
+    assert main(["render", str(scene), "-o", str(tmp_path / "o.png"), "--linear", "--width", "8", "--height", "8"]) == 2
+    assert "o.npy: exists" in capsys.readouterr().err
+    assert not (tmp_path / "o.png").exists() and (tmp_path / "o.npy").read_text() == "keep"
+
+
+def test_an_internal_error_exits_1_with_a_traceback(tmp_path, capsys, monkeypatch):
+    """A bug (not a DifflabError) is exit 1 through the real main, with the traceback to report."""
+    from difflab import commands
+
+    def broken(args):
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr(commands, "run_render", broken)  # main builds its parser at each call
+    assert main(["render", str(tiny_scene(tmp_path)), "-o", str(tmp_path / "o.png")]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "ZeroDivisionError: a bug" in err
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_render_command_ray_traces_with_the_given_depth_and_specular(tmp_path):
+    """--method raytrace --max-depth --specular reach the renderer: the written linear image equals
+    difflab.render with the same overrides, and differs when the flag differs."""
+    from difflab import render
+
+    d = json.loads(tiny_scene(tmp_path).read_text())
+    d["objects"].append({"type": "plane", "point": [0, -0.8, 0], "normal": [0, 1, 0], "material": "floor"})
+    d["materials"]["floor"] = {"kd": [0.3] * 3, "kr": 0.5}
+    d["materials"]["m"]["kr"] = 0.5
+    scene = tmp_path / "mirror.json"
+    scene.write_text(json.dumps(d))
+    images = {}
+    for depth, specular in [(1, "phong"), (3, "phong"), (3, "blinn")]:
+        out = tmp_path / f"d{depth}{specular}.npy"
+        assert main(["render", str(scene), "-o", str(out), "--method", "raytrace", "--max-depth", str(depth),
+                     "--specular", specular, "--width", "16", "--height", "16"]) == 0
+        images[depth, specular] = load_image(out)
+        want = render(d, method="raytrace", max_depth=depth, specular=specular, width=16, height=16)
+        np.testing.assert_array_equal(images[depth, specular], want)
+    assert np.abs(images[3, "phong"] - images[1, "phong"]).max() > 0.05  # reflections appear
+    assert np.abs(images[3, "blinn"] - images[3, "phong"]).max() > 0.01  # another highlight
+
+
+def test_linear_8_bit_files_skip_the_srgb_curve(tmp_path):
+    """srgb=False writes round(255 clip(x)) and reads back k / 255, no transfer curve either way."""
+    image = np.array([[[0.0, 0.2, 0.5], [0.75, 1.0, 1.7]]], np.float32)
+    save_image(tmp_path / "lin.png", image, srgb=False)
+    with Image.open(tmp_path / "lin.png") as png:
+        stored = np.asarray(png)[..., :3]
+    np.testing.assert_array_equal(stored, np.round(np.clip(image, 0, 1) * 255).astype(np.uint8))
+    np.testing.assert_allclose(load_image(tmp_path / "lin.png", srgb=False), stored / 255.0, atol=1e-7)
+    save_image(tmp_path / "enc.png", image)  # the default encodes: mid-grey is stored brighter
+    np.testing.assert_allclose(load_image(tmp_path / "enc.png", srgb=False)[0, 0, 2],
+                               np.round(255 * linear_to_srgb(0.5)) / 255, atol=1e-7)

@@ -20,6 +20,7 @@ EXIT_OK, EXIT_NOT_CONVERGED = 0, 3
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Add the `fit` subcommand to an argparse subparsers object."""
+    from ..commands import add_force
     from .solve import SOLVERS
 
     p = subparsers.add_parser("fit", help="fit material coefficients to target images",
@@ -40,21 +41,19 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--max-steps", type=int, default=256)
     p.add_argument("--float32", action="store_true", help="compute in float32 (default float64)")
     p.add_argument("--device", default="cpu", help="where Warp renders the G-buffers (cpu | cuda)")
-    p.add_argument("--force", action="store_true", help="overwrite existing output files")
+    add_force(p)
     p.set_defaults(func=run)
     return p
 
 
 def run(args) -> int:
-    from ..io import write_json_atomic
+    from ..io import refuse_overwrite, write_json_atomic
     from ..scene import save_scene
     from .fit import fit_material
 
     output = Path(args.output)
     report = Path(args.report) if args.report else output.with_name(output.stem + ".fit.json")
-    for path in (output, report):
-        if path.exists() and not args.force:
-            raise FitError(f"{path}: exists; use --force to overwrite")
+    refuse_overwrite(output, report, force=args.force)
     if args.max_steps < 1:
         raise FitError(f"--max-steps: must be >= 1, got {args.max_steps}")
     masks = args.mask
