@@ -64,7 +64,9 @@ class CompiledScene:
 
 def object_mesh(obj, base_dir=None) -> geometry.TriMesh:
     """The world-space triangle mesh of a scene `Mesh` object (smooth or faceted normals)."""
-    if obj.file is not None:
+    if obj.vertices is not None:
+        mesh = geometry.TriMesh(obj.vertices, obj.faces, obj.normals, obj.uvs)
+    elif obj.file is not None:
         mesh = geometry.load_mesh(obj.file)
     elif obj.builtin == "teapot":
         mesh = geometry.teapot(obj.resolution)

@@ -6,6 +6,8 @@ import dataclasses
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+import numpy as np
+
 from ._check import check_keys, existing_file, join, mapping
 
 
@@ -13,6 +15,8 @@ def plain(value) -> Any:
     """A JSON-able copy: records become dicts, tuples become lists."""
     if isinstance(value, Record):
         return value.to_dict()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
     if isinstance(value, (tuple, list)):
         return [plain(v) for v in value]
     if isinstance(value, Mapping):

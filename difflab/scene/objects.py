@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import hashlib
+from dataclasses import dataclass, fields
 from typing import ClassVar, Union
 
+import numpy as np
+
+from ..errors import MeshError, SceneError
+from ..geometry import TriMesh
 from ._check import (Vec3, boolean, choice, coordinate, existing_file, fail, integer, join, mapping,
                      number, point3, show, string, unit3, vec3)
 from ._record import Record
@@ -107,17 +112,47 @@ class Plane(Record):
         return {"type": self.TYPE, **super().to_dict()}
 
 
-@dataclass(frozen=True)
+#: The fields of a mesh given as arrays (`vertices` and `faces` required together).
+ARRAY_FIELDS = ("vertices", "faces", "normals", "uvs")
+
+
+def _arrays(v: dict, path: str) -> dict:
+    """vertices (V, 3), faces (F, 3) and optional normals (V, 3), uvs (V, 2), validated as a file's
+    mesh is (`geometry.TriMesh`: finite, indices in range, at least one face), read-only arrays."""
+    if v["faces"] is None:
+        fail(join(path, "faces"), "required with 'vertices'")
+    try:
+        mesh = TriMesh(v["vertices"], v["faces"], v["normals"], v["uvs"], name=path)
+    except MeshError as exc:
+        raise SceneError(str(exc)) from None
+    return {"vertices": mesh.vertices, "faces": mesh.faces, "normals": mesh.normals, "uvs": mesh.uvs}
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.shape == b.shape and np.array_equal(a, b)
+    return a == b
+
+
+@dataclass(frozen=True, eq=False)
 class Mesh(Record):
-    """A triangle mesh: exactly one of `file` (OBJ/PLY..., absolute path once loaded) or `builtin`
-    ("teapot" | "sphere" | "box" | "cylinder" | "quad", tessellated at `resolution`, 1..1024: the
-    teapot's steps per patch side, the sphere's latitude bands (2x as many segments), the cylinder's
-    segments / 4, the quad's and each box side's cells per edge).
-    smooth: interpolate vertex normals (else faceted). transform: object-to-world Transform."""
+    """A triangle mesh from exactly one source: `file` (OBJ/PLY..., absolute path once loaded),
+    `builtin` ("teapot" | "sphere" | "box" | "cylinder" | "quad", tessellated at `resolution`,
+    1..1024: the teapot's steps per patch side, the sphere's latitude bands (2x as many segments),
+    the cylinder's segments / 4, the quad's and each box side's cells per edge), or arrays given from
+    Python or inline in the file: `vertices` (V, 3) and `faces` (F, 3) vertex indices,
+    counter-clockwise seen from the front, with optional per-vertex `normals` (V, 3) and `uvs`
+    (V, 2) -- validated as a file's mesh is, stored as read-only numpy arrays.
+    smooth: interpolate vertex normals (else faceted). transform: object-to-world Transform.
+    Meshes compare equal when every field (and every array element) is equal."""
 
     material: str
     file: str | None = None
     builtin: str | None = None
+    vertices: np.ndarray | None = None
+    faces: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    uvs: np.ndarray | None = None
     resolution: int = 8
     smooth: bool = True
     transform: Transform = Transform()
@@ -131,26 +166,48 @@ class Mesh(Record):
     def _check(cls, v: dict, path: str) -> dict:
         p = lambda name: join(path, name)  # noqa: E731
         material = string(v["material"], p("material"))
-        file, builtin = v["file"], v["builtin"]
-        if file is None and builtin is None:
-            fail(path, "needs one of 'file' or 'builtin'")
-        if file is not None and builtin is not None:
-            fail(p("builtin"), "give either 'file' or 'builtin', not both")
+        file, builtin, vertices = v["file"], v["builtin"], v["vertices"]
+        given = [key for key, value in (("file", file), ("builtin", builtin), ("vertices", vertices)) if value is not None]
+        if not given:
+            fail(path, "needs one of 'file', 'builtin' or 'vertices' (with 'faces')")
+        if len(given) > 1:
+            fail(p(given[1]), f"give one of 'file', 'builtin' or 'vertices', not {' and '.join(repr(g) for g in given)}")
+        if vertices is None:
+            for key in ARRAY_FIELDS[1:]:
+                if v[key] is not None:
+                    fail(p(key), "only used with 'vertices'")
         if file is not None:
             file = existing_file(file, p("file"))
         if builtin is not None:
             builtin = choice(builtin, p("builtin"), BUILTIN_MESHES)
+        arrays = dict.fromkeys(ARRAY_FIELDS) if vertices is None else _arrays(v, path)
         transform = v["transform"]
         if not isinstance(transform, Transform):
             fail(p("transform"), f"expected a Transform, got {show(transform)}")
         return dict(
-            material=material, file=file, builtin=builtin,
+            material=material, file=file, builtin=builtin, **arrays,
             resolution=integer(v["resolution"], p("resolution"), ge=1, le=MAX_RESOLUTION),
             smooth=boolean(v["smooth"], p("smooth")), transform=transform,
         )
 
     def to_dict(self) -> dict:
-        return {"type": self.TYPE, **super().to_dict()}
+        """The JSON form: only the fields of the mesh's source (arrays as nested lists)."""
+        d = super().to_dict()
+        for key in ("file", "builtin", *ARRAY_FIELDS):
+            if d[key] is None:
+                del d[key]
+        return {"type": self.TYPE, **d}
+
+    def __eq__(self, other) -> bool:
+        if type(other) is not Mesh:
+            return NotImplemented
+        return all(_same(getattr(self, f.name), getattr(other, f.name)) for f in fields(self))
+
+    def __hash__(self) -> int:
+        def key(value):
+            return hashlib.sha1(value.tobytes()).hexdigest() if isinstance(value, np.ndarray) else value
+
+        return hash(tuple(key(getattr(self, f.name)) for f in fields(self)))
 
 
 SceneObject = Union[Sphere, Plane, Mesh]
