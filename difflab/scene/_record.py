@@ -8,7 +8,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ._check import check_keys, existing_file, join, mapping
+from ._check import check_keys, existing_file, fail, join, mapping, show
+from ._spec import spec_of
 
 
 def plain(value) -> Any:
@@ -27,16 +28,16 @@ def plain(value) -> Any:
 class Record:
     """Base of the frozen scene dataclasses.
 
-    Subclasses implement `_check(values, path) -> values`, which validates and normalises every field
-    (idempotently) and raises `SceneError` naming `path.field`. It runs on direct construction (with
-    the class's `_PATH` as prefix) and in `parse` (with the position in the file as prefix).
+    Each field declares a `Spec` (`_spec.spec_field`) that validates it, documents it and gives its
+    JSON Schema. `_check(values, path) -> values` validates and normalises every field
+    (idempotently) and raises `SceneError` naming `path.field`: by default field by field through the
+    specs; records with rules across fields extend it. It runs on direct construction (with the
+    class's `_PATH` as prefix) and in `parse` (with the position in the file as prefix).
     """
 
     _PATH: ClassVar[str] = ""
-    #: field name -> Record subclass parsed from a nested JSON object
-    _NESTED: ClassVar[dict[str, type]] = {}
-    #: fields holding file paths, resolved against the scene file's folder when parsed
-    _FILES: ClassVar[tuple[str, ...]] = ()
+    #: The value of the JSON object's "type" key that selects this record (scene objects), or None.
+    TYPE: ClassVar[str | None] = None
 
     def __post_init__(self) -> None:
         values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
@@ -45,8 +46,19 @@ class Record:
 
     @classmethod
     def _check(cls, values: dict, path: str) -> dict:
-        """Validated (and normalised) field values; every record type overrides this with its rules."""
-        return values
+        """Validated (and normalised) field values: each field checked by its spec."""
+        out = dict(values)
+        for f in cls.spec_fields():
+            spec, value, where = spec_of(f), values[f.name], join(path, f.name)
+            if spec.kind == "record" and not (isinstance(value, spec.record) or (value is None and spec.nullable)):
+                fail(where, f"expected a {spec.record.__name__}, got {show(value)}")
+            out[f.name] = spec.check(value, where)
+        return out
+
+    @classmethod
+    def spec_fields(cls) -> tuple[dataclasses.Field, ...]:
+        """The fields of the JSON form, in order (those that carry a Spec)."""
+        return tuple(f for f in dataclasses.fields(cls) if spec_of(f) is not None)
 
     @classmethod
     def _defaults(cls) -> tuple[dict, tuple[str, ...]]:
@@ -74,11 +86,11 @@ class Record:
         for key in extra_keys:
             d.pop(key, None)
         values = {**defaults, **d}
-        for name, sub in cls._NESTED.items():
-            if name in d and not (d[name] is None and defaults.get(name, ...) is None):
-                values[name] = sub.parse(d[name], join(path, name), base_dir)
-        for name in cls._FILES:
-            if values.get(name) is not None:
+        for f in cls.spec_fields():
+            spec, name = spec_of(f), f.name
+            if spec.kind == "record" and name in d and not (d[name] is None and spec.nullable):
+                values[name] = spec.record.parse(d[name], join(path, name), base_dir)
+            if spec.kind == "file" and values.get(name) is not None:
                 values[name] = existing_file(values[name], join(path, name), base_dir)
         return cls(**cls._check(values, path))
 

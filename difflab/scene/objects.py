@@ -10,9 +10,9 @@ import numpy as np
 
 from ..errors import MeshError, SceneError
 from ..geometry import TriMesh
-from ._check import (Vec3, boolean, choice, coordinate, existing_file, fail, integer, join, mapping,
-                     number, point3, show, string, unit3, vec3)
+from ._check import Vec3, choice, coordinate, fail, join, mapping, number, show
 from ._record import Record
+from ._spec import Spec, bounds, spec_field
 
 BUILTIN_MESHES = ("teapot", "sphere", "box", "cylinder", "quad")
 #: Largest tessellation resolution of a mesh (keeps the triangle count within memory).
@@ -38,52 +38,58 @@ def _matrix(value, path: str) -> tuple[float, ...]:
     return m
 
 
+NUMBERS = {"type": "number"}
+MATRIX_JSON = {"description": "16 numbers (row-major 4x4, last row 0 0 0 1) or 4 rows of 4",
+               "anyOf": [{"type": "array", "items": NUMBERS, "minItems": 16, "maxItems": 16},
+                         {"type": "array", "minItems": 4, "maxItems": 4,
+                          "items": {"type": "array", "items": NUMBERS, "minItems": 4, "maxItems": 4}}]}
+
+
+def rows_of(width: int, items: dict, description: str) -> dict:
+    """The JSON Schema of an (N, width) array given as a list of rows."""
+    return {"description": description, "type": "array", "minItems": 1,
+            "items": {"type": "array", "items": items, "minItems": width, "maxItems": width}}
+
+
 @dataclass(frozen=True)
 class Transform(Record):
-    """Object-to-world transform of a mesh: scale, then rotate (degrees, about X then Y then Z, about
-    the object origin), then translate (scene units); then `matrix` (16 floats, row-major 4x4, affine)
-    if given. scale: per-axis factors, non-zero (one number means uniform)."""
+    """Object-to-world transform of a mesh: scale, then rotate (about X, then Y, then Z, about the
+    object origin), then translate; then `matrix` if given."""
 
-    translate: Vec3 = (0.0, 0.0, 0.0)
-    rotate_deg: Vec3 = (0.0, 0.0, 0.0)
-    scale: Vec3 = (1.0, 1.0, 1.0)
-    matrix: tuple[float, ...] | None = None
+    translate: Vec3 = spec_field(Spec("point3", "translation", "scene units"), (0.0, 0.0, 0.0))
+    rotate_deg: Vec3 = spec_field(Spec("vec3", "rotation about X, then Y, then Z", "degrees"), (0.0, 0.0, 0.0))
+    scale: Vec3 = spec_field(Spec("vec3", "per-axis scale factors, non-zero (one number: uniform)", grey=True),
+                             (1.0, 1.0, 1.0))
+    matrix: tuple[float, ...] | None = spec_field(
+        Spec("custom", "an affine, invertible matrix applied after the rest", nullable=True, json=MATRIX_JSON), None)
 
     _PATH: ClassVar[str] = "transform"
 
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:
-        scale = vec3(v["scale"], join(path, "scale"), grey=True)
-        for i, s in enumerate(scale):
+        out = super()._check(v, path)
+        for i, s in enumerate(out["scale"]):
             if s == 0.0:
                 fail(f"{join(path, 'scale')}[{i}]", "must not be zero")
             coordinate(s, f"{join(path, 'scale')}[{i}]")
-        return dict(
-            translate=point3(v["translate"], join(path, "translate")),
-            rotate_deg=vec3(v["rotate_deg"], join(path, "rotate_deg")),
-            scale=scale,
-            matrix=None if v["matrix"] is None else _matrix(v["matrix"], join(path, "matrix")),
-        )
+        if out["matrix"] is not None:
+            out["matrix"] = _matrix(out["matrix"], join(path, "matrix"))
+        return out
+
+
+MATERIAL_NAME = Spec("string", "name of a material defined in `materials`")
 
 
 @dataclass(frozen=True)
 class Sphere(Record):
-    """An analytic sphere: center (scene units), radius (> 0), material name."""
+    """An analytic sphere (ray-traced exactly; tessellated finely enough by the rasterizer)."""
 
-    center: Vec3
-    radius: float
-    material: str
+    center: Vec3 = spec_field(Spec("point3", "centre", "scene units"))
+    radius: float = spec_field(Spec("coordinate", "radius", "scene units", bounds(gt=0)))
+    material: str = spec_field(MATERIAL_NAME)
 
     TYPE: ClassVar[str] = "sphere"
     _PATH: ClassVar[str] = "sphere"
-
-    @classmethod
-    def _check(cls, v: dict, path: str) -> dict:
-        return dict(
-            center=point3(v["center"], join(path, "center")),
-            radius=coordinate(v["radius"], join(path, "radius"), gt=0),
-            material=string(v["material"], join(path, "material")),
-        )
 
     def to_dict(self) -> dict:
         return {"type": self.TYPE, **super().to_dict()}
@@ -91,22 +97,14 @@ class Sphere(Record):
 
 @dataclass(frozen=True)
 class Plane(Record):
-    """An infinite analytic plane through `point` with unit `normal` (stored normalised); material name."""
+    """An infinite analytic plane (the rasterizer draws a large quad clipped to the view)."""
 
-    point: Vec3
-    normal: Vec3
-    material: str
+    point: Vec3 = spec_field(Spec("point3", "a point on the plane", "scene units"))
+    normal: Vec3 = spec_field(Spec("unit3", "normal, the side the plane faces (stored normalised)"))
+    material: str = spec_field(MATERIAL_NAME)
 
     TYPE: ClassVar[str] = "plane"
     _PATH: ClassVar[str] = "plane"
-
-    @classmethod
-    def _check(cls, v: dict, path: str) -> dict:
-        return dict(
-            point=point3(v["point"], join(path, "point")),
-            normal=unit3(v["normal"], join(path, "normal")),
-            material=string(v["material"], join(path, "material")),
-        )
 
     def to_dict(self) -> dict:
         return {"type": self.TYPE, **super().to_dict()}
@@ -134,61 +132,52 @@ def _same(a, b) -> bool:
     return a == b
 
 
+def _array_field(width: int, items: dict, doc: str):
+    return spec_field(Spec("custom", doc, nullable=True, json=rows_of(width, items, doc)), None)
+
+
 @dataclass(frozen=True, eq=False)
 class Mesh(Record):
-    """A triangle mesh from exactly one source: `file` (OBJ/PLY..., absolute path once loaded),
-    `builtin` ("teapot" | "sphere" | "box" | "cylinder" | "quad", tessellated at `resolution`,
-    1..1024: the teapot's steps per patch side, the sphere's latitude bands (2x as many segments),
-    the cylinder's segments / 4, the quad's and each box side's cells per edge), or arrays given from
-    Python or inline in the file: `vertices` (V, 3) and `faces` (F, 3) vertex indices,
-    counter-clockwise seen from the front, with optional per-vertex `normals` (V, 3) and `uvs`
-    (V, 2) -- validated as a file's mesh is, stored as read-only numpy arrays.
-    smooth: interpolate vertex normals (else faceted). transform: object-to-world Transform.
-    Meshes compare equal when every field (and every array element) is equal."""
+    """A triangle mesh from exactly one source: `file`, `builtin`, or `vertices` + `faces` arrays
+    (from Python, or inline in the file; validated as a file's mesh is and stored as read-only numpy
+    arrays, with optional per-vertex `normals` and `uvs`). Meshes compare equal when every field
+    (and every array element) is equal."""
 
-    material: str
-    file: str | None = None
-    builtin: str | None = None
-    vertices: np.ndarray | None = None
-    faces: np.ndarray | None = None
-    normals: np.ndarray | None = None
-    uvs: np.ndarray | None = None
-    resolution: int = 8
-    smooth: bool = True
-    transform: Transform = Transform()
+    material: str = spec_field(MATERIAL_NAME)
+    file: str | None = spec_field(Spec("file", "mesh file (OBJ, PLY, ... read by trimesh)", nullable=True), None)
+    builtin: str | None = spec_field(
+        Spec("choice", "a built-in shape (the Utah teapot, or a unit sphere, box, cylinder or quad)",
+             options=BUILTIN_MESHES, nullable=True), None)
+    vertices: np.ndarray | None = _array_field(3, NUMBERS, "(V, 3) vertex positions")
+    faces: np.ndarray | None = _array_field(3, {"type": "integer", "minimum": 0},
+                                            "(F, 3) vertex indices, counter-clockwise seen from the front")
+    normals: np.ndarray | None = _array_field(3, NUMBERS, "(V, 3) per-vertex normals (with vertices)")
+    uvs: np.ndarray | None = _array_field(2, NUMBERS, "(V, 2) per-vertex texture coordinates (with vertices)")
+    resolution: int = spec_field(
+        Spec("integer", "tessellation of a builtin: the teapot's steps per patch side, the sphere's latitude "
+             "bands (2x as many segments), the cylinder's segments / 4, the quad's and each box side's cells "
+             "per edge", bounds=bounds(ge=1, le=MAX_RESOLUTION)), 8)
+    smooth: bool = spec_field(Spec("boolean", "interpolate vertex normals (false: faceted)"), True)
+    transform: Transform = spec_field(Spec("record", "object-to-world transform", record=Transform), Transform())
 
     TYPE: ClassVar[str] = "mesh"
     _PATH: ClassVar[str] = "mesh"
-    _NESTED: ClassVar[dict] = {"transform": Transform}
-    _FILES: ClassVar[tuple] = ("file",)
 
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:
         p = lambda name: join(path, name)  # noqa: E731
-        material = string(v["material"], p("material"))
-        file, builtin, vertices = v["file"], v["builtin"], v["vertices"]
-        given = [key for key, value in (("file", file), ("builtin", builtin), ("vertices", vertices)) if value is not None]
+        out = super()._check(v, path)
+        given = [key for key in ("file", "builtin", "vertices") if out[key] is not None]
         if not given:
             fail(path, "needs one of 'file', 'builtin' or 'vertices' (with 'faces')")
         if len(given) > 1:
             fail(p(given[1]), f"give one of 'file', 'builtin' or 'vertices', not {' and '.join(repr(g) for g in given)}")
-        if vertices is None:
+        if out["vertices"] is None:
             for key in ARRAY_FIELDS[1:]:
-                if v[key] is not None:
+                if out[key] is not None:
                     fail(p(key), "only used with 'vertices'")
-        if file is not None:
-            file = existing_file(file, p("file"))
-        if builtin is not None:
-            builtin = choice(builtin, p("builtin"), BUILTIN_MESHES)
-        arrays = dict.fromkeys(ARRAY_FIELDS) if vertices is None else _arrays(v, path)
-        transform = v["transform"]
-        if not isinstance(transform, Transform):
-            fail(p("transform"), f"expected a Transform, got {show(transform)}")
-        return dict(
-            material=material, file=file, builtin=builtin, **arrays,
-            resolution=integer(v["resolution"], p("resolution"), ge=1, le=MAX_RESOLUTION),
-            smooth=boolean(v["smooth"], p("smooth")), transform=transform,
-        )
+            return out
+        return {**out, **_arrays(out, path)}
 
     def to_dict(self) -> dict:
         """The JSON form: only the fields of the mesh's source (arrays as nested lists)."""

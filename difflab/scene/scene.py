@@ -14,8 +14,13 @@ from ..errors import SceneError
 from ._check import Vec3, check_keys, fail, join, mapping, sequence, show, string, vec3
 from ._record import FrozenDict, Record, plain
 from .material import Material
-from .objects import Mesh, Plane, SceneObject, Sphere, parse_object
+from ._spec import Spec, colour, spec_field
+from .objects import OBJECT_TYPES, Mesh, Plane, SceneObject, Sphere, parse_object
 from .view import MAX_PIXELS, Camera, Fog, Light, RenderSettings
+
+def list_of(record) -> dict:
+    return {"description": f"list of {record.__name__}", "type": "array", "items": {"$ref": f"#/$defs/{record.__name__}"}}
+
 
 SCENE_KEYS = ("camera", "ambient", "background", "lights", "materials", "objects", "fog", "render")
 #: The optional top-level key naming the file's JSON Schema (for editors); checked to be a string, not kept.
@@ -38,14 +43,20 @@ class Scene(Record):
     were resolved against (informational: not compared, not serialised; file paths are absolute).
     """
 
-    camera: Camera
-    ambient: Vec3 = (0.0, 0.0, 0.0)
-    background: Vec3 = (0.0, 0.0, 0.0)
-    lights: tuple[Light, ...] = ()
-    materials: Mapping[str, Material] = field(default_factory=FrozenDict)
-    objects: tuple[SceneObject, ...] = ()
-    fog: Fog | None = None
-    render: RenderSettings = RenderSettings()
+    camera: Camera = spec_field(Spec("record", "the view", record=Camera))
+    ambient: Vec3 = spec_field(colour("ambient light Ia"), (0.0, 0.0, 0.0))
+    background: Vec3 = spec_field(colour("colour of rays that hit nothing"), (0.0, 0.0, 0.0))
+    lights: tuple[Light, ...] = spec_field(Spec("custom", "the lights", json=list_of(Light)), ())
+    materials: Mapping[str, Material] = spec_field(
+        Spec("custom", "named materials; an object's material id is its name's position here",
+             json={"description": "object: name -> Material", "type": "object",
+                   "additionalProperties": {"$ref": "#/$defs/Material"}}), FrozenDict())
+    objects: tuple[SceneObject, ...] = spec_field(
+        Spec("custom", "the objects (required)",
+             json={"description": "list of Sphere | Plane | Mesh (by \"type\")", "type": "array",
+                   "items": {"oneOf": [{"$ref": f"#/$defs/{t.__name__}"} for t in OBJECT_TYPES.values()]}}), ())
+    fog: Fog | None = spec_field(Spec("record", "depth cueing / fog", record=Fog, nullable=True), None)
+    render: RenderSettings = spec_field(Spec("record", "render settings", record=RenderSettings), RenderSettings())
     base_dir: str | None = field(default=None, compare=False)
 
     _PATH: ClassVar[str] = ""

@@ -8,9 +8,9 @@ from typing import ClassVar
 
 from ..vocabulary import (FOG_MODES, FRESNEL_MODES, INTERPOLATIONS, LIGHT_TYPES, MAX_DEPTH_LIMIT, MAX_SPP, METHODS,
                           PROJECTIONS, SAMPLINGS, SHADING_MODELS, SPECULAR_MODELS)
-from ._check import (Vec3, boolean, choice, coordinate, fail, integer, join, normalised, number, point3,
-                     show, unit3, vec3)
+from ._check import Vec3, fail, integer, join, normalised, number, show
 from ._record import Record
+from ._spec import Spec, bounds, colour, spec_field
 
 #: Largest image (width * height) a scene may ask for: 64 megapixels, the memory budget of a frame
 #: and its G-buffer. A supersampled render's sample grid (width * height * spp) is held to it too.
@@ -33,32 +33,29 @@ def at_least(x: float, smallest: float, path: str) -> float:
 
 @dataclass(frozen=True)
 class Camera(Record):
-    """A pinhole (or orthographic) camera looking from `eye` at `target`, camera space looking down -z.
+    """A pinhole (or orthographic) camera looking from `eye` at `target`; camera space looks down -z.
+    width * height is at most MAX_PIXELS (64 megapixels); `up` must not be parallel to target - eye."""
 
-    eye, target, up: world-space points / direction (scene units). fov_y: vertical field of view in
-    degrees, 0 < fov_y < 180 (perspective). width, height: image size in pixels, each > 0 and
-    width * height <= MAX_PIXELS (64 megapixels). projection: "perspective" | "orthographic".
-    near, far: clip distances, 0 < near < far. ortho_height: full height of the orthographic view
-    volume in scene units (> 0).
-    """
-
-    eye: Vec3
-    target: Vec3
-    up: Vec3 = (0.0, 1.0, 0.0)
-    fov_y: float = 40.0
-    width: int = 320
-    height: int = 240
-    projection: str = "perspective"
-    near: float = 0.1
-    far: float = 100.0
-    ortho_height: float = 2.0
+    eye: Vec3 = spec_field(Spec("point3", "position of the eye", "scene units"))
+    target: Vec3 = spec_field(Spec("point3", "point looked at (differs from eye)", "scene units"))
+    up: Vec3 = spec_field(Spec("vec3", "up direction (not parallel to target - eye)"), (0.0, 1.0, 0.0))
+    fov_y: float = spec_field(Spec("number", "vertical field of view (perspective)", "degrees", bounds(gt=0, lt=180)),
+                              40.0)
+    width: int = spec_field(Spec("integer", "image width", "pixels", bounds(gt=0)), 320)
+    height: int = spec_field(Spec("integer", "image height", "pixels", bounds(gt=0)), 240)
+    projection: str = spec_field(Spec("choice", "projection", options=PROJECTIONS), "perspective")
+    near: float = spec_field(Spec("coordinate", "near clip distance", "scene units", bounds(gt=0)), 0.1)
+    far: float = spec_field(Spec("coordinate", "far clip distance (> near, far / near <= 1e6)", "scene units"), 100.0)
+    ortho_height: float = spec_field(Spec("coordinate", "full height of the orthographic view volume", "scene units",
+                                          bounds(gt=0)), 2.0)
 
     _PATH: ClassVar[str] = "camera"
 
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:
         p = lambda name: join(path, name)  # noqa: E731
-        eye, target, up = point3(v["eye"], p("eye")), point3(v["target"], p("target")), vec3(v["up"], p("up"))
+        out = super()._check(v, path)
+        eye, target, up = out["eye"], out["target"], out["up"]
         view = tuple(t - e for t, e in zip(target, eye))
         if math.hypot(*view) == 0.0:
             fail(p("target"), f"must differ from eye, got {list(target)}")
@@ -66,56 +63,46 @@ class Camera(Record):
         cross = (u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0])
         if not math.hypot(*cross) > 1e-6:
             fail(p("up"), f"must not be parallel to the view direction (target - eye), got {list(up)}")
-        width = integer(v["width"], p("width"), gt=0)
-        height = integer(v["height"], p("height"), gt=0)
+        width, height = out["width"], out["height"]
         if width * height > MAX_PIXELS:
             fail(p("width"), f"{width} x {height} = {width * height} pixels exceeds the memory budget "
                  f"of 64 megapixels ({MAX_PIXELS} pixels)")
-        near = coordinate(v["near"], p("near"), gt=0)
-        far = coordinate(v["far"], p("far"))
+        near, far = out["near"], out["far"]
         if not far > near:
             fail(p("far"), f"must be > near ({near}), got {show(v['far'])}")
         if far / near > MAX_FAR_NEAR:
             fail(p("near"), f"far / near = {far / near:.3g} is over {MAX_FAR_NEAR:.0e} (float32 depth and primary "
                  f"rays lose all precision); raise near or lower far")
-        return dict(
-            eye=eye, target=target, up=up,
-            fov_y=at_least(number(v["fov_y"], p("fov_y"), gt=0, lt=180), MIN_FOV_Y, p("fov_y")),
-            width=width, height=height,
-            projection=choice(v["projection"], p("projection"), PROJECTIONS),
-            near=near, far=far,
-            ortho_height=at_least(coordinate(v["ortho_height"], p("ortho_height"), gt=0), MIN_ORTHO_HEIGHT,
-                                  p("ortho_height")),
-        )
+        at_least(out["fov_y"], MIN_FOV_Y, p("fov_y"))
+        at_least(out["ortho_height"], MIN_ORTHO_HEIGHT, p("ortho_height"))
+        return out
 
 
 @dataclass(frozen=True)
 class Light(Record):
-    """A light source (OpenGL conventions).
+    """A light source (OpenGL conventions): "point" needs `position`; "directional" needs `direction`
+    (the way the light travels; no attenuation, att = 1); "spot" needs both and 0 < cutoff_deg <= 90.
+    att = 1 / (kc + kl d + kq d^2) with (kc, kl, kq) = attenuation, not all zero; a spot's falloff is
+    max(-L.D, 0)^exponent inside its cone."""
 
-    type: "point" (needs position), "directional" (needs direction: the direction the light
-    travels; attenuation is ignored, att = 1) or "spot" (needs both). direction is stored normalised.
-    intensity: linear RGB, >= 0. attenuation: (kc, kl, kq) of att = 1 / (kc + kl d + kq d^2),
-    non-negative and not all zero. cutoff_deg: half-angle of a spot's cone in degrees, 0 < c <= 90;
-    180 (no cone) for point and directional lights. exponent: spot falloff max(-L.D, 0)^exponent, >= 0.
-    """
-
-    type: str
-    position: Vec3 | None = None
-    direction: Vec3 | None = None
-    intensity: Vec3 = (1.0, 1.0, 1.0)
-    attenuation: Vec3 = (1.0, 0.0, 0.0)
-    cutoff_deg: float = 180.0
-    exponent: float = 0.0
+    type: str = spec_field(Spec("choice", "kind of light", options=tuple(LIGHT_TYPES)))
+    position: Vec3 | None = spec_field(Spec("point3", "position (point, spot)", "scene units", nullable=True), None)
+    direction: Vec3 | None = spec_field(Spec("unit3", "direction the light travels (directional, spot; stored "
+                                             "normalised)", nullable=True), None)
+    intensity: Vec3 = spec_field(colour("intensity Ip"), (1.0, 1.0, 1.0))
+    attenuation: Vec3 = spec_field(Spec("vec3", "(kc, kl, kq) of att = 1 / (kc + kl d + kq d^2), not all zero",
+                                        bounds=bounds(ge=0)), (1.0, 0.0, 0.0))
+    cutoff_deg: float = spec_field(Spec("number", "half-angle of a spot's cone, 0 < c <= 90 (180: no cone, the "
+                                        "only value for other lights)", "degrees"), 180.0)
+    exponent: float = spec_field(Spec("number", "spot falloff exponent", "", bounds(ge=0)), 0.0)
 
     _PATH: ClassVar[str] = "light"
 
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:
         p = lambda name: join(path, name)  # noqa: E731
-        kind = choice(v["type"], p("type"), LIGHT_TYPES)
-        position = None if v["position"] is None else point3(v["position"], p("position"))
-        direction = None if v["direction"] is None else unit3(v["direction"], p("direction"))
+        out = super()._check(v, path)
+        kind, position, direction = out["type"], out["position"], out["direction"]
         if kind in ("point", "spot") and position is None:
             fail(p("position"), f"required for a {kind} light")
         if kind == "directional" and position is not None:
@@ -124,53 +111,40 @@ class Light(Record):
             fail(p("direction"), f"required for a {kind} light")
         if kind == "point" and direction is not None:
             fail(p("direction"), "not used by a point light (use a spot light for a cone); remove it")
-        attenuation = vec3(v["attenuation"], p("attenuation"), ge=0)
-        if not any(attenuation):
+        if not any(out["attenuation"]):
             fail(p("attenuation"), "must not be all zero (kc + kl*d + kq*d^2 would be 0)")
-        cutoff = number(v["cutoff_deg"], p("cutoff_deg"))
+        cutoff = out["cutoff_deg"]
         if kind == "spot":
             if cutoff == 180.0:
                 fail(p("cutoff_deg"), "a spot light needs 0 < cutoff_deg <= 90 (180, the default, means "
                      f"no cone), got {show(v['cutoff_deg'])}")
-            cutoff = number(v["cutoff_deg"], p("cutoff_deg"), gt=0, le=90)
+            number(v["cutoff_deg"], p("cutoff_deg"), gt=0, le=90)
         elif cutoff != 180.0:
             fail(p("cutoff_deg"), f"only spot lights have a cone; must be 180 (no cone) for a {kind} "
                  f"light, got {show(v['cutoff_deg'])}")
-        return dict(
-            type=kind, position=position, direction=direction,
-            intensity=vec3(v["intensity"], p("intensity"), grey=True, ge=0),
-            attenuation=attenuation, cutoff_deg=cutoff,
-            exponent=number(v["exponent"], p("exponent"), ge=0),
-        )
+        return out
 
 
 @dataclass(frozen=True)
 class Fog(Record):
-    """Depth cueing / fog blended toward `color` (linear RGB, >= 0) by eye distance (scene units).
+    """Depth cueing / fog blended toward `color` by eye distance d (OpenGL GL_FOG): "linear"
+    f = (end - d) / (end - start), needs start < end; "exp" f = exp(-density d); "exp2"
+    f = exp(-(density d)^2)."""
 
-    mode "linear": f = (end - d) / (end - start), needs start < end. "exp": f = exp(-density d).
-    "exp2": f = exp(-(density d)^2). density >= 0. (OpenGL GL_FOG conventions.)
-    """
-
-    mode: str
-    color: Vec3 = (0.5, 0.5, 0.5)
-    start: float = 0.0
-    end: float = 1.0
-    density: float = 1.0
+    mode: str = spec_field(Spec("choice", "fog formula", options=tuple(FOG_MODES)))
+    color: Vec3 = spec_field(colour("fog colour"), (0.5, 0.5, 0.5))
+    start: float = spec_field(Spec("coordinate", "where linear fog begins", "scene units"), 0.0)
+    end: float = spec_field(Spec("coordinate", "where linear fog is complete (> start)", "scene units"), 1.0)
+    density: float = spec_field(Spec("number", "density of exp / exp2 fog", "per scene unit", bounds(ge=0)), 1.0)
 
     _PATH: ClassVar[str] = "fog"
 
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:
-        p = lambda name: join(path, name)  # noqa: E731
-        mode = choice(v["mode"], p("mode"), FOG_MODES)
-        start, end = coordinate(v["start"], p("start")), coordinate(v["end"], p("end"))
-        if mode == "linear" and not start < end:
-            fail(p("end"), f"must be > start ({start}) for linear fog, got {show(v['end'])}")
-        return dict(
-            mode=mode, color=vec3(v["color"], p("color"), grey=True, ge=0), start=start, end=end,
-            density=number(v["density"], p("density"), ge=0),
-        )
+        out = super()._check(v, path)
+        if out["mode"] == "linear" and not out["start"] < out["end"]:
+            fail(join(path, "end"), f"must be > start ({out['start']}) for linear fog, got {show(v['end'])}")
+        return out
 
 
 def _spp(value, path: str) -> int:
@@ -184,52 +158,34 @@ def _spp(value, path: str) -> int:
 
 @dataclass(frozen=True)
 class RenderSettings(Record):
-    """How to render: the scene file's "render" block; `difflab.render(...)` arguments override it.
+    """How to render: the scene file's "render" block; `difflab.render(...)` arguments override it."""
 
-    method "raster" | "raytrace"; shading "flat" | "gouraud" | "phong" (raster); specular "phong" |
-    "blinn" | "torrance"; shadows: cast shadow rays; max_depth: ray-tree depth, the primary ray counts
-    as 1 (1..64); spp: samples per pixel, a perfect square side^2 (1, 4, 9, ..., 4096) taken as a
-    side x side pattern in each pixel, "grid" (regular) or "stratified" (`sampling`);
-    fresnel "none" | "schlick" | "exact"; transparent_shadows: shadow rays are multiplied by kt at
-    each transparent surface; clamp_vertex_colors: clamp Gouraud vertex colours to [0, 1];
-    interpolation "perspective" | "affine"; cull_backfaces (raster); adaptive_threshold: Hall's
-    adaptive depth control, stop a ray whose weight falls below it (>= 0; 0 = off).
-    """
-
-    method: str = "raster"
-    shading: str = "phong"
-    specular: str = "phong"
-    shadows: bool = True
-    max_depth: int = 5
-    spp: int = 1
-    fresnel: str = "none"
-    transparent_shadows: bool = True
-    clamp_vertex_colors: bool = False
-    interpolation: str = "perspective"
-    cull_backfaces: bool = False
-    adaptive_threshold: float = 0.0
-    sampling: str = "grid"
+    method: str = spec_field(Spec("choice", "renderer", options=METHODS), "raster")
+    shading: str = spec_field(Spec("choice", "shading model (rasterizer)", options=tuple(SHADING_MODELS)), "phong")
+    specular: str = spec_field(Spec("choice", "specular model", options=tuple(SPECULAR_MODELS)), "phong")
+    shadows: bool = spec_field(Spec("boolean", "cast shadow rays"), True)
+    max_depth: int = spec_field(Spec("integer", "ray-tree depth, the primary ray counting as 1 (ray tracer)",
+                                     bounds=bounds(ge=1, le=MAX_DEPTH_LIMIT)), 5)
+    spp: int = spec_field(Spec("custom", f"samples per pixel, a perfect square side^2 (1, 4, 9, ..., {MAX_SPP}) taken "
+                               "as a side x side pattern in each pixel; width * height * spp <= 64 M",
+                               json={"description": f"perfect square integer 1..{MAX_SPP}",
+                                     "enum": [k * k for k in range(1, math.isqrt(MAX_SPP) + 1)]}), 1)
+    fresnel: str = spec_field(Spec("choice", "Fresnel weighting of kr / kt (none: the plain weights)",
+                                   options=tuple(FRESNEL_MODES)), "none")
+    transparent_shadows: bool = spec_field(Spec("boolean", "shadow rays are multiplied by kt at each transparent "
+                                                "surface (not blocked)"), True)
+    clamp_vertex_colors: bool = spec_field(Spec("boolean", "clamp Gouraud vertex colours to [0, 1] (OpenGL)"), False)
+    interpolation: str = spec_field(Spec("choice", "attribute interpolation", options=INTERPOLATIONS), "perspective")
+    cull_backfaces: bool = spec_field(Spec("boolean", "skip triangles facing away (rasterizer)"), False)
+    adaptive_threshold: float = spec_field(Spec("number", "Hall's adaptive depth control: stop a ray whose weight "
+                                                "falls below it (0: off)", "", bounds(ge=0)), 0.0)
+    sampling: str = spec_field(Spec("choice", "sample pattern in a pixel", options=SAMPLINGS), "grid")
 
     _PATH: ClassVar[str] = "render"
 
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:
-        p = lambda name: join(path, name)  # noqa: E731
-        return dict(
-            method=choice(v["method"], p("method"), METHODS),
-            shading=choice(v["shading"], p("shading"), SHADING_MODELS),
-            specular=choice(v["specular"], p("specular"), SPECULAR_MODELS),
-            shadows=boolean(v["shadows"], p("shadows")),
-            max_depth=integer(v["max_depth"], p("max_depth"), ge=1, le=MAX_DEPTH_LIMIT),
-            spp=_spp(v["spp"], p("spp")),
-            fresnel=choice(v["fresnel"], p("fresnel"), FRESNEL_MODES),
-            transparent_shadows=boolean(v["transparent_shadows"], p("transparent_shadows")),
-            clamp_vertex_colors=boolean(v["clamp_vertex_colors"], p("clamp_vertex_colors")),
-            interpolation=choice(v["interpolation"], p("interpolation"), INTERPOLATIONS),
-            cull_backfaces=boolean(v["cull_backfaces"], p("cull_backfaces")),
-            adaptive_threshold=number(v["adaptive_threshold"], p("adaptive_threshold"), ge=0),
-            sampling=choice(v["sampling"], p("sampling"), SAMPLINGS),
-        )
+        return {**super()._check(v, path), "spp": _spp(v["spp"], join(path, "spp"))}
 
     @property
     def spp_side(self) -> int:
