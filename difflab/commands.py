@@ -101,7 +101,3 @@ def add_fractal(sub) -> None:
     add_force(p)
     p.set_defaults(func=run_fractal)
 
-
-from .fit.command import add_parser as add_fit  # noqa: E402
-
-PARSERS = [add_render, add_demo, add_fit, add_fractal]
