@@ -38,6 +38,9 @@ class Record:
     _PATH: ClassVar[str] = ""
     #: The value of the JSON object's "type" key that selects this record (scene objects), or None.
     TYPE: ClassVar[str | None] = None
+    #: JSON Schema fragments for the rules across fields that `_check` enforces by hand and a schema
+    #: can state (added to the record's schema as "allOf"; see `reference.record_schema`).
+    JSON_RULES: ClassVar[tuple[dict, ...]] = ()
 
     def __post_init__(self) -> None:
         values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}

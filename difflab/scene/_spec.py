@@ -100,15 +100,20 @@ class Spec:
 
     def describe(self) -> str:
         """The type column of the reference: "number > 0", "one of 'a', 'b'", "3 numbers >= 0"..."""
-        limits = " ".join(f"{BOUND_SIGNS[k]} {v:g}" for k, v in self.bounds)
-        text = {
+        limits = ", ".join(f"{BOUND_SIGNS[k]} {v:g}" for k, v in self.bounds)
+        names = {
             "number": "number", "coordinate": "number within +-1e12", "point3": "3 numbers within +-1e12",
             "integer": "integer", "boolean": "true / false", "string": "string",
             "file": "file path (relative to the scene file)", "unit3": "3 numbers, not all 0 (normalised)",
             "vec3": "3 numbers" + (" or 1 (grey)" if self.grey else ""),
             "choice": "one of " + ", ".join(f'"{o}"' for o in self.options),
-            "record": f"object ({self.record.__name__})", "custom": str(self.json.get("description", "")),
-        }[self.kind]
+        }
+        if self.kind == "record":
+            text = f"object ({self.record.__name__})"
+        elif self.kind == "custom":
+            text = self.json["description"]
+        else:
+            text = names[self.kind]
         text = f"{text} {limits}".strip() if limits else text
         return f"{text} or null" if self.nullable else text
 

@@ -133,7 +133,8 @@ def _same(a, b) -> bool:
 
 
 def _array_field(width: int, items: dict, doc: str):
-    return spec_field(Spec("custom", doc, nullable=True, json=rows_of(width, items, doc)), None)
+    return spec_field(Spec("custom", doc, nullable=True, json=rows_of(width, items, f"list of rows of {width} numbers")),
+                      None)
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,6 +163,11 @@ class Mesh(Record):
 
     TYPE: ClassVar[str] = "mesh"
     _PATH: ClassVar[str] = "mesh"
+    JSON_RULES: ClassVar[tuple[dict, ...]] = (
+        {"oneOf": [{"required": [source]} for source in ("file", "builtin", "vertices")]},
+        {"dependentRequired": {"vertices": ["faces"], "faces": ["vertices"], "normals": ["vertices"],
+                               "uvs": ["vertices"]}},
+    )
 
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:

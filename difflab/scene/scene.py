@@ -34,14 +34,10 @@ def _lights(value, path: str) -> tuple[Light, ...]:
 
 @dataclass(frozen=True)
 class Scene(Record):
-    """A whole scene: camera, lights, named materials, objects, fog and render settings.
-
-    ambient: Ia, linear RGB (>= 0). background: colour of rays that hit nothing (linear RGB, >= 0).
-    lights: tuple of Light. materials: name -> Material, read-only, in file order (an object's
-    material index is its position here). objects: tuple of Sphere | Plane | Mesh; each names a
-    defined material. fog: optional Fog. render: RenderSettings. base_dir: the folder relative paths
-    were resolved against (informational: not compared, not serialised; file paths are absolute).
-    """
+    """A whole scene: camera, lights, named materials, objects, fog and render settings. Every
+    object names a defined material. In Python, `lights` and `objects` are tuples and `materials` a
+    read-only mapping; `base_dir` is the folder relative paths were resolved against (informational:
+    not compared, not written; file paths are stored absolute)."""
 
     camera: Camera = spec_field(Spec("record", "the view", record=Camera))
     ambient: Vec3 = spec_field(colour("ambient light Ia"), (0.0, 0.0, 0.0))
@@ -52,7 +48,7 @@ class Scene(Record):
              json={"description": "object: name -> Material", "type": "object",
                    "additionalProperties": {"$ref": "#/$defs/Material"}}), FrozenDict())
     objects: tuple[SceneObject, ...] = spec_field(
-        Spec("custom", "the objects (required)",
+        Spec("custom", "the objects",
              json={"description": "list of Sphere | Plane | Mesh (by \"type\")", "type": "array",
                    "items": {"oneOf": [{"$ref": f"#/$defs/{t.__name__}"} for t in OBJECT_TYPES.values()]}}), ())
     fog: Fog | None = spec_field(Spec("record", "depth cueing / fog", record=Fog, nullable=True), None)
@@ -60,6 +56,8 @@ class Scene(Record):
     base_dir: str | None = field(default=None, compare=False)
 
     _PATH: ClassVar[str] = ""
+    #: Keys a scene file must give (the others have defaults).
+    FILE_REQUIRED: ClassVar[tuple[str, ...]] = ("camera", "objects")
 
     @classmethod
     def _check(cls, v: dict, path: str = "") -> dict:
@@ -109,7 +107,7 @@ class Scene(Record):
         if base_dir is not None:
             base_dir = os.path.abspath(os.fspath(base_dir))
         d = mapping(d, "scene")
-        check_keys(d, "", (SCHEMA_KEY, *SCENE_KEYS), required=("camera", "objects"))
+        check_keys(d, "", (SCHEMA_KEY, *SCENE_KEYS), required=cls.FILE_REQUIRED)
         if SCHEMA_KEY in d:
             string(d[SCHEMA_KEY], SCHEMA_KEY)
         materials = mapping(d.get("materials", {}), "materials")

@@ -50,6 +50,7 @@ class Camera(Record):
                                           bounds(gt=0)), 2.0)
 
     _PATH: ClassVar[str] = "camera"
+    JSON_RULES: ClassVar[tuple[dict, ...]] = ({"properties": {"up": {"not": {"const": [0, 0, 0]}}}},)
 
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:
@@ -97,6 +98,17 @@ class Light(Record):
     exponent: float = spec_field(Spec("number", "spot falloff exponent", "", bounds(ge=0)), 0.0)
 
     _PATH: ClassVar[str] = "light"
+    JSON_RULES: ClassVar[tuple[dict, ...]] = (
+        {"if": {"properties": {"type": {"const": "point"}}},
+         "then": {"required": ["position"], "not": {"required": ["direction"]}}},
+        {"if": {"properties": {"type": {"const": "directional"}}},
+         "then": {"required": ["direction"], "not": {"required": ["position"]}}},
+        {"if": {"properties": {"type": {"const": "spot"}}},
+         "then": {"required": ["position", "direction", "cutoff_deg"],
+                  "properties": {"cutoff_deg": {"exclusiveMinimum": 0, "maximum": 90}}},
+         "else": {"properties": {"cutoff_deg": {"const": 180}}}},
+        {"properties": {"attenuation": {"not": {"const": [0, 0, 0]}}}},
+    )
 
     @classmethod
     def _check(cls, v: dict, path: str) -> dict:
