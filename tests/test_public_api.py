@@ -37,3 +37,15 @@ def test_fit_names_load_on_first_use_in_a_fresh_interpreter():
 def test_unknown_names_raise_attribute_error():
     with pytest.raises(AttributeError, match="module 'difflab' has no attribute 'fit_materials'"):
         difflab.fit_materials  # noqa: B018
+
+
+def test_knobs_are_keyword_only():
+    """One entry per problem with keyword-only knobs (optimistix style): `render(scene, "raytrace")`
+    is a TypeError, not a silently misread argument."""
+    import inspect
+
+    for fn in (difflab.render_frame, difflab.example_scene):
+        params = list(inspect.signature(fn).parameters.values())[1:]
+        assert params and all(p.kind in (p.KEYWORD_ONLY, p.VAR_KEYWORD) for p in params), fn.__name__
+    with pytest.raises(TypeError):
+        difflab.render(difflab.example_scene("glass_sphere", width=8, height=6), "raytrace")

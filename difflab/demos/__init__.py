@@ -9,7 +9,7 @@ them. Sections (each `section(out, size) -> [(path, what it shows), ...]`):
 - `fractals`: one figure per fractal kind (also `difflab fractal KIND`)
 
 Figure helpers: `save_figure`, `image_grid`, `strip` (in `figures`). Example scenes:
-`example_scene(name, width=None, height=None)`, `scene_path(name)`, `example_names()`.
+`example_scene(name, *, width=None, height=None)`, `scene_path(name)`, `example_names()`.
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ def scene_path(name: str) -> Path:
     return SCENE_FOLDER / f"{name}.json"
 
 
-def example_scene(name: str, width: int | None = None, height: int | None = None) -> Scene:
+def example_scene(name: str, *, width: int | None = None, height: int | None = None) -> Scene:
     """The shipped example scene `name` as a validated Scene, optionally at width x height pixels."""
     scene = load_scene(scene_path(name))
     size = {k: v for k, v in (("width", width), ("height", height)) if v is not None}

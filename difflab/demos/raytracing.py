@@ -21,7 +21,7 @@ from .figures import strip
 
 def depth_series(out: Path, width: int = 240, height: int = 180, depths=range(1, 8)) -> list[tuple[Path, str]]:
     """The chrome teapot and mirror at ray-tree depths 1..7, one strip (left to right)."""
-    scene = example_scene("lecture_teapot", width, height)
+    scene = example_scene("lecture_teapot", width=width, height=height)
     compiled = compile_scene(scene)
     images, counts = [], []
     for depth in depths:
@@ -38,7 +38,7 @@ def depth_series(out: Path, width: int = 240, height: int = 180, depths=range(1,
 def glass(out: Path, width: int = 240, height: int = 180) -> list[tuple[Path, str]]:
     """A glass sphere and a glass cube: refraction, Fresnel reflection, Beer absorption, and a map of
     the pixels whose ray tree meets total internal reflection."""
-    scene = example_scene("glass_sphere", width, height)
+    scene = example_scene("glass_sphere", width=width, height=height)
     frame = raytrace(compile_scene(scene), scene.render)
     tree = frame.ray_tree
     kt = np.array([scene.materials[name].kt for name in scene.material_names])

@@ -47,7 +47,7 @@ def check_applies(method: str, given: dict) -> None:
             raise RenderError(f"{name}: {value!r} does not apply to method={method!r} ({why})")
 
 
-def render_frame(scene, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None, *,
+def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None,
                  width=None, height=None, threads=None, **options) -> Frame:
     """Render a scene and return the `Frame` (image and G-buffer; the ray tree for ray tracing).
 
@@ -88,6 +88,7 @@ def render_frame(scene, method=None, shading=None, specular=None, max_depth=None
     return raytrace(compiled, settings, threads)
 
 
-def render(scene, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None, **kwargs):
-    """Render a scene (or a `CompiledScene`) to a numpy (H, W, 3) float32 linear RGB image (see `render_frame`)."""
-    return render_frame(scene, method, shading, specular, max_depth, spp, device, **kwargs).image
+def render(scene, **options):
+    """Render a scene (or a `CompiledScene`) to a numpy (H, W, 3) float32 linear RGB image; the
+    keyword-only options are those of `render_frame`."""
+    return render_frame(scene, **options).image
