@@ -27,8 +27,14 @@ from .errors import DifflabError
 #: Fraction of the memory still available that one request may take (the rest is for the caller,
 #: the interpreter and the estimate's error).
 BUDGET_FRACTION = 0.5
-#: Largest number of rays one render may trace (worst case, before adaptive cut-off), ~10 min on 2 cores.
-MAX_RAYS = 2 ** 32
+#: Largest number of rays one render may trace (worst case, before any adaptive cut-off): 2^30 rays take
+#: about 4 minutes at the 4-5 M rays/s of two cores.
+MAX_RAYS = 2 ** 30
+#: Largest magnitude of a world-space coordinate or size (scene units). The renderers compute in
+#: float32: squared distances (ray-sphere tests, attenuation) must stay far below 3.4e38, and the
+#: camera's matrices stop being invertible in float64 beyond ~1e16 (measured: an eye at 1e17 gives
+#: a singular view-projection matrix).
+MAX_COORD = 1e12
 #: Largest count of anything one kernel indexes (Warp indexes with 32-bit ints).
 MAX_INDEX = 2 ** 31 - 1
 

@@ -14,6 +14,7 @@ import warnings
 import numpy as np
 
 from difflab.errors import MeshError
+from difflab.limits import MAX_COORD
 
 from .mesh import TriMesh, concatenate
 
@@ -42,7 +43,10 @@ def _check_obj_text(path: str) -> None:
             if len(values) < 3:
                 raise MeshError(f"{path}:{number}: vertex needs 3 coordinates: {line!r}")
             if not all(math.isfinite(x) for x in values):
-                raise MeshError(f"{path}:{number}: vertex {n_vertices + 1} is not finite: {line!r}")
+                raise MeshError(f"{path}:{number}: vertex {n_vertices + 1} is not finite: {line[:80]!r}")
+            if not all(abs(x) <= MAX_COORD for x in values):
+                raise MeshError(f"{path}:{number}: vertex {n_vertices + 1} is beyond +-{MAX_COORD:g} (float32 "
+                                f"rendering overflows): {line[:80]!r}")
             n_vertices += 1
         elif key == "f":
             corners = parts[1:]
@@ -147,6 +151,8 @@ def load_mesh(path) -> TriMesh:
     except MeshError as exc:
         message = str(exc)
         raise MeshError(message if path in message else f"{path}: {message}") from None
-    if len(meshes) == 1:
-        return meshes[0]
-    return concatenate(meshes, name=path)
+    mesh = meshes[0] if len(meshes) == 1 else concatenate(meshes, name=path)
+    if not np.all(np.abs(mesh.vertices) <= MAX_COORD):
+        raise MeshError(f"{path}: vertex coordinates reach {np.abs(mesh.vertices).max():.3g}, beyond +-{MAX_COORD:g} "
+                        "(float32 rendering overflows)")
+    return mesh

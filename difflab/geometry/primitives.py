@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from difflab.errors import MeshError
+from difflab.limits import require_triangles
 
 from .mesh import TriMesh, concatenate
 
@@ -49,6 +50,7 @@ def uv_sphere(radius=1.0, center=(0.0, 0.0, 0.0), n_lat=16, n_lon=32) -> TriMesh
     c = _vec(center, 3, "center")
     n_lat = _count(n_lat, 2, "n_lat")
     n_lon = _count(n_lon, 3, "n_lon")
+    require_triangles(2 * n_lon * (n_lat - 1), f"uv_sphere of {n_lat} x {n_lon}", MeshError)
 
     def direction(lat, lon):
         s = np.sin(lat)
@@ -147,7 +149,9 @@ def quad(size=(1.0, 1.0), center=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), divisi
     if np.linalg.norm(n_in) == 0.0:
         raise MeshError("normal must not be the zero vector")
     t, b, n = _tangent_frame(n_in)
-    uv, faces = _grid(_count(divisions, 1, "divisions"))
+    d = _count(divisions, 1, "divisions")
+    require_triangles(2 * d * d, f"quad of {d} x {d} divisions", MeshError)
+    uv, faces = _grid(d)
     vertices = c + (uv[:, :1] - 0.5) * sx * t + (uv[:, 1:] - 0.5) * sz * b
     return TriMesh(vertices, faces, np.tile(n, (len(uv), 1)), uv, name="quad")
 
@@ -159,6 +163,7 @@ def box(size=(1.0, 1.0, 1.0), center=(0.0, 0.0, 0.0), divisions=1) -> TriMesh:
     s = np.array([_positive(v, f"size[{k}]") for k, v in enumerate(_vec(size, 3, "size"))])
     c = _vec(center, 3, "center")
     d = _count(divisions, 1, "divisions")
+    require_triangles(12 * d * d, f"box of {d} x {d} divisions", MeshError)
     sides = []
     for axis in range(3):
         for sign in (1.0, -1.0):
@@ -182,6 +187,7 @@ def cylinder(radius=0.5, height=1.0, segments=32, caps=True, center=(0.0, 0.0, 0
     r = _positive(radius, "radius")
     h = _positive(height, "height")
     n = _count(segments, 3, "segments")
+    require_triangles(4 * n, f"cylinder of {n} segments", MeshError)
     c = _vec(center, 3, "center")
     a = 2.0 * np.pi * np.arange(n + 1) / n
     cos_a, sin_a = np.cos(a), np.sin(a)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from difflab.errors import MeshError
+from difflab.limits import require_triangles
 
 from .mesh import TriMesh, weld
 from .normals import degenerate_faces, vertex_normals
@@ -90,6 +91,7 @@ def teapot(resolution: int = 8, weld_vertices: bool = True) -> TriMesh:
     if int(resolution) != resolution or int(resolution) < 1:
         raise MeshError(f"teapot: resolution must be an integer >= 1, got {resolution!r}")
     r = int(resolution)
+    require_triangles(64 * r * r, f"teapot at resolution {r}", MeshError)
     points, cross, patch_uvs = evaluate_patches(r)
     n_grid = (r + 1) ** 2
     grid_faces = _grid_faces(r)

@@ -14,15 +14,10 @@ import os
 from collections.abc import Mapping
 
 from ..errors import SceneError
+from ..limits import MAX_COORD
 
 #: Largest magnitude accepted for any number: the float32 range that the renderers compute in.
 FLOAT32_MAX = 3.4028234663852886e38
-
-#: Largest magnitude of a world-space coordinate or size (scene units). The renderers compute in
-#: float32: squared distances (ray-sphere tests, attenuation) must stay far below 3.4e38, and the
-#: camera's matrices stop being invertible in float64 beyond ~1e16 (measured: eye at 1e17 gives a
-#: singular view-projection matrix).
-MAX_COORD = 1e12
 
 Vec3 = tuple[float, float, float]
 

@@ -1,0 +1,151 @@
+"""Budgets and numeric edges: requests are priced before allocating, and valid-but-extreme numbers
+(a tiny field of view, an eye at 1e30, a vertex at 1e39) are refused with the field that causes them."""
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from conftest import scene_dict
+from difflab import DifflabError, MeshError, Scene, SceneError, limits
+from difflab.geometry import box, load_mesh, teapot, uv_sphere
+
+
+def test_parse_bytes_reads_binary_suffixes_and_names_bad_values():
+    assert limits.parse_bytes("512M", "X") == 512 * 2 ** 20
+    assert limits.parse_bytes("8G", "X") == 8 * 2 ** 30
+    assert limits.parse_bytes("1.5GiB", "X") == 3 * 2 ** 29
+    assert limits.parse_bytes("4096", "X") == 4096
+    for bad in ("abc", "-1G", "0", "nanG", ""):
+        with pytest.raises(DifflabError, match=r"^X: expected a positive size in bytes such as 8G or 512M, got "):
+            limits.parse_bytes(bad, "X")
+
+
+def test_budget_comes_from_the_environment_or_half_the_available_memory(monkeypatch):
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "3G")
+    assert limits.memory_budget() == 3 * 2 ** 30
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "lots")
+    with pytest.raises(DifflabError, match=r"^DIFFLAB_MEMORY_BUDGET: expected a positive size"):
+        limits.memory_budget()
+    monkeypatch.delenv("DIFFLAB_MEMORY_BUDGET")
+    monkeypatch.setattr(limits, "available_bytes", lambda: 10 * 2 ** 30)
+    assert limits.memory_budget() == 5 * 2 ** 30
+
+
+def test_an_address_space_limit_lowers_the_available_memory():
+    """Under `ulimit -v`, what the process may still map is the limit less what it has mapped."""
+    code = textwrap.dedent("""
+        import resource
+        from difflab import limits
+        mapped = limits._vm_size()
+        resource.setrlimit(resource.RLIMIT_AS, (mapped + 2 ** 30, resource.RLIM_INFINITY))
+        print(limits.available_bytes() / 2 ** 30)
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert 0.9 < float(out.stdout) <= 1.0
+
+
+def test_require_memory_names_the_request_and_the_setting(monkeypatch):
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "1G")
+    limits.require_memory(2 ** 30, "frame")  # exactly the budget is allowed
+    with pytest.raises(SceneError, match=r"^frame: needs about 2\.00 GiB, over the memory budget of 1\.00 GiB "
+                                         r"\(DIFFLAB_MEMORY_BUDGET; set DIFFLAB_MEMORY_BUDGET to raise it\); try less$"):
+        limits.require_memory(2 * 2 ** 30, "frame", SceneError, "try less")
+
+
+@pytest.mark.parametrize("depth, branching, weight, threshold, nodes", [
+    (5, 0, 1.0, 0.0, 1),          # opaque, no reflection: the primary ray only
+    (5, 1, 1.0, 0.0, 5),          # a mirror chain: one node per level
+    (5, 2, 1.0, 0.0, 31),         # glass: 1 + 2 + 4 + 8 + 16
+    (64, 2, 1.0, 0.0, 2 ** 62),   # capped
+    (64, 2, 0.5, 0.01, 2 ** 8 - 1),  # Hall's cut: 0.5^(k-1) >= 0.01 for k <= 7, so levels 1..8 can exist
+    (64, 2, 0.0, 0.01, 1),        # nothing is spawned with weight 0
+])
+def test_ray_tree_bound(depth, branching, weight, threshold, nodes):
+    assert limits.ray_tree_nodes(depth, branching, weight, threshold) == nodes
+
+
+def test_ray_budget_refuses_an_exponential_tree(monkeypatch):
+    with pytest.raises(DifflabError, match=r"^render: up to 2\.83e\+22 rays \(768 samples x 1\.84e\+19 ray-tree nodes "
+                                           r"x 2 rays per node\) is over the budget of 1\.07e\+09 rays"):
+        limits.check_rays(32 * 24, 2 ** 64 - 1, 1, "render")
+    monkeypatch.setenv("DIFFLAB_MAX_RAYS", "12")
+    limits.check_rays(2, 3, 1, "render")
+    with pytest.raises(DifflabError, match=r"over the budget of 12 rays"):
+        limits.check_rays(2, 3, 2, "render")
+    monkeypatch.setenv("DIFFLAB_MAX_RAYS", "many")
+    with pytest.raises(DifflabError, match=r"^DIFFLAB_MAX_RAYS: expected a positive integer, got 'many'$"):
+        limits.ray_budget()
+
+
+def test_tessellations_are_priced_before_they_are_built(monkeypatch):
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "1G")
+    with pytest.raises(MeshError, match=r"^teapot at resolution 1024 \(67108864 triangles\): needs about 33\.75 GiB, "
+                                        r"over the memory budget of 1\.00 GiB"):
+        teapot(1024)
+    with pytest.raises(MeshError, match=r"^uv_sphere of 4000 x 8000 \(63984000 triangles\): needs about"):
+        uv_sphere(1.0, n_lat=4000, n_lon=8000)
+    with pytest.raises(MeshError, match=r"^box of 3000 x 3000 divisions \(108000000 triangles\)"):
+        box(divisions=3000)
+    assert teapot(2).n_faces <= 64 * 2 * 2  # small ones are built as before
+
+
+@pytest.mark.parametrize("value, message", [
+    ("1e39", r"vertex 2 is beyond \+-1e\+12 \(float32 rendering overflows\)"),
+    ("-2e12", r"vertex 2 is beyond \+-1e\+12"),
+    ("inf", r"vertex 2 is not finite"),
+])
+def test_obj_vertices_beyond_float32_rendering_name_file_and_line(tmp_path, value, message):
+    path = tmp_path / "big.obj"
+    path.write_text(f"v 0 0 0\nv {value} 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(MeshError, match=rf"big\.obj:2: {message}"):
+        load_mesh(path)
+
+
+def test_ply_vertices_beyond_the_range_are_refused(tmp_path):
+    path = tmp_path / "big.ply"
+    path.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                    "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                    "0 0 0\n3e30 0 0\n0 1 0\n3 0 1 2\n")
+    with pytest.raises(MeshError, match=r"big\.ply: vertex coordinates reach 3e\+30, beyond \+-1e\+12"):
+        load_mesh(path)
+
+
+CAMERA = {"eye": [0, 0, 5], "target": [0, 0, 0], "width": 8, "height": 8}
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"fov_y": 1e-300}, r"camera\.fov_y: must be >= 1e-06 \(the camera's float32 matrices degenerate below\), got 1e-300"),
+    ({"projection": "orthographic", "ortho_height": 1e-30}, r"camera\.ortho_height: must be >= 1e-09"),
+    ({"near": 1e-20}, r"camera\.near: far / near = 1e\+22 is over 1e\+06"),
+    ({"far": 1e7}, r"camera\.near: far / near = 1e\+08 is over 1e\+06"),
+    ({"eye": [0, 0, 1e30], "target": [0, 0, 1e29]}, r"camera\.eye\[2\]: must be within \+-1e12 scene units"),
+    ({"target": [1e13, 0, 0]}, r"camera\.target\[0\]: must be within \+-1e12 scene units"),
+])
+def test_extreme_cameras_name_their_field(change, message):
+    with pytest.raises(SceneError, match="^" + message):
+        Scene.from_dict(scene_dict([], {}, camera={**CAMERA, **change}))
+
+
+@pytest.mark.parametrize("obj, message", [
+    ({"type": "sphere", "center": [0, 0, 0], "radius": 1e30, "material": "m"}, r"objects\[0\]\.radius: must be within"),
+    ({"type": "plane", "point": [0, 3e38, 0], "normal": [0, 1, 0], "material": "m"}, r"objects\[0\]\.point\[1\]: must"),
+    ({"type": "mesh", "builtin": "box", "material": "m", "transform": {"scale": 1e30}},
+     r"objects\[0\]\.transform\.scale\[0\]: must be within"),
+    ({"type": "mesh", "builtin": "box", "material": "m", "transform": {"translate": [0, 0, -1e13]}},
+     r"objects\[0\]\.transform\.translate\[2\]: must be within"),
+])
+def test_extreme_geometry_names_its_field(obj, message):
+    with pytest.raises(SceneError, match="^" + message):
+        Scene.from_dict(scene_dict([obj], {"m": {}}))
+
+
+def test_scene_file_errors_carry_the_file(tmp_path):
+    d = scene_dict([{"type": "sphere", "center": [0, 0, 0], "radius": 1e30, "material": "m"}], {"m": {}})
+    (tmp_path / "s.json").write_text(json.dumps(d))
+    from difflab import load_scene
+
+    with pytest.raises(SceneError, match=r"^objects\[0\]\.radius: must be within .* \(in .*s\.json\)$"):
+        load_scene(tmp_path / "s.json")
