@@ -49,6 +49,9 @@ RASTER_LIGHT_POINT_BYTES = 24
 RAYTRACE_SAMPLE_BYTES = 90
 TREE_NODE_BYTES = 110
 TREE_NODE_LIGHT_BYTES = 40
+#: Per node, light and material when shadow rays count their crossings of transparent surfaces
+#: (int32 on the device, its numpy copy, the uint8 result: from the dtypes, not measured).
+TREE_CROSSING_BYTES = 9
 #: One triangle of a tessellated mesh through compile and a raster frame (float64 mesh arrays,
 #: float32 device arrays, normals, uvs, BVH, per-face clip buffers; measured 488 on the teapot).
 TRIANGLE_BYTES = 540
@@ -141,14 +144,20 @@ def memory_budget() -> int:
     return int(BUDGET_FRACTION * available_bytes())
 
 
+def env_count(name: str, default: int) -> int:
+    """The positive integer in environment variable `name`, or `default` when it is unset or empty;
+    DifflabError naming the variable otherwise."""
+    value = os.environ.get(name, "").strip()
+    if not value:
+        return default
+    if not value.isdigit() or int(value) < 1:
+        raise DifflabError(f"{name}: expected a positive integer, got {shorten(value)}")
+    return int(value)
+
+
 def ray_budget() -> int:
     """Rays one render may trace: $DIFFLAB_MAX_RAYS, else MAX_RAYS."""
-    value = os.environ.get("DIFFLAB_MAX_RAYS")
-    if not value:
-        return MAX_RAYS
-    if not value.strip().isdigit() or int(value) < 1:
-        raise DifflabError(f"DIFFLAB_MAX_RAYS: expected a positive integer, got {shorten(value)}")
-    return int(value)
+    return env_count("DIFFLAB_MAX_RAYS", MAX_RAYS)
 
 
 def gib(nbytes: float) -> str:

@@ -123,6 +123,8 @@ CAMERA = {"eye": [0, 0, 5], "target": [0, 0, 0], "width": 8, "height": 8}
     ({"far": 1e7}, r"camera\.near: far / near = 1e\+08 is over 1e\+06"),
     ({"eye": [0, 0, 1e30], "target": [0, 0, 1e29]}, r"camera\.eye\[2\]: must be within \+-1e12 scene units"),
     ({"target": [1e13, 0, 0]}, r"camera\.target\[0\]: must be within \+-1e12 scene units"),
+    ({"up": [0, 1e-259, 0]}, r"camera\.up: is 1e-259 long, too short to give a direction \(must be >= 1e-09\)"),
+    ({"eye": [1e6, 0, 0], "target": [1e6, 0, 1e-5]}, r"camera\.target: is 1e-05 from eye, too close to give a view"),
 ])
 def test_extreme_cameras_name_their_field(change, message):
     with pytest.raises(SceneError, match="^" + message):

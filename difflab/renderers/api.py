@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ..errors import RenderError
+from ..guards import check_image, check_render
 from ..scene import Scene
 from .compile import CompiledScene, as_scene, compile_scene
 from .frame import Frame
@@ -62,6 +63,9 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
             tessellated for its camera: compile the resized scene instead).
         threads: CPU worker threads (default: all cores, or $DIFFLAB_THREADS).
 
+    Raises RenderError before allocating a render over the memory or ray budget (`difflab.limits`),
+    and instead of returning non-finite pixels (naming the scene's largest numbers).
+
     Returns: a `Frame`. A ray-traced frame has no G-buffer (`frame.gbuffer` raises) but its
     recorded `ray_tree`, whose root nodes are the primary hits.
     """
@@ -75,17 +79,23 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
         if device is not None and resolve_device(device) != compiled.device:
             raise RenderError(f"device: this CompiledScene lives on {compiled.device!r}, not {device!r}")
         compiled = compiled.with_scene(prepare(compiled.scene, None, None, **overrides))
+        check_render(compiled.scene)
     else:
-        compiled = compile_scene(prepare(scene, width, height, **overrides), device or "cpu")
+        scene = prepare(scene, width, height, **overrides)
+        check_render(scene)  # memory and ray budgets, before anything is allocated
+        compiled = compile_scene(scene, device or "cpu")
     settings = compiled.scene.render
     check_applies(settings.method, overrides)
     if settings.method == "raster":
         from .raster.driver import rasterize
 
-        return rasterize(compiled, settings, threads)
-    from .raytrace.driver import raytrace
+        frame = rasterize(compiled, settings, threads)
+    else:
+        from .raytrace.driver import raytrace
 
-    return raytrace(compiled, settings, threads)
+        frame = raytrace(compiled, settings, threads)
+    check_image(frame.image, compiled.scene)  # no NaN / inf is returned
+    return frame
 
 
 def render(scene, **options):

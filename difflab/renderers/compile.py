@@ -18,6 +18,8 @@ from .._warp import wp
 
 from .. import geometry
 from ..errors import MeshError, RenderError
+from ..guards import check_world_mesh, object_errors
+from ..limits import require_triangles
 from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Scene, Sphere, load_scene
 from .camera import camera_frame, pixel_size_at
@@ -158,16 +160,22 @@ def scene_parts(scene, sample_height: int):
     for index, obj in enumerate(scene.objects):
         material = names.index(obj.material)
         if isinstance(obj, Mesh):
-            mesh_parts.append((object_mesh(obj), material, index))
+            with object_errors(index, obj):
+                mesh = object_mesh(obj)
+            check_world_mesh(mesh, index, obj)
+            mesh_parts.append((mesh, material, index))
         elif isinstance(obj, Sphere):
             spheres.append((obj, material, index))
             n_lon = sphere_segments(obj, scene.camera, sample_height)
-            analytic_parts.append((geometry.uv_sphere(obj.radius, obj.center, max(2, n_lon // 2), n_lon), material, index))
+            with object_errors(index, obj):
+                analytic_parts.append((geometry.uv_sphere(obj.radius, obj.center, max(2, n_lon // 2), n_lon), material,
+                                       index))
         elif isinstance(obj, Plane):
             planes.append((obj, material, index))
             analytic_parts.append((plane_grid(obj, scene.camera), material, index))
         else:  # pragma: no cover - the scene validates object types
             raise RenderError(f"objects[{index}]: cannot render {type(obj).__name__}")
+    require_triangles(sum(m.n_faces for m, _, _ in mesh_parts + analytic_parts), "scene: triangles", RenderError)
     return mesh_parts, analytic_parts, spheres, planes
 
 

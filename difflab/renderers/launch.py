@@ -13,6 +13,7 @@ from concurrent.futures import ThreadPoolExecutor
 from .._warp import wp
 
 from ..errors import RenderError
+from ..limits import env_count
 
 _initialised = False
 
@@ -40,8 +41,7 @@ def resolve_device(device: str = "cpu") -> str:
 
 def cpu_threads() -> int:
     """Worker threads for banded CPU launches: $DIFFLAB_THREADS, else the number of cores."""
-    value = os.environ.get("DIFFLAB_THREADS")
-    return max(1, int(value)) if value else max(1, os.cpu_count() or 1)
+    return env_count("DIFFLAB_THREADS", max(1, os.cpu_count() or 1))
 
 
 def row_bands(n_rows: int, n_bands: int) -> list[tuple[int, int]]:

@@ -22,6 +22,9 @@ MAX_FAR_NEAR = 1e6
 #: the sphere tessellation stay finite for.
 MIN_FOV_Y = 1e-6
 MIN_ORTHO_HEIGHT = 1e-9
+#: Shortest `up` vector, and shortest eye -> target distance per unit of |eye| (squares of shorter
+#: ones underflow, or their float32 difference is noise).
+MIN_VECTOR = 1e-9
 
 
 def at_least(x: float, smallest: float, path: str) -> float:
@@ -60,6 +63,10 @@ class Camera(Record):
         view = tuple(t - e for t, e in zip(target, eye))
         if math.hypot(*view) == 0.0:
             fail(p("target"), f"must differ from eye, got {list(target)}")
+        if math.hypot(*view) < MIN_VECTOR * max(1.0, math.hypot(*eye)):
+            fail(p("target"), f"is {math.hypot(*view):.3g} from eye, too close to give a view direction in float32")
+        if 0.0 < math.hypot(*up) < MIN_VECTOR:
+            fail(p("up"), f"is {math.hypot(*up):.3g} long, too short to give a direction (must be >= {MIN_VECTOR:g})")
         u, w = normalised(up, p("up")), normalised(view, p("target"))
         cross = (u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0])
         if not math.hypot(*cross) > 1e-6:

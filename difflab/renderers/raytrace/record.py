@@ -11,15 +11,13 @@ import numpy as np
 
 from ..._warp import wp
 
-from ...errors import RenderError
+from ...guards import check_tree
 from ...lighting.warp_model import fog_params
 from ..trace import HIT_TRIANGLE, HitW
 from .surface import RayW, SplitW, SurfaceW
 from .tree import RayTree
 
 wp.set_module_options({"enable_backward": False})
-
-MAX_TREE_BYTES = 4 * 1024 ** 3  # recorded trees larger than this are refused (render with record_tree=False)
 
 
 @wp.struct
@@ -111,18 +109,12 @@ def empty_tree(shape: tuple[int, int], n_nodes: int, n_lights: int, device: str,
     return tree
 
 
-def node_bytes(n_lights: int) -> int:
-    return 9 * 4 + 4 * 4 + 4 * 12 + n_lights * 20
-
-
 def sized_tree(counts: np.ndarray, n_lights: int, n_materials: int, device: str) -> tuple[TreeW, np.ndarray]:
     """A `TreeW` sized for per-sample node `counts` (rows, cols), and the (S + 1,) int64 offsets."""
     offsets = np.zeros(counts.size + 1, np.int64)
     np.cumsum(counts.ravel(), out=offsets[1:])
     n_nodes = int(offsets[-1])
-    if n_nodes >= 2 ** 31 or n_nodes * node_bytes(n_lights) > MAX_TREE_BYTES:
-        raise RenderError(f"record_tree: the ray tree has {n_nodes} nodes, over the memory budget of "
-                          f"{MAX_TREE_BYTES // 1024 ** 3} GiB; render with record_tree=False or fewer samples")
+    check_tree(n_nodes, n_lights, n_lights * n_materials)
     tree = empty_tree(counts.shape, n_nodes, n_lights, device, n_materials)
     tree.offset = wp.array(offsets[:-1].reshape(counts.shape).astype(np.int32), dtype=wp.int32, device=device)
     return tree, offsets

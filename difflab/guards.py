@@ -1,0 +1,110 @@
+"""The guards the renderers call at their boundary (Warp-free): price a render before allocating it,
+name the object and file of a mesh that cannot be rendered, and refuse to return non-finite pixels.
+
+    check_render(scene, record_tree)      before compiling: memory and ray budgets (`limits`)
+    object_errors(index, obj)             around building an object's mesh: errors name the object
+    check_world_mesh(mesh, index, obj)    after transforming it: coordinates within +-MAX_COORD
+    check_image(image, scene)             before returning: no NaN / inf, with the likely cause named
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+
+from . import limits
+from .errors import MeshError, RenderError
+
+
+def tree_shape(scene) -> tuple[int, float]:
+    """(branching, weight) of the scene's ray trees: rays one hit can spawn (a reflected ray where
+    kr > 0, a refracted one where kt > 0; the most over all materials) and the largest factor a
+    spawned ray's weight carries (kr or kt, times a Fresnel factor <= 1)."""
+    materials = list(scene.materials.values())
+    branching = max([int(m.kr > 0) + int(m.kt > 0) for m in materials], default=0)
+    weight = max([max(m.kr, m.kt) for m in materials], default=0.0)
+    return branching, weight
+
+
+def check_render(scene, record_tree: bool = True) -> None:
+    """Refuse, before anything is allocated, a render of `scene` (its camera and render settings)
+    over the memory budget or (ray tracing) the ray budget; RenderError says what to lower."""
+    camera, settings = scene.camera, scene.render
+    samples = camera.width * camera.height * settings.spp
+    n_lights = len(scene.lights)
+    what = f"render: {camera.width} x {camera.height} pixels at spp {settings.spp} ({settings.method})"
+    if settings.method == "raster":
+        limits.require_memory(limits.raster_frame_bytes(samples, samples, n_lights, 0), what, RenderError,
+                              "lower the image size or spp")
+        return
+    branching, weight = tree_shape(scene)
+    nodes = limits.ray_tree_nodes(settings.max_depth, branching, weight, settings.adaptive_threshold)
+    limits.check_rays(samples, nodes, n_lights, f"{what} at max_depth {settings.max_depth}", RenderError)
+    limits.require_memory(limits.raytrace_bytes(samples, samples, n_lights, record_tree), what, RenderError,
+                          "lower the image size or spp")
+
+
+def check_tree(n_nodes: int, n_lights: int, n_crossing_counts: int) -> None:
+    """Refuse recording a ray tree of `n_nodes` (counted by the first pass) over the memory budget;
+    `n_crossing_counts` = lights x materials per node when transparent shadow crossings are recorded."""
+    limits.require_count(n_nodes, "record_tree: ray-tree nodes", RenderError)
+    nbytes = limits.raytrace_bytes(0, n_nodes, n_lights, True) + n_nodes * n_crossing_counts * limits.TREE_CROSSING_BYTES
+    limits.require_memory(nbytes, f"record_tree: a ray tree of {n_nodes} nodes", RenderError,
+                          "render with record_tree=False, fewer samples or a lower max_depth")
+
+
+def _object_label(index: int, obj) -> str:
+    file = getattr(obj, "file", None)
+    return f"objects[{index}]" + (f" ({limits.short_path(file)})" if file else "")
+
+
+@contextlib.contextmanager
+def object_errors(index: int, obj):
+    """Re-raise a MeshError from building object `index`'s mesh with the object (and its file) named."""
+    try:
+        yield
+    except MeshError as exc:
+        raise MeshError(f"{_object_label(index, obj)}: {exc}") from None
+
+
+def check_world_mesh(mesh, index: int, obj) -> None:
+    """MeshError naming the object, its file and transform if a world-space vertex is beyond +-MAX_COORD
+    (float32 rendering would overflow)."""
+    largest = float(np.max(np.abs(mesh.vertices), initial=0.0))
+    if not largest <= limits.MAX_COORD:
+        raise MeshError(f"{_object_label(index, obj)}.transform: vertices reach {largest:.3g} after the transform, "
+                        f"beyond +-{limits.MAX_COORD:g} (float32 rendering overflows)")
+
+
+def _numbers(value, path: str):
+    """(path, number) for every number in a scene's JSON form."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            yield from _numbers(item, f"{path}.{key}" if path else str(key))
+    elif isinstance(value, (list, tuple)):
+        for i, item in enumerate(value):
+            yield from _numbers(item, f"{path}[{i}]")
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        yield path, float(value)
+
+
+def likely_causes(scene, count: int = 3) -> str:
+    """The `count` numbers of largest magnitude in the scene's materials, lights, ambient, background
+    and fog, as 'path = value' (where float32 shading overflows first), or the smallest non-zero
+    attenuation (a light that divides by nearly zero)."""
+    d = scene.to_dict()
+    values = [(p, x) for key in ("materials", "lights", "ambient", "background", "fog")
+              for p, x in _numbers(d.get(key), key)]
+    ranked = sorted(values, key=lambda px: -abs(px[1]))[:count]
+    shown = ", ".join(f"{p} = {x:.3g}" for p, x in ranked)
+    tiny = [(p, x) for p, x in values if ".attenuation[" in p and 0 < x < 1e-20]
+    return shown + ("".join(f", {p} = {x:.3g}" for p, x in tiny[:1]))
+
+
+def check_image(image: np.ndarray, scene) -> None:
+    """RenderError if `image` has NaN or infinite values, with their count and the likely cause."""
+    bad = int(np.count_nonzero(~np.isfinite(image).all(axis=-1)))
+    if bad:
+        raise RenderError(f"render: {bad} of {image.shape[0] * image.shape[1]} pixels are not finite (float32 "
+                          f"overflow); the largest numbers in the scene: {likely_causes(scene)}")
