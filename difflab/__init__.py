@@ -12,6 +12,7 @@ The names below are the public API (`docs/api.md`). Public subpackages: `difflab
 `difflab.fit` on first use, so `import difflab` loads neither JAX nor optimistix.
 """
 
+from .batch import fit_many as fit_many
 from .demos.examples import example_scene as example_scene
 from .errors import DifflabError as DifflabError
 from .errors import FitError as FitError
@@ -72,7 +73,7 @@ __all__ = [
     # images
     "load_image", "save_image",
     # fitting (lazy)
-    "fit_material", "fit_scene", "identify", "FitResult", "Identifiability",
+    "fit_material", "fit_scene", "identify", "FitResult", "Identifiability", "fit_many",
     # errors
     "DifflabError", "SceneError", "MeshError", "TextureError", "RenderError", "FitError", "OutputError",
 ]

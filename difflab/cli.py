@@ -44,12 +44,13 @@ def check_outputs(args) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     from . import commands
+    from .batch.command import add_parser as add_fit_batch
     from .fit.command import add_parser as add_fit
 
     parser = Parser(prog="difflab", description="A differentiable shading lab.")
     parser.add_argument("--version", action="version", version="difflab 0.1.0")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add_parser in (commands.add_render, commands.add_demo, add_fit, commands.add_fractal):
+    for add_parser in (commands.add_render, commands.add_demo, add_fit, add_fit_batch, commands.add_fractal):
         add_parser(sub)
     return parser
 

@@ -39,3 +39,7 @@ class OutputError(DifflabError, ValueError):
 
 class FitError(DifflabError, RuntimeError):
     """A fit was given bad input, or failed and was asked to raise (`throw=True`)."""
+
+
+class ManifestError(DifflabError, ValueError):
+    """A batch manifest cannot be read, or its lines are invalid; the message names the line."""

@@ -1,0 +1,108 @@
+"""`fit_many`: every fit of a manifest, on this machine's cores or a Dask cluster, resumable."""
+
+from __future__ import annotations
+
+import os
+import sys
+from contextlib import closing
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import DifflabError
+from .manifest import load_manifest
+from .store import Store
+
+
+@dataclass(frozen=True)
+class BatchSummary:
+    """What `fit_many` did. rows: one per manifest line, as in OUTDIR/summary.json (line, name,
+    status, result, loss, psnr, steps, params, error); counts: status -> rows; ran: fits run by this
+    call; skipped: fits found finished from an earlier run (resume)."""
+
+    outdir: Path
+    rows: list
+    counts: dict
+    ran: int
+    skipped: int
+
+    @property
+    def all_converged(self) -> bool:
+        return all(row["status"] == "converged" for row in self.rows)
+
+
+def _say(quiet: bool, text: str) -> None:
+    if not quiet:
+        print(text, file=sys.stderr)
+
+
+def fit_many(manifest, outdir, *, workers: int | None = None, client=None, scheduler: str | None = None,
+             inline: bool = False, retries: int = 2, progress: bool | None = None, quiet: bool = False) -> BatchSummary:
+    """Run every fit of a manifest and write each result as it finishes.
+
+    The manifest is validated whole before any fit starts; each bad line is reported (on stderr,
+    with its line number) and recorded as a failure, and the valid lines run. A fit already finished
+    in `outdir` with the same line is skipped (resume), so an interrupted batch is completed by
+    running it again; the folder then holds the same files as after an uninterrupted run (timing/
+    apart). A failing fit is recorded with its error and the others go on. See `store.py` for the
+    folder's layout and docs/batch.md for the manifest.
+
+    Arguments:
+        manifest: a JSON Lines file, or a list of line objects (dicts).
+        outdir: the output folder (created if needed).
+        workers: processes on this machine (default: the number of cores).
+        client: a `distributed.Client`: run the fits on its cluster instead; or
+        scheduler: a Dask scheduler address ("tcp://host:8786") to connect a client to.
+        inline: send the input files' bytes to the cluster workers instead of letting them read paths.
+        retries: Dask's retries of a task that raised (a task whose worker died is rescheduled anyway).
+        progress: show a progress bar with ETA (default: when stderr is a terminal).
+        quiet: do not print the bad lines and the final counts on stderr.
+    Returns:
+        a `BatchSummary`.
+    Raises:
+        ManifestError: the manifest cannot be read or lists nothing.
+        DifflabError: bad `workers`, or both `client` and `scheduler`.
+    """
+    jobs, invalid = load_manifest(manifest)
+    if workers is not None and not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1):
+        raise DifflabError(f"workers: expected an integer >= 1, got {workers!r}")
+    if client is not None and scheduler is not None:
+        raise DifflabError("client, scheduler: give one or the other")
+    for bad in invalid:
+        _say(quiet, f"manifest line {bad.line}: {bad.error}")
+    store = Store(outdir)
+    store.record_invalid(invalid)
+    todo = [job for job in jobs if not store.done(job)]
+    owned = None
+    if scheduler is not None and todo:
+        from distributed import Client
+
+        client = owned = Client(scheduler)
+    try:
+        _run(store, todo, client, workers or os.cpu_count() or 1, inline, retries, progress)
+    finally:
+        if owned is not None:
+            owned.close()
+    table = store.summarise(jobs, invalid)
+    summary = BatchSummary(Path(outdir), table["jobs"], table["counts"], len(todo), len(jobs) - len(todo))
+    _say(quiet, f"{table['lines']} lines: " + ", ".join(f"{n} {status}" for status, n in summary.counts.items() if n)
+         + f" ({summary.ran} run, {summary.skipped} already done); summary in {Path(outdir) / 'summary.csv'}")
+    return summary
+
+
+def _run(store: Store, todo, client, workers: int, inline: bool, retries: int, progress) -> None:
+    """Run `todo` on the cluster of `client` (or local processes) and record each outcome as it comes."""
+    from tqdm.auto import tqdm
+
+    from .runners import cluster_jobs, local_jobs
+
+    if not todo:
+        return
+    outcomes = cluster_jobs(todo, client, inline, retries) if client is not None else local_jobs(todo, workers)
+    failed = 0
+    with closing(outcomes), tqdm(total=len(todo), unit="fit", desc="fit-batch", dynamic_ncols=True,
+                                 disable=None if progress is None else not progress) as bar:
+        for job, outcome in outcomes:
+            store.record(job, outcome)
+            failed += not outcome["ok"]
+            bar.set_postfix(failed=failed, refresh=False)
+            bar.update()

@@ -1,0 +1,40 @@
+"""`difflab fit-batch`: every fit of a manifest, resumable, locally or on a Dask cluster.
+
+    difflab fit-batch MANIFEST.jsonl -o OUTDIR [--workers N] [--scheduler tcp://host:8786 [--inline]]
+
+Bad manifest lines are listed (with their line numbers) before any fit starts and recorded as
+failures; the other fits run. Rerun the same command to finish an interrupted batch: finished fits
+are skipped. Exit code: 0 when every line gave a converged fit, 3 when any line is invalid, failed or
+did not converge (everything is still written: see OUTDIR/summary.csv), 2 when the manifest cannot
+be read. docs/batch.md describes the manifest and the output folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+EXIT_OK, EXIT_INCOMPLETE = 0, 3
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the `fit-batch` subcommand to an argparse subparsers object."""
+    p = subparsers.add_parser("fit-batch", help="run the fits of a manifest (resumable; local or Dask)",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("manifest", help="JSON Lines file: one fit per line")
+    p.add_argument("-o", "--output", required=True, help="output folder (rerun into it to resume)")
+    p.add_argument("--workers", type=int, help="worker processes on this machine (default: one per core)")
+    p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786 (needs difflab[cluster])")
+    p.add_argument("--inline", action="store_true",
+                   help="send input files to the Dask workers as bytes (default: workers read the paths)")
+    p.add_argument("--retries", type=int, default=2, help="Dask retries of a task that raised (default %(default)s)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+    return p
+
+
+def run(args) -> int:
+    from .api import fit_many
+
+    summary = fit_many(args.manifest, args.output, workers=args.workers, scheduler=args.scheduler,
+                       inline=args.inline, retries=args.retries, progress=False if args.no_progress else None)
+    return EXIT_OK if summary.all_converged else EXIT_INCOMPLETE

@@ -1,0 +1,113 @@
+"""A batch's output folder: each result written atomically as it arrives, resume, the summary table.
+
+    OUTDIR/scenes/NAME.json         the fitted scene (scene file format)
+    OUTDIR/reports/NAME.json        the fit report: the job as run, then `FitResult.to_dict()` less
+                                    its timings; written after the scene, so it marks the job done
+    OUTDIR/failures/NAME.json       a job that failed: the job and the error
+    OUTDIR/failures/line-N.json     an invalid manifest line: its number, name if any, and the error
+    OUTDIR/timing/NAME.json         the job's wall time in its worker (the one thing that changes
+                                    from run to run; everything else is the same for the same manifest)
+    OUTDIR/summary.csv, .json       one row per manifest line, in manifest order, written at the end
+
+Only the process that owns the folder writes to it, one file at a time, each through a temporary file
+renamed into place: an interrupted run leaves complete files or none (a process killed mid-write can
+leave a hidden temporary, which the next run removes).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+from ..io import write_json_atomic, write_text_atomic
+from .manifest import Invalid, Job
+
+FOLDERS = ("scenes", "reports", "failures", "timing")
+COLUMNS = ("line", "name", "status", "result", "loss", "psnr", "steps", "params", "error")
+
+
+def _read_json(path: Path):
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+class Store:
+    """The output folder of one batch (see the module docstring for its layout)."""
+
+    def __init__(self, outdir):
+        self.root = Path(outdir)
+        for folder in FOLDERS:
+            (self.root / folder).mkdir(parents=True, exist_ok=True)
+        for folder in (self.root, *(self.root / f for f in FOLDERS)):  # temporaries of a killed writer
+            for tmp in folder.glob(".*.tmp*"):
+                tmp.unlink()
+
+    def _file(self, folder: str, name: str) -> Path:
+        return self.root / folder / f"{name}.json"
+
+    def done(self, job: Job) -> bool:
+        """Has `job`, exactly as specified now, a result written? (A changed line is redone.)"""
+        report = _read_json(self._file("reports", job.name))
+        return isinstance(report, dict) and report.get("job") == job.spec and self._file("scenes", job.name).is_file()
+
+    def record(self, job: Job, outcome: dict) -> None:
+        """Write a worker's outcome (`worker.run_job`): scene then report, or the failure; then the
+        timing. A result replaces an earlier failure of the same name, and the other way round."""
+        if outcome["ok"]:
+            self._file("failures", job.name).unlink(missing_ok=True)
+            write_json_atomic(self._file("scenes", job.name), outcome["scene"])
+            write_json_atomic(self._file("reports", job.name), {"name": job.name, "job": job.spec, **outcome["report"]})
+        else:
+            self._file("reports", job.name).unlink(missing_ok=True)
+            self._file("scenes", job.name).unlink(missing_ok=True)
+            write_json_atomic(self._file("failures", job.name),
+                              {"name": job.name, "job": job.spec, "error": outcome["error"]})
+        write_json_atomic(self._file("timing", job.name), {"name": job.name, "seconds": outcome["seconds"]})
+
+    def record_invalid(self, invalid: list[Invalid]) -> None:
+        """Write one failure per invalid line, and drop those of lines that are no longer invalid."""
+        keep = {self._file("failures", f"line-{bad.line}") for bad in invalid}
+        for old in (self.root / "failures").glob("line-*.json"):
+            if old not in keep:
+                old.unlink()
+        for bad in invalid:
+            write_json_atomic(self._file("failures", f"line-{bad.line}"),
+                              {"line": bad.line, "name": bad.name, "error": bad.error})
+
+    def row(self, job: Job) -> dict:
+        """The summary row of a job, from what the folder holds for it now."""
+        row = {"line": job.line, "name": job.name, "status": "not_run", "result": None, "loss": None, "psnr": None,
+               "steps": None, "params": None, "error": None}
+        report = _read_json(self._file("reports", job.name))
+        failure = _read_json(self._file("failures", job.name))
+        if isinstance(report, dict) and report.get("job") == job.spec:
+            row.update({k: report.get(k) for k in ("result", "loss", "psnr", "steps", "params")},
+                       status="converged" if report.get("converged") else "not_converged")
+        elif isinstance(failure, dict) and failure.get("job") == job.spec:
+            row.update(status="failed", error=failure.get("error"))
+        return row
+
+    def summarise(self, jobs: list[Job], invalid: list[Invalid]) -> dict:
+        """Write summary.csv and summary.json (one row per manifest line, in line order) and return the
+        latter's content: {"lines", "counts": status -> rows, "jobs": rows}.
+        Status: converged, not_converged (a result, flagged), failed (no result: the error says why),
+        invalid (a bad manifest line), not_run."""
+        rows = [self.row(job) for job in jobs]
+        rows += [{**dict.fromkeys(COLUMNS), "line": bad.line, "name": bad.name, "status": "invalid", "error": bad.error}
+                 for bad in invalid]
+        rows.sort(key=lambda r: r["line"])
+        counts = {status: sum(r["status"] == status for r in rows)
+                  for status in ("converged", "not_converged", "failed", "invalid", "not_run")}
+        summary = {"lines": len(rows), "counts": counts, "jobs": rows}
+        write_json_atomic(self.root / "summary.json", summary)
+        text = io.StringIO()
+        writer = csv.DictWriter(text, fieldnames=COLUMNS, lineterminator="\n")
+        writer.writeheader()
+        for r in rows:
+            writer.writerow({**r, "params": None if r["params"] is None else json.dumps(r["params"])})
+        write_text_atomic(self.root / "summary.csv", text.getvalue())
+        return summary

@@ -1,0 +1,123 @@
+"""One fit of a batch, as a worker process runs it (a local pool process or a Dask worker).
+
+A worker only computes: it returns the fitted scene and the report as plain data, and the process
+that owns the output folder writes them (`store.py`), so a worker that dies or is interrupted leaves
+nothing behind. The compiled solves stay in the worker process (jobs of the same problem shape reuse
+them), and JAX's persistent compilation cache on disk lets a new worker skip most compilation.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+from ..errors import DifflabError, FitError
+
+NO_FIT = ("empty_mask", "nonfinite_target")  # result codes that mean no fit was made: a failed job
+VOLATILE = ("seconds", "timings")  # report fields that change from run to run (kept apart from the report)
+
+_prepared = False
+
+
+def cache_dir() -> Path:
+    """JAX's persistent compilation cache folder: $DIFFLAB_CACHE/jax, else the user cache folder
+    ($XDG_CACHE_HOME or ~/.cache)/difflab/jax."""
+    root = os.environ.get("DIFFLAB_CACHE") or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "difflab"
+    return Path(root) / "jax"
+
+
+def prepare_process() -> None:
+    """Once per process, before the first fit: point JAX's persistent compilation cache at `cache_dir`
+    unless the process set one already, and keep every compiled function there (a fit compiles
+    dozens of small ones besides the solve; together they are most of a cold start)."""
+    global _prepared
+    if _prepared:
+        return
+    import jax
+
+    if not jax.config.jax_compilation_cache_dir:
+        jax.config.update("jax_compilation_cache_dir", str(cache_dir()))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    _prepared = True
+
+
+def fit_job(spec: dict):
+    """Run the fit a manifest line describes (`manifest.parse_line`'s spec) and return its FitResult."""
+    from ..fit import fit_material, fit_scene
+
+    targets = [(view["image"], {k: view[k] for k in ("camera", "lights") if k in view}) for view in spec["targets"]]
+    masks = [view.get("mask") for view in spec["targets"]]
+    options = {**spec["solver"], "init": spec["init"] or None, "history": False,
+               "masks": None if all(m is None for m in masks) else masks}
+    if "params" in spec:
+        options["params"] = tuple(spec["params"])
+    material = spec.get("material")
+    if material is not None and len(material) == 1:
+        material = material[0]
+    if spec["method"] == "raytrace":
+        return fit_scene(spec["scene"], targets, materials=material, **options)
+    return fit_material(spec["scene"], targets, material=material, **options)
+
+
+def input_files(spec: dict) -> list[str]:
+    """The files a job reads: its scene file, then each view's image and mask."""
+    return [spec["scene"]] + [view[k] for view in spec["targets"] for k in ("image", "mask") if k in view]
+
+
+def pack(spec: dict) -> dict:
+    """The bytes of a job's input files, path -> bytes, to send to workers that cannot read them.
+    A file that cannot be read is left out (the job then fails on the worker, naming it)."""
+    files = {}
+    for path in input_files(spec):
+        try:
+            files[path] = Path(path).read_bytes()
+        except OSError:
+            pass
+    return files
+
+
+def _unpacked(spec: dict, files: dict, folder: Path) -> dict:
+    """`spec` with every packed input written into `folder` and its path pointing there."""
+    local = {}
+    for i, (path, data) in enumerate(files.items()):
+        local[path] = folder / f"{i}-{Path(path).name}"  # keep the name: its suffix says how to decode
+        local[path].write_bytes(data)
+
+    def moved(path):
+        return str(local.get(path, path))
+
+    views = [{k: (moved(v) if k in ("image", "mask") else v) for k, v in view.items()} for view in spec["targets"]]
+    return {**spec, "scene": moved(spec["scene"]), "targets": views}
+
+
+def outcome_of(spec: dict) -> dict:
+    """Fit one job: {"ok": True, "scene": fitted scene dict, "report": FitResult.to_dict() without the
+    VOLATILE fields} or {"ok": False, "error": message}. Never raises for a failed job: a bad input
+    (DifflabError) gives its message, anything else "internal error: Type: message"."""
+    try:
+        result = fit_job(spec)
+        if result.result in NO_FIT:
+            raise FitError(f"no fit made: {result.result}")
+        report = result.to_dict()
+        for key in VOLATILE:
+            report.pop(key, None)
+        return {"ok": True, "scene": result.to_scene().to_dict(), "report": report}
+    except DifflabError as exc:
+        return {"ok": False, "error": str(exc)}
+    except Exception as exc:  # one job's internal error must not stop the batch: record it
+        return {"ok": False, "error": f"internal error: {type(exc).__name__}: {exc}"}
+
+
+def run_job(spec: dict, files: dict | None = None) -> dict:
+    """A worker's task: `outcome_of(spec)` plus its wall time in "seconds". With `files` (from `pack`)
+    the inputs are read from those bytes, written to a temporary folder, instead of from the paths."""
+    start = time.perf_counter()
+    prepare_process()
+    if files:
+        with tempfile.TemporaryDirectory(prefix="difflab-job-") as folder:
+            outcome = outcome_of(_unpacked(spec, files, Path(folder)))
+    else:
+        outcome = outcome_of(spec)
+    return {**outcome, "seconds": time.perf_counter() - start}
