@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
+import time
 
 from .worker import pack, run_job
 
@@ -17,10 +19,19 @@ def _lost(error: str) -> dict:
     return {"ok": False, "error": error, "seconds": 0.0}
 
 
+def _exit_with(parent: int) -> None:
+    """Exit this process once `parent` is gone (a parent killed outright cannot stop its pool)."""
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    os._exit(1)
+
+
 def _init_worker(env: dict) -> None:
-    """A pool process: its environment, and Ctrl-C left to the parent (which stops the pool)."""
+    """A pool process: its environment; Ctrl-C left to the parent, which stops the pool; and an exit
+    when the parent dies."""
     os.environ.update(env)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_exit_with, args=(os.getppid(),), daemon=True).start()
 
 
 def local_jobs(jobs, workers: int):

@@ -16,9 +16,12 @@ leave a hidden temporary, which the next run removes).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
+import signal
+import threading
 from pathlib import Path
 
 from ..io import write_json_atomic, write_text_atomic
@@ -33,6 +36,24 @@ def _read_json(path: Path):
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
+
+
+@contextlib.contextmanager
+def uninterrupted():
+    """Hold Ctrl-C (SIGINT) back until the block is done, so that the files it writes are all written
+    and no temporary is left half-made; the KeyboardInterrupt is raised after it. (Only the main thread
+    receives signals; elsewhere the block runs as it is.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught = []
+    previous = signal.signal(signal.SIGINT, lambda number, frame: caught.append(number))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt
 
 
 class Store:
@@ -57,6 +78,10 @@ class Store:
     def record(self, job: Job, outcome: dict) -> None:
         """Write a worker's outcome (`worker.run_job`): scene then report, or the failure; then the
         timing. A result replaces an earlier failure of the same name, and the other way round."""
+        with uninterrupted():
+            self._record(job, outcome)
+
+    def _record(self, job: Job, outcome: dict) -> None:
         if outcome["ok"]:
             self._file("failures", job.name).unlink(missing_ok=True)
             write_json_atomic(self._file("scenes", job.name), outcome["scene"])
@@ -71,12 +96,13 @@ class Store:
     def record_invalid(self, invalid: list[Invalid]) -> None:
         """Write one failure per invalid line, and drop those of lines that are no longer invalid."""
         keep = {self._file("failures", f"line-{bad.line}") for bad in invalid}
-        for old in (self.root / "failures").glob("line-*.json"):
-            if old not in keep:
-                old.unlink()
-        for bad in invalid:
-            write_json_atomic(self._file("failures", f"line-{bad.line}"),
-                              {"line": bad.line, "name": bad.name, "error": bad.error})
+        with uninterrupted():
+            for old in (self.root / "failures").glob("line-*.json"):
+                if old not in keep:
+                    old.unlink()
+            for bad in invalid:
+                write_json_atomic(self._file("failures", f"line-{bad.line}"),
+                                  {"line": bad.line, "name": bad.name, "error": bad.error})
 
     def row(self, job: Job) -> dict:
         """The summary row of a job, from what the folder holds for it now."""
@@ -103,11 +129,12 @@ class Store:
         counts = {status: sum(r["status"] == status for r in rows)
                   for status in ("converged", "not_converged", "failed", "invalid", "not_run")}
         summary = {"lines": len(rows), "counts": counts, "jobs": rows}
-        write_json_atomic(self.root / "summary.json", summary)
         text = io.StringIO()
         writer = csv.DictWriter(text, fieldnames=COLUMNS, lineterminator="\n")
         writer.writeheader()
         for r in rows:
             writer.writerow({**r, "params": None if r["params"] is None else json.dumps(r["params"])})
-        write_text_atomic(self.root / "summary.csv", text.getvalue())
+        with uninterrupted():
+            write_json_atomic(self.root / "summary.json", summary)
+            write_text_atomic(self.root / "summary.csv", text.getvalue())
         return summary

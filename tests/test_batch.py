@@ -1,0 +1,253 @@
+"""Batches of fits (`fit_many`, `difflab fit-batch`): the manifest's validation, results recovered and
+written per job, failures recorded, resume, interruption, and the Dask backend with a worker killed.
+
+One small batch (16x16 targets of a sphere with known kd) is run once, uninterrupted, on two local
+worker processes; the other runs must leave the same files (timing/ apart)."""
+
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_fit_helpers import scene_dict
+
+from difflab import fit_many
+from difflab.batch.manifest import load_manifest, parse_line
+from difflab.batch.store import Store
+from difflab.batch.worker import outcome_of
+from difflab.errors import DifflabError, ManifestError
+from difflab.io import save_image
+from difflab.render.api import render_frame
+from difflab.scene import Scene, load_scene, save_scene
+
+KDS = [[0.3, 0.2, 0.1], [0.5, 0.2, 0.1], [0.7, 0.3, 0.1], [0.4, 0.4, 0.2], [0.6, 0.1, 0.3], [0.2, 0.5, 0.4]]
+GOOD = [f"fit{i}" for i in range(len(KDS))]
+
+
+def write_batch(folder: Path) -> Path:
+    """A start scene, one .npy target per kd of KDS, and a manifest of 8 lines: the good fits, a bad
+    line (line 3: an unknown key) and a target that does not exist (line 8)."""
+    start = scene_dict(size=16)
+    start["materials"]["red"].update(kd=[0.5, 0.5, 0.5], ks=[0.3, 0.3, 0.3], n=18.0)
+    save_scene(Scene.from_dict(start), folder / "scene.json")
+    lines = []
+    for i, kd in enumerate(KDS):
+        truth = scene_dict(size=16)
+        truth["materials"]["red"]["kd"] = kd
+        save_image(folder / f"t{i}.npy", render_frame(Scene.from_dict(truth)).image)
+        lines.append({"name": GOOD[i], "scene": "scene.json", "targets": [f"t{i}.npy"], "material": "red"})
+    lines.insert(2, {"name": "typo", "scene": "scene.json", "targets": ["t0.npy"], "materal": "red"})
+    lines.append({"name": "unreachable", "scene": "scene.json", "targets": ["nope.npy"], "material": "red"})
+    manifest = folder / "manifest.jsonl"
+    manifest.write_text("".join(json.dumps(line) + "\n" for line in lines))
+    return manifest
+
+
+def snapshot(outdir: Path) -> dict:
+    """Every file of an output folder (path -> bytes) but the run-dependent timing/."""
+    return {str(p.relative_to(outdir)): p.read_bytes() for p in sorted(outdir.rglob("*"))
+            if p.is_file() and p.relative_to(outdir).parts[0] != "timing"}
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """(manifest, output folder, summary) of the uninterrupted run; JAX's compilation cache in a
+    temporary folder, shared by this module's worker processes."""
+    folder = tmp_path_factory.mktemp("batch")
+    old = os.environ.get("DIFFLAB_CACHE")
+    os.environ["DIFFLAB_CACHE"] = str(folder / "cache")
+    try:
+        manifest = write_batch(folder)
+        summary = fit_many(manifest, folder / "out", workers=2, quiet=True)
+        yield manifest, folder / "out", summary
+    finally:
+        if old is None:
+            os.environ.pop("DIFFLAB_CACHE", None)
+        else:
+            os.environ["DIFFLAB_CACHE"] = old
+
+
+# -- the manifest ------------------------------------------------------------------------------------
+
+BASE = {"name": "a", "scene": "s.json", "targets": ["t.png"]}
+
+
+@pytest.mark.parametrize("line, message", [
+    ([1, 2], "expected a JSON object, got list"),
+    ({"scene": "s.json", "targets": ["t.png"]}, "name: missing (required: name, scene, targets)"),
+    ({**BASE, "material": "red", "solvr": {}}, "unknown key(s) ['solvr']; known: name, scene, targets, material, "
+     "params, method, init, solver"),
+    ({**BASE, "name": "../x"}, "name: expected letters, digits, '.', '_', '-' (at most 100, starting with a letter "
+     "or digit), got '../x'"),
+    ({**BASE, "targets": []}, "targets: empty list"),
+    ({**BASE, "targets": [{"image": "t.png", "camra": {}}]}, "targets[0]: unknown key(s) ['camra']; known: image, "
+     "mask, camera, lights"),
+    ({**BASE, "targets": [{"image": "t.png", "lights": {}}]},
+     "targets[0].lights: expected a list of light objects (a scene file's lights)"),
+    ({**BASE, "targets": [3]}, "targets[0]: expected an image path or a view object, got int"),
+    ({**BASE, "method": "path"}, "method: expected one of raster, raytrace, got 'path'"),
+    ({**BASE, "material": ["red", "red"]}, "material: names repeat: ['red', 'red']"),
+    ({**BASE, "params": ""}, "params: expected a name or a non-empty list of names, got ['']"),
+    ({**BASE, "init": {"kd": [0.1, "x"]}}, "init.kd: expected a number or a list of numbers, got [0.1, 'x']"),
+    ({**BASE, "solver": {"max_steps": 2.5}}, "solver.max_steps: expected int, got 2.5"),
+    ({**BASE, "solver": {"rtol": True}}, "solver.rtol: expected int or float, got True"),
+    ({**BASE, "solver": {"spp": 4}}, "solver.spp: applies to method 'raytrace' only, not 'raster'"),
+    ({**BASE, "solver": {"tol": 1}}, "solver.tol: unknown option; known: solver, max_steps, rtol, atol, x64, "
+     "per_channel, loss, loss_scale, learning_rate, bounded, max_depth, spp"),
+])
+def test_bad_line_names_its_problem(line, message):
+    with pytest.raises(ManifestError) as info:
+        parse_line(line, Path("/data"))
+    assert str(info.value) == message
+
+
+def test_manifest_reports_every_bad_line_with_its_number(tmp_path):
+    text = ['{"name": "a", "scene": "s.json", "targets": "t.png"}', "", '{"name": "b", "scene": 1, "targets": ["t.png"]}',
+            "{not json", '{"name": "a", "scene": "s.json", "targets": "u.png", "method": "raytrace"}']
+    (tmp_path / "m.jsonl").write_text("\n".join(text) + "\n")
+    jobs, invalid = load_manifest(tmp_path / "m.jsonl")
+    assert [(j.line, j.name) for j in jobs] == [(1, "a")]
+    assert jobs[0].spec == {"name": "a", "scene": str(tmp_path / "s.json"), "method": "raster", "init": {},
+                            "solver": {}, "targets": [{"image": str(tmp_path / "t.png")}]}
+    assert [(bad.line, bad.name, bad.error) for bad in invalid] == [
+        (3, "b", "scene: expected a file path, got 1"),
+        (4, None, "not JSON: Expecting property name enclosed in double quotes: line 1 column 2 (char 1)"),
+        (5, "a", "name: 'a' is already used on line 1")]
+
+
+def test_manifest_that_cannot_run(tmp_path):
+    with pytest.raises(ManifestError, match="manifest not found"):
+        load_manifest(tmp_path / "none.jsonl")
+    (tmp_path / "empty.jsonl").write_text("\n\n")
+    with pytest.raises(ManifestError, match="no fits listed"):
+        load_manifest(tmp_path / "empty.jsonl")
+    with pytest.raises(DifflabError, match="workers: expected an integer >= 1, got 0"):
+        fit_many([BASE], tmp_path / "out", workers=0, quiet=True)
+
+
+# -- a local run -------------------------------------------------------------------------------------
+
+
+def test_batch_recovers_each_fit_and_records_failures(reference):
+    manifest, out, summary = reference
+    assert summary.counts == {"converged": 6, "not_converged": 0, "failed": 1, "invalid": 1, "not_run": 0}
+    assert (summary.ran, summary.skipped, summary.all_converged) == (7, 0, False)
+    for name, kd in zip(GOOD, KDS):
+        np.testing.assert_allclose(load_scene(out / "scenes" / f"{name}.json").materials["red"].kd, kd, rtol=1e-4)
+        report = json.loads((out / "reports" / f"{name}.json").read_text())
+        assert (report["result"], report["converged"], report["job"]["name"]) == ("successful", True, name)
+        assert "seconds" not in report and json.loads((out / "timing" / f"{name}.json").read_text())["seconds"] > 0
+    failure = json.loads((out / "failures" / "unreachable.json").read_text())
+    assert failure["error"] == f"targets[0]: {manifest.parent / 'nope.npy'}: image file not found"
+    invalid = json.loads((out / "failures" / "line-3.json").read_text())
+    assert invalid == {"line": 3, "name": "typo", "error": "unknown key(s) ['materal']; known: name, scene, targets, "
+                       "material, params, method, init, solver"}
+    rows = (out / "summary.csv").read_text().splitlines()
+    assert rows[0] == "line,name,status,result,loss,psnr,steps,params,error"
+    assert [r.split(",")[:3] for r in rows[1:]] == [["1", "fit0", "converged"], ["2", "fit1", "converged"],
+                                                     ["3", "typo", "invalid"], ["4", "fit2", "converged"],
+                                                     ["5", "fit3", "converged"], ["6", "fit4", "converged"],
+                                                     ["7", "fit5", "converged"], ["8", "unreachable", "failed"]]
+
+
+def _run_until(manifest: Path, out: Path, log: Path, count: int, sig) -> int:
+    """Start `difflab fit-batch` on one worker process (this tree first on the path), send it `sig` once
+    `count` reports are written, and return its exit status."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parents[1]), os.environ.get("PYTHONPATH", "")])}
+    with log.open("w") as stderr:
+        proc = subprocess.Popen([sys.executable, "-m", "difflab.cli", "fit-batch", str(manifest), "-o", str(out),
+                                 "--workers", "1", "--no-progress"], env=env, stderr=stderr)
+        while len(list((out / "reports").glob("*.json"))) < count and proc.poll() is None:
+            time.sleep(0.01)
+        proc.send_signal(sig)
+        return proc.wait(timeout=60)
+
+
+def test_interrupted_and_killed_runs_completed_by_a_rerun_are_identical(reference, tmp_path):
+    """Ctrl-C (SIGINT) once a result is written, then a second run killed outright (SIGKILL) once
+    another is: each leaves complete files only, and a third run leaves the same files as the
+    uninterrupted run -- redoing only what is missing (here also a report lost between its scene and
+    itself, and a temporary file left by a killed writer)."""
+    manifest, out, _ = reference
+    reports, log = tmp_path / "out" / "reports", tmp_path / "log.txt"
+    assert _run_until(manifest, tmp_path / "out", log, 1, signal.SIGINT) == 1
+    assert "difflab: interrupted" in log.read_text()
+    assert not list((tmp_path / "out").rglob(".*.tmp*"))
+    first = len(list(reports.glob("*.json")))
+    assert _run_until(manifest, tmp_path / "out", log, first + 1, signal.SIGKILL) == -signal.SIGKILL
+    done = sorted(reports.glob("*.json"))
+    assert first < len(done) < len(GOOD)  # it was stopped half-way
+    for path in (tmp_path / "out").rglob("*.json"):
+        json.loads(path.read_text())  # complete files only
+    done[0].unlink()  # as if killed between a scene and its report
+    (tmp_path / "out" / "scenes" / ".fit4.json.x1.tmp.json").write_text("{")  # a killed writer's temporary
+    summary = fit_many(manifest, tmp_path / "out", workers=2, quiet=True)
+    assert (summary.ran, summary.skipped) == (len(GOOD) - len(done) + 2, len(done) - 1)  # + the failing one
+    assert snapshot(tmp_path / "out") == snapshot(out)
+
+
+def test_failed_fits_are_values_not_exceptions(reference):
+    manifest, _, _ = reference
+    jobs, _ = load_manifest(manifest)
+    spec = jobs[0].spec
+    mask = manifest.parent / "nothing.png"
+    save_image(mask, np.zeros((16, 16, 3), np.float32))
+    empty = outcome_of({**spec, "targets": [{**spec["targets"][0], "mask": str(mask)}]})
+    assert empty == {"ok": False, "error": "no fit made: empty_mask"}
+    unknown = outcome_of({**spec, "solver": {"solver": "newton"}})
+    assert unknown == {"ok": False, "error": "solver: unknown solver 'newton'; known: lm, gauss_newton, dogleg, bfgs, "
+                       "adam, varpro"}
+
+
+def test_store_keeps_one_outcome_per_job(tmp_path):
+    """A result replaces an earlier failure of the same job and the other way round."""
+    (job,), _ = load_manifest([{"name": "a", "scene": "s.json", "targets": "t.png"}])
+    store = Store(tmp_path)
+    store.record(job, {"ok": False, "error": "boom", "seconds": 1.0})
+    assert store.row(job)["status"] == "failed" and not store.done(job)
+    store.record(job, {"ok": True, "scene": {"x": 1}, "report": {"converged": False, "result": "r"}, "seconds": 2.0})
+    assert not (tmp_path / "failures" / "a.json").exists() and store.done(job)
+    assert store.row(job)["status"] == "not_converged"
+    changed = dataclasses.replace(job, spec={**job.spec, "params": ["kd"]})
+    assert not store.done(changed) and store.row(changed)["status"] == "not_run"  # a changed line is redone
+    store.record(job, {"ok": False, "error": "boom", "seconds": 1.0})
+    assert sorted(p.name for p in tmp_path.rglob("*.json")) == ["a.json", "a.json"]  # failures/ and timing/
+
+
+# -- a Dask cluster ----------------------------------------------------------------------------------
+
+
+def _kill_a_busy_worker(client, killed: list) -> None:
+    """Wait until a worker is running a task, then SIGKILL its process (the nanny starts a new one)."""
+    pids = client.run(os.getpid)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        busy = [worker for worker, keys in client.processing().items() if keys]
+        if busy:
+            os.kill(pids[busy[0]], signal.SIGKILL)
+            killed.append(pids[busy[0]])
+            return
+        time.sleep(0.01)
+
+
+def test_dask_cluster_with_a_worker_killed_gives_the_same_files(reference, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    manifest, out, _ = reference
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        killed = []
+        killer = threading.Thread(target=_kill_a_busy_worker, args=(client, killed))
+        killer.start()
+        summary = fit_many(manifest, tmp_path / "paths", client=client, quiet=True)
+        killer.join()
+        assert killed and killed[0] not in client.run(os.getpid).values()
+        assert summary.ran == 7 and snapshot(tmp_path / "paths") == snapshot(out)
+        fit_many(manifest, tmp_path / "bytes", client=client, inline=True, quiet=True)
+        assert snapshot(tmp_path / "bytes") == snapshot(out)
