@@ -61,17 +61,17 @@ def reference(tmp_path_factory):
     """(manifest, output folder, summary) of the uninterrupted run; JAX's compilation cache in a
     temporary folder, shared by this module's worker processes."""
     folder = tmp_path_factory.mktemp("batch")
-    old = os.environ.get("DIFFLAB_CACHE")
-    os.environ["DIFFLAB_CACHE"] = str(folder / "cache")
+    old = os.environ.get("DIFFLAB_CACHE_DIR")
+    os.environ["DIFFLAB_CACHE_DIR"] = str(folder / "cache")
     try:
         manifest = write_batch(folder)
         summary = fit_many(manifest, folder / "out", workers=2, quiet=True)
         yield manifest, folder / "out", summary
     finally:
         if old is None:
-            os.environ.pop("DIFFLAB_CACHE", None)
+            os.environ.pop("DIFFLAB_CACHE_DIR", None)
         else:
-            os.environ["DIFFLAB_CACHE"] = old
+            os.environ["DIFFLAB_CACHE_DIR"] = old
 
 
 # -- the manifest ------------------------------------------------------------------------------------

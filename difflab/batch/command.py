@@ -28,7 +28,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="send input files to the Dask workers as bytes (default: workers read the paths)")
     p.add_argument("--retries", type=int, default=2, help="Dask retries of a task that raised (default %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, output_is_folder=True)
     return p
 
 

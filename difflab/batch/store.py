@@ -11,7 +11,7 @@
 
 Only the process that owns the folder writes to it, one file at a time, each through a temporary file
 renamed into place: an interrupted run leaves complete files or none (a process killed mid-write can
-leave a hidden temporary, which the next run removes).
+leave a hidden temporary, which the next run removes). One run per output folder at a time.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import signal
 import threading
 from pathlib import Path
 
-from ..io import write_json_atomic, write_text_atomic
+from ..io import TMP_MARK, write_json_atomic, write_text_atomic
 from .manifest import Invalid, Job
 
 FOLDERS = ("scenes", "reports", "failures", "timing")
@@ -64,7 +64,7 @@ class Store:
         for folder in FOLDERS:
             (self.root / folder).mkdir(parents=True, exist_ok=True)
         for folder in (self.root, *(self.root / f for f in FOLDERS)):  # temporaries of a killed writer
-            for tmp in folder.glob(".*.tmp*"):
+            for tmp in folder.glob(f".*{TMP_MARK}*"):
                 tmp.unlink()
 
     def _file(self, folder: str, name: str) -> Path:

@@ -21,11 +21,15 @@ VOLATILE = ("seconds", "timings")  # report fields that change from run to run (
 _prepared = False
 
 
-def cache_dir() -> Path:
-    """JAX's persistent compilation cache folder: $DIFFLAB_CACHE/jax, else the user cache folder
+def cache_dir() -> Path | None:
+    """JAX's persistent compilation cache folder: $DIFFLAB_CACHE_DIR ("off": none), else
     ($XDG_CACHE_HOME or ~/.cache)/difflab/jax."""
-    root = os.environ.get("DIFFLAB_CACHE") or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "difflab"
-    return Path(root) / "jax"
+    value = os.environ.get("DIFFLAB_CACHE_DIR", "").strip()
+    if value.lower() == "off":
+        return None
+    if value:
+        return Path(value).expanduser()
+    return Path(os.environ.get("XDG_CACHE_HOME", "").strip() or Path.home() / ".cache") / "difflab" / "jax"
 
 
 def prepare_process() -> None:
@@ -37,8 +41,9 @@ def prepare_process() -> None:
         return
     import jax
 
-    if not jax.config.jax_compilation_cache_dir:
-        jax.config.update("jax_compilation_cache_dir", str(cache_dir()))
+    folder = cache_dir()
+    if folder is not None and not jax.config.jax_compilation_cache_dir:
+        jax.config.update("jax_compilation_cache_dir", str(folder))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     _prepared = True
 
