@@ -22,9 +22,9 @@ from difflab import fit_many
 from difflab.batch.manifest import load_manifest, parse_line
 from difflab.batch.store import Store
 from difflab.batch.worker import outcome_of
-from difflab.errors import DifflabError, ManifestError
+from difflab.errors import DifflabError, ManifestError, OutputError
 from difflab.io import save_image
-from difflab.render.api import render_frame
+from difflab import render_frame
 from difflab.scene import Scene, load_scene, save_scene
 
 KDS = [[0.3, 0.2, 0.1], [0.5, 0.2, 0.1], [0.7, 0.3, 0.1], [0.4, 0.4, 0.2], [0.6, 0.1, 0.3], [0.2, 0.5, 0.4]]
@@ -130,6 +130,11 @@ def test_manifest_that_cannot_run(tmp_path):
         load_manifest(tmp_path / "empty.jsonl")
     with pytest.raises(DifflabError, match="workers: expected an integer >= 1, got 0"):
         fit_many([BASE], tmp_path / "out", workers=0, quiet=True)
+    (tmp_path / "photos").mkdir()
+    (tmp_path / "photos" / "a.png").write_bytes(b"")
+    with pytest.raises(OutputError, match="photos: exists; use --force to overwrite"):
+        fit_many([BASE], tmp_path / "photos", quiet=True)
+    assert sorted(p.name for p in (tmp_path / "photos").iterdir()) == ["a.png"]  # nothing written
 
 
 # -- a local run -------------------------------------------------------------------------------------

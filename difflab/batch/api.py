@@ -36,7 +36,8 @@ def _say(quiet: bool, text: str) -> None:
 
 
 def fit_many(manifest, outdir, *, workers: int | None = None, client=None, scheduler: str | None = None,
-             inline: bool = False, retries: int = 2, progress: bool | None = None, quiet: bool = False) -> BatchSummary:
+             inline: bool = False, retries: int = 2, progress: bool | None = None, quiet: bool = False,
+             force: bool = False) -> BatchSummary:
     """Run every fit of a manifest and write each result as it finishes.
 
     The manifest is validated whole before any fit starts; each bad line is reported (on stderr,
@@ -56,10 +57,12 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
         retries: Dask's retries of a task that raised (a task whose worker died is rescheduled anyway).
         progress: show a progress bar with ETA (default: when stderr is a terminal).
         quiet: do not print the bad lines and the final counts on stderr.
+        force: write into `outdir` even when it holds other files than a batch's.
     Returns:
         a `BatchSummary`.
     Raises:
         ManifestError: the manifest cannot be read or lists nothing.
+        OutputError: `outdir` holds files and is not a batch's folder (without `force`).
         DifflabError: bad `workers`, or both `client` and `scheduler`.
     """
     jobs, invalid = load_manifest(manifest)
@@ -67,9 +70,9 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
         raise DifflabError(f"workers: expected an integer >= 1, got {workers!r}")
     if client is not None and scheduler is not None:
         raise DifflabError("client, scheduler: give one or the other")
+    store = Store(outdir, force)
     for bad in invalid:
         _say(quiet, f"manifest line {bad.line}: {bad.error}")
-    store = Store(outdir)
     store.record_invalid(invalid)
     todo = [job for job in jobs if not store.done(job)]
     owned = None

@@ -28,6 +28,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="send input files to the Dask workers as bytes (default: workers read the paths)")
     p.add_argument("--retries", type=int, default=2, help="Dask retries of a task that raised (default %(default)s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--force", action="store_true",
+                   help="write into an output folder that holds other files (a batch's folder is resumed without it)")
     p.set_defaults(func=run, output_is_folder=True)
     return p
 
@@ -36,5 +38,6 @@ def run(args) -> int:
     from .api import fit_many
 
     summary = fit_many(args.manifest, args.output, workers=args.workers, scheduler=args.scheduler,
-                       inline=args.inline, retries=args.retries, progress=False if args.no_progress else None)
+                       inline=args.inline, retries=args.retries, progress=False if args.no_progress else None,
+                       force=args.force)
     return EXIT_OK if summary.all_converged else EXIT_INCOMPLETE

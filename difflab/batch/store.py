@@ -11,7 +11,8 @@
 
 Only the process that owns the folder writes to it, one file at a time, each through a temporary file
 renamed into place: an interrupted run leaves complete files or none (a process killed mid-write can
-leave a hidden temporary, which the next run removes). One run per output folder at a time.
+leave a hidden temporary, which the next run removes). One run per output folder at a time; a
+non-empty folder that is not a batch's is not written into without `force`.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import signal
 import threading
 from pathlib import Path
 
-from ..io import TMP_MARK, write_json_atomic, write_text_atomic
+from ..io import TMP_MARK, refuse_overwrite, write_json_atomic, write_text_atomic
 from .manifest import Invalid, Job
 
 FOLDERS = ("scenes", "reports", "failures", "timing")
@@ -59,8 +60,12 @@ def uninterrupted():
 class Store:
     """The output folder of one batch (see the module docstring for its layout)."""
 
-    def __init__(self, outdir):
+    def __init__(self, outdir, force: bool = False):
+        """Open (make) the folder. A batch's folder is reopened as it is (resume); any other folder
+        with something in it is refused (OutputError) unless `force`, by the one overwrite rule."""
         self.root = Path(outdir)
+        if not any((self.root / name).exists() for name in (*FOLDERS, "summary.json")):
+            refuse_overwrite(self.root, force=force)
         for folder in FOLDERS:
             (self.root / folder).mkdir(parents=True, exist_ok=True)
         for folder in (self.root, *(self.root / f for f in FOLDERS)):  # temporaries of a killed writer
