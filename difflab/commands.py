@@ -5,12 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from .errors import DifflabError
+from .io import add_force
 from .vocabulary import MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS, SPECULAR_MODELS
-
-
-def add_force(parser) -> None:
-    """--force: the flag of the one overwrite rule (`io.refuse_overwrite`), the same in every command."""
-    parser.add_argument("--force", action="store_true", help="overwrite existing output files")
 
 
 def run_render(args) -> int:

@@ -116,6 +116,11 @@ def check_output_path(path: str | os.PathLike, what: str = "output", create_pare
     return path
 
 
+def add_force(parser) -> None:
+    """--force: the command-line flag of the one overwrite rule (`refuse_overwrite`), the same in every command."""
+    parser.add_argument("--force", action="store_true", help="overwrite existing output files")
+
+
 def refuse_overwrite(*paths, force: bool = False) -> None:
     """The one rule of every command: an output that exists (a file, or a folder with anything in
     it) is not overwritten unless `force`. Raises OutputError naming the first such path; call it

@@ -20,7 +20,7 @@ EXIT_OK, EXIT_NOT_CONVERGED = 0, 3
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Add the `fit` subcommand to an argparse subparsers object."""
-    from ..commands import add_force
+    from ..io import add_force
     from .solve import SOLVERS
 
     p = subparsers.add_parser("fit", help="fit material coefficients to target images",
