@@ -23,7 +23,8 @@ class Parser(argparse.ArgumentParser):
     """argparse with one-line errors: `difflab: error: ...` and exit code 2 (no usage block)."""
 
     def error(self, message):
-        self.exit(EXIT_INVALID, f"difflab: error: {self.prog.removeprefix('difflab ')}: {message}\n")
+        command = self.prog.removeprefix("difflab").strip()
+        self.exit(EXIT_INVALID, f"difflab: error: {command + ': ' if command else ''}{message}\n")
 
 
 def check_outputs(args) -> None:

@@ -55,8 +55,8 @@ TREE_CROSSING_BYTES = 9
 #: One triangle of a tessellated mesh through compile and a raster frame (float64 mesh arrays,
 #: float32 device arrays, normals, uvs, BVH, per-face clip buffers; measured 488 on the teapot).
 TRIANGLE_BYTES = 540
-#: One texel of a texture through load, mip pyramid and packing (measured 108).
-TEXEL_BYTES = 120
+#: One texel of a texture through load, mip pyramid and packing (measured 73.5).
+TEXEL_BYTES = 80
 #: One pixel of an 8-bit image file being read (decode, table lookup to float32; measured 26.5).
 IMAGE_LOAD_BYTES = 30
 #: One float64 element of a fit's Jacobian-sized arrays (residuals x parameters), with the solver's

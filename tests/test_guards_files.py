@@ -221,6 +221,9 @@ def test_argument_errors_are_one_line_with_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert info.value.code == 2 and err == "difflab: error: render: argument --width: invalid int value: 'abc'\n"
     with pytest.raises(SystemExit) as info:
+        main(["render", str(scene), "-o", str(tmp_path / "x.png"), "--bogus"])
+    assert info.value.code == 2 and capsys.readouterr().err == "difflab: error: unrecognized arguments: --bogus\n"
+    with pytest.raises(SystemExit) as info:
         main([])
     assert info.value.code == 2 and capsys.readouterr().err.count("\n") == 1
 

@@ -21,9 +21,8 @@ from ..._warp import wp
 
 from ...errors import DifflabError, TextureError
 from ...io import load_image
+from ...limits import TEXEL_BYTES, require_count, require_memory
 from .sampling import TexturesW
-
-MAX_TEXELS = 64 * 1024 * 1024  # all levels of all textures of a scene
 
 
 def load_texture(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
@@ -72,10 +71,10 @@ class TextureStore:
     @classmethod
     def from_images(cls, images, device: str = "cpu", paths=None) -> TextureStore:
         """Pack linear (H, W, 3) images given in image orientation (row 0 at the top)."""
+        texels = sum(int(np.shape(image)[0]) * int(np.shape(image)[1]) for image in images)
+        require_memory(texels * TEXEL_BYTES, f"textures: {texels} texels", TextureError)  # before the pyramids
+        require_count(2 * texels, "textures: texels in all levels", TextureError)  # a pyramid adds < 1/3
         pyramids = [mip_pyramid(np.flipud(np.asarray(image, np.float32)[..., :3])) for image in images]
-        total = sum(level.shape[0] * level.shape[1] for pyr in pyramids for level in pyr)
-        if total > MAX_TEXELS:
-            raise TextureError(f"textures: {total} texels in all levels, over the budget of {MAX_TEXELS}")
         return cls(pyramids, list(paths) if paths is not None else [None] * len(pyramids),
                    pack(pyramids, device))
 
