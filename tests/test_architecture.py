@@ -1,5 +1,5 @@
 """The import graph of the package: no cycles, and imports point down the layers
-(scene / geometry -> lighting -> render -> fit -> demos / cli), read from the source with `ast`."""
+(scene / geometry -> lighting -> renderers -> fit -> demos / cli), read from the source with `ast`."""
 
 from __future__ import annotations
 
@@ -90,10 +90,10 @@ def test_no_import_cycles():
 
 # (layer of the importer, what it must never import)
 RULES = [
-    (("scene", "geometry"), ("render", "renderers", "fit", "lighting", "demos", "warp", "jax", "optimistix",
+    (("scene", "geometry"), ("renderers", "fit", "lighting", "demos", "warp", "jax", "optimistix",
                              "difflab._warp")),
-    (("lighting",), ("render", "renderers", "fit", "demos")),
-    (("render", "renderers"), ("fit", "demos", "jax", "optimistix", "equinox", "lineax")),
+    (("lighting",), ("renderers", "fit", "demos")),
+    (("renderers",), ("fit", "demos", "jax", "optimistix", "equinox", "lineax")),
     (("fit",), ("demos",)),
     (("fractals",), ("fit", "demos", "jax", "optimistix")),
     (("vocabulary",), ("warp", "jax", "numpy", "difflab._warp")),
@@ -112,3 +112,12 @@ def test_imports_point_down(layers, forbidden):
                 bad.append(f"{module} imports {dep}")
     assert not bad, "\n".join(sorted(bad))
 
+
+
+def test_only_the_command_line_reaches_into_the_demos():
+    """The engine never depends on its demos: besides the demos themselves only the CLI and the
+    top-level `example_scene` re-export import them."""
+    allowed = {"difflab", "difflab.cli", "difflab.commands"}
+    bad = [f"{m} imports {d}" for m, deps in GRAPH.items() for d in deps
+           if in_layer(d, "demos") and not in_layer(m, "demos") and m not in allowed]
+    assert not bad, "\n".join(sorted(bad))
