@@ -70,18 +70,16 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
         raise DifflabError(f"workers: expected an integer >= 1, got {workers!r}")
     if client is not None and scheduler is not None:
         raise DifflabError("client, scheduler: give one or the other")
+    if not (isinstance(retries, int) and not isinstance(retries, bool) and retries >= 0):
+        raise DifflabError(f"retries: expected an integer >= 0, got {retries!r}")
     store = Store(outdir, force)
     for bad in invalid:
         _say(quiet, f"manifest line {bad.line}: {bad.error}")
     store.record_invalid(invalid)
     todo = [job for job in jobs if not store.done(job)]
-    owned = None
-    if scheduler is not None and todo:
-        from distributed import Client
-
-        client = owned = Client(scheduler)
+    owned = _connect(scheduler) if scheduler is not None and todo else None
     try:
-        _run(store, todo, client, workers or os.cpu_count() or 1, inline, retries, progress)
+        _run(store, todo, owned or client, min(workers or os.cpu_count() or 1, len(todo)), inline, retries, progress)
     finally:
         if owned is not None:
             owned.close()
@@ -90,6 +88,19 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
     _say(quiet, f"{table['lines']} lines: " + ", ".join(f"{n} {status}" for status, n in summary.counts.items() if n)
          + f" ({summary.ran} run, {summary.skipped} already done); summary in {Path(outdir) / 'summary.csv'}")
     return summary
+
+
+def _connect(scheduler: str):
+    """A `distributed.Client` of the scheduler at `scheduler`; DifflabError when Dask is missing or
+    the scheduler does not answer."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise DifflabError("scheduler: running on a Dask cluster needs Dask: pip install -e \".[cluster]\"") from None
+    try:
+        return Client(scheduler)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise DifflabError(f"scheduler: cannot connect to {scheduler!r} ({exc})") from None
 
 
 def _run(store: Store, todo, client, workers: int, inline: bool, retries: int, progress) -> None:
