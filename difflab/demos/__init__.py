@@ -1,6 +1,6 @@
 """difflab.demos: the figures of `difflab demo` and the example scenes shipped with the package.
 
-The engine (scene, geometry, lighting, render, fit, fractals) never imports this package; it imports
+The engine (scene, geometry, lighting, renderers, fit, fractals) never imports this package; it imports
 them. Sections (each `section(out, size) -> [(path, what it shows), ...]`):
 
 - `lighting`: flat / Gouraud / Phong, the model term by term, the lecture's material table
