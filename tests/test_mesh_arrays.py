@@ -1,6 +1,9 @@
 """Meshes given as arrays from Python: validated as file meshes are, round-tripped through the JSON
 form, and rendered exactly as the same mesh read from a file."""
 
+import copy
+import pickle
+
 import numpy as np
 import pytest
 
@@ -23,6 +26,15 @@ def test_arrays_are_stored_read_only_in_float64_and_int64():
     assert mesh.vertices.dtype == np.float64 and mesh.faces.dtype == np.int64 and mesh.normals is None
     assert not mesh.vertices.flags.writeable and not mesh.faces.flags.writeable
     assert np.array_equal(mesh.vertices, VERTICES) and np.array_equal(mesh.uvs, UVS)
+
+
+@pytest.mark.parametrize("copy_of", [lambda m: pickle.loads(pickle.dumps(m)), copy.deepcopy],
+                         ids=["pickle", "deepcopy"])
+def test_copies_are_equal_and_stay_read_only(copy_of):
+    mesh = difflab.Mesh(material="m", vertices=VERTICES, faces=FACES, normals=np.tile([0.0, 0.0, 1.0], (4, 1)))
+    again = copy_of(mesh)
+    assert again == mesh and hash(again) == hash(mesh)
+    assert not any(getattr(again, k).flags.writeable for k in ("vertices", "faces", "normals"))
 
 
 def test_equality_hash_and_json_round_trip():

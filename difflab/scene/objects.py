@@ -198,6 +198,13 @@ class Mesh(Record):
             return NotImplemented
         return all(_same(getattr(self, f.name), getattr(other, f.name)) for f in fields(self))
 
+    def __setstate__(self, state: dict) -> None:
+        """Unpickling and deep copies keep the arrays read-only (numpy restores them writeable)."""
+        for name, value in state.items():
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
     def __hash__(self) -> int:
         def key(value):
             return hashlib.sha1(value.tobytes()).hexdigest() if isinstance(value, np.ndarray) else value
