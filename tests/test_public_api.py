@@ -3,6 +3,7 @@ names load lazily."""
 
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -49,3 +50,16 @@ def test_knobs_are_keyword_only():
         assert params and all(p.kind in (p.KEYWORD_ONLY, p.VAR_KEYWORD) for p in params), fn.__name__
     with pytest.raises(TypeError):
         difflab.render(difflab.example_scene("glass_sphere", width=8, height=6), "raytrace")
+
+
+def test_render_is_the_function_after_every_renderer_module_is_imported():
+    """No subpackage is named like a public function (importing it would rebind the name)."""
+    import importlib
+    import inspect
+
+    for module in ("difflab.renderers.api", "difflab.renderers.raster.driver", "difflab.renderers.raytrace.driver"):
+        importlib.import_module(module)
+    assert inspect.isfunction(difflab.render) and inspect.isfunction(difflab.render_frame)
+    functions = {n for n in difflab.__all__ if inspect.isfunction(getattr(difflab, n))}
+    packages = {p.name for p in Path(difflab.__file__).parent.iterdir() if (p / "__init__.py").is_file()}
+    assert not functions & packages
