@@ -2,6 +2,7 @@
 name the object and file of a mesh that cannot be rendered, and refuse to return non-finite pixels.
 
     check_render(scene, record_tree)      before compiling: memory and ray budgets (`limits`)
+    check_threads(threads)                the CPU worker count a caller asks for
     object_errors(index, obj)             around building an object's mesh: errors name the object
     check_world_mesh(mesh, index, obj)    after transforming it: coordinates within +-MAX_COORD
     check_image(image, scene)             before returning: no NaN / inf, with the likely cause named
@@ -43,6 +44,13 @@ def check_render(scene, record_tree: bool = True) -> None:
     limits.check_rays(samples, nodes, n_lights, f"{what} at max_depth {settings.max_depth}", RenderError)
     limits.require_memory(limits.raytrace_bytes(samples, samples, n_lights, record_tree), what, RenderError,
                           "lower the image size or spp")
+
+
+def check_threads(threads):
+    """`threads` (CPU workers of a render) as given: None (all cores) or a positive integer."""
+    if threads is None or (isinstance(threads, int) and not isinstance(threads, bool) and threads >= 1):
+        return threads
+    raise RenderError(f"threads: expected a positive integer or None, got {limits.shorten(threads)}")
 
 
 def check_tree(n_nodes: int, n_lights: int, n_crossing_counts: int) -> None:

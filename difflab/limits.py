@@ -55,6 +55,9 @@ TREE_CROSSING_BYTES = 9
 #: One triangle of a tessellated mesh through compile and a raster frame (float64 mesh arrays,
 #: float32 device arrays, normals, uvs, BVH, per-face clip buffers; measured 488 on the teapot).
 TRIANGLE_BYTES = 540
+#: One byte of a mesh file being loaded (text scan, trimesh, the TriMesh; measured 12.6 on OBJ
+#: spheres of 5.6 and 23.8 MB, about 480 bytes per triangle).
+MESH_FILE_BYTES = 14
 #: One texel of a texture through load, mip pyramid and packing (measured 73.5).
 TEXEL_BYTES = 80
 #: One pixel of an 8-bit image file being read (decode, table lookup to float32; measured 26.5).

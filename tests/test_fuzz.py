@@ -53,9 +53,12 @@ EXTREMES = [0, -1, 1, 2, 1e-300, 1e-30, 1e-7, 1e6, 1e12, 1e13, 1e30, 3e38, -3e38
             [3e38, 0, 0], {"a": 1}, 64, 65, 4096, 2 ** 31, "teapot", "raytrace", "schlick"]
 VALUES = st.one_of(st.sampled_from(EXTREMES), st.floats(-10, 10, allow_nan=False), st.integers(-3, 70))
 
+KEYWORDS = ["method", "shading", "specular", "shadows", "max_depth", "spp", "fresnel", "transparent_shadows",
+            "clamp_vertex_colors", "interpolation", "cull_backfaces", "adaptive_threshold", "sampling", "width",
+            "height", "threads", "device", "colour"]
 #: Where a message may start: a field of the scene, a render option, or a file path.
 FIELD = re.compile(r"^(scene|camera|ambient|background|lights|materials|objects|fog|render|record_tree|"
-                   r"textures|DIFFLAB_\w+|/)")
+                   r"textures|DIFFLAB_\w+|/|(" + "|".join(KEYWORDS) + r")\b)")
 
 
 def paths(doc, prefix=()):
@@ -90,10 +93,10 @@ def small_budgets(monkeypatch):
     monkeypatch.setenv("DIFFLAB_MAX_RAYS", str(10 ** 6))
 
 
-def check(doc, what=FIELD):
+def check(doc, what=FIELD, **keywords):
     """Render `doc`: finite pixels, or a DifflabError whose message starts with a field or file."""
     try:
-        image = render(doc)
+        image = render(doc, **keywords)
     except DifflabError as exc:
         message = str(exc)
         event(f"{type(exc).__name__}: {message.split(':')[0][:30]}")
@@ -121,6 +124,15 @@ def test_the_unmutated_fuzz_scene_renders(small_budgets):
 
 
 COORD = st.floats(-2, 2, allow_nan=False).map(lambda x: f"{x:.3g}")
+@FUZZ
+@given(keywords=st.dictionaries(st.sampled_from(KEYWORDS), VALUES, max_size=3),
+       method=st.sampled_from(["raster", "raytrace"]))
+def test_hostile_keyword_arguments_render_or_name_the_argument(small_budgets, keywords, method):
+    doc = copy.deepcopy(BASE)
+    doc["render"]["method"] = method
+    check(doc, **{"method": method, **keywords})
+
+
 OBJ_LINES = st.one_of(
     st.builds(lambda *xyz: "v " + " ".join(xyz), COORD, COORD, COORD),
     st.builds(lambda *ijk: "f " + " ".join(ijk), *[st.sampled_from(["1", "2", "3", "4", "-1", "-2"])] * 3),

@@ -7,6 +7,7 @@ import pytest
 
 from conftest import scene_dict
 from difflab import MeshError, RenderError, Scene, TextureError, compile_scene, limits, render, render_frame
+from difflab.geometry import load_mesh
 from difflab.guards import check_image, check_render, likely_causes, tree_shape
 from difflab.renderers.launch import cpu_threads
 from difflab.renderers.raytrace.record import sized_tree
@@ -141,3 +142,20 @@ def test_difflab_threads_must_be_a_positive_integer(monkeypatch):
         monkeypatch.setenv("DIFFLAB_THREADS", bad)
         with pytest.raises(limits.DifflabError, match=rf"^DIFFLAB_THREADS: expected a positive integer, got '{bad}'$"):
             render(scene())
+
+
+def test_the_triangles_of_a_whole_scene_are_priced_as_they_are_built(monkeypatch):
+    """Each of 40 spheres is small; together they pass a 64 MiB budget at the 8th (16 128 triangles each)."""
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "64M")
+    spheres = [{**SPHERE, "center": [0, 0, -k]} for k in range(40)]
+    with pytest.raises(RenderError, match=r"^objects\[0\.\.7\]: triangles of the scene \(129024 triangles\): needs "
+                                          r"about 66\.4 MiB, over the memory budget of 64\.0 MiB"):
+        compile_scene(scene(spheres))
+
+
+def test_mesh_files_are_priced_by_their_size_before_reading(tmp_path, monkeypatch):
+    path = tmp_path / "big.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n" + "# padding\n" * 100_000)  # 1,000,032 bytes
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "10M")
+    with pytest.raises(MeshError, match=rf"^{path}: loading a mesh file of 1000032 bytes: needs about 13\.4 MiB"):
+        load_mesh(path)

@@ -14,7 +14,7 @@ import warnings
 import numpy as np
 
 from difflab.errors import MeshError
-from difflab.limits import MAX_COORD
+from difflab.limits import MAX_COORD, MESH_FILE_BYTES, require_memory
 
 from .mesh import TriMesh, concatenate
 
@@ -131,6 +131,8 @@ def load_mesh(path) -> TriMesh:
         raise MeshError(f"{path}: mesh file not found")
     if not os.path.isfile(path):
         raise MeshError(f"{path}: not a file")
+    require_memory(os.path.getsize(path) * MESH_FILE_BYTES, f"{path}: loading a mesh file of "
+                   f"{os.path.getsize(path)} bytes", MeshError)
     if path.lower().endswith(".obj"):
         _check_obj_text(path)
     try:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..errors import RenderError
-from ..guards import check_image, check_render
+from ..guards import check_image, check_render, check_threads
 from ..scene import Scene
 from .compile import CompiledScene, as_scene, compile_scene
 from .frame import Frame
@@ -70,6 +70,7 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
     recorded `ray_tree`, whose root nodes are the primary hits.
     """
     overrides = dict(options, method=method, shading=shading, specular=specular, max_depth=max_depth, spp=spp)
+    threads = check_threads(threads)
     if isinstance(scene, CompiledScene):
         compiled = scene
         if width is not None or height is not None:

@@ -157,6 +157,7 @@ def scene_parts(scene, sample_height: int):
     first, then the analytic ones' tessellations; and the analytic spheres and planes themselves."""
     names = scene.material_names
     mesh_parts, analytic_parts, spheres, planes = [], [], [], []
+    triangles = 0
     for index, obj in enumerate(scene.objects):
         material = names.index(obj.material)
         if isinstance(obj, Mesh):
@@ -175,7 +176,8 @@ def scene_parts(scene, sample_height: int):
             analytic_parts.append((plane_grid(obj, scene.camera), material, index))
         else:  # pragma: no cover - the scene validates object types
             raise RenderError(f"objects[{index}]: cannot render {type(obj).__name__}")
-    require_triangles(sum(m.n_faces for m, _, _ in mesh_parts + analytic_parts), "scene: triangles", RenderError)
+        triangles += (mesh_parts if isinstance(obj, Mesh) else analytic_parts)[-1][0].n_faces
+        require_triangles(triangles, f"objects[0..{index}]: triangles of the scene", RenderError)
     return mesh_parts, analytic_parts, spheres, planes
 
 
