@@ -18,11 +18,12 @@ from ._spec import Spec, colour, spec_field
 from .objects import OBJECT_TYPES, Mesh, Plane, SceneObject, Sphere, parse_object
 from .view import MAX_PIXELS, Camera, Fog, Light, RenderSettings
 
+
 def list_of(record) -> dict:
+    """The JSON Schema of a list of `record` objects."""
     return {"description": f"list of {record.__name__}", "type": "array", "items": {"$ref": f"#/$defs/{record.__name__}"}}
 
 
-SCENE_KEYS = ("camera", "ambient", "background", "lights", "materials", "objects", "fog", "render")
 #: The optional top-level key naming the file's JSON Schema (for editors); checked to be a string, not kept.
 SCHEMA_KEY = "$schema"
 
@@ -107,7 +108,7 @@ class Scene(Record):
         if base_dir is not None:
             base_dir = os.path.abspath(os.fspath(base_dir))
         d = mapping(d, "scene")
-        check_keys(d, "", (SCHEMA_KEY, *SCENE_KEYS), required=cls.FILE_REQUIRED)
+        check_keys(d, "", (SCHEMA_KEY, *(f.name for f in cls.spec_fields())), required=cls.FILE_REQUIRED)
         if SCHEMA_KEY in d:
             string(d[SCHEMA_KEY], SCHEMA_KEY)
         materials = mapping(d.get("materials", {}), "materials")
@@ -129,7 +130,7 @@ class Scene(Record):
     def to_dict(self) -> dict:
         """The scene as a plain JSON-able dict: every field explicit, lists not tuples, absolute paths.
         `Scene.from_dict(s.to_dict()) == s`."""
-        return {name: plain(getattr(self, name)) for name in SCENE_KEYS}
+        return {f.name: plain(getattr(self, f.name)) for f in self.spec_fields()}
 
     # -- queries and variants -------------------------------------------------------------------
 
