@@ -70,6 +70,20 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
     recorded `ray_tree`, whose root nodes are the primary hits.
     """
     overrides = dict(options, method=method, shading=shading, specular=specular, max_depth=max_depth, spp=spp)
+    return draw(scene, overrides, device, width, height, threads, keep=True)
+
+
+def render(scene, *, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None,
+           width=None, height=None, threads=None, **options):
+    """Render a scene (or a `CompiledScene`) to a numpy (H, W, 3) float32 linear RGB image; the
+    keyword-only options are those of `render_frame`. Only the image is formed (no G-buffer, no
+    recorded ray tree)."""
+    overrides = dict(options, method=method, shading=shading, specular=specular, max_depth=max_depth, spp=spp)
+    return draw(scene, overrides, device, width, height, threads, keep=False).image
+
+
+def draw(scene, overrides: dict, device, width, height, threads, keep: bool) -> Frame:
+    """The frame of `scene` under `overrides`; `keep`: also its G-buffer or recorded ray tree."""
     threads = check_threads(threads)
     if isinstance(scene, CompiledScene):
         compiled = scene
@@ -90,16 +104,10 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
     if settings.method == "raster":
         from .raster.driver import rasterize
 
-        frame = rasterize(compiled, settings, threads)
+        frame = rasterize(compiled, settings, threads, gbuffer=keep)
     else:
         from .raytrace.driver import raytrace
 
-        frame = raytrace(compiled, settings, threads)
+        frame = raytrace(compiled, settings, threads, record_tree=keep)
     check_image(frame.image, compiled.scene)  # no NaN / inf is returned
     return frame
-
-
-def render(scene, **options):
-    """Render a scene (or a `CompiledScene`) to a numpy (H, W, 3) float32 linear RGB image; the
-    keyword-only options are those of `render_frame`."""
-    return render_frame(scene, **options).image

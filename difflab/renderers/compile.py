@@ -50,7 +50,10 @@ class CompiledScene:
     face_material: np.ndarray
     face_object: np.ndarray
     face_normal: np.ndarray
+    vertex_material: np.ndarray  # per vertex, its object's material and index (Gouraud's vertex points)
+    vertex_object: np.ndarray
     n_mesh_faces: int
+    n_mesh_vertices: int
     epsilon: float
     arrays: dict  # name -> wp.array on the device
     geom: SceneGeomW
@@ -188,7 +191,8 @@ def triangle_soup(parts) -> dict:
         return {"vertices": np.zeros((0, 3), np.float32), "normals": np.zeros((0, 3), np.float32),
                 "uvs": np.zeros((0, 2), np.float32), "faces": np.zeros((0, 3), np.int32),
                 "face_material": np.zeros(0, np.int32), "face_object": np.zeros(0, np.int32),
-                "face_normal": np.zeros((0, 3), np.float32)}
+                "face_normal": np.zeros((0, 3), np.float32), "vertex_material": np.zeros(0, np.int32),
+                "vertex_object": np.zeros(0, np.int32)}
     offsets = np.cumsum([0] + [m.vertices.shape[0] for m, _, _ in parts])
     vertices = np.concatenate([m.vertices for m, _, _ in parts]).astype(np.float32)
     faces = np.concatenate([m.faces + o for (m, _, _), o in zip(parts, offsets)]).astype(np.int32)
@@ -201,6 +205,8 @@ def triangle_soup(parts) -> dict:
         "face_material": np.concatenate([np.full(m.faces.shape[0], mat, np.int32) for m, mat, _ in parts]),
         "face_object": np.concatenate([np.full(m.faces.shape[0], obj, np.int32) for m, _, obj in parts]),
         "face_normal": geometry.face_normals(vertices.astype(np.float64), faces).astype(np.float32),
+        "vertex_material": np.concatenate([np.full(m.vertices.shape[0], mat, np.int32) for m, mat, _ in parts]),
+        "vertex_object": np.concatenate([np.full(m.vertices.shape[0], obj, np.int32) for m, _, obj in parts]),
     }
 
 
@@ -262,10 +268,11 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     mesh_parts, analytic_parts, spheres, planes = scene_parts(scene, scene.camera.height * scene.render.spp_side)
     soup = triangle_soup(mesh_parts + analytic_parts)
     n_mesh_faces = sum(m.faces.shape[0] for m, _, _ in mesh_parts)
+    n_mesh_vertices = sum(m.vertices.shape[0] for m, _, _ in mesh_parts)
     faces = soup["faces"]
     epsilon = ray_epsilon(scene.camera, soup["vertices"][faces[:n_mesh_faces].ravel()], spheres)
     dtypes = {"vertices": wp.vec3, "normals": wp.vec3, "uvs": wp.vec2, "faces": wp.int32, "face_material": wp.int32,
-              "face_object": wp.int32, "face_normal": wp.vec3}
+              "face_object": wp.int32, "face_normal": wp.vec3, "vertex_material": wp.int32, "vertex_object": wp.int32}
     arrays = {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device)
               for name, dtype in dtypes.items()}
     arrays["faces"] = arrays["faces"].reshape((faces.shape[0], 3))
@@ -273,7 +280,8 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     ordered = [scene.materials[name] for name in scene.material_names]
     textures, texture_ids = scene_textures(ordered, device)
     return CompiledScene(
-        scene=scene, device=device, **soup, n_mesh_faces=n_mesh_faces, epsilon=epsilon, arrays=arrays, geom=geom,
+        scene=scene, device=device, **soup, n_mesh_faces=n_mesh_faces, n_mesh_vertices=n_mesh_vertices,
+        epsilon=epsilon, arrays=arrays, geom=geom,
         lights=lights_to_warp(scene.lights, device), materials=materials_to_warp(ordered, device, texture_ids),
         bvh=bvh, textures=textures,
     )

@@ -117,10 +117,10 @@ class Frame:
     @property
     def gbuffer(self) -> GBuffer:
         if self.buffers is None:
-            method = self.stats.get("method", "raytrace")
-            raise RenderError(f"gbuffer: a {method} frame has no G-buffer; the ray tracer records its ray tree "
-                              f"(frame.ray_tree, whose root nodes are the primary hits) -- render with "
-                              f"method='raster' for a G-buffer")
+            raise RenderError(f"gbuffer: a {self.stats.get('method', 'raytrace')} frame has no G-buffer (only "
+                              f"render_frame's rasterized frames keep one; the ray tracer records its ray tree, "
+                              f"frame.ray_tree, whose root nodes are the primary hits) -- use render_frame with "
+                              f"method='raster'")
         return self.buffers
 
 
@@ -130,3 +130,10 @@ def box_downsample(samples: np.ndarray, side: int) -> np.ndarray:
         return samples
     h, w = samples.shape[0] // side, samples.shape[1] // side
     return samples.reshape(h, side, w, side, *samples.shape[2:]).mean(axis=(1, 3), dtype=np.float64).astype(samples.dtype)
+
+
+def nonfinite_pixels(pixels: np.ndarray) -> int:
+    """Pixels with a non-finite channel (one sum tells whether any is; only then are they counted)."""
+    if np.isfinite(pixels.sum(dtype=np.float64)):
+        return 0
+    return int(np.count_nonzero(~np.isfinite(pixels).all(axis=-1)))

@@ -8,6 +8,9 @@ already parallel and is issued whole.
 from __future__ import annotations
 
 import os
+import sys
+import tempfile
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 from .._warp import wp
@@ -15,15 +18,60 @@ from .._warp import wp
 from ..errors import RenderError
 from ..limits import env_count
 
+CUDA_DRIVER_MISSING = "Could not find or load the NVIDIA CUDA driver"  # Warp's start-up line on CPU-only machines
+COMPILE_NOTICE_SECONDS = 2.0  # a module load longer than this is Warp compiling, not reading its cache
+
 _initialised = False
+_loaded: set = set()
+_noticed = False
 
 
 def init() -> None:
-    """Initialise Warp once (quietly)."""
+    """Initialise Warp once. Its native start-up writes to the process's stderr; the line saying that
+    no CUDA driver exists is dropped (noise on a CPU-only machine: asking for device="cuda" there
+    raises a RenderError that says so), anything else is passed on."""
     global _initialised
-    if not _initialised:
-        wp.init()
-        _initialised = True
+    if _initialised:
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as capture:
+        os.dup2(capture.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        capture.seek(0)
+        lines = capture.read().decode(errors="replace").splitlines(keepends=True)
+    sys.stderr.write("".join(line for line in lines if CUDA_DRIVER_MISSING not in line))
+    _initialised = True
+
+
+def load_kernels(device: str, *kernels) -> None:
+    """Load the Warp modules of `kernels` on `device` before their first launch in this process.
+    Loading is compiling the first time (tens of seconds, then cached): when it takes longer than
+    COMPILE_NOTICE_SECONDS a one-line notice goes to stderr, once per process."""
+    modules = {kernel.module.name: kernel.module for kernel in kernels if (kernel.module.name, device) not in _loaded}
+    if not modules:
+        return
+    timer = threading.Timer(COMPILE_NOTICE_SECONDS, compile_notice)
+    timer.daemon = True
+    timer.start()
+    try:
+        for name, module in modules.items():
+            wp.load_module(module, device=device)
+            _loaded.add((name, device))
+    finally:
+        timer.cancel()
+
+
+def compile_notice() -> None:
+    global _noticed
+    if not _noticed:
+        _noticed = True
+        sys.stderr.write("difflab: compiling Warp kernels (first run only; they are cached for later runs)...\n")
+        sys.stderr.flush()
 
 
 def resolve_device(device: str = "cpu") -> str:
@@ -51,20 +99,38 @@ def row_bands(n_rows: int, n_bands: int) -> list[tuple[int, int]]:
     return [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
+def band_plan(n_rows: int, device: str, threads: int | None = None) -> list[tuple[int, int]]:
+    """The row bands a launch over n_rows is split into: one on CUDA or with one thread, else 4 per
+    thread (more bands than threads balances uneven rows)."""
+    threads = cpu_threads() if threads is None else max(1, threads)
+    if not device.startswith("cpu") or threads == 1 or n_rows < 2:
+        return [(0, n_rows)]
+    return row_bands(n_rows, 4 * threads)
+
+
+_pools: dict[int, ThreadPoolExecutor] = {}
+
+
+def run_bands(run_band, bands: list[tuple[int, int]], threads: int | None = None) -> None:
+    """Call `run_band(begin, end)` for every band, on a pool of `threads` workers (kept between calls)."""
+    threads = cpu_threads() if threads is None else max(1, threads)
+    if len(bands) == 1 or threads == 1:
+        for begin, end in bands:
+            run_band(begin, end)
+        return
+    if threads not in _pools:
+        _pools[threads] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="difflab")
+    for future in [_pools[threads].submit(run_band, a, b) for a, b in bands]:
+        future.result()
+
+
 def parallel_bands(run_band, n_rows: int, device: str, threads: int | None = None) -> None:
     """Call `run_band(begin, end)` over row bands: all cores on the CPU, a single band on CUDA.
 
     `run_band` must launch Warp kernels that touch only rows [begin, end) of their outputs, so that
     bands never write the same element and the result is bitwise identical to one launch.
     """
-    threads = cpu_threads() if threads is None else max(1, threads)
-    if not device.startswith("cpu") or threads == 1 or n_rows < 2:
-        run_band(0, n_rows)
-        return
-    bands = row_bands(n_rows, 4 * threads)  # more bands than threads balances uneven rows
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        for future in [pool.submit(run_band, a, b) for a, b in bands]:
-            future.result()
+    run_bands(run_band, band_plan(n_rows, device, threads), threads)
 
 
 def launch_rows(kernel, shape: tuple[int, int], inputs: list, device: str, threads: int | None = None) -> None:
@@ -77,5 +143,15 @@ def launch_rows(kernel, shape: tuple[int, int], inputs: list, device: str, threa
 
     def run_band(begin: int, end: int) -> None:
         wp.launch(kernel, dim=(end - begin, cols), inputs=[begin, *inputs], device=device)
+
+    parallel_bands(run_band, rows, device, threads)
+
+
+def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int | None = None) -> None:
+    """Launch `kernel` with one thread per row, in row bands: its first argument is `row0: int` and
+    its thread wp.tid() handles row row0 + tid, looping over the columns itself. On the CPU this reads
+    the kernel's (struct) arguments once per row rather than once per pixel."""
+    def run_band(begin: int, end: int) -> None:
+        wp.launch(kernel, dim=end - begin, inputs=[begin, *inputs], device=device)
 
     parallel_bands(run_band, rows, device, threads)

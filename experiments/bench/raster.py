@@ -1,64 +1,103 @@
-"""Rasterizer throughput: frames and triangles per second, one thread versus all cores.
+"""Rasterizer against Mesa's llvmpipe (OSMesa, fixed function), side by side in one run.
 
-Phong shading of the Utah teapot tessellated to ~100k and ~1M triangles, at 640x480 and 1920x1080,
-one point light with shadows. Reports medians over repeats (after a warm-up render that compiles the
-kernels), the all-cores / one-thread speed-up measured in the same run, and the peak resident memory
-of a process that renders one 1080p frame. Writes experiments/results/bench_raster.json.
+The four rows of issue 14: a UV sphere of ~100k and ~1M triangles at 640x480 and 1920x1080, Gouraud
+shading, Blinn specular, one point light, no shadows, warm (kernels compiled, scene compiled once:
+`difflab.render(compiled)` forms only the image). Each repeat renders difflab on all cores, Mesa,
+and difflab on one thread, interleaved, so a machine shared with other work loads all three alike;
+the table gives medians, difflab / Mesa per row, the 1 -> all-cores speed-up, compile time, the
+PSNR of difflab's 8-bit image against Mesa's (the same picture), and the peak resident memory of a
+fresh process that loads, compiles and renders the 1080p 1M-triangle frame. Writes
+experiments/results/bench_raster.json with the machine's load average before and after.
 
     python experiments/bench/raster.py            # full
-    python experiments/bench/raster.py --small    # quick check
+    python experiments/bench/raster.py --small    # quick check (10k triangles, 160x120)
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import warp
 
 import difflab
 from difflab.io import write_json_atomic
-from difflab.renderers.compile import compile_scene
+from difflab.renderers.compile import object_mesh
 from difflab.renderers.launch import cpu_threads
-from difflab.renderers.raster.driver import rasterize
+
+sys.path.insert(0, str(Path(__file__).parent))
+import mesa  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
+MESHES = {"100k": 158, "1M": 500}  # a UV sphere of resolution r has 4 r (r - 1) triangles
+SIZES = [(640, 480), (1920, 1080)]
 
 
-def teapot_scene(resolution: int, width: int, height: int) -> difflab.Scene:
+def sphere_scene(resolution: int, width: int, height: int) -> difflab.Scene:
     return difflab.Scene.from_dict({
-        "camera": {"eye": [0, 3, 9], "target": [0, 1.2, 0], "fov_y": 35, "width": width, "height": height},
-        "ambient": [0.1, 0.1, 0.1],
-        "lights": [{"type": "point", "position": [5, 8, 6]}],
-        "materials": {"red": {"ka": [0.2, 0, 0], "kd": [0.7, 0.1, 0.1], "ks": [0.5] * 3, "n": 32}},
-        "objects": [{"type": "mesh", "builtin": "teapot", "resolution": resolution, "material": "red"}],
-        "render": {"shading": "phong", "shadows": True},
+        "camera": {"eye": [0.4, 0.8, 3.2], "target": [0, 0, 0], "fov_y": 45, "width": width, "height": height,
+                   "near": 0.5, "far": 20},
+        "ambient": [0.15, 0.12, 0.1],
+        "lights": [{"type": "point", "position": [2.0, 3.0, 2.5], "intensity": [0.9, 0.85, 0.8],
+                    "attenuation": [0.6, 0.15, 0.03]}],
+        "materials": {"m": {"ka": [0.3, 0.2, 0.2], "kd": [0.7, 0.35, 0.2], "ks": [0.6, 0.6, 0.6], "n": 24}},
+        "objects": [{"type": "mesh", "builtin": "sphere", "resolution": resolution, "material": "m"}],
+        "render": {"method": "raster", "shading": "gouraud", "specular": "blinn", "shadows": False,
+                   "clamp_vertex_colors": True},
     })
 
 
-def time_render(compiled, threads: int, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        rasterize(compiled, compiled.scene.render, threads)
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    return float(10 * np.log10(1.0 / max(float(np.mean((a - b) ** 2)), 1e-12)))
+
+
+def timed(fn) -> tuple[float, object]:
+    start = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - start, out
 
 
 def peak_memory_mib(resolution: int, width: int, height: int) -> float:
-    """Peak RSS of a fresh process that compiles the scene and renders one frame."""
-    code = (f"import resource, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import raster as b; "
-            f"from difflab.renderers.compile import compile_scene; from difflab.renderers.raster.driver import rasterize; "
-            f"c = compile_scene(b.teapot_scene({resolution}, {width}, {height})); rasterize(c, c.scene.render); "
+    """Peak RSS of a fresh process that builds, compiles and renders one frame."""
+    code = (f"import resource, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import raster as b, difflab; "
+            f"difflab.render(b.sphere_scene({resolution}, {width}, {height})); "
             f"print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return int(out.stdout.strip().splitlines()[-1]) / 1024.0
+
+
+def bench_row(label: str, resolution: int, width: int, height: int, repeats: int, threads: int) -> dict:
+    scene = sphere_scene(resolution, width, height)
+    compile_seconds, compiled = timed(lambda: difflab.compile_scene(scene))
+    difflab.render(compiled, threads=threads)  # warm-up: kernels compiled and loaded
+    peer = mesa.MesaRenderer(scene, object_mesh(scene.objects[0])) if mesa.available() is None else None
+    ours, theirs, single, image, reference = [], [], [], None, None
+    for _ in range(repeats):
+        seconds, image = timed(lambda: difflab.render(compiled, threads=threads))
+        ours.append(seconds)
+        if peer is not None:
+            seconds, reference = peer.draw()
+            theirs.append(seconds)
+        single.append(timed(lambda: difflab.render(compiled, threads=1))[0])
+    if peer is not None:
+        peer.close()
+    row = {"mesh": label, "triangles": int(compiled.faces.shape[0]), "width": width, "height": height,
+           "compile_seconds": compile_seconds, "difflab_seconds": statistics.median(ours),
+           "difflab_1_thread_seconds": statistics.median(single), "threads": threads,
+           "speedup_1_to_all": statistics.median(single) / statistics.median(ours)}
+    if peer is not None:
+        row["mesa_seconds"] = statistics.median(theirs)
+        row["difflab_over_mesa"] = row["difflab_seconds"] / row["mesa_seconds"]
+        row["psnr_vs_mesa_db"] = psnr(np.round(np.clip(image, 0, 1) * 255) / 255, reference)
+    return row
 
 
 def main(argv=None) -> int:
@@ -66,31 +105,34 @@ def main(argv=None) -> int:
     parser.add_argument("--small", action="store_true", help="tiny sizes, for a quick check")
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args(argv)
-    meshes = {"100k": 40, "1M": 125} if not args.small else {"10k": 12}
-    sizes = [(640, 480), (1920, 1080)] if not args.small else [(160, 120)]
-    all_threads = cpu_threads()
+    meshes = {"10k": 50} if args.small else MESHES
+    sizes = [(160, 120)] if args.small else SIZES
+    threads = cpu_threads()
+    why_not = mesa.available()
+    load_before = os.getloadavg()
     rows = []
+    print(f"{'mesh':>5} {'tris':>8} {'size':>10} {'difflab ms':>10} {'Mesa ms':>8} {'ratio':>6} {'1->' + str(threads):>6} "
+          f"{'compile s':>9} {'PSNR dB':>7}")
     for label, resolution in meshes.items():
         for width, height in sizes:
-            compiled = compile_scene(teapot_scene(resolution, width, height))
-            triangles = compiled.faces.shape[0]
-            rasterize(compiled, compiled.scene.render)  # warm-up: compile kernels
-            one = time_render(compiled, 1, args.repeats)
-            many = time_render(compiled, all_threads, args.repeats)
-            rows.append({"mesh": label, "triangles": triangles, "width": width, "height": height,
-                         "seconds_1_thread": one, f"seconds_{all_threads}_threads": many,
-                         "fps_all_threads": 1.0 / many, "triangles_per_second": triangles / many,
-                         "speedup": one / many})
-            print(f"{label:>5} {triangles:>8} tris {width}x{height}: 1 thread {one * 1e3:8.1f} ms, "
-                  f"{all_threads} threads {many * 1e3:8.1f} ms, {1 / many:6.2f} fps, "
-                  f"{triangles / many / 1e6:6.2f} Mtri/s, speed-up {one / many:4.2f}x", flush=True)
-    big = max(meshes.values())
+            row = bench_row(label, resolution, width, height, args.repeats, threads)
+            rows.append(row)
+            print(f"{label:>5} {row['triangles']:>8} {width:>4}x{height:<5} {row['difflab_seconds'] * 1e3:>10.1f} "
+                  f"{row.get('mesa_seconds', float('nan')) * 1e3:>8.1f} {row.get('difflab_over_mesa', float('nan')):>6.2f} "
+                  f"{row['speedup_1_to_all']:>6.2f} {row['compile_seconds']:>9.2f} "
+                  f"{row.get('psnr_vs_mesa_db', float('nan')):>7.1f}", flush=True)
     width, height = sizes[-1]
-    peak = peak_memory_mib(big, width, height)
-    print(f"peak RSS rendering one {width}x{height} frame of the largest mesh: {peak:.0f} MiB")
-    result = {"benchmark": "raster", "threads": all_threads, "repeats": args.repeats, "statistic": "median",
-              "rows": rows, "peak_rss_mib": peak, "versions": {"difflab": difflab.__version__,
-              "warp": warp.config.version, "python": platform.python_version()}, "machine": platform.machine()}
+    peak = peak_memory_mib(max(meshes.values()), width, height)
+    print(f"peak RSS of a fresh process rendering the {width}x{height} {list(meshes)[-1]} frame: {peak:.0f} MiB")
+    if why_not:
+        print(f"Mesa not measured: {why_not}")
+    result = {"benchmark": "raster_vs_mesa", "statistic": "median", "repeats": args.repeats, "interleaved": True,
+              "threads": threads, "rows": rows, "peak_rss_mib": peak, "mesa": why_not or "OSMesa llvmpipe",
+              "load_average_before": load_before, "load_average_after": os.getloadavg(),
+              "versions": {"difflab": difflab.__version__, "warp": warp.config.version,
+                           "python": platform.python_version()},
+              "machine": platform.machine(), "cpus": os.cpu_count(),
+              "max_rss_this_process_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
     RESULTS.mkdir(parents=True, exist_ok=True)
     write_json_atomic(RESULTS / "bench_raster.json", result)
     print(f"wrote {RESULTS / 'bench_raster.json'}")

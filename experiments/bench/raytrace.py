@@ -1,118 +1,164 @@
-"""Ray-tracer throughput on the lecture's test scene: rays per second, item buffer, threads.
+"""Ray tracer against its peers, side by side in one run: Mitsuba 3 and POV-Ray 3.7.
 
-the example scene "lecture_teapot" (difflab/demos/scenes/lecture_teapot.json: chrome teapot, mirror, shiny checker floor, shadows, two
-point lights) at 640x480, max depth 5, with the teapot tessellated to ~10k, ~100k and ~1M
-triangles. For each mesh: the full ray tracer and the item-buffer variant (primary visibility from
-the rasterizer's z-buffer), each on one thread and on all cores; medians over repeats after a
-warm-up render that compiles the kernels. Ratios (item buffer / full, all cores / one thread) are
-measured in the same run. The ray tree is not recorded in the timed renders; its cost (the second
-pass) is measured once on the smallest mesh. POV-Ray's time on the equivalent scene is not measured
-(no exporter yet; reported as absent). Writes experiments/results/bench_raytrace.json.
+1. Primary rays: an 81,920-triangle icosphere filling a 1024x1024 view, depth 1, no shadows, shading
+   included (`difflab.render` of a compiled scene: no ray tree recorded), against Mitsuba's
+   `scene.ray_intersect` on the same rays (closest hit only; llvm_ad_rgb when Mitsuba's LLVM backend
+   loads, else scalar_rgb, named in the output). Rays per second, medians, interleaved repeats.
+2. Whitted scenes: spheres (mirror, glass, diffuse) over a checkered plane, two point lights with
+   shadows, depth 5, against POV-Ray rendering the same scene exported to SDL (no anti-aliasing,
+   same thread count; its wall time includes parsing, as difflab's includes compiling the scene).
+
+The machine may be shared: every ratio is measured within one run, repeats interleaved, and the load
+average before and after is written with the results to experiments/results/bench_raytrace.json.
 
     python experiments/bench/raytrace.py            # full
-    python experiments/bench/raytrace.py --small    # quick check (160x120, 10k triangles)
+    python experiments/bench/raytrace.py --small    # quick check (256^2 rays, 160x120 Whitted)
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import platform
-import shutil
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+import trimesh
 import warp
 
 import difflab
-from difflab.demos import scene_path
 from difflab.io import write_json_atomic
-from difflab.renderers.compile import compile_scene
+from difflab.renderers.camera import camera_frame
 from difflab.renderers.launch import cpu_threads
-from difflab.renderers.raytrace.driver import raytrace
 
-ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "results"
-SCENE = scene_path("lecture_teapot")
-MESHES = {"10k": 13, "100k": 40, "1M": 125}  # teapot resolution r gives ~64 r^2 triangles
+sys.path.insert(0, str(Path(__file__).parent))
+import peers  # noqa: E402
 
-
-def lecture_scene(resolution: int, width: int, height: int, depth: int) -> difflab.Scene:
-    data = json.loads(SCENE.read_text())
-    data["camera"].update(width=width, height=height)
-    data["objects"][0]["resolution"] = resolution
-    data["render"].update(max_depth=depth, spp=1)
-    return difflab.Scene.from_dict(data)
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+CAMERA = {"eye": [0.0, 0.0, 3.0], "target": [0.0, 0.0, 0.0], "fov_y": 45}
 
 
-def time_render(compiled, threads: int, repeats: int, item: bool, record: bool = False):
-    times, frame = [], None
+def icosphere_scene(obj_path: Path, size: int) -> difflab.Scene:
+    return difflab.Scene.from_dict({
+        "camera": {**CAMERA, "width": size, "height": size},
+        "ambient": [0.1, 0.1, 0.1], "lights": [{"type": "point", "position": [3, 4, 5]}],
+        "materials": {"m": {"kd": [0.7, 0.3, 0.2], "ks": [0.5, 0.5, 0.5], "n": 30}},
+        "objects": [{"type": "mesh", "file": str(obj_path), "material": "m"}],
+        "render": {"method": "raytrace", "max_depth": 1, "shadows": False},
+    })
+
+
+def whitted_scene(width: int, height: int, glass: bool) -> difflab.Scene:
+    second = ({"ka": [0, 0, 0], "kd": [0.02, 0.02, 0.02], "ks": [0.6, 0.6, 0.6], "n": 200, "kt": 0.9, "ior": 1.5}
+              if glass else {"ka": [0, 0, 0], "kd": [0.05, 0.05, 0.05], "ks": [0.8, 0.8, 0.8], "n": 200, "kr": 0.9})
+    return difflab.Scene.from_dict({
+        "camera": {"eye": [0, 1.6, 6], "target": [0, 0.8, 0], "fov_y": 40, "width": width, "height": height},
+        "ambient": [0.1, 0.1, 0.1], "background": [0.3, 0.4, 0.6],
+        "lights": [{"type": "point", "position": [5, 8, 6]}, {"type": "point", "position": [-6, 5, 3],
+                                                             "intensity": [0.5, 0.5, 0.5]}],
+        "materials": {"red": {"ka": [0.1, 0, 0], "kd": [0.7, 0.1, 0.1], "ks": [0.4, 0.4, 0.4], "n": 30, "kr": 0.2},
+                      "second": second,
+                      "floor": {"ka": [0.1, 0.1, 0.1], "kd": [0.8, 0.8, 0.8], "kr": 0.3,
+                                "checker": {"size": 1.0, "ka2": [0, 0, 0], "kd2": [0.1, 0.1, 0.1]}}},
+        "objects": [{"type": "sphere", "center": [-1.2, 1, 0], "radius": 1, "material": "red"},
+                    {"type": "sphere", "center": [1.2, 1, 0.5], "radius": 1, "material": "second"},
+                    {"type": "sphere", "center": [0, 0.5, -2], "radius": 0.5, "material": "red"},
+                    {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "floor"}],
+        "render": {"method": "raytrace", "max_depth": 5, "shadows": True, "transparent_shadows": False},
+    })
+
+
+def primary_rays(camera, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The pinhole rays through the pixel centres of a size x size image (difflab's camera)."""
+    right, up, forward = camera_frame(camera)
+    half = np.tan(np.radians(camera.fov_y) / 2)
+    centres = (np.arange(size) + 0.5) / size * 2 - 1
+    x, y = np.meshgrid(centres * half, -centres * half)
+    directions = x[..., None] * right + y[..., None] * up + forward
+    directions /= np.linalg.norm(directions, axis=-1, keepdims=True)
+    directions = directions.reshape(-1, 3)
+    return np.broadcast_to(np.asarray(camera.eye, float), directions.shape).copy(), directions
+
+
+def timed_render(compiled, threads: int) -> float:
+    start = time.perf_counter()
+    difflab.render(compiled, threads=threads)
+    return time.perf_counter() - start
+
+
+def primary_case(size: int, repeats: int, threads: int) -> dict:
+    with tempfile.TemporaryDirectory() as folder:
+        obj_path = Path(folder) / "icosphere.obj"
+        trimesh.creation.icosphere(subdivisions=6, radius=1.0).export(obj_path)
+        scene = icosphere_scene(obj_path, size)
+        compiled = difflab.compile_scene(scene)
+        difflab.render(compiled, threads=threads)  # warm-up: kernels compiled and loaded
+        ours = [timed_render(compiled, threads) for _ in range(repeats)]
+        single = [timed_render(compiled, 1) for _ in range(repeats)]
+        origins, directions = primary_rays(scene.camera, size)
+        mitsuba, variant = peers.mitsuba_rays_per_second(obj_path, origins, directions, repeats)
+    rays = size * size
+    row = {"case": "icosphere primary rays", "triangles": int(compiled.n_mesh_faces), "size": size, "rays": rays,
+           "difflab_rays_per_second": rays / statistics.median(ours),
+           "difflab_1_thread_rays_per_second": rays / statistics.median(single),
+           "mitsuba_variant": variant, "mitsuba_rays_per_second": mitsuba}
+    if mitsuba:
+        row["difflab_over_mitsuba"] = row["difflab_rays_per_second"] / mitsuba
+    return row
+
+
+def whitted_case(width: int, height: int, glass: bool, repeats: int, threads: int) -> dict:
+    scene = whitted_scene(width, height, glass)
+    difflab.render(scene, threads=threads)  # warm-up
+    ours, theirs = [], []
     for _ in range(repeats):
         start = time.perf_counter()
-        frame = raytrace(compiled, compiled.scene.render, threads, record_tree=record, use_item_buffer=item)
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), frame
+        difflab.render(scene, threads=threads)  # compiling the scene included, as POV-Ray's parsing is
+        ours.append(time.perf_counter() - start)
+        pov = peers.povray_seconds(scene, 1, threads)
+        if pov is not None:
+            theirs.append(pov)
+    row = {"case": "whitted " + ("glass" if glass else "mirror"), "width": width, "height": height,
+           "max_depth": scene.render.max_depth, "difflab_seconds": statistics.median(ours)}
+    if theirs:
+        row["povray_seconds"] = statistics.median(theirs)
+        row["difflab_over_povray"] = row["difflab_seconds"] / row["povray_seconds"]
+    return row
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--small", action="store_true", help="tiny sizes, for a quick check")
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--depth", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args(argv)
-    meshes = {"10k": MESHES["10k"]} if args.small else MESHES
+    threads = cpu_threads()
+    size = 256 if args.small else 1024
     width, height = (160, 120) if args.small else (640, 480)
-    repeats = 1 if args.small else args.repeats
-    all_threads = cpu_threads()
-    rows = []
-    print(f"lecture scene {width}x{height}, depth {args.depth}, {all_threads} cores, median of {repeats}")
-    print(f"{'mesh':>5} {'tris':>8} {'primary':>8} {'shadow':>8} {'second.':>8} | {'full 1t':>8} {'full Nt':>8} "
-          f"{'item 1t':>8} {'item Nt':>8} | {'Mray/s':>6} {'thr x':>5} {'item x':>6}")
-    for label, resolution in meshes.items():
-        compiled = compile_scene(lecture_scene(resolution, width, height, args.depth))
-        triangles = compiled.n_mesh_faces
-        raytrace(compiled, compiled.scene.render, record_tree=False)  # warm-up: compile kernels
-        raytrace(compiled, compiled.scene.render, record_tree=False, use_item_buffer=True)
-        t = {}
-        for item in (False, True):
-            for threads in (1, all_threads):
-                t[item, threads], frame = time_render(compiled, threads, repeats, item)
-                if not item:
-                    rays = frame.stats["rays"]
-        total = sum(rays.values())
-        row = {"mesh": label, "triangles": triangles, "width": width, "height": height, "max_depth": args.depth,
-               "rays": rays, "total_rays": total,
-               "seconds": {f"{'item' if item else 'full'}_{threads}_threads": s for (item, threads), s in t.items()},
-               "rays_per_second_all_cores": total / t[False, all_threads],
-               "rays_per_second_1_thread": total / t[False, 1],
-               "thread_speedup": t[False, 1] / t[False, all_threads],
-               "item_buffer_speedup": t[False, all_threads] / t[True, all_threads],
-               "item_buffer_speedup_1_thread": t[False, 1] / t[True, 1]}
-        rows.append(row)
-        print(f"{label:>5} {triangles:>8} {rays['primary']:>8} {rays['shadow']:>8} "
-              f"{rays['reflection'] + rays['refraction']:>8} | {t[False, 1]:8.3f} {t[False, all_threads]:8.3f} "
-              f"{t[True, 1]:8.3f} {t[True, all_threads]:8.3f} | {row['rays_per_second_all_cores'] / 1e6:6.2f} "
-              f"{row['thread_speedup']:5.2f} {row['item_buffer_speedup']:6.2f}", flush=True)
-    compiled = compile_scene(lecture_scene(meshes[next(iter(meshes))], width, height, args.depth))
-    plain, _ = time_render(compiled, all_threads, repeats, False)
-    recorded, frame = time_render(compiled, all_threads, repeats, False, record=True)
-    tree = {"seconds_without": plain, "seconds_with": recorded, "ratio": recorded / plain,
-            "nodes": frame.stats["nodes"]}
-    print(f"recording the ray tree ({tree['nodes']} nodes): {recorded:.3f} s vs {plain:.3f} s ({tree['ratio']:.2f}x)")
-    povray = shutil.which("povray")
-    print("POV-Ray: " + ("installed, but no scene exporter yet: not timed" if povray else "not installed: not timed"))
-    result = {"benchmark": "raytrace", "scene": SCENE.name, "threads": all_threads, "repeats": repeats,
-              "statistic": "median", "rows": rows, "tree_recording": tree, "povray": None,
+    load_before = os.getloadavg()
+    primary = primary_case(size, args.repeats, threads)
+    print(f"icosphere ({primary['triangles']} tris) {size}^2 primary rays: difflab "
+          f"{primary['difflab_rays_per_second'] / 1e6:.2f} Mrays/s ({threads} threads; "
+          f"{primary['difflab_1_thread_rays_per_second'] / 1e6:.2f} on 1), Mitsuba ray_intersect "
+          + (f"{primary['mitsuba_rays_per_second'] / 1e6:.2f} Mrays/s ({primary['mitsuba_variant']}): "
+             f"difflab / Mitsuba {primary['difflab_over_mitsuba']:.2f}" if primary["mitsuba_rays_per_second"]
+             else "not installed"), flush=True)
+    whitted = [whitted_case(width, height, glass, args.repeats, threads) for glass in (False, True)]
+    for row in whitted:
+        print(f"{row['case']} {width}x{height} depth {row['max_depth']}: difflab {row['difflab_seconds']:.3f} s, "
+              + (f"POV-Ray {row['povray_seconds']:.3f} s: difflab / POV-Ray {row['difflab_over_povray']:.2f}"
+                 if "povray_seconds" in row else "POV-Ray not installed"), flush=True)
+    result = {"benchmark": "raytrace_vs_peers", "statistic": "median", "repeats": args.repeats, "interleaved": True,
+              "threads": threads, "primary": primary, "whitted": whitted,
+              "load_average_before": load_before, "load_average_after": os.getloadavg(),
               "versions": {"difflab": difflab.__version__, "warp": warp.config.version,
-                           "python": platform.python_version()}, "machine": platform.machine()}
+                           "python": platform.python_version()}, "machine": platform.machine(), "cpus": os.cpu_count()}
     RESULTS.mkdir(parents=True, exist_ok=True)
     write_json_atomic(RESULTS / "bench_raytrace.json", result)
-    summary = rows[-1]
-    print(f"wrote {RESULTS / 'bench_raytrace.json'}: {summary['mesh']} mesh "
-          f"{summary['rays_per_second_all_cores'] / 1e6:.2f} Mrays/s on {all_threads} cores, threads x{summary['thread_speedup']:.2f}, "
-          f"item buffer x{summary['item_buffer_speedup']:.2f}")
+    print(f"wrote {RESULTS / 'bench_raytrace.json'}")
     return 0
 
 

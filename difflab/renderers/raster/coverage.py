@@ -15,35 +15,14 @@ wp.set_module_options({"enable_backward": False})
 
 DEPTH_LEVELS = 2147483647.0  # depth quantisation of the visibility key (31 bits)
 NO_HIT = wp.constant(wp.int64(9223372036854775807))
+SAMPLE_CENTRE = SUBPIXEL // 2  # a sample centre, in fixed-point steps from its sample's corner
 
 
 @wp.func
-def screen_barycentrics(screen: wp.array2d(dtype=wp.vec4d), slot: int, i: int, j: int):
-    """Whether sample (i, j) is inside triangle `slot` (exact integer edge functions) and its
-    screen-space barycentrics (float64)."""
-    s0 = screen[slot, 0]
-    s1 = screen[slot, 1]
-    s2 = screen[slot, 2]
-    x0 = snap(s0[0])
-    y0 = snap(s0[1])
-    x1 = snap(s1[0])
-    y1 = snap(s1[1])
-    x2 = snap(s2[0])
-    y2 = snap(s2[1])
-    px = wp.int64(j * SUBPIXEL + SUBPIXEL // 2)
-    py = wp.int64(i * SUBPIXEL + SUBPIXEL // 2)
-    b0 = edge(x1, y1, x2, y2, px, py)
-    b1 = edge(x2, y2, x0, y0, px, py)
-    b2 = edge(x0, y0, x1, y1, px, py)
-    inside = True
-    if b0 < wp.int64(0) or (b0 == wp.int64(0) and not owns_edge(x1, y1, x2, y2)):
-        inside = False
-    if b1 < wp.int64(0) or (b1 == wp.int64(0) and not owns_edge(x2, y2, x0, y0)):
-        inside = False
-    if b2 < wp.int64(0) or (b2 == wp.int64(0) and not owns_edge(x0, y0, x1, y1)):
-        inside = False
-    # Coverage is decided on the snapped integers; the weights come from the unsnapped float64
-    # vertices, so interpolation carries no snapping error.
+def float_barycentrics(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, i: int, j: int):
+    """Screen-space barycentrics (float64) of sample centre (j + 0.5, i + 0.5) in triangle s0 s1 s2.
+    Coverage is decided on the snapped integers; the weights come from the unsnapped float64
+    vertices, so interpolation carries no snapping error."""
     cx = wp.float64(j) + wp.float64(0.5)
     cy = wp.float64(i) + wp.float64(0.5)
     e0 = (s2[0] - s1[0]) * (cy - s1[1]) - (s2[1] - s1[1]) * (cx - s1[0])
@@ -51,9 +30,14 @@ def screen_barycentrics(screen: wp.array2d(dtype=wp.vec4d), slot: int, i: int, j
     e2 = (s1[0] - s0[0]) * (cy - s0[1]) - (s1[1] - s0[1]) * (cx - s0[0])
     area = e0 + e1 + e2
     if area == wp.float64(0.0):  # a sliver only the snapped vertices give an area
-        return inside, wp.vec3d(wp.float64(1.0), wp.float64(0.0), wp.float64(0.0))
-    return inside, wp.vec3d(e0 / area, e1 / area, e2 / area)
+        return wp.vec3d(wp.float64(1.0), wp.float64(0.0), wp.float64(0.0))
+    return wp.vec3d(e0 / area, e1 / area, e2 / area)
 
+
+@wp.func
+def covers(b: wp.int64, owned: bool):
+    """A sample is on the inner side of an edge, or exactly on an edge its triangle owns."""
+    return b > wp.int64(0) or (b == wp.int64(0) and owned)
 
 
 @wp.kernel
@@ -69,11 +53,32 @@ def raster_kernel(row_begin: int, row_end: int, slots: wp.array(dtype=wp.int32),
     j_hi = wp.min(int(wp.floor(wp.max(s0[0], wp.max(s1[0], s2[0])) - half)), width - 1)
     i_lo = wp.max(int(wp.ceil(wp.min(s0[1], wp.min(s1[1], s2[1])) - half)), row_begin)
     i_hi = wp.min(int(wp.floor(wp.max(s0[1], wp.max(s1[1], s2[1])) - half)), row_end - 1)
+    if j_lo > j_hi or i_lo > i_hi:
+        return
+    x0 = snap(s0[0])
+    y0 = snap(s0[1])
+    x1 = snap(s1[0])
+    y1 = snap(s1[1])
+    x2 = snap(s2[0])
+    y2 = snap(s2[1])
+    own0 = owns_edge(x1, y1, x2, y2)
+    own1 = owns_edge(x2, y2, x0, y0)
+    own2 = owns_edge(x0, y0, x1, y1)
+    step = wp.int64(SUBPIXEL)
+    centre = wp.int64(SAMPLE_CENTRE)
+    px = wp.int64(j_lo) * step + centre
     for i in range(i_lo, i_hi + 1):
+        py = wp.int64(i) * step + centre
+        b0 = edge(x1, y1, x2, y2, px, py)  # exact integer edge functions, stepped along the row
+        b1 = edge(x2, y2, x0, y0, px, py)
+        b2 = edge(x0, y0, x1, y1, px, py)
         for j in range(j_lo, j_hi + 1):
-            inside, b = screen_barycentrics(screen, slot, i, j)
-            if inside:
+            if covers(b0, own0) and covers(b1, own1) and covers(b2, own2):
+                b = float_barycentrics(s0, s1, s2, i, j)
                 z_ndc = float(b[0] * s0[2] + b[1] * s1[2] + b[2] * s2[2])  # z_ndc is affine in screen space
                 if z_ndc >= -1.0 and z_ndc <= 1.0:
                     depth = wp.int64((z_ndc + 1.0) * 0.5 * DEPTH_LEVELS)
                     wp.atomic_min(key, i * width + j, depth * wp.int64(4294967296) + wp.int64(slot))
+            b0 = b0 - (y2 - y1) * step
+            b1 = b1 - (y0 - y2) * step
+            b2 = b2 - (y1 - y0) * step

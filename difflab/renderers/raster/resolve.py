@@ -13,27 +13,120 @@ from __future__ import annotations
 from ..._warp import wp
 
 from ...lighting.warp_model import MaterialW, checker_cell
-from ..camera import CameraW, view_direction
 from ...vocabulary import FLAT, PHONG_SHADING
-from .coverage import NO_HIT, screen_barycentrics
+from ..camera import CameraW, view_direction
+from .coverage import NO_HIT, float_barycentrics
 
 wp.set_module_options({"enable_backward": False})
 
+
+@wp.struct
+class RasterMeshW:
+    """The compiled triangles as the raster kernels read them."""
+
+    faces: wp.array2d(dtype=wp.int32)
+    vertices: wp.array(dtype=wp.vec3)
+    normals: wp.array(dtype=wp.vec3)  # unit vertex normals
+    uvs: wp.array(dtype=wp.vec2)
+    face_normal: wp.array(dtype=wp.vec3)  # unit geometric (winding) normal
+    face_material: wp.array(dtype=wp.int32)
+    face_object: wp.array(dtype=wp.int32)
+    vertex_material: wp.array(dtype=wp.int32)  # of a face using the vertex (Gouraud's vertex points)
+    vertex_object: wp.array(dtype=wp.int32)
+    n_mesh_faces: int  # faces [0, n_mesh_faces) are mesh faces; the rest tessellate spheres and planes
+    n_mesh_vertices: int  # and so are vertices [0, n_mesh_vertices)
+
+
+@wp.struct
+class ScreenW:
+    """Stage 2's screen triangles, two slots per face (see `clip`)."""
+
+    screen: wp.array2d(dtype=wp.vec4d)  # (x_raster, y_raster, z_ndc, 1/w) per corner
+    weight: wp.array2d(dtype=wp.vec3)  # per corner, its weights over the original face's vertices
+    facing: wp.array(dtype=wp.int32)  # +1 front, -1 back, 0 not drawn
+
+
+@wp.struct
+class PointW:
+    """One shading point: where the illumination model is evaluated."""
+
+    p: wp.vec3
+    normal: wp.vec3  # unit shading normal, facing the viewer
+    geo: wp.vec3  # unit geometric normal, facing the viewer
+    view: wp.vec3  # unit direction to the viewer
+    material: int  # -1: nothing here
+    cell: int  # checker cell 0 / 1
+    ignore: int  # object shadow rays skip (convex analytic surfaces), else -1
+
+
 @wp.struct
 class PointsW:
-    """Shading points: where the illumination model is evaluated."""
+    """Shading points in arrays (the G-buffer's samples, or flat / Gouraud points)."""
 
     position: wp.array(dtype=wp.vec3)
-    normal: wp.array(dtype=wp.vec3)  # unit shading normal, facing the viewer
-    geo_normal: wp.array(dtype=wp.vec3)  # unit geometric normal, facing the viewer
-    view: wp.array(dtype=wp.vec3)  # unit direction to the viewer
-    material: wp.array(dtype=wp.int32)  # -1: nothing here
-    cell: wp.array(dtype=wp.int32)  # checker cell 0 / 1
-    ignore: wp.array(dtype=wp.int32)  # object shadow rays skip (convex analytic surfaces), else -1
+    normal: wp.array(dtype=wp.vec3)
+    geo_normal: wp.array(dtype=wp.vec3)
+    view: wp.array(dtype=wp.vec3)
+    material: wp.array(dtype=wp.int32)
+    cell: wp.array(dtype=wp.int32)
+    ignore: wp.array(dtype=wp.int32)
     uv: wp.array(dtype=wp.vec2)  # texture coordinates (samples only; zero at flat / Gouraud points)
     duv_dx: wp.array(dtype=wp.vec2)  # d(uv)/dx, d(uv)/dy per sample of the sample grid (samples only)
     duv_dy: wp.array(dtype=wp.vec2)
 
+
+@wp.struct
+class SampleW:
+    """What a covered sample sees: the face and its interpolation weights, and the surface point."""
+
+    face: int
+    slot: int
+    weights: wp.vec3  # over the face's vertices: perspective-correct or affine
+    side: float  # +1 the face's front is seen, -1 its back
+    point: PointW
+
+
+@wp.func
+def make_point(p: wp.vec3, normal: wp.vec3, geo: wp.vec3, view: wp.vec3, mat: int,
+               materials: wp.array(dtype=MaterialW), obj: int, analytic: bool):
+    """A shading point, with its checker cell and the object its shadow rays skip (convex analytic ones)."""
+    point = PointW()
+    point.p = p
+    point.normal = normal
+    point.geo = geo
+    point.view = view
+    point.material = mat
+    point.cell = 0
+    if materials[mat].checker_size > 0.0:
+        point.cell = checker_cell(p, geo, materials[mat].checker_size)
+    point.ignore = -1
+    if analytic:
+        point.ignore = obj
+    return point
+
+
+@wp.func
+def store_point(points: PointsW, k: int, point: PointW):
+    points.position[k] = point.p
+    points.normal[k] = point.normal
+    points.geo_normal[k] = point.geo
+    points.view[k] = point.view
+    points.material[k] = point.material
+    points.cell[k] = point.cell
+    points.ignore[k] = point.ignore
+
+
+@wp.func
+def load_point(points: PointsW, k: int):
+    point = PointW()
+    point.p = points.position[k]
+    point.normal = points.normal[k]
+    point.geo = points.geo_normal[k]
+    point.view = points.view[k]
+    point.material = points.material[k]
+    point.cell = points.cell[k]
+    point.ignore = points.ignore[k]
+    return point
 
 
 @wp.func
@@ -81,123 +174,161 @@ def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=
     return dx[0] * ua + dx[1] * ub + dx[2] * uc, dy[0] * ua + dy[1] * ub + dy[2] * uc
 
 
-
 @wp.func
-def write_point(points: PointsW, k: int, p: wp.vec3, normal: wp.vec3, geo: wp.vec3, view: wp.vec3, mat: int,
-                materials: wp.array(dtype=MaterialW), obj: int, analytic: bool):
-    """Store shading point k; its checker cell, and the object its shadow rays skip (convex analytic ones)."""
-    points.position[k] = p
-    points.normal[k] = normal
-    points.geo_normal[k] = geo
-    points.view[k] = view
-    points.material[k] = mat
-    points.cell[k] = 0
-    if materials[mat].checker_size > 0.0:
-        points.cell[k] = checker_cell(p, geo, materials[mat].checker_size)
-    points.ignore[k] = -1
-    if analytic:
-        points.ignore[k] = obj
-
-
-@wp.kernel
-def resolve_kernel(
-    row0: int, key: wp.array(dtype=wp.int64), screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3),
-    facing: wp.array(dtype=wp.int32), faces: wp.array2d(dtype=wp.int32), vertices: wp.array(dtype=wp.vec3),
-    normals: wp.array(dtype=wp.vec3), uvs: wp.array(dtype=wp.vec2), face_normal: wp.array(dtype=wp.vec3),
-    face_material: wp.array(dtype=wp.int32), face_object: wp.array(dtype=wp.int32),
-    materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
-    n_mesh_faces: int, n_vertices: int,
-    out_face: wp.array(dtype=wp.int32), out_bary: wp.array(dtype=wp.vec3), out_depth: wp.array(dtype=float),
-    out_uv: wp.array(dtype=wp.vec2), out_object: wp.array(dtype=wp.int32), samples: PointsW,
-    point_index: wp.array2d(dtype=wp.int32), point_weight: wp.array(dtype=wp.vec3),
-):
-    ii, j = wp.tid()
-    i = row0 + ii
-    s = i * cam.width + j
-    samples.material[s] = -1
-    out_face[s] = -1
-    out_object[s] = -1
-    out_depth[s] = wp.inf
-    point_index[s, 0] = s
-    point_index[s, 1] = s
-    point_index[s, 2] = s
-    point_weight[s] = wp.vec3(0.0)
-    k = key[s]
-    if k == NO_HIT:
-        return
-    slot = int(k % wp.int64(4294967296))
-    inside, bd = screen_barycentrics(screen, slot, i, j)
+def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: int, j: int):
+    """Which face covered sample (i, j) sees (its visibility key is `key`) and with what weights:
+    barycentrics of the winning slot, perspective-correct (b_k / w_k renormalised) or affine, carried
+    to the original face. Only `point.material` of the returned sample is filled in."""
+    slot = int(key % wp.int64(4294967296))
+    screen = tris.screen
+    weight = tris.weight
+    bd = float_barycentrics(screen[slot, 0], screen[slot, 1], screen[slot, 2], i, j)
     if perspective_correct == 1:  # b_k / w_k, renormalised
         bd = wp.vec3d(bd[0] * screen[slot, 0][3], bd[1] * screen[slot, 1][3], bd[2] * screen[slot, 2][3])
         bd = bd / (bd[0] + bd[1] + bd[2])
     b = wp.vec3(float(bd[0]), float(bd[1]), float(bd[2]))
-    wb = b[0] * weight[slot, 0] + b[1] * weight[slot, 1] + b[2] * weight[slot, 2]
-    f = slot // 2
-    v0 = faces[f, 0]
-    v1 = faces[f, 1]
-    v2 = faces[f, 2]
-    p = wb[0] * vertices[v0] + wb[1] * vertices[v1] + wb[2] * vertices[v2]
-    view = view_direction(cam, p)
-    side = float(facing[slot])
-    geo = side * face_normal[f]
+    sample = SampleW()
+    sample.face = slot // 2
+    sample.slot = slot
+    sample.weights = b[0] * weight[slot, 0] + b[1] * weight[slot, 1] + b[2] * weight[slot, 2]
+    sample.side = float(tris.facing[slot])
+    return sample
+
+
+@wp.func
+def sample_position(sample: SampleW, mesh: RasterMeshW):
+    """The world-space point a sample sees."""
+    f = sample.face
+    wb = sample.weights
+    return wb[0] * mesh.vertices[mesh.faces[f, 0]] + wb[1] * mesh.vertices[mesh.faces[f, 1]] \
+        + wb[2] * mesh.vertices[mesh.faces[f, 2]]
+
+
+@wp.func
+def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: wp.array(dtype=MaterialW),
+                   cam: CameraW, perspective_correct: int, shading: int, i: int, j: int):
+    """`sample_weights` and the surface point there (shading normal: the face's under flat shading,
+    else the interpolated vertex normals; both facing the viewer side the face shows)."""
+    sample = sample_weights(key, tris, perspective_correct, i, j)
+    f = sample.face
+    wb = sample.weights
+    side = sample.side
+    p = sample_position(sample, mesh)
+    geo = side * mesh.face_normal[f]
     normal = geo
     if shading != FLAT:
-        normal = side * wp.normalize(wb[0] * normals[v0] + wb[1] * normals[v1] + wb[2] * normals[v2])
-    mat = face_material[f]
-    out_face[s] = f
-    out_bary[s] = wb
-    out_depth[s] = wp.dot(p - cam.eye, cam.forward)
-    uv = wb[0] * uvs[v0] + wb[1] * uvs[v1] + wb[2] * uvs[v2]
-    out_uv[s] = uv
-    duv_dx, duv_dy = uv_derivatives(screen, weight, slot, i, j, perspective_correct, uvs[v0], uvs[v1], uvs[v2])
+        normal = side * wp.normalize(wb[0] * mesh.normals[mesh.faces[f, 0]] + wb[1] * mesh.normals[mesh.faces[f, 1]]
+                                     + wb[2] * mesh.normals[mesh.faces[f, 2]])
+    sample.point = make_point(p, normal, geo, view_direction(cam, p), mesh.face_material[f], materials,
+                              mesh.face_object[f], f >= mesh.n_mesh_faces)
+    return sample
+
+
+@wp.func
+def sample_uv(sample: SampleW, tris: ScreenW, mesh: RasterMeshW, perspective_correct: int, i: int, j: int):
+    """uv at a covered sample and its exact screen derivatives d(uv)/dx, d(uv)/dy."""
+    f = sample.face
+    wb = sample.weights
+    uv0 = mesh.uvs[mesh.faces[f, 0]]
+    uv1 = mesh.uvs[mesh.faces[f, 1]]
+    uv2 = mesh.uvs[mesh.faces[f, 2]]
+    duv_dx, duv_dy = uv_derivatives(tris.screen, tris.weight, sample.slot, i, j, perspective_correct, uv0, uv1, uv2)
+    return wb[0] * uv0 + wb[1] * uv1 + wb[2] * uv2, duv_dx, duv_dy
+
+
+@wp.func
+def sample_points(sample: SampleW, mesh: RasterMeshW, shading: int, s: int, n_vertices: int):
+    """Which three shading points make sample s's colour (indices, weights): itself (phong), its face
+    (flat), or its face's vertices (gouraud; the back-face copies after the first n_vertices)."""
+    if shading == PHONG_SHADING:
+        return wp.vec3i(s, s, s), wp.vec3(1.0, 0.0, 0.0)
+    f = sample.face
+    if shading == FLAT:
+        return wp.vec3i(f, f, f), wp.vec3(1.0, 0.0, 0.0)
+    offset = 0
+    if sample.side < 0.0:
+        offset = n_vertices
+    return wp.vec3i(mesh.faces[f, 0] + offset, mesh.faces[f, 1] + offset, mesh.faces[f, 2] + offset), sample.weights
+
+
+@wp.struct
+class GBufferW:
+    """Stage 4's per-sample outputs (the G-buffer)."""
+
+    face: wp.array(dtype=wp.int32)
+    bary: wp.array(dtype=wp.vec3)
+    depth: wp.array(dtype=float)
+    uv: wp.array(dtype=wp.vec2)
+    object: wp.array(dtype=wp.int32)
+    point_index: wp.array(dtype=wp.vec3i)
+    point_weight: wp.array(dtype=wp.vec3)
+
+
+@wp.func
+def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
+                 materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
+                 n_vertices: int, out: GBufferW, samples: PointsW, i: int, j: int):
+    """Stage 4 at sample (i, j): its G-buffer entries (empty ones where nothing covers it)."""
+    s = i * cam.width + j
+    k = key[s]
+    if k == NO_HIT:
+        samples.material[s] = -1
+        out.face[s] = -1
+        out.object[s] = -1
+        out.depth[s] = wp.inf
+        out.point_index[s] = wp.vec3i(s, s, s)
+        out.point_weight[s] = wp.vec3(0.0)
+        out.bary[s] = wp.vec3(0.0)
+        out.uv[s] = wp.vec2(0.0)
+        return
+    sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j)
+    store_point(samples, s, sample.point)
+    uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, perspective_correct, i, j)
     samples.uv[s] = uv
     samples.duv_dx[s] = duv_dx
     samples.duv_dy[s] = duv_dy
-    out_object[s] = face_object[f]
-    write_point(samples, s, p, normal, geo, view, mat, materials, face_object[f], f >= n_mesh_faces)
-    if shading == PHONG_SHADING:
-        point_weight[s] = wp.vec3(1.0, 0.0, 0.0)
-    elif shading == FLAT:
-        point_index[s, 0] = f
-        point_index[s, 1] = f
-        point_index[s, 2] = f
-        point_weight[s] = wp.vec3(1.0, 0.0, 0.0)
-    else:  # gouraud: vertex colours, the back-face copies after the first n_vertices
-        offset = 0
-        if side < 0.0:
-            offset = n_vertices
-        point_index[s, 0] = v0 + offset
-        point_index[s, 1] = v1 + offset
-        point_index[s, 2] = v2 + offset
-        point_weight[s] = wb
+    out.face[s] = sample.face
+    out.bary[s] = sample.weights
+    out.depth[s] = wp.dot(sample.point.p - cam.eye, cam.forward)
+    out.uv[s] = uv
+    out.object[s] = mesh.face_object[sample.face]
+    index, weight = sample_points(sample, mesh, shading, s, n_vertices)
+    out.point_index[s] = index
+    out.point_weight[s] = weight
 
 
 @wp.kernel
-def flat_points_kernel(faces: wp.array2d(dtype=wp.int32), vertices: wp.array(dtype=wp.vec3),
-                       face_normal: wp.array(dtype=wp.vec3), face_material: wp.array(dtype=wp.int32),
-                       face_object: wp.array(dtype=wp.int32), materials: wp.array(dtype=MaterialW),
-                       cam: CameraW, n_mesh_faces: int, points: PointsW):
+def resolve_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
+                   materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
+                   n_vertices: int, out: GBufferW, samples: PointsW):
+    """Stage 4, one row of samples per thread."""
+    i = row0 + wp.tid()
+    for j in range(cam.width):
+        resolve_into(key, tris, mesh, materials, cam, perspective_correct, shading, n_vertices, out, samples, i, j)
+
+
+@wp.kernel
+def flat_points_kernel(mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), cam: CameraW, points: PointsW):
     """One point per face: its centroid, with the face normal turned toward the viewer."""
     f = wp.tid()
-    p = (vertices[faces[f, 0]] + vertices[faces[f, 1]] + vertices[faces[f, 2]]) / 3.0
+    p = (mesh.vertices[mesh.faces[f, 0]] + mesh.vertices[mesh.faces[f, 1]] + mesh.vertices[mesh.faces[f, 2]]) / 3.0
     view = view_direction(cam, p)
-    normal = face_normal[f]
+    normal = mesh.face_normal[f]
     if wp.dot(normal, view) < 0.0:
         normal = -normal
-    write_point(points, f, p, normal, normal, view, face_material[f], materials, face_object[f], f >= n_mesh_faces)
+    store_point(points, f, make_point(p, normal, normal, view, mesh.face_material[f], materials, mesh.face_object[f],
+                                      f >= mesh.n_mesh_faces))
 
 
 @wp.kernel
-def gouraud_points_kernel(vertices: wp.array(dtype=wp.vec3), normals: wp.array(dtype=wp.vec3),
-                          vertex_material: wp.array(dtype=wp.int32), vertex_object: wp.array(dtype=wp.int32),
-                          vertex_analytic: wp.array(dtype=wp.int32), materials: wp.array(dtype=MaterialW),
-                          cam: CameraW, points: PointsW):
+def gouraud_points_kernel(mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), cam: CameraW, points: PointsW):
     """Two points per vertex: the front copy with the vertex normal, the back copy (index + V) with
     its negation, for back-facing triangles (OpenGL's two-sided lighting)."""
     k, back = wp.tid()
-    p = vertices[k]
-    normal = normals[k]
+    p = mesh.vertices[k]
+    normal = mesh.normals[k]
     if back == 1:
         normal = -normal
-    write_point(points, k + back * vertices.shape[0], p, normal, normal, view_direction(cam, p), vertex_material[k],
-                materials, vertex_object[k], vertex_analytic[k] == 1)
+    point = make_point(p, normal, normal, view_direction(cam, p), mesh.vertex_material[k], materials,
+                       mesh.vertex_object[k], k >= mesh.n_mesh_vertices)
+    store_point(points, k + back * mesh.vertices.shape[0], point)

@@ -4,6 +4,9 @@ Stage 6 (`light_points_kernel`), per point and light: direction, distance, shado
 the colour from the one illumination model. Stage 7 (`compose_kernel`), per sample: the weighted
 colours of its points (gouraud: the vertex colours interpolated, optionally clamped to [0, 1]
 first), the texture per fragment under flat / Gouraud, background and fog.
+
+`image_kernel` is stages 4, 6 (for Phong's per-sample points) and 7 fused per sample, with the same
+functions, for renders that need only the image: nothing of the G-buffer is stored.
 """
 
 from __future__ import annotations
@@ -12,65 +15,120 @@ from ..._warp import wp
 
 from ...lighting.warp_model import (FogW, LightW, MaterialW, ambient_term, fog_blend, light_term, light_vector,
                                    surface_material, target_only, textured_material)
+from ...vocabulary import FOG_NONE, PHONG_SHADING
+from ..camera import CameraW
 from ..texture.sampling import TexturesW, sample_texture
 from ..trace import SceneGeomW, light_visibility
-from .resolve import PointsW
+from .coverage import NO_HIT
+from .resolve import (PointsW, PointW, RasterMeshW, SampleW, ScreenW, load_point, resolve_sample, sample_points,
+                      sample_position, sample_uv, sample_weights)
 
 wp.set_module_options({"enable_backward": False})
 
-@wp.kernel
-def light_points_kernel(
-    begin: int, points: PointsW, lights: wp.array(dtype=LightW), materials: wp.array(dtype=MaterialW),
-    geom: SceneGeomW, specular: int, ambient: wp.vec3, shadows: int, transparent: int,
-    light_dir: wp.array2d(dtype=wp.vec3), light_dist: wp.array2d(dtype=float), visibility: wp.array2d(dtype=float),
-    color: wp.array(dtype=wp.vec3), textures: TexturesW, points_are_samples: int,
-    factor: wp.array(dtype=wp.vec3), texel: wp.array(dtype=wp.vec3),
-):
-    """ka Ia + sum_p s_p light_term_p at each point, recording L_p, d_p and s_p.
 
-    Textured materials: where the points are the samples (Phong) the texture is sampled here and
-    modulates its target coefficient (`texel[k]` records the value). Elsewhere (flat, Gouraud) the
-    point's `color` is lit with the target coefficient 0 and `factor` is what that coefficient
-    multiplies (lit with it 1, the others 0); compose adds texel * factor per sample."""
-    k = begin + wp.tid()
-    factor[k] = wp.vec3(0.0)
-    mat_id = points.material[k]
-    if mat_id < 0:
-        color[k] = wp.vec3(0.0)
-        return
-    p = points.position[k]
-    mat = surface_material(materials[mat_id], points.cell[k])
+@wp.struct
+class LightingW:
+    """What lighting a point needs: the scene's lights, materials, textures and ray geometry, and
+    the render settings that change the result."""
+
+    lights: wp.array(dtype=LightW)
+    materials: wp.array(dtype=MaterialW)
+    textures: TexturesW
+    geom: SceneGeomW  # shadow rays
+    specular: int
+    ambient: wp.vec3
+    shadows: int
+    transparent: int
+
+
+@wp.struct
+class LitW:
+    """Stage 6's outputs per point (N points, P lights)."""
+
+    light_dir: wp.array2d(dtype=wp.vec3)
+    light_dist: wp.array2d(dtype=float)
+    visibility: wp.array2d(dtype=float)
+    color: wp.array(dtype=wp.vec3)
+    factor: wp.array(dtype=wp.vec3)  # textures under flat / Gouraud (see `light_point`)
+    texel: wp.array(dtype=wp.vec3)  # per sample: the texture value there
+
+
+@wp.func
+def light_point(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3, lit: LitW, k: int, record: int):
+    """ka Ia + sum_p s_p light_term_p at a point (recording L_p, d_p, s_p as point k when asked).
+
+    Textured materials: `textured` = 1 where the texel is known at the point (a sample): it modulates
+    its target coefficient. Otherwise (flat, Gouraud points) the colour is lit with the target
+    coefficient 0, and the second value returned, the *factor*, is what that coefficient multiplies
+    (lit with it 1, the others 0): compose adds texel * factor per sample. Returns (colour, factor)."""
+    materials = lighting.materials
+    mat = surface_material(materials[point.material], point.cell)
     split = False
     unit = mat
     if mat.texture >= 0:
-        if points_are_samples == 1:
-            value = sample_texture(textures, mat.texture, points.uv[k], points.duv_dx[k], points.duv_dy[k],
-                                   mat.texture_filter, mat.texture_wrap)
-            texel[k] = value
-            mat = textured_material(mat, mat.texture_target, value)
+        if textured == 1:
+            mat = textured_material(mat, mat.texture_target, texel)
         else:
             split = True
             unit = target_only(mat, mat.texture_target)
             mat = textured_material(mat, mat.texture_target, wp.vec3(0.0))
-    total = ambient_term(mat, ambient)
-    unit_total = ambient_term(unit, ambient)
-    for q in range(lights.shape[0]):
-        l, d = light_vector(lights[q], p)
+    total = ambient_term(mat, lighting.ambient)
+    unit_total = ambient_term(unit, lighting.ambient)
+    geom = lighting.geom
+    for q in range(lighting.lights.shape[0]):
+        l, d = light_vector(lighting.lights[q], point.p)
         s = float(1.0)
-        if shadows == 1 and wp.dot(points.geo_normal[k], l) > 0.0:
-            origin = p + geom.epsilon * points.geo_normal[k]
-            s = light_visibility(geom, materials, origin, l, d - geom.epsilon, points.ignore[k], transparent)
-        light_dir[k, q] = l
-        light_dist[k, q] = d
-        visibility[k, q] = s
+        if lighting.shadows == 1 and wp.dot(point.geo, l) > 0.0:
+            origin = point.p + geom.epsilon * point.geo
+            s = light_visibility(geom, materials, origin, l, d - geom.epsilon, point.ignore, lighting.transparent)
+        if record == 1:
+            lit.light_dir[k, q] = l
+            lit.light_dist[k, q] = d
+            lit.visibility[k, q] = s
         if s > 0.0:
-            total = total + s * light_term(lights[q], mat, specular, points.normal[k], points.view[k], l, d)
+            total = total + s * light_term(lighting.lights[q], mat, lighting.specular, point.normal, point.view, l, d)
             if split:
-                unit_total = unit_total + s * light_term(lights[q], unit, specular, points.normal[k], points.view[k],
-                                                         l, d)
-    color[k] = total
-    if split:
-        factor[k] = unit_total
+                unit_total = unit_total + s * light_term(lighting.lights[q], unit, lighting.specular, point.normal,
+                                                         point.view, l, d)
+    if not split:
+        unit_total = wp.vec3(0.0)
+    return total, unit_total
+
+
+@wp.func
+def texel_at(lighting: LightingW, mat_id: int, uv: wp.vec2, duv_dx: wp.vec2, duv_dy: wp.vec2):
+    """The filtered texel of material `mat_id`'s texture at uv (0 for an untextured material)."""
+    mat = lighting.materials[mat_id]
+    if mat.texture < 0:
+        return wp.vec3(0.0)
+    return sample_texture(lighting.textures, mat.texture, uv, duv_dx, duv_dy, mat.texture_filter, mat.texture_wrap)
+
+
+@wp.func
+def light_into(points: PointsW, lighting: LightingW, points_are_samples: int, record: int, lit: LitW, k: int):
+    """Stage 6 at point k; under Phong the points are the samples, whose texels are sampled here.
+    `record` keeps each light's direction, distance and visibility (the G-buffer's)."""
+    lit.factor[k] = wp.vec3(0.0)
+    point = load_point(points, k)
+    if point.material < 0:
+        lit.color[k] = wp.vec3(0.0)
+        return
+    texel = wp.vec3(0.0)
+    if points_are_samples == 1:
+        texel = texel_at(lighting, point.material, points.uv[k], points.duv_dx[k], points.duv_dy[k])
+        lit.texel[k] = texel
+    color, factor = light_point(point, lighting, points_are_samples, texel, lit, k, record)
+    lit.color[k] = color
+    lit.factor[k] = factor
+
+
+@wp.kernel
+def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, lighting: LightingW,
+                        points_are_samples: int, record: int, lit: LitW):
+    """Stage 6 over points [begin, end), `chunk` consecutive points per thread."""
+    first = begin + wp.tid() * chunk
+    for k in range(first, wp.min(first + chunk, end)):
+        light_into(points, lighting, points_are_samples, record, lit, k)
 
 
 @wp.func
@@ -79,40 +137,100 @@ def clamp01(c: wp.vec3):
 
 
 @wp.func
-def blend_points(values: wp.array(dtype=wp.vec3), point_index: wp.array2d(dtype=wp.int32), w: wp.vec3, s: int,
-                 clamp_colors: int):
-    """sum_k w_k values[point k of sample s], each value clamped to [0, 1] first when asked (OpenGL)."""
+def blend_points(values: wp.array(dtype=wp.vec3), index: wp.vec3i, w: wp.vec3, clamp_colors: int):
+    """sum_k w_k values[index_k], each value clamped to [0, 1] first when asked (OpenGL)."""
     out = wp.vec3(0.0)
     for k in range(3):
-        c = values[point_index[s, k]]
+        c = values[index[k]]
         if clamp_colors == 1:
             c = clamp01(c)
         out = out + w[k] * c
     return out
 
 
-@wp.kernel
-def compose_kernel(row0: int, width: int, mask_material: wp.array(dtype=wp.int32), depth: wp.array(dtype=float),
-                   point_index: wp.array2d(dtype=wp.int32), point_weight: wp.array(dtype=wp.vec3),
-                   color: wp.array(dtype=wp.vec3), clamp_colors: int, background: wp.vec3, fog: FogW,
-                   image: wp.array(dtype=wp.vec3), materials: wp.array(dtype=MaterialW), textures: TexturesW,
-                   samples: PointsW, per_fragment: int, factor: wp.array(dtype=wp.vec3),
-                   texel: wp.array(dtype=wp.vec3)):
-    """Sample colour = sum_k w_k colour_k (+ texel * sum_k w_k factor_k for a textured material under
-    flat / Gouraud shading, the texture sampled per sample: `per_fragment`), then fog."""
-    ii, j = wp.tid()
-    s = (row0 + ii) * width + j
-    mat_id = mask_material[s]
+@wp.func
+def fragment_color(lit: LitW, index: wp.vec3i, w: wp.vec3, clamp_colors: int, texel: wp.vec3, per_fragment: int):
+    """A sample's colour from its points: sum_k w_k colour_k, plus texel * sum_k w_k factor_k for a
+    textured material under flat / Gouraud shading (`per_fragment`)."""
+    out = blend_points(lit.color, index, w, clamp_colors)
+    if per_fragment == 1:
+        out = out + wp.cw_mul(texel, blend_points(lit.factor, index, w, clamp_colors))
+    return out
+
+
+@wp.func
+def compose_into(samples: PointsW, depth: wp.array(dtype=float), point_index: wp.array(dtype=wp.vec3i),
+                 point_weight: wp.array(dtype=wp.vec3), lit: LitW, lighting: LightingW, clamp_colors: int,
+                 per_fragment: int, background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3), s: int):
+    """Stage 7 from the G-buffer at sample s: its colour, then fog."""
+    mat_id = samples.material[s]
     if mat_id < 0:
         image[s] = background
         return
-    out = blend_points(color, point_index, point_weight[s], s, clamp_colors)
-    if per_fragment == 1 and materials[mat_id].texture >= 0:
-        mat = materials[mat_id]
-        modulated = blend_points(factor, point_index, point_weight[s], s, clamp_colors)
-        value = sample_texture(textures, mat.texture, samples.uv[s], samples.duv_dx[s], samples.duv_dy[s],
-                               mat.texture_filter, mat.texture_wrap)
-        texel[s] = value
-        out = out + wp.cw_mul(value, modulated)
+    textured = int(per_fragment == 1 and lighting.materials[mat_id].texture >= 0)
+    texel = wp.vec3(0.0)
+    if textured == 1:
+        texel = texel_at(lighting, mat_id, samples.uv[s], samples.duv_dx[s], samples.duv_dy[s])
+        lit.texel[s] = texel
+    out = fragment_color(lit, point_index[s], point_weight[s], clamp_colors, texel, textured)
     f = fog_blend(fog, depth[s])
     image[s] = f * out + (1.0 - f) * fog.color
+
+
+@wp.kernel
+def compose_kernel(row0: int, width: int, samples: PointsW, depth: wp.array(dtype=float),
+                   point_index: wp.array(dtype=wp.vec3i), point_weight: wp.array(dtype=wp.vec3), lit: LitW,
+                   lighting: LightingW, clamp_colors: int, per_fragment: int, background: wp.vec3, fog: FogW,
+                   image: wp.array(dtype=wp.vec3)):
+    """Stage 7, one row of samples per thread."""
+    i = row0 + wp.tid()
+    for j in range(width):
+        compose_into(samples, depth, point_index, point_weight, lit, lighting, clamp_colors, per_fragment, background,
+                     fog, image, i * width + j)
+
+
+@wp.func
+def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, lighting: LightingW, lit: LitW,
+                 perspective_correct: int, shading: int, clamp_colors: int, fog: FogW, i: int, j: int, s: int):
+    """The colour of covered sample (i, j) (index s) as `compose_kernel` gives it from the G-buffer.
+    Under flat / Gouraud shading `lit` holds the points lit by stage 6."""
+    sample = SampleW()
+    p = wp.vec3(0.0)
+    if shading == PHONG_SHADING:  # the whole surface point, lit here
+        sample = resolve_sample(key, tris, mesh, lighting.materials, cam, perspective_correct, shading, i, j)
+        p = sample.point.p
+    else:  # the weights of the face's points, and the point only where fog needs its depth
+        sample = sample_weights(key, tris, perspective_correct, i, j)
+        if fog.mode != FOG_NONE:
+            p = sample_position(sample, mesh)
+    mat_id = mesh.face_material[sample.face]
+    texel = wp.vec3(0.0)
+    textured = int(lighting.materials[mat_id].texture >= 0)
+    if textured == 1:
+        uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, perspective_correct, i, j)
+        texel = texel_at(lighting, mat_id, uv, duv_dx, duv_dy)
+    out = wp.vec3(0.0)
+    if shading == PHONG_SHADING:
+        out, unused = light_point(sample.point, lighting, 1, texel, lit, 0, 0)
+    else:
+        index, weight = sample_points(sample, mesh, shading, s, mesh.vertices.shape[0])
+        out = fragment_color(lit, index, weight, clamp_colors, texel, textured)
+    f = fog_blend(fog, wp.dot(p - cam.eye, cam.forward))
+    return f * out + (1.0 - f) * fog.color
+
+
+@wp.kernel
+def image_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW, cam: CameraW,
+                 lighting: LightingW, lit: LitW, perspective_correct: int, shading: int, clamp_colors: int,
+                 background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3)):
+    """Stages 4, 6 (Phong) and 7 fused, one row of samples per thread (the kernel's arguments are
+    read once per row): the image `compose_kernel` gives from the G-buffer, without storing it."""
+    i = row0 + wp.tid()
+    for j in range(cam.width):
+        s = i * cam.width + j
+        k = key[s]
+        if k == NO_HIT:
+            image[s] = background
+        else:
+            image[s] = image_sample(k, tris, mesh, cam, lighting, lit, perspective_correct, shading, clamp_colors,
+                                    fog, i, j, s)

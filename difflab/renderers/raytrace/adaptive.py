@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from ...errors import RenderError
-from ..frame import Frame
+from ..frame import Frame, nonfinite_pixels
 from .driver import trace_points
 
 
@@ -58,5 +58,5 @@ def raytrace_adaptive(compiled, settings, threshold: float = 0.05, refine: int =
     stats = {"method": "raytrace", "adaptive_supersampling": True, "threshold": threshold, "refine": refine,
              "seconds": seconds, "rays": rays, "total_rays": total, "rays_per_second": total / max(seconds, 1e-9),
              "refined_pixels": int(mask.sum()), "refined_fraction": float(mask.mean()), "refine_mask": mask,
-             "nonfinite_pixels": int(np.count_nonzero(~np.isfinite(image).all(axis=-1)))}
+             "nonfinite_pixels": nonfinite_pixels(image)}
     return Frame(image=image, buffers=None, stats=stats, ray_tree=None)

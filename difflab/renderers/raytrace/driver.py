@@ -27,8 +27,8 @@ from ...errors import RenderError
 from ...lighting.warp_model import fog_struct
 from ...vocabulary import FRESNEL_MODES, SPECULAR_MODELS
 from ..camera import camera_struct
-from ..frame import Frame, box_downsample
-from ..launch import launch_rows
+from ..frame import Frame, box_downsample, nonfinite_pixels
+from ..launch import launch_row_loops, load_kernels
 from .itembuffer import item_buffer, item_struct
 from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, TraceOutW, TraceParamsW, \
     whitted_kernel
@@ -108,6 +108,8 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
     """Trace one ray tree per raster point of `points` (rows, cols, 2), in pixels of the camera's
     image (or of `pixel_size` = (width, height)). `item`: an `ItemBufferW` on the same grid."""
     scene, device = compiled.scene, compiled.device
+    kernel = whitted_kernel(settings.max_depth)
+    load_kernels(device, kernel)
     rows, cols = points.shape[:2]
     width, height = pixel_size or (scene.camera.width, scene.camera.height)
     cam = camera_struct(scene.camera, width, height)
@@ -127,7 +129,7 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
         out.node_count = wp.zeros(shape, dtype=wp.int32, device=device)
         out.rays = wp.zeros((rows, 4), dtype=wp.int32, device=device)
         out.depth_hist = wp.zeros((rows, settings.max_depth), dtype=wp.int32, device=device)
-        launch_rows(whitted_kernel, shape, [wp_points, cam, scene_w, params, item, tree, out], device, threads)
+        launch_row_loops(kernel, rows, [wp_points, cam, scene_w, params, item, tree, out], device, threads)
         return out
 
     out = launch(trace_params(scene, settings, False, spread), empty_tree(shape, 0, 0, device))
@@ -182,5 +184,5 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
              "rays": dict(traced.rays), "total_rays": total_rays, "rays_per_second": total_rays / max(seconds, 1e-9),
              "depth_histogram": traced.depth_histogram, "nodes": int(traced.node_count.sum()),
              "item_buffer": bool(use_item_buffer), "recorded_tree": bool(record_tree),
-             "nonfinite_pixels": int(np.count_nonzero(~np.isfinite(image).all(axis=-1)))}
+             "nonfinite_pixels": nonfinite_pixels(image)}
     return Frame(image=image, buffers=None, stats=stats, ray_tree=traced.tree)

@@ -72,7 +72,7 @@ def hinted_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.v
 def visible_faces(compiled, width: int, height: int, threads: int | None = None) -> np.ndarray:
     """Nearest face per sample of a width x height grid (-1: empty), from the rasterizer's
     clip / assemble / z-buffer stages (no back-face culling)."""
-    key = zbuffer(compiled, camera_struct(compiled.scene.camera, width, height), 0, threads)[3]
+    key = zbuffer(compiled, camera_struct(compiled.scene.camera, width, height), 0, threads)[1]
     keys = key.numpy()
     empty = keys == np.iinfo(np.int64).max
     faces = ((keys & 0xFFFFFFFF) // 2).astype(np.int32)  # the key's low 32 bits hold the clipped slot 2f or 2f+1

@@ -42,7 +42,6 @@ from .tree import PRIMARY, REFLECTED, REFRACTED
 wp.set_module_options({"enable_backward": False})
 
 COUNT_PRIMARY, COUNT_SHADOW, COUNT_REFLECTED, COUNT_REFRACTED = 0, 1, 2, 3  # columns of TraceOutW.rays
-STACK_SIZE = MAX_DEPTH_LIMIT  # a depth-first walk never holds more pending rays than the deepest tree
 
 
 @wp.struct
@@ -125,67 +124,94 @@ def worth_tracing(weight: wp.vec3, threshold: float):
     return largest > 0.0 and largest >= threshold
 
 
-@wp.kernel
-def whitted_kernel(row0: int, points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW,
-                   params: TraceParamsW, item: ItemBufferW, tree: TreeW, out: TraceOutW):
-    ii, j = wp.tid()
-    i = row0 + ii
-    xy = points[i, j]
-    origin, direction = primary_ray(cam, xy[0], xy[1])
-    t_far = (params.far - wp.dot(origin - cam.eye, cam.forward)) / wp.dot(direction, cam.forward)
-    base = int(0)
-    if params.record == 1:
-        base = tree.offset[i, j]
-    stack = wp.zeros(shape=STACK_SIZE, dtype=RayW)
-    stack[0] = new_ray(origin, origin, direction, wp.vec3(1.0), 0.0, 1, -1, PRIMARY, -1, -1)
-    sp = int(1)
-    count = int(0)
-    total = wp.vec3(0.0)
-    fog_f = float(1.0)
+def make_whitted_kernel(stack_size: int):
+    """The walk (`trace_sample`) and its kernel for trees whose stack never holds more than `stack_size`
+    rays: a depth-first walk to depth D holds at most D (at most one pending sibling per level,
+    plus the two children just pushed), and the stack is allocated and cleared per sample, so a
+    shallow render should not pay for MAX_DEPTH_LIMIT entries."""
 
-    while sp > 0:
-        sp = sp - 1
-        ray = stack[sp]
-        node = count
-        count = count + 1
-        hit = trace_ray(scene, item, out, ray, i, j, t_far)
-        distance = wp.inf
-        if hit.kind != HIT_NONE:
-            distance = wp.length(ray.origin + hit.t * ray.direction - ray.start)  # from the surface, not the offset
-        w = ray.weight
-        if ray.medium >= 0:  # Beer absorption along this ray inside its medium
-            w = wp.cw_mul(w, beer(scene.materials[ray.medium].absorption, distance))
+    @wp.func
+    def trace_sample(points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW, params: TraceParamsW,
+                     item: ItemBufferW, tree: TreeW, out: TraceOutW, i: int, j: int):
+        """Walk sample (i, j)'s ray tree: its colour, fog blend and node count into `out`."""
+        xy = points[i, j]
+        origin, direction = primary_ray(cam, xy[0], xy[1])
+        t_far = (params.far - wp.dot(origin - cam.eye, cam.forward)) / wp.dot(direction, cam.forward)
+        base = int(0)
         if params.record == 1:
-            record_ray(tree, base, node, i * points.shape[1] + j, ray, hit, distance)
-        if hit.kind == HIT_NONE:
-            total = total + wp.cw_mul(w, params.background)
+            base = tree.offset[i, j]
+        stack = wp.zeros(shape=stack_size, dtype=RayW)
+        stack[0] = new_ray(origin, origin, direction, wp.vec3(1.0), 0.0, 1, -1, PRIMARY, -1, -1)
+        sp = int(1)
+        count = int(0)
+        total = wp.vec3(0.0)
+        fog_f = float(1.0)
+
+        while sp > 0:
+            sp = sp - 1
+            ray = stack[sp]
+            node = count
+            count = count + 1
+            hit = trace_ray(scene, item, out, ray, i, j, t_far)
+            distance = wp.inf
+            if hit.kind != HIT_NONE:
+                distance = wp.length(ray.origin + hit.t * ray.direction - ray.start)  # from the surface, not the offset
+            w = ray.weight
+            if ray.medium >= 0:  # Beer absorption along this ray inside its medium
+                w = wp.cw_mul(w, beer(scene.materials[ray.medium].absorption, distance))
             if params.record == 1:
-                tree.local[base + node] = params.background
-            continue
+                record_ray(tree, base, node, i * points.shape[1] + j, ray, hit, distance)
+            if hit.kind == HIT_NONE:
+                total = total + wp.cw_mul(w, params.background)
+                if params.record == 1:
+                    tree.local[base + node] = params.background
+                continue
 
-        surf = surface_at(scene, cam, hit, ray, xy, int(ray.kind == PRIMARY), params.spread)
-        if ray.kind == PRIMARY:
-            fog_f = fog_blend(params.fog, wp.dot(surf.p - cam.eye, cam.forward))
-        local = shade_hit(scene, params, hit, surf, tree, base + node, out, i)
-        total = total + wp.cw_mul(w, local)
-        split = fresnel_split(ray.direction, surf, params.fresnel)
-        if params.record == 1:
-            record_surface(tree, base + node, surf, local, split)
+            surf = surface_at(scene, cam, hit, ray, xy, int(ray.kind == PRIMARY), params.spread)
+            if ray.kind == PRIMARY:
+                fog_f = fog_blend(params.fog, wp.dot(surf.p - cam.eye, cam.forward))
+            local = shade_hit(scene, params, hit, surf, tree, base + node, out, i)
+            total = total + wp.cw_mul(w, local)
+            split = fresnel_split(ray.direction, surf, params.fresnel)
+            if params.record == 1:
+                record_surface(tree, base + node, surf, local, split)
 
-        if ray.depth < params.max_depth:  # refracted child pushed first, so the reflected one is walked first
-            w_t = w * (surf.mat.kt * split.f_t)
-            if split.refracts == 1 and worth_tracing(w_t, params.threshold):
-                medium = int(-1)
-                if surf.entering == 1:
-                    medium = hit.material
-                stack[sp] = child_ray(scene.geom, ray, node, hit, surf, split.t_dir, w_t, REFRACTED, medium)
-                sp = sp + 1
-            w_r = w * (surf.mat.kr * split.f_r)
-            if worth_tracing(w_r, params.threshold):
-                r_dir = reflect(ray.direction, surf.normal)
-                stack[sp] = child_ray(scene.geom, ray, node, hit, surf, r_dir, w_r, REFLECTED, ray.medium)
-                sp = sp + 1
+            if ray.depth < params.max_depth:  # refracted child pushed first, so the reflected one is walked first
+                w_t = w * (surf.mat.kt * split.f_t)
+                if split.refracts == 1 and worth_tracing(w_t, params.threshold):
+                    medium = int(-1)
+                    if surf.entering == 1:
+                        medium = hit.material
+                    stack[sp] = child_ray(scene.geom, ray, node, hit, surf, split.t_dir, w_t, REFRACTED, medium)
+                    sp = sp + 1
+                w_r = w * (surf.mat.kr * split.f_r)
+                if worth_tracing(w_r, params.threshold):
+                    r_dir = reflect(ray.direction, surf.normal)
+                    stack[sp] = child_ray(scene.geom, ray, node, hit, surf, r_dir, w_r, REFLECTED, ray.medium)
+                    sp = sp + 1
 
-    out.fog[i, j] = fog_f
-    out.color[i, j] = fog_f * total + (1.0 - fog_f) * params.fog.color
-    out.node_count[i, j] = count
+        out.fog[i, j] = fog_f
+        out.color[i, j] = fog_f * total + (1.0 - fog_f) * params.fog.color
+        out.node_count[i, j] = count
+
+    @wp.kernel(module="unique")
+    def whitted_kernel(row0: int, points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW,
+                       params: TraceParamsW, item: ItemBufferW, tree: TreeW, out: TraceOutW):
+        """One row of samples per thread (on the CPU the arguments are read once per row)."""
+        i = row0 + wp.tid()
+        for j in range(points.shape[1]):
+            trace_sample(points, cam, scene, params, item, tree, out, i, j)
+
+    return whitted_kernel
+
+
+STACK_SIZES = (1, 8, MAX_DEPTH_LIMIT)  # one kernel each, compiled on first use
+_whitted_kernels: dict[int, object] = {}
+
+
+def whitted_kernel(max_depth: int):
+    """The ray-tree kernel with the smallest stack that holds a walk to `max_depth`."""
+    size = next(size for size in STACK_SIZES if size >= max_depth)
+    if size not in _whitted_kernels:
+        _whitted_kernels[size] = make_whitted_kernel(size)
+    return _whitted_kernels[size]
