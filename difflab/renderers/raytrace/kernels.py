@@ -32,7 +32,7 @@ from ..._warp import wp
 from ...lighting.warp_model import FogW, ambient_term, fog_blend, light_term, light_vector
 from ...vocabulary import MAX_DEPTH_LIMIT
 from ..camera import CameraW, primary_ray
-from ..trace import HIT_NONE, HitW, closest_hit, count_shadow_crossings, light_visibility
+from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, light_visibility
 from .itembuffer import ItemBufferW, hinted_hit
 from .optics import beer, reflect
 from .record import TreeW, record_light, record_ray, record_surface
@@ -75,20 +75,20 @@ class TraceOutW:
 
 
 @wp.func
-def trace_ray(scene: SceneW, item: ItemBufferW, out: TraceOutW, ray: RayW, i: int, j: int, t_far: float):
+def trace_ray(geom: SceneGeomW, item: ItemBufferW, out: TraceOutW, ray: RayW, i: int, j: int, t_far: float):
     """The nearest hit of a popped ray (the primary one up to the far plane, through the item buffer
     when it is on), counted in the statistics of row i."""
     wp.atomic_add(out.depth_hist, i, ray.depth - 1, 1)
     if ray.kind == PRIMARY:
         wp.atomic_add(out.rays, i, COUNT_PRIMARY, 1)
         if item.use == 1:
-            return hinted_hit(scene.geom, item, i, j, ray.origin, ray.direction, t_far)
-        return closest_hit(scene.geom, ray.origin, ray.direction, 0.0, t_far, -1)
+            return hinted_hit(geom, item, i, j, ray.origin, ray.direction, t_far)
+        return closest_hit(geom, ray.origin, ray.direction, 0.0, t_far, -1)
     if ray.kind == REFLECTED:
         wp.atomic_add(out.rays, i, COUNT_REFLECTED, 1)
     else:
         wp.atomic_add(out.rays, i, COUNT_REFRACTED, 1)
-    return closest_hit(scene.geom, ray.origin, ray.direction, 0.0, wp.inf, ray.skip)
+    return closest_hit(geom, ray.origin, ray.direction, 0.0, wp.inf, ray.skip)
 
 
 @wp.func
@@ -152,7 +152,7 @@ def make_whitted_kernel(stack_size: int):
             ray = stack[sp]
             node = count
             count = count + 1
-            hit = trace_ray(scene, item, out, ray, i, j, t_far)
+            hit = trace_ray(scene.geom, item, out, ray, i, j, t_far)
             distance = wp.inf
             if hit.kind != HIT_NONE:
                 distance = wp.length(ray.origin + hit.t * ray.direction - ray.start)  # from the surface, not the offset
@@ -172,6 +172,8 @@ def make_whitted_kernel(stack_size: int):
                 fog_f = fog_blend(params.fog, wp.dot(surf.p - cam.eye, cam.forward))
             local = shade_hit(scene, params, hit, surf, tree, base + node, out, i)
             total = total + wp.cw_mul(w, local)
+            if params.record == 0 and ray.depth >= params.max_depth:
+                continue  # a leaf nobody records: no split to compute
             split = fresnel_split(ray.direction, surf, params.fresnel)
             if params.record == 1:
                 record_surface(tree, base + node, surf, local, split)
@@ -194,7 +196,7 @@ def make_whitted_kernel(stack_size: int):
         out.color[i, j] = fog_f * total + (1.0 - fog_f) * params.fog.color
         out.node_count[i, j] = count
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module="unique", enable_backward=False)
     def whitted_kernel(row0: int, points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW,
                        params: TraceParamsW, item: ItemBufferW, tree: TreeW, out: TraceOutW):
         """One row of samples per thread (on the CPU the arguments are read once per row)."""
