@@ -91,13 +91,24 @@ def _install_signal_cleanup() -> None:
             signal.signal(signum, _remove_live_and_die)
 
 
+def file_path(path, what: str = "path", error: type[DifflabError] = DifflabError) -> Path:
+    """`path` (a str or os.PathLike naming a file) as a Path; `error` naming `what` otherwise."""
+    if isinstance(path, os.PathLike):
+        path = os.fspath(path)
+    if not isinstance(path, str) or not path or "\x00" in path:
+        raise error(f"{what}: expected a file path, got {shorten(path)}")
+    return Path(path)
+
+
 def check_output_path(path: str | os.PathLike, what: str = "output", create_parent: bool = False) -> Path:
     """`path` as a file to write: not an existing folder; its parent a folder (made when
     `create_parent`, else it must exist), no file used as a folder on the way. Raises DifflabError
     naming `what` and the path, before any work is done."""
-    path = Path(path)
+    path = file_path(path, what)
     if not path.name or path.is_dir():
         raise DifflabError(f"{what}: {short_path(path)} is a folder; give a file name")
+    if path.exists() and not path.is_file():  # a device, FIFO or socket is never replaced by a file
+        raise DifflabError(f"{what}: {short_path(path)} exists and is not a regular file")
     parent = path.parent
     for folder in (parent, *parent.parents):
         if folder.exists() or folder.is_symlink():
@@ -160,7 +171,7 @@ def read_regular_file(path: str | os.PathLike, max_bytes: int, error: type[Diffl
                       what: str = "file") -> bytes:
     """The bytes of `path`, which must be a regular file of at most `max_bytes` (devices such as
     /dev/zero, FIFOs and folders are refused at once, without blocking). Raises `error` naming it."""
-    name = short_path(path)
+    name = short_path(file_path(path, what, error))
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
     except FileNotFoundError:
@@ -213,7 +224,7 @@ def save_image(path: str | os.PathLike, image, srgb: bool = True) -> Path:
     clamped to [0, 1] and sRGB-encoded when `srgb` is true (linear 8-bit otherwise).
     Non-finite pixels are not hidden: they raise, with their count.
     """
-    path = Path(path)
+    path = file_path(path, "image")
     image = _as_image(image)
     if path.suffix.lower() == ".npy":
         with atomic_path(path) as tmp:
@@ -287,7 +298,7 @@ def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
     header, truncated data, a pickled or string array, an image over the memory budget (checked from
     the header before decoding) -- raises DifflabError naming the path.
     """
-    path = Path(path)
+    path = file_path(path, "image")
     if not path.exists():
         raise DifflabError(f"{short_path(path)}: image file not found")
     if not path.is_file():

@@ -233,3 +233,22 @@ def test_cli_scene_errors_are_one_line(tmp_path, capsys):
                    "/dev/zero: scene file is not a regular file")
     multi = write_scene(tmp_path, json.dumps(scene_dict(SPHERE, {"m": {}}))[:-1] + ', "bad\\nkey": 1}')
     one_line_error(capsys, ["render", str(multi), "-o", str(tmp_path / "x.png")], "scene: unknown key 'bad\\nkey'")
+
+
+def test_devices_and_fifos_are_never_replaced(tmp_path):
+    fifo = tmp_path / "pipe.png"
+    os.mkfifo(fifo)
+    for target in ("/dev/null", fifo):
+        with pytest.raises(DifflabError, match=rf"^output: {target} exists and is not a regular file$"):
+            save_image(target, np.zeros((2, 2, 3), np.float32))
+    assert os.path.exists("/dev/null") and not os.path.isfile("/dev/null")
+
+
+@pytest.mark.parametrize("bad", [None, 5, b"x.png", "", "a\x00b.png", ["x.png"]])
+def test_paths_must_be_strings_or_path_likes(tmp_path, bad):
+    with pytest.raises(DifflabError, match=r"^image: expected a file path, got "):
+        load_image(bad)
+    with pytest.raises(DifflabError, match=r"^image: expected a file path, got "):
+        save_image(bad, np.zeros((2, 2, 3), np.float32))
+    with pytest.raises(SceneError, match=r"^scene: expected a file path, got "):
+        load_scene(bad)

@@ -20,7 +20,7 @@ def example_names() -> tuple[str, ...]:
 def scene_path(name: str) -> Path:
     """The path of the shipped example scene `name` (e.g. "lecture_teapot"); SceneError if unknown."""
     names = example_names()
-    if name not in names:
+    if not isinstance(name, str) or name not in names:
         raise SceneError(f"example scene: unknown name {name!r}{suggestion(name, names)}; "
                          f"known: {', '.join(names)}")
     return SCENE_FOLDER / f"{name}.json"

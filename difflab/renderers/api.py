@@ -98,7 +98,7 @@ def draw(scene, overrides: dict, device, width, height, threads, keep: bool) -> 
     else:
         scene = prepare(scene, width, height, **overrides)
         check_render(scene)  # memory and ray budgets, before anything is allocated
-        compiled = compile_scene(scene, device or "cpu")
+        compiled = compile_scene(scene, "cpu" if device is None else device)
     settings = compiled.scene.render
     check_applies(settings.method, overrides)
     if settings.method == "raster":

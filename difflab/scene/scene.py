@@ -191,12 +191,10 @@ def load_scene(path: str | os.PathLike) -> Scene:
     once). Raises SceneError: for bad JSON with the file, line and column; for invalid content with
     the field path first and the file appended.
     """
-    from ..io import read_regular_file
+    from ..io import file_path, read_regular_file
     from ..limits import short_path
 
-    if not isinstance(path, (str, os.PathLike)):
-        raise SceneError(f"scene: expected a path, got {type(path).__name__}")
-    path = Path(path)
+    path = file_path(path, "scene", SceneError)
     data = read_regular_file(path, MAX_SCENE_BYTES, SceneError, "scene file")
     try:
         text = data.decode("utf-8")
