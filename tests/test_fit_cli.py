@@ -1,33 +1,21 @@
-"""`difflab fit` on a tiny scene: exit codes and atomic outputs."""
+"""`difflab fit` through the real command line (`difflab.cli.main`): exit codes, summary, outputs."""
 
-import argparse
 import json
 import os
 
 import numpy as np
 import pytest
-from test_fit_helpers import TRUTH, make_scene, perturbed, target_of
+from test_fit_helpers import TRUTH, make_scene, perturbed, scene_dict, target_of
 
-from difflab.errors import DifflabError
-from difflab.fit import command
+from difflab import Scene, render
+from difflab.cli import main
 from difflab.io import save_image
-from difflab.scene import Scene, load_scene, save_scene
-
-
-def run_cli(argv) -> int:
-    """As `difflab.cli.main` does: DifflabError -> exit 2."""
-    parser = argparse.ArgumentParser(prog="difflab")
-    command.add_parser(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except DifflabError:
-        return 2
+from difflab.scene import load_scene, save_scene
 
 
 @pytest.fixture()
 def files(tmp_path):
-    truth = make_scene(size=32)
+    truth = make_scene(size=24)
     target = tmp_path / "target.npy"
     save_image(target, target_of(truth))
     start = Scene.from_dict({**truth.to_dict(), "materials": {
@@ -38,44 +26,71 @@ def files(tmp_path):
     return scene, target, tmp_path
 
 
-def test_fit_command_converges(files, capsys):
+def test_fit_command_converges_exit_0(files, capsys):
     scene, target, tmp = files
     out = tmp / "fitted.json"
-    assert run_cli(["fit", str(scene), str(target), "--material", "red", "-o", str(out)]) == 0
+    assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "±" in printed and "kd" in printed and "successful" in printed
+    assert "±" in printed and "kd" in printed and "successful" in printed and "reduced chi-square" in printed
+    assert "image model: raster" in printed
     fitted = load_scene(out)
     np.testing.assert_allclose(fitted.materials["red"].kd, TRUTH["kd"], rtol=1e-4)
     report = json.loads((tmp / "fitted.fit.json").read_text())
-    assert report["converged"] and report["result"] == "successful"
+    assert report["converged"] and report["result"] == "successful" and not report["model_mismatch"]
     # nothing is overwritten without --force
-    assert run_cli(["fit", str(scene), str(target), "--material", "red", "-o", str(out)]) == 2
+    assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out)]) == 2
 
 
 def test_fit_command_not_converged_exit_3(files):
     scene, target, tmp = files
     out = tmp / "fitted.json"
-    assert run_cli(["fit", str(scene), str(target), "--material", "red", "--max-steps", "2", "-o", str(out)]) == 3
+    assert main(["fit", str(scene), str(target), "--material", "red", "--max-steps", "2", "-o", str(out)]) == 3
     report = json.loads((tmp / "fitted.fit.json").read_text())
     assert (report["converged"], report["result"]) == (False, "nonlinear_max_steps_reached")
     assert out.exists()
 
 
+def test_fit_command_model_mismatch_exit_4(tmp_path, capsys):
+    """A ray-traced mirror fitted with --method raster: converged, flagged, exit 4, files written;
+    the scene's own model (the ray tree) exits 0. Two materials given as one comma-separated list."""
+    d = scene_dict(size=16, red={"kr": 0.1})
+    d["render"]["method"] = "raytrace"
+    scene = Scene.from_dict(d)
+    target = tmp_path / "target.npy"
+    save_image(target, render(scene))
+    path = tmp_path / "scene.json"
+    save_scene(scene, path)
+    out = tmp_path / "fitted.json"
+    args = ["fit", str(path), str(target), "--material", "red,floor", "--params", "red.kd,floor.kd", "-o", str(out)]
+    assert main(args + ["--method", "raster"]) == 4
+    assert "MODEL MISMATCH" in capsys.readouterr().out and out.exists()
+    assert json.loads((tmp_path / "fitted.fit.json").read_text())["model_mismatch"]
+    assert main(args + ["--force"]) == 0
+    assert "image model: raytrace" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("extra", [["--material", "nope"], ["--material", "red", "--params", "kd,zz"],
-                                   ["--material", "red", "--max-steps", "0"]])
-def test_fit_command_bad_input_exit_2(files, extra):
+                                   ["--material", "red", "--max-steps", "0"],
+                                   ["--material", "red", "--sigma", "-1"]])
+def test_fit_command_bad_input_exit_2(files, extra, capsys):
     scene, target, tmp = files
-    assert run_cli(["fit", str(scene), str(target), *extra, "-o", str(tmp / "x.json")]) == 2
+    assert main(["fit", str(scene), str(target), *extra, "-o", str(tmp / "x.json")]) == 2
     assert not (tmp / "x.json").exists()
+    assert capsys.readouterr().err.startswith("difflab: error:")
 
 
-def test_fit_command_missing_target_exit_2(files):
+def test_fit_command_wrong_size_and_missing_target_exit_2(files, capsys):
     scene, _, tmp = files
-    assert run_cli(["fit", str(scene), str(tmp / "missing.png"), "--material", "red", "-o", str(tmp / "x.json")]) == 2
+    small = tmp / "small.npy"
+    save_image(small, np.zeros((8, 8, 3), np.float32))
+    assert main(["fit", str(scene), str(small), "--material", "red", "-o", str(tmp / "x.json")]) == 2
+    assert "8x8" in capsys.readouterr().err
+    assert main(["fit", str(scene), str(tmp / "missing.png"), "--material", "red", "-o", str(tmp / "x.json")]) == 2
 
 
 def test_output_is_atomic(files, monkeypatch):
-    """A writer failing midway leaves the old file as it was and no temporary file behind."""
+    """A writer failing midway leaves the old file as it was and no temporary file behind (exit 1:
+    an internal error, not bad input)."""
     scene, target, tmp = files
     out = tmp / "fitted.json"
     out.write_text("old")
@@ -87,7 +102,6 @@ def test_output_is_atomic(files, monkeypatch):
             raise OSError("disk full")
 
     monkeypatch.setattr(io, "write_json_atomic", failing)
-    with pytest.raises(OSError):
-        run_cli(["fit", str(scene), str(target), "--material", "red", "-o", str(out), "--force"])
+    assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out), "--force"]) == 1
     assert out.read_text() == "old"
     assert sorted(os.listdir(tmp)) == sorted(["fitted.json", "scene.json", "target.npy"])

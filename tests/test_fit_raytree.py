@@ -12,9 +12,9 @@ from difflab import Scene, load_scene, render_frame
 from difflab.demos import scene_path
 from difflab.errors import FitError
 from difflab.fit.identify import identify
-from difflab.fit.raytree import TreeMaterials, evaluate_tree, tree_image, tree_to_jax
-from difflab.fit.scene_fit import SceneSetup, fit_scene
-from difflab.fit.tree_params import build_tree_layout
+from difflab.fit import MaterialTable, SceneSetup, fit_scene
+from difflab.fit.params import build_layout
+from difflab.fit.raytree import evaluate_tree, tree_image, tree_to_jax
 from difflab.lighting.jax_model import lights_to_jax
 
 LECTURE = scene_path("lecture_teapot")
@@ -40,10 +40,15 @@ def glass_scene(**render) -> Scene:
     return Scene.from_dict(d)
 
 
+def sized(scene: Scene, width: int, height: int) -> Scene:
+    """The scene with its camera rendering width x height (a target must have its camera's size)."""
+    return scene.with_overrides(camera={**scene.camera.to_dict(), "width": width, "height": height})
+
+
 @pytest.fixture(scope="module")
 def lecture():
-    scene = load_scene(LECTURE).with_overrides(render={"max_depth": 4})
-    return scene, render_frame(scene, width=W, height=H, threads=2)
+    scene = sized(load_scene(LECTURE).with_overrides(render={"max_depth": 4}), W, H)
+    return scene, render_frame(scene, threads=2)
 
 
 def jax_image(tree, scene):
@@ -106,7 +111,7 @@ def test_gradient_matches_warp_finite_differences(case):
     frame = render_frame(scene, width=w, height=h, threads=2)
     with jax.enable_x64(True):
         tree = tree_to_jax(frame.ray_tree, dtype=jnp.float64)
-        mats = TreeMaterials.from_scene(scene.materials.values(), jnp.float64)
+        mats = MaterialTable.from_scene(scene.materials.values(), jnp.float64)
         lights = lights_to_jax(scene.lights, jnp.float64)
         ambient, background = jnp.asarray(scene.ambient, jnp.float64), jnp.asarray(scene.background, jnp.float64)
         image = jax.jit(lambda x: tree_image(tree, mats._replace(**{kind: x}), lights, ambient, background))
@@ -145,33 +150,34 @@ def perturbed_start(scene, keys, factor=0.3, seed=0):
 
 def test_recovers_floor_teapot_and_mirror_of_the_lecture_scene(lecture):
     """Noise-free, LM, float64, 30 % perturbed start: every parameter within 1e-4 relative.
-    mirror.ka is 0 in the scene file: a value on the bound, where relative error means nothing (and
-    the softplus parameterisation only creeps towards it); it is held at 0, and its absence from the
-    fitted set is the only one."""
+    mirror.ka is 0 in the scene file: a value on the bound, where relative error means nothing; it is
+    fitted from 0.05 and must land on the bound (reported in at_bound)."""
     scene, frame = lecture
-    keys = [f"{m}.{k}" for m in FITTED for k in ("ka", "kd", "ks", "n", "kr") if f"{m}.{k}" != "mirror.ka"]
+    keys = [f"{m}.{k}" for m in FITTED for k in ("ka", "kd", "ks", "n", "kr")]
     assert np.all(np.asarray(scene.materials["mirror"].ka) == 0)
-    start = perturbed_start(scene, keys)
+    start = {**perturbed_start(scene, keys), "mirror.ka": [0.05] * 3}
     result = fit_scene(scene, [frame.image], FITTED, keys, init=start, threads=2)
     assert result.converged, result.result
     assert set(result.params) == set(keys)
-    for key in keys:
+    # on the bound, up to the float32 rounding of the target (its optimum need not be exactly 0)
+    assert np.max(result.params["mirror.ka"]) < 1e-6 and result.at_bound == ["mirror.ka"]
+    assert result.model == "raytrace" and not result.model_mismatch
+    for key in (k for k in keys if k != "mirror.ka"):
         name, kind = key.split(".")
         truth = np.asarray(getattr(scene.materials[name], kind), np.float64)
         assert np.max(np.abs(np.asarray(result.params[key]) - truth) / truth) < 1e-4, (key, result.params[key])
         assert np.max(np.abs(np.asarray(start[key]) - truth) / truth) > 0.29
-    assert result.poorly_determined == [] and result.psnr > 90
+    assert result.psnr > 90
     fitted = result.to_scene()
     assert fitted.materials["mirror"].kr == pytest.approx(0.9, rel=1e-4)
 
 
 def test_recovers_kt_and_absorption_through_glass():
     """Two views of the glass scene: glass kr, kt, absorption and the floor's kd from a perturbed start."""
-    scene = glass_scene()
+    scene = sized(glass_scene(), 32, 24)
     second = {"camera": {**scene.camera.to_dict(), "eye": [2.5, 1.6, 3.4]}}
-    targets = [render_frame(scene, width=32, height=24, threads=2).image,
-               (render_frame(scene.with_overrides(camera={**second["camera"], "width": 32, "height": 24}),
-                             threads=2).image, second)]
+    targets = [render_frame(scene, threads=2).image,
+               (render_frame(scene.with_overrides(camera=second["camera"]), threads=2).image, second)]
     keys = ["glass.kr", "glass.kt", "glass.absorption", "floor.kd"]
     start = perturbed_start(scene, keys, seed=1)
     result = fit_scene(scene, targets, ("glass", "floor"), keys, init=start, threads=2)
@@ -206,8 +212,8 @@ def test_identifiability_flags_what_the_view_cannot_see(lecture):
     ({"params": ("red.kt",)}, "red.kt is 0 at the start"),
     ({"materials": ("nope",)}, "undefined material 'nope'"),
     ({"params": ("kd",), "init": {"floor.kr": 2.0}}, "init\\['floor.kr'\\]"),
-    ({"params": ("kd",), "init": {"floor.kd": 0.5}}, "init: not fitted"),
-    ({"solver": "varpro"}, "solver"),
+    ({"params": ("kd",), "init": {"floor.kd": 0.5}}, "init\\['floor.kd'\\]: not fitted"),
+    ({"solver": "newton"}, "unknown solver"),
     ({"loss": "l1"}, "unknown loss"),
 ])
 def test_bad_input_raises_fit_error(lecture, kwargs, match):
@@ -221,7 +227,7 @@ def test_bad_input_raises_fit_error(lecture, kwargs, match):
 
 def test_generic_kr_kt_apply_only_where_the_tree_traces_them(lecture):
     scene, _ = lecture
-    layout = build_tree_layout(scene, ("floor", "frame"), ("kd", "kr", "kt", "absorption"))
+    layout = build_layout(scene, ("floor", "frame"), ("kd", "kr", "kt", "absorption"), tree=True)
     assert [p.key for p in layout] == ["floor.kd", "floor.kr", "frame.kd"]  # frame: kr = kt = 0
 
 

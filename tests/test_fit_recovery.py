@@ -1,4 +1,5 @@
-"""fit_material: recovery of known parameters, noise and standard errors, diagnostics, failures."""
+"""fit_material through the one engine (G-buffer model): recovery of known parameters by every solver,
+calibrated standard errors, bounds, diagnostics, failures and bad input."""
 
 import numpy as np
 import pytest
@@ -27,15 +28,15 @@ def test_noise_free_recovery(scene_and_target, solver):
                           max_steps=400 if solver in ("bfgs", "adam") else 100)
     assert set(result.params) == set(TRUTH) and set(result.stderr) == set(TRUTH)
     assert result.history and np.isfinite(result.seconds) and result.steps > 0
-    if solver == "adam":  # a gradient method: it need not converge, but must not claim to wrongly
+    if solver == "adam":  # a gradient method: it may use all its steps, but must get there and say so
         assert result.converged == (result.result == "successful")
-        if not result.converged:
-            assert result.result == "nonlinear_max_steps_reached"
-            return
-    assert result.converged, result.result
+        assert result.result in ("successful", "nonlinear_max_steps_reached")
+    else:
+        assert result.converged, result.result
     assert rel_err(result, TRUTH) < 1e-4
+    assert result.model == "raster" and not result.model_mismatch and result.at_bound == []
     if solver == "lm":
-        assert result.steps <= 40
+        assert result.steps <= 10
         assert result.psnr > 80 and result.poorly_determined == []
 
 
@@ -59,27 +60,40 @@ def test_varpro_agrees_with_lm(scene_and_target):
     assert vp.loss == pytest.approx(lm.loss, rel=1e-8)
 
 
-def test_noise_within_three_stderr(scene_and_target):
-    scene, target = scene_and_target
-    hits, total = 0, 0
-    for seed in range(4):
-        noisy = target + np.random.default_rng(seed).normal(0, 0.01, target.shape)
-        result = fit_material(scene, [noisy], "red", init=START)
-        assert result.converged
+def test_standard_errors_are_calibrated():
+    """Over 24 seeded noisy fits (240 fitted values), the fraction of values within 1 and 2 reported
+    standard errors of the truth is 68.3 % and 95.4 % within 4 binomial standard deviations: errors
+    too large fail this as surely as errors too small. With the noise given, the reduced chi-square
+    is 1 within its statistical spread."""
+    scene = make_scene(size=20)
+    target = target_of(scene)
+    rng = np.random.default_rng(7)
+    images = np.stack([target + rng.normal(0, 0.02, target.shape) for _ in range(24)])
+    results = fit_batch(scene, images, "red", init=START, sigma=0.02)
+    z = []
+    for result in results:
+        assert result.converged and not result.model_mismatch
         for key, truth in TRUTH.items():
-            err = np.abs(np.asarray(result.params[key]) - truth) / np.asarray(result.stderr[key])
-            hits += int(np.sum(err <= 3.0))
-            total += err.size
-    assert hits / total >= 0.95
+            z.extend(np.ravel(np.abs(np.asarray(result.params[key]) - truth) / np.asarray(result.stderr[key])))
+    z = np.asarray(z)
+    for k, p in ((1, 0.6827), (2, 0.9545)):
+        tolerance = 4 * np.sqrt(p * (1 - p) / z.size)
+        assert abs(np.mean(z <= k) - p) < tolerance, (k, np.mean(z <= k))
+    chi2 = np.array([r.chi2 for r in results])
+    dof = 3 * int(results[0].residuals[0].any(axis=-1).sum()) - 10
+    assert abs(chi2.mean() - 1.0) < 4 * np.sqrt(2.0 / dof / len(results))
 
 
-def test_no_highlight_flags_ks_and_n():
-    scene = make_scene(size=32, red={"ks": [0.0, 0.0, 0.0]})
+def test_matte_target_puts_ks_on_its_bound_in_a_few_steps():
+    """No highlight (ks = 0): ks lands on its bound 0 within 25 steps, reported in at_bound; ks and n
+    are flagged poorly determined (n has no effect at ks = 0), kd is recovered."""
+    scene = make_scene(size=24, red={"ks": [0.0, 0.0, 0.0]})
     result = fit_material(scene, [target_of(scene)], "red", init={"ks": [0.2, 0.2, 0.2], "n": 10.0})
+    assert result.converged and result.steps <= 25
+    assert max(result.params["ks"]) <= 1e-8 and "ks" in result.at_bound
     assert "ks" in result.poorly_determined and "n" in result.poorly_determined
     assert "kd" not in result.poorly_determined
-    well = fit_material(make_scene(size=32), [target_of(make_scene(size=32))], "red", init=START)
-    assert well.poorly_determined == []
+    np.testing.assert_allclose(result.params["kd"], TRUTH["kd"], rtol=1e-6)
 
 
 def test_multi_view_multi_light_and_materials():
@@ -108,13 +122,14 @@ def test_light_intensity():
     assert result.to_scene().lights[0].intensity == pytest.approx((0.9, 0.6, 0.3), rel=1e-4)
 
 
-def test_robust_loss_ignores_outliers(scene_and_target):
+@pytest.mark.parametrize("loss", ["huber", "cauchy"])
+def test_robust_loss_ignores_outliers(scene_and_target, loss):
     scene, target = scene_and_target
     spoiled = target.copy()
     spoiled[5:8, 10:20] = 5.0  # a glint that the model cannot explain
     l2 = fit_material(scene, [spoiled], "red", init=START)
-    huber = fit_material(scene, [spoiled], "red", init=START, loss="cauchy", loss_scale=0.01)
-    assert rel_err(huber, {"kd": TRUTH["kd"]}) < rel_err(l2, {"kd": TRUTH["kd"]})
+    robust = fit_material(scene, [spoiled], "red", init=START, loss=loss, loss_scale=0.01)
+    assert robust.converged and rel_err(robust, {"kd": TRUTH["kd"]}) < 0.2 * rel_err(l2, {"kd": TRUTH["kd"]})
 
 
 def test_failures_are_values(scene_and_target):
@@ -141,36 +156,55 @@ def test_failures_are_values(scene_and_target):
 @pytest.mark.parametrize("kwargs,message", [
     ({"material": "nope"}, "undefined material"), ({"params": ("kd", "q")}, "unknown parameter"),
     ({"solver": "newton"}, "unknown solver"), ({"loss": "l1"}, "unknown loss"),
-    ({"init": {"n": -1.0}}, "init"), ({"targets": [np.zeros((4, 4))]}, "expected an (H, W, 3) image"),
+    ({"init": {"n": -1.0}}, r"init\['n'\]"), ({"targets": [np.zeros((4, 4))]}, r"expected an \(H, W, 3\) image"),
     ({"targets": [(np.zeros((4, 4, 3)), {"fog": {}})]}, "unknown override"),
+    ({"params": 5}, "params: expected a name"), ({"params": ["kd", 3]}, "params: expected a name"),
+    ({"material": 5}, "material: expected a name"), ({"init": {"kd": "abc"}}, r"init\['kd'\]"),
+    ({"init": 3}, "init: expected a dict"), ({"params": ("kr",)}, "needs the ray-traced image model"),
+    ({"targets": [np.zeros((32, 32, 3), np.uint8)]}, r"targets\[0\]: an integer image \(uint8\)"),
+    ({"targets": [np.zeros((32, 32, 3), np.int64)]}, r"targets\[0\]: an integer image"),
+    ({"targets": [np.zeros((32, 32, 3), complex)]}, r"targets\[0\]: an image of dtype complex128"),
+    ({"targets": [np.zeros((20, 30, 3))]}, r"targets\[0\]: the image is 30x20 .* camera renders 32x32"),
+    ({"weights": [-np.ones((32, 32))]}, r"weights\[0\]: weights must be finite and >= 0"),
+    ({"masks": [np.ones((8, 8), bool)]}, r"masks\[0\]: expected shape"),
+    ({"sigma": -1.0}, "sigma: must be a finite number > 0"), ({"max_steps": 0}, "max_steps"),
+    ({"x64": "yes"}, "x64: must be True or False"), ({"tolerance": 1e-3}, r"unknown argument\(s\) \['tolerance'\]"),
+    ({"method": "pathtrace"}, "method: expected one of raster, raytrace"),
 ])
 def test_bad_input_raises(scene_and_target, kwargs, message):
     scene, target = scene_and_target
     args = {"targets": [target], "material": "red", **kwargs}
-    with pytest.raises(FitError, match=message.replace("(", r"\(").replace(")", r"\)")):
+    with pytest.raises(FitError, match=message):
         fit_material(scene, **args)
 
 
 @pytest.mark.parametrize("vmap", [True, False])
 def test_batch(vmap):
+    """Per-target results from one compiled solve; a target with NaN under the mask fails alone."""
     scene = make_scene(size=16)
     kds = [[0.6, 0.3, 0.2], [0.3, 0.5, 0.7], [0.9, 0.1, 0.4]]
     images = np.stack([target_of(make_scene(size=16, red={"kd": kd})) for kd in kds])
+    images = np.concatenate([images[:1], np.full_like(images[:1], np.nan), images[1:]])
     results = fit_batch(scene, images, "red", ("kd", "n"), vmap=vmap, init={"kd": [0.5, 0.5, 0.5], "n": 18.0})
-    assert [r.converged for r in results] == [True] * 3
-    for r, kd in zip(results, kds):
+    assert [r.result for r in results] == ["successful", "nonfinite_target", "successful", "successful"]
+    for r, kd in zip(results[:1] + results[2:], kds):
         np.testing.assert_allclose(r.params["kd"], kd, rtol=1e-4)
 
 
-def test_a_textured_material_is_refused_with_a_pointer(tmp_path):
+def test_a_textured_material_goes_through_the_ray_tree(tmp_path):
+    """The G-buffer model carries no texture: the scene's choice is the ray tree (which does), and
+    forcing the G-buffer is refused with a pointer to what can fit it."""
     from test_fit_helpers import scene_dict
 
     from difflab import Scene, render, save_image
 
-    save_image(tmp_path / "t.png", np.full((4, 4, 3), 0.5, np.float32))
+    save_image(tmp_path / "t.png", np.random.default_rng(0).uniform(0.3, 1.0, (4, 4, 3)))
     d = scene_dict(16)
     d["materials"]["red"].update(texture=str(tmp_path / "t.png"))
     scene = Scene.from_dict(d)
-    target = render(scene)
+    target = render(scene, method="raytrace")
+    result = fit_material(scene, [target], "red", ("kd",), init={"kd": [0.5, 0.3, 0.2]})
+    assert result.model == "raytrace" and result.converged
+    np.testing.assert_allclose(result.params["kd"], TRUTH["kd"], rtol=1e-4)
     with pytest.raises(FitError, match="texture_fit"):
-        fit_material(scene, [target], "red")
+        fit_material(scene, [target], "red", method="raster")

@@ -10,7 +10,6 @@ from jax.test_util import check_grads
 from test_fit_helpers import make_scene, target_of
 
 from difflab.fit import Setup, shade_gbuffer
-from difflab.fit.params import values_from_u
 from difflab.renderers.api import render_frame
 
 LIGHTS = [
@@ -64,14 +63,14 @@ def _setup(params, size=12, **kw):
 def test_check_grads_every_parameter(specular, params):
     setup = _setup(params, specular=specular, lights=LIGHTS)
     with jax.enable_x64(True):
-        values = values_from_u(setup.layout, setup.u0)
-        values = {k: v * 0.9 for k, v in values.items()}
-
-        def total(vals):
-            return sum(jnp.sum(r) for r in setup.problem.weighted_residuals(vals))
-
-        check_grads(total, (values,), order=1, modes=("fwd", "rev"), atol=1e-5, rtol=1e-5)
-        check_grads(lambda u: sum(jnp.sum(r) for r in setup.problem.residuals(u)), (setup.u0,), order=1,
+        x = jnp.asarray(setup.x0)
+        values = setup.layout.values(x) * 0.9
+        check_grads(lambda v: jnp.sum(setup.problem.weighted(v)), (values,), order=1, modes=("fwd", "rev"),
+                    atol=1e-5, rtol=1e-5)
+        check_grads(lambda x: jnp.sum(setup.problem.residuals(x)), (x,), order=1, modes=("fwd", "rev"), atol=1e-5,
+                    rtol=1e-5)
+        z = jnp.asarray(setup.layout.free_from_x(setup.x0))  # the unconstrained solvers' coordinates
+        check_grads(lambda z: jnp.sum(setup.problem.residuals(setup.layout.x_from_free(z))), (z,), order=1,
                     modes=("fwd", "rev"), atol=1e-5, rtol=1e-5)
 
 
@@ -81,19 +80,18 @@ def test_gradient_in_n_is_finite_everywhere(specular, n):
     """Points with N.L <= 0 and with R.V <= 0 are in view; the gradient in n stays finite."""
     side = [{"type": "point", "position": [-3, 1, 4], "intensity": [1, 1, 1], "attenuation": [1, 0, 0]}]
     setup = _setup(("ks", "n"), size=16, specular=specular, lights=side)
-    view = setup.problem.views[0]
-    normal, l_dir = np.asarray(view.points.normal), np.asarray(view.points.light_dir)[:, 0]
-    v_dir = np.asarray(view.points.view)
+    points = setup.problem.views[0].model.points
+    normal, l_dir = np.asarray(points.normal), np.asarray(points.light_dir)[:, 0]
+    v_dir = np.asarray(points.view)
     n_dot_l = np.sum(normal * l_dir, axis=-1)
     r = 2 * n_dot_l[:, None] * normal - l_dir
     assert (n_dot_l <= 0).any() and ((np.sum(r * v_dir, axis=-1) <= 0) & (n_dot_l > 0)).any()
     with jax.enable_x64(True):
-        values = {k: jnp.asarray(v) for k, v in values_from_u(setup.layout, setup.u0).items()}
-        values["n"] = jnp.asarray([n])
-        grad = jax.grad(lambda vals: sum(jnp.sum(r ** 2) for r in setup.problem.weighted_residuals(vals)))(values)
-        assert all(np.all(np.isfinite(np.asarray(g))) for g in grad.values())
-        # and through the solver's parameterisation, at the ends of its range
-        for u_n in (-50.0, -12.0, 0.0, 12.0, 50.0):
-            u = dict(setup.u0, n=jnp.asarray([u_n]))
-            g = jax.grad(lambda u: sum(jnp.sum(r ** 2) for r in setup.problem.residuals(u)))(u)
-            assert all(np.all(np.isfinite(np.asarray(x))) for x in g.values())
+        values = setup.layout.values(jnp.asarray(setup.x0)).at[-1].set(n)  # layout: ks (3), n
+        grad = jax.grad(lambda v: jnp.sum(setup.problem.weighted(v) ** 2))(values)
+        assert np.all(np.isfinite(np.asarray(grad)))
+        # and through the solver's coordinate log n, at the ends of its range and beyond
+        for x_n in (-50.0, -12.0, 0.0, 12.0, 50.0):
+            x = jnp.asarray(setup.x0).at[-1].set(x_n)
+            g = jax.grad(lambda x: jnp.sum(setup.problem.residuals(x) ** 2))(x)
+            assert np.all(np.isfinite(np.asarray(g)))

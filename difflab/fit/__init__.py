@@ -1,22 +1,38 @@
-"""Fitting: the illumination model in JAX on Warp's G-buffers, solved with optimistix.
+"""Fitting: the illumination model in JAX on what Warp recorded once per view, solved by one engine.
 
-`fit_material` recovers material coefficients (ka, kd, ks, n, and m, f0, light intensities) from
-target images; `shade_gbuffer` re-forms a rasterized image from its G-buffer, differentiably.
+`fit` (and its classic spellings `fit_material`, `fit_scene`, `fit_batch`) recovers material
+coefficients (ka, kd, ks, n, m, f0, kr, kt, absorption) and light intensities from target images,
+through the G-buffer ("raster") or the recorded ray tree ("raytrace") as the scene requires;
+`FitOptions` says how to solve; `FitResult` reports values, standard errors, noise, chi-square and
+flags. `shade_gbuffer` / `evaluate_tree` re-form a rendered image differentiably; `identify` tells
+which parameters a set of views determines; `texture_fit.fit_texture` fits a texture's texels.
+
+The names load on first use (PEP 562), so that importing `difflab.fit.command` for the command
+line's parser imports neither JAX nor optimistix.
 """
 
-from .batch import fit_batch
-from .fit import Setup, fit_material, solve
-from .params import Param
-from .result import FitResult
-from .shading import MaterialTable, shade_gbuffer
-from .solve import SOLVERS
+from __future__ import annotations
 
-__all__ = ["FitResult", "MaterialTable", "Param", "SOLVERS", "Setup", "fit_batch", "fit_material", "shade_gbuffer",
-           "solve"]
+import importlib
 
-# Issue 7: fitting through the recorded ray tree (reflections, refractions, several materials at once)
-from .identify import Identifiability, identify  # noqa: E402
-from .raytree import TreeMaterials, evaluate_tree, tree_to_jax  # noqa: E402
-from .scene_fit import SceneSetup, fit_scene  # noqa: E402
+_EXPORTS = {
+    "FitOptions": "options", "SOLVERS": "options", "FitResult": "result", "fit": "fit", "fit_material": "fit",
+    "fit_scene": "fit", "fit_batch": "batch", "Identifiability": "identify", "identify": "identify",
+    "MaterialTable": "materials", "KINDS": "params", "Param": "params", "evaluate_tree": "raytree",
+    "tree_to_jax": "raytree", "METHODS": "setup", "SceneSetup": "setup", "Setup": "setup",
+    "shade_gbuffer": "shading",
+}
+__all__ = sorted(_EXPORTS)
 
-__all__ += ["Identifiability", "SceneSetup", "TreeMaterials", "evaluate_tree", "fit_scene", "identify", "tree_to_jax"]
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

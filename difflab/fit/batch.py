@@ -1,119 +1,132 @@
-"""Batched fits: many independent targets of one view (same geometry, camera and lights), one call.
+"""Batched fits: many independent targets of one view (same geometry, camera and lights), one
+prepared `Setup` and one compiled solve.
 
-Two ways, same compiled residuals:
-- `vmap=True`: `jax.vmap` over one optimistix solve (throw=False; each element's result code is read
-  separately). Every element runs until the slowest has terminated -- a `while_loop` under vmap keeps
-  stepping (masked) until all elements are done -- and each element's step count is its own.
-- `vmap=False`: a Python loop calling the same compiled solve once per element.
+- `vmap=True` (solver "lm"): `jax.vmap` over the box Levenberg-Marquardt solve. Every element runs
+  until the slowest has terminated (a vmapped `while_loop` keeps stepping, masked, until all are
+  done); each element keeps its own result code and step count.
+- `vmap=False` (or another solver): a loop over the same compiled solve, with a progress bar.
+
+A target that cannot be fitted (non-finite values under the mask) gets its own failed result; the
+others are fitted as usual.
 """
 
 from __future__ import annotations
 
-import copy
 import time
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ..errors import FitError
-from .fit import DEFAULT_TOL, Setup, finish
-from .params import initial_values, u_from_values
-from .solve import RECORDER, make_solver, run_solver, run_solver_vmap
+from . import lm
+from .fit import report
+from .params import DEFAULT_PARAMS
+from .setup import Setup
+from .options import FitOptions
+from .solve import Solved, run
+
+SETUP_KEYWORDS = ("method", "per_channel", "bounded", "loss", "loss_scale", "masks", "weights", "sigma", "ceiling",
+                  "max_depth", "spp", "device", "threads")
 
 
-def _with_target(problem, target):
-    view = eqx.tree_at(lambda v: v.target, problem.views[0], target)
-    return eqx.tree_at(lambda p: p.views, problem, (view,) + tuple(problem.views[1:]))
+def _element_init(init, count: int, b: int):
+    """Element b's starting values: init[key] shared, or with a leading axis of B for one each."""
+    if init is None:
+        return None
+    if not isinstance(init, dict):
+        raise FitError(f"init: expected a dict of name -> value, got {type(init).__name__}")
+    out = {}
+    for key, value in init.items():
+        array = np.asarray(value, dtype=object)
+        batched = array.ndim >= 1 and array.shape[0] == count and (array.ndim == 2 or count not in (1, 3))
+        out[key] = value[b] if batched else value
+    return out
 
 
-def _starts(setup, init, count) -> list[dict]:
-    """Each element's starting values: init[key] shared, or batched with one more leading axis of B."""
-    starts = []
-    for b in range(count):
-        chosen = {}
-        for p in setup.layout:
-            if p.key not in (init or {}):
-                continue
-            value = np.asarray(init[p.key], np.float64)
-            batched = value.ndim == (2 if p.rgb else 1) and value.shape[0] == count
-            chosen[p.key] = value[b] if batched else value
-        starts.append(initial_values(setup.scene, setup.layout, chosen))
-    unknown = set(init or {}) - {p.key for p in setup.layout}
-    if unknown:
-        raise FitError(f"init: not fitted: {sorted(unknown)}")
-    return starts
-
-
-def fit_batch(scene, images, material=None, params=("ka", "kd", "ks", "n"), *, overrides=None, vmap=True,
-              solver="lm", init=None, max_steps=256, rtol=None, atol=None, learning_rate=0.05, x64=True,
-              throw=False, history=False, rel_tol=0.1, abs_tol=1e-3, **options) -> list:
-    """Fit each of B images independently (see `fit_material` for the arguments).
+def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=None, vmap=True, init=None,
+              options=None, **kwargs) -> list:
+    """Fit each of B target images of one view independently.
 
     Arguments:
-        images: (B, H, W, 3) linear float array, or a list of B such images, all of one view.
-        overrides: the view's "camera" / "lights" (as in `fit_material`'s (image, overrides) pairs).
-        vmap: one vmapped solve (True) or a loop over one compiled solve (False).
+        images: (B, H, W, 3) array, or a list of B images of one view (as `fit`'s targets).
+        material, params: as `fit_material`.
+        overrides: the view's "camera" / "lights" (as in `fit`'s (image, overrides) pairs).
+        vmap: one vmapped solve (True, solver "lm") or a loop over one compiled solve.
         init: name -> start, the same for all, or with a leading axis B for one start each.
-        options: the other `fit_material` options that shape the problem (per_channel, bounded, loss,
-            loss_scale, masks, weights, device).
+        options, kwargs: `FitOptions` (and its fields as keywords), and `fit`'s keywords that shape
+            the problem (method, per_channel, bounded, loss, masks, weights, sigma, ceiling, ...).
     Returns:
-        a list of B `FitResult`s; each `seconds` is the batch's solve time divided by B.
+        a list of B `FitResult`s; each `seconds` is the batch's solve time divided by B. In a batch
+        the targets share the ceiling found for the first one (or given).
     """
-    if solver == "varpro":
-        raise FitError("solver: fit_batch supports the optimistix solvers, not 'varpro'")
-    images = np.asarray(images, np.float64)
-    if images.ndim != 4 or images.shape[-1] != 3 or images.shape[0] < 1:
-        raise FitError(f"images: expected (B, H, W, 3), got {images.shape}")
-    count = images.shape[0]
+    setup_kwargs = {k: kwargs.pop(k) for k in SETUP_KEYWORDS if k in kwargs}
+    options = FitOptions.make(options, **kwargs)
+    try:
+        images = [np.asarray(image) for image in images]
+    except TypeError:
+        raise FitError(f"images: expected a list of images, got {type(images).__name__}") from None
+    if not images:
+        raise FitError("images: no target images given")
+    count = len(images)
     start = time.perf_counter()
     first = images[0] if overrides is None else (images[0], overrides)
-    setup = Setup(scene, [first], material, params, x64=x64, **options)
-    starts = _starts(setup, init, count)
-    pixels = np.asarray(setup.problem.views[0].pixels)
-    used = images.reshape(count, -1, 3)[:, pixels]  # (B, U, 3): the pixels the fit reads
-    nonfinite = [int(np.count_nonzero(~np.isfinite(u))) for u in used]
+    setup = Setup(scene, [first], material, params, init=_element_init(init, count, 0), x64=options.x64,
+                  **setup_kwargs)
+    elements = [setup] + [setup.retarget([_decoded(image, setup, b)], _element_init(init, count, b))
+                          for b, image in enumerate(images) if b > 0]
     timings = {"setup": time.perf_counter() - start}
-    code = setup.precheck()
-    default_rtol, default_atol = DEFAULT_TOL[setup.x64]
-    optimiser = make_solver(solver, default_rtol if rtol is None else rtol, default_atol if atol is None else atol,
-                            learning_rate, history)
+    t0 = time.perf_counter()
+    solved = [None] * count
+    todo = [b for b in range(count) if elements[b].precheck() is None]
     with jax.enable_x64(setup.x64):
-        targets = jnp.asarray(np.where(np.isfinite(used), used, 0.0), setup.dtype)
-        u0s = [u_from_values(setup.layout, start_b, setup.dtype) for start_b in starts]
-        if history:
-            RECORDER.start()
-        t0 = time.perf_counter()
-        try:
-            if code is not None:
-                raw = None
-            elif vmap:
-                u0 = jax.tree.map(lambda *xs: jnp.stack(xs), *u0s)
-                u, names, steps = run_solver_vmap(optimiser, u0, setup.problem, (targets,), max_steps)
-                jax.block_until_ready(u)
-                raw = [(jax.tree.map(lambda x, b=b: x[b], u), names[b], int(steps[b])) for b in range(count)]
-            else:
-                raw = []
-                for b in range(count):
-                    u, name, steps = run_solver(optimiser, u0s[b], _with_target(setup.problem, targets[b]), max_steps)
-                    jax.block_until_ready(u)
-                    raw.append((u, name, steps))
-        finally:
-            log = RECORDER.stop() if history else []
-        seconds = time.perf_counter() - t0
-    timings["solve"] = seconds
+        if vmap and options.solver == "lm" and todo:
+            rtol, atol = options.tolerances()
+            lower, upper = (jnp.asarray(v, setup.dtype) for v in setup.layout.bounds())
+            x0 = jnp.asarray(np.stack([elements[b].x0 for b in todo]), setup.dtype)
+            targets = tuple(jnp.stack([elements[b].problem.views[i].target for b in todo])
+                            for i in range(len(setup.views)))
+            out = lm.solve_box_batch(setup.problem, x0, targets, lower, upper, options.max_steps, rtol, atol)
+            x, codes, steps, history, r, jac = (np.asarray(a) for a in out)
+            for i, b in enumerate(todo):
+                hist = history[i, :steps[i]].tolist() if options.history else []
+                name = lm.CODES[int(codes[i])]
+                solved[b] = Solved(x[i].astype(np.float64), name, int(steps[i]), hist,
+                                   None if name == "nonfinite" else (r[i], jac[i]))
+        else:
+            quiet = FitOptions.make(options, progress=False)
+            bar = _bar(len(todo), options)
+            for b in todo:
+                solved[b] = run(elements[b].problem, elements[b].x0, quiet)
+                if bar is not None:
+                    bar.update(1)
+            if bar is not None:
+                bar.close()
+    timings["solve"] = time.perf_counter() - t0
     results = []
     for b in range(count):
-        element = copy.copy(setup)
-        element.problem = _with_target(setup.problem, targets[b])
-        element.initial = starts[b]
-        hist = [np.asarray(h).reshape(-1)[b if np.asarray(h).size == count else 0] for h, _ in log] if history else []
-        if code is not None or nonfinite[b]:
-            results.append(finish(element, None, code or "nonfinite_target", 0, seconds / count, [], solver,
-                                   timings, rel_tol, abs_tol, throw))
-            continue
-        u, name, steps = raw[b]
-        results.append(finish(element, element.values(u), name, steps, seconds / count, hist, solver, timings,
-                               rel_tol, abs_tol, throw))
+        each = {**timings, "solve": timings["solve"] / count}
+        if solved[b] is None:
+            results.append(report(elements[b], None, elements[b].precheck(), 0, [], options, each))
+        else:
+            s = solved[b]
+            results.append(report(elements[b], s.x, s.result, s.steps, s.history, options, each, s.linearised))
     return results
+
+
+def _decoded(image, setup: Setup, b: int) -> np.ndarray:
+    """Target b as linear float data of the view's size (decoded like the first)."""
+    from .targets import load_target
+
+    array, _ = load_target(image, f"images[{b}]")
+    if array.shape != setup.views[0].target.shape:
+        raise FitError(f"images[{b}]: shape {array.shape}, but the batch's view is {setup.views[0].target.shape}")
+    return array
+
+
+def _bar(total: int, options: FitOptions):
+    if not options.show_progress():
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc="batch", unit="fit", leave=False)

@@ -1,11 +1,19 @@
-"""`difflab fit`: fit a material to target images and write the fitted scene.
+"""`difflab fit`: fit materials to target images and write the fitted scene.
 
-    difflab fit SCENE.json TARGET.png [TARGET2.png ...] --material NAME [--params ka,kd,ks,n]
-                [--solver lm] -o fitted.json
+    difflab fit SCENE.json TARGET.png [TARGET2.png ...] --material NAME[,NAME2] [--params ka,kd,ks,n]
+                [--method raster|raytrace] [--solver lm] [--sigma S] -o fitted.json
 
-Prints a table of the fitted values with standard errors, writes the fitted scene (and a report of
-the fit beside it) atomically, and exits 0 when the solver converged, 3 when it did not (the files are
-still written, with the status in the report), 2 for invalid input.
+The image model is the scene's (the recorded ray tree for ray-traced scenes and mirrors / glass,
+else the G-buffer) unless --method says. Prints the fit summary -- values ± standard errors, PSNR,
+noise, reduced chi-square, flags -- writes the fitted scene and a report of the fit beside it
+(atomically), and exits with:
+
+    0  converged, and the image model explains the targets
+    2  invalid input (nothing written)
+    3  the solver did not converge (files written, the status in the report)
+    4  converged, but MODEL MISMATCH: the residuals sit far above the noise (files written); the
+       fitted values answer a different question than asked -- try --method raytrace, other params
+       or another specular model
 """
 
 from __future__ import annotations
@@ -15,22 +23,26 @@ from pathlib import Path
 
 from ..errors import FitError
 
-EXIT_OK, EXIT_NOT_CONVERGED = 0, 3
+EXIT_OK, EXIT_NOT_CONVERGED, EXIT_MODEL_MISMATCH = 0, 3, 4
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Add the `fit` subcommand to an argparse subparsers object."""
     from ..io import add_force
-    from .solve import SOLVERS
+    from .options import SOLVERS
 
     p = subparsers.add_parser("fit", help="fit material coefficients to target images",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", help="scene file (JSON); its values are the starting point")
     p.add_argument("targets", nargs="+", help="target images (8-bit files are sRGB-decoded; .npy is linear)")
     p.add_argument("--material", action="append", required=True,
-                   help="material to fit (repeat for several)")
+                   help="material(s) to fit: a name, or several comma-separated (or the option repeated)")
+    p.add_argument("--method", choices=("raster", "raytrace"), default=None,
+                   help="image model: the G-buffer (raster) or the recorded ray tree (default: the scene's)")
+    p.add_argument("--sigma", type=float, default=None, help="the targets' pixel noise (default: estimated)")
     p.add_argument("--params", default="ka,kd,ks,n",
-                   help="comma-separated: ka, kd, ks, n, m, f0, intensity, lights[i].intensity (default %(default)s)")
+                   help="comma-separated: ka, kd, ks, n, m, f0, kr, kt, absorption, intensity, lights[i].intensity "
+                        "(default %(default)s)")
     p.add_argument("--solver", default="lm", choices=SOLVERS)
     p.add_argument("-o", "--output", required=True, help="where to write the fitted scene (JSON)")
     p.add_argument("--report", help="where to write the fit report (JSON; default: OUTPUT with .fit.json)")
@@ -49,7 +61,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args) -> int:
     from ..io import refuse_overwrite, write_json_atomic
     from ..scene import save_scene
-    from .fit import fit_material
+    from .fit import fit
 
     output = Path(args.output)
     report = Path(args.report) if args.report else output.with_name(output.stem + ".fit.json")
@@ -59,15 +71,17 @@ def run(args) -> int:
     masks = args.mask
     if masks is not None and len(masks) != len(args.targets):
         raise FitError(f"--mask: give one per target ({len(args.targets)}), got {len(masks)}")
-    material = args.material[0] if len(args.material) == 1 else args.material
-    result = fit_material(args.scene, list(args.targets), material=material, params=args.params, solver=args.solver,
-                          per_channel=not args.grey, bounded=args.bounded, loss=args.loss, masks=masks,
-                          max_steps=args.max_steps, x64=not args.float32, device=args.device)
+    materials = [name.strip() for item in args.material for name in item.split(",") if name.strip()]
+    result = fit(args.scene, list(args.targets), materials, args.params, method=args.method, solver=args.solver,
+                 per_channel=not args.grey, bounded=args.bounded, loss=args.loss, masks=masks, sigma=args.sigma,
+                 max_steps=args.max_steps, x64=not args.float32, device=args.device)
     print(result.table())
     if result.result in ("empty_mask", "nonfinite_target"):
         raise FitError(f"no fit made: {result.result}")
     save_scene(result.to_scene(), output)
     write_json_atomic(report, {"scene": str(args.scene), "targets": [str(t) for t in args.targets],
-                               "material": args.material, **result.to_dict()})
+                               "materials": materials, **result.to_dict()})
     print(f"wrote {output} and {report}")
-    return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
+    if not result.converged:
+        return EXIT_NOT_CONVERGED
+    return EXIT_MODEL_MISMATCH if result.model_mismatch else EXIT_OK

@@ -22,7 +22,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .scene_fit import DEFAULT_PARAMS, SceneSetup
+from .params import SCENE_PARAMS
+from .setup import Setup
 from .stats import QUANTISATION_SIGMA, SINGULAR_RCOND, covariance_unscaled, jacobian, poorly_determined
 
 CHANNELS = ("r", "g", "b")
@@ -108,15 +109,14 @@ def column_names(layout) -> tuple:
     return tuple(names)
 
 
-def identifiability(setup: SceneSetup, values: dict | None = None, *, sigma=None, rel_tol=0.1, abs_tol=1e-3,
+def identifiability(setup: Setup, values: dict | None = None, *, sigma=None, rel_tol=0.1, abs_tol=1e-3,
                     n_weakest=3) -> Identifiability:
-    """The report for a prepared `SceneSetup` at `values` (key -> value in scene units; default: its start)."""
+    """The report for a prepared `Setup` at `values` (key -> value in scene units; default: its start)."""
     layout = setup.layout
     values = {k: np.asarray(v, np.float64).reshape(-1) for k, v in (values or setup.initial).items()}
     sigma = QUANTISATION_SIGMA if sigma is None else float(sigma)
     with jax.enable_x64(setup.x64):
-        jvalues = {k: jnp.asarray(v, setup.dtype) for k, v in values.items()}
-        jac, _ = jacobian(setup.problem, jvalues, layout)
+        jac, _ = jacobian(setup.problem, jnp.asarray(layout.flatten(values), setup.dtype))
     norms = np.linalg.norm(jac, axis=0)
     scaled = jac / np.where(norms > 0, norms, 1.0)
     eigval, eigvec = np.linalg.eigh(scaled.T @ scaled)
@@ -146,25 +146,25 @@ def identifiability(setup: SceneSetup, values: dict | None = None, *, sigma=None
                            views=len(setup.views))
 
 
-def identify(scene, targets, materials=None, params=DEFAULT_PARAMS, *, values=None, sigma=None, rel_tol=0.1,
-             abs_tol=1e-3, per_channel=True, masks=None, weights=None, max_depth=None, spp=None, x64=True,
-             device="cpu", threads=None) -> Identifiability:
+def identify(scene, targets, materials=None, params=SCENE_PARAMS, *, method="raytrace", values=None, sigma=None,
+             rel_tol=0.1, abs_tol=1e-3, per_channel=True, masks=None, weights=None, max_depth=None, spp=None,
+             x64=True, device="cpu", threads=None) -> Identifiability:
     """Which of `params` the views in `targets` determine, at the scene's values (or `values`).
 
     Only the targets' sizes and per-view overrides (and masks / weights) matter, not their pixels:
     the report is about the views, not the data. Read it before trusting a `fit_scene`.
 
     Arguments:
-        scene, targets, materials, params, per_channel, masks, weights, max_depth, spp, x64, device,
-            threads: as `fit_scene` (the ray trees are recorded at the scene's values).
+        scene, targets, materials, params, method, per_channel, masks, weights, max_depth, spp, x64,
+            device, threads: as `fit_scene` (the ray trees are recorded at the scene's values).
         values: key -> value (scene units) to evaluate at, e.g. a `FitResult.params`; default the scene's.
         sigma: pixel noise standard deviation (linear units); default one 8-bit quantisation step.
         rel_tol, abs_tol: a parameter is undetermined when stderr > rel_tol |value| + abs_tol.
     Returns:
         an `Identifiability`; print its `table()`.
     """
-    setup = SceneSetup(scene, targets, materials, params, per_channel=per_channel, masks=masks, weights=weights,
-                       x64=x64, max_depth=max_depth, spp=spp, device=device, threads=threads)
+    setup = Setup(scene, targets, materials, params, method=method, per_channel=per_channel, masks=masks,
+                  weights=weights, x64=x64, max_depth=max_depth, spp=spp, device=device, threads=threads)
     given = None
     if values is not None:
         given = {p.key: np.broadcast_to(np.asarray(values[p.key], np.float64).reshape(-1), (p.size,))

@@ -1,14 +1,18 @@
-"""What is fitted, and how: parameter names, sizes, and the reparameterisations that keep them valid.
+"""What is fitted: one table from parameter kind to its size, bounds and solver coordinate, and the
+layout of the fitted values in one flat vector.
 
-The solver works on unconstrained numbers u; the scene sees values in its own units:
+    kind        size     bounds (scene units)      solver coordinate x
+    ka, kd, ks  RGB      [0, inf)  ([0, 1] bounded) the value
+    intensity   RGB      [0, inf)                   the value        (a light's Ip)
+    kr, kt      1        [0, 1]                     the value        (ray tree only)
+    absorption  RGB      [0, inf)                   the value        (ray tree only)
+    f0          1        [0, 1]                     the value
+    n, m        1        [e^-12, e^12]              log(value)
 
-    ka, kd, ks, light intensity   k = softplus(u) - softplus(U_FLOOR)   (>= 0, exactly 0 at the floor)
-                      (bounded)   k = sigmoid(u)                        (in [0, 1])
-    n (Phong / Blinn exponent), m (Beckmann roughness)   = exp(u)
-    f0 (Schlick reflectance)                             = sigmoid(u)
-
-u is clipped to a finite range first, so a coefficient whose best value is 0 stops at 0 (its
-gradient vanishes there and the solver stops moving it) instead of walking u to -infinity.
+The box-constrained Levenberg-Marquardt solver (`lm.py`) works on x inside its bounds, so a
+coefficient whose best value is 0 lands on 0. The unconstrained solvers (optimistix's and Adam) see
+z, mapped into the box smoothly: x = softplus(z) - softplus(Z_FLOOR) on [0, inf), sigmoid(z) on
+[0, 1], clip(z) on a finite log range.
 """
 
 from __future__ import annotations
@@ -23,116 +27,223 @@ import numpy as np
 
 from ..errors import FitError
 
+INF = math.inf
+LOG_RANGE = (-12.0, 12.0)
+
+
+@dataclass(frozen=True)
+class Kind:
+    """A parameter kind: rgb (an RGB triple, or one grey value); lower / upper bounds in scene units;
+    log: the solver coordinate is log(value); tree: needs the ray-tree image model; linear: the
+    image is affine in it (variable projection solves it exactly)."""
+
+    rgb: bool
+    lower: float
+    upper: float
+    log: bool = False
+    tree: bool = False
+    linear: bool = False
+
+
+KINDS = {
+    "ka": Kind(True, 0.0, INF, linear=True), "kd": Kind(True, 0.0, INF, linear=True),
+    "ks": Kind(True, 0.0, INF, linear=True), "n": Kind(False, math.exp(LOG_RANGE[0]), math.exp(LOG_RANGE[1]), log=True),
+    "m": Kind(False, math.exp(LOG_RANGE[0]), math.exp(LOG_RANGE[1]), log=True), "f0": Kind(False, 0.0, 1.0),
+    "kr": Kind(False, 0.0, 1.0, tree=True), "kt": Kind(False, 0.0, 1.0, tree=True),
+    "absorption": Kind(True, 0.0, INF, tree=True), "intensity": Kind(True, 0.0, INF),
+}
+MATERIAL_KINDS = tuple(k for k in KINDS if k != "intensity")
 COLOR_PARAMS = ("ka", "kd", "ks")
-SCALAR_PARAMS = ("n", "m", "f0")
-MATERIAL_PARAMS = COLOR_PARAMS + SCALAR_PARAMS
+DEFAULT_PARAMS = ("ka", "kd", "ks", "n")
+SCENE_PARAMS = ("ka", "kd", "ks", "n", "kr", "kt", "absorption")  # fit_scene's: kr / kt only where > 0
 LIGHT_PARAM = re.compile(r"^lights\[(\d+)\]\.intensity$")
-U_FLOOR = -20.0  # softplus(-20) = 2e-9: below this a coefficient is 0
-U_CEIL = 30.0
-LOG_RANGE = (-12.0, 12.0)  # n, m in [6e-6, 1.6e5]
-LOGIT_RANGE = 20.0
-START_FLOOR = 1e-2  # a coefficient starting at 0 starts here instead (0 is the floor, with no gradient)
+Z_FLOOR, Z_CEIL, LOGIT_RANGE = -20.0, 30.0, 20.0
+START_FLOOR = 1e-2  # an unconstrained solver starting at a bound 0 starts here (no gradient at the floor)
 
 
 @dataclass(frozen=True)
 class Param:
-    """One fitted quantity. key: its name in `FitResult.params` ("kd", or "red.kd" when several
-    materials are fitted, or "lights[0].intensity"); kind: "ka" | "kd" | "ks" | "n" | "m" | "f0" |
-    "intensity"; index: material id or light index; size: 3 (RGB) or 1 (grey / scalar);
-    transform: "softplus" | "sigmoid" | "exp"."""
+    """One fitted quantity. key: its name in `FitResult.params` ("kd", "red.kd" when several
+    materials are fitted, "lights[0].intensity"); kind: a key of `KINDS`; index: material id or
+    light index; size: 3 (RGB) or 1; lower / upper: bounds in scene units."""
 
     key: str
     kind: str
     index: int
     size: int
-    transform: str
+    lower: float
+    upper: float
 
     @property
     def rgb(self) -> bool:
-        return self.kind in COLOR_PARAMS or self.kind == "intensity"
+        return KINDS[self.kind].rgb
+
+    @property
+    def log(self) -> bool:
+        return KINDS[self.kind].log
 
 
-def softplus_inverse(x):
-    return x + np.log(-np.expm1(-x))
+@dataclass(frozen=True)
+class Layout:
+    """The fitted parameters in the order of the flat vector (hashable: a static field of the
+    problem)."""
+
+    params: tuple
+
+    def __iter__(self):
+        return iter(self.params)
+
+    def __len__(self):
+        return len(self.params)
+
+    @property
+    def size(self) -> int:
+        return sum(p.size for p in self.params)
+
+    def entries(self, attribute: str) -> np.ndarray:
+        """Per entry of the flat vector: the parameter's `attribute` (a float array)."""
+        return np.concatenate([np.full(p.size, float(getattr(p, attribute))) for p in self.params])
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) of the solver coordinate x per entry."""
+        log = self.entries("log") > 0
+        lo, hi = self.entries("lower"), self.entries("upper")
+        return np.where(log, np.log(np.where(log, lo, 1.0)), lo), np.where(log, np.log(np.where(log, hi, 1.0)), hi)
+
+    def values(self, x):
+        """Solver coordinates x -> values in scene units (JAX)."""
+        return jnp.where(self.entries("log") > 0, jnp.exp(x), x)
+
+    def x_of(self, values) -> np.ndarray:
+        """Values (flat, scene units) -> x inside the bounds (numpy)."""
+        lo, hi = self.bounds()
+        values = np.asarray(values, np.float64)
+        x = np.where(self.entries("log") > 0, np.log(np.maximum(values, 1e-300)), values)
+        return np.clip(x, lo, hi)
+
+    def x_from_free(self, z):
+        """Unconstrained z -> x in the box (JAX, differentiable; see the module docstring)."""
+        lo, hi = self.bounds()
+        half_open = np.isinf(hi)
+        soft = jax.nn.softplus(jnp.clip(z, Z_FLOOR, Z_CEIL)) - jax.nn.softplus(Z_FLOOR) + lo
+        unit = lo + (np.where(half_open, 1.0, hi) - lo) * jax.nn.sigmoid(jnp.clip(z, -LOGIT_RANGE, LOGIT_RANGE))
+        clipped = jnp.clip(z, lo, hi)
+        return jnp.where(half_open, soft, jnp.where(self.entries("log") > 0, clipped, unit))
+
+    def free_from_x(self, x) -> np.ndarray:
+        """x -> z (numpy), starts on a bound moved inside where the map has no gradient."""
+        lo, hi = self.bounds()
+        x = np.asarray(x, np.float64)
+        log = self.entries("log") > 0
+        half_open = np.isinf(hi)
+        shift = np.maximum(x - lo, START_FLOOR)
+        soft = shift + np.log(-np.expm1(-(shift + math.log1p(math.exp(Z_FLOOR))))) + math.log1p(math.exp(Z_FLOOR))
+        width = np.where(half_open, 1.0, hi - lo)
+        t = np.clip((x - lo) / width, START_FLOOR, 1.0 - 1e-6)
+        return np.where(half_open, soft, np.where(log, x, np.log(t) - np.log1p(-t)))
+
+    def flatten(self, values: dict) -> np.ndarray:
+        """key -> value (scalar, grey or RGB) as one vector in layout order."""
+        return np.concatenate([np.broadcast_to(np.asarray(values[p.key], np.float64).reshape(-1), (p.size,))
+                               for p in self.params])
+
+    def unflatten(self, vector) -> dict:
+        """One vector back to key -> (size,) float64 arrays."""
+        vector = np.asarray(vector, np.float64)
+        out, offset = {}, 0
+        for p in self.params:
+            out[p.key] = vector[offset:offset + p.size]
+            offset += p.size
+        return out
 
 
-def to_value(param: Param, u):
-    """Unconstrained u -> value in scene units (JAX, differentiable)."""
-    if param.transform == "softplus":
-        return jax.nn.softplus(jnp.clip(u, U_FLOOR, U_CEIL)) - jax.nn.softplus(U_FLOOR)
-    if param.transform == "sigmoid":
-        return jax.nn.sigmoid(jnp.clip(u, -LOGIT_RANGE, LOGIT_RANGE))
-    return jnp.exp(jnp.clip(u, *LOG_RANGE))
+def _names(value, argument: str) -> tuple[str, ...]:
+    """A name, a comma-separated string or a sequence of names, as a tuple (FitError otherwise)."""
+    if isinstance(value, str):
+        return tuple(part.strip() for part in value.split(",") if part.strip())
+    if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
+        return tuple(value)
+    raise FitError(f"{argument}: expected a name, a comma-separated string or a list of names, got {value!r}")
 
 
-def to_unconstrained(param: Param, value) -> np.ndarray:
-    """Value in scene units -> u (numpy), moved inside the valid range where needed."""
-    value = np.asarray(value, np.float64).reshape(param.size)
-    if param.transform == "softplus":
-        value = np.where(value <= 0.0, START_FLOOR, value)
-        return softplus_inverse(value + math.log1p(math.exp(U_FLOOR)))
-    if param.transform == "sigmoid":
-        value = np.clip(np.where(value <= 0.0, START_FLOOR, value), 1e-6, 1.0 - 1e-6)
-        return np.log(value) - np.log1p(-value)
-    return np.log(np.clip(value, math.exp(LOG_RANGE[0]) * 10, math.exp(LOG_RANGE[1]) / 10))
-
-
-def build_layout(scene, materials, params, per_channel=True, bounded=False) -> tuple[Param, ...]:
-    """The fitted parameters for `materials` (names) and `params` (names: "kd" for every fitted
-    material, "red.kd" for one of them; "intensity" means every light's intensity,
-    "lights[i].intensity" one light's). Raises FitError for unknown names."""
-    if isinstance(params, str):
-        params = tuple(p.strip() for p in params.split(",") if p.strip())
-    params = tuple(params)
-    if not params:
-        raise FitError("params: nothing to fit (give at least one of ka, kd, ks, n, m, f0, intensity)")
-    if len(set(params)) != len(params):
-        raise FitError(f"params: duplicate names in {list(params)}")
+def fitted_materials(scene, materials) -> tuple[str, ...]:
+    """The materials to fit: the names given (checked), or every material an object uses."""
     names = scene.material_names
-    qualify = len(materials) > 1
-    for name in materials:
+    if materials is None:
+        used = {obj.material for obj in scene.objects}
+        return tuple(name for name in names if name in used)
+    chosen = _names(materials, "material")
+    if not chosen or len(set(chosen)) != len(chosen):
+        raise FitError(f"material: expected one or more distinct names, got {list(chosen)}")
+    for name in chosen:
         if name not in names:
             raise FitError(f"material: undefined material {name!r} (defined: {', '.join(names) or 'none'})")
-    wanted = []  # (material, kind): "kd" for every fitted material, "red.kd" for one
+    return chosen
+
+
+def _traced(mat, kind: str) -> bool:
+    """Whether the recorded tree can see this kind move: kr needs kr > 0, kt and absorption kt > 0."""
+    if kind == "kr":
+        return mat.kr > 0
+    if kind in ("kt", "absorption"):
+        return mat.kt > 0
+    return True
+
+
+def build_layout(scene, materials, params, *, tree: bool, per_channel=True, bounded=False) -> Layout:
+    """The fitted parameters of `materials` (names): "kd" means every fitted material's (kr only
+    where kr > 0 at the start, kt and absorption only where kt > 0), "red.kd" one material's;
+    "intensity" every light's, "lights[i].intensity" one light's. `tree`: the image model is the ray
+    tree (kr, kt, absorption allowed). Raises FitError naming the offending parameter."""
+    params = _names(params, "params")
+    if not params:
+        raise FitError(f"params: nothing to fit (give some of {', '.join(KINDS)})")
+    if len(set(params)) != len(params):
+        raise FitError(f"params: duplicate names in {list(params)}")
+    wanted, lights = set(), []
     for p in params:
-        head, _, tail = p.rpartition(".")
-        if head in materials and tail in MATERIAL_PARAMS:
-            wanted.append((head, tail))
-        elif p in MATERIAL_PARAMS:
-            wanted.extend((name, p) for name in materials)
-    layout = []
-    for name in materials:
-        mat_id = names.index(name)
-        for p in MATERIAL_PARAMS:
-            if (name, p) not in wanted:
-                continue
-            key = f"{name}.{p}" if qualify else p
-            if p in COLOR_PARAMS:
-                layout.append(Param(key, p, mat_id, 3 if per_channel else 1, "sigmoid" if bounded else "softplus"))
-            else:
-                layout.append(Param(key, p, mat_id, 1, "sigmoid" if p == "f0" else "exp"))
-    for p in params:
-        head, _, tail = p.rpartition(".")
-        if p in MATERIAL_PARAMS or (head in materials and tail in MATERIAL_PARAMS):
-            continue
+        head, _, kind = p.rpartition(".")
         if p == "intensity":
-            indices = range(len(scene.lights))
-        elif (match := LIGHT_PARAM.match(p)) is not None:
-            indices = [int(match.group(1))]
-        else:
-            raise FitError(f"params: unknown parameter {p!r}; known: {', '.join(MATERIAL_PARAMS)}, intensity, "
-                           "lights[i].intensity")
-        for i in indices:
+            lights.extend(range(len(scene.lights)))
+            continue
+        if (match := LIGHT_PARAM.match(p)) is not None:
+            i = int(match.group(1))
             if i >= len(scene.lights):
                 raise FitError(f"params: {p!r}: the scene has {len(scene.lights)} light(s)")
-            layout.append(Param(f"lights[{i}].intensity", "intensity", i, 3 if per_channel else 1, "softplus"))
+            lights.append(i)
+            continue
+        if kind not in MATERIAL_KINDS or (head and head not in materials):
+            where = f"{head!r} is not among the fitted materials ({', '.join(materials)})" if kind in KINDS else \
+                f"known: {', '.join(KINDS)}, lights[i].intensity, or 'material.kind'"
+            raise FitError(f"params: unknown parameter {p!r}; {where}")
+        if KINDS[kind].tree and not tree:
+            raise FitError(f"params: {p!r} needs the ray-traced image model (method='raytrace')")
+        if head and not _traced(scene.materials[head], kind):
+            weight = "kr" if kind == "kr" else "kt"
+            raise FitError(f"params: {p!r}: {head}.{weight} is 0 at the start, so the recorded ray tree has no "
+                           f"{'reflected' if weight == 'kr' else 'refracted'} rays from it; start {weight} > 0 "
+                           "(scene or init)")
+        wanted.update((name, kind) for name in ((head,) if head else materials)
+                      if _traced(scene.materials[name], kind))
+    qualify = len(materials) > 1
+    layout = []
+    for name in materials:
+        for kind in MATERIAL_KINDS:
+            if (name, kind) in wanted:
+                spec = KINDS[kind]
+                upper = 1.0 if bounded and kind in COLOR_PARAMS else spec.upper
+                layout.append(Param(f"{name}.{kind}" if qualify else kind, kind, scene.material_names.index(name),
+                                    3 if spec.rgb and per_channel else 1, spec.lower, upper))
+    for i in sorted(set(lights)):
+        layout.append(Param(f"lights[{i}].intensity", "intensity", i, 3 if per_channel else 1, 0.0, INF))
     if not layout:
-        raise FitError("params: nothing to fit")
-    return tuple(layout)
+        raise FitError(f"params: nothing to fit in {list(params)} for materials {list(materials)} (kr needs kr > 0 "
+                       "at the start, kt and absorption kt > 0)")
+    return Layout(tuple(layout))
 
 
 def scene_value(scene, param: Param) -> np.ndarray:
-    """The parameter's current value in the scene (grey: the mean of the RGB triple), shape (size,)."""
+    """The parameter's value in the scene (grey: the mean of the RGB triple), shape (size,)."""
     if param.kind == "intensity":
         raw = scene.lights[param.index].intensity
     else:
@@ -141,55 +252,8 @@ def scene_value(scene, param: Param) -> np.ndarray:
     return raw if param.size == raw.size else np.full(param.size, raw.mean())
 
 
-def initial_values(scene, layout, init=None) -> dict:
-    """Starting values in scene units: `init[key]` where given, else the scene's."""
-    init = dict(init or {})
-    unknown = set(init) - {p.key for p in layout}
-    if unknown:
-        raise FitError(f"init: not fitted: {sorted(unknown)} (fitted: {[p.key for p in layout]})")
-    out = {}
-    for p in layout:
-        value = np.asarray(init[p.key], np.float64).reshape(-1) if p.key in init else scene_value(scene, p)
-        if value.size == 1 and p.size == 3:
-            value = np.repeat(value, 3)
-        if value.size != p.size or not np.all(np.isfinite(value)) or np.any(value < 0):
-            raise FitError(f"init[{p.key!r}]: expected {p.size} finite value(s) >= 0, got {value.tolist()}")
-        out[p.key] = value
-    return out
-
-
-def values_from_u(layout, u: dict) -> dict:
-    return {p.key: to_value(p, u[p.key]) for p in layout}
-
-
-def u_from_values(layout, values: dict, dtype) -> dict:
-    return {p.key: jnp.asarray(to_unconstrained(p, values[p.key]), dtype) for p in layout}
-
-
-def apply_values(layout, values: dict, table, lights_per_view):
-    """The material table and each view's lights with the fitted values written in."""
-    for p in layout:
-        if p.kind == "intensity":
-            continue
-        value = values[p.key]
-        field = getattr(table, p.kind)
-        if p.kind in COLOR_PARAMS:
-            field = field.at[p.index].set(jnp.broadcast_to(value, (3,)))  # a checker's ka2 / kd2 stay
-        else:
-            field = field.at[p.index].set(value[0])
-        table = table._replace(**{p.kind: field})
-    out_lights = []
-    for lights in lights_per_view:
-        intensity = lights.intensity
-        for p in layout:
-            if p.kind == "intensity":
-                intensity = intensity.at[p.index].set(jnp.broadcast_to(values[p.key], (3,)))
-        out_lights.append(lights._replace(intensity=intensity))
-    return table, tuple(out_lights)
-
-
 def public_value(param: Param, value) -> float | list:
-    """A value as the scene file writes it: an RGB list for colour parameters, else a float."""
+    """A value as the scene file writes it: an RGB list for RGB kinds, else a float."""
     value = np.asarray(value, np.float64).reshape(-1)
     if param.rgb:
         return [float(x) for x in np.broadcast_to(value, (3,))]

@@ -1,62 +1,61 @@
-"""The fitting problem as a JAX pytree: views (fixed G-buffer arrays and targets), the materials'
-base values, and the residual function the solvers see.
+"""The fitting problem as a JAX pytree: the views (an image model each, fixed by one Warp render, and
+the target), the materials' base values, where the fitted values go, and the residuals.
 
-    r_i = rho( sqrt(w_i) * (model_i - target_i) )
+    r_i = rho( sqrt(w_i) * (min(model_i, c) - target_i) )
 
-over every channel of the pixels that count in every view (in the mask, weight > 0, showing a fitted
-material), where rho is the identity (l2) or rescales r so that r^2 is the Huber or Cauchy loss of r.
-The residuals are not divided by their count: J^T J then grows with the image, and the
-Levenberg-Marquardt damping (which starts at lambda = 1) is small against it from the first step.
+over every channel of the pixels that count in every view (in the mask, weight > 0, influenced by a
+fitted parameter). c is the target's ceiling: a pixel recorded at the ceiling (a clipped highlight)
+only says the model reaches it, so the model is clipped there too (c = inf for unclipped targets).
+rho is the identity (l2) or rescales r so that r^2 is the Huber or Cauchy loss of r. The residuals
+are not divided by their count: J^T J then grows with the image, and the damping of the
+Levenberg-Marquardt solver is small against it from the first step.
 """
 
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..lighting.jax_model import LightsJ, lights_to_jax
-from .params import apply_values, values_from_u
-from .shading import ComposeJ, Formation, MaterialTable, PointsJ, compose, pixel_arrays, point_colors
+from ..lighting.jax_model import LightsJ
+from .materials import MaterialTable
 
 LOSSES = ("l2", "huber", "cauchy")
+TABLE_KINDS = ("ka", "kd", "ks", "n", "m", "f0", "kr", "kt", "absorption")
 
 
 class ViewJ(eqx.Module):
-    """One view on the device, cut down to the U pixels that count (in the mask, weight > 0, and
-    showing a fitted material): the R shading points those pixels use, which of them are re-shaded
-    each step (`active`: a fitted material's, or all when light intensities are fitted), the fixed
-    colours of the others, the composition, the view's lights, and its target and sqrt(weight) (U, 3)."""
+    """One view on the device, cut down to the U pixels that count: its image model (a
+    `shading.GBufferModel` or a `raytree.TreeModel`), lights, target and sqrt(weight) (U, 3), the
+    target's ceiling (inf: none), the pixels' flat indices, and intensity_index (P, 3): the entry of
+    the flat value vector each of its lights' intensity channels takes (-1: not fitted)."""
 
-    points: PointsJ
-    active: jnp.ndarray
-    base_colors: jnp.ndarray
-    comp: ComposeJ
+    model: eqx.Module
     lights: LightsJ
     target: jnp.ndarray
     sqrt_weight: jnp.ndarray
+    ceiling: jnp.ndarray
     pixels: jnp.ndarray
-    formation: Formation = eqx.field(static=True)
-    clip: bool = eqx.field(static=True)
+    intensity_index: jnp.ndarray
 
 
-_point_colors_jit = jax.jit(point_colors, static_argnums=4)
+def value_index(layout, n_materials: int, n_lights: int) -> dict:
+    """kind -> int32 array of the flat-vector entry each material (or light) field takes (-1: the
+    base value stays): (M, 3) for RGB kinds, (M,) for scalars, (P, 3) for "intensity"."""
+    index = {k: np.full((n_materials, 3) if k in ("ka", "kd", "ks", "absorption") else (n_materials,), -1, np.int32)
+             for k in TABLE_KINDS}
+    index["intensity"] = np.full((n_lights, 3), -1, np.int32)
+    offset = 0
+    for p in layout:
+        entries = np.arange(offset, offset + p.size)
+        target = index[p.kind]
+        target[p.index] = np.broadcast_to(entries, (3,)) if target.ndim == 2 else entries[0]
+        offset += p.size
+    return index
 
 
-def make_view(view, used: np.ndarray, table: MaterialTable, ambient, material_ids, all_points: bool, dtype) -> ViewJ:
-    """A `ViewJ` from a `targets.View` and its (H, W) bool map of pixels used."""
-    pixels = np.flatnonzero(used)
-    points, comp, formation, _ = pixel_arrays(view.gbuffer, pixels, dtype)
-    lights = lights_to_jax(view.scene.lights, dtype)
-    base_colors = _point_colors_jit(points, table, lights, ambient, formation.specular)
-    material = np.asarray(points.material)
-    active = np.ones(material.shape, bool) if all_points else np.isin(material, list(material_ids))
-    target = view.target.reshape(-1, 3)[pixels]
-    weight = view.weight.reshape(-1, 3)[pixels]
-    return ViewJ(points=points, active=jnp.asarray(active), base_colors=base_colors, comp=comp, lights=lights,
-                 target=jnp.asarray(target, dtype), sqrt_weight=jnp.asarray(np.sqrt(weight), dtype),
-                 pixels=jnp.asarray(pixels, jnp.int32), formation=formation, clip=view.clip)
+def _put(index, values, base):
+    return jnp.where(index >= 0, values[jnp.maximum(index, 0)], base)
 
 
 def robust(kind: str, r, scale):
@@ -75,48 +74,42 @@ def robust(kind: str, r, scale):
 
 
 class Problem(eqx.Module):
-    """Everything the residual function needs. Arrays are leaves (so one compiled solve serves any
-    targets of the same shapes); the parameter layout and the loss are static."""
+    """Everything the residuals need. Arrays are leaves (one compiled solve serves any targets of
+    the same shapes); the parameter layout and the loss are static. Values travel as one flat
+    vector in layout order (`params.Layout`)."""
 
     views: tuple
     table: MaterialTable
     ambient: jnp.ndarray
+    index: dict
     loss_scale: jnp.ndarray
-    layout: tuple = eqx.field(static=True)
+    layout: object = eqx.field(static=True)
     loss: str = eqx.field(static=True)
 
-    def images(self, values: dict) -> tuple:
-        """The model's pixels (U, 3) of each view (those the fit uses) for values in scene units."""
-        table, lights = apply_values(self.layout, values, self.table, [v.lights for v in self.views])
+    def materials(self, values) -> MaterialTable:
+        """The table with the flat values written in (a checker's ka2 / kd2 stay)."""
+        return self.table._replace(**{k: _put(self.index[k], values, getattr(self.table, k)) for k in TABLE_KINDS})
+
+    def images(self, values) -> tuple:
+        """The model's pixels (U, 3) of each view for flat values in scene units."""
+        table = self.materials(values)
         out = []
-        for view, view_lights in zip(self.views, lights):
-            shaded = point_colors(view.points, table, view_lights, self.ambient, view.formation.specular)
-            colors = jnp.where(view.active[:, None], shaded, view.base_colors)
-            out.append(compose(colors, view.comp, view.formation))
+        for view in self.views:
+            lights = view.lights._replace(intensity=_put(view.intensity_index, values, view.lights.intensity))
+            out.append(view.model.pixels(table, lights, self.ambient))
         return tuple(out)
 
-    def weighted_residuals(self, values: dict) -> tuple:
-        """sqrt(w) (model - target) per view, (U, 3) each: the plain residuals (no robust loss,
-        no normalisation), in image units."""
-        out = []
-        for view, image in zip(self.views, self.images(values)):
-            if view.clip:  # an 8-bit target saturates at 1: so does the model
-                image = jnp.clip(image, 0.0, 1.0)
-            out.append(view.sqrt_weight * (image - view.target))
-        return tuple(out)
+    def weighted(self, values):
+        """sqrt(w) (min(model, ceiling) - target) of every view, flattened (N,): the plain residuals
+        in image units (no robust loss)."""
+        return jnp.concatenate([(view.sqrt_weight * (jnp.minimum(image, view.ceiling) - view.target)).reshape(-1)
+                                for view, image in zip(self.views, self.images(values))])
 
-    def residuals_from_values(self, values: dict) -> tuple:
-        return tuple(robust(self.loss, r, self.loss_scale) for r in self.weighted_residuals(values))
+    def residuals(self, x):
+        """What the least-squares solvers see, for solver coordinates x (`Layout.values`)."""
+        return robust(self.loss, self.weighted(self.layout.values(x)), self.loss_scale)
 
-    def residuals(self, u: dict) -> tuple:
-        """What the least-squares solvers see, for unconstrained parameters u."""
-        return self.residuals_from_values(values_from_u(self.layout, u))
-
-
-def residual_fn(u, problem: Problem):
-    return problem.residuals(u)
-
-
-def loss_fn(u, problem: Problem):
-    """0.5 sum r^2: the scalar the minimisers (BFGS through least_squares, Adam) see."""
-    return 0.5 * sum(jnp.sum(r * r) for r in problem.residuals(u))
+    def with_targets(self, targets) -> Problem:
+        """The same problem with other targets, one (U, 3) array per view."""
+        views = tuple(eqx.tree_at(lambda v: v.target, view, t) for view, t in zip(self.views, targets))
+        return eqx.tree_at(lambda p: p.views, self, views)

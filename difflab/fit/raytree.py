@@ -26,45 +26,19 @@ every material whose kr / kt is evaluated here, and with adaptive_threshold 0.
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..lighting.jax_model import LightsJ, MaterialJ, lights_to_jax, safe_pow, shade, textured_material
+from ..lighting.jax_model import LightsJ, lights_to_jax, safe_pow, shade, surface_material, textured_material
 from ..lighting.warp_model import SPECULAR_MODELS, TEXTURE_TARGET_IDS
 from ..renderers.raytrace.tree import REFLECTED
-from .shading import MaterialTable, PointsJ
+from .materials import MaterialTable
+from .shading import PointsJ
 
-__all__ = ["TreeMaterials", "TreeJ", "tree_to_jax", "tree_pixels", "tree_image", "evaluate_tree",
+__all__ = ["TreeModel", "TreeJ", "tree_to_jax", "tree_pixels", "tree_image", "evaluate_tree",
            "tree_influence"]
-
-
-class TreeMaterials(NamedTuple):
-    """M materials stacked by material id: the local model's `MaterialTable`, the ray tracer's
-    kr, kt (M,) and absorption (M, 3), and texture_target (M,) int32: the TARGET_* id of the
-    coefficient a material's image texture modulates (-1: no texture)."""
-
-    table: MaterialTable
-    kr: jnp.ndarray
-    kt: jnp.ndarray
-    absorption: jnp.ndarray
-    texture_target: jnp.ndarray
-
-    @classmethod
-    def from_scene(cls, materials, dtype=jnp.float32) -> TreeMaterials:
-        """From scene `Material`s in material-id order (a Scene's `materials.values()`)."""
-        materials = list(materials)
-
-        def stack(name, shape):
-            values = np.asarray([getattr(m, name) for m in materials], np.float64).reshape((len(materials),) + shape)
-            return jnp.asarray(values, dtype=dtype)
-
-        targets = [TEXTURE_TARGET_IDS[m.texture_target] if m.texture is not None else -1 for m in materials]
-        return cls(table=MaterialTable.from_scene(materials, dtype), kr=stack("kr", ()), kt=stack("kt", ()),
-                   absorption=stack("absorption", (3,)), texture_target=jnp.asarray(targets, jnp.int32).reshape(-1))
 
 
 class TreeJ(eqx.Module):
@@ -205,18 +179,14 @@ def node_visibility(tree: TreeJ, kt):
     return jnp.where(crossed & (vis > 0.0), product, vis)
 
 
-def local_colors(tree: TreeJ, mats: TreeMaterials, lights: LightsJ, ambient, background):
+def local_colors(tree: TreeJ, mats: MaterialTable, lights: LightsJ, ambient, background):
     """(N, 3) local colour of every node: the illumination model (`jax_model.shade`) with the node's
-    material -- checker cell 1 taking ka2 / kd2, a texture modulating its target coefficient -- and
-    the shadow rays' visibility under the current kt; background where the ray hit nothing."""
+    material (`jax_model.surface_material`; a texture modulating its target coefficient) and the
+    shadow rays' visibility under the current kt; background where the ray hit nothing."""
     p = tree.points
     has_material = p.material >= 0
     mat_id = jnp.where(has_material, p.material, 0)
-    table = mats.table
-    second = (p.cell == 1)[:, None]
-    mat = MaterialJ(ka=jnp.where(second, table.ka2[mat_id], table.ka[mat_id]),
-                    kd=jnp.where(second, table.kd2[mat_id], table.kd[mat_id]),
-                    ks=table.ks[mat_id], n=table.n[mat_id], m=table.m[mat_id], f0=table.f0[mat_id])
+    mat = surface_material(mats, mat_id, p.cell)
     if tree.texel is not None:
         target = mats.texture_target[mat_id]
         for t in sorted(set(TEXTURE_TARGET_IDS.values())):
@@ -228,7 +198,7 @@ def local_colors(tree: TreeJ, mats: TreeMaterials, lights: LightsJ, ambient, bac
     return jnp.where(has_material[:, None], color, background)
 
 
-def node_factors(tree: TreeJ, mats: TreeMaterials):
+def node_factors(tree: TreeJ, mats: MaterialTable):
     """(N, 3) per node: edge weight from its parent (1 for roots) times its Beer factor."""
     edge = jnp.where(tree.edge_reflected, mats.kr[tree.edge_material], mats.kt[tree.edge_material])
     edge = edge * tree.edge_fresnel
@@ -244,12 +214,12 @@ def node_factors(tree: TreeJ, mats: TreeMaterials):
     return edge[:, None] * beer
 
 
-def tree_image(tree: TreeJ, mats: TreeMaterials, lights: LightsJ, ambient, background, local=None):
+def tree_image(tree: TreeJ, mats: MaterialTable, lights: LightsJ, ambient, background, local=None):
     """The pixels (U, 3) of the tree for these materials (linear RGB, as the Warp ray tracer forms them).
 
     Arguments:
         tree: a `TreeJ` (from `tree_to_jax`).
-        mats: `TreeMaterials`; lights: the view's `LightsJ`; ambient, background: (3,).
+        mats: a `MaterialTable`; lights: the view's `LightsJ`; ambient, background: (3,).
         local: optional (N, 3) node colours to use instead of shading the nodes.
     """
     if local is None:
@@ -272,6 +242,21 @@ def tree_image(tree: TreeJ, mats: TreeMaterials, lights: LightsJ, ambient, backg
     return total.reshape(-1, tree.samples_per_pixel, 3).mean(axis=1)
 
 
+class TreeModel(eqx.Module):
+    """The ray-tree image model of U pixels: their part of the recorded tree and the view's
+    background. `pixels` is the (U, 3) image for given materials, lights and ambient."""
+
+    tree: TreeJ
+    background: jnp.ndarray
+
+    @classmethod
+    def build(cls, tree, pixels, background, dtype) -> TreeModel:
+        return cls(tree=tree_to_jax(tree, pixels, dtype), background=jnp.asarray(background, dtype))
+
+    def pixels(self, table: MaterialTable, lights: LightsJ, ambient):
+        return tree_image(self.tree, table, lights, ambient, self.background)
+
+
 @jax.jit
 def _evaluate_jit(tree, mats, lights, ambient, background):
     return tree_image(tree, mats, lights, ambient, background)
@@ -282,7 +267,7 @@ def evaluate_tree(tree, materials, lights, ambient, background, *, dtype=jnp.flo
 
     Arguments:
         tree: a `RayTree` (`render_frame(scene, method="raytrace").ray_tree`) or a `TreeJ` of every pixel.
-        materials: `TreeMaterials`, or scene `Material`s in material-id order (`scene.materials.values()`).
+        materials: a `MaterialTable`, or scene `Material`s in material-id order (`scene.materials.values()`).
         lights: `LightsJ` or scene `Light`s (only intensity, attenuation and spot settings are read:
             directions, distances and visibility are the tree's).
         ambient, background: (3,) RGB.
@@ -292,7 +277,7 @@ def evaluate_tree(tree, materials, lights, ambient, background, *, dtype=jnp.flo
     """
     shape = tree.image_shape if not isinstance(tree, TreeJ) else None
     tree_j = tree if isinstance(tree, TreeJ) else tree_to_jax(tree, dtype=dtype)
-    mats = materials if isinstance(materials, TreeMaterials) else TreeMaterials.from_scene(materials, dtype)
+    mats = materials if isinstance(materials, MaterialTable) else MaterialTable.from_scene(materials, dtype)
     lights = lights if isinstance(lights, LightsJ) else lights_to_jax(tuple(lights), dtype)
     image = _evaluate_jit(tree_j, mats, lights, jnp.asarray(ambient, dtype), jnp.asarray(background, dtype))
     return image.reshape(*shape, 3) if shape is not None else image

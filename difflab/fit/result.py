@@ -8,6 +8,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import FitError
+
 
 def _json_number(x):
     x = float(x)
@@ -22,13 +24,16 @@ def _json(value):
 
 @dataclass(frozen=True)
 class FitResult:
-    """The outcome of `fit_material`. Failure is a value: read `converged` and `result`.
+    """The outcome of a fit (`fit_material`, `fit_scene`, `fit_batch`). Failure is a value: read
+    `converged`, `result` and `model_mismatch`; `ok` is True only for a converged fit whose image
+    model explains the targets.
 
     params: name -> fitted value in scene units (RGB lists for ka / kd / ks / light intensities,
         floats for n, m, f0); names are "kd", ..., or "<material>.kd" when several materials were
         fitted, and "lights[i].intensity".
     stderr: name -> standard error (same shapes; inf where the data do not determine it; nan when
-        no fit was made).
+        no fit was made). They assume the image model holds (see `fit.stats`): with
+        `model_mismatch` set they understate the real error.
     loss: the solvers' objective 0.5 sum r^2 at the solution, summed over the channels of the pixels
         used (for the l2 loss: half the weighted sum of squared errors).
     psnr: 10 log10(1 / MSE) of the fit over the pixels used (dB, peak 1): those in the masks that
@@ -41,7 +46,15 @@ class FitResult:
     history: the loss at the point each solver step evaluated (rejected trial points included).
     poorly_determined: names whose value the images do not pin down (see `fit.stats`).
     initial: the starting values (same shapes as params). solver: the solver's name.
-    timings: seconds per phase ("setup": G-buffers and arrays; "solve"; "stats").
+    timings: seconds per phase ("setup": G-buffers / ray trees and arrays; "solve"; "stats").
+    model: the image model fitted through: "raster" (the G-buffer) or "raytrace" (the recorded ray
+        tree). sigma: the pixel noise used (given, or estimated from the targets; see `fit.stats`).
+    chi2: reduced chi-square of the residuals at noise sigma (about 1 when the model explains the
+        targets to their noise). model_mismatch: chi2 far above 1 (`fit.stats.MISMATCH_CHI2`).
+    at_bound: names with a value (some channel) on a bound (ks = 0 for a matte target).
+    censored: target pixel channels at the target's ceiling (clipped highlights), fitted as "at
+        least the ceiling". residuals: per view (H, W, 3) float32 model - target on the pixels
+        used (0 elsewhere).
     """
 
     params: dict
@@ -57,13 +70,25 @@ class FitResult:
     initial: dict = field(default_factory=dict)
     solver: str = "lm"
     timings: dict = field(default_factory=dict)
+    model: str = "raster"
+    sigma: float = float("nan")
+    chi2: float = float("nan")
+    model_mismatch: bool = False
+    at_bound: list = field(default_factory=list)
+    censored: int = 0
+    residuals: list = field(default_factory=list, repr=False, compare=False)
     scene: object = field(default=None, repr=False, compare=False)
     layout: tuple = field(default=(), repr=False, compare=False)
+
+    @property
+    def ok(self) -> bool:
+        """Converged, and the image model explains the targets (no mismatch flag)."""
+        return self.converged and not self.model_mismatch
 
     def to_scene(self):
         """The scene with the fitted values written back (materials, and lights where fitted)."""
         if self.scene is None:
-            raise ValueError("to_scene: this result carries no scene")
+            raise FitError("to_scene: this result carries no scene")
         scene = self.scene
         names = scene.material_names
         materials = dict(scene.materials)
@@ -87,7 +112,9 @@ class FitResult:
             "loss": _json_number(self.loss), "psnr": _json_number(self.psnr), "steps": self.steps,
             "seconds": self.seconds, "converged": self.converged, "result": self.result, "solver": self.solver,
             "poorly_determined": list(self.poorly_determined), "history": [_json_number(x) for x in self.history],
-            "timings": dict(self.timings),
+            "timings": dict(self.timings), "model": self.model, "sigma": _json_number(self.sigma),
+            "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch, "at_bound": list(self.at_bound),
+            "censored": self.censored,
         }
 
     def table(self) -> str:
@@ -99,7 +126,14 @@ class FitResult:
             errs = err if isinstance(err, list) else [err] * len(values)
             cells = ", ".join(f"{v:.6g} ± {e:.2g}" for v, e in zip(values, errs))
             flag = "  (poorly determined)" if key in self.poorly_determined else ""
+            flag += "  (at bound)" if key in self.at_bound else ""
             rows.append(f"{key:<22} {cells}{flag}")
+        flags = [name for name, on in (("MODEL MISMATCH: the image model does not explain the targets; the standard "
+                                         "errors assume it does", self.model_mismatch),
+                                        (f"at bound: {', '.join(self.at_bound)}", bool(self.at_bound)),
+                                        (f"censored (clipped) target values: {self.censored}", self.censored > 0)) if on]
         rows.append(f"result: {self.result}, converged: {self.converged}, steps: {self.steps}, "
                     f"loss: {self.loss:.4g}, PSNR: {self.psnr:.2f} dB, {self.seconds:.3f} s ({self.solver})")
+        rows.append(f"image model: {self.model}, noise sigma: {self.sigma:.3g}, reduced chi-square: {self.chi2:.3g}")
+        rows.extend(flags)
         return "\n".join(rows)

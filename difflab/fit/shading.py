@@ -14,47 +14,16 @@ loop shades the same points again and again without running Warp (DESIGN.md, inv
 
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..lighting.jax_model import LightsJ, MaterialJ, fog_factor, lights_to_jax, shade
+from ..lighting.jax_model import LightsJ, fog_factor, lights_to_jax, shade, surface_material
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS
-
-
-class MaterialTable(NamedTuple):
-    """M materials stacked, indexed by material id: ka, kd, ks, ka2, kd2 (M, 3); n, m, f0 (M,).
-
-    ka2 / kd2 are the checker's second cell (equal to ka / kd for materials without a checker, as in
-    `warp_model.material_struct`)."""
-
-    ka: jnp.ndarray
-    kd: jnp.ndarray
-    ks: jnp.ndarray
-    n: jnp.ndarray
-    m: jnp.ndarray
-    f0: jnp.ndarray
-    ka2: jnp.ndarray
-    kd2: jnp.ndarray
-
-    @classmethod
-    def from_scene(cls, materials, dtype=jnp.float32) -> MaterialTable:
-        """From scene `Material`s in material-id order (a Scene's `materials.values()`)."""
-        materials = list(materials)
-
-        def stack(get, shape):
-            values = np.asarray([get(mat) for mat in materials], np.float64).reshape((len(materials),) + shape)
-            return jnp.asarray(values, dtype=dtype)
-
-        def second(name):
-            return lambda mat: getattr(mat.checker, name) if mat.checker is not None else getattr(mat, name[:2])
-
-        return cls(ka=stack(lambda m: m.ka, (3,)), kd=stack(lambda m: m.kd, (3,)), ks=stack(lambda m: m.ks, (3,)),
-                   n=stack(lambda m: m.n, ()), m=stack(lambda m: m.m, ()), f0=stack(lambda m: m.f0, ()),
-                   ka2=stack(second("ka2"), (3,)), kd2=stack(second("kd2"), (3,)))
+from .materials import MaterialTable
 
 
 class PointsJ(NamedTuple):
@@ -153,16 +122,10 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
 
 
 def point_colors(points: PointsJ, table: MaterialTable, lights: LightsJ, ambient, specular: int):
-    """The illumination model at each point with its material (checker cell 1: ka2 / kd2); 0 where
-    a point has no material. Returns (N, 3)."""
+    """The illumination model at each point with its material (`jax_model.surface_material`); 0
+    where a point has no material. Returns (N, 3)."""
     has_material = points.material >= 0
-    mat_id = jnp.where(has_material, points.material, 0)
-    second = (points.cell == 1)[:, None]
-    mat = MaterialJ(
-        ka=jnp.where(second, table.ka2[mat_id], table.ka[mat_id]),
-        kd=jnp.where(second, table.kd2[mat_id], table.kd[mat_id]),
-        ks=table.ks[mat_id], n=table.n[mat_id], m=table.m[mat_id], f0=table.f0[mat_id],
-    )
+    mat = surface_material(table, jnp.where(has_material, points.material, 0), points.cell)
     color = shade(mat, specular, points.normal, points.view, lights, points.light_dir, points.light_dist,
                   points.visibility, ambient)
     return jnp.where(has_material[:, None], color, 0.0)
@@ -199,16 +162,50 @@ def shade_gbuffer(gbuffer, materials, lights, ambient=None, *, dtype=jnp.float32
         (H, W, 3) JAX array of linear RGB, equal to `Frame.image` (to float32 rounding) when the
         arguments are the scene's own.
     """
-    points, comp, formation, _ = pixel_arrays(gbuffer, None, dtype)
     table = materials if isinstance(materials, MaterialTable) else MaterialTable.from_scene(materials, dtype)
     lights = lights if isinstance(lights, LightsJ) else lights_to_jax(tuple(lights), dtype)
     ambient = jnp.asarray(gbuffer.ambient if ambient is None else ambient, dtype)
     side = int(gbuffer.spp_side)
     shape = (gbuffer.mask.shape[0] // side, gbuffer.mask.shape[1] // side, 3)
-    return _shade_jit(points, comp, table, lights, ambient, formation).reshape(shape)
+    return _pixels_jit(GBufferModel.build(gbuffer, None, dtype), table, lights, ambient).reshape(shape)
 
 
-@functools.partial(jax.jit, static_argnames="formation")
-def _shade_jit(points, comp, table, lights, ambient, formation):
-    colors = point_colors(points, table, lights, ambient, formation.specular)
-    return compose(colors, comp, formation)
+def influence(gbuffer, material_ids, any_surface: bool) -> np.ndarray:
+    """(H, W) bool: pixels whose colour depends on the fitted materials (or on any surface when
+    light intensities are fitted)."""
+    if any_surface:
+        touched = gbuffer.mask
+    else:
+        touched = np.isin(gbuffer.material, np.asarray(list(material_ids), np.int32))
+        if gbuffer.shading != "phong":  # a sample's colour mixes its points': look at those
+            point_material = gbuffer.points.material
+            if point_material.size:
+                index = np.clip(gbuffer.point_index, 0, point_material.size - 1)
+                from_points = np.isin(point_material[index], list(material_ids)) & (gbuffer.point_weight != 0)
+                touched = touched | (gbuffer.mask & from_points.any(axis=-1))
+    side = gbuffer.spp_side
+    h, w = touched.shape[0] // side, touched.shape[1] // side
+    return touched.reshape(h, side, w, side).any(axis=(1, 3))
+
+
+class GBufferModel(eqx.Module):
+    """The G-buffer image model of U pixels: their shading points, composition and formation
+    (`pixel_arrays`). `pixels` is the (U, 3) image for given materials, lights and ambient."""
+
+    points: PointsJ
+    comp: ComposeJ
+    formation: Formation = eqx.field(static=True)
+
+    @classmethod
+    def build(cls, gbuffer, pixels, dtype) -> GBufferModel:
+        points, comp, formation, _ = pixel_arrays(gbuffer, pixels, dtype)
+        return cls(points=points, comp=comp, formation=formation)
+
+    def pixels(self, table: MaterialTable, lights: LightsJ, ambient):
+        return compose(point_colors(self.points, table, lights, ambient, self.formation.specular), self.comp,
+                       self.formation)
+
+
+@eqx.filter_jit
+def _pixels_jit(model, table, lights, ambient):
+    return model.pixels(table, lights, ambient)

@@ -1,36 +1,65 @@
-"""Solvers: optimistix's least-squares solvers and an Adam loop, one compiled solve per problem shape.
+"""Solvers behind every fit, chosen by one value object, `FitOptions`.
 
-Failure is a value: every run returns the solver's result code (`optimistix.RESULTS`, as its name)
-and never raises here; `fit_material` decides what to do with it.
+"lm" is difflab's box-constrained Levenberg-Marquardt (`lm.py`) on the bounded values themselves;
+"varpro" solves ka, kd, ks exactly inside an "lm" search over the rest (`varpro.py`); "gauss_newton",
+"dogleg", "bfgs" (optimistix) and "adam" (optax through optimistix) run on unconstrained coordinates
+mapped into the bounds (`params.Layout.x_from_free`). Failure is a value: each run returns a result
+code name and never raises here.
 """
 
 from __future__ import annotations
 
+import sys
 import threading
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
-import lineax as lx
+import jax.numpy as jnp
 import numpy as np
 import optax
 import optimistix as optx
 
-from ..errors import FitError
-from .problem import loss_fn, residual_fn
+from . import lm
+from .cache import enable_compilation_cache
+from .options import SOLVERS, FitOptions  # noqa: F401  (SOLVERS: re-exported)
 
-SOLVERS = ("lm", "gauss_newton", "dogleg", "bfgs", "adam", "varpro")
-RESULT_NAMES = {int(item._value): name for name, item in optx.RESULTS._name_to_item.items()}
+enable_compilation_cache()
 SUCCESSFUL = "successful"
+RESULT_NAMES = {int(item._value): name for name, item in optx.RESULTS._name_to_item.items()}
+
+class Solved(NamedTuple):
+    """A solve's outcome: x (p,) solver coordinates, result code name, steps, loss history, and
+    linearised = (r, J) at x (residuals and Jacobian in solver coordinates) when the solver has
+    them ("lm"), else None."""
+
+    x: np.ndarray
+    result: str
+    steps: int
+    history: list
+    linearised: tuple | None = None
 
 
-class HistoryRecorder:
-    """An optimistix `verbose=` callable that sends each step's loss to the host.
+class Progress:
+    """A tqdm bar fed from inside the compiled solve (`jax.debug.callback`), one update per step."""
 
-    Solvers call it once per step with keyword pairs (label, value); it records the loss at the point
-    the step evaluated (for the trust-region and line-search solvers that includes trial points they
-    then reject, so the history need not decrease monotonically), with the unconstrained parameters
-    it evaluated (the trajectory; `fit.solve` returns both). One module-level instance serves every fit, so the solver's hash -- and the compiled
-    solve -- stay the same from call to call; fits that record history run one at a time."""
+    def __init__(self, total: int, label: str):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, desc=label, unit="step", leave=False, file=sys.stderr)
+
+    def __call__(self, step, loss):
+        self.bar.update(int(step) - self.bar.n)
+        self.bar.set_postfix(loss=f"{float(loss):.4g}", refresh=False)
+
+    def close(self):
+        self.bar.close()
+
+
+class LossRecorder:
+    """An optimistix `verbose=` callable that sends each step's loss to the host (the optimistix
+    solvers only; "lm" keeps its own history). One instance serves every fit, so the solver's hash
+    -- and the compiled solve -- stay the same from call to call."""
 
     def __init__(self):
         self._lock = threading.Lock()
@@ -39,16 +68,14 @@ class HistoryRecorder:
     def __call__(self, **kwargs):
         entry = kwargs.get("loss_this_step")
         if entry is not None:
-            y = kwargs.get("y", (None, None))[1]
-            jax.debug.callback(self._append, entry[1], y)
+            jax.debug.callback(self._append, entry[1])
 
-    def _append(self, value, y):  # runs on the runtime's callback thread
+    def _append(self, value):
         with self._lock:
             if self._log is not None:
-                y = None if y is None else jax.tree.map(lambda a: np.asarray(a, np.float64), y)
-                self._log.append((np.asarray(value, np.float64), y))
+                self._log.append(float(np.asarray(value, np.float64).reshape(-1)[0]))
 
-    def start(self) -> None:
+    def start(self):
         with self._lock:
             self._log = []
 
@@ -59,64 +86,68 @@ class HistoryRecorder:
         return log
 
 
-RECORDER = HistoryRecorder()
+RECORDER = LossRecorder()
 
 
-def make_solver(name: str, rtol: float, atol: float, learning_rate: float = 0.05, history: bool = True):
-    """An optimistix solver by name (see `SOLVERS`; "varpro" runs LM on its reduced problem)."""
+def optimistix_solver(name: str, rtol: float, atol: float, learning_rate: float, history: bool):
+    """An optimistix solver by name ("gauss_newton", "dogleg", "bfgs", "adam")."""
     verbose = RECORDER if history else False
-    if name in ("lm", "varpro"):
-        # The damped step through the normal equations (J^T J + lambda I) dx = J^T r: forming the small
-        # p x p matrix is one GEMM, several times cheaper than a Householder QR of the tall J, and the
-        # damping keeps it positive definite where J^T J alone is singular.
-        return optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()), verbose=verbose)
     if name == "gauss_newton":
         return optx.GaussNewton(rtol=rtol, atol=atol, verbose=verbose)
     if name == "dogleg":
         return optx.Dogleg(rtol=rtol, atol=atol, verbose=verbose)
     if name == "bfgs":
         return optx.BFGS(rtol=rtol, atol=atol, verbose=verbose)
-    if name == "adam":
-        return optx.OptaxMinimiser(optax.adam(learning_rate), rtol=rtol, atol=atol, verbose=verbose)
-    raise FitError(f"solver: unknown solver {name!r}; known: {', '.join(SOLVERS)}")
+    return optx.OptaxMinimiser(optax.adam(learning_rate), rtol=rtol, atol=atol, verbose=verbose)
 
 
-def _ls_inner(solver, u0, problem, max_steps):
-    sol = optx.least_squares(residual_fn, solver, u0, args=problem, max_steps=max_steps, throw=False)
-    return sol.value, sol.result._value, sol.stats["num_steps"]
+def _free_residuals(z, problem):
+    return problem.residuals(problem.layout.x_from_free(z))
 
 
-def _min_inner(solver, u0, problem, max_steps):
-    sol = optx.minimise(loss_fn, solver, u0, args=problem, max_steps=max_steps, throw=False)
-    return sol.value, sol.result._value, sol.stats["num_steps"]
+def _free_loss(z, problem):
+    r = _free_residuals(z, problem)
+    return 0.5 * jnp.sum(r * r)
 
 
-_least_squares = eqx.filter_jit(_ls_inner)
-_minimise = eqx.filter_jit(_min_inner)
+@eqx.filter_jit
+def _optimistix(solver, z0, problem, max_steps):
+    if isinstance(solver, optx.OptaxMinimiser):
+        sol = optx.minimise(_free_loss, solver, z0, args=problem, max_steps=max_steps, throw=False)
+    else:
+        sol = optx.least_squares(_free_residuals, solver, z0, args=problem, max_steps=max_steps, throw=False)
+    return problem.layout.x_from_free(sol.value), sol.result._value, sol.stats["num_steps"]
 
 
-def run_solver(solver, u0: dict, problem, max_steps: int):
-    """One solve: (u, result name, steps). Compiled once per (solver, problem structure, max_steps)."""
-    run = _minimise if isinstance(solver, optx.OptaxMinimiser) else _least_squares
-    u, code, steps = run(solver, u0, problem, int(max_steps))
-    return u, RESULT_NAMES[int(code)], int(steps)
+def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
+    """One solve from solver coordinates x0, a `Solved`."""
+    rtol, atol = options.tolerances()
+    dtype = problem.ambient.dtype
+    lower, upper = (jnp.asarray(b, dtype) for b in problem.layout.bounds())
+    progress = Progress(options.max_steps, label) if options.show_progress() else None
+    try:
+        if options.solver == "lm":
+            x, code, steps, history, r, jac = lm.solve_box(problem, jnp.asarray(x0, dtype), lower, upper,
+                                                           options.max_steps, rtol, atol, progress)
+            steps = int(steps)
+            history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
+            name = lm.CODES[int(code)]  # a non-finite start leaves r, J unset
+            return Solved(np.asarray(x, np.float64), name, steps, history, None if name == "nonfinite" else (r, jac))
+        if options.solver == "varpro":
+            from .varpro import run_varpro
 
-
-def _batched(run):
-    def solve_all(solver, u0, problem, targets, max_steps):
-        def one(u0_i, targets_i):
-            views = tuple(eqx.tree_at(lambda v: v.target, view, t) for view, t in zip(problem.views, targets_i))
-            return run(solver, u0_i, eqx.tree_at(lambda p: p.views, problem, views), max_steps)
-        return jax.vmap(one)(u0, targets)
-    return eqx.filter_jit(solve_all)
-
-
-_BATCH = {"least_squares": _batched(_ls_inner), "minimise": _batched(_min_inner)}
-
-
-def run_solver_vmap(solver, u0: dict, problem, targets: tuple, max_steps: int):
-    """Many solves at once with `jax.vmap` over the targets (leading axis B of each view's target) and
-    starts (leading axis B of u0). Returns (u, [result names], steps array)."""
-    kind = "minimise" if isinstance(solver, optx.OptaxMinimiser) else "least_squares"
-    u, codes, steps = _BATCH[kind](solver, u0, problem, targets, int(max_steps))
-    return u, [RESULT_NAMES[int(c)] for c in np.asarray(codes)], np.asarray(steps)
+            return Solved(*run_varpro(problem, x0, options, progress))
+        solver = optimistix_solver(options.solver, rtol, atol, options.learning_rate, options.history)
+        z0 = jnp.asarray(problem.layout.free_from_x(x0), dtype)
+        if options.history:
+            RECORDER.start()
+        try:
+            x, code, steps = _optimistix(solver, z0, problem, options.max_steps)
+            x = np.asarray(x, np.float64)
+        finally:
+            history = RECORDER.stop() if options.history else []
+        return Solved(x, RESULT_NAMES[int(code)], int(steps), history)
+    finally:
+        if progress is not None:
+            jax.effects_barrier()
+            progress.close()

@@ -1,18 +1,34 @@
-"""Diagnostics at the solution: standard errors, poorly determined parameters, loss and PSNR.
+"""Diagnostics at the solution: the noise level, reduced chi-square, the model-mismatch flag,
+standard errors, poorly determined parameters and PSNR.
 
-Standard errors are those of linearised least squares, in scene units:
+Noise: `sigma` when given, else estimated from the residual images at the solution by Immerkaer's
+Laplacian operator with a robust (median) scale, sigma = 1.4826 median |L| / 6, over the pixels
+whose 3 x 3 neighbourhood is all used and uncensored (L = R * [1 -2 1; -2 4 -2; 1 -2 1] has standard
+deviation 6 sigma for white noise). The Laplacian removes what a wrong model leaves smoothly (an
+offset, a gradual shading error), so the estimate sees the noise, not the mismatch. With fewer than
+MIN_NOISE_PIXELS such pixels the targets themselves are used (smooth shading adds a little: an
+upper estimate). It is floored at the targets' quantisation: one 8-bit step / sqrt(12) for
+integer-coded targets, FLOAT_SIGMA for float data (float32 rounding of a render is ~1e-7).
 
-    cov = sigma^2 (J^T J)^-1,   sigma^2 = sum_i r_i^2 / (count - p)
+    chi2_red = sum_i r_i^2 / (sigma^2 (N - p))
 
-with J the Jacobian of the plain weighted residuals sqrt(w) (model - target) with respect to the
-parameter values (not the solver's unconstrained ones: jax.jacfwd through the value -> image map is
-the chain rule). Directions of J^T J that are numerically singular (after scaling its columns to
-unit norm) give an infinite standard error to every parameter they involve.
+over the N uncensored residual entries and p fitted entries. `model_mismatch` is set when
+chi2_red > MISMATCH_CHI2 (and above 1 + 5 sqrt(2 / (N - p)), its statistical spread): the residuals
+sit far above the noise, so the image model does not explain the target (wrong image model, wrong
+specular model, missing light...) and the fitted values answer a different question.
 
-A parameter is *poorly determined* when, even at a noise floor of one 8-bit quantisation step
-(sigma >= 1 / (255 sqrt 12)), its standard error exceeds `rel_tol` |value| + `abs_tol` in some
-channel. A specular exponent (n, or roughness m) and the ks of the same material are only read from
-a highlight together, so when one of them is poorly determined, so is the other.
+Standard errors are those of linearised least squares, in scene units, and assume the model holds:
+
+    cov = s^2 (J^T J)^-1,   s^2 = sum_i r_i^2 / (N - p)
+
+with J the Jacobian of the plain weighted residuals with respect to the values (jax.jacfwd through
+the value -> image map). Directions of J^T J that are numerically singular (after scaling its
+columns to unit norm) give an infinite standard error to every parameter they involve.
+
+A parameter is *poorly determined* when, even at a noise floor of one 8-bit quantisation step, its
+standard error exceeds `rel_tol` |value| + `abs_tol` in some channel. A specular exponent (n, or
+roughness m) and the ks of the same material are only read from a highlight together, so when one
+of them is poorly determined, so is the other.
 """
 
 from __future__ import annotations
@@ -21,28 +37,53 @@ import math
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 QUANTISATION_SIGMA = 1.0 / (255.0 * math.sqrt(12.0))
+FLOAT_SIGMA = 1e-5
+MISMATCH_CHI2 = 2.0
+MIN_NOISE_PIXELS = 48  # pixel channels
 SINGULAR_RCOND = 1e-12
+LAPLACIAN = np.array([[1.0, -2.0, 1.0], [-2.0, 4.0, -2.0], [1.0, -2.0, 1.0]])
+
+
+def estimate_sigma(images, used_maps, *, interior=True) -> float | None:
+    """The robust Laplacian noise estimate of (H, W, 3) images over their used pixels -- only those
+    whose 3 x 3 neighbourhood is used, when `interior` -- or None with fewer than MIN_NOISE_PIXELS."""
+    values = []
+    for image, used in zip(images, used_maps):
+        h, w = used.shape
+        if h < 3 or w < 3:
+            continue
+        centre = used[1:-1, 1:-1]
+        if interior:
+            centre = np.logical_and.reduce([used[i:h - 2 + i, j:w - 2 + j] for i in range(3) for j in range(3)])
+        lap = sum(LAPLACIAN[i, j] * image[i:h - 2 + i, j:w - 2 + j] for i in range(3) for j in range(3))
+        values.append(np.abs(lap[centre]).reshape(-1))
+    values = np.concatenate(values) if values else np.zeros(0)
+    values = values[np.isfinite(values)]
+    return float(1.4826 * np.median(values) / 6.0) if values.size >= MIN_NOISE_PIXELS else None
 
 
 @eqx.filter_jit
-def _jacobian(problem, values):
-    return jax.jacfwd(problem.weighted_residuals)(values), problem.weighted_residuals(values)
+def _linearised(problem, values):
+    r, jvp = jax.linearize(problem.weighted, values)
+    return r, jax.vmap(jvp, out_axes=1)(jnp.eye(values.shape[0], dtype=values.dtype))
 
 
-def jacobian(problem, values: dict, layout) -> tuple[np.ndarray, np.ndarray]:
-    """(J (count, p) float64, r (count,)) over the residual entries with weight > 0."""
-    weights = np.concatenate([np.asarray(v.sqrt_weight).reshape(-1) for v in problem.views])
-    used = weights > 0
-    jac, residuals = _jacobian(problem, values)
-    columns = []
-    for p in layout:
-        block = np.concatenate([np.asarray(j[p.key], np.float64).reshape(-1, p.size) for j in jac])
-        columns.append(block[used])
-    r = np.concatenate([np.asarray(x, np.float64).reshape(-1) for x in residuals])
-    return np.concatenate(columns, axis=1), r[used]
+def jacobian(problem, values, solved=None) -> tuple[np.ndarray, np.ndarray]:
+    """(J (N, p) float64, r (N,)) of the plain weighted residuals with respect to the flat values,
+    over all residual entries: from `solved` = (r, J with respect to the solver coordinates x) when
+    the solver returned them for the l2 loss (d value / d x = value for log coordinates), else
+    computed (one compiled call)."""
+    if solved is not None and problem.loss == "l2":
+        r, jac_x = (np.asarray(a, np.float64) for a in solved)
+        log = problem.layout.entries("log") > 0
+        values = np.asarray(values, np.float64)
+        return jac_x / np.where(log, values, 1.0), r
+    r, jac = _linearised(problem, values)
+    return np.asarray(jac, np.float64), np.asarray(r, np.float64)
 
 
 def covariance_unscaled(jac: np.ndarray) -> np.ndarray:
@@ -64,24 +105,23 @@ def covariance_unscaled(jac: np.ndarray) -> np.ndarray:
     return cov
 
 
-def standard_errors(problem, values: dict, layout) -> dict:
-    """The statistics at `values`: sigma2, stderr (key -> array), stderr at the noise floor,
-    count (residual entries used), sse (sum of squared plain residuals)."""
-    jac, r = jacobian(problem, values, layout)
-    count, p = r.size, jac.shape[1]
+def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
+    """sqrt(diag (J^T J)^-1 * sigma2), inf where the diagonal is."""
+    finite = np.isfinite(diag)
+    return np.where(finite, np.sqrt(np.where(finite, np.maximum(diag, 0.0), 0.0) * sigma2), np.inf)
+
+
+def fit_statistics(jac: np.ndarray, r: np.ndarray, censored: int, sigma: float) -> dict:
+    """sse, dof (N - p, N uncensored entries), s2 = sse / dof, chi2 (reduced, at noise sigma),
+    mismatch flag, and diag (J^T J)^-1 (p,)."""
+    p = jac.shape[1]
     sse = float(np.sum(r * r))
-    sigma2 = sse / max(count - p, 1)
-    cov = covariance_unscaled(jac)
-    diag = np.diag(cov)
-    floor2 = max(sigma2, QUANTISATION_SIGMA ** 2)
-    stderr, stderr_floor, offset = {}, {}, 0
-    for prm in layout:
-        block = diag[offset:offset + prm.size]
-        finite = np.isfinite(block)
-        stderr[prm.key] = np.where(finite, np.sqrt(np.where(finite, block, 0.0) * sigma2), np.inf)
-        stderr_floor[prm.key] = np.sqrt(block * floor2)
-        offset += prm.size
-    return {"sigma2": sigma2, "stderr": stderr, "stderr_floor": stderr_floor, "count": count, "sse": sse}
+    dof = max(r.size - censored - p, 1)
+    s2 = sse / dof
+    chi2 = s2 / (sigma * sigma) if sigma > 0 else math.inf
+    mismatch = bool(chi2 > max(MISMATCH_CHI2, 1.0 + 5.0 * math.sqrt(2.0 / dof)))
+    return {"sse": sse, "dof": dof, "s2": s2, "chi2": chi2, "mismatch": mismatch,
+            "diag": np.diag(covariance_unscaled(jac))}
 
 
 def poorly_determined(layout, values: dict, stderr_floor: dict, rel_tol=0.1, abs_tol=1e-3) -> list[str]:
@@ -101,12 +141,13 @@ def poorly_determined(layout, values: dict, stderr_floor: dict, rel_tol=0.1, abs
     return [p.key for p in layout if p.key in flagged]
 
 
-def psnr(problem, values: dict) -> float:
-    """10 log10(1 / MSE) over the weighted pixel channels used (peak 1); inf for a perfect fit."""
-    r = np.concatenate([np.asarray(x, np.float64).reshape(-1) for x in problem.weighted_residuals(values)])
-    w = np.concatenate([np.asarray(v.sqrt_weight, np.float64).reshape(-1) ** 2 for v in problem.views])
-    total = float(w.sum())
-    if total <= 0:
+def psnr(r: np.ndarray, weight_total: float) -> float:
+    """10 log10(1 / MSE) of weighted residuals r (peak 1): inf for a perfect fit, -inf when the
+    error overflows, nan without weight."""
+    if weight_total <= 0:
         return float("nan")
-    mse = float(np.sum(r * r) / total)
+    with np.errstate(over="ignore", invalid="ignore"):
+        mse = float(np.sum(np.square(r)) / weight_total)
+    if not math.isfinite(mse):
+        return float("-inf")
     return float("inf") if mse == 0 else 10.0 * math.log10(1.0 / mse)

@@ -1,36 +1,23 @@
-"""Targets in: images (arrays or files), their per-view camera / lights, masks and weights; and the
-one Warp render per view that gives the G-buffer the fit shades again and again."""
+"""Targets in: images (arrays or files), their per-view camera / lights, masks and weights, checked
+at the boundary.
+
+Image arrays are linear RGB floats. Integer arrays (what Pillow returns: 8-bit sRGB code values) are
+refused with a message saying how to decode them -- never read as linear -- and so are boolean,
+complex and object arrays. Image files are read by `io.load_image` (8-bit files sRGB-decoded); a
+decoded 8-bit file saturates at 1.0: its ceiling, where highlights clip. A target must have its
+view's camera size.
+"""
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
-
 import numpy as np
 
 from ..errors import DifflabError, FitError
 from ..io import load_image
-from ..renderers.api import as_scene
-from ..renderers.frame import GBuffer
 
 OVERRIDE_KEYS = ("camera", "lights")
 EIGHT_BIT = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
-
-
-@dataclass(frozen=True)
-class View:
-    """One target and what it was seen with. target (H, W, 3) float64 (0 where masked out); mask
-    (H, W) bool: pixels that count; weight (H, W, 3) >= 0 (0 outside the mask); clip: the target came
-    from an 8-bit file, so the model is clipped to [0, 1] before comparing; nonfinite: non-finite
-    target values inside the mask; gbuffer: the view's G-buffer; scene: the scene of this view."""
-
-    target: np.ndarray
-    mask: np.ndarray
-    weight: np.ndarray
-    clip: bool
-    nonfinite: int
-    gbuffer: GBuffer
-    scene: object
 
 
 def _is_path(x) -> bool:
@@ -63,18 +50,28 @@ def normalise_targets(targets) -> list[tuple[object, dict]]:
     return out
 
 
-def load_target(item, where: str) -> tuple[np.ndarray, bool]:
-    """(image (H, W, 3) float64, from an 8-bit file?)."""
+def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
+    """(image (H, W, 3) float64 linear, its ceiling: 1.0 for 8-bit image files, None for float
+    data)."""
     if _is_path(item):
         try:
             image = load_image(item)
         except DifflabError as exc:
             raise FitError(f"{where}: {exc}") from None
-        return image.astype(np.float64), str(item).lower().endswith(EIGHT_BIT)
+        return np.asarray(image, np.float64), (None if str(item).lower().endswith(".npy") else 1.0)
+    if not isinstance(item, np.ndarray) and not hasattr(item, "__array__"):
+        raise FitError(f"{where}: expected an image array or a file path, got {type(item).__name__}")
     image = np.asarray(item)
-    if image.ndim != 3 or image.shape[-1] not in (3, 4) or not np.issubdtype(image.dtype, np.number):
+    if image.ndim != 3 or image.shape[-1] not in (3, 4):
         raise FitError(f"{where}: expected an (H, W, 3) image, got shape {image.shape} of {image.dtype}")
-    return image[..., :3].astype(np.float64), False
+    image = image[..., :3]
+    if image.dtype.kind in "iu":
+        raise FitError(f"{where}: an integer image ({image.dtype}) holds sRGB code values, not linear light; pass "
+                       "the file's path, or decode it: difflab.io.srgb_to_linear(image / 255.0) for 8-bit, with "
+                       "ceiling=1.0 for its clipped highlights")
+    if image.dtype.kind != "f":
+        raise FitError(f"{where}: an image of dtype {image.dtype} is refused; give linear RGB floats")
+    return image.astype(np.float64), None
 
 
 def per_view(values, count: int, name: str) -> list:
@@ -89,13 +86,26 @@ def per_view(values, count: int, name: str) -> list:
     return values
 
 
+def _numeric(value, where: str) -> np.ndarray:
+    """A real-valued (or boolean) array, or FitError naming the argument."""
+    array = np.asarray(value) if isinstance(value, np.ndarray) or hasattr(value, "__array__") else None
+    if array is None:
+        try:
+            array = np.asarray(value, np.float64)
+        except (TypeError, ValueError):
+            array = np.asarray([], object)
+    if array.dtype.kind not in "biuf":
+        raise FitError(f"{where}: expected a real-valued array, got {type(value).__name__} of {array.dtype}")
+    return array.astype(np.float64) if array.dtype.kind != "b" else array
+
+
 def view_mask(value, shape, where) -> np.ndarray:
     """A view's boolean mask (H, W) from None (all), an array or an image path."""
     if value is None:
         return np.ones(shape, bool)
     if _is_path(value):
         value = load_image(value, srgb=False)[..., 0] > 0.5
-    mask = np.asarray(value)
+    mask = _numeric(value, where)
     if mask.ndim == 3:
         mask = mask[..., 0]
     if mask.shape != shape:
@@ -107,7 +117,7 @@ def view_weight(value, shape, where) -> np.ndarray:
     """A view's non-negative per-pixel weights broadcast to (H, W, 3) (None: all 1)."""
     if value is None:
         return np.ones(shape + (3,))
-    weight = np.asarray(value, np.float64)
+    weight = _numeric(value, where)
     if weight.ndim == 2:
         weight = weight[..., None]
     try:
@@ -120,59 +130,28 @@ def view_weight(value, shape, where) -> np.ndarray:
 
 
 def prepared_targets(scene, targets, masks, weights, render: dict):
-    """For each target: (its view's scene, target image, clip, mask, weight, count of non-finite
-    masked values). A view's scene is `scene` with the target's camera / lights override, the
-    camera resized to the target, and the `render` settings; non-finite target values are zeroed
+    """For each target: (its view's scene, target image, ceiling, mask, weight, count of non-finite
+    masked values). A view's scene is `scene` with the target's camera / lights override and the
+    `render` settings; the target must have that camera's size. Non-finite target values are zeroed
     (and counted, so that the fit reports them)."""
     items = normalise_targets(targets)
     masks = per_view(masks, len(items), "masks")
     weights = per_view(weights, len(items), "weights")
     for i, ((item, overrides), mask, weight) in enumerate(zip(items, masks, weights)):
         where = f"targets[{i}]"
-        image, clip = load_target(item, where)
+        image, ceiling = load_target(item, where)
         height, width = image.shape[:2]
         try:
-            camera = overrides.get("camera")
-            camera = dict(camera if camera is not None else scene.camera.to_dict(), width=width, height=height)
-            view_scene = scene.with_overrides(camera=camera, lights=overrides.get("lights"), render=render)
+            view_scene = scene.with_overrides(camera=overrides.get("camera"), lights=overrides.get("lights"),
+                                              render=render)
         except DifflabError as exc:
             raise FitError(f"{where}: {exc}") from None
+        camera = view_scene.camera
+        if (camera.height, camera.width) != (height, width):
+            raise FitError(f"{where}: the image is {width}x{height} (width x height) but its view's camera renders "
+                           f"{camera.width}x{camera.height}; resize the target or set the camera's width / height")
         mask = view_mask(mask, (height, width), f"masks[{i}]")
         weight = view_weight(weight, (height, width), f"weights[{i}]") * mask[..., None]
         finite = np.isfinite(image)
         nonfinite = int(np.count_nonzero(~finite & mask[..., None]))
-        yield view_scene, np.where(finite & mask[..., None], image, 0.0), clip, mask, weight, nonfinite
-
-
-def load_views(scene, targets, masks=None, weights=None, device="cpu") -> tuple[object, list[View]]:
-    """The scene (validated) and one `View` per target, each with its G-buffer rendered once.
-
-    A view's camera is the scene's (or its override's) with width and height set to the target's."""
-    from ..renderers.api import render_frame
-
-    scene = as_scene(scene)
-    views = []
-    for view_scene, image, clip, mask, weight, nonfinite in prepared_targets(scene, targets, masks, weights,
-                                                                             {"method": "raster"}):
-        gbuffer = render_frame(view_scene, device=device).gbuffer
-        views.append(View(target=image, mask=mask, weight=weight, clip=clip, nonfinite=nonfinite,
-                          gbuffer=gbuffer, scene=view_scene))
-    return scene, views
-
-
-def influence(gbuffer: GBuffer, material_ids, any_surface: bool) -> np.ndarray:
-    """(H, W) bool: pixels whose colour depends on the fitted materials (or on any surface when
-    light intensities are fitted)."""
-    if any_surface:
-        touched = gbuffer.mask
-    else:
-        touched = np.isin(gbuffer.material, np.asarray(list(material_ids), np.int32))
-        if gbuffer.shading != "phong":  # a sample's colour mixes its points': look at those
-            point_material = gbuffer.points.material
-            if point_material.size:
-                index = np.clip(gbuffer.point_index, 0, point_material.size - 1)
-                from_points = np.isin(point_material[index], list(material_ids)) & (gbuffer.point_weight != 0)
-                touched = touched | (gbuffer.mask & from_points.any(axis=-1))
-    side = gbuffer.spp_side
-    h, w = touched.shape[0] // side, touched.shape[1] // side
-    return touched.reshape(h, side, w, side).any(axis=(1, 3))
+        yield view_scene, np.where(finite & mask[..., None], image, 0.0), ceiling, mask, weight, nonfinite

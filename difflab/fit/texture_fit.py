@@ -35,6 +35,9 @@ import optimistix as optx
 from ..errors import FitError
 from ..lighting.jax_model import MaterialJ, fog_factor, lights_to_jax, shade, target_only, textured_material
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS, TEXTURE_TARGET_IDS
+from .cache import enable_compilation_cache
+
+enable_compilation_cache()
 
 FIT_FILTERS = ("nearest", "bilinear")
 RESULT_NAMES = {int(item._value): name for name, item in optx.RESULTS._name_to_item.items()}

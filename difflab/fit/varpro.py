@@ -1,14 +1,14 @@
-"""Variable projection: the image is affine in ka, kd and ks once n, m and f0 are fixed, so solve
-those exactly and search only over the nonlinear rest.
+"""Variable projection: the image is affine in ka, kd and ks once the rest (n, m, f0, ...) and the
+geometry are fixed, so solve those exactly and search only over the nonlinear rest.
 
     r(k, theta) = A(theta) k + b(theta)                    (plain weighted residuals)
     k*(theta)   = argmin_k |A k + b|^2                     (normal equations, columns scaled)
-    theta*      = argmin_theta |A(theta) k*(theta) + b(theta)|^2     (Levenberg-Marquardt)
+    theta*      = argmin_theta |A(theta) k*(theta) + b(theta)|^2     (box Levenberg-Marquardt)
 
-A and b come from the same image formation as every other solver (A = dr/dk, exact because r is
-affine in k; b = r at k = 0), so nothing here restates the illumination model. The linear solve is
-unconstrained: if a coefficient comes out negative, `fit_material` polishes the clipped solution with
-the general Levenberg-Marquardt solver, which keeps it >= 0.
+A and b come from the same residuals as every other solver (A = dr/dk, exact because r is affine in
+k; b = r at k = 0), so nothing here restates the image model. The linear solve is unconstrained;
+when a coefficient comes out negative, the box Levenberg-Marquardt solver polishes from the clipped
+solution, which brings it onto its bound 0.
 """
 
 from __future__ import annotations
@@ -16,86 +16,84 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
+import numpy as np
 
 from ..errors import FitError
-from .params import COLOR_PARAMS, to_value
-from .solve import RESULT_NAMES
+from . import lm
+from .params import KINDS
 
 RIDGE = {True: 1e-13, False: 1e-6}  # relative ridge on the scaled normal equations, by x64
 
 
-def check_applicable(problem, layout) -> None:
-    """FitError unless the problem is affine in its colour parameters."""
+def check_applicable(problem) -> None:
+    """FitError unless the problem's residuals are affine in some of its parameters."""
     if problem.loss != "l2":
         raise FitError("solver: varpro needs loss='l2' (a robust loss is not linear least squares)")
-    if any(p.kind == "intensity" for p in layout):
+    if any(p.kind == "intensity" for p in problem.layout):
         raise FitError("solver: varpro cannot fit light intensities (intensity x k is not linear)")
-    for v in problem.views:
-        if v.clip or v.formation.clamp_colors:
-            raise FitError("solver: varpro needs an unclamped image (8-bit targets and Gouraud vertex-colour "
+    for view in problem.views:
+        if bool(np.isfinite(np.asarray(view.ceiling))) or getattr(getattr(view.model, "formation", None),
+                                                                   "clamp_colors", False):
+            raise FitError("solver: varpro needs an unclipped image (clipped targets and Gouraud vertex-colour "
                            "clamping are not linear); use 'lm'")
-    if not any(p.kind in COLOR_PARAMS for p in layout):
+    if not any(KINDS[p.kind].linear for p in problem.layout):
         raise FitError("solver: varpro needs at least one of ka, kd, ks among the params")
 
 
-def _split(layout):
-    linear = tuple(p for p in layout if p.kind in COLOR_PARAMS)
-    nonlinear = tuple(p for p in layout if p.kind not in COLOR_PARAMS)
-    return linear, nonlinear
+def _linear_mask(layout) -> np.ndarray:
+    return np.concatenate([np.full(p.size, KINDS[p.kind].linear) for p in layout])
 
 
-def solve_linear(problem, layout, nl_values: dict):
-    """(k*: key -> values, flattened residual at k*) for fixed nonlinear values."""
-    linear, _ = _split(layout)
-    dtype = problem.ambient.dtype
-    zeros = {p.key: jnp.zeros(p.size, dtype) for p in linear}
+def solve_linear(problem, x):
+    """(x with its linear entries replaced by k*, the plain residual at k*) for the nonlinear
+    entries of x fixed."""
+    linear = _linear_mask(problem.layout)
+    lin_idx = np.flatnonzero(linear)
+    dtype = x.dtype
+    base = jnp.where(linear, 0.0, x)
 
-    def flat(lin):
-        return jnp.concatenate([r.reshape(-1) for r in problem.weighted_residuals({**nl_values, **lin})])
+    def flat(k):
+        return problem.weighted(problem.layout.values(base.at[lin_idx].set(k)))
 
+    zeros = jnp.zeros(lin_idx.size, dtype)
     b = flat(zeros)
-    jac = jax.jacfwd(flat)(zeros)
-    a = jnp.concatenate([jac[p.key].reshape(b.shape[0], p.size) for p in linear], axis=1)
+    a = jax.jacfwd(flat)(zeros)
     norms = jnp.sqrt(jnp.sum(a * a, axis=0))
     scale = jnp.where(norms > 0, 1.0 / jnp.where(norms > 0, norms, 1.0), 0.0)
     a_scaled = a * scale
-    gram = a_scaled.T @ a_scaled
-    gram = gram + RIDGE[dtype == jnp.float64] * jnp.eye(gram.shape[0], dtype=dtype)
+    gram = a_scaled.T @ a_scaled + RIDGE[dtype == jnp.float64] * jnp.eye(lin_idx.size, dtype=dtype)
     k = scale * jnp.linalg.solve(gram, -(a_scaled.T @ b))
-    out, offset = {}, 0
-    for p in linear:
-        out[p.key] = k[offset:offset + p.size]
-        offset += p.size
-    return out, b + a @ k
-
-
-def _reduced_residuals(u, args):
-    problem, layout = args
-    _, nonlinear = _split(layout)
-    nl_values = {p.key: to_value(p, u[p.key]) for p in nonlinear}
-    _, r = solve_linear(problem, layout, nl_values)
-    return r
+    return base.at[lin_idx].set(k), b + a @ k
 
 
 @eqx.filter_jit
-def _solve_reduced(solver, u0, problem, layout, max_steps):
-    sol = optx.least_squares(_reduced_residuals, solver, u0, args=(problem, layout), max_steps=max_steps,
-                             throw=False)
-    return sol.value, sol.result._value, sol.stats["num_steps"]
+def _solve_reduced(problem, x0, lower, upper, max_steps, rtol, atol, progress):
+    nonlinear = np.flatnonzero(~_linear_mask(problem.layout))
+
+    def reduced(theta, p):
+        return solve_linear(p, x0.at[nonlinear].set(theta))[1]
+
+    theta, code, steps, history, _, _ = lm.box_lm(reduced, x0[nonlinear], lower[nonlinear], upper[nonlinear], problem,
+                                            max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)
+    x, _ = solve_linear(problem, x0.at[nonlinear].set(theta))
+    return x, code, steps, history
 
 
-_solve_linear_jit = eqx.filter_jit(solve_linear)
-
-
-def run_varpro(solver, u0: dict, problem, layout, max_steps: int):
-    """(values in scene units, result name, steps) by variable projection."""
-    _, nonlinear = _split(layout)
-    if not nonlinear:
-        lin, _ = _solve_linear_jit(problem, layout, {})
-        return dict(lin), "successful", 1
-    u_nl = {p.key: u0[p.key] for p in nonlinear}
-    u, code, steps = _solve_reduced(solver, u_nl, problem, layout, int(max_steps))
-    nl_values = {p.key: to_value(p, u[p.key]) for p in nonlinear}
-    lin, _ = _solve_linear_jit(problem, layout, nl_values)
-    return {**dict(lin), **nl_values}, RESULT_NAMES[int(code)], int(steps)
+def run_varpro(problem, x0: np.ndarray, options, progress):
+    """(x, result name, steps, loss history) by variable projection, polished by box LM when a
+    linear coefficient came out negative."""
+    check_applicable(problem)
+    rtol, atol = options.tolerances()
+    dtype = problem.ambient.dtype
+    lower, upper = (jnp.asarray(b, dtype) for b in problem.layout.bounds())
+    x, code, steps, history = _solve_reduced(problem, jnp.asarray(x0, dtype), lower, upper, options.max_steps, rtol,
+                                             atol, progress)
+    x, steps = np.asarray(x, np.float64), int(steps)
+    history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
+    lo, hi = problem.layout.bounds()
+    if lm.CODES[int(code)] == "successful" and (np.any(x < lo) or np.any(x > hi)):
+        x, code, more, extra, _, _ = lm.solve_box(problem, jnp.asarray(np.clip(x, lo, hi), dtype), lower, upper,
+                                            options.max_steps, rtol, atol, progress)
+        x, steps = np.asarray(x, np.float64), steps + int(more)
+        history += np.asarray(extra, np.float64)[:int(more)].tolist() if options.history else []
+    return x, lm.CODES[int(code)], steps, history

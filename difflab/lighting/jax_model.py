@@ -135,6 +135,17 @@ def target_only(mat: MaterialJ, target: int) -> MaterialJ:
     return mat._replace(**{k: (getattr(mat, k) if k == name else zero) for k in ("ka", "kd", "ks")})
 
 
+def surface_material(table, material_id, cell) -> MaterialJ:
+    """The coefficients at shading points, as `warp_model.surface_material`: material `material_id`
+    (int array, >= 0) of a stacked table (fields ka, kd, ks, ka2, kd2 (M, 3); n, m, f0 (M,)), with a
+    checker's second cell (cell == 1) taking ka2 / kd2."""
+    second = (cell == 1)[..., None]
+    return MaterialJ(ka=jnp.where(second, table.ka2[material_id], table.ka[material_id]),
+                     kd=jnp.where(second, table.kd2[material_id], table.kd[material_id]),
+                     ks=table.ks[material_id], n=table.n[material_id], m=table.m[material_id],
+                     f0=table.f0[material_id])
+
+
 def _target_name(target: int) -> str:
     return "ka" if target == TARGET_KA else "kd" if target == TARGET_KD else "ks"
 

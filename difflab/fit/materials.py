@@ -1,0 +1,55 @@
+"""The one material table of the fits: every fittable field of every material, stacked by id."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..lighting.warp_model import TEXTURE_TARGET_IDS
+
+
+class MaterialTable(NamedTuple):
+    """M materials stacked by material id (a Scene's `materials.values()` order).
+
+    ka, kd, ks, ka2, kd2 (M, 3); n, m, f0, kr, kt (M,); absorption (M, 3) per unit length;
+    texture_target (M,) int32: the TARGET_* id of the coefficient an image texture modulates (-1:
+    none). ka2 / kd2 are the checker's second cell (equal to ka / kd without a checker, as in
+    `warp_model.material_struct`). `lighting.jax_model.surface_material` reads the local part.
+    """
+
+    ka: jnp.ndarray
+    kd: jnp.ndarray
+    ks: jnp.ndarray
+    n: jnp.ndarray
+    m: jnp.ndarray
+    f0: jnp.ndarray
+    ka2: jnp.ndarray
+    kd2: jnp.ndarray
+    kr: jnp.ndarray
+    kt: jnp.ndarray
+    absorption: jnp.ndarray
+    texture_target: jnp.ndarray
+
+    @classmethod
+    def from_scene(cls, materials, dtype=jnp.float32) -> MaterialTable:
+        """From scene `Material`s in material-id order."""
+        materials = list(materials)
+
+        def stack(get, shape):
+            values = np.asarray([get(mat) for mat in materials], np.float64).reshape((len(materials),) + shape)
+            return jnp.asarray(values, dtype=dtype)
+
+        def field(name, shape):
+            return stack(lambda mat: getattr(mat, name), shape)
+
+        def second(name):
+            return stack(lambda mat: getattr(mat.checker, name) if mat.checker is not None else getattr(mat, name[:2]),
+                         (3,))
+
+        targets = [TEXTURE_TARGET_IDS[m.texture_target] if m.texture is not None else -1 for m in materials]
+        return cls(ka=field("ka", (3,)), kd=field("kd", (3,)), ks=field("ks", (3,)), n=field("n", ()),
+                   m=field("m", ()), f0=field("f0", ()), ka2=second("ka2"), kd2=second("kd2"), kr=field("kr", ()),
+                   kt=field("kt", ()), absorption=field("absorption", (3,)),
+                   texture_target=jnp.asarray(targets, jnp.int32).reshape(-1))

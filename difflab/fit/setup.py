@@ -1,0 +1,323 @@
+"""A fit prepared: the scene at its start values, the image model chosen, one Warp render per view,
+the parameter layout and the device problem. Every front end (`fit_material`, `fit_scene`,
+`fit_batch`, `identify`) builds one `Setup`; only the solve differs.
+
+The image model: "raytrace" re-forms the Whitted ray tracer's image from each view's recorded ray
+tree (`raytree.py`), "raster" the rasterizer's from its G-buffer (`shading.py`). Unless told, the
+scene decides: the ray tree when the scene is ray-traced, when any material it uses has kr or kt > 0
+(reflections or transparent shadows can carry a fitted material's colour to other pixels), or when a
+fitted material has an image texture; else the G-buffer.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..errors import DifflabError, FitError
+from ..lighting.jax_model import lights_to_jax
+from ..renderers.api import as_scene, render_frame
+from .materials import MaterialTable
+from .params import DEFAULT_PARAMS, KINDS, LIGHT_PARAM, SCENE_PARAMS, Layout, build_layout, fitted_materials, scene_value
+from .problem import LOSSES, Problem, ViewJ, value_index
+from .raytree import TreeModel, tree_influence
+from .shading import GBufferModel, influence
+from .stats import FLOAT_SIGMA, QUANTISATION_SIGMA, estimate_sigma
+from .targets import prepared_targets
+
+METHODS = ("raster", "raytrace")
+CENSOR_MIN_TIES = 3  # float targets: ties at the maximum (this many, under half the values) mark a ceiling
+
+
+@dataclass(frozen=True)
+class View:
+    """One target and what it was seen with. target (H, W, 3) float64 (0 where masked out); mask
+    (H, W) bool; weight (H, W, 3) >= 0 (0 outside the mask); ceiling: where its values clip (inf:
+    nowhere); quantised: integer-coded (8-bit steps); nonfinite: non-finite target values inside the
+    mask; record: its G-buffer or ray tree; scene: the scene of this view; used (H, W) bool: the
+    pixels the fit reads."""
+
+    target: np.ndarray
+    mask: np.ndarray
+    weight: np.ndarray
+    ceiling: float
+    quantised: bool
+    nonfinite: int
+    record: object
+    scene: object
+    used: np.ndarray
+
+
+def choose_method(scene, materials, method) -> str:
+    """The image model: `method` when given, else from the scene (see the module docstring)."""
+    if method is not None:
+        if method not in METHODS:
+            raise FitError(f"method: expected one of {', '.join(METHODS)} (or None: from the scene), got {method!r}")
+        return method
+    used = {obj.material for obj in scene.objects}
+    if scene.render.method == "raytrace" or any(scene.materials[m].kr > 0 or scene.materials[m].kt > 0 for m in used):
+        return "raytrace"
+    if any(scene.materials[m].texture is not None for m in materials):
+        return "raytrace"
+    return "raster"
+
+
+def apply_init(scene, materials, init):
+    """The scene with the starting values `init` written in: keys "kind" (one fitted material),
+    "material.kind" or "lights[i].intensity"; values a number or an RGB triple."""
+    if init is None:
+        return scene
+    if not isinstance(init, dict):
+        raise FitError(f"init: expected a dict of name -> value, got {type(init).__name__}")
+    mats, lights = dict(scene.materials), list(scene.lights)
+    for key, value in init.items():
+        where = f"init[{key!r}]"
+        if not isinstance(key, str):
+            raise FitError(f"{where}: names are strings")
+        try:
+            array = np.asarray(value, np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise FitError(f"{where}: expected a number or an RGB triple, got {value!r}") from None
+        if array.size not in (1, 3) or not np.all(np.isfinite(array)):
+            raise FitError(f"{where}: expected a finite number or RGB triple, got {array.tolist()}")
+        rgb = tuple(np.broadcast_to(array, (3,)).tolist())
+        try:
+            if (match := LIGHT_PARAM.match(key)) is not None:
+                i = int(match.group(1))
+                if i >= len(lights):
+                    raise FitError(f"{where}: the scene has {len(lights)} light(s)")
+                lights[i] = dataclasses.replace(lights[i], intensity=rgb)
+                continue
+            head, _, kind = key.rpartition(".")
+            name = head or (materials[0] if len(materials) == 1 else None)
+            if kind not in KINDS or kind == "intensity" or name not in materials:
+                raise FitError(f"{where}: expected 'kind' (one fitted material), 'material.kind' or "
+                               f"'lights[i].intensity'; fitted materials: {', '.join(materials)}")
+            if not KINDS[kind].rgb and array.size != 1:
+                raise FitError(f"{where}: {kind} is one number, got {array.tolist()}")
+            mats[name] = dataclasses.replace(mats[name], **{kind: rgb if KINDS[kind].rgb else float(array[0])})
+        except FitError:
+            raise
+        except DifflabError as exc:  # the scene's own validation names the field
+            raise FitError(f"{where}: {exc}") from None
+    return dataclasses.replace(scene, materials=mats, lights=tuple(lights))
+
+
+def _check_number(value, name, *, positive=True, allow_none=False):
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or \
+            (positive and value <= 0):
+        raise FitError(f"{name}: must be a finite number{' > 0' if positive else ''}, got {value!r}")
+    return float(value)
+
+
+class Setup:
+    """A fit prepared (see the module docstring). Attributes: scene (start values written in),
+    materials, method, layout, initial (key -> value), x0 (solver coordinates), views, used_pixels,
+    nonfinite, censored, sigma_given, sigma_floor, x64, dtype, problem."""
+
+    def __init__(self, scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None,
+                 per_channel=True, bounded=False, loss="l2", loss_scale=0.05, masks=None, weights=None, init=None,
+                 sigma=None, ceiling=None, x64=True, max_depth=None, spp=None, device="cpu", threads=None):
+        if loss not in LOSSES:
+            raise FitError(f"loss: unknown loss {loss!r}; known: {', '.join(LOSSES)}")
+        loss_scale = _check_number(loss_scale, "loss_scale")
+        self.sigma_given = _check_number(sigma, "sigma", allow_none=True)
+        if ceiling is not None and ceiling is not False:
+            ceiling = _check_number(ceiling, "ceiling")
+        for name, flag in (("per_channel", per_channel), ("bounded", bounded), ("x64", x64)):
+            if not isinstance(flag, bool):
+                raise FitError(f"{name}: must be True or False, got {flag!r}")
+        try:
+            scene = as_scene(scene)
+        except DifflabError as exc:
+            raise FitError(f"scene: {exc}") from None
+        self.materials = fitted_materials(scene, materials)
+        self.method = choose_method(scene, self.materials, method)
+        self.scene = scene = apply_init(scene, self.materials, init)  # a tree is recorded at the start values
+        self.layout: Layout = build_layout(scene, self.materials, params, tree=self.method == "raytrace",
+                                           per_channel=per_channel, bounded=bounded)
+        self._check_init_keys(init)
+        if self.method == "raster":
+            textured = [m for m in self.materials if scene.materials[m].texture is not None]
+            if textured:
+                raise FitError(f"material: {', '.join(textured)} has an image texture, which the G-buffer image "
+                               "model does not carry; fit with method='raytrace', or fit the texture itself with "
+                               "difflab.fit.texture_fit.fit_texture")
+        self.initial = {p.key: scene_value(scene, p) for p in self.layout}
+        self.x0 = self.layout.x_of(self.layout.flatten(self.initial))
+        self.views = self._record(targets, masks, weights, ceiling, max_depth, spp, device, threads)
+        self.used_pixels = int(sum(int(v.used.sum()) for v in self.views))
+        self._target_statistics()
+        self.x64 = x64
+        self.dtype = jnp.float64 if x64 else jnp.float32
+        with jax.enable_x64(x64):
+            self.problem = self._problem(loss, loss_scale)
+
+    def _target_statistics(self):
+        """nonfinite, censored (used values at the ceiling) and the noise floor of the targets."""
+        self.nonfinite = int(sum(v.nonfinite for v in self.views))
+        self.censored = int(sum(int(np.count_nonzero((v.target >= v.ceiling) & v.used[..., None]
+                                                     & (v.weight > 0))) for v in self.views))
+        self.sigma_floor = QUANTISATION_SIGMA if any(v.quantised for v in self.views) else FLOAT_SIGMA
+
+    def noise(self, residual_images) -> float:
+        """The pixel noise sigma: given, or estimated from the residual images (H, W, 3) at the
+        solution (from the targets where too few pixels allow), floored (see `stats`)."""
+        if self.sigma_given is not None:
+            return self.sigma_given
+        clean = [v.used & ~np.any(v.target >= v.ceiling, axis=-1) for v in self.views]
+        estimate = estimate_sigma(residual_images, clean)
+        if estimate is None:
+            estimate = estimate_sigma([v.target for v in self.views], clean, interior=False)
+        return max(estimate or 0.0, self.sigma_floor)
+
+    def retarget(self, images, init=None) -> Setup:
+        """The same fit (views, image models, compiled solve) for other target images, one (H, W, 3)
+        linear float array per view, and optionally other start values `init`."""
+        out = copy.copy(self)
+        views = []
+        for view, image in zip(self.views, images):
+            image = np.asarray(image, np.float64)
+            inside = np.isfinite(image) & view.mask[..., None]
+            views.append(dataclasses.replace(view, target=np.where(inside, image, 0.0),
+                                             nonfinite=int(np.count_nonzero(~np.isfinite(image) & view.mask[..., None]))))
+        out.views = views
+        out._target_statistics()
+        if init is not None:
+            scene = apply_init(self.scene, self.materials, init)
+            out.initial = {p.key: scene_value(scene, p) for p in self.layout}
+            out.x0 = self.layout.x_of(self.layout.flatten(out.initial))
+        with jax.enable_x64(self.x64):
+            out.problem = self.problem.with_targets(
+                [jnp.asarray(v.target.reshape(-1, 3)[np.flatnonzero(v.used)], self.dtype) for v in views])
+        return out
+
+    def _check_init_keys(self, init):
+        keys = {p.key for p in self.layout}
+        single = self.materials[0] + "." if len(self.materials) == 1 else None
+        for key in init or {}:
+            plain = key[len(single):] if single and key.startswith(single) else key
+            if plain not in keys:
+                raise FitError(f"init[{key!r}]: not fitted (fitted: {sorted(keys)})")
+
+    def _record(self, targets, masks, weights, ceiling, max_depth, spp, device, threads) -> list[View]:
+        """One Warp render per target: its G-buffer, or its ray tree (adaptive_threshold 0, so that
+        no child is cut by weight)."""
+        render = {"method": self.method}
+        if self.method == "raytrace":
+            render["adaptive_threshold"] = 0.0
+            if max_depth is not None:
+                render["max_depth"] = max_depth
+            if spp is not None:
+                render["spp"] = spp
+        ids = sorted({p.index for p in self.layout if p.kind != "intensity"})
+        all_surfaces = any(p.kind == "intensity" for p in self.layout)
+        crossing = sorted({p.index for p in self.layout if p.kind == "kt"})
+        views = []
+        for view_scene, image, file_ceiling, mask, weight, nonfinite in prepared_targets(self.scene, targets, masks,
+                                                                                          weights, render):
+            frame = render_frame(view_scene, device=device, threads=threads)
+            if self.method == "raytrace":
+                record = frame.ray_tree
+                tree_ids = range(len(self.scene.materials)) if all_surfaces else ids
+                touched = tree_influence(record, tree_ids, crossing)
+            else:
+                record = frame.gbuffer
+                touched = influence(record, ids, all_surfaces)
+            used = mask & (weight > 0).any(axis=-1) & touched
+            top = ceiling if ceiling is not None else file_ceiling
+            if top is None:  # float data: a clipped ceiling shows as ties at the maximum
+                values = image[used]
+                peak = float(values.max()) if values.size else 0.0
+                ties = np.count_nonzero(values == peak)
+                top = peak if CENSOR_MIN_TIES <= ties < values.size // 2 else np.inf
+            views.append(View(target=image, mask=mask, weight=weight, ceiling=np.inf if top is False else float(top),
+                              quantised=file_ceiling is not None, nonfinite=nonfinite, record=record,
+                              scene=view_scene, used=used))
+        return views
+
+    def _model(self, view: View, pixels):
+        if self.method == "raytrace":
+            return TreeModel.build(view.record, pixels, view.scene.background, self.dtype)
+        return GBufferModel.build(view.record, pixels, self.dtype)
+
+    def _view(self, view: View, pixels, index) -> ViewJ:
+        lights = lights_to_jax(view.scene.lights, self.dtype)
+        count = lights.intensity.shape[0]
+        intensity_index = np.full((count, 3), -1, np.int32)
+        shared = min(count, index.shape[0])
+        intensity_index[:shared] = index[:shared]
+        f = lambda x: jnp.asarray(np.asarray(x, np.float64), self.dtype)  # noqa: E731
+        return ViewJ(model=self._model(view, pixels), lights=lights, target=f(view.target.reshape(-1, 3)[pixels]),
+                     sqrt_weight=f(np.sqrt(view.weight.reshape(-1, 3)[pixels])), ceiling=f(view.ceiling),
+                     pixels=jnp.asarray(pixels, jnp.int32), intensity_index=jnp.asarray(intensity_index))
+
+    def _problem(self, loss, loss_scale) -> Problem:
+        index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
+        views = tuple(self._view(v, np.flatnonzero(v.used), index["intensity"]) for v in self.views)
+        return Problem(views=views, table=MaterialTable.from_scene(self.scene.materials.values(), self.dtype),
+                       ambient=jnp.asarray(self.scene.ambient, self.dtype),
+                       index={k: jnp.asarray(v) for k, v in index.items() if k != "intensity"},
+                       loss_scale=jnp.asarray(loss_scale, self.dtype), layout=self.layout, loss=loss)
+
+    def precheck(self) -> str | None:
+        """A result code when the fit cannot be made (non-finite target values under the masks, or
+        no pixel that the fitted parameters affect), else None."""
+        if self.nonfinite:
+            return "nonfinite_target"
+        if self.used_pixels == 0:
+            return "empty_mask"
+        return None
+
+    def residual_images(self, r) -> list[np.ndarray]:
+        """Per view (H, W, 3) float32 plain residuals min(model, ceiling) - target from the flat
+        weighted residuals r (0 outside the pixels used and where the weight is 0)."""
+        out, offset = [], 0
+        for view, jview in zip(self.views, self.problem.views):
+            sqrt_w = np.asarray(jview.sqrt_weight, np.float64)
+            part = np.asarray(r[offset:offset + sqrt_w.size], np.float64).reshape(sqrt_w.shape)
+            offset += sqrt_w.size
+            full = np.zeros(view.target.shape, np.float32)
+            full.reshape(-1, 3)[np.flatnonzero(view.used)] = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w,
+                                                                                                   1.0), 0.0)
+            out.append(full)
+        return out
+
+    def values(self, x) -> dict:
+        """Solver coordinates -> key -> (size,) values in scene units."""
+        with jax.enable_x64(True):
+            return self.layout.unflatten(np.asarray(self.layout.values(jnp.asarray(x, jnp.float64))))
+
+    def render(self, values: dict | None = None) -> list[np.ndarray]:
+        """Each view's whole image (H, W, 3) float32 from its image model at `values` (key -> value in
+        scene units; default: the start), pixels outside the masks included."""
+        flat = self.layout.flatten(self.initial if values is None else values)
+        out = []
+        with jax.enable_x64(self.x64):
+            index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
+            for view in self.views:
+                every = np.arange(view.used.size)
+                full = eqx.tree_at(lambda p: p.views, self.problem, (self._view(view, every, index["intensity"]),))
+                image = _images_jit(full, jnp.asarray(flat, self.dtype))[0]
+                out.append(np.asarray(image, np.float32).reshape(view.target.shape))
+        return out
+
+
+@eqx.filter_jit
+def _images_jit(problem, values):
+    return problem.images(values)
+
+
+class SceneSetup(Setup):
+    """A `Setup` with `fit_scene`'s defaults: the ray-tree image model and SCENE_PARAMS."""
+
+    def __init__(self, scene, targets, materials=None, params=SCENE_PARAMS, *, method="raytrace", **kwargs):
+        super().__init__(scene, targets, materials, params, method=method, **kwargs)

@@ -1,0 +1,117 @@
+"""The one fitting engine: the image model chosen from the scene, honest results (noise, chi-square,
+model mismatch), censored (clipped) targets, non-finite losses, and the parameter table's maps."""
+
+import jax
+import numpy as np
+import pytest
+from test_fit_helpers import TRUTH, make_scene, perturbed, scene_dict, target_of
+
+from difflab import Scene, render
+from difflab.fit import FitOptions, fit_material
+from difflab.fit.params import KINDS, Layout, Param
+
+START = perturbed(TRUTH)
+
+
+@pytest.fixture(scope="module")
+def mirror():
+    """The issue's trap: a ray-traced scene whose sphere reflects (kr = 0.1), with shadows."""
+    d = scene_dict(size=24, red={"kr": 0.1})
+    d["render"]["method"] = "raytrace"
+    scene = Scene.from_dict(d)
+    return scene, render(scene)
+
+
+def test_ray_traced_mirror_is_fitted_through_the_ray_tree(mirror):
+    scene, target = mirror
+    result = fit_material(scene, [target], "red", init=START)
+    assert result.model == "raytrace" and result.converged and not result.model_mismatch
+    for key in ("ka", "kd", "ks"):
+        np.testing.assert_allclose(result.params[key], TRUTH[key], rtol=1e-3)
+    assert result.chi2 < 1e-2
+
+
+def test_ray_traced_mirror_with_the_raster_model_forced_is_flagged(mirror):
+    """The G-buffer has no reflection: its best fit is biased (ka off by > 100 %), and the residuals
+    sit far above the noise, so the result says so: model_mismatch, chi-square >> 1, not `ok`."""
+    scene, target = mirror
+    result = fit_material(scene, [target], "red", init=START, method="raster")
+    assert result.model == "raster" and result.converged
+    assert result.model_mismatch and result.chi2 > 100 and not result.ok
+    assert np.max(np.abs(np.asarray(result.params["ka"]) - TRUTH["ka"]) / TRUTH["ka"]) > 0.5
+    assert "MODEL MISMATCH" in result.table()
+    # the residual image shows where: the reflection of the floor on the sphere
+    assert result.residuals[0].shape == target.shape and np.abs(result.residuals[0]).max() > 0.05
+
+
+def test_noise_estimate_and_chi_square_with_the_right_model(mirror):
+    """Noise added with sigma 0.02: estimated within 15 %, reduced chi-square near 1, no flag."""
+    scene, target = mirror
+    noisy = target + np.random.default_rng(3).normal(0, 0.02, target.shape)
+    result = fit_material(scene, [noisy], "red", init=START)
+    assert result.converged and not result.model_mismatch
+    assert result.sigma == pytest.approx(0.02, rel=0.15) and 0.7 < result.chi2 < 1.4
+
+
+def test_clipped_highlight_recovers_ks_and_n():
+    """A highlight rendered above 1 and clipped to 1 (as an 8-bit photo or a 16-bit render clips it):
+    the ceiling is detected, those pixels are censored, and ks and n come back within 1 %. Read as
+    plain values they bias ks and n by tens of percent."""
+    scene = make_scene(size=32, red={"ks": [1.5, 1.5, 1.5], "n": 20.0})
+    image = target_of(scene)
+    assert np.count_nonzero(image > 1.0) >= 10
+    clipped = np.minimum(image, 1.0)
+    start = {"ks": [1.2] * 3, "n": 16.0}
+    result = fit_material(scene, [clipped], "red", ("ka", "kd", "ks", "n"), init=start)
+    assert result.converged and result.censored == np.count_nonzero(image >= 1.0)
+    np.testing.assert_allclose(result.params["ks"], [1.5] * 3, rtol=1e-2)
+    assert result.params["n"] == pytest.approx(20.0, rel=1e-2)
+    naive = fit_material(scene, [clipped], "red", ("ka", "kd", "ks", "n"), init=start, ceiling=False)
+    assert naive.censored == 0 and abs(naive.params["n"] / 20.0 - 1) > 0.1
+
+
+def test_clipped_8bit_file_is_censored_at_one(tmp_path):
+    from difflab.io import save_image
+
+    scene = make_scene(size=24, red={"ks": [1.5, 1.5, 1.5], "n": 20.0})
+    image = target_of(scene)
+    path = save_image(tmp_path / "target.png", image)  # 8-bit sRGB: clipped at 1
+    result = fit_material(scene, [path], "red", ("kd", "ks", "n"), init={"ks": [1.2] * 3, "n": 16.0})
+    assert result.converged and result.censored >= np.count_nonzero(image > 1.0)
+    assert result.params["n"] == pytest.approx(20.0, rel=0.05)  # 8-bit quantisation limits it
+
+
+def test_infinite_loss_is_never_successful():
+    """A target of 1e30 everywhere, fitted in float32: every loss overflows; the fit ends with a
+    failure code (in float64 the same target is a finite problem, fitted by ka ~ 5e30)."""
+    scene = make_scene(size=16)
+    result = fit_material(scene, [np.full((16, 16, 3), 1e30)], "red", x64=False)
+    assert not result.converged and result.result == "nonfinite"
+    assert result.psnr < -500  # computed, not a math domain error
+
+
+@pytest.mark.parametrize("kind", sorted(KINDS))
+def test_every_kind_maps_into_its_bounds_and_back(kind):
+    """Solver coordinates stay inside each kind's bounds; the unconstrained map lands in them and
+    inverts (away from the start floor)."""
+    spec = KINDS[kind]
+    param = Param(kind, kind, 0, 1, spec.lower, spec.upper)
+    layout = Layout((param,))
+    lo, hi = layout.bounds()
+    value = np.array([0.3]) if np.isfinite(spec.upper) and spec.upper <= 1 else np.array([2.5])
+    x = layout.x_of(value)
+    assert lo <= x <= hi
+    with jax.enable_x64(True):
+        np.testing.assert_allclose(np.asarray(layout.values(x)), value, rtol=1e-12)
+        z = layout.free_from_x(x)
+        np.testing.assert_allclose(np.asarray(layout.x_from_free(z)), x, rtol=1e-9)
+        for far in (-1e3, 1e3):
+            assert lo <= float(layout.x_from_free(np.array([far]))[0]) <= hi
+
+
+def test_options_object_and_keywords_agree():
+    scene = make_scene(size=16)
+    target = target_of(scene)
+    a = fit_material(scene, [target], "red", init=START, options=FitOptions(solver="lm", max_steps=50))
+    b = fit_material(scene, [target], "red", init=START, max_steps=50)
+    assert a.params == b.params and a.steps == b.steps
