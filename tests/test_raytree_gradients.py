@@ -45,10 +45,10 @@ def jacobian():
     target = render_frame(scene).image
     setup = SceneSetup(scene, [target], materials=MATERIALS, params=PARAMS, per_channel=False, max_depth=4)
     with jax.enable_x64(True):
-        values = {k: jnp.asarray(np.asarray(v, np.float64)) for k, v in setup.initial.items()}
-        jac = jax.jacfwd(lambda vals: setup.problem.images(vals)[0])(values)
-        jac = {k: np.asarray(v).reshape(-1, 3) for k, v in jac.items()}
-    pixels = np.flatnonzero(setup.used[0])
+        values = jnp.asarray(setup.layout.flatten(setup.initial))
+        columns = np.asarray(jax.jacfwd(lambda v: setup.problem.images(v)[0])(values))  # (U, 3, p)
+        jac = {p.key: columns[..., i] for i, p in enumerate(setup.layout)}  # grey: one entry each
+    pixels = np.flatnonzero(setup.views[0].used)
     return setup, pixels, jac
 
 
