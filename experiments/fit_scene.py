@@ -77,7 +77,7 @@ def view_targets(scene, n_views, width, height, noise, rng):
 
 def recovery(scene, keys, start, width, height, rng) -> tuple[list[dict], dict]:
     """Rows (views, noise, key, relative error, stderr, ...) and the 3-view noise-free fit for the figure."""
-    from difflab.fit.scene_fit import fit_scene
+    from difflab.fit import fit_scene
 
     rows, figure = [], None
     for noise in (0.0, NOISE):
@@ -98,26 +98,27 @@ def recovery(scene, keys, start, width, height, rng) -> tuple[list[dict], dict]:
 
 def step_cost(scene, keys, start, width, height, depths, steps=4, repeats=3) -> list[dict]:
     """Median seconds per LM step (compiled; the first call compiles) at each max_depth."""
-    from difflab.fit.fit import solve
-    from difflab.fit.scene_fit import SceneSetup
+    from difflab.fit import SceneSetup, solve
     from difflab.renderers.api import render_frame
 
     rows = []
     for depth in depths:
-        deep = scene.with_overrides(render={"max_depth": depth})
-        target = render_frame(deep, width=width, height=height).image
+        deep = scene.with_overrides(render={"max_depth": depth},
+                                    camera={**scene.camera.to_dict(), "width": width, "height": height})
+        target = render_frame(deep).image
         setup = SceneSetup(deep, [target], MATERIALS, keys, init=start)
         t0 = time.perf_counter()
-        solve(setup, "lm", max_steps=steps, history=False)  # compile
+        solve(setup, max_steps=steps, history=False)  # compile
         compile_s = time.perf_counter() - t0
         times = []
         for _ in range(repeats):
-            _, _, done, seconds, _ = solve(setup, "lm", max_steps=steps, history=False)
-            times.append(seconds / max(done, 1))
-        tree = setup.views[0].tree
+            result = solve(setup, max_steps=steps, history=False)
+            times.append(result.seconds / max(result.steps, 1))
+        tree = setup.views[0].record
         rows.append({"max_depth": depth, "width": width, "height": height, "nodes": tree.n_nodes,
-                     "nodes_used": setup.problem.views[0].tree.n_nodes, "parameters": sum(p.size for p in setup.layout),
-                     "seconds_per_step": statistics.median(times), "first_call_seconds": round(compile_s, 2)})
+                     "nodes_used": setup.problem.views[0].model.tree.n_nodes,
+                     "parameters": setup.layout.size, "seconds_per_step": statistics.median(times),
+                     "first_call_seconds": round(compile_s, 2)})
     base = rows[0]["seconds_per_step"]
     for row in rows:
         row["ratio_to_depth1"] = row["seconds_per_step"] / base
@@ -133,7 +134,7 @@ def main(argv=None) -> int:
     fit_size, time_size, depths = ((48, 36), (96, 72), (1, 2, 3)) if args.small else ((160, 120), (320, 240),
                                                                                        (1, 2, 3, 4, 5))
     from difflab.demos import image_grid
-    from difflab.fit.scene_fit import SceneSetup
+    from difflab.fit import SceneSetup
     from difflab.io import write_json_atomic
     from difflab.scene import load_scene
 

@@ -17,7 +17,7 @@ import importlib
 
 _EXPORTS = {
     "FitOptions": "options", "SOLVERS": "options", "FitResult": "result", "fit": "fit", "fit_material": "fit",
-    "fit_scene": "fit", "fit_batch": "batch", "Identifiability": "identify", "identify": "identify",
+    "fit_scene": "fit", "solve": "fit", "fit_batch": "batch", "Identifiability": "identify", "identify": "identify",
     "MaterialTable": "materials", "KINDS": "params", "Param": "params", "evaluate_tree": "raytree",
     "tree_to_jax": "raytree", "METHODS": "setup", "SceneSetup": "setup", "Setup": "setup",
     "shade_gbuffer": "shading",

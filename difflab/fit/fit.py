@@ -91,6 +91,13 @@ def run_fit(setup: Setup, options: FitOptions, setup_seconds: float) -> FitResul
     return report(setup, out.x, out.result, out.steps, out.history, options, timings, out.linearised)
 
 
+def solve(setup: Setup, options=None, **option_fields) -> FitResult:
+    """Solve a prepared `Setup` (again: its compiled solve is reused) and report it; `options` and
+    keywords as `fit`'s (the precision is the setup's)."""
+    options = FitOptions.make(options, **{**option_fields, "x64": setup.x64})
+    return run_fit(setup, options, 0.0)
+
+
 def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, options=None, per_channel=True,
         bounded=False, loss="l2", loss_scale=0.05, masks=None, weights=None, init=None, sigma=None, ceiling=None,
         max_depth=None, spp=None, device="cpu", threads=None, **option_fields) -> FitResult:

@@ -13,20 +13,20 @@ from ..lighting.warp_model import TEXTURE_TARGET_IDS
 class MaterialTable(NamedTuple):
     """M materials stacked by material id (a Scene's `materials.values()` order).
 
-    ka, kd, ks, ka2, kd2 (M, 3); n, m, f0, kr, kt (M,); absorption (M, 3) per unit length;
+    ka, ka2, kd, kd2, ks (M, 3); n, m, f0, kr, kt (M,); absorption (M, 3) per unit length;
     texture_target (M,) int32: the TARGET_* id of the coefficient an image texture modulates (-1:
     none). ka2 / kd2 are the checker's second cell (equal to ka / kd without a checker, as in
     `warp_model.material_struct`). `lighting.jax_model.surface_material` reads the local part.
     """
 
     ka: jnp.ndarray
+    ka2: jnp.ndarray
     kd: jnp.ndarray
+    kd2: jnp.ndarray
     ks: jnp.ndarray
     n: jnp.ndarray
     m: jnp.ndarray
     f0: jnp.ndarray
-    ka2: jnp.ndarray
-    kd2: jnp.ndarray
     kr: jnp.ndarray
     kt: jnp.ndarray
     absorption: jnp.ndarray

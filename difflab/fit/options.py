@@ -9,7 +9,7 @@ from dataclasses import dataclass, fields
 
 from ..errors import FitError
 
-SOLVERS = ("lm", "varpro", "gauss_newton", "dogleg", "bfgs", "adam")
+SOLVERS = ("lm", "gauss_newton", "dogleg", "bfgs", "adam", "varpro")
 DEFAULT_TOL = {True: (1e-8, 1e-10), False: (1e-5, 1e-7)}  # (rtol, atol) by x64
 
 

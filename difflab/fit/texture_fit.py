@@ -33,9 +33,10 @@ import numpy as np
 import optimistix as optx
 
 from ..errors import FitError
-from ..lighting.jax_model import MaterialJ, fog_factor, lights_to_jax, shade, target_only, textured_material
+from ..lighting.jax_model import fog_factor, lights_to_jax, shade, surface_material, target_only, textured_material
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS, TEXTURE_TARGET_IDS
 from .cache import enable_compilation_cache
+from .materials import MaterialTable
 
 enable_compilation_cache()
 
@@ -122,8 +123,7 @@ def _affine_terms(gbuffer, sample, scene, mat):
     pts = gbuffer.points
     light_dist = np.where(np.isfinite(pts.light_dist[sample]), pts.light_dist[sample], np.inf)
     lights = lights_to_jax(tuple(scene.lights), jnp.float64)
-    base = MaterialJ(ka=jnp.asarray(mat.ka), kd=jnp.asarray(mat.kd), ks=jnp.asarray(mat.ks), n=jnp.asarray(mat.n),
-                     m=jnp.asarray(mat.m), f0=jnp.asarray(mat.f0))
+    base = surface_material(MaterialTable.from_scene([mat], jnp.float64), 0, jnp.int32(0))  # the one table
     target_id = TEXTURE_TARGET_IDS[mat.texture_target]
     model = SPECULAR_MODELS[gbuffer.specular]
     ambient = jnp.asarray(gbuffer.ambient, jnp.float64)

@@ -1,14 +1,21 @@
-"""Benchmark: fitting ka, kd, ks (RGB) and n to a 256x256 target, Levenberg-Marquardt versus Adam.
+"""Benchmark of the fitting engine, every figure measured in the same run.
 
-Measures wall time and iterations of one fit, including compilation (first call after
-`jax.clear_caches()`) and after it (median over repeats), for LM, Adam, variable projection, LM in
-float32; and a batch of independent fits, `jax.vmap` over one LM solve versus a loop over the same
-compiled solve. Ratios are against LM measured in the same run. Mitsuba 3 is compared when installed.
+1. Steps and per-step cost of the box Levenberg-Marquardt solve (ka, kd, ks RGB and n, a size x size
+   Phong target, 30 % perturbed start) against a plain JAX step on the same pixels (jax.jacfwd of
+   the same residuals + a Cholesky solve of the damped normal equations), in float64 and float32;
+   the warm wall time of a whole `fit_material` call (setup, solve, statistics).
+2. A fresh process that loads a scene file and a target and fits: wall time with the persistent
+   compilation cache warm, and with an empty one.
+3. Batches: B targets of one view, vmap and loop, throughput against B x one fit.
+4. Mitsuba 3 (when installed): a Lambertian sphere rendered by Mitsuba (64 spp, direct light) is the
+   target. Mitsuba's own Adam loop (llvm_ad_rgb, 4 spp per step) recovers the reflectance; difflab
+   fits kd, ks and n to the same image. Reported: Mitsuba's time to 1 % and 0.1 % of the truth,
+   difflab's steps, wall time, kd against reflectance / pi and ks.
 
 Writes experiments/results/bench_fit.json and prints a table.
 
-    python experiments/bench/fit.py            # 256x256, 5 repeats, batch of 8 at 64x64
-    python experiments/bench/fit.py --small    # 64x64, 2 repeats, batch of 4 at 32x32
+    python experiments/bench/fit.py            # 256x256, 5 repeats, batches of up to 16 at 64x64
+    python experiments/bench/fit.py --small    # 64x64, 2 repeats, batches of up to 8 at 32x32
 """
 
 from __future__ import annotations
@@ -18,7 +25,9 @@ import glob
 import os
 import re
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -27,8 +36,17 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from fit_common import RESULTS, SEED, perturb, rel_error, scene_dict, versions  # noqa: E402
 
-
-DIFFUSE_TRUTH = [0.2, 0.5, 0.8]
+REFLECTANCE = [0.2, 0.5, 0.8]
+LIGHT = {"position": [3.0, 4.0, 3.0], "intensity": 40.0}
+FRESH = """
+import sys, time
+t0 = time.perf_counter()
+import numpy as np
+from difflab import fit_material, load_image, load_scene
+scene = load_scene(sys.argv[1])
+result = fit_material(scene, [load_image(sys.argv[2])], "red", history=False, progress=False)
+print(result.result, result.steps, time.perf_counter() - t0)
+"""
 
 
 def newest_libllvm() -> str | None:
@@ -42,10 +60,96 @@ def newest_libllvm() -> str | None:
     return max(found)[1] if found else None
 
 
-def mitsuba_diffuse_loop(size: int, iterations: int) -> dict:
-    """Mitsuba 3 (llvm_ad_rgb) recovering a sphere's diffuse reflectance by gradient descent (Adam,
-    lr 0.05, 4 spp per step, from 0.5 grey) against a 64-spp target of the same scene: the way a
-    physically based inverse renderer fits a material. Raises ImportError without Mitsuba."""
+def median_time(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def per_step(scene, target, start, x64: bool, repeats: int) -> dict:
+    """The engine's LM against a plain JAX Jacobian + Cholesky step on the same problem."""
+    import jax
+    import jax.numpy as jnp
+    import jax.scipy.linalg as jsl
+
+    from difflab.fit import Setup, solve
+
+    setup = Setup(scene, [target], "red", init=start, x64=x64)
+    first = time.perf_counter()
+    result = solve(setup, history=False, progress=False)
+    first = time.perf_counter() - first
+    solve_s = statistics.median([solve(setup, history=False, progress=False).seconds for _ in range(repeats)])
+
+    with jax.enable_x64(x64):
+        problem, x0 = setup.problem, jnp.asarray(setup.x0, setup.dtype)
+
+        @jax.jit
+        def plain(problem, x):
+            r = problem.residuals(x)
+            jac = jax.jacfwd(problem.residuals)(x)
+            a = jac.T @ jac + 1e-3 * jnp.diag(jnp.diagonal(jac.T @ jac))
+            return x + jsl.cho_solve(jsl.cho_factor(a), -jac.T @ r)
+
+        jax.block_until_ready(plain(problem, x0))
+        baseline = median_time(lambda: jax.block_until_ready(plain(problem, x0)), max(repeats, 5))
+    err = rel_error(result.params, {k: v for k, v in TRUTH.items()})
+    step = solve_s / max(result.steps, 1)
+    return {"x64": x64, "result": result.result, "steps": result.steps, "first_call_s": first, "solve_s": solve_s,
+            "step_s": step, "plain_step_s": baseline, "step_ratio": step / baseline, "max_rel_error": max(err.values()),
+            "used_pixels": setup.used_pixels}
+
+
+def fresh_process(scene, target, cache_dir: str | None) -> dict:
+    """Wall time of a new Python process that loads the scene file and the target and fits."""
+    from difflab.io import save_image
+    from difflab.scene import save_scene
+
+    with tempfile.TemporaryDirectory() as folder:
+        scene_path, target_path = Path(folder) / "scene.json", Path(folder) / "target.npy"
+        save_scene(scene, scene_path)
+        save_image(target_path, target)
+        env = dict(os.environ)
+        if cache_dir is not None:
+            env["DIFFLAB_CACHE_DIR"] = cache_dir
+        t0 = time.perf_counter()
+        out = subprocess.run([sys.executable, "-c", FRESH, str(scene_path), str(target_path)], env=env,
+                             capture_output=True, text=True, check=True)
+        wall = time.perf_counter() - t0
+    code, steps, inside = out.stdout.split()[-3:]
+    return {"wall_s": wall, "inside_s": float(inside), "result": code, "steps": int(steps)}
+
+
+def batches(rng, sizes, px: int) -> list[dict]:
+    """Throughput of fit_batch (vmap and loop) against B x a single fit of the same view."""
+    from difflab.fit import fit_batch
+    from difflab.renderers.api import render_frame
+    from difflab.scene import Scene
+
+    scene = Scene.from_dict(scene_dict(px))
+    images = np.stack([render_frame(Scene.from_dict(scene_dict(px, red={"kd": rng.uniform(0.2, 0.8, 3).tolist()})))
+                       .image for _ in range(max(sizes))])
+    rows = []
+    for vmap in (True, False):
+        for b in sizes:
+            def run():
+                return fit_batch(scene, images[:b], "red", ("kd", "n"), vmap=vmap, init={"kd": [0.5] * 3, "n": 18.0},
+                                 history=False, progress=False)
+
+            results = run()  # compile for this batch size
+            seconds = median_time(run, 3)
+            rows.append({"vmap": vmap, "batch": b, "seconds": seconds, "per_fit_s": seconds / b,
+                         "converged": sum(r.converged for r in results)})
+    for row in rows:
+        one = next(r for r in rows if r["vmap"] == row["vmap"] and r["batch"] == 1)
+        row["efficiency"] = one["seconds"] * row["batch"] / row["seconds"]
+    return rows
+
+
+def mitsuba_comparison(size: int, iterations: int, repeats: int) -> dict:
+    """Mitsuba's Adam loop and difflab's fit on one Mitsuba target (raises ImportError without it)."""
     libllvm = newest_libllvm()
     if libllvm and "DRJIT_LIBLLVM_PATH" not in os.environ:
         os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
@@ -55,14 +159,17 @@ def mitsuba_diffuse_loop(size: int, iterations: int) -> dict:
     mi.set_variant("llvm_ad_rgb")
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "direct"},
-        "sensor": {"type": "perspective", "fov": 40,
+        "sensor": {"type": "perspective", "fov": 40, "fov_axis": "y",
                    "to_world": mi.ScalarTransform4f().look_at(origin=[0, 1.2, 4], target=[0, 0.6, 0], up=[0, 1, 0]),
-                   "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb"}},
-        "light": {"type": "point", "position": [3, 4, 3], "intensity": {"type": "rgb", "value": [40.0] * 3}},
+                   "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb",
+                            "rfilter": {"type": "box"}}},
+        "light": {"type": "point", "position": LIGHT["position"],
+                  "intensity": {"type": "rgb", "value": [LIGHT["intensity"]] * 3}},
         "sphere": {"type": "sphere", "center": [0, 1, 0], "radius": 1,
-                   "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": DIFFUSE_TRUTH}}},
+                   "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": REFLECTANCE}}},
     })
     target = mi.render(scene, spp=64, seed=SEED)
+    target_np = np.asarray(target, np.float32)[..., :3]
     params = mi.traverse(scene)
     key = "sphere.bsdf.reflectance.value"
     params[key] = mi.Color3f(0.5, 0.5, 0.5)
@@ -70,6 +177,7 @@ def mitsuba_diffuse_loop(size: int, iterations: int) -> dict:
     opt = mi.ad.Adam(lr=0.05)
     opt[key] = params[key]
     params.update(opt)
+    trace = []
     start = time.perf_counter()
     for it in range(iterations):
         image = mi.render(scene, params, spp=4, seed=it + 1)
@@ -78,27 +186,52 @@ def mitsuba_diffuse_loop(size: int, iterations: int) -> dict:
         value = opt[key]
         opt[key] = dr.select(value < 0.0, 0.0, dr.select(value > 1.0, 1.0, value))  # (dr.clip: LLVM fmaximum)
         params.update(opt)
-    seconds = time.perf_counter() - start
-    found = np.array(params[key], np.float64).reshape(-1)[:3]
-    return {"variant": "llvm_ad_rgb", "iterations": iterations, "seconds": seconds,
-            "seconds_per_iteration": seconds / iterations, "found": found.tolist(),
-            "max_rel_error": float(np.max(np.abs(found - DIFFUSE_TRUTH) / DIFFUSE_TRUTH))}
+        found = np.array(params[key], np.float64).reshape(-1)[:3]
+        trace.append((time.perf_counter() - start, float(np.max(np.abs(found - REFLECTANCE) / REFLECTANCE))))
+
+    def time_to(tol):
+        return next((t for t, err in trace if err < tol), None)
+
+    mitsuba = {"iterations": iterations, "seconds": trace[-1][0], "final_max_rel_error": trace[-1][1],
+               "time_to_1pct_s": time_to(1e-2), "time_to_0.1pct_s": time_to(1e-3)}
+    return {"mitsuba": mitsuba, "difflab": difflab_on_mitsuba_target(size, target_np, repeats)}
 
 
-def difflab_diffuse_fit(size: int) -> dict:
-    """difflab's LM on the matching problem: kd of a Lambert sphere (ks = 0) from one exact target."""
+def difflab_on_mitsuba_target(size: int, target: np.ndarray, repeats: int) -> dict:
+    """kd, ks, n of a sphere fitted to Mitsuba's image: kd should be reflectance / pi, ks 0 (its bound).
+    Mitsuba's pixels integrate over their area, difflab samples centres: the fit reads the sphere's
+    interior pixels (2 pixels in from its silhouette)."""
     from difflab.fit import fit_material
     from difflab.renderers.api import render_frame
     from difflab.scene import Scene
 
-    scene = Scene.from_dict(scene_dict(size, red={"kd": DIFFUSE_TRUTH, "ks": [0.0] * 3}))
-    target = render_frame(scene).image
-    times = []
-    for _ in range(3):
-        result = fit_material(scene, [target], "red", ("kd",), init={"kd": [0.5] * 3}, history=False)
-        times.append(result.seconds)
-    return {"steps": result.steps, "first_call_s": times[0], "median_s": statistics.median(times[1:]),
-            "max_rel_error": float(np.max(np.abs(np.asarray(result.params["kd"]) - DIFFUSE_TRUTH) / DIFFUSE_TRUTH))}
+    d = scene_dict(size, red={"ka": [0.0] * 3, "kd": [0.1] * 3, "ks": [0.2] * 3, "n": 10.0},
+                   lights=[{"type": "point", "position": LIGHT["position"], "intensity": [LIGHT["intensity"]] * 3,
+                            "attenuation": [0, 0, 1]}])
+    d["ambient"], d["background"] = [0, 0, 0], [0, 0, 0]
+    d["objects"] = d["objects"][:1]  # the sphere alone, as in Mitsuba's scene
+    d["render"]["shadows"] = False
+    scene = Scene.from_dict(d)
+    mask = render_frame(scene).gbuffer.material == 0
+    for _ in range(2):  # erode by one pixel
+        padded = np.pad(mask, 1)
+        mask = np.logical_and.reduce([padded[1 + di:mask.shape[0] + 1 + di, 1 + dj:mask.shape[1] + 1 + dj]
+                                      for di in (-1, 0, 1) for dj in (-1, 0, 1)])
+
+    def run():
+        return fit_material(scene, [target], "red", ("kd", "ks", "n"), masks=[mask], history=False, progress=False)
+
+    t0 = time.perf_counter()
+    result = run()
+    first = time.perf_counter() - t0
+    wall = median_time(run, repeats)
+    kd_error = np.abs(np.asarray(result.params["kd"]) * np.pi - REFLECTANCE) / REFLECTANCE
+    return {"result": result.result, "steps": result.steps, "first_call_s": first, "wall_s": wall,
+            "kd_times_pi": (np.asarray(result.params["kd"]) * np.pi).tolist(), "kd_max_rel_error": float(kd_error.max()),
+            "ks": result.params["ks"], "at_bound": result.at_bound, "chi2": result.chi2}
+
+
+TRUTH = {"ka": [0.1, 0.05, 0.02], "kd": [0.7, 0.2, 0.1], "ks": [0.5, 0.4, 0.3], "n": 24.0}
 
 
 def main(argv=None) -> int:
@@ -106,90 +239,68 @@ def main(argv=None) -> int:
     parser.add_argument("--small", action="store_true")
     parser.add_argument("--size", type=int)
     parser.add_argument("--repeats", type=int)
-    parser.add_argument("--adam-steps", type=int, default=2000)
+    parser.add_argument("--adam-steps", type=int)
     parser.add_argument("--out", type=Path, default=RESULTS / "bench_fit.json")
     args = parser.parse_args(argv)
     size = args.size or (64 if args.small else 256)
     repeats = args.repeats or (2 if args.small else 5)
 
-    import jax
-
-    from difflab.fit import Setup, fit_batch, solve
+    from difflab.fit import fit_material
     from difflab.io import write_json_atomic
     from difflab.renderers.api import render_frame
     from difflab.scene import Scene
 
     rng = np.random.default_rng(SEED)
-    truth = {"ka": [0.1, 0.05, 0.02], "kd": [0.7, 0.2, 0.1], "ks": [0.5, 0.4, 0.3], "n": 24.0}
     scene = Scene.from_dict(scene_dict(size))
     target = render_frame(scene).image
-    start = perturb(truth, rng)
-
-    configs = [("lm", {"solver": "lm"}, True), ("adam", {"solver": "adam", "max_steps": args.adam_steps,
-                                                         "learning_rate": 0.02}, True),
-               ("varpro", {"solver": "varpro"}, True), ("lm_float32", {"solver": "lm"}, False)]
-    rows = []
-    for name, opts, x64 in configs:
-        jax.clear_caches()
-        setup = Setup(scene, [target], "red", init=start, x64=x64)
-        times = []
-        for i in range(repeats + 1):
-            values, result, steps, seconds, _ = solve(setup, history=False, **opts)
-            times.append(seconds)
-        err = rel_error({k: values[k] for k in truth}, truth)
-        rows.append({"method": name, "x64": x64, "result": result, "steps": steps,
-                     "first_call_s": times[0], "median_s": statistics.median(times[1:]),
-                     "max_rel_error": max(err.values()), "used_pixels": setup.used_pixels})
-
-    lm = rows[0]
-    for row in rows:
-        row["ratio_to_lm"] = row["median_s"] / lm["median_s"]
-
-    # batched fits: B independent targets of one view
-    batch_size, batch_px = (4, 32) if args.small else (8, 64)
-    small_scene = Scene.from_dict(scene_dict(batch_px))
-    images = np.stack([render_frame(Scene.from_dict(scene_dict(batch_px, red={"kd": rng.uniform(0.2, 0.8, 3).tolist()})))
-                       .image for _ in range(batch_size)])
-    batch = {}
-    for vmap in (True, False):
-        times = []
-        for _ in range(repeats + 1):
-            t0 = time.perf_counter()
-            results = fit_batch(small_scene, images, "red", ("kd", "n"), vmap=vmap, init={"kd": [0.5] * 3, "n": 18.0})
-            times.append(time.perf_counter() - t0)
-        batch["vmap" if vmap else "loop"] = {
-            "first_call_s": times[0], "median_s": statistics.median(times[1:]),
-            "solve_median_s": results[0].timings["solve"], "results": sorted({r.result for r in results}),
-            "steps": [r.steps for r in results]}
-
+    start = perturb(TRUTH, rng)
+    steps = [per_step(scene, target, start, x64, repeats) for x64 in (True, False)]
+    fit_material(scene, [target], "red", init=start, history=False, progress=False)
+    warm = median_time(lambda: fit_material(scene, [target], "red", init=start, history=False, progress=False),
+                       repeats)
+    start_scene = Scene.from_dict(scene_dict(size, red=start))
+    with tempfile.TemporaryDirectory() as empty:
+        fresh = {"warm_cache": (fresh_process(start_scene, target, None), fresh_process(start_scene, target, None))[1],
+                 "empty_cache": fresh_process(start_scene, target, empty)}
+    batch_rows = batches(rng, (1, 2, 4, 8) if args.small else (1, 2, 4, 8, 16), 32 if args.small else 64)
     try:
-        mitsuba = mitsuba_diffuse_loop(size, iterations=20 if args.small else 100)
-        mitsuba_kd = difflab_diffuse_fit(size)
-        mitsuba = {**mitsuba, "difflab_same_problem": mitsuba_kd,
-                   "summary": f"Mitsuba 3 Adam recovering a diffuse reflectance: {mitsuba['iterations']} iterations "
-                              f"in {mitsuba['seconds']:.2f} s ({mitsuba['seconds_per_iteration'] * 1e3:.0f} ms each), "
-                              f"max rel. error {mitsuba['max_rel_error']:.2e}; difflab LM on the same kd problem: "
-                              f"{mitsuba_kd['steps']} steps, {mitsuba_kd['median_s']:.3f} s, max rel. error "
-                              f"{mitsuba_kd['max_rel_error']:.2e}"}
-    except ImportError:
-        mitsuba = "not installed: Mitsuba comparison skipped"
+        mitsuba = mitsuba_comparison(size, args.adam_steps or (60 if args.small else 200), repeats)
+    except ImportError as exc:
+        mitsuba = f"not installed ({exc}): Mitsuba comparison skipped"
 
-    report = {"what": f"fit ka, kd, ks (RGB) and n to a {size}x{size} Phong target from a 30% perturbed start",
-              "seed": SEED, "repeats": repeats, "size": size, "rows": rows,
-              "batch": {"size": batch_size, "pixels": batch_px, **batch}, "mitsuba": mitsuba, "versions": versions()}
+    report = {"what": f"fit ka, kd, ks (RGB) and n to a {size}x{size} Phong target from a 30 % perturbed start; "
+                      "batches; a fresh process; Mitsuba 3 on its own target", "seed": SEED, "size": size,
+              "repeats": repeats, "per_step": steps, "warm_fit_material_s": warm, "fresh_process": fresh,
+              "batch": batch_rows, "mitsuba": mitsuba, "versions": versions()}
     write_json_atomic(args.out, report)
-    print(f"{'method':<12} {'result':<28} {'steps':>6} {'first (s)':>10} {'median (s)':>11} {'x LM':>7} {'max rel err':>12}")
-    for r in rows:
-        print(f"{r['method']:<12} {r['result']:<28} {r['steps']:>6} {r['first_call_s']:>10.3f} {r['median_s']:>11.4f} "
-              f"{r['ratio_to_lm']:>7.2f} {r['max_rel_error']:>12.2e}")
-    b = report["batch"]
-    print(f"batch of {batch_size} at {batch_px}x{batch_px}: vmap {b['vmap']['median_s']:.3f} s "
-          f"(solve {b['vmap']['solve_median_s']:.3f} s), loop {b['loop']['median_s']:.3f} s "
-          f"(solve {b['loop']['solve_median_s']:.3f} s)")
-    print(mitsuba["summary"] if isinstance(mitsuba, dict) else f"Mitsuba: {mitsuba}")
-    print(f"summary: {size}x{size} LM {lm['median_s']:.3f} s after compilation ({lm['steps']} steps, "
-          f"{lm['first_call_s']:.1f} s with compilation); Adam {rows[1]['median_s'] / lm['median_s']:.1f}x slower "
-          f"({rows[1]['steps']} steps, {rows[1]['result']}); wrote {args.out}")
+
+    print(f"{'precision':<10} {'result':<12} {'steps':>5} {'first (s)':>10} {'solve (s)':>10} {'step (ms)':>10} "
+          f"{'plain JAX step (ms)':>20} {'ratio':>6} {'max rel err':>12}")
+    for r in steps:
+        print(f"{'float64' if r['x64'] else 'float32':<10} {r['result']:<12} {r['steps']:>5} {r['first_call_s']:>10.2f} "
+              f"{r['solve_s']:>10.4f} {r['step_s'] * 1e3:>10.2f} {r['plain_step_s'] * 1e3:>20.2f} "
+              f"{r['step_ratio']:>6.2f} {r['max_rel_error']:>12.1e}")
+    print(f"float32 / float64 solve time: {steps[1]['solve_s'] / steps[0]['solve_s']:.2f}; warm fit_material "
+          f"(setup + solve + statistics): {warm:.3f} s")
+    print(f"fresh process (load scene + target, fit): warm cache {fresh['warm_cache']['wall_s']:.2f} s, "
+          f"empty cache {fresh['empty_cache']['wall_s']:.2f} s")
+    for vmap in (True, False):
+        cells = ", ".join(f"B={r['batch']}: {r['per_fit_s'] * 1e3:.1f} ms/fit ({r['efficiency'] * 100:.0f} %)"
+                          for r in batch_rows if r["vmap"] == vmap)
+        print(f"batch {'vmap' if vmap else 'loop'} (throughput vs B x one fit): {cells}")
+    if isinstance(mitsuba, dict):
+        m, d = mitsuba["mitsuba"], mitsuba["difflab"]
+        fmt = lambda s: "not reached" if s is None else f"{s:.2f} s"  # noqa: E731
+        print(f"Mitsuba 3 Adam ({m['iterations']} iterations, {m['seconds']:.1f} s): 1 % at "
+              f"{fmt(m['time_to_1pct_s'])}, 0.1 % at {fmt(m['time_to_0.1pct_s'])}; difflab kd, ks, n on the same "
+              f"target: {d['steps']} steps, {d['wall_s']:.3f} s warm ({d['first_call_s']:.1f} s first), kd x pi "
+              f"within {d['kd_max_rel_error'] * 100:.2f} % of the reflectance, ks max {max(d['ks']):.2g} "
+              f"(at bound: {d['at_bound']})")
+        if m["time_to_1pct_s"]:
+            print(f"difflab / Mitsuba time to 1 %: 1/{m['time_to_1pct_s'] / d['wall_s']:.0f}")
+    else:
+        print(f"Mitsuba: {mitsuba}")
+    print(f"wrote {args.out}")
     return 0
 
 
