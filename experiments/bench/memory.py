@@ -85,15 +85,26 @@ def run(case: str, size: int) -> dict:
         difflab.save_image(path, np.random.default_rng(0).random((n, n, 3)).astype(np.float32))
         return lambda: difflab.load_image(path)
 
+    def obj(n):  # an OBJ file of a uv sphere with n bands, 4 n^2 triangles
+        from difflab.geometry import load_mesh, uv_sphere
+
+        path = texture_dir / f"sphere{n}.obj"
+        mesh = uv_sphere(1.0, n_lat=n, n_lon=2 * n)
+        path.write_text("".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in mesh.vertices)
+                        + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces))
+        return path, lambda: load_mesh(path)
+
     lights = 5 if case == "raster_lights" else 1
     warm = {"raster": lambda: raster(8, lights), "raster_lights": lambda: raster(8, lights),
             "raytrace": lambda: raytrace(8), "raytrace_deep": lambda: raytrace_deep(8), "teapot": lambda: teapot(2), "texture": texture(8)[1],
-            "load": load(8)}[case]
+            "load": load(8), "obj": obj(4)[1]}[case]
     warm()
     if case == "texture":
         _, work = texture(size)
     elif case == "load":
         work = load(size)
+    elif case == "obj":
+        obj_path, work = obj(size)
     else:
         work = {"raster": lambda: raster(size, lights), "raster_lights": lambda: raster(size, lights),
                 "raytrace": lambda: raytrace(size), "raytrace_deep": lambda: raytrace_deep(size),
@@ -109,10 +120,13 @@ def run(case: str, size: int) -> dict:
         estimate = limits.raster_frame_bytes(units, units, lights, result.stats["triangles"])
     elif case in ("raytrace", "raytrace_deep"):
         units = result.stats["nodes"]
-        estimate = limits.raytrace_bytes(units, result.stats["nodes"], 1, True)
+        estimate = limits.raytrace_bytes(size * size, units, 1, True)
     elif case == "teapot":
         units = result.stats["triangles"]
         estimate = limits.raster_frame_bytes(32 * 32, 32 * 32, 1, units)
+    elif case == "obj":
+        units = obj_path.stat().st_size
+        estimate = units * limits.MESH_FILE_BYTES
     else:
         units = size * size
         estimate = units * (limits.TEXEL_BYTES if case == "texture" else limits.IMAGE_LOAD_BYTES)
@@ -127,6 +141,7 @@ CASES = {  # case: (small sizes, full sizes, unit)
     "teapot": ((32, 64), (64, 128), "triangle"),
     "texture": ((512, 1024), (1024, 2048), "texel"),
     "load": ((512, 1024), (1024, 2048), "pixel"),
+    "obj": ((100, 200), (200, 400), "byte of an OBJ file"),
 }
 
 
