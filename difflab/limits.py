@@ -62,9 +62,10 @@ MESH_FILE_BYTES = 14
 TEXEL_BYTES = 80
 #: One pixel of an 8-bit image file being read (decode, table lookup to float32; measured 26.5).
 IMAGE_LOAD_BYTES = 30
-#: One float64 element of a fit's Jacobian-sized arrays (residuals x parameters), with the solver's
-#: copies (Jacobian, J^T J work space, a factorisation): an estimate, 4 copies of 8 bytes.
-FIT_ELEMENT_BYTES = 4 * 8
+#: A fit (fit_material, Levenberg-Marquardt, float64): per residual x fitted number (the Jacobian and
+#: the solver's copies; measured 24.4), plus JAX's compilation for a new problem size (measured ~180 MiB).
+FIT_ELEMENT_BYTES = 28
+FIT_OVERHEAD_BYTES = 256 * 2 ** 20
 
 _SUFFIX = {"": 1, "K": 2 ** 10, "M": 2 ** 20, "G": 2 ** 30, "T": 2 ** 40}
 
@@ -235,5 +236,5 @@ def require_image(width: int, height: int, what: str, per_pixel: int = IMAGE_LOA
 
 
 def fit_bytes(n_residuals: int, n_params: int) -> int:
-    """Peak bytes of a least-squares fit: residuals x parameters x FIT_ELEMENT_BYTES."""
-    return n_residuals * max(1, n_params) * FIT_ELEMENT_BYTES
+    """Peak bytes of a least-squares fit: FIT_OVERHEAD_BYTES + residuals x parameters x FIT_ELEMENT_BYTES."""
+    return FIT_OVERHEAD_BYTES + n_residuals * max(1, n_params) * FIT_ELEMENT_BYTES

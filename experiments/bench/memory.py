@@ -94,10 +94,16 @@ def run(case: str, size: int) -> dict:
                         + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces))
         return path, lambda: load_mesh(path)
 
+    def fit(n):  # fit ka, kd, ks, n (10 numbers) of a sphere to an n x n target of itself
+        sphere = scene(n, [{"type": "sphere", "center": [0, 0, 0], "radius": 1.5, "material": "m"}],
+                       {"m": {"ka": 0.1, "kd": [0.6, 0.3, 0.2], "ks": 0.4, "n": 20}}, 1, method="raster")
+        target = difflab.render(sphere)
+        return lambda: difflab.fit_material(sphere, [target], "m", max_steps=5)
+
     lights = 5 if case == "raster_lights" else 1
     warm = {"raster": lambda: raster(8, lights), "raster_lights": lambda: raster(8, lights),
             "raytrace": lambda: raytrace(8), "raytrace_deep": lambda: raytrace_deep(8), "teapot": lambda: teapot(2), "texture": texture(8)[1],
-            "load": load(8), "obj": obj(4)[1]}[case]
+            "load": load(8), "obj": obj(4)[1], "fit": fit(8)}[case]
     warm()
     if case == "texture":
         _, work = texture(size)
@@ -105,6 +111,8 @@ def run(case: str, size: int) -> dict:
         work = load(size)
     elif case == "obj":
         obj_path, work = obj(size)
+    elif case == "fit":
+        work = fit(size)
     else:
         work = {"raster": lambda: raster(size, lights), "raster_lights": lambda: raster(size, lights),
                 "raytrace": lambda: raytrace(size), "raytrace_deep": lambda: raytrace_deep(size),
@@ -124,6 +132,9 @@ def run(case: str, size: int) -> dict:
     elif case == "teapot":
         units = result.stats["triangles"]
         estimate = limits.raster_frame_bytes(32 * 32, 32 * 32, 1, units)
+    elif case == "fit":
+        units = size * size * 3 * 10  # residuals x fitted numbers
+        estimate = limits.fit_bytes(size * size * 3, 10)
     elif case == "obj":
         units = obj_path.stat().st_size
         estimate = units * limits.MESH_FILE_BYTES
@@ -142,6 +153,7 @@ CASES = {  # case: (small sizes, full sizes, unit)
     "texture": ((512, 1024), (1024, 2048), "texel"),
     "load": ((512, 1024), (1024, 2048), "pixel"),
     "obj": ((100, 200), (200, 400), "byte of an OBJ file"),
+    "fit": ((64, 128), (128, 256), "residual x parameter (fit_material, lm)"),
 }
 
 
