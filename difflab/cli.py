@@ -65,6 +65,10 @@ def main(argv=None) -> int:
     except DifflabError as exc:
         print(f"difflab: error: {' '.join(str(exc).split())}", file=sys.stderr)  # one line
         return EXIT_INVALID
+    except MemoryError:  # the budgets (docs/limits.md) should refuse such a request before it starts
+        print("difflab: error: out of memory: the request is too big for this machine; lower the image size, "
+              "spp or mesh resolution, or DIFFLAB_MEMORY_BUDGET", file=sys.stderr)
+        return EXIT_INVALID
     except KeyboardInterrupt:
         print("difflab: interrupted", file=sys.stderr)
         return EXIT_INTERNAL

@@ -156,6 +156,22 @@ def test_hostile_obj_files_render_or_name_the_file(small_budgets, tmp_path, line
     check(doc, re.compile(r"^(objects\[2\] \(.*fuzz\.obj\): .*fuzz\.obj|objects\[2\]\.transform: )"))
 
 
+PNG_HEAD = b"\x89PNG\r\n\x1a\n"
+NPY_HEAD = b"\x93NUMPY\x01\x00"
+
+
+@FUZZ
+@given(head=st.sampled_from([b"", PNG_HEAD, NPY_HEAD]), body=st.binary(max_size=200),
+       suffix=st.sampled_from([".png", ".npy", ".jpg"]), method=st.sampled_from(["raster", "raytrace"]))
+def test_hostile_texture_files_render_or_name_the_file(small_budgets, tmp_path, head, body, suffix, method):
+    path = tmp_path / f"fuzz{suffix}"
+    path.write_bytes(head + body)
+    doc = copy.deepcopy(BASE)
+    doc["render"]["method"] = method
+    doc["materials"]["red"]["texture"] = str(path)
+    check(doc, re.compile(r"^.*fuzz\.(png|npy|jpg)"))
+
+
 def test_scene_documents_round_trip_their_json_form():
     """The base document is valid: from_dict -> to_dict -> from_dict gives the same scene."""
     scene = Scene.from_dict(json.loads(json.dumps(BASE)))

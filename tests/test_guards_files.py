@@ -252,3 +252,12 @@ def test_paths_must_be_strings_or_path_likes(tmp_path, bad):
         save_image(bad, np.zeros((2, 2, 3), np.float32))
     with pytest.raises(SceneError, match=r"^scene: expected a file path, got "):
         load_scene(bad)
+
+
+def test_running_out_of_memory_is_one_line_with_exit_2(tmp_path, capsys, monkeypatch):
+    def exhausted(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr("difflab.renderers.api.compile_scene", exhausted)
+    one_line_error(capsys, ["render", str(write_scene(tmp_path)), "-o", str(tmp_path / "x.png")],
+                   "difflab: error: out of memory: the request is too big for this machine")
