@@ -98,9 +98,9 @@ BASE = {"name": "a", "scene": "s.json", "targets": ["t.png"]}
     ({**BASE, "init": {"kd": [0.1, "x"]}}, "init.kd: expected a number or a list of numbers, got [0.1, 'x']"),
     ({**BASE, "solver": {"max_steps": 2.5}}, "solver.max_steps: expected int, got 2.5"),
     ({**BASE, "solver": {"rtol": True}}, "solver.rtol: expected int or float, got True"),
-    ({**BASE, "solver": {"spp": 4}}, "solver.spp: applies to method 'raytrace' only, not 'raster'"),
-    ({**BASE, "solver": {"tol": 1}}, "solver.tol: unknown option; known: solver, max_steps, rtol, atol, x64, "
-     "per_channel, loss, loss_scale, learning_rate, bounded, max_depth, spp"),
+    ({**BASE, "solver": {"ceiling": "1"}}, "solver.ceiling: expected int or float or bool, got '1'"),
+    ({**BASE, "solver": {"tol": 1}}, "solver.tol: unknown option; known: solver, max_steps, rtol, atol, "
+     "learning_rate, x64, rel_tol, abs_tol, per_channel, bounded, loss, loss_scale, sigma, ceiling, max_depth, spp"),
 ])
 def test_bad_line_names_its_problem(line, message):
     with pytest.raises(ManifestError) as info:
@@ -114,8 +114,8 @@ def test_manifest_reports_every_bad_line_with_its_number(tmp_path):
     (tmp_path / "m.jsonl").write_text("\n".join(text) + "\n")
     jobs, invalid = load_manifest(tmp_path / "m.jsonl")
     assert [(j.line, j.name) for j in jobs] == [(1, "a")]
-    assert jobs[0].spec == {"name": "a", "scene": str(tmp_path / "s.json"), "method": "raster", "init": {},
-                            "solver": {}, "targets": [{"image": str(tmp_path / "t.png")}]}
+    assert jobs[0].spec == {"name": "a", "scene": str(tmp_path / "s.json"), "init": {}, "solver": {},
+                            "targets": [{"image": str(tmp_path / "t.png")}]}
     assert [(bad.line, bad.name, bad.error) for bad in invalid] == [
         (3, "b", "scene: expected a file path, got 1"),
         (4, None, "not JSON: Expecting property name enclosed in double quotes: line 1 column 2 (char 1)"),
@@ -148,6 +148,7 @@ def test_batch_recovers_each_fit_and_records_failures(reference):
         np.testing.assert_allclose(load_scene(out / "scenes" / f"{name}.json").materials["red"].kd, kd, rtol=1e-4)
         report = json.loads((out / "reports" / f"{name}.json").read_text())
         assert (report["result"], report["converged"], report["job"]["name"]) == ("successful", True, name)
+        assert (report["model"], report["model_mismatch"]) == ("raster", False)
         assert "seconds" not in report and json.loads((out / "timing" / f"{name}.json").read_text())["seconds"] > 0
     failure = json.loads((out / "failures" / "unreachable.json").read_text())
     assert failure["error"] == f"targets[0]: {manifest.parent / 'nope.npy'}: image file not found"
@@ -155,7 +156,7 @@ def test_batch_recovers_each_fit_and_records_failures(reference):
     assert invalid == {"line": 3, "name": "typo", "error": "unknown key(s) ['materal']; known: name, scene, targets, "
                        "material, params, method, init, solver"}
     rows = (out / "summary.csv").read_text().splitlines()
-    assert rows[0] == "line,name,status,result,loss,psnr,steps,params,error"
+    assert rows[0] == "line,name,status,result,model,model_mismatch,loss,psnr,chi2,steps,params,error"
     assert [r.split(",")[:3] for r in rows[1:]] == [["1", "fit0", "converged"], ["2", "fit1", "converged"],
                                                      ["3", "typo", "invalid"], ["4", "fit2", "converged"],
                                                      ["5", "fit3", "converged"], ["6", "fit4", "converged"],

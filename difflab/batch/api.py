@@ -27,7 +27,13 @@ class BatchSummary:
 
     @property
     def all_converged(self) -> bool:
+        """Every line gave a converged fit (model mismatches aside: see `mismatched`)."""
         return all(row["status"] == "converged" for row in self.rows)
+
+    @property
+    def mismatched(self) -> list:
+        """Names of the fits flagged model_mismatch: their image model does not explain the targets."""
+        return [row["name"] for row in self.rows if row["model_mismatch"]]
 
 
 def _say(quiet: bool, text: str) -> None:

@@ -4,16 +4,17 @@
 
 Bad manifest lines are listed (with their line numbers) before any fit starts and recorded as
 failures; the other fits run. Rerun the same command to finish an interrupted batch: finished fits
-are skipped. Exit code: 0 when every line gave a converged fit, 3 when any line is invalid, failed or
-did not converge (everything is still written: see OUTDIR/summary.csv), 2 when the manifest cannot
-be read. docs/batch.md describes the manifest and the output folder.
+are skipped. Exit code: 0 when every line gave a converged fit that its image model explains; 3 when
+any line is invalid, failed or did not converge; else 4 when any fit is flagged model_mismatch (as
+`difflab fit`; everything is still written: see OUTDIR/summary.csv); 2 when the manifest cannot be
+read. docs/batch.md describes the manifest and the output folder.
 """
 
 from __future__ import annotations
 
 import argparse
 
-EXIT_OK, EXIT_INCOMPLETE = 0, 3
+EXIT_OK, EXIT_INCOMPLETE, EXIT_MODEL_MISMATCH = 0, 3, 4
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -40,4 +41,6 @@ def run(args) -> int:
     summary = fit_many(args.manifest, args.output, workers=args.workers, scheduler=args.scheduler,
                        inline=args.inline, retries=args.retries, progress=False if args.no_progress else None,
                        force=args.force)
-    return EXIT_OK if summary.all_converged else EXIT_INCOMPLETE
+    if not summary.all_converged:
+        return EXIT_INCOMPLETE
+    return EXIT_MODEL_MISMATCH if summary.mismatched else EXIT_OK

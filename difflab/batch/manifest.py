@@ -8,11 +8,11 @@ Keys of a line (docs/batch.md is the reference):
     scene     scene file (JSON).
     targets   an image file, or a list of image files and/or views {"image": FILE, "mask": FILE,
               "camera": {...}, "lights": [...]}, camera / lights replacing the scene's for that view.
-    material  a material name or a list of names (default: the scene's only one / every used one).
-    params    "ka,kd,ks,n" or a list of names (default: the fitting function's).
-    method    "raster" (`fit_material`, the default) or "raytrace" (`fit_scene`).
+    material  a material name or a list of names (default: every material an object uses).
+    params    "ka,kd,ks,n" or a list of names (default: `difflab.fit.fit`'s, ka, kd, ks, n).
+    method    "raster" (G-buffer) or "raytrace" (ray tree); default: chosen from the scene.
     init      parameter name -> starting value (a number or an RGB list).
-    solver    solver options: see `OPTIONS`.
+    solver    options of the fit: see `OPTIONS`.
 Relative file paths resolve against the manifest's folder. Blank lines are skipped; line numbers
 count every line of the file from 1.
 """
@@ -33,12 +33,12 @@ REQUIRED = ("name", "scene", "targets")
 VIEW_KEYS = ("image", "mask", "camera", "lights")
 METHODS = ("raster", "raytrace")
 NUMBER = (int, float)
-# solver option -> (accepted types, the methods that take it)
+# option -> accepted JSON types; the values are `difflab.fit.fit`'s keywords (and FitOptions fields),
+# whose ranges the fit checks (a bad value fails that job, naming it)
 OPTIONS = {
-    "solver": (str, METHODS), "max_steps": (int, METHODS), "rtol": (NUMBER, METHODS), "atol": (NUMBER, METHODS),
-    "x64": (bool, METHODS), "per_channel": (bool, METHODS), "loss": (str, METHODS),
-    "loss_scale": (NUMBER, METHODS), "learning_rate": (NUMBER, METHODS), "bounded": (bool, ("raster",)),
-    "max_depth": (int, ("raytrace",)), "spp": (int, ("raytrace",)),
+    "solver": str, "max_steps": int, "rtol": NUMBER, "atol": NUMBER, "learning_rate": NUMBER, "x64": bool,
+    "rel_tol": NUMBER, "abs_tol": NUMBER, "per_channel": bool, "bounded": bool, "loss": str, "loss_scale": NUMBER,
+    "sigma": NUMBER, "ceiling": (int, float, bool), "max_depth": int, "spp": int,
 }
 
 
@@ -63,7 +63,7 @@ class Invalid:
 
 def _typed(value, types) -> bool:
     """isinstance that does not take a bool for a number (JSON true is not 1)."""
-    return types is bool if isinstance(value, bool) else isinstance(value, types)
+    return bool in _tuple(types) if isinstance(value, bool) else isinstance(value, types)
 
 
 def _tuple(types) -> tuple:
@@ -109,18 +109,15 @@ def _names(value, where: str) -> list[str]:
     return value
 
 
-def _solver(value, method: str) -> dict:
+def _solver(value) -> dict:
     if not isinstance(value, dict):
         raise ManifestError(f"solver: expected an object of options, got {type(value).__name__}")
     for key, option in value.items():
         if key not in OPTIONS:
             raise ManifestError(f"solver.{key}: unknown option; known: {', '.join(OPTIONS)}")
-        types, methods = OPTIONS[key]
-        if not _typed(option, types):
-            names = " or ".join(t.__name__ for t in _tuple(types))
+        if not _typed(option, OPTIONS[key]):
+            names = " or ".join(t.__name__ for t in _tuple(OPTIONS[key]))
             raise ManifestError(f"solver.{key}: expected {names}, got {option!r}")
-        if method not in methods:
-            raise ManifestError(f"solver.{key}: applies to method {methods[0]!r} only, not {method!r}")
     return dict(value)
 
 
@@ -148,21 +145,22 @@ def parse_line(data, base: Path) -> dict:
     if not (isinstance(name, str) and NAME.fullmatch(name)):
         raise ManifestError(f"name: expected letters, digits, '.', '_', '-' (at most 100, starting with a letter "
                             f"or digit), got {name!r}")
-    method = data.get("method", "raster")
-    if method not in METHODS:
-        raise ManifestError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if data.get("method", METHODS[0]) not in METHODS:
+        raise ManifestError(f"method: expected one of {', '.join(METHODS)}, got {data['method']!r}")
     targets = data["targets"]
     targets = targets if isinstance(targets, list) else [targets]
     if not targets:
         raise ManifestError("targets: empty list")
-    spec = {"name": name, "scene": _path(data["scene"], base, "scene"), "method": method,
+    spec = {"name": name, "scene": _path(data["scene"], base, "scene"),
             "targets": [_view(t, base, f"targets[{i}]") for i, t in enumerate(targets)]}
+    if "method" in data:
+        spec["method"] = data["method"]
     if "material" in data:
         spec["material"] = _names(data["material"], "material")
     if "params" in data:
         spec["params"] = _names(data["params"], "params")
     spec["init"] = _init(data.get("init", {}))
-    spec["solver"] = _solver(data.get("solver", {}), method)
+    spec["solver"] = _solver(data.get("solver", {}))
     return spec
 
 

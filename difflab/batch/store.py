@@ -29,7 +29,9 @@ from ..io import TMP_MARK, refuse_overwrite, write_json_atomic, write_text_atomi
 from .manifest import Invalid, Job
 
 FOLDERS = ("scenes", "reports", "failures", "timing")
-COLUMNS = ("line", "name", "status", "result", "loss", "psnr", "steps", "params", "error")
+COLUMNS = ("line", "name", "status", "result", "model", "model_mismatch", "loss", "psnr", "chi2", "steps", "params",
+           "error")
+REPORTED = ("result", "model", "model_mismatch", "loss", "psnr", "chi2", "steps", "params")  # columns from a report
 
 
 def _read_json(path: Path):
@@ -111,12 +113,11 @@ class Store:
 
     def row(self, job: Job) -> dict:
         """The summary row of a job, from what the folder holds for it now."""
-        row = {"line": job.line, "name": job.name, "status": "not_run", "result": None, "loss": None, "psnr": None,
-               "steps": None, "params": None, "error": None}
+        row = {**dict.fromkeys(COLUMNS), "line": job.line, "name": job.name, "status": "not_run"}
         report = _read_json(self._file("reports", job.name))
         failure = _read_json(self._file("failures", job.name))
         if isinstance(report, dict) and report.get("job") == job.spec:
-            row.update({k: report.get(k) for k in ("result", "loss", "psnr", "steps", "params")},
+            row.update({k: report.get(k) for k in REPORTED},
                        status="converged" if report.get("converged") else "not_converged")
         elif isinstance(failure, dict) and failure.get("job") == job.spec:
             row.update(status="failed", error=failure.get("error"))
@@ -126,7 +127,7 @@ class Store:
         """Write summary.csv and summary.json (one row per manifest line, in line order) and return the
         latter's content: {"lines", "counts": status -> rows, "jobs": rows}.
         Status: converged, not_converged (a result, flagged), failed (no result: the error says why),
-        invalid (a bad manifest line), not_run."""
+        invalid (a bad manifest line), not_run; a converged fit may still carry model_mismatch."""
         rows = [self.row(job) for job in jobs]
         rows += [{**dict.fromkeys(COLUMNS), "line": bad.line, "name": bad.name, "status": "invalid", "error": bad.error}
                  for bad in invalid]

@@ -3,12 +3,12 @@
 A worker only computes: it returns the fitted scene and the report as plain data, and the process
 that owns the output folder writes them (`store.py`), so a worker that dies or is interrupted leaves
 nothing behind. The compiled solves stay in the worker process (jobs of the same problem shape reuse
-them), and JAX's persistent compilation cache on disk lets a new worker skip most compilation.
+them), and JAX's persistent compilation cache on disk ($DIFFLAB_CACHE_DIR, `difflab.fit.cache`)
+lets a new worker skip most compilation.
 """
 
 from __future__ import annotations
 
-import os
 import tempfile
 import time
 from pathlib import Path
@@ -18,52 +18,20 @@ from ..errors import DifflabError, FitError
 NO_FIT = ("empty_mask", "nonfinite_target")  # result codes that mean no fit was made: a failed job
 VOLATILE = ("seconds", "timings")  # report fields that change from run to run (kept apart from the report)
 
-_prepared = False
-
-
-def cache_dir() -> Path | None:
-    """JAX's persistent compilation cache folder: $DIFFLAB_CACHE_DIR ("off": none), else
-    ($XDG_CACHE_HOME or ~/.cache)/difflab/jax."""
-    value = os.environ.get("DIFFLAB_CACHE_DIR", "").strip()
-    if value.lower() == "off":
-        return None
-    if value:
-        return Path(value).expanduser()
-    return Path(os.environ.get("XDG_CACHE_HOME", "").strip() or Path.home() / ".cache") / "difflab" / "jax"
-
-
-def prepare_process() -> None:
-    """Once per process, before the first fit: point JAX's persistent compilation cache at `cache_dir`
-    unless the process set one already, and keep every compiled function there (a fit compiles
-    dozens of small ones besides the solve; together they are most of a cold start)."""
-    global _prepared
-    if _prepared:
-        return
-    import jax
-
-    folder = cache_dir()
-    if folder is not None and not jax.config.jax_compilation_cache_dir:
-        jax.config.update("jax_compilation_cache_dir", str(folder))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    _prepared = True
-
-
 def fit_job(spec: dict):
-    """Run the fit a manifest line describes (`manifest.parse_line`'s spec) and return its FitResult."""
-    from ..fit import fit_material, fit_scene
+    """Run the fit a manifest line describes (`manifest.parse_line`'s spec) through the fitting
+    engine, `difflab.fit.fit`, and return its FitResult. Its compiled solves stay in this process for
+    the next job of the same problem shape, and its JAX compilation cache on disk serves every
+    worker (`difflab.fit.cache`)."""
+    from ..fit import fit
 
     targets = [(view["image"], {k: view[k] for k in ("camera", "lights") if k in view}) for view in spec["targets"]]
     masks = [view.get("mask") for view in spec["targets"]]
-    options = {**spec["solver"], "init": spec["init"] or None, "history": False,
+    options = {**spec["solver"], "init": spec["init"] or None, "history": False, "progress": False,
                "masks": None if all(m is None for m in masks) else masks}
     if "params" in spec:
         options["params"] = tuple(spec["params"])
-    material = spec.get("material")
-    if material is not None and len(material) == 1:
-        material = material[0]
-    if spec["method"] == "raytrace":
-        return fit_scene(spec["scene"], targets, materials=material, **options)
-    return fit_material(spec["scene"], targets, material=material, **options)
+    return fit(spec["scene"], targets, spec.get("material"), method=spec.get("method"), **options)
 
 
 def input_files(spec: dict) -> list[str]:
@@ -119,7 +87,6 @@ def run_job(spec: dict, files: dict | None = None) -> dict:
     """A worker's task: `outcome_of(spec)` plus its wall time in "seconds". With `files` (from `pack`)
     the inputs are read from those bytes, written to a temporary folder, instead of from the paths."""
     start = time.perf_counter()
-    prepare_process()
     if files:
         with tempfile.TemporaryDirectory(prefix="difflab-job-") as folder:
             outcome = outcome_of(_unpacked(spec, files, Path(folder)))

@@ -70,9 +70,8 @@ def warm_fit_seconds(manifest: Path, repeats: int) -> float:
     """Median wall time of one job in this process once its compiled solve exists (the first call
     compiles and is not counted)."""
     from difflab.batch.manifest import load_manifest
-    from difflab.batch.worker import outcome_of, prepare_process
+    from difflab.batch.worker import outcome_of
 
-    prepare_process()
     jobs, _ = load_manifest(manifest)
     assert outcome_of(jobs[0].spec)["ok"]
     times = []
