@@ -1,14 +1,18 @@
 """`load_mesh`: OBJ / PLY (and whatever else trimesh reads) into a validated `TriMesh`.
 
 trimesh is lenient: it may drop faces that index past the vertex list or read a garbage file as an
-empty scene. For OBJ files we therefore scan the raw text first (vertex values, every `f` index,
-at least one face) so each problem is reported, with the path, instead of silently repaired.
+empty scene. For OBJ files we therefore check the raw text (vertex values, every `f` index, at least
+one face) so each problem is reported, with the path and line, instead of silently repaired: a
+file in the plain layout (`v x y z`, triangle `f a b c`) is vouched for by vectorised byte checks and
+by trimesh reading exactly as many vertices and triangles as it has; anything else is scanned line
+by line.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import re
 import warnings
 
 import numpy as np
@@ -19,13 +23,37 @@ from difflab.limits import MAX_COORD, MESH_FILE_BYTES, require_memory
 from .mesh import TriMesh, concatenate
 
 
-def _check_obj_text(path: str) -> None:
-    """Raise MeshError for the problems trimesh would hide in an OBJ file."""
+def _read_obj(path: str) -> bytes:
     try:
-        with open(path, "r", encoding="utf-8", errors="replace") as handle:
-            lines = handle.readlines()
+        with open(path, "rb") as handle:
+            return handle.read()
     except OSError as exc:
         raise MeshError(f"{path}: cannot read mesh file: {exc}") from None
+
+
+VERTEX_CHARS = b"0123456789.eE+- \r\n"  # a plain `v x y z` line, once its key is removed
+FACE_CHARS = b"0123456789/ \r\n"  # a plain `f a b c` line with positive indices
+
+
+def _plain_obj_counts(data: bytes) -> tuple[int, int] | None:
+    """(vertices, triangles) of an OBJ text in the plain layout trimesh reads without dropping or
+    reinterpreting anything: only `v x y z` lines of numbers, triangle `f a b c` lines of positive
+    indices (optionally `a/b/c`), comments and `vn` / `vt` / `o` / `g` / `s` / `usemtl` / `mtllib`
+    lines. None for anything else, which `_scan_obj_lines` then checks line by line."""
+    vertex_text = b"\n".join(re.findall(rb"^v ([^\n]*)", data, re.M))
+    face_text = b"\n".join(re.findall(rb"^f ([^\n]*)", data, re.M))
+    n_vertices, n_faces = vertex_text.count(b"\n") + bool(vertex_text), face_text.count(b"\n") + bool(face_text)
+    other = len(re.findall(rb"^(?:v |f |vn |vt |o |g |s |usemtl |mtllib |#|\r?$)", data, re.M))
+    if (not n_faces or other != data.count(b"\n") + 1 or vertex_text.translate(None, VERTEX_CHARS)
+            or face_text.translate(None, FACE_CHARS) or b"  " in vertex_text + face_text
+            or vertex_text.count(b" ") != 2 * n_vertices or face_text.count(b" ") != 2 * n_faces
+            or re.search(rb"(?:^| )0+(?:/|\s|$)", face_text, re.M)):
+        return None
+    return n_vertices, n_faces
+
+
+def _scan_obj_lines(lines: list[str], path: str) -> None:
+    """The line-by-line check, naming the first problem's line."""
     n_vertices = 0
     n_faces = 0
     indices: list[tuple[int, int, int]] = []  # (line, index as written, absolute 1-based index)
@@ -133,8 +161,12 @@ def load_mesh(path) -> TriMesh:
         raise MeshError(f"{path}: not a file")
     require_memory(os.path.getsize(path) * MESH_FILE_BYTES, f"{path}: loading a mesh file of "
                    f"{os.path.getsize(path)} bytes", MeshError)
+    plain = None
     if path.lower().endswith(".obj"):
-        _check_obj_text(path)
+        data = _read_obj(path)
+        plain = _plain_obj_counts(data)
+        if plain is None:
+            _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)
     try:
         import trimesh
 
@@ -144,6 +176,8 @@ def load_mesh(path) -> TriMesh:
     except MeshError:
         raise
     except Exception as exc:  # trimesh raises many kinds on bad input
+        if plain is not None:  # the line scan names the problem better where it finds one
+            _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)
         raise MeshError(f"{path}: cannot read mesh: {type(exc).__name__}: {exc}") from None
     parts = _to_trimesh_list(loaded, path)
     if not parts:
@@ -154,6 +188,10 @@ def load_mesh(path) -> TriMesh:
         message = str(exc)
         raise MeshError(message if path in message else f"{path}: {message}") from None
     mesh = meshes[0] if len(meshes) == 1 else concatenate(meshes, name=path)
+    if plain is not None and (mesh.n_vertices, mesh.n_faces) != plain:  # trimesh dropped or split something
+        _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise MeshError(f"{path}: vertex coordinates are not finite")
     if not np.all(np.abs(mesh.vertices) <= MAX_COORD):
         raise MeshError(f"{path}: vertex coordinates reach {np.abs(mesh.vertices).max():.3g}, beyond +-{MAX_COORD:g} "
                         "(float32 rendering overflows)")

@@ -8,6 +8,7 @@ POV-Ray 3.7 on the same Whitted scene (spheres, a checkered plane, point lights,
 from __future__ import annotations
 
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -34,11 +35,12 @@ def mitsuba_variant() -> str | None:
 
 
 def mitsuba_rays_per_second(obj_path: Path, origins: np.ndarray, directions: np.ndarray, repeats: int):
-    """Median rays/s of `scene.ray_intersect` (closest hit, with t and the primitive index evaluated)
-    over the given (N, 3) rays, and the variant used; (None, None) without Mitsuba."""
+    """Median rays per second (wall) and per CPU-second (all of the process's threads) of
+    `scene.ray_intersect` (closest hit, t and primitive index evaluated) over the given (N, 3) rays,
+    and the variant used; (None, None, None) without Mitsuba."""
     variant = mitsuba_variant()
     if variant is None:
-        return None, None
+        return None, None, None
     import drjit as dr
     import mitsuba as mi
 
@@ -46,14 +48,16 @@ def mitsuba_rays_per_second(obj_path: Path, origins: np.ndarray, directions: np.
     rays = mi.Ray3f(o=mi.Point3f(*[origins[:, k].astype(np.float32) for k in range(3)]),
                     d=mi.Vector3f(*[directions[:, k].astype(np.float32) for k in range(3)]))
     dr.eval(rays)
-    times = []
+    times, cpu = [], []
     for _ in range(repeats + 1):  # the first call JIT-compiles the kernel
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         hit = scene.ray_intersect(rays)
         dr.eval(hit.t, hit.prim_index)
         dr.sync_thread()
         times.append(time.perf_counter() - start)
-    return origins.shape[0] / statistics.median(times[1:]), variant
+        cpu.append(time.process_time() - start_cpu)
+    n = origins.shape[0]
+    return n / statistics.median(times[1:]), n / statistics.median(cpu[1:]), variant
 
 
 def pov_vec(v) -> str:
@@ -105,9 +109,9 @@ def to_pov(scene) -> str:
     return "\n".join(lines) + "\n"
 
 
-def povray_seconds(scene, repeats: int, threads: int) -> float | None:
-    """Median wall time of `povray` rendering the scene (parse + trace, no anti-aliasing, no display,
-    `threads` render threads); None when povray is not installed."""
+def povray_seconds(scene, repeats: int, threads: int) -> tuple[float, float] | None:
+    """Median wall time and CPU time (user + system of the child) of `povray` rendering the scene
+    (parse + trace, no anti-aliasing, no display, `threads` render threads); None without povray."""
     povray = shutil.which("povray")
     if povray is None:
         return None
@@ -116,9 +120,12 @@ def povray_seconds(scene, repeats: int, threads: int) -> float | None:
         path.write_text(to_pov(scene))
         command = [povray, f"+I{path}", f"+O{Path(folder) / 'out.png'}", f"+W{scene.camera.width}",
                    f"+H{scene.camera.height}", "-D", "-A", "+Q9", f"+WT{threads}", "-V", "-GA"]
-        times = []
+        times, cpu = [], []
         for _ in range(repeats):
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
             start = time.perf_counter()
             subprocess.run(command, capture_output=True, check=True, cwd=folder, env={**os.environ, "HOME": folder})
             times.append(time.perf_counter() - start)
-    return statistics.median(times)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu.append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
+    return statistics.median(times), statistics.median(cpu)

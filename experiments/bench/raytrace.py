@@ -8,8 +8,10 @@
    shadows, depth 5, against POV-Ray rendering the same scene exported to SDL (no anti-aliasing,
    same thread count; its wall time includes parsing, as difflab's includes compiling the scene).
 
-The machine may be shared: every ratio is measured within one run, repeats interleaved, and the load
-average before and after is written with the results to experiments/results/bench_raytrace.json.
+The machine may be shared: every ratio is measured within one run, repeats interleaved, both on wall
+time and on CPU time (all threads of the process, or of the povray child), the latter less
+sensitive to other work; the load average before and after is written with the results to
+experiments/results/bench_raytrace.json.
 
     python experiments/bench/raytrace.py            # full
     python experiments/bench/raytrace.py --small    # quick check (256^2 rays, 160x120 Whitted)
@@ -84,10 +86,15 @@ def primary_rays(camera, size: int) -> tuple[np.ndarray, np.ndarray]:
     return np.broadcast_to(np.asarray(camera.eye, float), directions.shape).copy(), directions
 
 
-def timed_render(compiled, threads: int) -> float:
-    start = time.perf_counter()
-    difflab.render(compiled, threads=threads)
-    return time.perf_counter() - start
+def timed_render(scene, threads: int) -> tuple[float, float]:
+    """Wall seconds and CPU seconds (all threads of this process) of one `difflab.render`."""
+    start, start_cpu = time.perf_counter(), time.process_time()
+    difflab.render(scene, threads=threads)
+    return time.perf_counter() - start, time.process_time() - start_cpu
+
+
+def medians(pairs) -> tuple[float, float]:
+    return statistics.median(p[0] for p in pairs), statistics.median(p[1] for p in pairs)
 
 
 def primary_case(size: int, repeats: int, threads: int) -> dict:
@@ -100,14 +107,16 @@ def primary_case(size: int, repeats: int, threads: int) -> dict:
         ours = [timed_render(compiled, threads) for _ in range(repeats)]
         single = [timed_render(compiled, 1) for _ in range(repeats)]
         origins, directions = primary_rays(scene.camera, size)
-        mitsuba, variant = peers.mitsuba_rays_per_second(obj_path, origins, directions, repeats)
+        mitsuba, mitsuba_cpu, variant = peers.mitsuba_rays_per_second(obj_path, origins, directions, repeats)
     rays = size * size
+    wall, cpu = medians(ours)
     row = {"case": "icosphere primary rays", "triangles": int(compiled.n_mesh_faces), "size": size, "rays": rays,
-           "difflab_rays_per_second": rays / statistics.median(ours),
-           "difflab_1_thread_rays_per_second": rays / statistics.median(single),
-           "mitsuba_variant": variant, "mitsuba_rays_per_second": mitsuba}
+           "difflab_rays_per_second": rays / wall, "difflab_rays_per_cpu_second": rays / cpu,
+           "difflab_1_thread_rays_per_second": rays / medians(single)[0],
+           "mitsuba_variant": variant, "mitsuba_rays_per_second": mitsuba, "mitsuba_rays_per_cpu_second": mitsuba_cpu}
     if mitsuba:
         row["difflab_over_mitsuba"] = row["difflab_rays_per_second"] / mitsuba
+        row["difflab_over_mitsuba_cpu"] = row["difflab_rays_per_cpu_second"] / mitsuba_cpu
     return row
 
 
@@ -116,17 +125,17 @@ def whitted_case(width: int, height: int, glass: bool, repeats: int, threads: in
     difflab.render(scene, threads=threads)  # warm-up
     ours, theirs = [], []
     for _ in range(repeats):
-        start = time.perf_counter()
-        difflab.render(scene, threads=threads)  # compiling the scene included, as POV-Ray's parsing is
-        ours.append(time.perf_counter() - start)
+        ours.append(timed_render(scene, threads))  # compiling the scene included, as POV-Ray's parsing is
         pov = peers.povray_seconds(scene, 1, threads)
         if pov is not None:
             theirs.append(pov)
     row = {"case": "whitted " + ("glass" if glass else "mirror"), "width": width, "height": height,
-           "max_depth": scene.render.max_depth, "difflab_seconds": statistics.median(ours)}
+           "max_depth": scene.render.max_depth}
+    row["difflab_seconds"], row["difflab_cpu_seconds"] = medians(ours)
     if theirs:
-        row["povray_seconds"] = statistics.median(theirs)
+        row["povray_seconds"], row["povray_cpu_seconds"] = medians(theirs)
         row["difflab_over_povray"] = row["difflab_seconds"] / row["povray_seconds"]
+        row["difflab_over_povray_cpu"] = row["difflab_cpu_seconds"] / row["povray_cpu_seconds"]
     return row
 
 
@@ -142,14 +151,17 @@ def main(argv=None) -> int:
     primary = primary_case(size, args.repeats, threads)
     print(f"icosphere ({primary['triangles']} tris) {size}^2 primary rays: difflab "
           f"{primary['difflab_rays_per_second'] / 1e6:.2f} Mrays/s ({threads} threads; "
-          f"{primary['difflab_1_thread_rays_per_second'] / 1e6:.2f} on 1), Mitsuba ray_intersect "
-          + (f"{primary['mitsuba_rays_per_second'] / 1e6:.2f} Mrays/s ({primary['mitsuba_variant']}): "
-             f"difflab / Mitsuba {primary['difflab_over_mitsuba']:.2f}" if primary["mitsuba_rays_per_second"]
-             else "not installed"), flush=True)
+          f"{primary['difflab_1_thread_rays_per_second'] / 1e6:.2f} on 1; "
+          f"{primary['difflab_rays_per_cpu_second'] / 1e6:.2f} per CPU-s), Mitsuba ray_intersect "
+          + (f"{primary['mitsuba_rays_per_second'] / 1e6:.2f} Mrays/s ({primary['mitsuba_variant']}; "
+             f"{primary['mitsuba_rays_per_cpu_second'] / 1e6:.2f} per CPU-s): difflab / Mitsuba "
+             f"{primary['difflab_over_mitsuba']:.2f} (wall), {primary['difflab_over_mitsuba_cpu']:.2f} (CPU)"
+             if primary["mitsuba_rays_per_second"] else "not installed"), flush=True)
     whitted = [whitted_case(width, height, glass, args.repeats, threads) for glass in (False, True)]
     for row in whitted:
         print(f"{row['case']} {width}x{height} depth {row['max_depth']}: difflab {row['difflab_seconds']:.3f} s, "
-              + (f"POV-Ray {row['povray_seconds']:.3f} s: difflab / POV-Ray {row['difflab_over_povray']:.2f}"
+              + (f"POV-Ray {row['povray_seconds']:.3f} s: difflab / POV-Ray {row['difflab_over_povray']:.2f} (wall), "
+                 f"{row['difflab_over_povray_cpu']:.2f} (CPU)"
                  if "povray_seconds" in row else "POV-Ray not installed"), flush=True)
     result = {"benchmark": "raytrace_vs_peers", "statistic": "median", "repeats": args.repeats, "interleaved": True,
               "threads": threads, "primary": primary, "whitted": whitted,

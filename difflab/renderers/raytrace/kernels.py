@@ -29,13 +29,13 @@ from __future__ import annotations
 
 from ..._warp import wp
 
-from ...lighting.warp_model import FogW, ambient_term, fog_blend, light_term, light_vector
+from ...lighting.warp_model import FogW, LightW, MaterialW, ambient_term, fog_blend, light_term, light_vector
 from ...vocabulary import MAX_DEPTH_LIMIT
 from ..camera import CameraW, primary_ray
 from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, light_visibility
 from .itembuffer import ItemBufferW, hinted_hit
 from .optics import beer, reflect
-from .record import TreeW, record_light, record_ray, record_surface
+from .record import LightRecW, TreeW, light_arrays, record_light, record_ray, record_surface
 from .surface import RayW, SceneW, SurfaceW, child_ray, fresnel_split, new_ray, skip_object, surface_at
 from .tree import PRIMARY, REFLECTED, REFRACTED
 
@@ -92,28 +92,27 @@ def trace_ray(geom: SceneGeomW, item: ItemBufferW, out: TraceOutW, ray: RayW, i:
 
 
 @wp.func
-def shade_hit(scene: SceneW, params: TraceParamsW, hit: HitW, surf: SurfaceW, tree: TreeW, k: int,
-              out: TraceOutW, i: int):
+def shade_hit(geom: SceneGeomW, lights: wp.array(dtype=LightW), materials: wp.array(dtype=MaterialW),
+              params: TraceParamsW, hit: HitW, surf: SurfaceW, rec: LightRecW, k: int, rays: wp.array2d(dtype=wp.int32),
+              i: int):
     """Local illumination at a hit, the one model with a shadow ray per light: ka Ia + sum_p s_p
-    light_term_p. Records what each light contributed at node k when recording."""
-    geom = scene.geom
+    light_term_p. Records what each light contributed at node k when recording. (Its arguments are
+    the few arrays it reads: a CPU call copies them.)"""
     local = ambient_term(surf.mat, params.ambient)
-    for q in range(scene.lights.shape[0]):
-        l, light_d = light_vector(scene.lights[q], surf.p)
+    for q in range(lights.shape[0]):
+        l, light_d = light_vector(lights[q], surf.p)
         s = float(1.0)
         if params.shadows == 1 and wp.dot(surf.geo, l) > 0.0:
-            wp.atomic_add(out.rays, i, COUNT_SHADOW, 1)
+            wp.atomic_add(rays, i, COUNT_SHADOW, 1)
             origin = surf.p + geom.epsilon * surf.geo
             skip = skip_object(geom, hit, l)
-            s = light_visibility(geom, scene.materials, origin, l, light_d - geom.epsilon, skip, params.transparent)
+            s = light_visibility(geom, materials, origin, l, light_d - geom.epsilon, skip, params.transparent)
             if params.count_crossings == 1 and s > 0.0:
-                count_shadow_crossings(geom, scene.materials, origin, l, light_d - geom.epsilon, skip, tree.crossings,
-                                       k, q)
+                count_shadow_crossings(geom, materials, origin, l, light_d - geom.epsilon, skip, rec.crossings, k, q)
         if s > 0.0:
-            local = local + s * light_term(scene.lights[q], surf.mat, params.specular, surf.normal, surf.view, l,
-                                           light_d)
+            local = local + s * light_term(lights[q], surf.mat, params.specular, surf.normal, surf.view, l, light_d)
         if params.record == 1:
-            record_light(tree, k, q, l, light_d, s)
+            record_light(rec, k, q, l, light_d, s)
     return local
 
 
@@ -141,6 +140,7 @@ def make_whitted_kernel(stack_size: int):
         if params.record == 1:
             base = tree.offset[i, j]
         stack = wp.zeros(shape=stack_size, dtype=RayW)
+        rec = light_arrays(tree)
         stack[0] = new_ray(origin, origin, direction, wp.vec3(1.0), 0.0, 1, -1, PRIMARY, -1, -1)
         sp = int(1)
         count = int(0)
@@ -170,7 +170,8 @@ def make_whitted_kernel(stack_size: int):
             surf = surface_at(scene, cam, hit, ray, xy, int(ray.kind == PRIMARY), params.spread)
             if ray.kind == PRIMARY:
                 fog_f = fog_blend(params.fog, wp.dot(surf.p - cam.eye, cam.forward))
-            local = shade_hit(scene, params, hit, surf, tree, base + node, out, i)
+            local = shade_hit(scene.geom, scene.lights, scene.materials, params, hit, surf, rec, base + node,
+                              out.rays, i)
             total = total + wp.cw_mul(w, local)
             if params.record == 0 and ray.depth >= params.max_depth:
                 continue  # a leaf nobody records: no split to compute

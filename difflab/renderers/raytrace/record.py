@@ -49,6 +49,26 @@ class TreeW:
     crossings: wp.array3d(dtype=wp.int32)  # (node, light, material): transparent crossings of the shadow ray
 
 
+@wp.struct
+class LightRecW:
+    """`TreeW`'s per-light arrays on their own: what `kernels.shade_hit` writes, cheap to pass."""
+
+    light_dir: wp.array2d(dtype=wp.vec3)
+    light_dist: wp.array2d(dtype=float)
+    visibility: wp.array2d(dtype=float)
+    crossings: wp.array3d(dtype=wp.int32)
+
+
+@wp.func
+def light_arrays(tree: TreeW):
+    rec = LightRecW()
+    rec.light_dir = tree.light_dir
+    rec.light_dist = tree.light_dist
+    rec.visibility = tree.visibility
+    rec.crossings = tree.crossings
+    return rec
+
+
 @wp.func
 def record_ray(tree: TreeW, base: int, node: int, sample: int, ray: RayW, hit: HitW, distance: float):
     """Node `base + node`: the ray itself and what it hit (material -1: nothing)."""
@@ -69,11 +89,11 @@ def record_ray(tree: TreeW, base: int, node: int, sample: int, ray: RayW, hit: H
 
 
 @wp.func
-def record_light(tree: TreeW, k: int, q: int, l: wp.vec3, distance: float, visibility: float):
+def record_light(rec: LightRecW, k: int, q: int, l: wp.vec3, distance: float, visibility: float):
     """Light q as node k saw it."""
-    tree.light_dir[k, q] = l
-    tree.light_dist[k, q] = distance
-    tree.visibility[k, q] = visibility
+    rec.light_dir[k, q] = l
+    rec.light_dist[k, q] = distance
+    rec.visibility[k, q] = visibility
 
 
 @wp.func
