@@ -11,6 +11,9 @@ import pytest
 
 from conftest import scene_dict
 from difflab import render
+from difflab._warp import wp
+from difflab.renderers.raytrace.optics import beer, fresnel, reflect, refract
+from difflab.vocabulary import FRESNEL_MODES
 from difflab.renderers.texture.store import TextureStore, sample
 
 ORTHO = {"eye": [0, 0, 5], "target": [0, 0, 0], "projection": "orthographic", "ortho_height": 2.0,
@@ -37,6 +40,68 @@ def schlick(cos_i, eta):
         return 1.0
     c = cos_i if eta <= 1 else math.sqrt(1 - sin2_t)
     return r0 + (1 - r0) * (1 - c) ** 5
+
+
+@wp.kernel(enable_backward=False)
+def optics_kernel(d: wp.array(dtype=wp.vec3), normal: wp.array(dtype=wp.vec3), eta: wp.array(dtype=float),
+                  alpha: wp.array(dtype=wp.vec3), length: wp.array(dtype=float), r: wp.array(dtype=wp.vec3),
+                  ok: wp.array(dtype=int), t: wp.array(dtype=wp.vec3), f: wp.array2d(dtype=float),
+                  absorbed: wp.array(dtype=wp.vec3)):
+    k = wp.tid()
+    cos_i = -wp.dot(d[k], normal[k])
+    r[k] = reflect(d[k], normal[k])
+    refracts, direction = refract(d[k], normal[k], eta[k])
+    ok[k] = refracts
+    t[k] = direction
+    for mode in range(3):
+        f[k, mode] = fresnel(mode, cos_i, eta[k])
+    absorbed[k] = beer(alpha[k], length[k])
+
+
+def test_optics_functions_against_their_formulas():
+    """The ray tree's optics on 2000 random incidences (float64 formulas from the module doc):
+    mirror r = d - 2 (d.N) N; Snell t = eta d + (eta cos_i - sqrt(k)) N, k = 1 - eta^2 (1 - cos_i^2),
+    none where k < 0; F = 0 (none), Schlick and the exact dielectric F (1 under total internal
+    reflection); Beer exp(-alpha l), exactly 1 where alpha = 0 (also at l = inf), 0 at l = inf."""
+    rng = np.random.default_rng(11)
+    n = 2000
+    normal = rng.normal(size=(n, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    d = rng.normal(size=(n, 3))
+    d -= np.maximum(np.sum(d * normal, 1), 0)[:, None] * normal * 2  # travel toward the surface
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    eta = rng.choice([1 / 1.5, 1.5, 1 / 2.4, 2.4, 1.0, 1.33], n)
+    alpha = rng.uniform(0, 2, (n, 3)) * (rng.random((n, 3)) < 0.7)
+    length = np.where(rng.random(n) < 0.1, np.inf, rng.uniform(0, 5, n))
+    f32 = lambda a, dtype=wp.vec3: wp.array(np.asarray(a, np.float32), dtype=dtype)  # noqa: E731
+    out = [wp.zeros(n, dtype=wp.vec3), wp.zeros(n, dtype=int), wp.zeros(n, dtype=wp.vec3), wp.zeros((n, 3), dtype=float),
+           wp.zeros(n, dtype=wp.vec3)]
+    wp.launch(optics_kernel, dim=n, inputs=[f32(d), f32(normal), f32(eta, float), f32(alpha), f32(length, float), *out])
+    r, ok, t, f, absorbed = (a.numpy() for a in out)
+    d, normal, eta = (np.asarray(a, np.float32).astype(np.float64) for a in (d, normal, eta))
+    cos_i = -np.sum(d * normal, 1)
+    np.testing.assert_allclose(r, d + 2 * cos_i[:, None] * normal, atol=2e-6)
+    k = 1 - eta ** 2 * (1 - cos_i ** 2)
+    clear = np.abs(k) > 1e-4  # not at the critical angle
+    assert np.array_equal(ok[clear] == 1, k[clear] >= 0) and (k < 0).sum() > 100
+    through = clear & (k >= 0)
+    t_want = eta[:, None] * d + (eta * cos_i - np.sqrt(np.maximum(k, 0)))[:, None] * normal
+    np.testing.assert_allclose(t[through], t_want[through], atol=2e-5)
+    assert np.all(t[~ok.astype(bool)] == 0.0)
+    assert FRESNEL_MODES == {"none": 0, "schlick": 1, "exact": 2}  # the kernel's columns
+    np.testing.assert_array_equal(f[:, 0], 0.0)
+    want_schlick = np.array([schlick(c, e) for c, e in zip(cos_i, eta)])
+    np.testing.assert_allclose(f[clear, 1], want_schlick[clear], atol=2e-6)
+    cos_t = np.sqrt(np.maximum(k, 0))
+    rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    rp = (eta * cos_t - cos_i) / (eta * cos_t + cos_i)
+    np.testing.assert_allclose(f[clear, 2], np.where(k < 0, 1.0, 0.5 * (rs ** 2 + rp ** 2))[clear], atol=2e-6)
+    alpha32 = np.asarray(alpha, np.float32).astype(np.float64)
+    length32 = np.asarray(length, np.float32).astype(np.float64)[:, None]
+    with np.errstate(invalid="ignore"):
+        want_beer = np.where(alpha32 > 0, np.exp(-alpha32 * length32), 1.0)
+    np.testing.assert_allclose(absorbed, want_beer, rtol=2e-6, atol=1e-30)
+    assert np.all(absorbed[alpha32 == 0] == 1.0)
 
 
 @pytest.mark.parametrize("side, angle_deg", [("above", 30), ("above", 60), ("above", 80),
