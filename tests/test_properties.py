@@ -1,6 +1,7 @@
 """Properties (hypothesis, derandomized): the model is finite, non-negative and monotone in its
 coefficients; the order of a mesh's triangles does not change an opaque image."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from hypothesis import given, settings
@@ -41,11 +42,14 @@ def shading_inputs(draw):
     return lights, normal, v, l, d, visibility
 
 
+_shade = jax.jit(jm.shade, static_argnums=1)  # one compile per model: every example has the same shapes
+
+
 def shade(inputs, ka, kd, ks, n, model):
     lights, normal, v, l, d, visibility = inputs
     mat = jm.MaterialJ(jnp.full(3, ka), jnp.full(3, kd), jnp.full(3, ks), jnp.asarray(n), jnp.asarray(0.3),
                        jnp.asarray(0.04))
-    return np.asarray(jm.shade(mat, model, normal, v, lights, l, d, visibility, jnp.full(3, 0.2)))
+    return np.asarray(_shade(mat, model, normal, v, lights, l, d, visibility, jnp.full(3, 0.2)))
 
 
 @CI
