@@ -29,6 +29,10 @@ def test_srgb_round_trip_and_known_values():
     np.testing.assert_allclose(srgb_to_linear(linear_to_srgb(x)), x, atol=1e-12)
     assert linear_to_srgb(0.0031308) == pytest.approx(12.92 * 0.0031308)
     assert srgb_to_linear(1.0) == pytest.approx(1.0)
+    # IEC 61966-2-1 at mid-grey both ways, and encoding clamps to [0, 1] first
+    assert linear_to_srgb(0.5) == pytest.approx(1.055 * 0.5 ** (1 / 2.4) - 0.055, rel=1e-15)
+    assert srgb_to_linear(0.5) == pytest.approx(((0.5 + 0.055) / 1.055) ** 2.4, rel=1e-15)
+    np.testing.assert_allclose(linear_to_srgb([-0.5, 1.7, 1e30]), [0.0, 1.0, 1.0], atol=1e-15)
 
 
 def test_png_and_npy_round_trip(tmp_path):

@@ -19,6 +19,7 @@ Usage (from the repository root, in the project's environment):
     python tools/mutate.py                  # every configured module
     python tools/mutate.py difflab/io.py    # some modules
     python tools/mutate.py --list           # count the mutants, run nothing
+    python tools/mutate.py --survivors      # run again only the last run's survivors (after adding tests)
 
 Prints each survivor as a diff line and the score; writes results/mutation/<module>.json (git
 ignores results/). docs/testing.md records the last score and why each survivor is equivalent.
@@ -99,12 +100,21 @@ def prune_cache(cache: Path, keep: set) -> None:
             shutil.rmtree(entry, ignore_errors=True) if entry.is_dir() else entry.unlink(missing_ok=True)
 
 
-def mutate_module(scratch: Path, module: str, config: dict) -> dict:
-    """Run every mutant of one module; returns its record (also written to results/mutation/)."""
+def record_path(module: str) -> Path:
+    return ROOT / "results" / "mutation" / (module.replace("/", "_") + ".json")
+
+
+def mutate_module(scratch: Path, module: str, config: dict, survivors_only: bool = False) -> dict:
+    """Run every mutant of one module (or only the survivors of its last record); returns its record
+    (also written to results/mutation/)."""
     target = scratch / module
     original = target.read_text()
     tests = config["tests"]
     todo = mutants(ROOT / module, set(config.get("functions", ())))
+    previous = {}
+    if survivors_only:
+        previous = {r["id"]: r for r in json.loads(record_path(module).read_text())["results"]}
+        todo = [m for m in todo if previous.get(m["id"], {}).get("outcome") == "passed"]
     status, baseline = run_tests(scratch, tests, timeout=3600)
     if status != "passed":
         raise SystemExit(f"{module}: the unmutated tests do not pass ({status}): {' '.join(tests)}")
@@ -125,10 +135,11 @@ def mutate_module(scratch: Path, module: str, config: dict) -> dict:
             print(f"  [{k}/{len(todo)}] {mark:8s} line {m['line']}: {' | '.join(m['diff'])[:150]}", flush=True)
     finally:
         target.write_text(original)
+    results = list((previous | {r["id"]: r for r in results}).values())
     killed = sum(r["outcome"] != "passed" for r in results)
     record = {"module": module, "tests": tests, "functions": config.get("functions"), "mutants": len(results),
               "killed": killed, "score": killed / max(len(results), 1), "results": results}
-    out = ROOT / "results" / "mutation" / (module.replace("/", "_") + ".json")
+    out = record_path(module)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(record, indent=1) + "\n")
     return record
@@ -138,6 +149,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("modules", nargs="*", help="modules to mutate (default: every configured one)")
     parser.add_argument("--list", action="store_true", help="count the mutants per module and function, run nothing")
+    parser.add_argument("--survivors", action="store_true", help="run only the survivors of each module's last record")
     args = parser.parse_args(argv)
     table = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["difflab"]["mutation"]
     unknown = set(args.modules) - set(table)
@@ -162,7 +174,7 @@ def main(argv=None) -> int:
             else:
                 shutil.copy2(source, scratch / name)
         for module in chosen:
-            record = mutate_module(scratch, module, table[module])
+            record = mutate_module(scratch, module, table[module], survivors_only=args.survivors)
             summary.append(record)
             survivors = [r for r in record["results"] if r["outcome"] == "passed"]
             print(f"{module}: {record['killed']}/{record['mutants']} killed ({100 * record['score']:.1f} %)")
