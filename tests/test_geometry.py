@@ -607,3 +607,12 @@ def test_look_at_perspective_and_viewport_map_known_points():
                 lambda: look_at((0, 0, 0), (0, 1, 0))):
         with pytest.raises(ValueError):
             bad()
+
+
+def test_save_mesh_round_trips_through_load_mesh(tmp_path):
+    from difflab.geometry import save_mesh
+
+    m = uv_sphere(n_lat=4, n_lon=6)
+    back = load_mesh(save_mesh(tmp_path / "s.obj", m))
+    np.testing.assert_allclose(back.vertices[back.faces], m.vertices[m.faces], atol=1e-8)
+    np.testing.assert_allclose(back.normals[back.faces], m.normals[m.faces], atol=1e-8)

@@ -2,29 +2,13 @@
 
 from __future__ import annotations
 
-import io as _io
 import os
 from pathlib import Path
 
 import numpy as np
 
-from ..geometry import TriMesh
-from ..io import write_text_atomic
+from ..geometry import TriMesh, save_mesh
 from .terrain import TERRAIN_COLORS, TERRAIN_LEVELS, terrain_parts
-
-
-def obj_text(mesh: TriMesh) -> str:
-    """Wavefront OBJ text of the mesh's used vertices (v), its normals (vn) if any, and faces."""
-    used, faces = np.unique(mesh.faces, return_inverse=True)
-    faces = faces.reshape(-1, 3) + 1  # OBJ indices start at 1
-    out = _io.StringIO()
-    np.savetxt(out, mesh.vertices[used], fmt="v %.9g %.9g %.9g")
-    if mesh.normals is not None:
-        np.savetxt(out, mesh.normals[used], fmt="vn %.9g %.9g %.9g")
-        np.savetxt(out, np.repeat(faces, 2, axis=1), fmt="f %d//%d %d//%d %d//%d")
-    else:
-        np.savetxt(out, faces, fmt="f %d %d %d")
-    return out.getvalue()
 
 
 def terrain_scene(mesh: TriMesh, folder: str | os.PathLike, levels=TERRAIN_LEVELS, *, width: int = 320,
@@ -41,7 +25,7 @@ def terrain_scene(mesh: TriMesh, folder: str | os.PathLike, levels=TERRAIN_LEVEL
     materials, objects = {}, []
     for band, part in terrain_parts(mesh, levels).items():
         path = folder / f"terrain_{band}.obj"
-        write_text_atomic(path, obj_text(part))
+        save_mesh(path, part)
         glossy = band == "water"
         materials[band] = {"ka": list(TERRAIN_COLORS[band]), "kd": list(TERRAIN_COLORS[band]),
                            "ks": [0.4] * 3 if glossy else [0.0] * 3, "n": 40 if glossy else 1}

@@ -8,11 +8,11 @@
 - transforms: `transform_matrix` (M = matrix @ T @ Rz @ Ry @ Rx @ S), `rotation_matrix`,
   `translation_matrix`, `scale_matrix`, `apply_to_points`, `apply_to_normals`; the viewing and
   projection matrices `look_at`, `perspective`, `orthographic` (OpenGL's) and `ndc_to_raster`
-- files: `load_mesh` (OBJ, PLY via trimesh)
+- files: `load_mesh` (OBJ, PLY via trimesh), `save_mesh` (OBJ)
 - uv projection: `planar_uv`, `spherical_uv`, `cylindrical_uv`, `project_uvs`
 """
 
-from .loading import load_mesh
+from .loading import load_mesh, save_mesh
 from .mesh import TriMesh, concatenate, weld
 from .normals import degenerate_faces, face_areas, face_normals, vertex_normals
 from .primitives import box, cylinder, quad, uv_sphere
@@ -28,6 +28,6 @@ __all__ = [
     "face_normals", "face_areas", "vertex_normals", "degenerate_faces",
     "transform_matrix", "rotation_matrix", "translation_matrix", "scale_matrix",
     "apply_to_points", "apply_to_normals", "look_at", "perspective", "orthographic", "ndc_to_raster",
-    "load_mesh",
+    "load_mesh", "save_mesh",
     "planar_uv", "spherical_uv", "cylindrical_uv", "project_uvs",
 ]

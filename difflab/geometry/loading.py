@@ -1,4 +1,5 @@
-"""`load_mesh`: OBJ / PLY (and whatever else trimesh reads) into a validated `TriMesh`.
+"""`load_mesh`: OBJ / PLY (and whatever else trimesh reads) into a validated `TriMesh`; `save_mesh`
+writes a `TriMesh` as OBJ.
 
 trimesh is lenient: it may drop faces that index past the vertex list or read a garbage file as an
 empty scene. For OBJ files we therefore check the raw text (vertex values, every `f` index, at least
@@ -10,14 +11,17 @@ by line.
 
 from __future__ import annotations
 
+import io
 import math
 import os
 import re
 import warnings
+from pathlib import Path
 
 import numpy as np
 
 from difflab.errors import MeshError
+from difflab.io import write_text_atomic
 from difflab.limits import MAX_COORD, MESH_FILE_BYTES, require_memory
 
 from .mesh import TriMesh, concatenate
@@ -196,3 +200,25 @@ def load_mesh(path) -> TriMesh:
         raise MeshError(f"{path}: vertex coordinates reach {np.abs(mesh.vertices).max():.3g}, beyond +-{MAX_COORD:g} "
                         "(float32 rendering overflows)")
     return mesh
+
+
+def obj_text(mesh: TriMesh) -> str:
+    """Wavefront OBJ text of the mesh's used vertices (v), its normals (vn) if any, and faces."""
+    used, faces = np.unique(mesh.faces, return_inverse=True)
+    faces = faces.reshape(-1, 3) + 1  # OBJ indices start at 1
+    out = io.StringIO()
+    np.savetxt(out, mesh.vertices[used], fmt="v %.9g %.9g %.9g")
+    if mesh.normals is not None:
+        np.savetxt(out, mesh.normals[used], fmt="vn %.9g %.9g %.9g")
+        np.savetxt(out, np.repeat(faces, 2, axis=1), fmt="f %d//%d %d//%d %d//%d")
+    else:
+        np.savetxt(out, faces, fmt="f %d %d %d")
+    return out.getvalue()
+
+
+def save_mesh(path, mesh: TriMesh) -> Path:
+    """Write `mesh` as a Wavefront OBJ file (positions, normals if any, faces; no uvs), atomically.
+    `load_mesh` reads it back. Returns the path."""
+    path = Path(path)
+    write_text_atomic(path, obj_text(mesh))
+    return path
