@@ -8,7 +8,10 @@ them. Sections (each `section(out, size) -> [(path, what it shows), ...]`):
 - `raytracing`: the ray-tree depth series and glass with total internal reflection
 - `fractals`: one figure per fractal kind (also `difflab fractal KIND`)
 
-Figure helpers: `save_figure`, `image_grid`, `strip` (in `figures`). Example scenes:
+Figure helpers: `save_figure`, `image_grid`, `strip` (in `figures`). Lecture helpers the notebooks
+use: `incremental_span`, `polygon_scanline_shade`, `triangle_shade`, `tiled_surface` (Gouraud's
+scan line and its defects, in `gouraud`), `wireframe` (a scene's edges in raster coordinates, in
+`pipeline`). Example scenes:
 `example_scene(name, *, width=None, height=None)`, `scene_path(name)`, `example_names()`.
 """
 
@@ -21,6 +24,11 @@ from .examples import example_names as example_names
 from .examples import example_scene as example_scene
 from .examples import scene_path as scene_path
 from .figures import image_grid as image_grid
+from .gouraud import incremental_span as incremental_span
+from .gouraud import polygon_scanline_shade as polygon_scanline_shade
+from .gouraud import tiled_surface as tiled_surface
+from .gouraud import triangle_shade as triangle_shade
+from .pipeline import wireframe as wireframe
 from .figures import save_figure as save_figure
 
 #: Image size (pixels) of the demo's panels: full, and with `--quick`.
@@ -55,5 +63,6 @@ def run_demo(out, quick: bool = False) -> list[tuple[Path, str]]:
     return written
 
 
-__all__ = ["DEMO_SIZE", "QUICK_SIZE", "example_names", "example_scene", "image_grid", "run_demo", "save_figure",
-           "scene_path", "sections"]
+__all__ = ["DEMO_SIZE", "QUICK_SIZE", "example_names", "example_scene", "image_grid", "incremental_span",
+           "polygon_scanline_shade", "run_demo", "save_figure", "scene_path", "sections", "tiled_surface",
+           "triangle_shade", "wireframe"]
