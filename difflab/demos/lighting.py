@@ -8,22 +8,13 @@ from __future__ import annotations
 
 import csv
 import io as _io
-import math
 from pathlib import Path
-
-import numpy as np
 
 from ..io import write_text_atomic
 from ..renderers.api import render
 from .figures import image_grid
-
-# The lecture's material table. "shininess" s in [0, 1] maps to the Phong exponent n = 128 s, the
-# range of OpenGL's GL_SHININESS ([0, 128]).
-SHININESS_TO_N = 128.0
-LECTURE_MATERIALS = {
-    "lecture 1": {"ambient": 0.52, "diffuse": 0.00, "specular": 0.82, "shininess": 0.10},
-    "lecture 2": {"ambient": 0.39, "diffuse": 0.46, "specular": 0.82, "shininess": 0.75},
-}
+from .illumination import (LECTURE_GEOMETRY, LECTURE_MATERIALS, lecture_intensities, lecture_material,
+                           lecture_phong_table)
 
 
 def base_scene(objects, materials, width, height, eye=(0.0, 0.6, 4.0), target=(0.0, 0.0, 0.0), lights=None):
@@ -71,39 +62,19 @@ def decomposition(out: Path, size: int) -> list[tuple[Path, str]]:
     return [(path, "the illumination model term by term: ka Ia, kd Il cos(theta), ks Il cos^n(alpha), and the total")]
 
 
-def lecture_phong_table() -> list[dict]:
-    """The lecture's table: each material lit at incidence 60, 25 and 0 degrees (viewer along the
-    mirror direction's neighbour, 10 degrees off the normal), split into its terms, with Ia = Il = 1."""
-    rows = []
-    for name, m in LECTURE_MATERIALS.items():
-        n = SHININESS_TO_N * m["shininess"]
-        for incidence in (60.0, 25.0, 0.0):
-            theta = math.radians(incidence)
-            view = math.radians(-10.0)
-            l = np.array([math.sin(theta), 0.0, math.cos(theta)])
-            v = np.array([math.sin(view), 0.0, math.cos(view)])
-            r = 2.0 * l[2] * np.array([0.0, 0.0, 1.0]) - l
-            ambient, diffuse = m["ambient"], m["diffuse"] * math.cos(theta)
-            specular = m["specular"] * max(float(r @ v), 0.0) ** n
-            rows.append({"material": name, "n": n, "incidence_deg": incidence, "ambient": ambient,
-                         "diffuse": diffuse, "specular": specular, "total": ambient + diffuse + specular})
-    return rows
-
-
 def materials_table(out: Path, size: int) -> list[tuple[Path, str]]:
     """The lecture's two materials (and the table of their terms at three incidences)."""
     images, titles = [], []
     obj = [{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "m"}]
+    quoted = lecture_intensities()
     for name, m in LECTURE_MATERIALS.items():
-        grey = lambda x: [x, x, x]  # noqa: E731
-        material = {"ka": grey(m["ambient"]), "kd": grey(m["diffuse"]), "ks": grey(m["specular"]),
-                    "n": SHININESS_TO_N * m["shininess"]}
+        material = lecture_material(name)
         scene = base_scene(obj, {"m": material}, size, size,
                            lights=[{"type": "point", "position": [4.0, 5.0, 6.0], "intensity": [0.6, 0.6, 0.6]}])
         scene["ambient"] = [0.5, 0.5, 0.5]
         images.append(render(scene))
-        titles.append(f"{name}: ka {m['ambient']}, kd {m['diffuse']},\nks {m['specular']}, "
-                      f"shininess {m['shininess']} (n = {material['n']:.1f})")
+        titles.append(f"{name}: ka {m['ambient']}, kd {m['diffuse']}, ks {m['specular']},\n"
+                      f"shininess {m['shininess']} (n = {material['n']:.1f}); patch: {quoted[name]:.2f}")
     figure = image_grid(images, titles, out / "materials.png", columns=2)
     buffer = _io.StringIO()
     rows = lecture_phong_table()
@@ -112,5 +83,9 @@ def materials_table(out: Path, size: int) -> list[tuple[Path, str]]:
     writer.writerows({k: (round(v, 6) if isinstance(v, float) else v) for k, v in row.items()} for row in rows)
     table = out / "materials.csv"
     write_text_atomic(table, buffer.getvalue())
-    return [(figure, "the lecture's two materials (shininess s mapped to n = 128 s, OpenGL's GL_SHININESS range)"),
+    g = LECTURE_GEOMETRY
+    return [(figure, "the lecture's two materials (shininess s mapped to n = 128 s, OpenGL's GL_SHININESS range); "
+                     f"'patch' is the rendered intensity of a flat patch with Ia {g['ambient']}, Ip {g['intensity']}, "
+                     f"light {g['incidence_deg']:.0f} deg, viewer {g['view_deg']:.1f} deg from the normal "
+                     "(the lecture quotes 0.31 and 0.52)"),
             (table, "their ambient / diffuse / specular / total at incidence 60, 25 and 0 degrees")]
