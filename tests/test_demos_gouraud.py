@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from difflab.demos.gouraud import (incremental_span, polygon_scanline_shade, span_columns, tiled_surface,
+from difflab.demos.gouraud import (edge_kinks, incremental_span, polygon_scanline_shade, span_columns, tiled_surface,
                                    triangle_shade)
 from difflab.geometry import face_normals, vertex_normals
 
@@ -55,3 +55,13 @@ def test_tiled_surface_has_equal_averaged_normals_inside():
     np.testing.assert_allclose(normals[inner], np.tile([0, 1.0, 0], (inner.sum(), 1)), atol=1e-12)
     tilt = face_normals(mesh.vertices, mesh.faces)[:, 0]
     assert np.all(np.abs(tilt) > 0.1) and (tilt > 0).sum() == (tilt < 0).sum()
+
+
+def test_edge_kinks_measure_steps_and_slope_breaks_at_triangle_crossings():
+    faces = np.array([-1, 0, 0, 0, 1, 1, 1, -1])
+    step = np.array([0, 1, 1, 1, 2, 2, 2, 0.0])            # flat: a step of 1 at the crossing
+    ramp = np.array([0, 0, 1, 2, 4, 6, 8, 0.0])            # Gouraud: slope 1 then 2
+    line = np.array([0, 0, 1, 2, 3, 4, 5, 0.0])            # one straight line: nothing
+    assert edge_kinks(step, faces).tolist() == [1.0]
+    assert edge_kinks(ramp, faces).tolist() == [1.0]
+    assert edge_kinks(line, faces).tolist() == [0.0]

@@ -9,9 +9,11 @@ them. Sections (each `section(out, size) -> [(path, what it shows), ...]`):
 - `fractals`: one figure per fractal kind (also `difflab fractal KIND`)
 
 Figure helpers: `save_figure`, `image_grid`, `strip` (in `figures`). Lecture helpers the notebooks
-use: `incremental_span`, `polygon_scanline_shade`, `triangle_shade`, `tiled_surface` (Gouraud's
+use: `incremental_span`, `polygon_scanline_shade`, `triangle_shade`, `tiled_surface`, `edge_kinks` (Gouraud's
 scan line and its defects, in `gouraud`), `wireframe` (a scene's edges in raster coordinates, in
-`pipeline`). Example scenes:
+`pipeline`), `lit_patch`, `lecture_phong_table`, `lecture_intensities`, `lecture_material`,
+`LECTURE_GEOMETRY` (the illumination model measured on one patch at stated angles, in
+`illumination`). Example scenes:
 `example_scene(name, *, width=None, height=None)`, `scene_path(name)`, `example_names()`.
 """
 
@@ -24,10 +26,16 @@ from .examples import example_names as example_names
 from .examples import example_scene as example_scene
 from .examples import scene_path as scene_path
 from .figures import image_grid as image_grid
+from .gouraud import edge_kinks as edge_kinks
 from .gouraud import incremental_span as incremental_span
 from .gouraud import polygon_scanline_shade as polygon_scanline_shade
 from .gouraud import tiled_surface as tiled_surface
 from .gouraud import triangle_shade as triangle_shade
+from .illumination import LECTURE_GEOMETRY as LECTURE_GEOMETRY
+from .illumination import lecture_intensities as lecture_intensities
+from .illumination import lecture_material as lecture_material
+from .illumination import lecture_phong_table as lecture_phong_table
+from .illumination import lit_patch as lit_patch
 from .pipeline import wireframe as wireframe
 from .figures import save_figure as save_figure
 
@@ -63,6 +71,7 @@ def run_demo(out, quick: bool = False) -> list[tuple[Path, str]]:
     return written
 
 
-__all__ = ["DEMO_SIZE", "QUICK_SIZE", "example_names", "example_scene", "image_grid", "incremental_span",
+__all__ = ["DEMO_SIZE", "LECTURE_GEOMETRY", "lecture_intensities", "lecture_material", "lecture_phong_table",
+           "lit_patch", "QUICK_SIZE", "edge_kinks", "example_names", "example_scene", "image_grid", "incremental_span",
            "polygon_scanline_shade", "run_demo", "save_figure", "scene_path", "sections", "tiled_surface",
            "triangle_shade", "wireframe"]

@@ -7,6 +7,8 @@
   triangles (it does not).
 - `tiled_surface`: the "tiled" roof whose averaged vertex normals are all equal, so that Gouraud
   shading paints it flat.
+- `edge_kinks`: how sharply a scan line's intensity breaks where it crosses from one triangle to the
+  next (the Mach bands of flat and Gouraud shading).
 Raster convention (difflab's): pixel j covers [j, j + 1) and is sampled at its centre j + 0.5.
 """
 
@@ -104,3 +106,15 @@ def tiled_surface(tiles: int = 6, width: float = 3.0, depth: float = 2.0, height
         else:
             faces += [[s, s + 1, s + n], [s + 1, s + 1 + n, s + n]]
     return TriMesh(vertices, np.array(faces), name="tiled_surface")
+
+
+def edge_kinks(values, faces) -> np.ndarray:
+    """|second difference| of a scan line's `values` (W,) at each crossing between two triangles
+    (`faces` (W,) their ids, -1 where nothing is drawn): |(v[j+1] - v[j]) - (v[j] - v[j-1])| where
+    face[j] != face[j+1] and the four pixels j-1 .. j+2 are all drawn. A step in intensity (flat
+    shading) or in its slope (Gouraud) shows here; smooth shading (Phong) leaves only curvature."""
+    values, faces = np.asarray(values, float), np.asarray(faces)
+    j = np.arange(1, len(values) - 2)
+    crossing = (faces[j] != faces[j + 1]) & (faces[j - 1] >= 0) & (faces[j + 2] >= 0) & (faces[j] >= 0) & (faces[j + 1] >= 0)
+    j = j[crossing]
+    return np.abs((values[j + 1] - values[j]) - (values[j] - values[j - 1]))
