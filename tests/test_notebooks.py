@@ -87,7 +87,7 @@ def test_deep_reference_detector():
     assert deep_references("import difflab\nfrom difflab import geometry\ngeometry.teapot(2)") == []
     assert deep_references("from difflab.lighting import jax_model") == ["difflab.lighting.jax_model"]
     assert deep_references("from difflab.io import _as_image") == ["difflab.io._as_image"]
-    assert deep_references("x = difflab.render.api.render") != []
+    assert deep_references("x = difflab.renderers.api.render") != []
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ..render.api import render
+from ..renderers.api import render
 
 # The lecture's material table. "shininess" s in [0, 1] maps to the Phong exponent n = 128 s, the
 # range of OpenGL's GL_SHININESS ([0, 128]).

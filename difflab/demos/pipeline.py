@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from .. import geometry
-from ..render.camera import projection_matrix, view_matrix
-from ..render.compile import object_mesh
+from ..renderers.camera import projection_matrix, view_matrix
+from ..renderers.compile import object_mesh
 from ..scene import Mesh, Sphere
 
 
