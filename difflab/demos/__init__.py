@@ -13,7 +13,10 @@ use: `incremental_span`, `polygon_scanline_shade`, `triangle_shade`, `tiled_surf
 scan line and its defects, in `gouraud`), `wireframe` (a scene's edges in raster coordinates, in
 `pipeline`), `lit_patch`, `lecture_phong_table`, `lecture_intensities`, `lecture_material`,
 `LECTURE_GEOMETRY` (the illumination model measured on one patch at stated angles, in
-`illumination`). Example scenes:
+`illumination`), `texture_to_object`, `texture_to_screen`, `apply_projective`, `mip_pyramid` (the
+texture -> screen chain as one 3x3 projective map, in `texture_maps`), and the texture-filter
+comparison `checker_texture`, `receding_plane_scene`, `compare_filters`, `FILTER_ORDER`,
+`FILTER_TITLES` (in `textures`). Example scenes:
 `example_scene(name, *, width=None, height=None)`, `scene_path(name)`, `example_names()`.
 """
 
@@ -37,6 +40,15 @@ from .illumination import lecture_material as lecture_material
 from .illumination import lecture_phong_table as lecture_phong_table
 from .illumination import lit_patch as lit_patch
 from .pipeline import wireframe as wireframe
+from .texture_maps import apply_projective as apply_projective
+from .texture_maps import mip_pyramid as mip_pyramid
+from .texture_maps import texture_to_object as texture_to_object
+from .texture_maps import texture_to_screen as texture_to_screen
+from .textures import FILTER_ORDER as FILTER_ORDER
+from .textures import FILTER_TITLES as FILTER_TITLES
+from .textures import checker_texture as checker_texture
+from .textures import compare_filters as compare_filters
+from .textures import receding_plane_scene as receding_plane_scene
 from .figures import save_figure as save_figure
 
 #: Image size (pixels) of the demo's panels: full, and with `--quick`.
@@ -71,7 +83,8 @@ def run_demo(out, quick: bool = False) -> list[tuple[Path, str]]:
     return written
 
 
-__all__ = ["DEMO_SIZE", "LECTURE_GEOMETRY", "lecture_intensities", "lecture_material", "lecture_phong_table",
+__all__ = ["DEMO_SIZE", "FILTER_ORDER", "FILTER_TITLES", "apply_projective", "checker_texture", "compare_filters",
+           "mip_pyramid", "receding_plane_scene", "texture_to_object", "texture_to_screen", "LECTURE_GEOMETRY", "lecture_intensities", "lecture_material", "lecture_phong_table",
            "lit_patch", "QUICK_SIZE", "edge_kinks", "example_names", "example_scene", "image_grid", "incremental_span",
            "polygon_scanline_shade", "run_demo", "save_figure", "scene_path", "sections", "tiled_surface",
            "triangle_shade", "wireframe"]

@@ -5,7 +5,8 @@ coefficients (ka, kd, ks, n, m, f0, kr, kt, absorption) and light intensities fr
 through the G-buffer ("raster") or the recorded ray tree ("raytrace") as the scene requires;
 `FitOptions` says how to solve; `FitResult` reports values, standard errors, noise, chi-square and
 flags. `shade_gbuffer` / `evaluate_tree` re-form a rendered image differentiably; `identify` tells
-which parameters a set of views determines; `texture_fit.fit_texture` fits a texture's texels.
+which parameters a set of views determines; `fit_texture` fits a texture's texels (views from
+`texture_view`).
 
 The names load on first use (PEP 562), so that importing `difflab.fit.command` for the command
 line's parser imports neither JAX nor optimistix.
@@ -20,7 +21,7 @@ _EXPORTS = {
     "fit_scene": "fit", "solve": "fit", "fit_batch": "batch", "Identifiability": "identify", "identify": "identify",
     "MaterialTable": "materials", "KINDS": "params", "Param": "params", "evaluate_tree": "raytree",
     "tree_to_jax": "raytree", "METHODS": "setup", "SceneSetup": "setup", "Setup": "setup",
-    "shade_gbuffer": "shading",
+    "shade_gbuffer": "shading", "fit_texture": "texture_fit", "texture_view": "texture_fit",
 }
 __all__ = sorted(_EXPORTS)
 
