@@ -49,7 +49,7 @@ def check_applies(method: str, given: dict) -> None:
 
 
 def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None,
-                 width=None, height=None, threads=None, **options) -> Frame:
+                 width=None, height=None, threads=None, item_buffer=False, light_buffer=False, **options) -> Frame:
     """Render a scene and return the `Frame` (image and G-buffer; the ray tree for ray tracing).
 
     Arguments:
@@ -62,6 +62,10 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
         width, height: override the camera's image size (not with a CompiledScene, which is
             tessellated for its camera: compile the resized scene instead).
         threads: CPU worker threads (default: all cores, or $DIFFLAB_THREADS).
+        item_buffer, light_buffer: ray-tracer speed-ups that leave the image unchanged: primary
+            visibility from the rasterizer's z-buffer (needs "grid" sampling), and shadow rays that
+            test only the candidates of their light-buffer cell (Haines and Greenberg). Their costs
+            are in `frame.stats`. RenderError with the rasterizer.
 
     Raises RenderError before allocating a render over the memory or ray budget (`difflab.limits`),
     and instead of returning non-finite pixels (naming the scene's largest numbers).
@@ -70,20 +74,22 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
     recorded `ray_tree`, whose root nodes are the primary hits.
     """
     overrides = dict(options, method=method, shading=shading, specular=specular, max_depth=max_depth, spp=spp)
-    return draw(scene, overrides, device, width, height, threads, keep=True)
+    return draw(scene, overrides, device, width, height, threads, keep=True, speedups=(item_buffer, light_buffer))
 
 
 def render(scene, *, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None,
-           width=None, height=None, threads=None, **options):
+           width=None, height=None, threads=None, item_buffer=False, light_buffer=False, **options):
     """Render a scene (or a `CompiledScene`) to a numpy (H, W, 3) float32 linear RGB image; the
     keyword-only options are those of `render_frame`. Only the image is formed (no G-buffer, no
     recorded ray tree)."""
     overrides = dict(options, method=method, shading=shading, specular=specular, max_depth=max_depth, spp=spp)
-    return draw(scene, overrides, device, width, height, threads, keep=False).image
+    return draw(scene, overrides, device, width, height, threads, keep=False,
+                speedups=(item_buffer, light_buffer)).image
 
 
-def draw(scene, overrides: dict, device, width, height, threads, keep: bool) -> Frame:
-    """The frame of `scene` under `overrides`; `keep`: also its G-buffer or recorded ray tree."""
+def draw(scene, overrides: dict, device, width, height, threads, keep: bool, speedups=(False, False)) -> Frame:
+    """The frame of `scene` under `overrides`; `keep`: also its G-buffer or recorded ray tree;
+    `speedups`: (item buffer, light buffer) for the ray tracer."""
     threads = check_threads(threads)
     if isinstance(scene, CompiledScene):
         compiled = scene
@@ -102,12 +108,15 @@ def draw(scene, overrides: dict, device, width, height, threads, keep: bool) -> 
     settings = compiled.scene.render
     check_applies(settings.method, overrides)
     if settings.method == "raster":
+        if any(speedups):
+            raise RenderError("item_buffer / light_buffer: speed-ups of the ray tracer; use method='raytrace'")
         from .raster.driver import rasterize
 
         frame = rasterize(compiled, settings, threads, gbuffer=keep)
     else:
         from .raytrace.driver import raytrace
 
-        frame = raytrace(compiled, settings, threads, record_tree=keep)
+        frame = raytrace(compiled, settings, threads, record_tree=keep, use_item_buffer=speedups[0],
+                         use_light_buffer=speedups[1])
     check_image(frame.image, compiled.scene)  # no NaN / inf is returned
     return frame

@@ -30,6 +30,7 @@ from ..camera import camera_struct
 from ..frame import Frame, box_downsample, nonfinite_pixels
 from ..launch import launch_row_loops, load_kernels
 from .itembuffer import item_buffer, item_struct
+from .lightbuffer import DEFAULT_RESOLUTION, build_light_buffer, no_light_buffer
 from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, TraceOutW, TraceParamsW, \
     whitted_kernel
 from .record import empty_tree, sized_tree, tree_to_numpy
@@ -49,6 +50,7 @@ class Traced:
     rays: dict  # primary / shadow / reflection / refraction -> count
     depth_histogram: list  # rays traced at depth 1, 2, ...
     tree: RayTree | None
+    shadow_tests: int = 0  # candidates the light buffer's shadow rays tested (0 without one)
 
 
 def sample_points(width: int, height: int, side: int, sampling: str = "grid") -> np.ndarray:
@@ -90,8 +92,8 @@ def count_crossings(scene, settings) -> bool:
     return bool(settings.shadows and settings.transparent_shadows and any(m.kt > 0 for m in scene.materials.values()))
 
 
-def scene_struct(compiled) -> SceneW:
-    """The compiled scene as the kernel's `SceneW`."""
+def scene_struct(compiled, light_buffer=None) -> SceneW:
+    """The compiled scene as the kernel's `SceneW` (with `light_buffer`'s candidate lists, if given)."""
     mesh = MeshDataW()
     mesh.vertices = compiled.arrays["vertices"]
     mesh.normals = compiled.arrays["normals"]
@@ -100,13 +102,15 @@ def scene_struct(compiled) -> SceneW:
     out = SceneW()
     out.geom, out.mesh, out.lights, out.materials = compiled.geom, mesh, compiled.lights, compiled.materials
     out.textures = compiled.textures.warp
+    out.light_buffer = light_buffer.warp if light_buffer is not None else no_light_buffer(compiled)
     return out
 
 
 def trace_points(compiled, settings, points: np.ndarray, threads: int | None = None, *, record: bool = False,
-                 item=None, pixel_size: tuple[int, int] | None = None) -> Traced:
+                 item=None, pixel_size: tuple[int, int] | None = None, light_buffer=None) -> Traced:
     """Trace one ray tree per raster point of `points` (rows, cols, 2), in pixels of the camera's
-    image (or of `pixel_size` = (width, height)). `item`: an `ItemBufferW` on the same grid."""
+    image (or of `pixel_size` = (width, height)). `item`: an `ItemBufferW` on the same grid;
+    `light_buffer`: a `lightbuffer.LightBuffer` for the shadow rays."""
     scene, device = compiled.scene, compiled.device
     kernel = whitted_kernel(settings.max_depth)
     load_kernels(device, kernel)
@@ -117,7 +121,7 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
     shape = (rows, cols)
     wp_points = wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec2, device=device)
     item = item if item is not None else item_struct(compiled)
-    scene_w = scene_struct(compiled)
+    scene_w = scene_struct(compiled, light_buffer)
     # a sample's width per unit distance (texture footprints of secondary rays; 0 for orthographic views)
     spread = 2.0 * math.tan(math.radians(scene.camera.fov_y) / 2.0) / rows if scene.camera.projection == "perspective" \
         else 0.0
@@ -133,6 +137,7 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
         return out
 
     out = launch(trace_params(scene, settings, False, spread), empty_tree(shape, 0, 0, device))
+    shadow_tests = int(light_buffer.warp.tests.numpy()[0]) if light_buffer is not None else 0
     counts = out.node_count.numpy()
     ray_counts = out.rays.numpy().astype(np.int64).sum(axis=0)
     stats_rays = {"primary": int(ray_counts[COUNT_PRIMARY]), "shadow": int(ray_counts[COUNT_SHADOW]),
@@ -146,11 +151,12 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
         launch(trace_params(scene, settings, True, spread), wp_tree)
         tree = tree_to_numpy(wp_tree, offsets, n_lights, fog, scene, settings, points.shape[:2], crossings)
     return Traced(color=out.color.numpy(), fog=fog, node_count=counts, rays=stats_rays,
-                  depth_histogram=histogram, tree=tree)
+                  depth_histogram=histogram, tree=tree, shadow_tests=shadow_tests)
 
 
 def raytrace(compiled, settings, threads: int | None = None, *, record_tree: bool = True,
-             use_item_buffer: bool = False) -> Frame:
+             use_item_buffer: bool = False, use_light_buffer: bool = False,
+             light_buffer_resolution: int = DEFAULT_RESOLUTION) -> Frame:
     """Ray-trace a compiled scene under `settings` (a scene `RenderSettings`).
 
     Arguments:
@@ -161,10 +167,15 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
         record_tree: also record the ray tree (a second pass over the same trees).
         use_item_buffer: primary visibility from the rasterizer's z-buffer (`rt_itembuffer`); needs
             "grid" sampling, whose samples are the rasterizer's.
+        use_light_buffer: shadow rays to point and spot lights test only the candidates of their
+            light-buffer cell (`lightbuffer.py`), built for this render with
+            `light_buffer_resolution` cells per cube-face edge; the image is the same.
 
     Returns: a `Frame` with `image` (H, W, 3) float32 linear RGB, no G-buffer, `ray_tree` (a
     `RayTree` or None) and `stats`: rays traced per kind, `depth_histogram` (rays per depth, from
-    1), `nodes`, `seconds`, `rays_per_second`, `nonfinite_pixels`.
+    1), `nodes`, `seconds`, `rays_per_second`, `nonfinite_pixels`; with the light buffer also
+    `light_buffer_seconds` (building it, included in `seconds`), `light_buffer_entries` and
+    `shadow_tests` (candidates tested by all shadow rays).
     """
     scene = compiled.scene
     side = settings.spp_side  # the scene validated spp and the sample budget
@@ -175,7 +186,10 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
     start = time.perf_counter()
     points = sample_points(width, height, side, settings.sampling)
     item = item_buffer(compiled, width * side, height * side, threads) if use_item_buffer else None
-    traced = trace_points(compiled, settings, points, threads, record=record_tree, item=item)
+    built = time.perf_counter()
+    lights = build_light_buffer(compiled, light_buffer_resolution) if use_light_buffer else None
+    built = time.perf_counter() - built
+    traced = trace_points(compiled, settings, points, threads, record=record_tree, item=item, light_buffer=lights)
     image = box_downsample(traced.color, side)
     seconds = time.perf_counter() - start
     total_rays = sum(traced.rays.values())
@@ -185,4 +199,6 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
              "depth_histogram": traced.depth_histogram, "nodes": int(traced.node_count.sum()),
              "item_buffer": bool(use_item_buffer), "recorded_tree": bool(record_tree),
              "nonfinite_pixels": nonfinite_pixels(image)}
+    if lights is not None:
+        stats.update(light_buffer_seconds=built, light_buffer_entries=lights.entries, shadow_tests=traced.shadow_tests)
     return Frame(image=image, buffers=None, stats=stats, ray_tree=traced.tree)

@@ -18,7 +18,8 @@ below `threshold`.
 
 Shadow rays are cast as the rasterizer casts them: to lights on the front side of the geometric
 normal (a light behind it is left to the model's N.L gating), transparent occluders multiplying by
-kt when `transparent` is set.
+kt when `transparent` is set -- through the BVH, or through the light buffer's candidate lists
+(`lightbuffer.py`) when the scene struct carries one.
 
 With `record` set, the same walk writes every node into the flat arrays of `record.TreeW` at the
 sample's offset (see `tree.RayTree` for the layout); without it, it counts nodes per sample so that
@@ -34,6 +35,7 @@ from ...vocabulary import MAX_DEPTH_LIMIT
 from ..camera import CameraW, primary_ray
 from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, light_visibility
 from .itembuffer import ItemBufferW, hinted_hit
+from .lightbuffer import LightBufferW, buffered_visibility
 from .optics import beer, reflect
 from .record import LightRecW, TreeW, light_arrays, record_light, record_ray, record_surface
 from .surface import RayW, SceneW, SurfaceW, child_ray, fresnel_split, new_ray, skip_object, surface_at
@@ -93,6 +95,7 @@ def trace_ray(geom: SceneGeomW, item: ItemBufferW, out: TraceOutW, ray: RayW, i:
 
 @wp.func
 def shade_hit(geom: SceneGeomW, lights: wp.array(dtype=LightW), materials: wp.array(dtype=MaterialW),
+              buffer: LightBufferW, vertices: wp.array(dtype=wp.vec3), faces: wp.array2d(dtype=wp.int32),
               params: TraceParamsW, hit: HitW, surf: SurfaceW, rec: LightRecW, k: int, rays: wp.array2d(dtype=wp.int32),
               i: int):
     """Local illumination at a hit, the one model with a shadow ray per light: ka Ia + sum_p s_p
@@ -106,7 +109,11 @@ def shade_hit(geom: SceneGeomW, lights: wp.array(dtype=LightW), materials: wp.ar
             wp.atomic_add(rays, i, COUNT_SHADOW, 1)
             origin = surf.p + geom.epsilon * surf.geo
             skip = skip_object(geom, hit, l)
-            s = light_visibility(geom, materials, origin, l, light_d - geom.epsilon, skip, params.transparent)
+            if buffer.use == 1 and buffer.light_cell0[q] >= 0:
+                s = buffered_visibility(geom, buffer, vertices, faces, materials, q, lights[q].position, origin, l,
+                                        light_d - geom.epsilon, skip, params.transparent)
+            else:
+                s = light_visibility(geom, materials, origin, l, light_d - geom.epsilon, skip, params.transparent)
             if params.count_crossings == 1 and s > 0.0:
                 count_shadow_crossings(geom, materials, origin, l, light_d - geom.epsilon, skip, rec.crossings, k, q)
         if s > 0.0:
@@ -170,8 +177,8 @@ def make_whitted_kernel(stack_size: int):
             surf = surface_at(scene, cam, hit, ray, xy, int(ray.kind == PRIMARY), params.spread)
             if ray.kind == PRIMARY:
                 fog_f = fog_blend(params.fog, wp.dot(surf.p - cam.eye, cam.forward))
-            local = shade_hit(scene.geom, scene.lights, scene.materials, params, hit, surf, rec, base + node,
-                              out.rays, i)
+            local = shade_hit(scene.geom, scene.lights, scene.materials, scene.light_buffer, scene.mesh.vertices,
+                              scene.mesh.faces, params, hit, surf, rec, base + node, out.rays, i)
             total = total + wp.cw_mul(w, local)
             if params.record == 0 and ray.depth >= params.max_depth:
                 continue  # a leaf nobody records: no split to compute

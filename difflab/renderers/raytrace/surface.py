@@ -22,6 +22,7 @@ from ..camera import CameraW
 from ..texture.sampling import TexturesW, cone_footprint, pixel_footprint, plane_uv, plane_uv_derivatives, \
     sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
 from ..trace import HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, HitW, SceneGeomW
+from .lightbuffer import LightBufferW
 from .optics import fresnel, refract
 
 wp.set_module_options({"enable_backward": False})
@@ -46,6 +47,7 @@ class SceneW:
     lights: wp.array(dtype=LightW)
     materials: wp.array(dtype=MaterialW)
     textures: TexturesW
+    light_buffer: LightBufferW  # candidate occluders per light direction (`use` 0: shadow rays ask the BVH)
 
 
 @wp.struct

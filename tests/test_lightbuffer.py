@@ -1,0 +1,69 @@
+"""The light buffer (Haines and Greenberg): shadow rays through per-light candidate lists give the
+same image as shadow rays through the BVH, while testing only a few candidates each."""
+
+import numpy as np
+import pytest
+
+import difflab
+from difflab.renderers.raytrace.driver import raytrace
+from difflab.renderers.raytrace.lightbuffer import build_light_buffer
+
+
+def same_image(scene, resolution=32):
+    compiled = difflab.compile_scene(scene)
+    plain = raytrace(compiled, scene.render, record_tree=False)
+    buffered = raytrace(compiled, scene.render, record_tree=False, use_light_buffer=True,
+                        light_buffer_resolution=resolution)
+    np.testing.assert_allclose(buffered.image, plain.image, atol=1e-6)
+    return plain, buffered
+
+
+@pytest.mark.parametrize("name", ["lecture_teapot", "glass_sphere"])
+def test_light_buffer_gives_the_bvh_image(name):
+    # lecture_teapot: opaque occluders (teapot, frame, ball); glass_sphere: transparent shadows (kt^k).
+    plain, buffered = same_image(difflab.example_scene(name, 48, 36))
+    rays = buffered.stats["rays"]["shadow"]
+    assert rays == plain.stats["rays"]["shadow"] > 0
+    assert 0 < buffered.stats["shadow_tests"] and buffered.stats["light_buffer_entries"] > 0
+
+
+@pytest.mark.parametrize("resolution", [1, 8, 64])
+def test_a_small_occluder_casts_the_same_shadow_at_every_cube_resolution(resolution):
+    scene = difflab.Scene.from_dict({
+        "camera": {"eye": [0, 3, 3], "target": [0, 0, 0], "fov_y": 45, "width": 40, "height": 30},
+        "ambient": [0.1, 0.1, 0.1],
+        "lights": [{"type": "point", "position": [0.3, 3, 0.2]}, {"type": "directional", "direction": [0, -1, 0.2]}],
+        "materials": {"m": {"kd": [0.8, 0.8, 0.8]}},
+        "objects": [{"type": "mesh", "builtin": "quad", "resolution": 1, "material": "m",
+                     "transform": {"translate": [0, 1, 0], "scale": 0.4}},
+                    {"type": "sphere", "center": [-0.8, 0.5, 0], "radius": 0.3, "material": "m"},
+                    {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "m"}],
+        "render": {"method": "raytrace", "max_depth": 1}})
+    plain, _ = same_image(scene, resolution)
+    unshadowed = difflab.render(scene, shadows=False)
+    assert ((unshadowed - plain.image).max(-1) > 0.2).sum() > 20  # there are shadows to get right
+
+
+def test_candidates_are_culled_and_z_ordered():
+    scene = difflab.example_scene("lecture_teapot", 32, 24)
+    compiled = difflab.compile_scene(scene)
+    buffer = build_light_buffer(compiled, 16)
+    counts = buffer.counts[0]
+    assert counts.shape == (6, 16, 16) and sum(c.sum() for c in buffer.counts) == buffer.entries
+    primitives = compiled.n_mesh_faces + len(compiled.geom.sphere_center.numpy()) + len(compiled.geom.plane_point.numpy())
+    assert counts.mean() < 0.1 * primitives  # an average cell lists a small part of the scene
+    starts, near = buffer.warp.cell_start.numpy(), buffer.warp.near.numpy()
+    for k in range(len(starts) - 1):
+        assert np.all(np.diff(near[starts[k]:starts[k + 1]]) >= 0)
+
+
+def test_render_frame_offers_both_speed_ups_for_the_ray_tracer_only():
+    scene = difflab.example_scene("lecture_teapot", 32, 24)
+    plain = difflab.render_frame(scene)
+    np.testing.assert_allclose(difflab.render_frame(scene, light_buffer=True).image, plain.image, atol=1e-6)
+    fast = difflab.render_frame(scene, item_buffer=True, light_buffer=True)
+    # the item buffer's primary hits come from the rasterizer: a few silhouette samples may differ
+    assert (np.abs(fast.image - plain.image).max(-1) > 1e-6).mean() < 0.02
+    assert fast.stats["item_buffer"] and fast.stats["shadow_tests"] > 0
+    with pytest.raises(difflab.RenderError, match="light_buffer"):
+        difflab.render_frame(scene, method="raster", light_buffer=True)
