@@ -16,7 +16,8 @@ scan line and its defects, in `gouraud`), `wireframe` (a scene's edges in raster
 `illumination`), `texture_to_object`, `texture_to_screen`, `apply_projective`, `mip_pyramid` (the
 texture -> screen chain as one 3x3 projective map, in `texture_maps`), and the texture-filter
 comparison `checker_texture`, `receding_plane_scene`, `compare_filters`, `FILTER_ORDER`,
-`FILTER_TITLES` (in `textures`). Example scenes:
+`FILTER_TITLES` (in `textures`), `forward_trace`, `forward_scene`, `light_buffer_counts` (forward
+against backward tracing, and the light buffer's candidate lists, in `tracing`). Example scenes:
 `example_scene(name, *, width=None, height=None)`, `scene_path(name)`, `example_names()`.
 """
 
@@ -45,6 +46,9 @@ from .texture_maps import mip_pyramid as mip_pyramid
 from .texture_maps import texture_to_object as texture_to_object
 from .texture_maps import texture_to_screen as texture_to_screen
 from .textures import FILTER_ORDER as FILTER_ORDER
+from .tracing import forward_scene as forward_scene
+from .tracing import forward_trace as forward_trace
+from .tracing import light_buffer_counts as light_buffer_counts
 from .textures import FILTER_TITLES as FILTER_TITLES
 from .textures import checker_texture as checker_texture
 from .textures import compare_filters as compare_filters
@@ -83,7 +87,7 @@ def run_demo(out, quick: bool = False) -> list[tuple[Path, str]]:
     return written
 
 
-__all__ = ["DEMO_SIZE", "FILTER_ORDER", "FILTER_TITLES", "apply_projective", "checker_texture", "compare_filters",
+__all__ = ["DEMO_SIZE", "forward_scene", "forward_trace", "light_buffer_counts", "FILTER_ORDER", "FILTER_TITLES", "apply_projective", "checker_texture", "compare_filters",
            "mip_pyramid", "receding_plane_scene", "texture_to_object", "texture_to_screen", "LECTURE_GEOMETRY", "lecture_intensities", "lecture_material", "lecture_phong_table",
            "lit_patch", "QUICK_SIZE", "edge_kinks", "example_names", "example_scene", "image_grid", "incremental_span",
            "polygon_scanline_shade", "run_demo", "save_figure", "scene_path", "sections", "tiled_surface",
