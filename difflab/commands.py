@@ -76,7 +76,7 @@ def run_fractal(args) -> int:
                 options.pop(key, None)
         else:
             options.pop("max_iter")
-    caption = fractal_figure(args.kind, Path(args.output), args.width, args.height, **options)
+    caption = fractal_figure(args.kind, Path(args.output), args.width, args.height, titled=False, **options)
     print(f"wrote {args.output}: {caption}")
     return 0
 

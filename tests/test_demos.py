@@ -7,7 +7,6 @@ import pytest
 
 import difflab
 from difflab.demos import example_names, image_grid, scene_path
-from difflab.demos.figures import SEPARATOR, strip
 from difflab.errors import SceneError
 
 
@@ -32,13 +31,6 @@ def test_example_scene_at_another_size_keeps_the_rest():
 def test_unknown_example_names_the_closest():
     with pytest.raises(SceneError, match=r"unknown name 'lecture_teapo' \(did you mean 'lecture_teapot'\?\)"):
         scene_path("lecture_teapo")
-
-
-def test_strip_puts_white_separators_between_panels():
-    a, b = np.zeros((5, 3, 3), np.float32), np.full((5, 2, 3), 0.5, np.float32)
-    out = strip([a, b])
-    assert out.shape == (5, 3 + SEPARATOR + 2, 3)
-    assert np.all(out[:, 3:3 + SEPARATOR] == 1.0) and np.all(out[:, -2:] == 0.5) and np.all(out[:, :3] == 0)
 
 
 def test_image_grid_writes_a_png(tmp_path):

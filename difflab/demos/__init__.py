@@ -8,7 +8,7 @@ them. Sections (each `section(out, size) -> [(path, what it shows), ...]`):
 - `raytracing`: the ray-tree depth series and glass with total internal reflection
 - `fractals`: one figure per fractal kind (also `difflab fractal KIND`)
 
-Figure helpers: `save_figure`, `image_grid`, `strip` (in `figures`). Lecture helpers the notebooks
+Figure helpers: `save_figure`, `image_grid` (in `figures`). Lecture helpers the notebooks
 use: `incremental_span`, `polygon_scanline_shade`, `triangle_shade`, `tiled_surface`, `edge_kinks` (Gouraud's
 scan line and its defects, in `gouraud`), `wireframe` (a scene's edges in raster coordinates, in
 `pipeline`), `lit_patch`, `lecture_phong_table`, `lecture_intensities`, `lecture_material`,

@@ -1,16 +1,12 @@
-"""Figure helpers shared by every demo section: atomic matplotlib saves, labelled image grids and
-side-by-side strips of linear images."""
+"""Figure helpers shared by every demo section: atomic matplotlib saves and labelled image grids of
+linear images."""
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
 
-import numpy as np
-
 from ..io import atomic_path, linear_to_srgb
-
-SEPARATOR = 4  # pixels of white between the panels of a strip
 
 
 def save_figure(fig, path: Path) -> Path:
@@ -47,13 +43,3 @@ def image_grid(images, titles, path: Path, columns: int, row_labels=None) -> Pat
         for r, label in enumerate(row_labels):
             axes[r, 0].set_ylabel(label)
     return save_figure(fig, Path(path))
-
-
-def strip(images: list[np.ndarray]) -> np.ndarray:
-    """Linear images of equal height side by side, SEPARATOR white pixels apart."""
-    h = images[0].shape[0]
-    gap = np.ones((h, SEPARATOR, 3), np.float32)
-    parts = []
-    for k, image in enumerate(images):
-        parts += ([gap] if k else []) + [image]
-    return np.concatenate(parts, axis=1)

@@ -11,7 +11,7 @@ from ..fractals import (box_counting_dimension, cantor_staircase, hilbert, julia
                         mandelbulb, peano, polyline_length, terrain, terrain_scene)
 from ..io import save_image
 from ..renderers.api import render
-from .figures import save_figure
+from .figures import image_grid, save_figure
 
 CURVES = ("koch", "peano", "hilbert", "cantor")
 IMAGES = ("terrain", "mandelbrot", "julia", "mandelbulb")
@@ -65,12 +65,28 @@ def render_set(kind: str, width: int, height: int, *, order: int = 7, seed: int 
         return render(terrain_scene(mesh, folder, width=width, height=height), device=device)
 
 
-def fractal_figure(kind: str, path: Path, width: int, height: int, **options) -> str:
-    """Write one fractal picture to `path`; returns what it shows."""
+SET_TITLES = {
+    "terrain": "fractal terrain (diamond-square, H = {hurst}, level {order}), rasterized with shadows",
+    "mandelbrot": "Mandelbrot set, z <- z^2 + c, smooth colouring ({max_iter} iterations)",
+    "julia": "Julia set, c = -0.8 + 0.156i ({max_iter} iterations)",
+    "mandelbulb": "Mandelbulb (power 8), ray marched, lit by the illumination model, soft shadows",
+}
+
+
+def fractal_figure(kind: str, path: Path, width: int, height: int, *, titled: bool = True, **options) -> str:
+    """Write one fractal picture to `path`; returns what it shows. Curves are drawn with their
+    caption as title; the rendered sets get their title above the image when `titled` (the
+    demo's figures), or are written as the bare image (`difflab fractal KIND -o out.png`)."""
     if kind in CURVES:
         return draw_curve(kind, options.get("order", 4), path, size=max(width, 256))
-    save_image(path, render_set(kind, width, height, **options))
-    return f"{kind} ({width}x{height})"
+    image = render_set(kind, width, height, **options)
+    values = {"hurst": options.get("hurst", 0.8), "order": options.get("order", 7), "max_iter": options.get("max_iter", 256)}
+    caption = SET_TITLES[kind].format(**values) + f" ({width}x{height})"
+    if not titled:
+        save_image(path, image)
+        return caption
+    image_grid([image], [caption], path, columns=1)
+    return caption
 
 
 def gallery(out: Path, size: int) -> list[tuple[Path, str]]:

@@ -58,8 +58,11 @@ def decomposition(out: Path, size: int) -> list[tuple[Path, str]]:
              "specular": {"kd": [0, 0, 0], "ks": PLASTIC["ks"], "n": PLASTIC["n"]},
              "total": PLASTIC}
     images = [render(base_scene(obj, {"m": material}, size, size)) for material in parts.values()]
-    path = image_grid(images, [f"{k}" for k in parts], out / "decomposition.png", columns=4)
-    return [(path, "the illumination model term by term: ka Ia, kd Il cos(theta), ks Il cos^n(alpha), and the total")]
+    clipped = [int((image > 1.0).any(axis=-1).sum()) for image in images]
+    titles = [k if not c else f"{k} ({c} px > 1, shown as 1)" for k, c in zip(parts, clipped)]
+    path = image_grid(images, titles, out / "decomposition.png", columns=4)
+    return [(path, "the illumination model term by term: ka Ia, kd Il cos(theta), ks Il cos^n(alpha), and the total "
+                   f"(linear values above 1 are displayed as 1: {clipped[-1]} pixels of the total, at the highlight)")]
 
 
 def materials_table(out: Path, size: int) -> list[tuple[Path, str]]:

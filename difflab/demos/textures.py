@@ -150,6 +150,7 @@ def texture_figures(out_dir: Path, size: int) -> list[tuple[Path, str]]:
               for mode in ("perspective", "affine")]
     artefact = image_grid(interp, ["perspective-correct uv", "affine (screen-linear) uv"],
                           out_dir / "texture_interpolation.png", columns=2)
-    return [(figure, "a receding checkerboard texture: nearest and bilinear alias (moire), mip-maps blur, "
+    return [(texture, "the 64 x 64 checker texture (2 x 2 checks, sRGB) the two texture figures map onto the floor"),
+            (figure, "a receding checkerboard texture: nearest and bilinear alias (moire), mip-maps blur, "
                      "EWA follows the anisotropic footprint; RMSE against a supersampled ground truth"),
             (artefact, "perspective-correct vs affine texture-coordinate interpolation on the same plane")]
