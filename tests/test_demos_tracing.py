@@ -17,7 +17,7 @@ def test_forward_tracing_counts_are_consistent_and_few_rays_arrive():
 
 
 def test_light_buffer_counts_shape_and_directional_lights():
-    scene = difflab.example_scene("lecture_teapot", 32, 24).with_overrides(
+    scene = difflab.example_scene("lecture_teapot", width=32, height=24).with_overrides(
         lights=[{"type": "point", "position": [0, 3, 0]}, {"type": "directional", "direction": [0, -1, 0]}])
     counts = light_buffer_counts(scene, 8)
     assert counts[0].shape == (6, 8, 8) and counts[1] is None

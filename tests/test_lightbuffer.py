@@ -21,7 +21,7 @@ def same_image(scene, resolution=32):
 @pytest.mark.parametrize("name", ["lecture_teapot", "glass_sphere"])
 def test_light_buffer_gives_the_bvh_image(name):
     # lecture_teapot: opaque occluders (teapot, frame, ball); glass_sphere: transparent shadows (kt^k).
-    plain, buffered = same_image(difflab.example_scene(name, 48, 36))
+    plain, buffered = same_image(difflab.example_scene(name, width=48, height=36))
     rays = buffered.stats["rays"]["shadow"]
     assert rays == plain.stats["rays"]["shadow"] > 0
     assert 0 < buffered.stats["shadow_tests"] and buffered.stats["light_buffer_entries"] > 0
@@ -45,7 +45,7 @@ def test_a_small_occluder_casts_the_same_shadow_at_every_cube_resolution(resolut
 
 
 def test_candidates_are_culled_and_z_ordered():
-    scene = difflab.example_scene("lecture_teapot", 32, 24)
+    scene = difflab.example_scene("lecture_teapot", width=32, height=24)
     compiled = difflab.compile_scene(scene)
     buffer = build_light_buffer(compiled, 16)
     counts = buffer.counts[0]
@@ -58,7 +58,7 @@ def test_candidates_are_culled_and_z_ordered():
 
 
 def test_render_frame_offers_both_speed_ups_for_the_ray_tracer_only():
-    scene = difflab.example_scene("lecture_teapot", 32, 24)
+    scene = difflab.example_scene("lecture_teapot", width=32, height=24)
     plain = difflab.render_frame(scene)
     np.testing.assert_allclose(difflab.render_frame(scene, light_buffer=True).image, plain.image, atol=1e-6)
     fast = difflab.render_frame(scene, item_buffer=True, light_buffer=True)
