@@ -26,12 +26,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import ManifestError
+from ..vocabulary import METHODS
 
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
 KEYS = ("name", "scene", "targets", "material", "params", "method", "init", "solver")
 REQUIRED = ("name", "scene", "targets")
 VIEW_KEYS = ("image", "mask", "camera", "lights")
-METHODS = ("raster", "raytrace")
 NUMBER = (int, float)
 # option -> accepted JSON types; the values are `difflab.fit.fit`'s keywords (and FitOptions fields),
 # whose ranges the fit checks (a bad value fails that job, naming it)
