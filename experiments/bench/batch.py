@@ -4,8 +4,9 @@ A manifest of J small fits (a sphere's ka, kd, ks, n from one SxS target each, e
 own kd) runs through `difflab.fit_many` on local worker processes and on a `distributed.LocalCluster`
 of as many single-threaded worker processes. For each it reports the wall time of the whole batch
 (worker start-up and first compilation included) and the steady rate (fits finished after the first
-one, over the time from the first result to the last), beside one warm fit in this process (the
-same job function the workers run, medians over repeats). From those:
+one, over the time from the first result to the last), beside one warm fit: the median
+time of a fit inside the lone worker of the 1-in-flight local run (each worker's first, compiling,
+job left out), and, for reference, the same job function timed in this process. From those:
 
     ideal rate        = cores / warm fit time                  (fits/s: every core busy with warm fits)
     per-job overhead  = in-flight / steady rate - warm fit time  (s: what a job costs beyond its fit)
@@ -82,8 +83,9 @@ def warm_fit_seconds(manifest: Path, repeats: int) -> float:
     return statistics.median(times)
 
 
-def run_batch(manifest: Path, out: Path, **where) -> dict:
-    """One `fit_many` run: its wall time, and the steady rate from the reports' modification times."""
+def run_batch(manifest: Path, out: Path, in_flight: int, **where) -> dict:
+    """One `fit_many` run: its wall time, the steady rate from the reports' modification times, and
+    the median time of one fit inside a worker (timing/, without each worker's first, compiling, job)."""
     from difflab import fit_many
 
     start = time.perf_counter()
@@ -91,7 +93,9 @@ def run_batch(manifest: Path, out: Path, **where) -> dict:
     wall = time.perf_counter() - start
     finished = sorted(p.stat().st_mtime_ns for p in (out / "reports").glob("*.json"))
     steady = (len(finished) - 1) / ((finished[-1] - finished[0]) * 1e-9)
-    return {"wall_s": wall, "jobs_per_min": 60 * len(finished) / wall, "steady_jobs_per_min": 60 * steady,
+    fits = sorted(json.loads(p.read_text())["seconds"] for p in (out / "timing").glob("*.json"))[:-in_flight]
+    return {"in_flight": in_flight, "wall_s": wall, "jobs_per_min": 60 * len(finished) / wall,
+            "steady_jobs_per_min": 60 * steady, "fit_in_worker_median_s": statistics.median(fits),
             "converged": summary.counts["converged"], "jobs": summary.ran}
 
 
@@ -115,10 +119,10 @@ def main(argv=None) -> int:
         tmp = Path(tmp)
         os.environ.setdefault("DIFFLAB_CACHE_DIR", str(tmp / "cache"))  # an empty compilation cache to start
         manifest = write_batch(tmp, jobs, size)
-        warm = warm_fit_seconds(manifest, repeats=min(10, jobs - 1))
+        in_process = warm_fit_seconds(manifest, repeats=min(10, jobs - 1))
         rows = []
         for n in in_flight:
-            rows.append({"backend": "local", "in_flight": n, **run_batch(manifest, tmp / f"local{n}", workers=n)})
+            rows.append({"backend": "local", **run_batch(manifest, tmp / f"local{n}", n, workers=n)})
             print(rows[-1], file=sys.stderr)
         if not args.no_cluster:
             from distributed import Client, LocalCluster
@@ -126,9 +130,10 @@ def main(argv=None) -> int:
             for n in in_flight:
                 with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
                         Client(cluster) as client:
-                    rows.append({"backend": "dask", "in_flight": n,
-                                 **run_batch(manifest, tmp / f"dask{n}", client=client)})
+                    rows.append({"backend": "dask", **run_batch(manifest, tmp / f"dask{n}", n, client=client)})
                 print(rows[-1], file=sys.stderr)
+    one = [r for r in rows if r["backend"] == "local" and r["in_flight"] == 1]
+    warm = one[0]["fit_in_worker_median_s"] if one else in_process  # a warm fit in a worker, nothing beside it
     ideal = 60 * cores / warm
     for row in rows:
         row["per_job_overhead_s"] = row["in_flight"] * 60 / row["steady_jobs_per_min"] - warm
@@ -140,7 +145,7 @@ def main(argv=None) -> int:
     projection = ({str(m): 60 * m * cores / core_seconds for m in (1, 2, 4, 8, 16, 32)} if core_seconds else {})
 
     print(f"batch of {jobs} fits ({size}x{size}, ka/kd/ks/n), {cores} cores; warm single fit {warm * 1e3:.1f} ms "
-          f"-> ideal {ideal:.0f} fits/min")
+          f"in a lone worker ({in_process * 1e3:.1f} ms in this process) -> ideal {ideal:.0f} fits/min")
     print(f"{'backend':<8}{'in flight':>10}{'wall s':>9}{'fits/min':>10}{'steady/min':>12}{'vs ideal':>10}"
           f"{'overhead ms':>13}")
     for r in rows:
@@ -157,7 +162,8 @@ def main(argv=None) -> int:
 
     write_json_atomic(args.out, {
         "what": "fit_many throughput: local worker processes and a Dask LocalCluster vs one warm fit",
-        "jobs": jobs, "size": size, "cores": cores, "warm_fit_s": warm, "ideal_fits_per_min": ideal, "runs": rows,
+        "jobs": jobs, "size": size, "cores": cores, "warm_fit_s": warm, "warm_fit_in_process_s": in_process,
+        "ideal_fits_per_min": ideal, "runs": rows,
         "projection_fits_per_min_by_machines": projection,
         "core_seconds_per_job": core_seconds,
         "projection_note": "N x cores / core-seconds per job of the best Dask run; not measured",
