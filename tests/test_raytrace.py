@@ -14,7 +14,7 @@ from difflab.renderers.raytrace.driver import raytrace, sample_points
 from difflab.renderers.raytrace.adaptive import raytrace_adaptive
 from difflab.renderers.raytrace.optics import fresnel, refract
 from difflab.vocabulary import FRESNEL_EXACT, FRESNEL_SCHLICK
-from difflab.renderers.raytrace.tree import evaluate_ray_tree
+from difflab.fit import evaluate_tree
 from difflab.renderers.trace import ray_plane, ray_sphere
 
 wp.set_module_options({"enable_backward": False})
@@ -284,10 +284,8 @@ def test_ray_tree_reevaluates_the_image_for_new_materials(compare_images):
     assert set(np.unique(tree.kind)) == {0, 1, 2}
     np.testing.assert_array_equal(tree.sample_offset[:-1][tree.depth[tree.sample_offset[:-1]] == 1],
                                   tree.sample_offset[:-1])
-    again = evaluate_ray_tree(tree, mats, scene.lights, scene.ambient, scene.background)
+    again = np.asarray(evaluate_tree(tree, mats, scene.lights, scene.ambient, scene.background))
     compare_images(again, frame.image, atol=1e-5, name="tree_same")
-    recorded = evaluate_ray_tree(tree, mats, scene.lights, scene.ambient, scene.background, local=tree.local)
-    compare_images(recorded, frame.image, atol=1e-5, name="tree_local")
     # new kd, ks, n, kr, kt, absorption (all kr / kt still > 0, no adaptive cut-off): same tree
     d = lecture_like(max_depth=5, fresnel="exact", spp=4)
     d["materials"]["glass"].update(kr=0.5, kt=0.7, absorption=[0.0, 0.6, 0.1], ks=[0.2, 0.2, 0.2])
@@ -296,8 +294,7 @@ def test_ray_tree_reevaluates_the_image_for_new_materials(compare_images):
     d.update(ambient=[0.05, 0.1, 0.05], background=[0.5, 0.4, 0.1])
     changed = Scene.from_dict(d)
     want = render_frame(changed, threads=2).image
-    got = evaluate_ray_tree(tree, {k: changed.materials[k] for k in changed.material_names}, changed.lights,
-                            changed.ambient, changed.background)
+    got = np.asarray(evaluate_tree(tree, changed.materials, changed.lights, changed.ambient, changed.background))
     compare_images(got, want, atol=1e-5, name="tree_new_materials")
 
 

@@ -5,7 +5,7 @@ import numpy as np
 from conftest import scene_dict
 from test_raytrace import near_edge
 from difflab import Scene, render, render_frame, save_image
-from difflab.renderers.raytrace.tree import evaluate_ray_tree
+from difflab.fit import evaluate_tree
 
 
 def textured_scene(tmp_path, filter="bilinear", target="kd"):
@@ -51,11 +51,11 @@ def test_ray_tree_reproduces_a_textured_image_with_new_materials(tmp_path, compa
     tree = frame.ray_tree
     textured = tree.material == scene.material_index("t")
     assert np.abs(tree.texel[textured]).max() > 0.5  # mirror rays see textured surfaces too
-    again = evaluate_ray_tree(tree, scene.materials, scene.lights, scene.ambient, scene.background)
+    again = np.asarray(evaluate_tree(tree, scene.materials, scene.lights, scene.ambient, scene.background))
     compare_images(again, frame.image, atol=1e-5, name="textured_tree")
     d["materials"]["t"].update(ks=[0.6] * 3, ka=[0.05] * 3)
     d["materials"]["mirror"].update(kr=0.4)
     changed = Scene.from_dict(d)
     want = render(changed, method="raytrace", max_depth=3)
-    got = evaluate_ray_tree(tree, changed.materials, changed.lights, changed.ambient, changed.background)
+    got = np.asarray(evaluate_tree(tree, changed.materials, changed.lights, changed.ambient, changed.background))
     compare_images(got, want, atol=1e-5, name="textured_tree_new")

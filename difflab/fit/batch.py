@@ -24,7 +24,7 @@ from .fit import report
 from .params import DEFAULT_PARAMS
 from .setup import Setup
 from .options import FitOptions
-from .solve import Solved, run
+from .solvers import Solved, run
 
 SETUP_KEYWORDS = ("method", "per_channel", "bounded", "loss", "loss_scale", "masks", "weights", "sigma", "ceiling",
                   "max_depth", "spp", "device", "threads")

@@ -1,6 +1,6 @@
 """The fitting engine's front ends: `fit` (one signature for every fit), and `fit_material` /
 `fit_scene`, its two classic spellings. All of them prepare a `setup.Setup`, solve it
-(`solve.run`, options in one `FitOptions`) and report it (`report`).
+(`solvers.run`, options in one `FitOptions`) and report it (`report`).
 
 Warp renders each view once -- its G-buffer or its ray tree -- and JAX re-forms the image from it as
 often as the solver asks (DESIGN.md, invariant 3).
@@ -20,7 +20,7 @@ from .problem import robust
 from .result import FitResult
 from .setup import Setup
 from .options import FitOptions
-from .solve import SUCCESSFUL, run
+from .solvers import SUCCESSFUL, run
 from .stats import QUANTISATION_SIGMA, fit_statistics, jacobian, poorly_determined, psnr, standard_errors
 
 

@@ -13,10 +13,10 @@ sample is the weighted sum of its nodes' local colours:
     local = the one illumination model (`lighting.jax_model.shade`; a texture modulates its target)
             with the shadow rays' visibility prod_m kt_m ^ crossings_m; background where nothing was hit
 
-which is `renderers.raytrace.tree.evaluate_ray_tree` (the NumPy reference) in `jax.numpy`. Nodes are put in
-level order (by depth, then sample, then their recorded order), so each level's weights are one
-gather from the level above and no scatter is needed on the way down; a level's radiance goes to its
-samples with one sorted segment sum.
+formed here and nowhere else (the renderer records the tree; `evaluate_tree` re-forms its image).
+Nodes are put in level order (by depth, then sample, then their recorded order), so each level's
+weights are one gather from the level above and no scatter is needed on the way down; a level's
+radiance goes to its samples with one sorted segment sum.
 
 What the tree fixes: ior (the Fresnel factors and the refracted directions depend on it), the
 geometry, the lights' positions, and the tree's *shape* -- a child exists only where its weight was
@@ -267,7 +267,8 @@ def evaluate_tree(tree, materials, lights, ambient, background, *, dtype=jnp.flo
 
     Arguments:
         tree: a `RayTree` (`render_frame(scene, method="raytrace").ray_tree`) or a `TreeJ` of every pixel.
-        materials: a `MaterialTable`, or scene `Material`s in material-id order (`scene.materials.values()`).
+        materials: a `MaterialTable`, scene `Material`s in material-id order (`scene.materials.values()`),
+            or a name -> `Material` mapping (`scene.materials`).
         lights: `LightsJ` or scene `Light`s (only intensity, attenuation and spot settings are read:
             directions, distances and visibility are the tree's).
         ambient, background: (3,) RGB.
@@ -277,6 +278,8 @@ def evaluate_tree(tree, materials, lights, ambient, background, *, dtype=jnp.flo
     """
     shape = tree.image_shape if not isinstance(tree, TreeJ) else None
     tree_j = tree if isinstance(tree, TreeJ) else tree_to_jax(tree, dtype=dtype)
+    if isinstance(materials, dict):  # name -> Material
+        materials = [materials[name] for name in tree.material_names]
     mats = materials if isinstance(materials, MaterialTable) else MaterialTable.from_scene(materials, dtype)
     lights = lights if isinstance(lights, LightsJ) else lights_to_jax(tuple(lights), dtype)
     image = _evaluate_jit(tree_j, mats, lights, jnp.asarray(ambient, dtype), jnp.asarray(background, dtype))
