@@ -31,7 +31,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..lighting.jax_model import LightsJ, lights_to_jax, safe_pow, shade, surface_material, textured_material
+from ..lighting.jax_model import (LightsJ, lights_to_jax, safe_pow, shade, sum_axis, surface_material,
+                                  textured_material)
 from ..lighting.warp_model import SPECULAR_MODELS, TEXTURE_TARGET_IDS
 from ..renderers.raytrace.tree import REFLECTED
 from .materials import MaterialTable
@@ -239,7 +240,7 @@ def tree_image(tree: TreeJ, mats: MaterialTable, lights: LightsJ, ambient, backg
     if tree.fog_on:
         fog = tree.fog[:, None]
         total = fog * total + (1.0 - fog) * tree.fog_color
-    return total.reshape(-1, tree.samples_per_pixel, 3).mean(axis=1)
+    return sum_axis(total.reshape(-1, tree.samples_per_pixel, 3), 1) / tree.samples_per_pixel
 
 
 class TreeModel(eqx.Module):

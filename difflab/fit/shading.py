@@ -20,7 +20,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..lighting.jax_model import LightsJ, fog_factor, lights_to_jax, shade, surface_material
+from ..lighting.jax_model import LightsJ, fog_factor, lights_to_jax, shade, sum_axis, surface_material
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS
 from .materials import MaterialTable
 
@@ -137,12 +137,12 @@ def compose(colors, comp: ComposeJ, formation: Formation):
     gathered = colors[comp.point_index]  # (U, S, 3 points, 3 channels)
     if formation.clamp_colors:
         gathered = jnp.clip(gathered, 0.0, 1.0)
-    surface = jnp.sum(comp.point_weight[..., None] * gathered, axis=-2)
+    surface = sum_axis(comp.point_weight[..., None] * gathered, -2)
     if formation.fog_mode != FOG_NONE:
         f = fog_factor(formation.fog_mode, comp.depth, comp.fog_start, comp.fog_end, comp.fog_density)[..., None]
         surface = f * surface + (1.0 - f) * comp.fog_color
     samples = jnp.where(comp.mask[..., None], surface, comp.background)
-    return samples.mean(axis=1)
+    return sum_axis(samples, 1) / samples.shape[1]
 
 
 def shade_gbuffer(gbuffer, materials, lights, ambient=None, *, dtype=jnp.float32):

@@ -17,8 +17,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
-import optimistix as optx
 
 from . import lm
 from .cache import enable_compilation_cache
@@ -26,7 +24,6 @@ from .options import SOLVERS, FitOptions  # noqa: F401  (SOLVERS: re-exported)
 
 enable_compilation_cache()
 SUCCESSFUL = "successful"
-RESULT_NAMES = {int(item._value): name for name, item in optx.RESULTS._name_to_item.items()}
 
 class Solved(NamedTuple):
     """A solve's outcome: x (p,) solver coordinates, result code name, steps, loss history, and
@@ -90,7 +87,11 @@ RECORDER = LossRecorder()
 
 
 def optimistix_solver(name: str, rtol: float, atol: float, learning_rate: float, history: bool):
-    """An optimistix solver by name ("gauss_newton", "dogleg", "bfgs", "adam")."""
+    """An optimistix solver by name ("gauss_newton", "dogleg", "bfgs", "adam"). optimistix and optax
+    are imported here, on first use: the default solver needs neither."""
+    import optax
+    import optimistix as optx
+
     verbose = RECORDER if history else False
     if name == "gauss_newton":
         return optx.GaussNewton(rtol=rtol, atol=atol, verbose=verbose)
@@ -110,8 +111,17 @@ def _free_loss(z, problem):
     return 0.5 * jnp.sum(r * r)
 
 
+def result_name(code) -> str:
+    """optimistix's result code as its name."""
+    import optimistix as optx
+
+    return {int(item._value): name for name, item in optx.RESULTS._name_to_item.items()}[int(code)]
+
+
 @eqx.filter_jit
 def _optimistix(solver, z0, problem, max_steps):
+    import optimistix as optx
+
     if isinstance(solver, optx.OptaxMinimiser):
         sol = optx.minimise(_free_loss, solver, z0, args=problem, max_steps=max_steps, throw=False)
     else:
@@ -146,7 +156,7 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
             x = np.asarray(x, np.float64)
         finally:
             history = RECORDER.stop() if options.history else []
-        return Solved(x, RESULT_NAMES[int(code)], int(steps), history)
+        return Solved(x, result_name(code), int(steps), history)
     finally:
         if progress is not None:
             jax.effects_barrier()

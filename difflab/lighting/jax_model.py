@@ -49,6 +49,15 @@ def dot(a, b):
     return jnp.sum(a * b, axis=-1)
 
 
+def sum_axis(x, axis: int):
+    """x summed over a short axis as a chain of adds; 0 for an empty axis. (XLA's CPU reduction over
+    a tiny axis, after a gather, is several times slower than the adds -- most of all in float32.)"""
+    parts = [jnp.take(x, i, axis=axis) for i in range(x.shape[axis])]
+    if not parts:
+        return jnp.zeros(tuple(d for i, d in enumerate(x.shape) if i != axis % x.ndim), x.dtype)
+    return sum(parts[1:], parts[0])
+
+
 def normalize(x):
     """x / |x|, and 0 for a zero vector (as wp.normalize), with finite gradients at 0."""
     sq = dot(x, x)[..., None]
@@ -177,7 +186,7 @@ def shade(mat: MaterialJ, model: int, normal, v, lights: LightsJ, l, d, visibili
     """
     per_light = MaterialJ(*(jnp.expand_dims(jnp.asarray(field), -2 if i < 3 else -1) for i, field in enumerate(mat)))
     terms = light_term(lights, per_light, model, normal[..., None, :], v[..., None, :], l, d)
-    return ambient_term(mat, ambient) + jnp.sum(visibility[..., None] * terms, axis=-2)
+    return ambient_term(mat, ambient) + sum_axis(visibility[..., None] * terms, -2)
 
 
 def lights_to_jax(lights, dtype=jnp.float32) -> LightsJ:
