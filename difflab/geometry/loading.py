@@ -192,8 +192,9 @@ def load_mesh(path) -> TriMesh:
         message = str(exc)
         raise MeshError(message if path in message else f"{path}: {message}") from None
     mesh = meshes[0] if len(meshes) == 1 else concatenate(meshes, name=path)
-    if plain is not None and (mesh.n_vertices, mesh.n_faces) != plain:  # trimesh dropped or split something
-        _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)
+    if plain is not None and ((mesh.n_vertices, mesh.n_faces) != plain  # trimesh dropped or split something
+                              or not np.all(np.abs(mesh.vertices) <= MAX_COORD)):  # or a value is out of range
+        _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)  # names the line
     if not np.all(np.isfinite(mesh.vertices)):
         raise MeshError(f"{path}: vertex coordinates are not finite")
     if not np.all(np.abs(mesh.vertices) <= MAX_COORD):

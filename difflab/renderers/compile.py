@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from .._warp import wp
@@ -56,15 +56,31 @@ class CompiledScene:
     n_mesh_vertices: int
     epsilon: float
     arrays: dict  # name -> wp.array on the device
-    geom: SceneGeomW
+    geom: SceneGeomW  # spheres, planes and the faces' ids; no BVH (geom.mesh 0): see `traceable`
     lights: wp.array
     materials: wp.array
-    bvh: wp.Mesh | None
     textures: TextureStore | None = None  # every material's image texture; `textures.warp` for kernels
+    built: dict = field(default_factory=dict, compare=False, repr=False)  # what `traceable` built, shared by copies
 
     def with_scene(self, scene) -> CompiledScene:
         """The same device data under `scene`: the compiled scene with other render settings."""
         return replace(self, scene=scene)
+
+    def traceable(self) -> SceneGeomW:
+        """`geom` with the BVH over the mesh faces, built on first use (rasterizing without shadows
+        never needs it) and kept for every later render of this compiled scene."""
+        if "geom" not in self.built:
+            geom = self.geom
+            if self.n_mesh_faces:
+                indices = wp.array(np.ascontiguousarray(self.faces[:self.n_mesh_faces]).ravel(), dtype=wp.int32,
+                                   device=self.device)
+                self.built["bvh"] = wp.Mesh(points=self.arrays["vertices"], indices=indices)
+                geom = SceneGeomW()
+                for name in SceneGeomW.vars:
+                    setattr(geom, name, getattr(self.geom, name))
+                geom.mesh = self.built["bvh"].id
+            self.built["geom"] = geom
+        return self.built["geom"]
 
 
 def object_mesh(obj, base_dir=None) -> geometry.TriMesh:
@@ -220,19 +236,18 @@ def ray_epsilon(camera, mesh_vertices: np.ndarray, spheres) -> float:
 
 
 def ray_geometry(arrays: dict, soup: dict, n_mesh_faces: int, spheres, planes, epsilon: float, device: str):
-    """The ray-traceable scene: a BVH over the mesh faces (None without any), spheres and planes."""
+    """The ray-traceable scene's spheres and planes, and its mesh faces' ids; the BVH over the faces
+    is built when a ray first needs it (`CompiledScene.traceable`), geom.mesh is 0 until then."""
     def arr(values, dtype):
         return wp.array(np.ascontiguousarray(values), dtype=dtype, device=device)
 
-    bvh = None
     geom = SceneGeomW()
     geom.mesh = wp.uint64(0)
     if n_mesh_faces:
-        mesh_faces = soup["faces"][:n_mesh_faces]
-        if not np.all(np.isfinite(soup["vertices"][np.unique(mesh_faces)])):
+        used = np.zeros(soup["vertices"].shape[0], bool)
+        used[soup["faces"][:n_mesh_faces].ravel()] = True
+        if not np.all(np.isfinite(soup["vertices"][used])):
             raise MeshError("mesh vertices are not finite after transforming")
-        bvh = wp.Mesh(points=arrays["vertices"], indices=arr(mesh_faces.ravel(), wp.int32))
-        geom.mesh = bvh.id
     geom.face_material, geom.face_object = arrays["face_material"], arrays["face_object"]
     geom.sphere_center = arr(np.array([s.center for s, _, _ in spheres], np.float32).reshape(-1, 3), wp.vec3)
     geom.sphere_radius = arr(np.array([s.radius for s, _, _ in spheres], np.float32), float)
@@ -243,7 +258,7 @@ def ray_geometry(arrays: dict, soup: dict, n_mesh_faces: int, spheres, planes, e
     geom.plane_material = arr(np.array([m for _, m, _ in planes], np.int32), wp.int32)
     geom.plane_object = arr(np.array([o for _, _, o in planes], np.int32), wp.int32)
     geom.epsilon = float(epsilon)
-    return geom, bvh
+    return geom
 
 
 def as_scene(scene) -> Scene:
@@ -276,12 +291,12 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     arrays = {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device)
               for name, dtype in dtypes.items()}
     arrays["faces"] = arrays["faces"].reshape((faces.shape[0], 3))
-    geom, bvh = ray_geometry(arrays, soup, n_mesh_faces, spheres, planes, epsilon, device)
+    geom = ray_geometry(arrays, soup, n_mesh_faces, spheres, planes, epsilon, device)
     ordered = [scene.materials[name] for name in scene.material_names]
     textures, texture_ids = scene_textures(ordered, device)
     return CompiledScene(
         scene=scene, device=device, **soup, n_mesh_faces=n_mesh_faces, n_mesh_vertices=n_mesh_vertices,
         epsilon=epsilon, arrays=arrays, geom=geom,
         lights=lights_to_warp(scene.lights, device), materials=materials_to_warp(ordered, device, texture_ids),
-        bvh=bvh, textures=textures,
+        textures=textures,
     )

@@ -1,7 +1,9 @@
 """Rasterizer stages 1-2: world -> clip space, and primitive assembly (near-plane clipping, the
 perspective divide, raster space, fixed-point snapping, degenerate and back-face rejection).
 
-A face becomes at most two screen triangles (its two *slots*, 2 f and 2 f + 1). Every slot carries its
+A face becomes at most two screen triangles, stored in *slots*: face f's first triangle in slot f, the
+second (only a face with one vertex behind the near plane is clipped to a quad) in an extra slot
+after the F faces' (`extra_slots` numbers them, `split_kernel` finds them). Every slot carries its
 three corners (x_raster, y_raster, z_ndc, 1/w) in float64, their weights over the original face's
 vertices (a clipped corner lies on an edge), its facing, and the rows of sample centres it may cover.
 """
@@ -103,15 +105,37 @@ def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: w
         weight[slot, 2] = w2
 
 
+@wp.func
+def inside_near(c: wp.vec4):
+    return c[2] + c[3] >= 0.0  # z_clip >= -w_clip
+
+
+@wp.kernel
+def split_kernel(begin: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4),
+                 split: wp.array(dtype=wp.int32)):
+    """split[f] = 1 for a face with exactly one vertex behind the near plane (clipped to a quad)."""
+    f = begin + wp.tid()
+    count = int(inside_near(clip[faces[f, 0]])) + int(inside_near(clip[faces[f, 1]])) \
+        + int(inside_near(clip[faces[f, 2]]))
+    split[f] = int(count == 2)
+
+
+@wp.func
+def clear_slot(slot: int, facing: wp.array(dtype=wp.int32), rows: wp.array2d(dtype=wp.int32)):
+    facing[slot] = 0
+    rows[slot, 0] = 1  # empty row range [1, 0]: binned nowhere
+    rows[slot, 1] = 0
+
+
 @wp.kernel
 def assemble_kernel(begin: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4), cull: int,
-                    width: int, height: int, screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3),
-                    facing: wp.array(dtype=wp.int32), rows: wp.array2d(dtype=wp.int32)):
+                    width: int, height: int, extra_slot: wp.array(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d),
+                    weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32),
+                    rows: wp.array2d(dtype=wp.int32)):
     f = begin + wp.tid()
-    for k in range(2):
-        facing[2 * f + k] = 0
-        rows[2 * f + k, 0] = 1  # empty row range [1, 0]: binned nowhere
-        rows[2 * f + k, 1] = 0
+    clear_slot(f, facing, rows)
+    if extra_slot[f] >= 0:
+        clear_slot(extra_slot[f], facing, rows)
     i0 = faces[f, 0]
     i1 = faces[f, 1]
     i2 = faces[f, 2]
@@ -121,14 +145,14 @@ def assemble_kernel(begin: int, faces: wp.array2d(dtype=wp.int32), clip: wp.arra
     e0 = wp.vec3(1.0, 0.0, 0.0)
     e1 = wp.vec3(0.0, 1.0, 0.0)
     e2 = wp.vec3(0.0, 0.0, 1.0)
-    in0 = c0[2] + c0[3] >= 0.0
-    in1 = c1[2] + c1[3] >= 0.0
-    in2 = c2[2] + c2[3] >= 0.0
+    in0 = inside_near(c0)
+    in1 = inside_near(c1)
+    in2 = inside_near(c2)
     count = int(in0) + int(in1) + int(in2)
     if count == 0:
         return
     if count == 3:
-        emit(2 * f, to_screen(c0, width, height), to_screen(c1, width, height), to_screen(c2, width, height),
+        emit(f, to_screen(c0, width, height), to_screen(c1, width, height), to_screen(c2, width, height),
              e0, e1, e2, cull, screen, weight, facing, rows)
         return
     # Rotate (keeping the winding) so that vertex a is the odd one out: the only vertex inside
@@ -172,9 +196,9 @@ def assemble_kernel(begin: int, faces: wp.array2d(dtype=wp.int32), clip: wp.arra
     sab = to_screen(cab, width, height)
     sac = to_screen(cac, width, height)
     if count == 1:  # a inside: triangle (a, ab, ac)
-        emit(2 * f, to_screen(ca, width, height), sab, sac, wa, wab, wac, cull, screen, weight, facing, rows)
+        emit(f, to_screen(ca, width, height), sab, sac, wa, wab, wac, cull, screen, weight, facing, rows)
     else:  # a outside: quad (ab, b, c, ac)
         sb = to_screen(cb, width, height)
         sc = to_screen(cc, width, height)
-        emit(2 * f, sab, sb, sc, wab, wb, wc, cull, screen, weight, facing, rows)
-        emit(2 * f + 1, sab, sc, sac, wab, wc, wac, cull, screen, weight, facing, rows)
+        emit(f, sab, sb, sc, wab, wb, wc, cull, screen, weight, facing, rows)
+        emit(extra_slot[f], sab, sc, sac, wab, wc, wac, cull, screen, weight, facing, rows)

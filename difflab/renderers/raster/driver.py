@@ -41,8 +41,8 @@ def raster_mesh(compiled) -> resolve.RasterMeshW:
 
 def lighting_struct(compiled, settings) -> shade.LightingW:
     out = shade.LightingW()
-    out.lights, out.materials, out.textures, out.geom = compiled.lights, compiled.materials, \
-        compiled.textures.warp, compiled.geom
+    out.lights, out.materials, out.textures = compiled.lights, compiled.materials, compiled.textures.warp
+    out.geom = compiled.traceable() if settings.shadows else compiled.geom  # shadow rays need the BVH
     out.specular = SPECULAR_MODELS[settings.specular]
     out.ambient = wp.vec3(*compiled.scene.ambient)
     out.shadows, out.transparent = int(settings.shadows), int(settings.transparent_shadows)
@@ -69,36 +69,59 @@ def bin_rows(rows: np.ndarray, bands: list[tuple[int, int]], height: int) -> lis
     return out
 
 
+def empty_screen(device: str) -> resolve.ScreenW:
+    tris = resolve.ScreenW()
+    tris.screen = wp.empty((0, 3), dtype=wp.vec4d, device=device)
+    tris.weight = wp.empty((0, 3), dtype=wp.vec3, device=device)
+    tris.facing = wp.empty(0, dtype=wp.int32, device=device)
+    tris.face = wp.empty(0, dtype=wp.int32, device=device)
+    return tris
+
+
 def zbuffer(compiled, cam, cull: int, threads: int | None = None):
     """Stages 1-3 on the sample grid of `cam`: clip space, near-plane clipping, and the z-buffer.
 
-    Returns the clipped screen triangles (a `ScreenW`: two slots per face) and the visibility key
-    per sample (NO_HIT, or depth << 32 | slot of the nearest triangle). Vertices and faces are
-    transformed in bands on all cores; each band of rows rasterizes only the triangles binned to it
-    (those whose sample-centre rows meet the band)."""
+    Returns the clipped screen triangles (a `ScreenW`: a slot per face, and one more per face clipped
+    to a quad) and the visibility key per sample (NO_HIT, or depth << 32 | slot of the nearest
+    triangle). Vertices and faces are transformed in bands on all cores; each band of rows
+    rasterizes only the triangles binned to it (those whose sample-centre rows meet the band)."""
     device, arrays = compiled.device, compiled.arrays
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     width, height = cam.width, cam.height
-    tris = resolve.ScreenW()
-    tris.screen = wp.empty((2 * n_faces, 3), dtype=wp.vec4d, device=device)
-    tris.weight = wp.empty((2 * n_faces, 3), dtype=wp.vec3, device=device)
-    tris.facing = wp.empty(2 * n_faces, dtype=wp.int32, device=device)
     key = wp.full(width * height, value=coverage.NO_HIT, dtype=wp.int64, device=device)
     if not n_faces:
-        return tris, key
+        return empty_screen(device), key
     p_clip = wp.empty(n_vertices, dtype=wp.vec4, device=device)
-    rows = wp.empty((2 * n_faces, 2), dtype=wp.int32, device=device)
 
     def clip_band(begin, end):
         wp.launch(clip.clip_vertices_kernel, dim=end - begin, inputs=[begin, arrays["vertices"], cam.view_proj, p_clip],
                   device=device)
 
+    parallel_bands(clip_band, n_vertices, device, threads)
+    split = wp.empty(n_faces, dtype=wp.int32, device=device)
+
+    def split_band(begin, end):
+        wp.launch(clip.split_kernel, dim=end - begin, inputs=[begin, arrays["faces"], p_clip, split], device=device)
+
+    parallel_bands(split_band, n_faces, device, threads)
+    split_faces = np.flatnonzero(split.numpy()).astype(np.int32)  # faces clipped to a quad: a second slot each
+    extra_slot = np.full(n_faces, -1, np.int32)
+    extra_slot[split_faces] = n_faces + np.arange(split_faces.size, dtype=np.int32)
+    n_slots = n_faces + split_faces.size
+    tris = resolve.ScreenW()
+    tris.screen = wp.empty((n_slots, 3), dtype=wp.vec4d, device=device)
+    tris.weight = wp.empty((n_slots, 3), dtype=wp.vec3, device=device)
+    tris.facing = wp.empty(n_slots, dtype=wp.int32, device=device)
+    tris.face = wp.array(np.concatenate([np.arange(n_faces, dtype=np.int32), split_faces]), dtype=wp.int32,
+                         device=device)
+    rows = wp.empty((n_slots, 2), dtype=wp.int32, device=device)
+    extra = wp.array(extra_slot, dtype=wp.int32, device=device)
+
     def assemble_band(begin, end):
         wp.launch(clip.assemble_kernel, dim=end - begin, inputs=[
-            begin, arrays["faces"], p_clip, cull, width, height, tris.screen, tris.weight, tris.facing, rows],
+            begin, arrays["faces"], p_clip, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows],
             device=device)
 
-    parallel_bands(clip_band, n_vertices, device, threads)
     parallel_bands(assemble_band, n_faces, device, threads)
     bands = band_plan(height, device, threads)
     binned = dict(zip(bands, bin_rows(rows.numpy(), bands, height)))

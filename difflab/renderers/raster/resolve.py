@@ -39,11 +39,12 @@ class RasterMeshW:
 
 @wp.struct
 class ScreenW:
-    """Stage 2's screen triangles, two slots per face (see `clip`)."""
+    """Stage 2's screen triangles in slots: face f's first in slot f, second ones after (see `clip`)."""
 
     screen: wp.array2d(dtype=wp.vec4d)  # (x_raster, y_raster, z_ndc, 1/w) per corner
     weight: wp.array2d(dtype=wp.vec3)  # per corner, its weights over the original face's vertices
     facing: wp.array(dtype=wp.int32)  # +1 front, -1 back, 0 not drawn
+    face: wp.array(dtype=wp.int32)  # the face each slot belongs to
 
 
 @wp.struct
@@ -188,7 +189,7 @@ def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: in
         bd = bd / (bd[0] + bd[1] + bd[2])
     b = wp.vec3(float(bd[0]), float(bd[1]), float(bd[2]))
     sample = SampleW()
-    sample.face = slot // 2
+    sample.face = tris.face[slot]
     sample.slot = slot
     sample.weights = b[0] * weight[slot, 0] + b[1] * weight[slot, 1] + b[2] * weight[slot, 2]
     sample.side = float(tris.facing[slot])

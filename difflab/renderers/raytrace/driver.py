@@ -100,7 +100,7 @@ def scene_struct(compiled, light_buffer=None) -> SceneW:
     mesh.uvs = compiled.arrays["uvs"]
     mesh.faces = compiled.arrays["faces"]
     out = SceneW()
-    out.geom, out.mesh, out.lights, out.materials = compiled.geom, mesh, compiled.lights, compiled.materials
+    out.geom, out.mesh, out.lights, out.materials = compiled.traceable(), mesh, compiled.lights, compiled.materials
     out.textures = compiled.textures.warp
     out.light_buffer = light_buffer.warp if light_buffer is not None else no_light_buffer(compiled)
     return out

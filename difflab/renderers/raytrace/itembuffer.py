@@ -72,11 +72,11 @@ def hinted_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.v
 def visible_faces(compiled, width: int, height: int, threads: int | None = None) -> np.ndarray:
     """Nearest face per sample of a width x height grid (-1: empty), from the rasterizer's
     clip / assemble / z-buffer stages (no back-face culling)."""
-    key = zbuffer(compiled, camera_struct(compiled.scene.camera, width, height), 0, threads)[1]
+    tris, key = zbuffer(compiled, camera_struct(compiled.scene.camera, width, height), 0, threads)
     keys = key.numpy()
     empty = keys == np.iinfo(np.int64).max
-    faces = ((keys & 0xFFFFFFFF) // 2).astype(np.int32)  # the key's low 32 bits hold the clipped slot 2f or 2f+1
-    faces[empty] = -1
+    faces = np.full(keys.shape, -1, np.int32)
+    faces[~empty] = tris.face.numpy()[keys[~empty] & 0xFFFFFFFF]  # the key's low 32 bits hold the slot
     return faces.reshape(height, width)
 
 
