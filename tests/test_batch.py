@@ -23,7 +23,7 @@ from difflab.batch.manifest import load_manifest, parse_line
 from difflab.batch.store import Store
 from difflab.batch.worker import outcome_of
 from difflab.errors import DifflabError, ManifestError, OutputError
-from difflab.io import save_image
+from difflab.io import load_image, save_image
 from difflab import render_frame
 from difflab.scene import Scene, load_scene, save_scene
 
@@ -32,8 +32,9 @@ GOOD = [f"fit{i}" for i in range(len(KDS))]
 
 
 def write_batch(folder: Path) -> Path:
-    """A start scene, one .npy target per kd of KDS, and a manifest of 8 lines: the good fits, a bad
-    line (line 3: an unknown key) and a target that does not exist (line 8)."""
+    """A start scene, one .npy target per kd of KDS, and a manifest of 9 lines: the good fits, a bad
+    line (line 3: an unknown key), a target that does not exist (line 8) and one that the model
+    cannot explain (line 9: fit0's target with a bright 3x3 patch the scene has no reason for)."""
     start = scene_dict(size=16)
     start["materials"]["red"].update(kd=[0.5, 0.5, 0.5], ks=[0.3, 0.3, 0.3], n=18.0)
     save_scene(Scene.from_dict(start), folder / "scene.json")
@@ -45,6 +46,10 @@ def write_batch(folder: Path) -> Path:
         lines.append({"name": GOOD[i], "scene": "scene.json", "targets": [f"t{i}.npy"], "material": "red"})
     lines.insert(2, {"name": "typo", "scene": "scene.json", "targets": ["t0.npy"], "materal": "red"})
     lines.append({"name": "unreachable", "scene": "scene.json", "targets": ["nope.npy"], "material": "red"})
+    patched = load_image(folder / "t0.npy")
+    patched[6:9, 6:9] += 0.3
+    save_image(folder / "patched.npy", patched)
+    lines.append({"name": "patched", "scene": "scene.json", "targets": ["patched.npy"], "material": "red"})
     manifest = folder / "manifest.jsonl"
     manifest.write_text("".join(json.dumps(line) + "\n" for line in lines))
     return manifest
@@ -142,8 +147,10 @@ def test_manifest_that_cannot_run(tmp_path):
 
 def test_batch_recovers_each_fit_and_records_failures(reference):
     manifest, out, summary = reference
-    assert summary.counts == {"converged": 6, "not_converged": 0, "failed": 1, "invalid": 1, "not_run": 0}
-    assert (summary.ran, summary.skipped, summary.all_converged) == (7, 0, False)
+    assert summary.counts == {"converged": 7, "not_converged": 0, "failed": 1, "invalid": 1, "not_run": 0}
+    assert (summary.ran, summary.skipped, summary.all_converged, summary.mismatched) == (8, 0, False, ["patched"])
+    patched = json.loads((out / "reports" / "patched.json").read_text())
+    assert patched["converged"] and patched["model_mismatch"] and patched["chi2"] > 100
     for name, kd in zip(GOOD, KDS):
         np.testing.assert_allclose(load_scene(out / "scenes" / f"{name}.json").materials["red"].kd, kd, rtol=1e-4)
         report = json.loads((out / "reports" / f"{name}.json").read_text())
@@ -160,7 +167,8 @@ def test_batch_recovers_each_fit_and_records_failures(reference):
     assert [r.split(",")[:3] for r in rows[1:]] == [["1", "fit0", "converged"], ["2", "fit1", "converged"],
                                                      ["3", "typo", "invalid"], ["4", "fit2", "converged"],
                                                      ["5", "fit3", "converged"], ["6", "fit4", "converged"],
-                                                     ["7", "fit5", "converged"], ["8", "unreachable", "failed"]]
+                                                     ["7", "fit5", "converged"], ["8", "unreachable", "failed"],
+                                                     ["9", "patched", "converged"]]
 
 
 def _run_until(manifest: Path, out: Path, log: Path, count: int, sig) -> int:
@@ -189,13 +197,13 @@ def test_interrupted_and_killed_runs_completed_by_a_rerun_are_identical(referenc
     first = len(list(reports.glob("*.json")))
     assert _run_until(manifest, tmp_path / "out", log, first + 1, signal.SIGKILL) == -signal.SIGKILL
     done = sorted(reports.glob("*.json"))
-    assert first < len(done) < len(GOOD)  # it was stopped half-way
+    assert first < len(done) < len(GOOD) + 1  # it was stopped half-way
     for path in (tmp_path / "out").rglob("*.json"):
         json.loads(path.read_text())  # complete files only
     done[0].unlink()  # as if killed between a scene and its report
     (tmp_path / "out" / "scenes" / ".fit4.json.x1.tmp.json").write_text("{")  # a killed writer's temporary
     summary = fit_many(manifest, tmp_path / "out", workers=2, quiet=True)
-    assert (summary.ran, summary.skipped) == (len(GOOD) - len(done) + 2, len(done) - 1)  # + the failing one
+    assert (summary.ran, summary.skipped) == (len(GOOD) + 2 - (len(done) - 1), len(done) - 1)  # 8 valid lines
     assert snapshot(tmp_path / "out") == snapshot(out)
 
 
@@ -254,6 +262,6 @@ def test_dask_cluster_with_a_worker_killed_gives_the_same_files(reference, tmp_p
         summary = fit_many(manifest, tmp_path / "paths", client=client, quiet=True)
         killer.join()
         assert killed and killed[0] not in client.run(os.getpid).values()
-        assert summary.ran == 7 and snapshot(tmp_path / "paths") == snapshot(out)
+        assert summary.ran == 8 and snapshot(tmp_path / "paths") == snapshot(out)
         fit_many(manifest, tmp_path / "bytes", client=client, inline=True, quiet=True)
         assert snapshot(tmp_path / "bytes") == snapshot(out)
