@@ -62,6 +62,10 @@ MESH_FILE_BYTES = 14
 TEXEL_BYTES = 80
 #: One pixel of an 8-bit image file being read (decode, table lookup to float32; measured 26.5).
 IMAGE_LOAD_BYTES = 30
+#: One pixel of an escape-time fractal or the Mandelbulb (measured 108 with `difflab fractal mandelbrot`
+#: at 1000^2 and 2000^2), and of a matplotlib curve figure (measured 6 with `difflab fractal koch`).
+FRACTAL_PIXEL_BYTES = 120
+CURVE_PIXEL_BYTES = 8
 #: A fit (fit_material, Levenberg-Marquardt, float64): per residual x fitted number (the Jacobian and
 #: the solver's copies; measured 24.4), plus JAX's compilation for a new problem size (measured ~180 MiB).
 FIT_ELEMENT_BYTES = 28

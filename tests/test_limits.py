@@ -151,3 +151,17 @@ def test_scene_file_errors_carry_the_file(tmp_path):
 
     with pytest.raises(SceneError, match=r"^objects\[0\]\.radius: must be within .* \(in .*s\.json\)$"):
         load_scene(tmp_path / "s.json")
+
+
+def test_fractal_images_are_priced_before_they_are_drawn(monkeypatch, tmp_path):
+    from difflab import RenderError
+    from difflab.demos.fractals import draw_curve
+    from difflab.fractals import mandelbrot
+
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "1G")
+    with pytest.raises(RenderError, match=r"^width x height \(8000 x 8000 pixels\): needs about 7\.15 GiB, over the "
+                                          r"memory budget of 1\.00 GiB"):
+        mandelbrot(8000, 8000)
+    with pytest.raises(RenderError, match=r"^koch: a figure of \(20000 x 20000 pixels\): needs about 2\.98 GiB"):
+        draw_curve("koch", 2, tmp_path / "k.png", size=20000)
+    assert not (tmp_path / "k.png").exists()

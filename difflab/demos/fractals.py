@@ -9,7 +9,9 @@ import numpy as np
 
 from ..fractals import (box_counting_dimension, cantor_staircase, hilbert, julia, koch_snowflake, mandelbrot,
                         mandelbulb, peano, polyline_length, terrain, terrain_scene)
+from ..errors import RenderError
 from ..io import save_image
+from ..limits import CURVE_PIXEL_BYTES, require_image
 from ..renderers.api import render
 from .figures import image_grid, save_figure
 
@@ -38,6 +40,7 @@ def draw_curve(kind: str, order: int, path: Path, size: int = 512) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    require_image(size, size, f"{kind}: a figure of", CURVE_PIXEL_BYTES, RenderError)
     points, caption = curve_points(kind, order)
     if kind != "cantor" and len(points) > 16:
         caption += f", box-counting dimension {box_counting_dimension(points):.3f}"

@@ -7,6 +7,7 @@ import math
 import numbers
 
 from ..errors import DifflabError, RenderError
+from ..limits import FRACTAL_PIXEL_BYTES, require_image
 
 # Largest image a fractal renderer allocates (pixels): 64 Mpx of float32 RGB is 768 MiB.
 MAX_PIXELS = 64 * 1024 * 1024
@@ -59,4 +60,5 @@ def check_image_size(width, height) -> tuple[int, int]:
             raise RenderError(f"{name}: must be a positive integer, got {value!r}")
     if int(width) * int(height) > MAX_PIXELS:
         raise RenderError(f"width x height: {width} x {height} exceeds the budget of {MAX_PIXELS} pixels")
+    require_image(int(width), int(height), "width x height", FRACTAL_PIXEL_BYTES, RenderError)
     return int(width), int(height)
