@@ -259,3 +259,31 @@ def test_bad_requests_raise_clear_errors():
         render(scene, shinyness=3)
     with pytest.raises(SceneError, match="render.shading"):
         render(scene, shading="toon")
+
+
+@pytest.mark.parametrize("shading", ["flat", "gouraud", "phong"])
+def test_render_forms_the_image_render_frame_composes_from_its_gbuffer(tmp_path, shading):
+    """`render` fuses resolve, lighting and compose per sample and stores no G-buffer; its image is
+    the one `render_frame` composes from the G-buffer (textures, checker, fog, shadows, spp 4,
+    clamped vertex colours, a plane clipped by the near plane), to float32 rounding."""
+    from difflab.io import save_image
+
+    texels = np.zeros((8, 8, 3), np.float32)
+    texels[::2, ::2] = texels[1::2, 1::2] = 1.0
+    save_image(tmp_path / "checker.png", texels)
+    scene = scene_dict(
+        [{"type": "sphere", "center": [0, 0.6, 0], "radius": 0.6, "material": "textured"},
+         {"type": "mesh", "builtin": "teapot", "resolution": 3, "material": "shiny",
+          "transform": {"translate": [1.1, 0.3, 0.2], "scale": 0.3}},
+         {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "floor"}],
+        {"textured": {"kd": [1, 1, 1], "ks": [0.3, 0.3, 0.3], "n": 20, "texture": str(tmp_path / "checker.png"),
+                      "filter": "trilinear"},
+         "shiny": {"ka": [0.1, 0, 0], "kd": [0.6, 0.2, 0.1], "ks": [0.8, 0.8, 0.8], "n": 60},
+         "floor": {"kd": [0.7, 0.7, 0.7], "checker": {"size": 0.5, "kd2": [0.1, 0.1, 0.2]}}},
+        camera={"eye": [0.3, 1.2, 3.5], "target": [0.2, 0.4, 0], "fov_y": 45, "width": 24, "height": 20},
+        lights=[{"type": "point", "position": [2, 4, 3]}, {"type": "directional", "direction": [1, -1, -1]}],
+        ambient=(0.1, 0.1, 0.1), fog={"mode": "linear", "color": [0.5, 0.5, 0.6], "start": 2, "end": 9},
+        render={"shading": shading, "shadows": True, "spp": 4, "clamp_vertex_colors": shading == "gouraud"})
+    frame = render_frame(scene)
+    np.testing.assert_allclose(render(scene), frame.image, rtol=0, atol=1e-6)
+    assert frame.gbuffer.mask.any() and not frame.gbuffer.mask.all()
