@@ -27,15 +27,14 @@ TABLE_KINDS = ("ka", "kd", "ks", "n", "m", "f0", "kr", "kt", "absorption")
 class ViewJ(eqx.Module):
     """One view on the device, cut down to the U pixels that count: its image model (a
     `shading.GBufferModel` or a `raytree.TreeModel`), lights, target and sqrt(weight) (U, 3), the
-    target's ceiling (inf: none), the pixels' flat indices, and intensity_index (P, 3): the entry of
-    the flat value vector each of its lights' intensity channels takes (-1: not fitted)."""
+    target's ceiling (inf: none), and intensity_index (P, 3): the entry of the flat value vector
+    each of its lights' intensity channels takes (-1: not fitted)."""
 
     model: eqx.Module
     lights: LightsJ
     target: jnp.ndarray
     sqrt_weight: jnp.ndarray
     ceiling: jnp.ndarray
-    pixels: jnp.ndarray
     intensity_index: jnp.ndarray
 
 

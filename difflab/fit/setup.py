@@ -258,7 +258,7 @@ class Setup:
         f = lambda x: jnp.asarray(np.asarray(x, np.float64), self.dtype)  # noqa: E731
         return ViewJ(model=self._model(view, pixels), lights=lights, target=f(view.target.reshape(-1, 3)[pixels]),
                      sqrt_weight=f(np.sqrt(view.weight.reshape(-1, 3)[pixels])), ceiling=f(view.ceiling),
-                     pixels=jnp.asarray(pixels, jnp.int32), intensity_index=jnp.asarray(intensity_index))
+                     intensity_index=jnp.asarray(intensity_index))
 
     def _problem(self, loss, loss_scale) -> Problem:
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
