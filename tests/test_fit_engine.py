@@ -115,3 +115,24 @@ def test_options_object_and_keywords_agree():
     a = fit_material(scene, [target], "red", init=START, options=FitOptions(solver="lm", max_steps=50))
     b = fit_material(scene, [target], "red", init=START, max_steps=50)
     assert a.params == b.params and a.steps == b.steps
+
+
+def test_progress_bar_only_when_asked(capsys):
+    scene = make_scene(size=12)
+    target = target_of(scene)
+    fit_material(scene, [target], "red", ("kd",), progress=True)
+    assert "step" in capsys.readouterr().err  # tqdm's bar, on stderr
+    fit_material(scene, [target], "red", ("kd",))  # default: only on a terminal (pytest's stderr is not)
+    assert "step" not in capsys.readouterr().err
+
+
+def test_compilation_cache_folder_follows_the_environment(monkeypatch, tmp_path):
+    from difflab.fit.cache import cache_dir
+
+    monkeypatch.setenv("DIFFLAB_CACHE_DIR", str(tmp_path / "jax"))
+    assert cache_dir() == tmp_path / "jax"
+    monkeypatch.setenv("DIFFLAB_CACHE_DIR", "off")
+    assert cache_dir() is None
+    monkeypatch.delenv("DIFFLAB_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert cache_dir() == tmp_path / "difflab" / "jax"
