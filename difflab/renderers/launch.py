@@ -155,3 +155,15 @@ def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int 
         wp.launch(kernel, dim=end - begin, inputs=[begin, *inputs], device=device)
 
     parallel_bands(run_band, rows, device, threads)
+
+
+def launch_chunks(kernel, n: int, inputs: list, device: str, threads: int | None = None) -> None:
+    """Launch `kernel` over items [0, n) in bands: its first arguments are (begin, end, chunk) and
+    thread tid handles items begin + tid * chunk ... up to `chunk` of them (below end). On the CPU a
+    band is one chunk (one thread reads the arguments once); on CUDA a chunk is one item."""
+    def run_band(begin: int, end: int) -> None:
+        chunk = end - begin if device == "cpu" else 1
+        wp.launch(kernel, dim=(end - begin + chunk - 1) // chunk, inputs=[begin, end, chunk, *inputs], device=device)
+
+    if n:
+        parallel_bands(run_band, n, device, threads)

@@ -17,7 +17,7 @@ from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR
 from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample, nonfinite_pixels
-from ..launch import band_plan, launch_row_loops, load_kernels, parallel_bands, run_bands
+from ..launch import band_plan, launch_chunks, launch_row_loops, load_kernels, parallel_bands, run_bands
 
 
 def empty_points(count: int, device: str) -> resolve.PointsW:
@@ -136,32 +136,27 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None):
     return tris, key
 
 
-def shading_points(compiled, mesh, cam, shading: int, samples):
+def point_count(compiled, shading: int, n_samples: int) -> int:
+    """How many points stage 5 has: a sample each (phong), a face each (flat), two per vertex (gouraud)."""
+    if shading == PHONG_SHADING:
+        return n_samples
+    return compiled.faces.shape[0] if shading == FLAT else 2 * compiled.vertices.shape[0]
+
+
+def shading_points(compiled, mesh, cam, shading: int, samples, threads: int | None = None):
     """Stage 5: the points where the model is evaluated (`samples` themselves under Phong shading)."""
-    device = compiled.device
-    n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     if shading == PHONG_SHADING:
         return samples, samples.material.shape[0]
-    if shading == FLAT:
-        points = empty_points(n_faces, device)
-        if n_faces:
-            wp.launch(resolve.flat_points_kernel, dim=n_faces, inputs=[mesh, compiled.materials, cam, points],
-                      device=device)
-        return points, n_faces
-    points = empty_points(2 * n_vertices, device)
-    if n_vertices:
-        wp.launch(resolve.gouraud_points_kernel, dim=(n_vertices, 2), inputs=[mesh, compiled.materials, cam, points],
-                  device=device)
-    return points, 2 * n_vertices
+    n_points = point_count(compiled, shading, 0)
+    points = empty_points(n_points, compiled.device)
+    launch_chunks(resolve.mesh_points_kernel, n_points, [mesh, compiled.materials, cam, shading, points],
+                  compiled.device, threads)
+    return points, n_points
 
 
-def light_points(compiled, lighting, points, n_points: int, n_samples: int, points_are_samples: int, record: bool,
-                 threads: int | None = None) -> shade.LitW:
-    """Stage 6: light every point (its colour; the texture factor under flat / Gouraud, the texel per
-    sample under Phong; with `record`, per light its direction, distance and visibility)."""
-    device = compiled.device
+def empty_lit(device: str, n_points: int, n_lights: int, n_samples: int, record: bool) -> shade.LitW:
+    """Stage 6's outputs; the per-light records and per-sample texels only when `record` (else 1 element)."""
     rows = n_points if record else 1
-    n_lights = max(len(compiled.scene.lights), 1)
     lit = shade.LitW()
     lit.light_dir = wp.zeros((rows, n_lights), dtype=wp.vec3, device=device)  # zero where nothing is lit
     lit.light_dist = wp.zeros((rows, n_lights), dtype=float, device=device)
@@ -169,14 +164,16 @@ def light_points(compiled, lighting, points, n_points: int, n_samples: int, poin
     lit.color = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
     lit.factor = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
     lit.texel = wp.zeros(n_samples if record else 1, dtype=wp.vec3, device=device)
+    return lit
 
-    def light_band(begin, end):
-        chunk = end - begin if device == "cpu" else 1  # a CPU thread reads the arguments once per band
-        wp.launch(shade.light_points_kernel, dim=(end - begin + chunk - 1) // chunk, inputs=[
-            begin, end, chunk, points, lighting, points_are_samples, int(record), lit], device=device)
 
-    if n_points and points is not None:
-        parallel_bands(light_band, n_points, device, threads)
+def light_points(compiled, lighting, points, n_points: int, n_samples: int, points_are_samples: int,
+                 threads: int | None = None) -> shade.LitW:
+    """Stage 6 for the G-buffer: light every point, recording per light its direction, distance
+    and visibility (and the texture factor under flat / Gouraud, the texel per sample under Phong)."""
+    lit = empty_lit(compiled.device, n_points, max(len(compiled.scene.lights), 1), n_samples, True)
+    launch_chunks(shade.light_points_kernel, n_points, [points, lighting, points_are_samples, 1, lit],
+                  compiled.device, threads)
     return lit
 
 
@@ -199,8 +196,9 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     # Stages 1-3: clip space, clipping, z-buffer.
     tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)
     if not gbuffer:  # stages 5-6 for flat / Gouraud points, then 4, 6 (Phong) and 7 fused per sample
-        points, n_points = (None, 0) if shading == PHONG_SHADING else shading_points(compiled, mesh, cam, shading, None)
-        lit = light_points(compiled, lighting, points, n_points, 0, 0, False, threads)
+        n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading, 0)
+        lit = empty_lit(device, n_points, max(len(scene.lights), 1), 0, False)
+        launch_chunks(shade.light_mesh_points_kernel, n_points, [mesh, cam, shading, lighting, lit], device, threads)
         launch_row_loops(shade.image_kernel, height, [
             key, tris, mesh, cam, lighting, lit, perspective_correct, shading, int(clamp_colors), background, fog,
             image], device, threads)
@@ -218,9 +216,9 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         samples], device, threads)
 
     # Stages 5-6: shading points, lit.
-    points, n_points = shading_points(compiled, mesh, cam, shading, samples)
+    points, n_points = shading_points(compiled, mesh, cam, shading, samples, threads)
     points_are_samples = int(shading == PHONG_SHADING)
-    lit = light_points(compiled, lighting, points, n_points, width * height, points_are_samples, True, threads)
+    lit = light_points(compiled, lighting, points, n_points, width * height, points_are_samples, threads)
 
     # Stage 7: compose samples, then filter to pixels.
     launch_row_loops(shade.compose_kernel, height, [

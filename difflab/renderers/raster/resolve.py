@@ -308,28 +308,35 @@ def resolve_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh
         resolve_into(key, tris, mesh, materials, cam, perspective_correct, shading, n_vertices, out, samples, i, j)
 
 
-@wp.kernel
-def flat_points_kernel(mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), cam: CameraW, points: PointsW):
-    """One point per face: its centroid, with the face normal turned toward the viewer."""
-    f = wp.tid()
-    p = (mesh.vertices[mesh.faces[f, 0]] + mesh.vertices[mesh.faces[f, 1]] + mesh.vertices[mesh.faces[f, 2]]) / 3.0
-    view = view_direction(cam, p)
-    normal = mesh.face_normal[f]
-    if wp.dot(normal, view) < 0.0:
+@wp.func
+def mesh_point(mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), cam: CameraW, shading: int, k: int):
+    """Shading point k of flat or Gouraud shading. Flat: face k's centroid, with the face normal
+    turned toward the viewer. Gouraud: two points per vertex, the front copy (k < V) with the vertex
+    normal, the back copy (k - V) with its negation, for back-facing triangles (OpenGL's two-sided
+    lighting)."""
+    if shading == FLAT:
+        f = k
+        p = (mesh.vertices[mesh.faces[f, 0]] + mesh.vertices[mesh.faces[f, 1]] + mesh.vertices[mesh.faces[f, 2]]) / 3.0
+        view = view_direction(cam, p)
+        normal = mesh.face_normal[f]
+        if wp.dot(normal, view) < 0.0:
+            normal = -normal
+        return make_point(p, normal, normal, view, mesh.face_material[f], materials, mesh.face_object[f],
+                          f >= mesh.n_mesh_faces)
+    n_vertices = mesh.vertices.shape[0]
+    v = k % n_vertices
+    p = mesh.vertices[v]
+    normal = mesh.normals[v]
+    if k >= n_vertices:
         normal = -normal
-    store_point(points, f, make_point(p, normal, normal, view, mesh.face_material[f], materials, mesh.face_object[f],
-                                      f >= mesh.n_mesh_faces))
+    return make_point(p, normal, normal, view_direction(cam, p), mesh.vertex_material[v], materials,
+                      mesh.vertex_object[v], v >= mesh.n_mesh_vertices)
 
 
 @wp.kernel
-def gouraud_points_kernel(mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), cam: CameraW, points: PointsW):
-    """Two points per vertex: the front copy with the vertex normal, the back copy (index + V) with
-    its negation, for back-facing triangles (OpenGL's two-sided lighting)."""
-    k, back = wp.tid()
-    p = mesh.vertices[k]
-    normal = mesh.normals[k]
-    if back == 1:
-        normal = -normal
-    point = make_point(p, normal, normal, view_direction(cam, p), mesh.vertex_material[k], materials,
-                       mesh.vertex_object[k], k >= mesh.n_mesh_vertices)
-    store_point(points, k + back * mesh.vertices.shape[0], point)
+def mesh_points_kernel(begin: int, end: int, chunk: int, mesh: RasterMeshW, materials: wp.array(dtype=MaterialW),
+                       cam: CameraW, shading: int, points: PointsW):
+    """Stage 5 for flat / Gouraud shading: points [begin, end), `chunk` per thread."""
+    first = begin + wp.tid() * chunk
+    for k in range(first, wp.min(first + chunk, end)):
+        store_point(points, k, mesh_point(mesh, materials, cam, shading, k))

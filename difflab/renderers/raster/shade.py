@@ -20,8 +20,8 @@ from ..camera import CameraW
 from ..texture.sampling import TexturesW, sample_texture
 from ..trace import SceneGeomW, light_visibility
 from .coverage import NO_HIT
-from .resolve import (PointsW, PointW, RasterMeshW, SampleW, ScreenW, load_point, resolve_sample, sample_points,
-                      sample_position, sample_uv, sample_weights)
+from .resolve import (PointsW, PointW, RasterMeshW, SampleW, ScreenW, load_point, mesh_point, resolve_sample,
+                      sample_points, sample_position, sample_uv, sample_weights)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -129,6 +129,18 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
     first = begin + wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, end)):
         light_into(points, lighting, points_are_samples, record, lit, k)
+
+
+@wp.kernel
+def light_mesh_points_kernel(begin: int, end: int, chunk: int, mesh: RasterMeshW, cam: CameraW, shading: int,
+                             lighting: LightingW, lit: LitW):
+    """Stages 5 and 6 fused for flat / Gouraud points [begin, end) (`render`: nothing recorded)."""
+    first = begin + wp.tid() * chunk
+    for k in range(first, wp.min(first + chunk, end)):
+        point = mesh_point(mesh, lighting.materials, cam, shading, k)
+        color, factor = light_point(point, lighting, 0, wp.vec3(0.0), lit, k, 0)
+        lit.color[k] = color
+        lit.factor[k] = factor
 
 
 @wp.func
