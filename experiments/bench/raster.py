@@ -68,11 +68,13 @@ def timed(fn) -> tuple[float, float, object]:
 
 
 def peak_memory_mib(resolution: int, width: int, height: int) -> float:
-    """Peak RSS of a fresh process that builds, compiles and renders one frame."""
+    """Peak RSS of a fresh process that builds, compiles and renders one frame, with Warp's kernel
+    cache warm (run twice: the first may compile a kernel, which takes memory of its own)."""
     code = (f"import resource, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import raster as b, difflab; "
             f"difflab.render(b.sphere_scene({resolution}, {width}, {height})); "
             f"print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    for _ in range(2):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return int(out.stdout.strip().splitlines()[-1]) / 1024.0
 
 
