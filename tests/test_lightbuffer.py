@@ -67,3 +67,9 @@ def test_render_frame_offers_both_speed_ups_for_the_ray_tracer_only():
     assert fast.stats["item_buffer"] and fast.stats["shadow_tests"] > 0
     with pytest.raises(difflab.RenderError, match="light_buffer"):
         difflab.render_frame(scene, method="raster", light_buffer=True)
+
+
+def test_cube_resolution_grows_with_the_mesh():
+    from difflab.renderers.raytrace.lightbuffer import auto_resolution
+
+    assert [auto_resolution(n) for n in (10, 10_000, 100_000, 1_000_000, 10**8)] == [16, 32, 128, 256, 256]

@@ -7,7 +7,7 @@ import numpy as np
 
 from .. import geometry
 from ..renderers.compile import compile_scene
-from ..renderers.raytrace.lightbuffer import DEFAULT_RESOLUTION, build_light_buffer
+from ..renderers.raytrace.lightbuffer import build_light_buffer
 
 # The forward-tracing scene: a unit-diameter ball on a 6 x 6 floor, a point light, a pinhole eye.
 BALL_CENTER, BALL_RADIUS, FLOOR_HALF = np.array([0.0, 0.5, 0.0]), 0.5, 3.0
@@ -71,7 +71,8 @@ def forward_scene(width: int, height: int, fov_y: float = 40.0) -> dict:
             "render": {"method": "raytrace", "max_depth": 1}}
 
 
-def light_buffer_counts(scene, resolution: int = DEFAULT_RESOLUTION) -> list:
+def light_buffer_counts(scene, resolution: int | None = None) -> list:
     """Per light of `scene`, the number of candidate occluders in every light-buffer cell, (6, R, R)
-    ordered +x, -x, +y, -y, +z, -z (None for a directional light)."""
+    ordered +x, -x, +y, -y, +z, -z (None for a directional light); R = `resolution` (None: scaled
+    to the mesh size, as renders use)."""
     return build_light_buffer(compile_scene(scene), resolution).counts

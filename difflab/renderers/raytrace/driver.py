@@ -30,7 +30,7 @@ from ..camera import camera_struct
 from ..frame import Frame, box_downsample, nonfinite_pixels
 from ..launch import launch_row_loops, load_kernels
 from .itembuffer import item_buffer, item_struct
-from .lightbuffer import DEFAULT_RESOLUTION, build_light_buffer, no_light_buffer
+from .lightbuffer import build_light_buffer, no_light_buffer
 from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, TraceOutW, TraceParamsW, \
     whitted_kernel
 from .record import empty_tree, sized_tree, tree_to_numpy
@@ -156,7 +156,7 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
 
 def raytrace(compiled, settings, threads: int | None = None, *, record_tree: bool = True,
              use_item_buffer: bool = False, use_light_buffer: bool = False,
-             light_buffer_resolution: int = DEFAULT_RESOLUTION) -> Frame:
+             light_buffer_resolution: int | None = None) -> Frame:
     """Ray-trace a compiled scene under `settings` (a scene `RenderSettings`).
 
     Arguments:
@@ -169,7 +169,8 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
             "grid" sampling, whose samples are the rasterizer's.
         use_light_buffer: shadow rays to point and spot lights test only the candidates of their
             light-buffer cell (`lightbuffer.py`), built for this render with
-            `light_buffer_resolution` cells per cube-face edge; the image is the same.
+            `light_buffer_resolution` cells per cube-face edge (None: scaled to the mesh size);
+            the image is the same.
 
     Returns: a `Frame` with `image` (H, W, 3) float32 linear RGB, no G-buffer, `ray_tree` (a
     `RayTree` or None) and `stats`: rays traced per kind, `depth_histogram` (rays per depth, from

@@ -29,7 +29,7 @@ from ..trace import HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, MAX_SHADOW_CROSSINGS, S
 
 wp.set_module_options({"enable_backward": False})
 
-DEFAULT_RESOLUTION = 32  # cells per cube-face edge
+DEFAULT_RESOLUTION = 32  # cells per cube-face edge for ~10^4 triangles (see `auto_resolution`)
 
 
 @wp.struct
@@ -250,9 +250,19 @@ def near_bounds(kind, points, extra, light):
     return np.abs(((light - point) * normal).sum(axis=1))
 
 
-def build_light_buffer(compiled, resolution: int = DEFAULT_RESOLUTION) -> LightBuffer:
-    """The light buffer of a compiled scene: candidates of every point and spot light, z-ordered."""
+def auto_resolution(triangles: int) -> int:
+    """Cells per cube-face edge growing as sqrt(triangles) (the power of 2 nearest to 32 at 10^4
+    triangles, clamped to 16 .. 256), so that a cell lists about as many candidates at any mesh size.
+    Measured on the lecture scene (experiments/bench/speedups.py): at ~10^5 triangles a 32-cell cube
+    left 179 candidates per shadow ray, a 128-cell one 16."""
+    return int(np.clip(2 ** round(np.log2(DEFAULT_RESOLUTION * np.sqrt(max(triangles, 1) / 1e4))), 16, 256))
+
+
+def build_light_buffer(compiled, resolution: int | None = None) -> LightBuffer:
+    """The light buffer of a compiled scene: candidates of every point and spot light, z-ordered,
+    on cubes of `resolution` cells per face edge (None: `auto_resolution` of the mesh size)."""
     scene, device = compiled.scene, compiled.device
+    resolution = auto_resolution(compiled.n_mesh_faces) if resolution is None else int(resolution)
     cells_per_light = 6 * resolution * resolution
     cell0, counts, per_cells, kinds, indices, nears = [], [], [], [], [], []
     base = 0
