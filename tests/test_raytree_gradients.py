@@ -4,8 +4,6 @@ solvers get it from JAX through the recorded tree, equals the central finite dif
 renders with that value moved by +-h (the tree's shape cannot change: adaptive control is off and
 kr, kt stay > 0)."""
 
-import dataclasses
-
 import jax
 import jax.numpy as jnp
 import numpy as np
