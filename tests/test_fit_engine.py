@@ -136,3 +136,13 @@ def test_compilation_cache_folder_follows_the_environment(monkeypatch, tmp_path)
     monkeypatch.delenv("DIFFLAB_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     assert cache_dir() == tmp_path / "difflab" / "jax"
+
+
+def test_a_target_no_material_can_reach_puts_every_coefficient_on_its_bound():
+    """A negative image: the best non-negative ka, kd, ks are 0 -- reached, reported at bound, and
+    the residuals (the whole target) flagged as a model mismatch; negative values are no ceiling."""
+    scene = make_scene(size=16)
+    result = fit_material(scene, [-target_of(scene)], "red")
+    assert result.converged and result.censored == 0
+    assert all(max(result.params[k]) == 0.0 for k in ("ka", "kd", "ks"))
+    assert {"ka", "kd", "ks"} <= set(result.at_bound) and result.model_mismatch

@@ -12,8 +12,10 @@ is 0 lands on 0 in one projected step and stays there, instead of crawling along
 
 Stops with "successful" when a step changes every entry by at most atol + rtol |x|, or when an
 accepted step lowered the loss -- and the linear model predicted it would lower it -- by at most
-rtol of itself (MINPACK's xtol / ftol tests); "nonlinear_max_steps_reached" after max_steps; "nonfinite" as soon as a loss is
-not finite (a fit with an infinite loss is never successful). Each step costs one Jacobian and one
+rtol of itself (MINPACK's xtol / ftol tests); "nonlinear_max_steps_reached" after max_steps;
+"nonfinite" when the loss at the start is not finite. A trial step whose loss is not finite is
+rejected like any step that does not lower the loss, so the point returned always has a finite
+loss (a fit with an infinite loss is never successful). Each step costs one Jacobian and one
 p x p Cholesky solve, as a plain Gauss-Newton step does.
 """
 
@@ -59,7 +61,7 @@ def box_lm(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=N
         max_steps: the most steps (static); rtol, atol: the stopping tolerances above.
         progress: None, or a host callable (step, loss) called after each step.
     Returns:
-        (x, code index into CODES, steps, history (max_steps,) loss after each step (NaN beyond),
+        (x, code index into CODES, steps, history (max_steps,) the loss after each step (NaN beyond),
         r (N,) and J (N, p) at x).
     """
     dtype = x0.dtype
@@ -77,11 +79,12 @@ def box_lm(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=N
         a = s.jac.T @ s.jac
         fixed = first | ((s.x <= lower) & (g > 0)) | ((s.x >= upper) & (g < 0))
         diag = jnp.diagonal(a)
-        floor = 1e-9 * jnp.max(diag) + jnp.finfo(dtype).tiny
+        floor = 1e-9 * jnp.max(diag) + 1e-20  # a parameter no pixel sees still gets a (huge) damping
         free = ~fixed
         m = jnp.where(free[:, None] & free[None, :], a, 0.0) + jnp.diag(jnp.where(free, s.lam * jnp.maximum(diag, floor),
                                                                                    1.0))
         dx = jsl.cho_solve(jsl.cho_factor(m), jnp.where(free, -g, 0.0))
+        dx = jnp.where(jnp.isfinite(dx), dx, 0.0)
         x_new = jnp.clip(s.x + dx, lower, upper)
         d = x_new - s.x
         r_new, j_new = _linearise(fn, x_new, args)
@@ -98,14 +101,14 @@ def box_lm(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=N
         small_change = ((s.loss - loss_new) <= tol_loss) & (predicted <= tol_loss)
         done = ~first & (small_step | (accept & small_change))
         step = s.step + 1
-        code = jnp.where(~finite, NONFINITE, jnp.where(done, SUCCESSFUL,
-                                                        jnp.where(step >= max_steps, MAX_STEPS, RUNNING)))
+        # The start must have a finite loss; a trial step whose loss is not finite is only rejected.
+        code = jnp.where(first & ~finite, NONFINITE, jnp.where(done, SUCCESSFUL,
+                                                                jnp.where(step >= max_steps, MAX_STEPS, RUNNING)))
         keep = lambda new, old: jnp.where(accept, new, old)  # noqa: E731
         loss = keep(loss_new, s.loss)
         if progress is not None:
             jax.debug.callback(progress, step, loss)
-        history = jnp.where(first, s.history, s.history.at[jnp.maximum(s.step, 0)].set(jnp.where(finite, loss,
-                                                                                                  loss_new)))
+        history = jnp.where(first, s.history, s.history.at[jnp.maximum(s.step, 0)].set(loss))
         return State(keep(x_new, s.x), keep(r_new, s.r), keep(j_new, s.jac), loss, lam, nu, step, code, history)
 
     out = jax.lax.while_loop(lambda s: s.code == RUNNING, body, state)

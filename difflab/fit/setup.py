@@ -238,7 +238,7 @@ class Setup:
                 values = image[used]
                 peak = float(values.max()) if values.size else 0.0
                 ties = np.count_nonzero(values == peak)
-                top = peak if CENSOR_MIN_TIES <= ties < values.size // 2 else np.inf
+                top = peak if peak > 0 and CENSOR_MIN_TIES <= ties < values.size // 2 else np.inf
             views.append(View(target=image, mask=mask, weight=weight, ceiling=np.inf if top is False else float(top),
                               quantised=file_ceiling is not None, nonfinite=nonfinite, record=record,
                               scene=view_scene, used=used))
