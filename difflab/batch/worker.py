@@ -18,6 +18,7 @@ from ..errors import DifflabError, FitError
 NO_FIT = ("empty_mask", "nonfinite_target")  # result codes that mean no fit was made: a failed job
 VOLATILE = ("seconds", "timings")  # report fields that change from run to run (kept apart from the report)
 
+
 def fit_job(spec: dict):
     """Run the fit a manifest line describes (`manifest.parse_line`'s spec) through the fitting
     engine, `difflab.fit.fit`, and return its FitResult. Its compiled solves stay in this process for
