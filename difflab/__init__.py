@@ -7,13 +7,13 @@ material coefficients can be fitted to images with optimistix.
 
 The names below are the public API (`docs/api.md`). Public subpackages: `difflab.scene`,
 `difflab.geometry`, `difflab.fractals`, `difflab.fit`, `difflab.demos`, `difflab.vocabulary`,
-`difflab.errors`, `difflab.io`; every other module is internal and may change. The fitting names
-(`fit_material`, `fit_scene`, `identify`, `FitResult`, `Identifiability`) are imported from
-`difflab.fit` on first use, so `import difflab` loads neither JAX nor optimistix.
+`difflab.errors`, `difflab.io`; every other module is internal and may change. The rendering names
+(`render`, `render_frame`, `compile_scene`, `CompiledScene`, `Frame`, `GBuffer`, `ShadingPoints`,
+`example_scene`) and the fitting names (`fit_material`, `fit_scene`, `identify`, `FitResult`,
+`Identifiability`) are imported on first use, so `import difflab` loads neither Warp nor JAX.
 """
 
 from .batch import fit_many as fit_many
-from .demos.examples import example_scene as example_scene
 from .errors import DifflabError as DifflabError
 from .errors import FitError as FitError
 from .errors import MeshError as MeshError
@@ -23,13 +23,6 @@ from .errors import SceneError as SceneError
 from .errors import TextureError as TextureError
 from .io import load_image as load_image
 from .io import save_image as save_image
-from .renderers.api import render as render
-from .renderers.api import render_frame as render_frame
-from .renderers.compile import CompiledScene as CompiledScene
-from .renderers.compile import compile_scene as compile_scene
-from .renderers.frame import Frame as Frame
-from .renderers.frame import GBuffer as GBuffer
-from .renderers.frame import ShadingPoints as ShadingPoints
 from .scene import Camera as Camera
 from .scene import Checker as Checker
 from .scene import Fog as Fog
@@ -46,22 +39,29 @@ from .scene import save_scene as save_scene
 
 __version__ = "0.1.0"
 
-#: Public names of `difflab.fit`, imported on first use (module `__getattr__`, PEP 562).
-_FIT_NAMES = ("FitResult", "Identifiability", "fit_material", "fit_scene", "identify")
+#: Public names imported on first use (module `__getattr__`, PEP 562), by the module that holds them:
+#: the renderers load Warp and the fitting names load JAX, neither of which `import difflab` needs.
+_LAZY = {
+    "render": ".renderers.api", "render_frame": ".renderers.api",
+    "CompiledScene": ".renderers.compile", "compile_scene": ".renderers.compile",
+    "Frame": ".renderers.frame", "GBuffer": ".renderers.frame", "ShadingPoints": ".renderers.frame",
+    "example_scene": ".demos.examples",
+    "FitResult": ".fit", "Identifiability": ".fit", "fit_material": ".fit", "fit_scene": ".fit", "identify": ".fit",
+}
 
 
 def __getattr__(name: str):
-    if name in _FIT_NAMES:
+    if name in _LAZY:
         import importlib
 
-        value = getattr(importlib.import_module(".fit", __name__), name)
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
         globals()[name] = value
         return value
     raise AttributeError(f"module 'difflab' has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_FIT_NAMES))
+    return sorted(set(globals()) | set(_LAZY))
 
 
 __all__ = [

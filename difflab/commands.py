@@ -6,7 +6,7 @@ from pathlib import Path
 
 from .errors import DifflabError
 from .io import add_force
-from .vocabulary import MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS, SPECULAR_MODELS
+from .vocabulary import FRACTAL_KINDS, MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS, SPECULAR_MODELS
 
 
 def run_render(args) -> int:
@@ -82,10 +82,8 @@ def run_fractal(args) -> int:
 
 
 def add_fractal(sub) -> None:
-    from .demos.fractals import KINDS
-
     p = sub.add_parser("fractal", help="draw a fractal curve or render a fractal set")
-    p.add_argument("kind", choices=KINDS)
+    p.add_argument("kind", choices=FRACTAL_KINDS)
     p.add_argument("-o", "--output", required=True, help="output PNG")
     p.add_argument("--order", type=int, help="iterations / order / depth / terrain level")
     p.add_argument("--width", type=int, default=640)

@@ -46,3 +46,9 @@ MAX_SPP = 4096
 #: Below this N.H the Beckmann distribution exp(-tan^2/m^2) is ~0 and evaluating it would give 0/0;
 #: both halves of the illumination model return 0 there.
 BECKMANN_MIN_COS = 1.0e-3
+
+# -- fractals (`difflab fractal KIND`) ---------------------------------------------------------------
+#: Curves are drawn as figures, images are rendered.
+FRACTAL_CURVES = ("koch", "peano", "hilbert", "cantor")
+FRACTAL_IMAGES = ("terrain", "mandelbrot", "julia", "mandelbulb")
+FRACTAL_KINDS = FRACTAL_CURVES + FRACTAL_IMAGES

@@ -23,6 +23,27 @@ def test_a_cpu_render_says_nothing_about_cuda(tmp_path):
     assert (tmp_path / "out.png").stat().st_size > 0
 
 
+def loaded_after(code):
+    """The heavy packages (Warp, JAX, optimistix) that a fresh interpreter running `code` has imported."""
+    probe = code + "\nimport sys; print(sorted(m for m in ('warp', 'jax', 'optimistix') if m in sys.modules))"
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip().splitlines()[-1]
+
+
+def test_import_difflab_loads_neither_warp_nor_jax():
+    """`import difflab` and the scene API stay light; the lazy names load their renderer on first use."""
+    assert loaded_after("import difflab; difflab.Scene, difflab.load_scene, difflab.fit_many") == "[]"
+    assert loaded_after("import difflab; difflab.render") == "['warp']"
+
+
+def test_help_loads_neither_warp_nor_jax():
+    """`difflab --help` (every subcommand's parser) builds without importing a renderer or the fitter."""
+    code = ("import sys, contextlib, io\nfrom difflab import cli\nsys.argv = ['difflab', '--help']\n"
+            "with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()): cli.main()")
+    assert loaded_after(code) == "[]"
+
+
 def fake_kernel(name):
     return SimpleNamespace(module=SimpleNamespace(name=name))
 

@@ -13,11 +13,10 @@ from ..errors import RenderError
 from ..io import save_image
 from ..limits import CURVE_PIXEL_BYTES, require_image
 from ..renderers.api import render
+from ..vocabulary import FRACTAL_CURVES as CURVES
+from ..vocabulary import FRACTAL_IMAGES as IMAGES
+from ..vocabulary import FRACTAL_KINDS as KINDS
 from .figures import image_grid, save_figure
-
-CURVES = ("koch", "peano", "hilbert", "cantor")
-IMAGES = ("terrain", "mandelbrot", "julia", "mandelbulb")
-KINDS = CURVES + IMAGES
 
 
 def curve_points(kind: str, order: int) -> tuple[np.ndarray, str]:
