@@ -5,7 +5,7 @@ small: at most 64 MiB and 10^6 rays).
 
 The CI profile is derandomized with a fixed number of examples. For a longer local run:
 
-    DIFFLAB_FUZZ=long pytest tests/test_fuzz.py      # 2,000 random examples per property
+    DIFFLAB_FUZZ=long pytest tests/test_fuzz.py      # 2,000 random examples per property (300 fits)
 """
 
 import copy
@@ -19,14 +19,15 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from difflab import DifflabError, Scene, render
+from difflab import DifflabError, Scene, fit_material, render
 
 PROFILES = {
     "ci": dict(derandomize=True, max_examples=60, deadline=None, database=None),
     "long": dict(derandomize=False, max_examples=2000, deadline=None),
 }
-FUZZ = settings(**PROFILES[os.environ.get("DIFFLAB_FUZZ", "ci")],
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+PROFILE = os.environ.get("DIFFLAB_FUZZ", "ci")
+FUZZ = settings(**PROFILES[PROFILE], suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+FIT_FUZZ = settings(FUZZ, max_examples={"ci": 12, "long": 300}[PROFILE])  # each fit compiles: ~1 s
 
 BASE = {
     "camera": {"eye": [0, 1, 5], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y": 40, "width": 8, "height": 6,
@@ -154,6 +155,33 @@ def test_hostile_obj_files_render_or_name_the_file(small_budgets, tmp_path, line
     doc["render"]["method"] = method
     doc["objects"][2] = {"type": "mesh", "file": str(path), "material": "red", "smooth": True}
     check(doc, re.compile(r"^(objects\[2\] \(.*fuzz\.obj\): .*fuzz\.obj|objects\[2\]\.transform: )"))
+
+
+FIT_KEYWORDS = ["params", "material", "init", "solver", "max_steps", "loss", "loss_scale", "per_channel", "bounded",
+                "masks", "weights", "x64", "sigma", "colour"]
+FIT_VALUES = st.one_of(VALUES, st.sampled_from([("kd",), ["kd", 3], {"kd": "abc"}, {"kd": math.nan}, {"zz": 1},
+                                                "kd,ks", ("n",), [np.zeros((6, 8))], [np.ones((6, 8)) * -1]]))
+FIT_TARGETS = st.sampled_from(["same", "huge", "nan", "complex", "small", "negative"])
+
+
+@FIT_FUZZ
+@given(keywords=st.dictionaries(st.sampled_from(FIT_KEYWORDS), FIT_VALUES, max_size=2), target=FIT_TARGETS)
+def test_hostile_fit_arguments_fit_or_name_the_argument(small_budgets, keywords, target):
+    """A fit returns finite numbers (whatever its result code), or raises a DifflabError naming the argument."""
+    doc = {**BASE, "objects": BASE["objects"][:2], "fog": None}
+    image = render(doc)
+    targets = {"same": image, "huge": image * 1e30, "nan": image * np.nan, "complex": image.astype(complex),
+               "small": image[:2, :2], "negative": -image}[target]
+    try:
+        result = fit_material(doc, [targets], **{"material": "floor", "params": ("kd",), "max_steps": 3, **keywords})
+    except DifflabError as exc:
+        assert re.match(r"^(targets|" + "|".join(FIT_KEYWORDS) + r"|fit|scene|no fit|unknown argument)", str(exc)), \
+            str(exc)
+        event(f"{type(exc).__name__}: {str(exc).split(':')[0][:30]}")
+        return
+    event(f"result {result.result}")
+    values = np.concatenate([np.ravel(v) for v in result.params.values()])
+    assert np.isfinite(values).all() or result.result != "successful"
 
 
 PNG_HEAD = b"\x89PNG\r\n\x1a\n"
