@@ -17,8 +17,8 @@ from __future__ import annotations
 import importlib
 
 _EXPORTS = {
-    "FitOptions": "options", "SOLVERS": "options", "FitResult": "result", "fit": "fit", "fit_material": "fit",
-    "fit_scene": "fit", "solve": "fit", "fit_batch": "batch", "Identifiability": "identify", "identify": "identify",
+    "FitOptions": "options", "SOLVERS": "options", "FitResult": "result", "fit": "engine", "fit_material": "engine",
+    "fit_scene": "engine", "solve": "engine", "fit_batch": "batch", "Identifiability": "identify", "identify": "identify",
     "MaterialTable": "materials", "KINDS": "params", "Param": "params", "evaluate_tree": "raytree",
     "tree_to_jax": "raytree", "METHODS": "setup", "SceneSetup": "setup", "Setup": "setup",
     "shade_gbuffer": "shading", "fit_texture": "texture_fit", "texture_view": "texture_fit",

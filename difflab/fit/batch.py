@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import FitError
 from . import lm
-from .fit import report
+from .engine import report
 from .params import DEFAULT_PARAMS
 from .setup import Setup
 from .options import FitOptions

@@ -61,7 +61,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args) -> int:
     from ..io import refuse_overwrite, write_json_atomic
     from ..scene import save_scene
-    from .fit import fit
+    from .engine import fit
 
     output = Path(args.output)
     report = Path(args.report) if args.report else output.with_name(output.stem + ".fit.json")
