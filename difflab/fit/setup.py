@@ -39,7 +39,7 @@ CENSOR_MIN_TIES = 3  # float targets: ties at the maximum (this many, under half
 class View:
     """One target and what it was seen with. target (H, W, 3) float64 (0 where masked out); mask
     (H, W) bool; weight (H, W, 3) >= 0 (0 outside the mask); ceiling: where its values clip (inf:
-    nowhere); quantised: integer-coded (8-bit steps); nonfinite: non-finite target values inside the
+    nowhere); quantised: from an 8-bit image file; nonfinite: non-finite target values inside the
     mask; record: its G-buffer or ray tree; scene: the scene of this view; used (H, W) bool: the
     pixels the fit reads."""
 
@@ -109,12 +109,12 @@ def apply_init(scene, materials, init):
     return dataclasses.replace(scene, materials=mats, lights=tuple(lights))
 
 
-def _check_number(value, name, *, positive=True, allow_none=False):
+def _check_number(value, name, *, allow_none=False):
+    """A finite number > 0 as a float (None when allowed), or FitError naming the argument."""
     if value is None and allow_none:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or \
-            (positive and value <= 0):
-        raise FitError(f"{name}: must be a finite number{' > 0' if positive else ''}, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+        raise FitError(f"{name}: must be a finite number > 0, got {value!r}")
     return float(value)
 
 
