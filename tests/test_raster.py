@@ -287,3 +287,20 @@ def test_render_forms_the_image_render_frame_composes_from_its_gbuffer(tmp_path,
     frame = render_frame(scene)
     np.testing.assert_allclose(render(scene), frame.image, rtol=0, atol=1e-6)
     assert frame.gbuffer.mask.any() and not frame.gbuffer.mask.all()
+
+
+@pytest.mark.parametrize("shading", ["flat", "gouraud"])
+def test_the_image_path_lights_only_the_points_drawn_faces_read(shading):
+    """`render` lights only the shading points of drawn faces (Gouraud: the vertex copy on the side
+    each face shows); the image is bitwise the one `render_frame` composes from every lit point. The
+    near plane cuts the sphere open: front faces, back faces seen inside, and faces clipped to quads."""
+    scene = scene_dict([{"type": "mesh", "builtin": "sphere", "resolution": 16, "material": "m"}],
+                       {"m": {"ka": [0.2, 0.1, 0.1], "kd": [0.6, 0.5, 0.3], "ks": [0.5] * 3, "n": 20}},
+                       lights=[{"type": "point", "position": [0.5, 0.3, 0.2]}], ambient=(0.2, 0.2, 0.2),
+                       camera={"eye": [0, 0, 1.3], "target": [0, 0, 0], "near": 0.35, "fov_y": 100, "width": 40,
+                               "height": 30})
+    frame = render_frame(scene, shading=shading)
+    gouraud = render_frame(scene, shading="gouraud").gbuffer
+    copies = gouraud.point_index[gouraud.mask] >= len(gouraud.points.position) // 2  # back copies after the V fronts
+    assert copies.any() and not copies.all()  # both sides of the surface are seen
+    assert np.array_equal(render(scene, shading=shading), frame.image)

@@ -40,10 +40,10 @@ def covers(b: wp.int64, owned: bool):
     return b > wp.int64(0) or (b == wp.int64(0) and owned)
 
 
-@wp.kernel
-def raster_kernel(row_begin: int, row_end: int, slots: wp.array(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d),
-                  width: int, key: wp.array(dtype=wp.int64)):
-    slot = slots[wp.tid()]  # the triangles binned to this band of rows
+@wp.func
+def raster_slot(slot: int, row_begin: int, row_end: int, screen: wp.array2d(dtype=wp.vec4d), width: int,
+                key: wp.array(dtype=wp.int64)):
+    """Z-test the samples of rows [row_begin, row_end) that screen triangle `slot` covers."""
     s0 = screen[slot, 0]
     s1 = screen[slot, 1]
     s2 = screen[slot, 2]
@@ -82,3 +82,12 @@ def raster_kernel(row_begin: int, row_end: int, slots: wp.array(dtype=wp.int32),
             b0 = b0 - (y2 - y1) * step
             b1 = b1 - (y0 - y2) * step
             b2 = b2 - (y1 - y0) * step
+
+
+@wp.kernel
+def raster_kernel(chunk: int, row_begin: int, row_end: int, slots: wp.array(dtype=wp.int32),
+                  screen: wp.array2d(dtype=wp.vec4d), width: int, key: wp.array(dtype=wp.int64)):
+    """The triangles binned to rows [row_begin, row_end), `chunk` consecutive ones per thread."""
+    first = wp.tid() * chunk
+    for k in range(first, wp.min(first + chunk, slots.shape[0])):
+        raster_slot(slots[k], row_begin, row_end, screen, width, key)

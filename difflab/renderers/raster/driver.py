@@ -17,7 +17,7 @@ from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR
 from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample, nonfinite_pixels
-from ..launch import band_plan, launch_chunks, launch_row_loops, load_kernels, parallel_bands, run_bands
+from ..launch import band_plan, launch_chunks, launch_row_loops, load_kernels, run_bands
 
 
 def empty_points(count: int, device: str) -> resolve.PointsW:
@@ -78,13 +78,15 @@ def empty_screen(device: str) -> resolve.ScreenW:
     return tris
 
 
-def zbuffer(compiled, cam, cull: int, threads: int | None = None):
+def zbuffer(compiled, cam, cull: int, threads: int | None = None, mark: int = clip.MARK_NONE, needed=None):
     """Stages 1-3 on the sample grid of `cam`: clip space, near-plane clipping, and the z-buffer.
 
     Returns the clipped screen triangles (a `ScreenW`: a slot per face, and one more per face clipped
     to a quad) and the visibility key per sample (NO_HIT, or depth << 32 | slot of the nearest
     triangle). Vertices and faces are transformed in bands on all cores; each band of rows
-    rasterizes only the triangles binned to it (those whose sample-centre rows meet the band)."""
+    rasterizes only the triangles binned to it (those whose sample-centre rows meet the band).
+    With `mark` (clip.MARK_FACES / MARK_VERTICES), `needed` (zeroed, one per shading point) gets a 1
+    for every point a drawn triangle reads."""
     device, arrays = compiled.device, compiled.arrays
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     width, height = cam.width, cam.height
@@ -92,18 +94,9 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None):
     if not n_faces:
         return empty_screen(device), key
     p_clip = wp.empty(n_vertices, dtype=wp.vec4, device=device)
-
-    def clip_band(begin, end):
-        wp.launch(clip.clip_vertices_kernel, dim=end - begin, inputs=[begin, arrays["vertices"], cam.view_proj, p_clip],
-                  device=device)
-
-    parallel_bands(clip_band, n_vertices, device, threads)
+    launch_chunks(clip.clip_vertices_kernel, n_vertices, [arrays["vertices"], cam.view_proj, p_clip], device, threads)
     split = wp.empty(n_faces, dtype=wp.int32, device=device)
-
-    def split_band(begin, end):
-        wp.launch(clip.split_kernel, dim=end - begin, inputs=[begin, arrays["faces"], p_clip, split], device=device)
-
-    parallel_bands(split_band, n_faces, device, threads)
+    launch_chunks(clip.split_kernel, n_faces, [arrays["faces"], p_clip, split], device, threads)
     split_faces = np.flatnonzero(split.numpy()).astype(np.int32)  # faces clipped to a quad: a second slot each
     extra_slot = np.full(n_faces, -1, np.int32)
     extra_slot[split_faces] = n_faces + np.arange(split_faces.size, dtype=np.int32)
@@ -116,21 +109,20 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None):
                          device=device)
     rows = wp.empty((n_slots, 2), dtype=wp.int32, device=device)
     extra = wp.array(extra_slot, dtype=wp.int32, device=device)
-
-    def assemble_band(begin, end):
-        wp.launch(clip.assemble_kernel, dim=end - begin, inputs=[
-            begin, arrays["faces"], p_clip, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows],
-            device=device)
-
-    parallel_bands(assemble_band, n_faces, device, threads)
+    if needed is None:
+        needed = wp.empty(0, dtype=wp.int32, device=device)
+    launch_chunks(clip.assemble_kernel, n_faces, [arrays["faces"], p_clip, cull, width, height, extra, tris.screen,
+                                                  tris.weight, tris.facing, rows, mark, needed], device, threads)
     bands = band_plan(height, device, threads)
     binned = dict(zip(bands, bin_rows(rows.numpy(), bands, height)))
 
     def raster_band(begin, end):
         slots = binned[(begin, end)]
         if slots.size:
-            wp.launch(coverage.raster_kernel, dim=slots.size, inputs=[
-                begin, end, wp.array(slots, dtype=wp.int32, device=device), tris.screen, width, key], device=device)
+            chunk = slots.size if device == "cpu" else 1  # a band is one thread's work on the CPU
+            wp.launch(coverage.raster_kernel, dim=(slots.size + chunk - 1) // chunk, inputs=[
+                chunk, begin, end, wp.array(slots, dtype=wp.int32, device=device), tris.screen, width, key],
+                device=device)
 
     run_bands(raster_band, bands, threads)
     return tris, key
@@ -193,17 +185,22 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     image = wp.empty(width * height, dtype=wp.vec3, device=device)
     background, fog = wp.vec3(*scene.background), fog_struct(scene.fog)
 
-    # Stages 1-3: clip space, clipping, z-buffer.
-    tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)
-    if not gbuffer:  # stages 5-6 for flat / Gouraud points, then 4, 6 (Phong) and 7 fused per sample
+    # Stages 1-3: clip space, clipping, z-buffer (`zbuffer`).
+    if not gbuffer:  # stages 5-6 for the flat / Gouraud points drawn faces read, then 4, 6 (Phong) and 7 fused
         n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading, 0)
+        needed = wp.zeros(n_points, dtype=wp.int32, device=device)
+        mark = {FLAT: clip.MARK_FACES, GOURAUD: clip.MARK_VERTICES}.get(shading, clip.MARK_NONE)
+        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads, mark, needed)
         lit = empty_lit(device, n_points, max(len(scene.lights), 1), 0, False)
-        launch_chunks(shade.light_mesh_points_kernel, n_points, [mesh, cam, shading, lighting, lit], device, threads)
+        launch_chunks(shade.light_mesh_points_kernel, n_points, [mesh, cam, shading, lighting, needed, lit], device,
+                      threads)
         launch_row_loops(shade.image_kernel, height, [
             key, tris, mesh, cam, lighting, lit, perspective_correct, shading, int(clamp_colors), background, fog,
             image], device, threads)
         pixels = box_downsample(image.numpy().reshape(height, width, 3), side)
         return Frame(image=pixels, buffers=None, stats=frame_stats(compiled, start, pixels, width * height, n_points))
+
+    tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)
 
     # Stage 4: the per-sample G-buffer.
     samples = empty_points(width * height, device)

@@ -133,10 +133,13 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
 
 @wp.kernel
 def light_mesh_points_kernel(begin: int, end: int, chunk: int, mesh: RasterMeshW, cam: CameraW, shading: int,
-                             lighting: LightingW, lit: LitW):
-    """Stages 5 and 6 fused for flat / Gouraud points [begin, end) (`render`: nothing recorded)."""
+                             lighting: LightingW, needed: wp.array(dtype=wp.int32), lit: LitW):
+    """Stages 5 and 6 fused for flat / Gouraud points [begin, end) (`render`: nothing recorded), only
+    those a drawn triangle reads (`needed`; the others are left unset, no sample reads them)."""
     first = begin + wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, end)):
+        if needed[k] == 0:
+            continue
         point = mesh_point(mesh, lighting.materials, cam, shading, k)
         color, factor = light_point(point, lighting, 0, wp.vec3(0.0), lit, k, 0)
         lit.color[k] = color
