@@ -19,16 +19,6 @@ GUARD = 4194304.0  # |raster coordinate| clamp (samples) keeping int64 edge prod
 MARK_NONE, MARK_FACES, MARK_VERTICES = 0, 1, 2  # which shading points `assemble_kernel` flags as needed
 
 
-@wp.kernel
-def clip_vertices_kernel(begin: int, end: int, chunk: int, vertices: wp.array(dtype=wp.vec3), view_proj: wp.mat44,
-                         clip: wp.array(dtype=wp.vec4)):
-    """Vertices [begin, end) to clip space, `chunk` per thread."""
-    first = begin + wp.tid() * chunk
-    for k in range(first, wp.min(first + chunk, end)):
-        p = vertices[k]
-        clip[k] = view_proj * wp.vec4(p[0], p[1], p[2], 1.0)
-
-
 @wp.func
 def near_crossing(ia: int, ib: int, ca: wp.vec4, cb: wp.vec4, wa: wp.vec3, wb: wp.vec3):
     """Where edge a-b meets z = -w, computed from the lower vertex index so both triangles sharing
@@ -116,6 +106,22 @@ def inside_near(c: wp.vec4):
 
 
 @wp.kernel
+def clip_vertices_kernel(begin: int, end: int, chunk: int, vertices: wp.array(dtype=wp.vec3), view_proj: wp.mat44,
+                         width: int, height: int, clip: wp.array(dtype=wp.vec4), screen: wp.array(dtype=wp.vec4d),
+                         inside: wp.array(dtype=wp.int32)):
+    """Vertices [begin, end), `chunk` per thread: clip space, whether in front of the near plane,
+    and (only then) the screen position `to_screen` gives, shared by the faces around the vertex."""
+    first = begin + wp.tid() * chunk
+    for k in range(first, wp.min(first + chunk, end)):
+        p = vertices[k]
+        c = view_proj * wp.vec4(p[0], p[1], p[2], 1.0)
+        clip[k] = c
+        inside[k] = int(inside_near(c))
+        if inside_near(c):
+            screen[k] = to_screen(c, width, height)
+
+
+@wp.kernel
 def split_kernel(begin: int, end: int, chunk: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4),
                  split: wp.array(dtype=wp.int32)):
     """split[f] = 1 for a face with exactly one vertex behind the near plane (clipped to a quad);
@@ -135,7 +141,8 @@ def clear_slot(slot: int, facing: wp.array(dtype=wp.int32), rows: wp.array2d(dty
 
 
 @wp.func
-def assemble_face(f: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4), cull: int,
+def assemble_face(f: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4),
+                  vertex_screen: wp.array(dtype=wp.vec4d), cull: int,
                   width: int, height: int, extra_slot: wp.array(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d),
                   weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32),
                   rows: wp.array2d(dtype=wp.int32)):
@@ -160,8 +167,8 @@ def assemble_face(f: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtyp
     if count == 0:
         return 0, 0
     if count == 3:
-        return emit(f, to_screen(c0, width, height), to_screen(c1, width, height), to_screen(c2, width, height),
-                    e0, e1, e2, cull, screen, weight, facing, rows), 0
+        return emit(f, vertex_screen[i0], vertex_screen[i1], vertex_screen[i2], e0, e1, e2, cull, screen, weight,
+                    facing, rows), 0
     # Rotate (keeping the winding) so that vertex a is the odd one out: the only vertex inside
     # (count 1) or the only one outside (count 2).
     ia = i0
@@ -203,10 +210,10 @@ def assemble_face(f: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtyp
     sab = to_screen(cab, width, height)
     sac = to_screen(cac, width, height)
     if count == 1:  # a inside: triangle (a, ab, ac)
-        return emit(f, to_screen(ca, width, height), sab, sac, wa, wab, wac, cull, screen, weight, facing, rows), 0
+        return emit(f, vertex_screen[ia], sab, sac, wa, wab, wac, cull, screen, weight, facing, rows), 0
     # a outside: quad (ab, b, c, ac)
-    sb = to_screen(cb, width, height)
-    sc = to_screen(cc, width, height)
+    sb = vertex_screen[ib]
+    sc = vertex_screen[ic]
     return (emit(f, sab, sb, sc, wab, wb, wc, cull, screen, weight, facing, rows),
             emit(extra_slot[f], sab, sc, sac, wab, wc, wac, cull, screen, weight, facing, rows))
 
@@ -229,7 +236,7 @@ def mark_needed(f: int, side: int, faces: wp.array2d(dtype=wp.int32), n_vertices
 
 @wp.kernel
 def assemble_kernel(begin: int, end: int, chunk: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4),
-                    cull: int, width: int, height: int, extra_slot: wp.array(dtype=wp.int32),
+                    vertex_screen: wp.array(dtype=wp.vec4d), cull: int, width: int, height: int, extra_slot: wp.array(dtype=wp.int32),
                     screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3),
                     facing: wp.array(dtype=wp.int32), rows: wp.array2d(dtype=wp.int32), mark: int,
                     needed: wp.array(dtype=wp.int32)):
@@ -240,6 +247,6 @@ def assemble_kernel(begin: int, end: int, chunk: int, faces: wp.array2d(dtype=wp
     first = begin + wp.tid() * chunk
     n_vertices = clip.shape[0]
     for f in range(first, wp.min(first + chunk, end)):
-        side_a, side_b = assemble_face(f, faces, clip, cull, width, height, extra_slot, screen, weight, facing, rows)
+        side_a, side_b = assemble_face(f, faces, clip, vertex_screen, cull, width, height, extra_slot, screen, weight, facing, rows)
         mark_needed(f, side_a, faces, n_vertices, mark, needed)
         mark_needed(f, side_b, faces, n_vertices, mark, needed)

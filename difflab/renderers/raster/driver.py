@@ -94,10 +94,15 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, mark: int = cl
     if not n_faces:
         return empty_screen(device), key
     p_clip = wp.empty(n_vertices, dtype=wp.vec4, device=device)
-    launch_chunks(clip.clip_vertices_kernel, n_vertices, [arrays["vertices"], cam.view_proj, p_clip], device, threads)
-    split = wp.empty(n_faces, dtype=wp.int32, device=device)
-    launch_chunks(clip.split_kernel, n_faces, [arrays["faces"], p_clip, split], device, threads)
-    split_faces = np.flatnonzero(split.numpy()).astype(np.int32)  # faces clipped to a quad: a second slot each
+    p_screen = wp.empty(n_vertices, dtype=wp.vec4d, device=device)
+    inside = wp.empty(n_vertices, dtype=wp.int32, device=device)
+    launch_chunks(clip.clip_vertices_kernel, n_vertices, [arrays["vertices"], cam.view_proj, width, height, p_clip,
+                                                          p_screen, inside], device, threads)
+    split_faces = np.empty(0, np.int32)  # faces clipped to a quad: a second slot each
+    if not inside.numpy().all():  # only a vertex behind the near plane can split a face
+        split = wp.empty(n_faces, dtype=wp.int32, device=device)
+        launch_chunks(clip.split_kernel, n_faces, [arrays["faces"], p_clip, split], device, threads)
+        split_faces = np.flatnonzero(split.numpy()).astype(np.int32)
     extra_slot = np.full(n_faces, -1, np.int32)
     extra_slot[split_faces] = n_faces + np.arange(split_faces.size, dtype=np.int32)
     n_slots = n_faces + split_faces.size
@@ -111,8 +116,9 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, mark: int = cl
     extra = wp.array(extra_slot, dtype=wp.int32, device=device)
     if needed is None:
         needed = wp.empty(0, dtype=wp.int32, device=device)
-    launch_chunks(clip.assemble_kernel, n_faces, [arrays["faces"], p_clip, cull, width, height, extra, tris.screen,
-                                                  tris.weight, tris.facing, rows, mark, needed], device, threads)
+    launch_chunks(clip.assemble_kernel, n_faces, [arrays["faces"], p_clip, p_screen, cull, width, height, extra,
+                                                  tris.screen, tris.weight, tris.facing, rows, mark, needed],
+                  device, threads)
     bands = band_plan(height, device, threads)
     binned = dict(zip(bands, bin_rows(rows.numpy(), bands, height)))
 
