@@ -555,6 +555,8 @@ BAD_FILES = {
     "range.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 3 9\n",
     "negrange.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -4\n",
     "zero.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n",
+    "zeros.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 00\r\n",
+    "zero_slash.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 00//1 3//1\n",
     "nofaces.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\n",
     "empty.obj": "",
     "badnum.obj": "v 0 0 zero\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
@@ -563,6 +565,13 @@ BAD_FILES = {
     "nofaces.ply": ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
                     "property float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n"),
 }
+
+
+def test_load_mesh_reads_leading_zeros_and_crlf_lines(tmp_path):
+    path = tmp_path / "padded.obj"
+    path.write_bytes(b"v 0 0 0\r\nv 1 0 0\r\nv 0 1 0\r\nf 01 002 3\r\n")
+    loaded = load_mesh(path)
+    assert loaded.faces.tolist() == [[0, 1, 2]] and loaded.vertices[1].tolist() == [1, 0, 0]
 
 
 @pytest.mark.parametrize("name", sorted(BAD_FILES))
