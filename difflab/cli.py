@@ -1,5 +1,5 @@
 """The `difflab` command line. Exit codes: 0 success, 1 internal error, 2 invalid input, 3 a fit
-that did not converge (results still written)."""
+that did not converge, 4 a fit flagged model_mismatch (results still written for 3 and 4)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,9 @@ import os
 import sys
 import traceback
 
-from .errors import DifflabError
+from .errors import EXIT_INTERNAL, EXIT_INVALID, EXIT_OK, DifflabError
 from .limits import short_path
 
-EXIT_OK, EXIT_INTERNAL, EXIT_INVALID, EXIT_NOT_CONVERGED = 0, 1, 2, 3
 
 
 #: Arguments naming files a command writes; checked before any work (a folder, a missing folder, a

@@ -1,4 +1,10 @@
-"""The exceptions difflab raises: every bad input becomes one of these, with a message naming it."""
+"""The exceptions difflab raises: every bad input becomes one of these, with a message naming it;
+and the command line's exit codes, one table for every command."""
+
+#: Exit codes of every `difflab` command: 0 success, 1 internal error, 2 invalid input (a DifflabError,
+#: one line), 3 a fit (or a batch line) that did not converge, 4 a fit flagged model_mismatch
+#: (results are still written for 3 and 4).
+EXIT_OK, EXIT_INTERNAL, EXIT_INVALID, EXIT_NOT_CONVERGED, EXIT_MODEL_MISMATCH = 0, 1, 2, 3, 4
 
 
 class DifflabError(Exception):

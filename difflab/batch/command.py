@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 
-EXIT_OK, EXIT_INCOMPLETE, EXIT_MODEL_MISMATCH = 0, 3, 4
+from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOT_CONVERGED, EXIT_OK
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -42,5 +42,5 @@ def run(args) -> int:
                        inline=args.inline, retries=args.retries, progress=False if args.no_progress else None,
                        force=args.force)
     if not summary.all_converged:
-        return EXIT_INCOMPLETE
+        return EXIT_NOT_CONVERGED  # a line invalid, failed or not converged
     return EXIT_MODEL_MISMATCH if summary.mismatched else EXIT_OK

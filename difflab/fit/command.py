@@ -21,9 +21,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..errors import FitError
+from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOT_CONVERGED, EXIT_OK, FitError
 
-EXIT_OK, EXIT_NOT_CONVERGED, EXIT_MODEL_MISMATCH = 0, 3, 4
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
