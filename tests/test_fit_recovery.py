@@ -167,6 +167,8 @@ def test_failures_are_values(scene_and_target):
     ({"targets": [np.zeros((20, 30, 3))]}, r"targets\[0\]: the image is 30x20 .* camera renders 32x32"),
     ({"weights": [-np.ones((32, 32))]}, r"weights\[0\]: weights must be finite and >= 0"),
     ({"masks": [np.ones((8, 8), bool)]}, r"masks\[0\]: expected shape"),
+    ({"masks": 0}, "masks: expected an array, an image path or a list"),
+    ({"masks": ("kd",)}, r"masks\[0\]: .*kd"),
     ({"sigma": -1.0}, "sigma: must be a finite number > 0"), ({"max_steps": 0}, "max_steps"),
     ({"x64": "yes"}, "x64: must be True or False"), ({"tolerance": 1e-3}, r"unknown argument\(s\) \['tolerance'\]"),
     ({"method": "pathtrace"}, "method: expected one of raster, raytrace"),

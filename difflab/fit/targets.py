@@ -80,6 +80,9 @@ def per_view(values, count: int, name: str) -> list:
         return [None] * count
     if isinstance(values, np.ndarray) or _is_path(values):
         values = [values] * count
+    if not isinstance(values, (list, tuple)):
+        raise FitError(f"{name}: expected an array, an image path or a list of one per target, "
+                       f"got {type(values).__name__}")
     values = list(values)
     if len(values) != count:
         raise FitError(f"{name}: expected one per target ({count}), got {len(values)}")
@@ -104,7 +107,10 @@ def view_mask(value, shape, where) -> np.ndarray:
     if value is None:
         return np.ones(shape, bool)
     if _is_path(value):
-        value = load_image(value, srgb=False)[..., 0] > 0.5
+        try:
+            value = load_image(value, srgb=False)[..., 0] > 0.5
+        except DifflabError as exc:
+            raise FitError(f"{where}: {exc}") from None
     mask = _numeric(value, where)
     if mask.ndim == 3:
         mask = mask[..., 0]
