@@ -574,6 +574,26 @@ def test_load_mesh_reads_leading_zeros_and_crlf_lines(tmp_path):
     assert loaded.faces.tolist() == [[0, 1, 2]] and loaded.vertices[1].tolist() == [1, 0, 0]
 
 
+def test_a_bare_obj_is_read_without_trimesh_as_trimesh_reads_it(tmp_path, monkeypatch):
+    """Only `v`, `f a b c`, comment and blank lines: numpy reads it, to trimesh's result exactly
+    (every vertex in file order, an unused one kept; no normals or uvs)."""
+    import trimesh
+
+    from difflab.geometry import loading
+
+    rng = np.random.default_rng(3)
+    vertices = rng.normal(size=(7, 3))
+    faces = rng.integers(0, 6, size=(9, 3))  # vertex 7 is used by no face
+    path = tmp_path / "bare.obj"
+    path.write_text("# bare\r\n" + "".join(f"v {x:.17g} {y:.17g} {z:.17g}\r\n" for x, y, z in vertices) + "\n"
+                    + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces))
+    reference = trimesh.load(path, process=False, maintain_order=True)
+    monkeypatch.setattr(loading, "_trimesh_load", lambda *args: pytest.fail("trimesh was asked"))
+    loaded = load_mesh(path)
+    assert np.array_equal(loaded.vertices, reference.vertices) and np.array_equal(loaded.faces, reference.faces)
+    assert np.array_equal(loaded.vertices, vertices) and loaded.normals is None and loaded.uvs is None
+
+
 @pytest.mark.parametrize("name", sorted(BAD_FILES))
 def test_load_mesh_bad_files_raise_mesh_error_naming_path(tmp_path, name):
     path = tmp_path / name

@@ -38,25 +38,47 @@ def _read_obj(path: str) -> bytes:
 VERTEX_CHARS = b"0123456789.eE+- \r\n"  # a plain `v x y z` line, once its key is removed
 FACE_CHARS = b"0123456789/ \r\n"  # a plain `f a b c` line with positive indices
 PLAIN_OBJ_KEYS = (b"v ", b"f ", b"vn ", b"vt ", b"o ", b"g ", b"s ", b"usemtl ", b"mtllib ", b"#")  # line starts kept
+BARE_OBJ_KEYS = (b"v ", b"f ", b"#")
 
 
-def _plain_obj_counts(data: bytes) -> tuple[int, int] | None:
-    """(vertices, triangles) of an OBJ text in the plain layout trimesh reads without dropping or
-    reinterpreting anything: only `v x y z` lines of numbers, triangle `f a b c` lines of positive
-    indices (optionally `a/b/c`), comments and `vn` / `vt` / `o` / `g` / `s` / `usemtl` / `mtllib`
-    lines. None for anything else, which `_scan_obj_lines` then checks line by line."""
+def _plain_obj(data: bytes) -> tuple[bytes, bytes, bool] | None:
+    """The `v` and `f` lines (keys removed, joined by newlines) of an OBJ text in the plain layout
+    trimesh reads without dropping or reinterpreting anything: only `v x y z` lines of numbers,
+    triangle `f a b c` lines of positive indices (optionally `a/b/c`), comments and `vn` / `vt` / `o`
+    / `g` / `s` / `usemtl` / `mtllib` lines; and whether it is *bare*: nothing but `v`, `f a b c`,
+    comment and blank lines (`_bare_obj_mesh` reads those). None for anything else, which
+    `_scan_obj_lines` then checks line by line."""
     lines = data.split(b"\n")  # one pass in C; the filters below touch each line once
     vertex_text, face_text = (b"\n".join([line for line in lines if line.startswith(key)])[2:].replace(b"\n" + key,
                                                                                                       b"\n")
                               for key in (b"v ", b"f "))
-    n_vertices, n_faces = vertex_text.count(b"\n") + bool(vertex_text), face_text.count(b"\n") + bool(face_text)
+    n_vertices, n_faces = _line_count(vertex_text), _line_count(face_text)
     known = all(line.startswith(PLAIN_OBJ_KEYS) or line in (b"", b"\r") for line in lines)
     if (not n_faces or not known or vertex_text.translate(None, VERTEX_CHARS)
             or face_text.translate(None, FACE_CHARS) or b"  " in vertex_text or b"  " in face_text
             or vertex_text.count(b" ") != 2 * n_vertices or face_text.count(b" ") != 2 * n_faces
             or _has_zero_index(face_text)):
         return None
-    return n_vertices, n_faces
+    bare = b"/" not in face_text and all(line.startswith(BARE_OBJ_KEYS) or line in (b"", b"\r") for line in lines)
+    return vertex_text, face_text, bare
+
+
+def _line_count(text: bytes) -> int:
+    return text.count(b"\n") + bool(text)
+
+
+def _bare_obj_mesh(vertex_text: bytes, face_text: bytes, path: str) -> TriMesh | None:
+    """A bare OBJ's mesh (see `_plain_obj`) parsed with numpy: what trimesh gives for it (every vertex
+    in file order, faces 0-based, no normals or uvs). None where a number does not parse or an index
+    is out of range: trimesh's reading and the line scan then report it."""
+    try:
+        vertices = np.array(vertex_text.split(), dtype=np.float64).reshape(-1, 3)
+        faces = np.array(face_text.split(), dtype=np.int64).reshape(-1, 3) - 1
+    except ValueError:
+        return None
+    if faces.max() >= len(vertices):
+        return None
+    return TriMesh(vertices, faces, None, None, name=path)
 
 
 def _has_zero_index(face_text: bytes) -> bool:
@@ -179,9 +201,26 @@ def load_mesh(path) -> TriMesh:
     plain = None
     if path.lower().endswith(".obj"):
         data = _read_obj(path)
-        plain = _plain_obj_counts(data)
+        plain = _plain_obj(data)
         if plain is None:
             _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)
+    mesh = _bare_obj_mesh(*plain[:2], path) if plain is not None and plain[2] else None
+    if mesh is None:
+        mesh = _trimesh_load(path, data if plain is not None else None)
+    if plain is not None and ((mesh.n_vertices, mesh.n_faces) != tuple(map(_line_count, plain[:2]))  # dropped, split
+                              or not np.all(np.abs(mesh.vertices) <= MAX_COORD)):  # or a value is out of range
+        _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)  # names the line
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise MeshError(f"{path}: vertex coordinates are not finite")
+    if not np.all(np.abs(mesh.vertices) <= MAX_COORD):
+        raise MeshError(f"{path}: vertex coordinates reach {np.abs(mesh.vertices).max():.3g}, beyond +-{MAX_COORD:g} "
+                        "(float32 rendering overflows)")
+    return mesh
+
+
+def _trimesh_load(path: str, plain_data: bytes | None) -> TriMesh:
+    """The file read by trimesh (several geometries concatenated, node transforms applied).
+    `plain_data`: the text of a plain OBJ, which the line scan checks when trimesh fails on it."""
     try:
         import trimesh
 
@@ -191,8 +230,8 @@ def load_mesh(path) -> TriMesh:
     except MeshError:
         raise
     except Exception as exc:  # trimesh raises many kinds on bad input
-        if plain is not None:  # the line scan names the problem better where it finds one
-            _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)
+        if plain_data is not None:  # the line scan names the problem better where it finds one
+            _scan_obj_lines(plain_data.decode("utf-8", errors="replace").splitlines(), path)
         raise MeshError(f"{path}: cannot read mesh: {type(exc).__name__}: {exc}") from None
     parts = _to_trimesh_list(loaded, path)
     if not parts:
@@ -202,16 +241,7 @@ def load_mesh(path) -> TriMesh:
     except MeshError as exc:
         message = str(exc)
         raise MeshError(message if path in message else f"{path}: {message}") from None
-    mesh = meshes[0] if len(meshes) == 1 else concatenate(meshes, name=path)
-    if plain is not None and ((mesh.n_vertices, mesh.n_faces) != plain  # trimesh dropped or split something
-                              or not np.all(np.abs(mesh.vertices) <= MAX_COORD)):  # or a value is out of range
-        _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)  # names the line
-    if not np.all(np.isfinite(mesh.vertices)):
-        raise MeshError(f"{path}: vertex coordinates are not finite")
-    if not np.all(np.abs(mesh.vertices) <= MAX_COORD):
-        raise MeshError(f"{path}: vertex coordinates reach {np.abs(mesh.vertices).max():.3g}, beyond +-{MAX_COORD:g} "
-                        "(float32 rendering overflows)")
-    return mesh
+    return meshes[0] if len(meshes) == 1 else concatenate(meshes, name=path)
 
 
 def obj_text(mesh: TriMesh) -> str:
