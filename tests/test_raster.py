@@ -290,9 +290,9 @@ def test_render_forms_the_image_render_frame_composes_from_its_gbuffer(tmp_path,
 
 
 @pytest.mark.parametrize("shading", ["flat", "gouraud"])
-def test_the_image_path_lights_only_the_points_drawn_faces_read(shading):
-    """`render` lights only the shading points of drawn faces (Gouraud: the vertex copy on the side
-    each face shows); the image is bitwise the one `render_frame` composes from every lit point. The
+def test_the_image_path_lights_only_the_points_visible_samples_read(shading):
+    """`render` lights only the shading points visible samples read (Gouraud: the vertex copies on
+    the side each face shows); the image is bitwise the one `render_frame` composes from every lit point. The
     near plane cuts the sphere open: front faces, back faces seen inside, and faces clipped to quads."""
     scene = scene_dict([{"type": "mesh", "builtin": "sphere", "resolution": 16, "material": "m"}],
                        {"m": {"ka": [0.2, 0.1, 0.1], "kd": [0.6, 0.5, 0.3], "ks": [0.5] * 3, "n": 20}},

@@ -16,7 +16,6 @@ wp.set_module_options({"enable_backward": False})
 
 SUBPIXEL = 256  # fixed-point steps per sample
 GUARD = 4194304.0  # |raster coordinate| clamp (samples) keeping int64 edge products exact
-MARK_NONE, MARK_FACES, MARK_VERTICES = 0, 1, 2  # which shading points `assemble_kernel` flags as needed
 
 
 @wp.func
@@ -70,17 +69,16 @@ def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: w
          screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32),
          rows: wp.array2d(dtype=wp.int32)):
     """Store one screen triangle, wound so its integer area is positive; facing +1 front, -1 back,
-    0 not drawn (degenerate, or culled); and the rows of sample centres it may cover, for binning.
-    Returns the facing."""
+    0 not drawn (degenerate, or culled); and the rows of sample centres it may cover, for binning."""
     area = edge(snap(s0[0]), snap(s0[1]), snap(s1[0]), snap(s1[1]), snap(s2[0]), snap(s2[1]))
     facing[slot] = 0
     if area == wp.int64(0):
-        return 0
+        return
     side = 1  # counter-clockwise in NDC (y up) is clockwise in raster space (y down): area < 0
     if area > wp.int64(0):
         side = -1
     if cull == 1 and side < 0:
-        return 0
+        return
     facing[slot] = side
     half = wp.float64(0.5)
     rows[slot, 0] = int(wp.ceil(wp.min(s0[1], wp.min(s1[1], s2[1])) - half))
@@ -97,7 +95,6 @@ def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: w
         screen[slot, 2] = s2
         weight[slot, 1] = w1
         weight[slot, 2] = w2
-    return side
 
 
 @wp.func
@@ -146,8 +143,7 @@ def assemble_face(f: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtyp
                   width: int, height: int, extra_slot: wp.array(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d),
                   weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32),
                   rows: wp.array2d(dtype=wp.int32)):
-    """Clip face f and store its slot(s). Returns the facing of its first and second slot (+1, -1,
-    or 0 where not drawn; the second is 0 unless the face was clipped to a quad)."""
+    """Clip face f and store its slot(s)."""
     clear_slot(f, facing, rows)
     if extra_slot[f] >= 0:
         clear_slot(extra_slot[f], facing, rows)
@@ -165,10 +161,11 @@ def assemble_face(f: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtyp
     in2 = inside_near(c2)
     count = int(in0) + int(in1) + int(in2)
     if count == 0:
-        return 0, 0
+        return
     if count == 3:
-        return emit(f, vertex_screen[i0], vertex_screen[i1], vertex_screen[i2], e0, e1, e2, cull, screen, weight,
-                    facing, rows), 0
+        emit(f, vertex_screen[i0], vertex_screen[i1], vertex_screen[i2], e0, e1, e2, cull, screen, weight, facing,
+             rows)
+        return
     # Rotate (keeping the winding) so that vertex a is the odd one out: the only vertex inside
     # (count 1) or the only one outside (count 2).
     ia = i0
@@ -210,43 +207,20 @@ def assemble_face(f: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtyp
     sab = to_screen(cab, width, height)
     sac = to_screen(cac, width, height)
     if count == 1:  # a inside: triangle (a, ab, ac)
-        return emit(f, vertex_screen[ia], sab, sac, wa, wab, wac, cull, screen, weight, facing, rows), 0
-    # a outside: quad (ab, b, c, ac)
-    sb = vertex_screen[ib]
-    sc = vertex_screen[ic]
-    return (emit(f, sab, sb, sc, wab, wb, wc, cull, screen, weight, facing, rows),
-            emit(extra_slot[f], sab, sc, sac, wab, wc, wac, cull, screen, weight, facing, rows))
-
-
-@wp.func
-def mark_needed(f: int, side: int, faces: wp.array2d(dtype=wp.int32), n_vertices: int, mark: int,
-                needed: wp.array(dtype=wp.int32)):
-    """Flag the shading points that a slot of face f drawn with facing `side` reads."""
-    if side == 0 or mark == MARK_NONE:
-        return
-    if mark == MARK_FACES:
-        needed[f] = 1
-        return
-    offset = 0
-    if side < 0:
-        offset = n_vertices
-    for c in range(3):
-        needed[faces[f, c] + offset] = 1
+        emit(f, vertex_screen[ia], sab, sac, wa, wab, wac, cull, screen, weight, facing, rows)
+    else:  # a outside: quad (ab, b, c, ac)
+        sb = vertex_screen[ib]
+        sc = vertex_screen[ic]
+        emit(f, sab, sb, sc, wab, wb, wc, cull, screen, weight, facing, rows)
+        emit(extra_slot[f], sab, sc, sac, wab, wc, wac, cull, screen, weight, facing, rows)
 
 
 @wp.kernel
 def assemble_kernel(begin: int, end: int, chunk: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4),
-                    vertex_screen: wp.array(dtype=wp.vec4d), cull: int, width: int, height: int, extra_slot: wp.array(dtype=wp.int32),
-                    screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3),
-                    facing: wp.array(dtype=wp.int32), rows: wp.array2d(dtype=wp.int32), mark: int,
-                    needed: wp.array(dtype=wp.int32)):
-    """Faces [begin, end), `chunk` per thread. With `mark` = MARK_FACES or MARK_VERTICES, also flags
-    the shading points a drawn face reads (`needed[k]` = 1): the face itself (flat), or the copies of
-    its vertices on the side it shows (Gouraud: front copy v, back copy V + v). Every write is a 1, so
-    faces sharing a point may write it in any order."""
+                    vertex_screen: wp.array(dtype=wp.vec4d), cull: int, width: int, height: int,
+                    extra_slot: wp.array(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d),
+                    weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32), rows: wp.array2d(dtype=wp.int32)):
+    """Faces [begin, end), `chunk` per thread."""
     first = begin + wp.tid() * chunk
-    n_vertices = clip.shape[0]
     for f in range(first, wp.min(first + chunk, end)):
-        side_a, side_b = assemble_face(f, faces, clip, vertex_screen, cull, width, height, extra_slot, screen, weight, facing, rows)
-        mark_needed(f, side_a, faces, n_vertices, mark, needed)
-        mark_needed(f, side_b, faces, n_vertices, mark, needed)
+        assemble_face(f, faces, clip, vertex_screen, cull, width, height, extra_slot, screen, weight, facing, rows)

@@ -78,15 +78,13 @@ def empty_screen(device: str) -> resolve.ScreenW:
     return tris
 
 
-def zbuffer(compiled, cam, cull: int, threads: int | None = None, mark: int = clip.MARK_NONE, needed=None):
+def zbuffer(compiled, cam, cull: int, threads: int | None = None):
     """Stages 1-3 on the sample grid of `cam`: clip space, near-plane clipping, and the z-buffer.
 
     Returns the clipped screen triangles (a `ScreenW`: a slot per face, and one more per face clipped
     to a quad) and the visibility key per sample (NO_HIT, or depth << 32 | slot of the nearest
     triangle). Vertices and faces are transformed in bands on all cores; each band of rows
-    rasterizes only the triangles binned to it (those whose sample-centre rows meet the band).
-    With `mark` (clip.MARK_FACES / MARK_VERTICES), `needed` (zeroed, one per shading point) gets a 1
-    for every point a drawn triangle reads."""
+    rasterizes only the triangles binned to it (those whose sample-centre rows meet the band)."""
     device, arrays = compiled.device, compiled.arrays
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     width, height = cam.width, cam.height
@@ -114,11 +112,8 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, mark: int = cl
                          device=device)
     rows = wp.empty((n_slots, 2), dtype=wp.int32, device=device)
     extra = wp.array(extra_slot, dtype=wp.int32, device=device)
-    if needed is None:
-        needed = wp.empty(0, dtype=wp.int32, device=device)
     launch_chunks(clip.assemble_kernel, n_faces, [arrays["faces"], p_clip, p_screen, cull, width, height, extra,
-                                                  tris.screen, tris.weight, tris.facing, rows, mark, needed],
-                  device, threads)
+                                                  tris.screen, tris.weight, tris.facing, rows], device, threads)
     bands = band_plan(height, device, threads)
     binned = dict(zip(bands, bin_rows(rows.numpy(), bands, height)))
 
@@ -192,11 +187,14 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     background, fog = wp.vec3(*scene.background), fog_struct(scene.fog)
 
     # Stages 1-3: clip space, clipping, z-buffer (`zbuffer`).
-    if not gbuffer:  # stages 5-6 for the flat / Gouraud points drawn faces read, then 4, 6 (Phong) and 7 fused
+    tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)
+    if not gbuffer:  # stages 5-6 for the flat / Gouraud points visible samples read, then 4, 6 (Phong), 7 fused
         n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading, 0)
         needed = wp.zeros(n_points, dtype=wp.int32, device=device)
-        mark = {FLAT: clip.MARK_FACES, GOURAUD: clip.MARK_VERTICES}.get(shading, clip.MARK_NONE)
-        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads, mark, needed)
+        if n_points:
+            launch_row_loops(shade.seen_points_kernel, height, [
+                width, key, tris, compiled.arrays["faces"], compiled.vertices.shape[0], shading, needed], device,
+                threads)
         lit = empty_lit(device, n_points, max(len(scene.lights), 1), 0, False)
         launch_chunks(shade.light_mesh_points_kernel, n_points, [mesh, cam, shading, lighting, needed, lit], device,
                       threads)
@@ -205,8 +203,6 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
             image], device, threads)
         pixels = box_downsample(image.numpy().reshape(height, width, 3), side)
         return Frame(image=pixels, buffers=None, stats=frame_stats(compiled, start, pixels, width * height, n_points))
-
-    tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)
 
     # Stage 4: the per-sample G-buffer.
     samples = empty_points(width * height, device)

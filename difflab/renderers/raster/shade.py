@@ -15,7 +15,7 @@ from ..._warp import wp
 
 from ...lighting.warp_model import (FogW, LightW, MaterialW, ambient_term, fog_blend, light_term, light_vector,
                                    surface_material, target_only, textured_material)
-from ...vocabulary import FOG_NONE, PHONG_SHADING
+from ...vocabulary import FLAT, FOG_NONE, PHONG_SHADING
 from ..camera import CameraW
 from ..texture.sampling import TexturesW, sample_texture
 from ..trace import SceneGeomW, light_visibility
@@ -132,10 +132,33 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
 
 
 @wp.kernel
+def seen_points_kernel(row0: int, width: int, key: wp.array(dtype=wp.int64), tris: ScreenW,
+                       faces: wp.array2d(dtype=wp.int32), n_vertices: int, shading: int,
+                       needed: wp.array(dtype=wp.int32)):
+    """needed[k] = 1 for every flat / Gouraud point a visible sample reads: its face (flat), or the
+    copies of the face's vertices on the side it shows (Gouraud: front v, back V + v); one row of
+    samples per thread. Every write is a 1, so rows sharing a point may write it in any order."""
+    i = row0 + wp.tid()
+    for j in range(width):
+        k = key[i * width + j]
+        if k != NO_HIT:
+            slot = int(k % wp.int64(4294967296))
+            f = tris.face[slot]
+            if shading == FLAT:
+                needed[f] = 1
+            else:
+                offset = 0
+                if tris.facing[slot] < 0:
+                    offset = n_vertices
+                for c in range(3):
+                    needed[faces[f, c] + offset] = 1
+
+
+@wp.kernel
 def light_mesh_points_kernel(begin: int, end: int, chunk: int, mesh: RasterMeshW, cam: CameraW, shading: int,
                              lighting: LightingW, needed: wp.array(dtype=wp.int32), lit: LitW):
     """Stages 5 and 6 fused for flat / Gouraud points [begin, end) (`render`: nothing recorded), only
-    those a drawn triangle reads (`needed`; the others are left unset, no sample reads them)."""
+    those a visible sample reads (`needed`; the others are left unset, no sample reads them)."""
     first = begin + wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, end)):
         if needed[k] == 0:
