@@ -22,4 +22,8 @@ Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
                            colour from the one illumination model.
 7. `compose_kernel`        per sample: the weighted colours of its points (gouraud: the vertex colours
                            interpolated, optionally clamped to [0, 1] first), background, fog.
+
+`render` (no G-buffer) runs stages 1-3, then `seen_points_kernel` flags the flat / Gouraud points
+visible samples read, `light_mesh_points_kernel` lights only those (5-6), and `image_kernel` fuses 4,
+6 (Phong) and 7 per sample.
 """

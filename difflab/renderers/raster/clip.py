@@ -219,7 +219,8 @@ def assemble_face(f: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtyp
 def assemble_kernel(begin: int, end: int, chunk: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4),
                     vertex_screen: wp.array(dtype=wp.vec4d), cull: int, width: int, height: int,
                     extra_slot: wp.array(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d),
-                    weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32), rows: wp.array2d(dtype=wp.int32)):
+                    weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32),
+                    rows: wp.array2d(dtype=wp.int32)):
     """Faces [begin, end), `chunk` per thread."""
     first = begin + wp.tid() * chunk
     for f in range(first, wp.min(first + chunk, end)):
