@@ -110,9 +110,16 @@ def likely_causes(scene, count: int = 3) -> str:
     return shown + ("".join(f", {p} = {x:.3g}" for p, x in tiny[:1]))
 
 
+def nonfinite_pixels(pixels: np.ndarray) -> int:
+    """Pixels with a non-finite channel (one sum tells whether any is; only then are they counted)."""
+    if np.isfinite(pixels.sum(dtype=np.float64)):
+        return 0
+    return int(np.count_nonzero(~np.isfinite(pixels).all(axis=-1)))
+
+
 def check_image(image: np.ndarray, scene) -> None:
     """RenderError if `image` has NaN or infinite values, with their count and the likely cause."""
-    bad = int(np.count_nonzero(~np.isfinite(image).all(axis=-1)))
+    bad = nonfinite_pixels(image)
     if bad:
         raise RenderError(f"render: {bad} of {image.shape[0] * image.shape[1]} pixels are not finite (float32 "
                           f"overflow); the largest numbers in the scene: {likely_causes(scene)}")

@@ -130,10 +130,3 @@ def box_downsample(samples: np.ndarray, side: int) -> np.ndarray:
         return samples
     h, w = samples.shape[0] // side, samples.shape[1] // side
     return samples.reshape(h, side, w, side, *samples.shape[2:]).mean(axis=(1, 3), dtype=np.float64).astype(samples.dtype)
-
-
-def nonfinite_pixels(pixels: np.ndarray) -> int:
-    """Pixels with a non-finite channel (one sum tells whether any is; only then are they counted)."""
-    if np.isfinite(pixels.sum(dtype=np.float64)):
-        return 0
-    return int(np.count_nonzero(~np.isfinite(pixels).all(axis=-1)))

@@ -12,11 +12,12 @@ import time
 import numpy as np
 from ..._warp import wp
 
+from ...guards import nonfinite_pixels
 from ...lighting.warp_model import fog_params, fog_struct
 from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR_MODELS
 from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
-from ..frame import Frame, GBuffer, ShadingPoints, box_downsample, nonfinite_pixels
+from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
 from ..launch import band_plan, launch_chunks, launch_row_loops, load_kernels, run_bands
 
 

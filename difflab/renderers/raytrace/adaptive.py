@@ -14,7 +14,8 @@ import time
 import numpy as np
 
 from ...errors import RenderError
-from ..frame import Frame, nonfinite_pixels
+from ...guards import nonfinite_pixels
+from ..frame import Frame
 from .driver import trace_points
 
 

@@ -24,10 +24,11 @@ import numpy as np
 from ..._warp import wp
 
 from ...errors import RenderError
+from ...guards import nonfinite_pixels
 from ...lighting.warp_model import fog_struct
 from ...vocabulary import FRESNEL_MODES, SPECULAR_MODELS
 from ..camera import camera_struct
-from ..frame import Frame, box_downsample, nonfinite_pixels
+from ..frame import Frame, box_downsample
 from ..launch import launch_row_loops, load_kernels
 from .itembuffer import item_buffer, item_struct
 from .lightbuffer import build_light_buffer, no_light_buffer
