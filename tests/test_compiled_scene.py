@@ -42,6 +42,24 @@ def test_compiled_scene_renders_every_setting_as_a_fresh_scene_does(no_compiling
     assert compiled.scene == difflab.Scene.from_dict(SCENE)  # rendering with overrides leaves it as it was
 
 
+def test_frames_of_one_compiled_scene_keep_their_images_and_threads_do_not_share_scratch(no_compiling):
+    """A compiled scene reuses its per-frame arrays (`scratch`): an earlier frame's image stays as it
+    was, a different sample grid (spp) reallocates them, and threads rendering it at once each get
+    their own."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    compiled = compile_scene(SCENE)
+    cases = [dict(shading=s, spp=n) for s in ("flat", "gouraud") for n in (1, 4)]
+    first = [render(compiled, threads=1, **case) for case in cases]
+    kept = [image.copy() for image in first]
+    again = [render(compiled, threads=1, **case) for case in reversed(cases)][::-1]
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        threaded = list(pool.map(lambda case: render(compiled, threads=1, **case), cases * 3))
+    for k, case in enumerate(cases):
+        assert np.array_equal(first[k], kept[k]) and np.array_equal(again[k], kept[k]), case
+        assert all(np.array_equal(threaded[k + j * len(cases)], kept[k]) for j in range(3)), case
+
+
 def test_compiled_scene_gives_the_frame_a_fresh_scene_gives(no_compiling):
     compiled = compile_scene(SCENE)
     frame = render_frame(compiled, method="raster", shading="phong")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -65,6 +66,17 @@ class CompiledScene:
     def with_scene(self, scene) -> CompiledScene:
         """The same device data under `scene`: the compiled scene with other render settings."""
         return replace(self, scene=scene)
+
+    def scratch(self, name: str, shape, dtype) -> wp.array:
+        """A device array `name` for one frame's intermediate results, kept for this compiled scene's
+        next frame (fresh memory costs a page fault per 4 KiB on every frame). It holds whatever the
+        last frame left; one set per thread, so threads rendering the same compiled scene never share."""
+        shape = (shape,) if isinstance(shape, int) else tuple(shape)
+        pool = self.built.setdefault(("scratch", threading.get_ident()), {})
+        array = pool.get(name)
+        if array is None or array.shape != shape or array.dtype != dtype:
+            array = pool[name] = wp.empty(shape, dtype=dtype, device=self.device)
+        return array
 
     def traceable(self) -> SceneGeomW:
         """`geom` with the BVH over the mesh faces, built on first use (rasterizing without shadows

@@ -89,29 +89,30 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None):
     device, arrays = compiled.device, compiled.arrays
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     width, height = cam.width, cam.height
-    key = wp.full(width * height, value=coverage.NO_HIT, dtype=wp.int64, device=device)
+    scratch = compiled.scratch  # arrays kept between frames: no fresh pages to fault in
+    key = scratch("key", width * height, wp.int64)
+    key.fill_(coverage.NO_HIT)
     if not n_faces:
         return empty_screen(device), key
-    p_clip = wp.empty(n_vertices, dtype=wp.vec4, device=device)
-    p_screen = wp.empty(n_vertices, dtype=wp.vec4d, device=device)
-    inside = wp.empty(n_vertices, dtype=wp.int32, device=device)
+    p_clip, p_screen = scratch("clip", n_vertices, wp.vec4), scratch("screen", n_vertices, wp.vec4d)
+    inside = scratch("inside", n_vertices, wp.int32)
     launch_chunks(clip.clip_vertices_kernel, n_vertices, [arrays["vertices"], cam.view_proj, width, height, p_clip,
                                                           p_screen, inside], device, threads)
     split_faces = np.empty(0, np.int32)  # faces clipped to a quad: a second slot each
     if not inside.numpy().all():  # only a vertex behind the near plane can split a face
-        split = wp.empty(n_faces, dtype=wp.int32, device=device)
+        split = scratch("split", n_faces, wp.int32)
         launch_chunks(clip.split_kernel, n_faces, [arrays["faces"], p_clip, split], device, threads)
         split_faces = np.flatnonzero(split.numpy()).astype(np.int32)
     extra_slot = np.full(n_faces, -1, np.int32)
     extra_slot[split_faces] = n_faces + np.arange(split_faces.size, dtype=np.int32)
     n_slots = n_faces + split_faces.size
     tris = resolve.ScreenW()
-    tris.screen = wp.empty((n_slots, 3), dtype=wp.vec4d, device=device)
-    tris.weight = wp.empty((n_slots, 3), dtype=wp.vec3, device=device)
-    tris.facing = wp.empty(n_slots, dtype=wp.int32, device=device)
+    tris.screen = scratch("tris.screen", (n_slots, 3), wp.vec4d)
+    tris.weight = scratch("tris.weight", (n_slots, 3), wp.vec3)
+    tris.facing = scratch("tris.facing", n_slots, wp.int32)
     tris.face = wp.array(np.concatenate([np.arange(n_faces, dtype=np.int32), split_faces]), dtype=wp.int32,
                          device=device)
-    rows = wp.empty((n_slots, 2), dtype=wp.int32, device=device)
+    rows = scratch("rows", (n_slots, 2), wp.int32)
     extra = wp.array(extra_slot, dtype=wp.int32, device=device)
     launch_chunks(clip.assemble_kernel, n_faces, [arrays["faces"], p_clip, p_screen, cull, width, height, extra,
                                                   tris.screen, tris.weight, tris.facing, rows], device, threads)
@@ -191,7 +192,8 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)
     if not gbuffer:  # stages 5-6 for the flat / Gouraud points visible samples read, then 4, 6 (Phong), 7 fused
         n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading, 0)
-        needed = wp.zeros(n_points, dtype=wp.int32, device=device)
+        needed = compiled.scratch("needed", n_points, wp.int32)
+        needed.zero_()
         if n_points:
             launch_row_loops(shade.seen_points_kernel, height, [
                 width, key, tris, compiled.arrays["faces"], compiled.vertices.shape[0], shading, needed], device,
