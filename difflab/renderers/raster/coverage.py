@@ -19,19 +19,28 @@ SAMPLE_CENTRE = SUBPIXEL // 2  # a sample centre, in fixed-point steps from its 
 
 
 @wp.func
-def float_barycentrics(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, i: int, j: int):
-    """Screen-space barycentrics (float64) of sample centre (j + 0.5, i + 0.5) in triangle s0 s1 s2.
-    Coverage is decided on the snapped integers; the weights come from the unsnapped float64
-    vertices, so interpolation carries no snapping error."""
+def edge_values(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, i: int, j: int):
+    """The three edge functions (float64, unsnapped) of triangle s0 s1 s2 at sample centre
+    (j + 0.5, i + 0.5): e_k is twice the signed area of the sub-triangle opposite corner k, so
+    e / (e0 + e1 + e2) are the screen-space barycentrics."""
     cx = wp.float64(j) + wp.float64(0.5)
     cy = wp.float64(i) + wp.float64(0.5)
     e0 = (s2[0] - s1[0]) * (cy - s1[1]) - (s2[1] - s1[1]) * (cx - s1[0])
     e1 = (s0[0] - s2[0]) * (cy - s2[1]) - (s0[1] - s2[1]) * (cx - s2[0])
     e2 = (s1[0] - s0[0]) * (cy - s0[1]) - (s1[1] - s0[1]) * (cx - s0[0])
-    area = e0 + e1 + e2
+    return wp.vec3d(e0, e1, e2)
+
+
+@wp.func
+def float_barycentrics(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, i: int, j: int):
+    """Screen-space barycentrics (float64) of sample centre (j + 0.5, i + 0.5) in triangle s0 s1 s2.
+    Coverage is decided on the snapped integers; the weights come from the unsnapped float64
+    vertices, so interpolation carries no snapping error."""
+    e = edge_values(s0, s1, s2, i, j)
+    area = e[0] + e[1] + e[2]
     if area == wp.float64(0.0):  # a sliver only the snapped vertices give an area
         return wp.vec3d(wp.float64(1.0), wp.float64(0.0), wp.float64(0.0))
-    return wp.vec3d(e0 / area, e1 / area, e2 / area)
+    return e / area
 
 
 @wp.func

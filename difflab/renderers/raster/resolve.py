@@ -15,7 +15,7 @@ from ..._warp import wp
 from ...lighting.warp_model import MaterialW, checker_cell
 from ...vocabulary import FLAT, PHONG_SHADING
 from ..camera import CameraW, view_direction
-from .coverage import NO_HIT, float_barycentrics
+from .coverage import NO_HIT, edge_values, float_barycentrics
 
 wp.set_module_options({"enable_backward": False})
 
@@ -147,15 +147,11 @@ def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=
     s0 = screen[slot, 0]
     s1 = screen[slot, 1]
     s2 = screen[slot, 2]
-    cx = wp.float64(j) + wp.float64(0.5)
-    cy = wp.float64(i) + wp.float64(0.5)
-    e0 = (s2[0] - s1[0]) * (cy - s1[1]) - (s2[1] - s1[1]) * (cx - s1[0])
-    e1 = (s0[0] - s2[0]) * (cy - s2[1]) - (s0[1] - s2[1]) * (cx - s2[0])
-    e2 = (s1[0] - s0[0]) * (cy - s0[1]) - (s1[1] - s0[1]) * (cx - s0[0])
-    area = e0 + e1 + e2
+    e = edge_values(s0, s1, s2, i, j)
+    area = e[0] + e[1] + e[2]
     if area == wp.float64(0.0):
         return wp.vec2(0.0), wp.vec2(0.0)
-    b = wp.vec3d(e0, e1, e2) / area
+    b = e / area
     db_dx = wp.vec3d(s1[1] - s2[1], s2[1] - s0[1], s0[1] - s1[1]) / area
     db_dy = wp.vec3d(s2[0] - s1[0], s0[0] - s2[0], s1[0] - s0[0]) / area
     if perspective_correct == 1:
