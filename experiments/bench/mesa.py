@@ -1,9 +1,9 @@
 """Mesa's llvmpipe through OSMesa (PyOpenGL), fixed-function lighting: the rasterizer's peer in the
 benchmarks. One context per image size; the mesh is drawn from client-side vertex arrays with
-glDrawElements, the lights and material set as `tests/test_opengl_reference.py` sets them (GL 2.x
-lighting with a local viewer and no light ambient is difflab's Gouraud + Blinn model).
+glDrawElements (GL 2.x lighting with a local viewer and no light ambient is difflab's Gouraud + Blinn
+model). `tests/test_opengl_reference.py` holds difflab's images to this renderer's.
 
-    renderer = MesaRenderer(scene, mesh)   # None when PyOpenGL or libOSMesa is missing: see `available`
+    renderer = MesaRenderer(scene, mesh)   # needs PyOpenGL and libOSMesa: see `available`
     seconds, image = renderer.draw()
 """
 
@@ -28,9 +28,10 @@ def available() -> str | None:
 
 
 class MesaRenderer:
-    """A scene's first material, lights and camera on an OSMesa context; `mesh` drawn with them."""
+    """A scene's first material, lights and camera on an OSMesa context; `mesh` drawn with them,
+    smooth (per-vertex colours interpolated) or flat (GL_FLAT: each face lit at its provoking vertex)."""
 
-    def __init__(self, scene, mesh):
+    def __init__(self, scene, mesh, flat: bool = False):
         from OpenGL import GL, osmesa
 
         from difflab.renderers.camera import projection_matrix, view_matrix
@@ -54,7 +55,7 @@ class MesaRenderer:
         GL.glMaterialfv(GL.GL_FRONT_AND_BACK, GL.GL_DIFFUSE, [*material.kd, 1])
         GL.glMaterialfv(GL.GL_FRONT_AND_BACK, GL.GL_SPECULAR, [*material.ks, 1])
         GL.glMaterialf(GL.GL_FRONT_AND_BACK, GL.GL_SHININESS, min(material.n, 128.0))
-        GL.glShadeModel(GL.GL_SMOOTH)
+        GL.glShadeModel(GL.GL_FLAT if flat else GL.GL_SMOOTH)
         self.vertices = np.ascontiguousarray(mesh.vertices, np.float32)
         self.normals = np.ascontiguousarray(mesh.normals, np.float32)
         self.indices = np.ascontiguousarray(mesh.faces, np.uint32).ravel()
