@@ -11,7 +11,7 @@ import pytest
 from difflab import Scene, load_scene, render_frame
 from difflab.demos import scene_path
 from difflab.errors import FitError
-from difflab.fit.identify import identify
+from difflab.fit import identify
 from difflab.fit import MaterialTable, SceneSetup, fit_scene
 from difflab.fit.params import build_layout
 from difflab.fit.raytree import evaluate_tree, tree_image, tree_to_jax

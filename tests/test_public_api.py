@@ -63,3 +63,18 @@ def test_render_is_the_function_after_every_renderer_module_is_imported():
     functions = {n for n in difflab.__all__ if inspect.isfunction(getattr(difflab, n))}
     packages = {p.name for p in Path(difflab.__file__).parent.iterdir() if (p / "__init__.py").is_file()}
     assert not functions & packages
+
+
+def test_lazy_fit_names_are_not_rebound_by_their_modules():
+    """`difflab.fit` loads its names on first use: a module named like one of them would replace it
+    once imported (`from difflab.fit import identify` would then give the module)."""
+    import importlib
+    import pkgutil
+
+    import difflab.fit as fit
+
+    modules = {m.name for m in pkgutil.iter_modules(fit.__path__)}
+    assert not modules & set(fit.__all__)
+    for name in modules - {"command"}:
+        importlib.import_module(f"difflab.fit.{name}")
+    assert callable(fit.identify) and callable(fit.fit) and not isinstance(fit.identify, type(fit))
