@@ -193,11 +193,13 @@ def bilinear_reference(level, u, v):
     return (1 - fy) * bottom + fy * top
 
 
+@pytest.mark.parametrize("longer", ["dx", "dy"])
 @pytest.mark.parametrize("lod", [0.6, 1.6, 2.3, 3.45])
-def test_mip_levels_follow_the_level_of_detail(lod):
+def test_mip_levels_follow_the_level_of_detail(lod, longer):
     """A 32x16 texture whose levels all differ (random texels): a footprint whose longer Jacobian
-    column is rho = 2^lod level-0 texels long (and not along an axis) is read, with mipmap, in level
-    round(lod) and, with trilinear, as the lerp of levels floor(lod) and floor(lod) + 1 by frac(lod)."""
+    column (d(uv)/dx or d(uv)/dy) is rho = 2^lod level-0 texels long (and not along an axis) is
+    read, with mipmap, in level round(lod) and, with trilinear, as the lerp of levels floor(lod)
+    and floor(lod) + 1 by frac(lod)."""
     image = np.random.default_rng(5).random((16, 32, 3)).astype(np.float32)
     store = TextureStore.from_images([image])
     levels = store.pyramids[0]
@@ -206,6 +208,8 @@ def test_mip_levels_follow_the_level_of_detail(lod):
     uv = np.array([[0.37, 0.61]])
     duv_dx = np.array([[rho * 0.6 / w, rho * 0.8 / h]])  # rho texels long
     duv_dy = np.array([[-rho * 0.4 / w, rho * 0.3 / h]])  # half as long: it must not set the level
+    if longer == "dy":
+        duv_dx, duv_dy = duv_dy, duv_dx
     ref = [bilinear_reference(level, *uv[0]) for level in levels]
     mipmap = sample(store, 0, uv, duv_dx, duv_dy, filter="mipmap")[0]
     np.testing.assert_allclose(mipmap, ref[int(math.floor(lod + 0.5))], atol=2e-6)
