@@ -61,5 +61,8 @@ def test_mask_report_loss_solver_and_float32_flags(files):
     np.testing.assert_allclose(ka, want, atol=2e-4)  # float32 solve
     assert np.all(ka < right.mean(axis=0) - 0.04)  # not the mean: the loss was Huber
     assert np.all(ka.astype(np.float32).astype(np.float64) == ka)  # float32 values
+    r = np.abs(ka - right)  # the reported loss is 0.5 sum of Huber's rho over the masked-in pixels
+    rho = np.where(r <= SCALE, r * r, 2 * SCALE * r - SCALE ** 2)
+    assert report["loss"] == pytest.approx(0.5 * rho.sum(), rel=1e-4)
     fitted = json.loads((tmp / "fitted.json").read_text())
     np.testing.assert_allclose(fitted["materials"]["m"]["ka"], ka, rtol=1e-7)
