@@ -194,12 +194,12 @@ def bilinear_reference(level, u, v):
 
 
 @pytest.mark.parametrize("longer", ["dx", "dy"])
-@pytest.mark.parametrize("lod", [0.6, 1.6, 2.3, 3.45])
+@pytest.mark.parametrize("lod", [-0.5, 0.6, 1.6, 2.3, 3.45])
 def test_mip_levels_follow_the_level_of_detail(lod, longer):
     """A 32x16 texture whose levels all differ (random texels): a footprint whose longer Jacobian
     column (d(uv)/dx or d(uv)/dy) is rho = 2^lod level-0 texels long (and not along an axis) is
     read, with mipmap, in level round(lod) and, with trilinear, as the lerp of levels floor(lod)
-    and floor(lod) + 1 by frac(lod)."""
+    and floor(lod) + 1 by frac(lod); lod <= 0 (magnification) reads level 0 with both."""
     image = np.random.default_rng(5).random((16, 32, 3)).astype(np.float32)
     store = TextureStore.from_images([image])
     levels = store.pyramids[0]
@@ -212,12 +212,26 @@ def test_mip_levels_follow_the_level_of_detail(lod, longer):
         duv_dx, duv_dy = duv_dy, duv_dx
     ref = [bilinear_reference(level, *uv[0]) for level in levels]
     mipmap = sample(store, 0, uv, duv_dx, duv_dy, filter="mipmap")[0]
-    np.testing.assert_allclose(mipmap, ref[int(math.floor(lod + 0.5))], atol=2e-6)
+    np.testing.assert_allclose(mipmap, ref[max(int(math.floor(lod + 0.5)), 0)], atol=2e-6)
     lower, frac = int(math.floor(lod)), lod - math.floor(lod)
     trilinear = sample(store, 0, uv, duv_dx, duv_dy, filter="trilinear")[0]
-    np.testing.assert_allclose(trilinear, (1 - frac) * ref[lower] + frac * ref[lower + 1], atol=2e-6)
+    want = ref[0] if lod <= 0 else (1 - frac) * ref[lower] + frac * ref[lower + 1]
+    np.testing.assert_allclose(trilinear, want, atol=2e-6)
     # the levels differ by far more than the tolerance, so a neighbouring level would fail
     assert min(np.abs(a - b).max() for a, b in zip(ref, ref[1:])) > 0.01
+
+
+def test_a_zero_or_non_finite_footprint_reads_level_0():
+    """texture_lod gives NO_LOD (magnification: bilinear in level 0) for a footprint of length 0, one
+    whose squared length overflows float32 to inf, and a NaN one."""
+    image = np.random.default_rng(6).random((16, 32, 3)).astype(np.float32)
+    store = TextureStore.from_images([image])
+    uv = np.array([[0.37, 0.61]] * 3)
+    duv_dx = np.array([[0.0, 0.0], [1e30, 0.0], [np.nan, 0.0]])
+    want = bilinear_reference(store.pyramids[0][0], *uv[0])
+    for filter in ("mipmap", "trilinear"):
+        out = sample(store, 0, uv, duv_dx, np.zeros_like(duv_dx), filter=filter)
+        np.testing.assert_allclose(out, np.broadcast_to(want, out.shape), atol=2e-6, err_msg=filter)
 
 
 # ---- sphere uv in the ray tracer ---------------------------------------------------------------
