@@ -131,14 +131,19 @@ def mutate_module(scratch: Path, module: str, config: dict, survivors_only: bool
             prune_cache(cache, keep)
             results.append({key: m[key] for key in ("id", "function", "line", "diff")} | {"outcome": outcome,
                                                                                          "seconds": round(seconds, 1)})
+            write_record(module, config, list((previous | {r["id"]: r for r in results}).values()))
             mark = "SURVIVED" if outcome == "passed" else outcome
             print(f"  [{k}/{len(todo)}] {mark:8s} line {m['line']}: {' | '.join(m['diff'])[:150]}", flush=True)
     finally:
         target.write_text(original)
-    results = list((previous | {r["id"]: r for r in results}).values())
+    return write_record(module, config, list((previous | {r["id"]: r for r in results}).values()))
+
+
+def write_record(module: str, config: dict, results: list) -> dict:
+    """results/mutation/<module>.json, rewritten after every mutant so that a stopped run keeps what it did."""
     killed = sum(r["outcome"] != "passed" for r in results)
-    record = {"module": module, "tests": tests, "functions": config.get("functions"), "mutants": len(results),
-              "killed": killed, "score": killed / max(len(results), 1), "results": results}
+    record = {"module": module, "tests": config["tests"], "functions": config.get("functions"),
+              "mutants": len(results), "killed": killed, "score": killed / max(len(results), 1), "results": results}
     out = record_path(module)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(record, indent=1) + "\n")
