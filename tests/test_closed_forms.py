@@ -234,6 +234,20 @@ def test_a_zero_or_non_finite_footprint_reads_level_0():
         np.testing.assert_allclose(out, np.broadcast_to(want, out.shape), atol=2e-6, err_msg=filter)
 
 
+def test_a_footprint_at_or_past_the_last_level_reads_the_last_level():
+    """The 32x16 texture has levels 0..5 (level 5: the 1x1 mean). A footprint of exactly 32 texels
+    (lod 5.0, exact in float32) and one of 128 (lod 7) read level 5 with mipmap and trilinear, and
+    nothing of the next texture in the store (NaN texels: even a weight-0 read would show)."""
+    image = np.random.default_rng(7).random((16, 32, 3)).astype(np.float32)
+    store = TextureStore.from_images([image, np.full((2, 2, 3), np.nan, np.float32)])
+    last = store.pyramids[0][-1][0, 0]
+    uv = np.array([[0.37, 0.61]] * 2)
+    duv_dx = np.array([[1.0, 0.0], [4.0, 0.0]])  # 32 and 128 level-0 texels
+    for filter in ("mipmap", "trilinear"):
+        out = sample(store, 0, uv, duv_dx, np.zeros_like(duv_dx), filter=filter)
+        np.testing.assert_allclose(out, np.broadcast_to(last, out.shape), rtol=1e-6, err_msg=filter)
+
+
 # ---- sphere uv in the ray tracer ---------------------------------------------------------------
 
 
