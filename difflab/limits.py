@@ -30,6 +30,11 @@ BUDGET_FRACTION = 0.5
 #: Largest number of rays one render may trace (worst case, before any adaptive cut-off): 2^30 rays take
 #: about 4 minutes at the 4-5 M rays/s of two cores.
 MAX_RAYS = 2 ** 30
+#: Sample tests the rasterizer's coverage stage may make in one frame (the sum over triangles of
+#: their screen bounding boxes, in samples: overdraw); $DIFFLAB_MAX_RASTER_TESTS raises it. Measured
+#: on 2 cores: 2,000 full-screen triangles at 512^2 (5.2e8 tests) in 2.9 s, so 2^32 is ~25 s of
+#: coverage work, while a 1M-triangle 1080p frame needs ~1e7 tests.
+MAX_RASTER_TESTS = 2 ** 32
 #: Largest magnitude of a world-space coordinate or size (scene units). The renderers compute in
 #: float32: squared distances (ray-sphere tests, attenuation) must stay far below 3.4e38, and the
 #: camera's matrices stop being invertible in float64 beyond ~1e16 (measured: an eye at 1e17 gives
@@ -225,6 +230,15 @@ def check_rays(samples: int, nodes_per_sample: int, n_lights: int, what: str,
         raise error(f"{what}: up to {rays:.3g} rays ({samples} samples x {nodes_per_sample:.3g} ray-tree nodes x "
                     f"{1 + n_lights} rays per node) is over the budget of {budget:.3g} rays (set DIFFLAB_MAX_RAYS to "
                     "raise it); lower max_depth, kr / kt, spp or the image size, or set render.adaptive_threshold")
+
+
+def check_raster_work(tests: int, n_triangles: int, what: str, error: type[DifflabError] = DifflabError) -> None:
+    """Refuse a raster frame whose coverage stage would make more sample tests than the budget."""
+    budget = env_count("DIFFLAB_MAX_RASTER_TESTS", MAX_RASTER_TESTS)
+    if tests > budget:
+        raise error(f"{what}: rasterizing {n_triangles} triangles means {tests:.3g} sample tests (their screen "
+                    f"bounding boxes, overlapping), over the budget of {budget:.3g} (set DIFFLAB_MAX_RASTER_TESTS "
+                    "to raise it); lower the image size or spp, or draw fewer overlapping triangles")
 
 
 def require_triangles(n_triangles: int, what: str, error: type[DifflabError] = DifflabError) -> None:

@@ -165,3 +165,20 @@ def test_fractal_images_are_priced_before_they_are_drawn(monkeypatch, tmp_path):
     with pytest.raises(RenderError, match=r"^koch: a figure of \(20000 x 20000 pixels\): needs about 2\.98 GiB"):
         draw_curve("koch", 2, tmp_path / "k.png", size=20000)
     assert not (tmp_path / "k.png").exists()
+
+
+def test_raster_overdraw_is_priced_by_bounding_boxes_and_refused_over_the_budget(monkeypatch):
+    """Two triangles of a quad larger than the 32x32 frame: each box spans every sample, so the
+    coverage stage makes 2 x 32 x 32 = 2048 tests; one fewer allowed is a RenderError before drawing."""
+    from difflab import RenderError, render
+
+    quad = {"type": "mesh", "vertices": [[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]],
+            "faces": [[0, 1, 2], [0, 2, 3]], "material": "m"}
+    scene = Scene.from_dict(scene_dict([quad], {"m": {"ka": [1, 1, 1]}}, ambient=(0.5, 0.5, 0.5)))
+    monkeypatch.setenv("DIFFLAB_MAX_RASTER_TESTS", "2048")
+    image = render(scene, method="raster")
+    assert image.shape == (32, 32, 3) and float(image.min()) == pytest.approx(0.5)
+    monkeypatch.setenv("DIFFLAB_MAX_RASTER_TESTS", "2047")
+    with pytest.raises(RenderError, match=r"^render: rasterizing 2 triangles means 2\.05e\+03 sample tests .* "
+                                          r"over the budget of 2\.05e\+03 \(set DIFFLAB_MAX_RASTER_TESTS"):
+        render(scene, method="raster")

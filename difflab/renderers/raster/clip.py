@@ -83,6 +83,8 @@ def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: w
     half = wp.float64(0.5)
     rows[slot, 0] = int(wp.ceil(wp.min(s0[1], wp.min(s1[1], s2[1])) - half))
     rows[slot, 1] = int(wp.floor(wp.max(s0[1], wp.max(s1[1], s2[1])) - half))
+    rows[slot, 2] = int(wp.ceil(wp.min(s0[0], wp.min(s1[0], s2[0])) - half))  # its box's sample columns
+    rows[slot, 3] = int(wp.floor(wp.max(s0[0], wp.max(s1[0], s2[0])) - half))
     screen[slot, 0] = s0
     weight[slot, 0] = w0
     if side > 0:
@@ -135,6 +137,8 @@ def clear_slot(slot: int, facing: wp.array(dtype=wp.int32), rows: wp.array2d(dty
     facing[slot] = 0
     rows[slot, 0] = 1  # empty row range [1, 0]: binned nowhere
     rows[slot, 1] = 0
+    rows[slot, 2] = 1
+    rows[slot, 3] = 0
 
 
 @wp.func

@@ -12,7 +12,9 @@ import time
 import numpy as np
 from ..._warp import wp
 
+from ...errors import RenderError
 from ...guards import nonfinite_pixels
+from ...limits import check_raster_work
 from ...lighting.warp_model import fog_params, fog_struct
 from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR_MODELS
 from . import clip, coverage, resolve, shade
@@ -70,6 +72,15 @@ def bin_rows(rows: np.ndarray, bands: list[tuple[int, int]], height: int) -> lis
     return out
 
 
+def coverage_tests(rows: np.ndarray, width: int, height: int) -> int:
+    """The sample tests the coverage stage will make: the sum over slots of their bounding boxes'
+    samples on screen (the overdraw work, whatever the triangles' depth order)."""
+    def span(first, last, size):
+        return np.maximum(np.minimum(last, size - 1) - np.maximum(first, 0) + 1, 0).astype(np.int64)
+
+    return int(np.dot(span(rows[:, 0], rows[:, 1], height), span(rows[:, 2], rows[:, 3], width)))
+
+
 def empty_screen(device: str) -> resolve.ScreenW:
     tris = resolve.ScreenW()
     tris.screen = wp.empty((0, 3), dtype=wp.vec4d, device=device)
@@ -112,12 +123,14 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None):
     tris.facing = scratch("tris.facing", n_slots, wp.int32)
     tris.face = wp.array(np.concatenate([np.arange(n_faces, dtype=np.int32), split_faces]), dtype=wp.int32,
                          device=device)
-    rows = scratch("rows", (n_slots, 2), wp.int32)
+    rows = scratch("rows", (n_slots, 4), wp.int32)  # each slot's box: first / last sample row and column
     extra = wp.array(extra_slot, dtype=wp.int32, device=device)
     launch_chunks(clip.assemble_kernel, n_faces, [arrays["faces"], p_clip, p_screen, cull, width, height, extra,
                                                   tris.screen, tris.weight, tris.facing, rows], device, threads)
+    rows_np = rows.numpy()
+    check_raster_work(coverage_tests(rows_np, width, height), n_slots, "render", RenderError)
     bands = band_plan(height, device, threads)
-    binned = dict(zip(bands, bin_rows(rows.numpy(), bands, height)))
+    binned = dict(zip(bands, bin_rows(rows_np, bands, height)))
 
     def raster_band(begin, end):
         slots = binned[(begin, end)]
