@@ -7,6 +7,7 @@ import difflab
 from conftest import scene_dict
 from difflab import CompiledScene, RenderError, compile_scene, render, render_frame
 from difflab.renderers import api
+from difflab.renderers.compile import chunked_face_normals
 
 CAMERA = {"eye": [0.5, 1.0, 4.0], "target": [0, 0.2, 0], "fov_y": 40, "width": 24, "height": 18}
 SCENE = scene_dict(
@@ -82,3 +83,19 @@ def test_compiled_scene_refuses_what_it_was_not_built_for(no_compiling):
         render(compiled, method="raytrace", shading="flat")
     with pytest.raises(RenderError, match="^scene: expected a Scene, a dict or a path, got int"):
         compile_scene(3)
+
+
+def test_compiled_mesh_is_one_copy_and_chunked_face_normals_equal_one_call():
+    """On the CPU the device arrays alias the compiled numpy arrays (no second copy of the mesh);
+    face normals computed a few faces at a time are bitwise those of one float64 call."""
+    compiled = compile_scene(SCENE)
+    for name in ("vertices", "normals", "uvs", "faces", "face_normal", "face_material"):
+        assert compiled.arrays[name].ptr == getattr(compiled, name).ctypes.data, name
+    mesh = difflab.geometry.uv_sphere(1.0, (0.2, 0.0, -0.3), 9, 14)
+    vertices = mesh.vertices.astype(np.float32)
+    faces = mesh.faces.astype(np.int32)
+    whole = difflab.geometry.face_normals(vertices.astype(np.float64), faces).astype(np.float32)
+    chunked = chunked_face_normals(vertices, faces, chunk=5)  # 5 does not divide the 224 faces
+    assert faces.shape[0] % 5 and chunked.dtype == np.float32
+    np.testing.assert_array_equal(chunked, whole)
+    np.testing.assert_allclose(np.linalg.norm(chunked, axis=1), 1.0, atol=1e-6)

@@ -212,6 +212,17 @@ def scene_parts(scene, sample_height: int):
     return mesh_parts, analytic_parts, spheres, planes
 
 
+def chunked_face_normals(vertices: np.ndarray, faces: np.ndarray, chunk: int = 1 << 17) -> np.ndarray:
+    """(F, 3) float32 unit face normals, computed in float64 `chunk` faces at a time (the same
+    values as one call: each row depends only on its face; the float64 temporaries stay ~30 MB
+    instead of ~200 bytes per face)."""
+    vertices = vertices.astype(np.float64)
+    out = np.empty(faces.shape, np.float32)
+    for begin in range(0, faces.shape[0], chunk):
+        out[begin:begin + chunk] = geometry.face_normals(vertices, faces[begin:begin + chunk])
+    return out
+
+
 def triangle_soup(parts) -> dict:
     """The parts' triangles in one set of float32 / int32 arrays (vertices, normals, uvs, faces,
     and per face its material, object and geometric normal)."""
@@ -232,7 +243,7 @@ def triangle_soup(parts) -> dict:
                                for m, _, _ in parts]).astype(np.float32),
         "face_material": np.concatenate([np.full(m.faces.shape[0], mat, np.int32) for m, mat, _ in parts]),
         "face_object": np.concatenate([np.full(m.faces.shape[0], obj, np.int32) for m, _, obj in parts]),
-        "face_normal": geometry.face_normals(vertices.astype(np.float64), faces).astype(np.float32),
+        "face_normal": chunked_face_normals(vertices, faces),
         "vertex_material": np.concatenate([np.full(m.vertices.shape[0], mat, np.int32) for m, mat, _ in parts]),
         "vertex_object": np.concatenate([np.full(m.vertices.shape[0], obj, np.int32) for m, _, obj in parts]),
     }
@@ -300,7 +311,8 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     epsilon = ray_epsilon(scene.camera, soup["vertices"][faces[:n_mesh_faces].ravel()], spheres)
     dtypes = {"vertices": wp.vec3, "normals": wp.vec3, "uvs": wp.vec2, "faces": wp.int32, "face_material": wp.int32,
               "face_object": wp.int32, "face_normal": wp.vec3, "vertex_material": wp.int32, "vertex_object": wp.int32}
-    arrays = {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device)
+    # on the CPU the device arrays alias the soup's (copy=False): one copy of the mesh in memory
+    arrays = {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device, copy=False)
               for name, dtype in dtypes.items()}
     arrays["faces"] = arrays["faces"].reshape((faces.shape[0], 3))
     geom = ray_geometry(arrays, soup, n_mesh_faces, spheres, planes, epsilon, device)

@@ -122,9 +122,9 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None):
     tris.weight = scratch("tris.weight", (n_slots, 3), wp.vec3)
     tris.facing = scratch("tris.facing", n_slots, wp.int32)
     tris.face = wp.array(np.concatenate([np.arange(n_faces, dtype=np.int32), split_faces]), dtype=wp.int32,
-                         device=device)
+                         device=device, copy=False)  # copy=False: on the CPU no second copy of the index
     rows = scratch("rows", (n_slots, 4), wp.int32)  # each slot's box: first / last sample row and column
-    extra = wp.array(extra_slot, dtype=wp.int32, device=device)
+    extra = wp.array(extra_slot, dtype=wp.int32, device=device, copy=False)
     launch_chunks(clip.assemble_kernel, n_faces, [arrays["faces"], p_clip, p_screen, cull, width, height, extra,
                                                   tris.screen, tris.weight, tris.facing, rows], device, threads)
     rows_np = rows.numpy()
