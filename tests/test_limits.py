@@ -182,3 +182,16 @@ def test_raster_overdraw_is_priced_by_bounding_boxes_and_refused_over_the_budget
     with pytest.raises(RenderError, match=r"^render: rasterizing 2 triangles means 2\.05e\+03 sample tests .* "
                                           r"over the budget of 2\.05e\+03 \(set DIFFLAB_MAX_RASTER_TESTS"):
         render(scene, method="raster")
+
+
+def test_overdraw_count_is_the_same_past_the_chunk_size():
+    """coverage_tests sums 2^16 slots at a time: 2^17 + 3 boxes of known size count exactly, the
+    off-screen parts of boxes clipped to the frame (rows -5..2 of 10 -> 3 rows; columns 7..30 of 20 -> 13)."""
+    import numpy as np
+
+    from difflab.renderers.raster.driver import coverage_tests
+
+    n = (1 << 17) + 3
+    rows = np.tile(np.array([[-5, 2, 7, 30]], np.int32), (n, 1))
+    rows[-1] = [4, 3, 0, 0]  # an empty slot (last row before the first) counts nothing
+    assert coverage_tests(rows, 20, 10) == (n - 1) * 3 * 13

@@ -74,11 +74,13 @@ def bin_rows(rows: np.ndarray, bands: list[tuple[int, int]], height: int) -> lis
 
 def coverage_tests(rows: np.ndarray, width: int, height: int) -> int:
     """The sample tests the coverage stage will make: the sum over slots of their bounding boxes'
-    samples on screen (the overdraw work, whatever the triangles' depth order)."""
+    samples on screen (the overdraw work, whatever the triangles' depth order). Summed 2^16 slots
+    at a time, so the int64 temporaries stay small beside the frame's arrays."""
     def span(first, last, size):
         return np.maximum(np.minimum(last, size - 1) - np.maximum(first, 0) + 1, 0).astype(np.int64)
 
-    return int(np.dot(span(rows[:, 0], rows[:, 1], height), span(rows[:, 2], rows[:, 3], width)))
+    return sum(int(np.dot(span(part[:, 0], part[:, 1], height), span(part[:, 2], part[:, 3], width)))
+               for part in np.array_split(rows, range(1 << 16, rows.shape[0], 1 << 16)))
 
 
 def empty_screen(device: str) -> resolve.ScreenW:
