@@ -111,11 +111,21 @@ def _free_loss(z, problem):
     return 0.5 * jnp.sum(r * r)
 
 
-def result_name(code) -> str:
-    """optimistix's result code as its name."""
+#: The result codes optimistix (and lineax beneath it) define, by name: `RESULTS.<name>` is public,
+#: the table behind it is not, so a result is named by comparing it with each.
+OPTIMISTIX_RESULTS = ("successful", "nonlinear_max_steps_reached", "nonlinear_divergence", "nonfinite",
+                      "max_steps_reached", "singular", "breakdown", "stagnation", "conlim")
+
+
+def result_name(result) -> str:
+    """optimistix's result (an `optx.RESULTS` item) as its name, or 'unknown: <its message>'."""
     import optimistix as optx
 
-    return {int(item._value): name for name, item in optx.RESULTS._name_to_item.items()}[int(code)]
+    for name in OPTIMISTIX_RESULTS:
+        item = getattr(optx.RESULTS, name, None)
+        if item is not None and bool(result == item):
+            return name
+    return f"unknown: {optx.RESULTS[result]}"
 
 
 @eqx.filter_jit
@@ -126,7 +136,7 @@ def _optimistix(solver, z0, problem, max_steps):
         sol = optx.minimise(_free_loss, solver, z0, args=problem, max_steps=max_steps, throw=False)
     else:
         sol = optx.least_squares(_free_residuals, solver, z0, args=problem, max_steps=max_steps, throw=False)
-    return problem.layout.x_from_free(sol.value), sol.result._value, sol.stats["num_steps"]
+    return problem.layout.x_from_free(sol.value), sol.result, sol.stats["num_steps"]
 
 
 def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
@@ -152,11 +162,11 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
         if options.history:
             RECORDER.start()
         try:
-            x, code, steps = _optimistix(solver, z0, problem, options.max_steps)
+            x, result, steps = _optimistix(solver, z0, problem, options.max_steps)
             x = np.asarray(x, np.float64)
         finally:
             history = RECORDER.stop() if options.history else []
-        return Solved(x, result_name(code), int(steps), history)
+        return Solved(x, result_name(result), int(steps), history)
     finally:
         if progress is not None:
             jax.effects_barrier()

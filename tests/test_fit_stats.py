@@ -1,0 +1,48 @@
+"""The fit's statistics in closed form: degrees of freedom net of censored values, the reduced
+chi-square, the mismatch threshold, standard errors and optimistix result names."""
+
+import math
+
+import numpy as np
+import pytest
+
+from difflab.fit.stats import MISMATCH_CHI2, fit_statistics, standard_errors
+from difflab.fit.solvers import result_name
+
+
+def test_reduced_chi_square_counts_uncensored_values_less_parameters():
+    jac = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0], [0.0, 0.0], [0.0, 0.0], [3.0, 0.0]])
+    r = np.array([0.1, -0.2, 0.3, 0.0, 0.4, -0.1])
+    sse = float(np.sum(r * r))
+    st = fit_statistics(jac, r, censored=1, sigma=0.5)
+    assert st["s2"] == pytest.approx(sse / (6 - 1 - 2), rel=1e-15)
+    assert st["chi2"] == pytest.approx(sse / 3 / 0.25, rel=1e-15)
+    np.testing.assert_allclose(st["diag"], np.diag(np.linalg.inv(jac.T @ jac)), rtol=1e-12)
+    assert fit_statistics(jac, r, censored=0, sigma=0.5)["s2"] == pytest.approx(sse / 4, rel=1e-15)
+    assert fit_statistics(jac, r, censored=0, sigma=0.0)["chi2"] == math.inf
+
+
+@pytest.mark.parametrize("dof", [2, 8, 50, 5000])
+def test_mismatch_threshold_is_max_of_two_and_five_sigma_of_chi_square(dof):
+    """chi2 of dof degrees of freedom has standard deviation sqrt(2 / dof) (reduced): the flag is
+    raised above max(2, 1 + 5 sqrt(2 / dof)), just there and not just below."""
+    threshold = max(MISMATCH_CHI2, 1.0 + 5.0 * math.sqrt(2.0 / dof))
+    jac = np.zeros((dof + 1, 1))
+    jac[0, 0] = 1.0
+    for chi2, flagged in ((threshold * (1 - 1e-9), False), (threshold * (1 + 1e-9), True)):
+        r = np.full(dof + 1, math.sqrt(chi2 * dof / (dof + 1)))
+        st = fit_statistics(jac, r, censored=0, sigma=1.0)
+        assert st["chi2"] == pytest.approx(chi2, rel=1e-12)
+        assert st["mismatch"] is flagged
+
+
+def test_standard_errors_scale_with_sigma_and_are_infinite_where_undetermined():
+    np.testing.assert_array_equal(standard_errors(np.array([4.0, np.inf, 0.25]), 9.0), [6.0, np.inf, 1.5])
+
+
+def test_optimistix_results_are_named():
+    import optimistix as optx
+
+    assert result_name(optx.RESULTS.successful) == "successful"
+    assert result_name(optx.RESULTS.nonlinear_max_steps_reached) == "nonlinear_max_steps_reached"
+    assert result_name(optx.RESULTS.nonfinite) == "nonfinite"
