@@ -20,6 +20,7 @@ from test_fit_helpers import scene_dict
 
 from difflab import fit_many
 from difflab.batch.manifest import load_manifest, parse_line
+from difflab.batch.runners import cluster_render_threads
 from difflab.batch.store import Store
 from difflab.batch.worker import outcome_of
 from difflab.errors import DifflabError, ManifestError, OutputError
@@ -238,6 +239,35 @@ def test_store_keeps_one_outcome_per_job(tmp_path):
 # -- a Dask cluster ----------------------------------------------------------------------------------
 
 
+class _Cluster:
+    """What `cluster_render_threads` asks a client: each worker's cores and its host and threads."""
+
+    def __init__(self, workers):  # address -> (host, cores, nthreads)
+        self.workers = workers
+
+    def run(self, function):
+        return {address: cores for address, (_, cores, _) in self.workers.items()}
+
+    def scheduler_info(self):
+        return {"workers": {a: {"host": h, "nthreads": n} for a, (h, _, n) in self.workers.items()}}
+
+
+def test_cluster_render_threads_share_each_hosts_cores(monkeypatch):
+    """A host's cores over its workers' task threads, the smallest over the hosts; $DIFFLAB_THREADS
+    instead when set; 1 with no worker."""
+    monkeypatch.delenv("DIFFLAB_THREADS", raising=False)
+    cluster = _Cluster({"a:1": ("a", 16, 2), "a:2": ("a", 16, 2), "b:1": ("b", 8, 1), "c:1": ("c", 2, 4)})
+    assert cluster_render_threads(_Cluster(dict(list(cluster.workers.items())[:2]))) == 4  # 16 cores / 4 threads
+    assert cluster_render_threads(_Cluster(dict(list(cluster.workers.items())[:3]))) == 4  # b: 8 / 1, a: 4
+    assert cluster_render_threads(cluster) == 1  # c: 2 cores for 4 threads, at least 1
+    assert cluster_render_threads(_Cluster({})) == 1
+    monkeypatch.setenv("DIFFLAB_THREADS", "3")
+    assert cluster_render_threads(cluster) == 3
+    monkeypatch.setenv("DIFFLAB_THREADS", "many")
+    with pytest.raises(DifflabError, match="DIFFLAB_THREADS"):
+        cluster_render_threads(cluster)
+
+
 def _kill_a_busy_worker(client, killed: list) -> None:
     """Wait until a worker is running a task, then SIGKILL its process (the nanny starts a new one)."""
     pids = client.run(os.getpid)
@@ -251,11 +281,13 @@ def _kill_a_busy_worker(client, killed: list) -> None:
         time.sleep(0.01)
 
 
-def test_dask_cluster_with_a_worker_killed_gives_the_same_files(reference, tmp_path):
+def test_dask_cluster_with_a_worker_killed_gives_the_same_files(reference, tmp_path, monkeypatch):
     distributed = pytest.importorskip("distributed")
+    monkeypatch.delenv("DIFFLAB_THREADS", raising=False)
     manifest, out, _ = reference
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
+        assert cluster_render_threads(client) == max(1, (os.cpu_count() or 1) // 2)  # as the local pool of 2
         killed = []
         killer = threading.Thread(target=_kill_a_busy_worker, args=(client, killed))
         killer.start()

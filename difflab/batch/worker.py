@@ -19,16 +19,17 @@ NO_FIT = ("empty_mask", "nonfinite_target")  # result codes that mean no fit was
 VOLATILE = ("seconds", "timings")  # report fields that change from run to run (kept apart from the report)
 
 
-def fit_job(spec: dict):
+def fit_job(spec: dict, threads: int | None = None):
     """Run the fit a manifest line describes (`manifest.parse_line`'s spec) through the fitting
     engine, `difflab.fit.fit`, and return its FitResult. Its compiled solves stay in this process for
     the next job of the same problem shape, and its JAX compilation cache on disk serves every
-    worker (`difflab.fit.cache`)."""
+    worker (`difflab.fit.cache`). `threads`: the Warp render's CPU threads (default $DIFFLAB_THREADS,
+    else every core); the results do not depend on it."""
     from ..fit import fit
 
     targets = [(view["image"], {k: view[k] for k in ("camera", "lights") if k in view}) for view in spec["targets"]]
     masks = [view.get("mask") for view in spec["targets"]]
-    options = {**spec["solver"], "init": spec["init"] or None, "history": False, "progress": False,
+    options = {**spec["solver"], "init": spec["init"] or None, "history": False, "progress": False, "threads": threads,
                "masks": None if all(m is None for m in masks) else masks}
     if "params" in spec:
         options["params"] = tuple(spec["params"])
@@ -66,12 +67,12 @@ def _unpacked(spec: dict, files: dict, folder: Path) -> dict:
     return {**spec, "scene": moved(spec["scene"]), "targets": views}
 
 
-def outcome_of(spec: dict) -> dict:
+def outcome_of(spec: dict, threads: int | None = None) -> dict:
     """Fit one job: {"ok": True, "scene": fitted scene dict, "report": FitResult.to_dict() without the
     VOLATILE fields} or {"ok": False, "error": message}. Never raises for a failed job: a bad input
     (DifflabError) gives its message, anything else "internal error: Type: message"."""
     try:
-        result = fit_job(spec)
+        result = fit_job(spec, threads)
         if result.result in NO_FIT:
             raise FitError(f"no fit made: {result.result}")
         report = result.to_dict()
@@ -84,13 +85,13 @@ def outcome_of(spec: dict) -> dict:
         return {"ok": False, "error": f"internal error: {type(exc).__name__}: {exc}"}
 
 
-def run_job(spec: dict, files: dict | None = None) -> dict:
-    """A worker's task: `outcome_of(spec)` plus its wall time in "seconds". With `files` (from `pack`)
-    the inputs are read from those bytes, written to a temporary folder, instead of from the paths."""
+def run_job(spec: dict, files: dict | None = None, threads: int | None = None) -> dict:
+    """A worker's task: `outcome_of(spec, threads)` plus its wall time in "seconds". With `files` (from
+    `pack`) the inputs are read from those bytes, written to a temporary folder, instead of from the paths."""
     start = time.perf_counter()
     if files:
         with tempfile.TemporaryDirectory(prefix="difflab-job-") as folder:
-            outcome = outcome_of(_unpacked(spec, files, Path(folder)))
+            outcome = outcome_of(_unpacked(spec, files, Path(folder)), threads)
     else:
-        outcome = outcome_of(spec)
+        outcome = outcome_of(spec, threads)
     return {**outcome, "seconds": time.perf_counter() - start}
