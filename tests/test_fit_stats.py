@@ -20,6 +20,8 @@ def test_reduced_chi_square_counts_uncensored_values_less_parameters():
     np.testing.assert_allclose(st["diag"], np.diag(np.linalg.inv(jac.T @ jac)), rtol=1e-12)
     assert fit_statistics(jac, r, censored=0, sigma=0.5)["s2"] == pytest.approx(sse / 4, rel=1e-15)
     assert fit_statistics(jac, r, censored=0, sigma=0.0)["chi2"] == math.inf
+    assert fit_statistics(jac[:3], r[:3], censored=0, sigma=1.0)["s2"] == pytest.approx(0.14, rel=1e-14)  # dof 1
+    assert fit_statistics(jac[:3], r[:3], censored=1, sigma=1.0)["s2"] == pytest.approx(0.14, rel=1e-14)  # floor 1
 
 
 @pytest.mark.parametrize("dof", [2, 8, 50, 5000])

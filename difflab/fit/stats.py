@@ -112,16 +112,15 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
 
 
 def fit_statistics(jac: np.ndarray, r: np.ndarray, censored: int, sigma: float) -> dict:
-    """sse, dof (N - p, N uncensored entries), s2 = sse / dof, chi2 (reduced, at noise sigma),
-    mismatch flag, and diag (J^T J)^-1 (p,)."""
+    """s2 = sse / dof (dof = N - p, N uncensored entries), chi2 = s2 / sigma^2 (reduced), the
+    mismatch flag (chi2 above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and diag (J^T J)^-1 (p,)."""
     p = jac.shape[1]
     sse = float(np.sum(r * r))
     dof = max(r.size - censored - p, 1)
     s2 = sse / dof
     chi2 = s2 / (sigma * sigma) if sigma > 0 else math.inf
     mismatch = bool(chi2 > max(MISMATCH_CHI2, 1.0 + 5.0 * math.sqrt(2.0 / dof)))
-    return {"sse": sse, "dof": dof, "s2": s2, "chi2": chi2, "mismatch": mismatch,
-            "diag": np.diag(covariance_unscaled(jac))}
+    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": np.diag(covariance_unscaled(jac))}
 
 
 def poorly_determined(layout, values: dict, stderr_floor: dict, rel_tol=0.1, abs_tol=1e-3) -> list[str]:
