@@ -285,7 +285,7 @@ def test_dask_cluster_with_a_worker_killed_gives_the_same_files(reference, tmp_p
     distributed = pytest.importorskip("distributed")
     monkeypatch.delenv("DIFFLAB_THREADS", raising=False)
     manifest, out, _ = reference
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
             distributed.Client(cluster) as client:
         assert cluster_render_threads(client) == max(1, (os.cpu_count() or 1) // 2)  # as the local pool of 2
         killed = []

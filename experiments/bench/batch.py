@@ -128,7 +128,7 @@ def main(argv=None) -> int:
             from distributed import Client, LocalCluster
 
             for n in in_flight:
-                with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+                with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
                         Client(cluster) as client:
                     rows.append({"backend": "dask", **run_batch(manifest, tmp / f"dask{n}", n, client=client)})
                 print(rows[-1], file=sys.stderr)
