@@ -9,6 +9,9 @@ lets a new worker skip most compilation.
 
 from __future__ import annotations
 
+import ctypes
+import functools
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -17,6 +20,8 @@ from ..errors import DifflabError, FitError
 
 NO_FIT = ("empty_mask", "nonfinite_target")  # result codes that mean no fit was made: a failed job
 VOLATILE = ("seconds", "timings")  # report fields that change from run to run (kept apart from the report)
+M_MMAP_THRESHOLD = -3  # glibc's mallopt parameter number
+MMAP_THRESHOLD = 32 << 20  # bytes: glibc's own ceiling for its adaptive mmap threshold (64-bit)
 
 
 def fit_job(spec: dict, threads: int | None = None):
@@ -85,9 +90,27 @@ def outcome_of(spec: dict, threads: int | None = None) -> dict:
         return {"ok": False, "error": f"internal error: {type(exc).__name__}: {exc}"}
 
 
+@functools.cache
+def adaptive_allocator() -> bool:
+    """Undo the fixed mmap threshold of a process started with $MALLOC_TRIM_THRESHOLD_ set (Dask's
+    nanny sets it to 64 KiB in every worker): glibc then stops adapting its mmap threshold, so each
+    array over 128 KiB a fit makes is mapped and unmapped afresh, page-faulting every time; a fit ran
+    ~35 ms in a Dask worker against ~27 ms once this is set (issue 13). Sets the threshold to
+    MMAP_THRESHOLD once per process (the trim threshold stays); True when set. Results do not depend
+    on it."""
+    if "MALLOC_TRIM_THRESHOLD_" not in os.environ or "MALLOC_MMAP_THRESHOLD_" in os.environ:
+        return False
+    try:
+        mallopt = ctypes.CDLL(None).mallopt  # glibc only
+    except (OSError, AttributeError):
+        return False
+    return bool(mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD))
+
+
 def run_job(spec: dict, files: dict | None = None, threads: int | None = None) -> dict:
     """A worker's task: `outcome_of(spec, threads)` plus its wall time in "seconds". With `files` (from
     `pack`) the inputs are read from those bytes, written to a temporary folder, instead of from the paths."""
+    adaptive_allocator()
     start = time.perf_counter()
     if files:
         with tempfile.TemporaryDirectory(prefix="difflab-job-") as folder:
