@@ -69,10 +69,12 @@ def timed(fn) -> tuple[float, float, object]:
 
 def peak_memory_mib(resolution: int, width: int, height: int) -> float:
     """Peak RSS of a fresh process that builds, compiles and renders one frame, with Warp's kernel
-    cache warm (run twice: the first may compile a kernel, which takes memory of its own)."""
-    code = (f"import resource, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import raster as b, difflab; "
+    cache warm (run twice: the first may compile a kernel, which takes memory of its own). Read as
+    VmHWM of /proc/self/status, which belongs to the new process image: getrusage's ru_maxrss
+    survives fork + exec on Linux and reported this (large) benchmark process's RSS instead."""
+    code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import raster as b, difflab; "
             f"difflab.render(b.sphere_scene({resolution}, {width}, {height})); "
-            f"print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+            "print(next(l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM:')))")
     for _ in range(2):
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return int(out.stdout.strip().splitlines()[-1]) / 1024.0
