@@ -61,6 +61,23 @@ def test_frames_of_one_compiled_scene_keep_their_images_and_threads_do_not_share
         assert all(np.array_equal(threaded[k + j * len(cases)], kept[k]) for j in range(3)), case
 
 
+def test_every_frame_starts_from_a_cleared_zbuffer_whatever_ran_before(no_compiling):
+    """The z-buffer is kept between frames and reset by the kernel that reads it last (or filled
+    when that did not run). A quad seen from behind, drawn and then culled: the culled frame is
+    empty after a render, a G-buffer frame, the ray tracer's item buffer (which reads the keys and
+    leaves them) and other thread counts (a stale key would show the quad)."""
+    quad = {"type": "mesh", "vertices": [[-0.5, -0.5, 0], [0.5, -0.5, 0], [0.5, 0.5, 0], [-0.5, 0.5, 0]],
+            "faces": [[0, 2, 1], [0, 3, 2]], "material": "m"}  # clockwise from the eye: its back
+    compiled = compile_scene(scene_dict([quad], {"m": {"ka": [1, 1, 1]}}, ambient=(0.5, 0.5, 0.5)))
+    drawn = render(compiled, threads=1)
+    assert float(drawn.max()) == pytest.approx(0.5) and float(drawn.mean()) == pytest.approx(0.125)
+    for before in [lambda: render(compiled, threads=3), lambda: render_frame(compiled, threads=2),
+                   lambda: render(compiled, method="raytrace", item_buffer=True, threads=1)]:
+        before()
+        assert not render(compiled, cull_backfaces=True, threads=1).any()
+        assert np.array_equal(render(compiled, threads=2), drawn)
+
+
 def test_compiled_scene_gives_the_frame_a_fresh_scene_gives(no_compiling):
     compiled = compile_scene(SCENE)
     frame = render_frame(compiled, method="raster", shading="phong")

@@ -184,14 +184,20 @@ def test_raster_overdraw_is_priced_by_bounding_boxes_and_refused_over_the_budget
         render(scene, method="raster")
 
 
-def test_overdraw_count_is_the_same_past_the_chunk_size():
-    """coverage_tests sums 2^16 slots at a time: 2^17 + 3 boxes of known size count exactly, the
-    off-screen parts of boxes clipped to the frame (rows -5..2 of 10 -> 3 rows; columns 7..30 of 20 -> 13)."""
-    import numpy as np
+@pytest.mark.parametrize("threads", [1, 3])
+def test_overdraw_count_adds_up_over_the_launch_parts(monkeypatch, threads):
+    """Assembling sums each launch part's box samples apart (1 part on one thread, 12 on three) and
+    the driver adds the parts: 300 copies of the frame-covering quad make exactly 600 x 32 x 32 tests."""
+    from difflab import RenderError, render
 
-    from difflab.renderers.raster.driver import coverage_tests
-
-    n = (1 << 17) + 3
-    rows = np.tile(np.array([[-5, 2, 7, 30]], np.int32), (n, 1))
-    rows[-1] = [4, 3, 0, 0]  # an empty slot (last row before the first) counts nothing
-    assert coverage_tests(rows, 20, 10) == (n - 1) * 3 * 13
+    copies = 300
+    faces = [[4 * k, 4 * k + 1, 4 * k + 2] for k in range(copies)] + [[4 * k, 4 * k + 2, 4 * k + 3]
+                                                                       for k in range(copies)]
+    quads = {"type": "mesh", "vertices": [[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]] * copies, "faces": faces,
+             "material": "m"}
+    scene = Scene.from_dict(scene_dict([quads], {"m": {"ka": [1, 1, 1]}}, ambient=(0.5, 0.5, 0.5)))
+    monkeypatch.setenv("DIFFLAB_MAX_RASTER_TESTS", str(2 * copies * 32 * 32))
+    assert float(render(scene, method="raster", threads=threads).min()) == pytest.approx(0.5)
+    monkeypatch.setenv("DIFFLAB_MAX_RASTER_TESTS", str(2 * copies * 32 * 32 - 1))
+    with pytest.raises(RenderError, match=r"^render: rasterizing 600 triangles means 6\.14e\+05 sample tests"):
+        render(scene, method="raster", threads=threads)

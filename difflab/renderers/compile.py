@@ -24,7 +24,7 @@ from ..limits import require_triangles
 from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Scene, Sphere, load_scene
 from .camera import camera_frame, pixel_size_at
-from .launch import resolve_device
+from .launch import host_empty, resolve_device
 from .texture.store import TextureStore, scene_textures
 from .trace import SceneGeomW
 
@@ -72,11 +72,15 @@ class CompiledScene:
         next frame (fresh memory costs a page fault per 4 KiB on every frame). It holds whatever the
         last frame left; one set per thread, so threads rendering the same compiled scene never share."""
         shape = (shape,) if isinstance(shape, int) else tuple(shape)
-        pool = self.built.setdefault(("scratch", threading.get_ident()), {})
+        pool = self.scratch_pool()
         array = pool.get(name)
         if array is None or array.shape != shape or array.dtype != dtype:
-            array = pool[name] = wp.empty(shape, dtype=dtype, device=self.device)
+            array = pool[name] = host_empty(shape, dtype, self.device)
         return array
+
+    def scratch_pool(self) -> dict:
+        """This thread's `scratch` arrays by name (a renderer may keep notes about them there too)."""
+        return self.built.setdefault(("scratch", threading.get_ident()), {})
 
     def traceable(self) -> SceneGeomW:
         """`geom` with the BVH over the mesh faces, built on first use (rasterizing without shadows

@@ -13,6 +13,8 @@ import tempfile
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
+import numpy as np
+
 from .._warp import wp
 
 from ..errors import RenderError
@@ -167,3 +169,36 @@ def launch_chunks(kernel, n: int, inputs: list, device: str, threads: int | None
 
     if n:
         parallel_bands(run_band, n, device, threads)
+
+
+def launch_parts(kernel, n: int, inputs: list, device: str, threads: int | None = None) -> None:
+    """`launch_chunks` with the band's index first: the kernel's first arguments are (part, begin,
+    end, chunk), part p of `part_count(n, ...)` covering items [begin, end). A kernel may keep
+    per-part results (counts, sums) there without two CPU threads sharing an element."""
+    bands = band_plan(n, device, threads)
+    part = {band: k for k, band in enumerate(bands)}
+
+    def run_band(begin: int, end: int) -> None:
+        chunk = end - begin if device == "cpu" else 1
+        wp.launch(kernel, dim=(end - begin + chunk - 1) // chunk,
+                  inputs=[part[(begin, end)], begin, end, chunk, *inputs], device=device)
+
+    if n:
+        run_bands(run_band, bands, threads)
+
+
+def part_count(n: int, device: str, threads: int | None = None) -> int:
+    """How many parts `launch_parts` splits n items into."""
+    return len(band_plan(n, device, threads))
+
+
+def host_empty(shape, dtype, device: str) -> wp.array:
+    """An uninitialised device array; on the CPU in numpy's memory, which asks the kernel for
+    transparent huge pages on large arrays (a page fault per 2 MiB instead of per 4 KiB: ~1 ms
+    instead of ~10 ms to first write a 1920x1080 RGB float image)."""
+    if not device.startswith("cpu"):
+        return wp.empty(shape, dtype=dtype, device=device)
+    shape = (shape,) if isinstance(shape, int) else tuple(shape)
+    scalar = getattr(dtype, "_wp_scalar_type_", dtype)  # a vector / matrix type's scalar, else dtype itself
+    host = np.empty(shape + tuple(getattr(dtype, "_shape_", ())), dtype=wp.dtype_to_numpy(scalar))
+    return wp.array(host, dtype=dtype, device=device, copy=False)

@@ -107,17 +107,19 @@ def inside_near(c: wp.vec4):
 @wp.kernel
 def clip_vertices_kernel(begin: int, end: int, chunk: int, vertices: wp.array(dtype=wp.vec3), view_proj: wp.mat44,
                          width: int, height: int, clip: wp.array(dtype=wp.vec4), screen: wp.array(dtype=wp.vec4d),
-                         inside: wp.array(dtype=wp.int32)):
-    """Vertices [begin, end), `chunk` per thread: clip space, whether in front of the near plane,
-    and (only then) the screen position `to_screen` gives, shared by the faces around the vertex."""
+                         behind: wp.array(dtype=wp.int32)):
+    """Vertices [begin, end), `chunk` per thread: clip space and (in front of the near plane) the
+    screen position `to_screen` gives, shared by the faces around the vertex; behind[0] = 1 when
+    a vertex is behind the near plane (every write is a 1: threads may write it in any order)."""
     first = begin + wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, end)):
         p = vertices[k]
         c = view_proj * wp.vec4(p[0], p[1], p[2], 1.0)
         clip[k] = c
-        inside[k] = int(inside_near(c))
         if inside_near(c):
             screen[k] = to_screen(c, width, height)
+        else:
+            behind[0] = 1
 
 
 @wp.kernel
@@ -144,13 +146,13 @@ def clear_slot(slot: int, facing: wp.array(dtype=wp.int32), rows: wp.array2d(dty
 @wp.func
 def assemble_face(f: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4),
                   vertex_screen: wp.array(dtype=wp.vec4d), cull: int,
-                  width: int, height: int, extra_slot: wp.array(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d),
+                  width: int, height: int, extra: int, screen: wp.array2d(dtype=wp.vec4d),
                   weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32),
                   rows: wp.array2d(dtype=wp.int32)):
-    """Clip face f and store its slot(s)."""
+    """Clip face f and store its slot(s): slot f, and `extra` (-1: none) when it is clipped to a quad."""
     clear_slot(f, facing, rows)
-    if extra_slot[f] >= 0:
-        clear_slot(extra_slot[f], facing, rows)
+    if extra >= 0:
+        clear_slot(extra, facing, rows)
     i0 = faces[f, 0]
     i1 = faces[f, 1]
     i2 = faces[f, 2]
@@ -216,16 +218,52 @@ def assemble_face(f: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtyp
         sb = vertex_screen[ib]
         sc = vertex_screen[ic]
         emit(f, sab, sb, sc, wab, wb, wc, cull, screen, weight, facing, rows)
-        emit(extra_slot[f], sab, sc, sac, wab, wc, wac, cull, screen, weight, facing, rows)
+        emit(extra, sab, sc, sac, wab, wc, wac, cull, screen, weight, facing, rows)
+
+
+@wp.func
+def drawn_rows(slot: int, rows: wp.array2d(dtype=wp.int32), width: int, height: int):
+    """The sample rows [first, last] of `slot`'s box on screen, and its sample tests (box samples on
+    screen); (1, 0, 0) for a slot that draws nothing there (not drawn, or its box off screen)."""
+    first = wp.max(rows[slot, 0], 0)
+    last = wp.min(rows[slot, 1], height - 1)
+    columns = wp.min(rows[slot, 3], width - 1) - wp.max(rows[slot, 2], 0) + 1
+    if first > last or columns <= 0:
+        return 1, 0, wp.int64(0)
+    return first, last, wp.int64(last - first + 1) * wp.int64(columns)
+
+
+@wp.func
+def count_slot(slot: int, rows: wp.array2d(dtype=wp.int32), width: int, height: int,
+               band_of_row: wp.array(dtype=wp.int32), part: int, counts: wp.array2d(dtype=wp.int32),
+               tests: wp.array(dtype=wp.int64)):
+    """Count `slot` in every row band its box meets (counts[part, band]) and add its sample tests."""
+    first, last, n_tests = drawn_rows(slot, rows, width, height)
+    if first <= last:
+        wp.atomic_add(tests, part, n_tests)
+        for band in range(band_of_row[first], band_of_row[last] + 1):
+            wp.atomic_add(counts, part, band, 1)
 
 
 @wp.kernel
-def assemble_kernel(begin: int, end: int, chunk: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtype=wp.vec4),
-                    vertex_screen: wp.array(dtype=wp.vec4d), cull: int, width: int, height: int,
-                    extra_slot: wp.array(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d),
+def assemble_kernel(part: int, begin: int, end: int, chunk: int, faces: wp.array2d(dtype=wp.int32),
+                    clip: wp.array(dtype=wp.vec4), vertex_screen: wp.array(dtype=wp.vec4d), cull: int, width: int,
+                    height: int, extra_slot: wp.array(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d),
                     weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32),
-                    rows: wp.array2d(dtype=wp.int32)):
-    """Faces [begin, end), `chunk` per thread."""
+                    rows: wp.array2d(dtype=wp.int32), slot_face: wp.array(dtype=wp.int32),
+                    band_of_row: wp.array(dtype=wp.int32), counts: wp.array2d(dtype=wp.int32),
+                    tests: wp.array(dtype=wp.int64)):
+    """Faces [begin, end) of launch part `part`, `chunk` per thread: their slots, each slot's face,
+    and per row band the slots meeting it (counts[part, band]) and their sample tests (tests[part]).
+    `extra_slot` is empty when no face is clipped to a quad."""
     first = begin + wp.tid() * chunk
     for f in range(first, wp.min(first + chunk, end)):
-        assemble_face(f, faces, clip, vertex_screen, cull, width, height, extra_slot, screen, weight, facing, rows)
+        extra = int(-1)
+        if extra_slot.shape[0] > 0:
+            extra = extra_slot[f]
+        assemble_face(f, faces, clip, vertex_screen, cull, width, height, extra, screen, weight, facing, rows)
+        slot_face[f] = f
+        count_slot(f, rows, width, height, band_of_row, part, counts, tests)
+        if extra >= 0:
+            slot_face[extra] = f
+            count_slot(extra, rows, width, height, band_of_row, part, counts, tests)

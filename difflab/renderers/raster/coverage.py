@@ -1,5 +1,7 @@
-"""Rasterizer stage 3: coverage and the z-buffer.
+"""Rasterizer stage 3: binning, coverage and the z-buffer.
 
+`bin_kernel` lists the slots meeting each band of rows (stage 2 counted them), so that each band's
+coverage launch reads only its own triangles.
 For every sample centre inside a screen triangle (exact integer edge functions with a top-left-style
 fill rule: a shared edge's samples go to exactly one triangle) the kernel writes min(depth, slot) into
 a 64-bit visibility key: the z-buffer test and a deterministic tie-break in one atomic.
@@ -9,7 +11,7 @@ from __future__ import annotations
 
 from ..._warp import wp
 
-from .clip import SUBPIXEL, edge, owns_edge, snap
+from .clip import SUBPIXEL, drawn_rows, edge, owns_edge, snap
 
 wp.set_module_options({"enable_backward": False})
 
@@ -100,3 +102,29 @@ def raster_kernel(chunk: int, row_begin: int, row_end: int, slots: wp.array(dtyp
     first = wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, slots.shape[0])):
         raster_slot(slots[k], row_begin, row_end, screen, width, key)
+
+
+@wp.func
+def bin_slot(slot: int, rows: wp.array2d(dtype=wp.int32), width: int, height: int,
+             band_of_row: wp.array(dtype=wp.int32), part: int, cursor: wp.array2d(dtype=wp.int32),
+             binned: wp.array(dtype=wp.int32)):
+    """Write `slot` into the list of every row band its box meets, at cursor[part, band] (then advanced)."""
+    first, last, unused = drawn_rows(slot, rows, width, height)
+    if first <= last:
+        for band in range(band_of_row[first], band_of_row[last] + 1):
+            binned[wp.atomic_add(cursor, part, band, 1)] = slot
+
+
+@wp.kernel
+def bin_kernel(part: int, begin: int, end: int, chunk: int, extra_slot: wp.array(dtype=wp.int32),
+               rows: wp.array2d(dtype=wp.int32), width: int, height: int, band_of_row: wp.array(dtype=wp.int32),
+               cursor: wp.array2d(dtype=wp.int32), binned: wp.array(dtype=wp.int32)):
+    """The slots of faces [begin, end) (launch part `part`, as `assemble_kernel` counted them), `chunk`
+    faces per thread, into their bands' lists; cursor[part, band] starts where that part's slots of
+    that band go. `extra_slot` is empty when no face is clipped to a quad."""
+    first = begin + wp.tid() * chunk
+    for f in range(first, wp.min(first + chunk, end)):
+        bin_slot(f, rows, width, height, band_of_row, part, cursor, binned)
+        if extra_slot.shape[0] > 0:
+            if extra_slot[f] >= 0:
+                bin_slot(extra_slot[f], rows, width, height, band_of_row, part, cursor, binned)

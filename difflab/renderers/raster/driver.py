@@ -20,7 +20,8 @@ from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR
 from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
-from ..launch import band_plan, launch_chunks, launch_row_loops, load_kernels, run_bands
+from ..launch import (band_plan, host_empty, launch_chunks, launch_parts, launch_row_loops, load_kernels,
+                      part_count, run_bands)
 
 
 def empty_points(count: int, device: str) -> resolve.PointsW:
@@ -52,35 +53,34 @@ def lighting_struct(compiled, settings) -> shade.LightingW:
     return out
 
 
-def bin_rows(rows: np.ndarray, bands: list[tuple[int, int]], height: int) -> list[np.ndarray]:
-    """Per band of rows, the slots whose sample rows [first, last] meet it (empty slots: last < first).
-
-    Slots are sorted by the band of their first row (a radix sort on a small key); the few that
-    reach into later bands are added to those too."""
-    first, last = rows[:, 0], rows[:, 1]
-    drawn = np.flatnonzero((last >= first) & (last >= 0) & (first < height)).astype(np.int32)
-    band_of_row = np.repeat(np.arange(len(bands), dtype=np.uint16), [b - a for a, b in bands])
-    band_first = band_of_row[np.clip(first[drawn], 0, height - 1)]
-    band_last = band_of_row[np.clip(last[drawn], 0, height - 1)]
-    order = np.argsort(band_first, kind="stable")
-    starts = np.searchsorted(band_first[order], np.arange(len(bands) + 1))
-    spanning = np.flatnonzero(band_last > band_first)
-    out = []
-    for k in range(len(bands)):
-        extra = spanning[(band_first[spanning] < k) & (band_last[spanning] >= k)]
-        out.append(np.concatenate([drawn[order[starts[k]:starts[k + 1]]], drawn[extra]]))
-    return out
+def band_rows(bands: list[tuple[int, int]], height: int, device: str) -> wp.array:
+    """Per sample row, the index of its band."""
+    band_of_row = np.repeat(np.arange(len(bands), dtype=np.int32), [b - a for a, b in bands])
+    return wp.array(band_of_row[:height], dtype=wp.int32, device=device)
 
 
-def coverage_tests(rows: np.ndarray, width: int, height: int) -> int:
-    """The sample tests the coverage stage will make: the sum over slots of their bounding boxes'
-    samples on screen (the overdraw work, whatever the triangles' depth order). Summed 2^16 slots
-    at a time, so the int64 temporaries stay small beside the frame's arrays."""
-    def span(first, last, size):
-        return np.maximum(np.minimum(last, size - 1) - np.maximum(first, 0) + 1, 0).astype(np.int64)
+def bin_starts(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """From counts[part, band] (slots of each launch part meeting each band): where each band's list
+    starts in the binned array (B + 1 entries, the last the total), and where each part writes its
+    slots of each band (cursor[part, band]: the band's start plus the earlier parts' counts)."""
+    starts = np.concatenate([[0], np.cumsum(counts.sum(axis=0))])
+    cursor = starts[None, :-1] + np.cumsum(counts, axis=0) - counts
+    return starts, cursor.astype(np.int32)
 
-    return sum(int(np.dot(span(part[:, 0], part[:, 1], height), span(part[:, 2], part[:, 3], width)))
-               for part in np.array_split(rows, range(1 << 16, rows.shape[0], 1 << 16)))
+
+def cleared_key(compiled, n_samples: int) -> wp.array:
+    """The visibility key per sample, all NO_HIT. The array is kept between frames; the kernel that
+    reads a frame's keys last resets each to NO_HIT (and `mark_key_cleared` notes it), so the array
+    is filled here only when the last frame's reader did not (a first frame, a new size, a frame
+    stopped midway, the ray tracer's item buffer)."""
+    key = compiled.scratch("key", n_samples, wp.int64)
+    if compiled.scratch_pool().pop("cleared key", None) is not key:
+        key.fill_(coverage.NO_HIT)
+    return key
+
+
+def mark_key_cleared(compiled, key: wp.array) -> None:
+    compiled.scratch_pool()["cleared key"] = key
 
 
 def empty_screen(device: str) -> resolve.ScreenW:
@@ -92,55 +92,74 @@ def empty_screen(device: str) -> resolve.ScreenW:
     return tris
 
 
-def zbuffer(compiled, cam, cull: int, threads: int | None = None):
+def split_slots(compiled, p_clip: wp.array, threads: int | None) -> tuple[wp.array, int]:
+    """Per face, its extra slot (-1: none) for the faces with one vertex behind the near plane
+    (clipped to a quad), numbered after the F faces' own slots; and how many there are."""
+    n_faces, device = compiled.faces.shape[0], compiled.device
+    split = compiled.scratch("split", n_faces, wp.int32)
+    launch_chunks(clip.split_kernel, n_faces, [compiled.arrays["faces"], p_clip, split], device, threads)
+    split_faces = np.flatnonzero(split.numpy())
+    extra_slot = np.full(n_faces, -1, np.int32)
+    extra_slot[split_faces] = n_faces + np.arange(split_faces.size, dtype=np.int32)
+    return wp.array(extra_slot, dtype=wp.int32, device=device), split_faces.size
+
+
+def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
     """Stages 1-3 on the sample grid of `cam`: clip space, near-plane clipping, and the z-buffer.
 
     Returns the clipped screen triangles (a `ScreenW`: a slot per face, and one more per face clipped
     to a quad) and the visibility key per sample (NO_HIT, or depth << 32 | slot of the nearest
-    triangle). Vertices and faces are transformed in bands on all cores; each band of rows
-    rasterizes only the triangles binned to it (those whose sample-centre rows meet the band)."""
+    triangle). Vertices and faces are transformed in parts on all cores; assembling counts the slots
+    meeting each band of rows, `bin_kernel` lists them, and each band rasterizes only its list, then
+    calls `then(tris, key, begin, end)` when given (the band's keys are final there)."""
     device, arrays = compiled.device, compiled.arrays
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     width, height = cam.width, cam.height
     scratch = compiled.scratch  # arrays kept between frames: no fresh pages to fault in
-    key = scratch("key", width * height, wp.int64)
-    key.fill_(coverage.NO_HIT)
+    key = cleared_key(compiled, width * height)
     if not n_faces:
         return empty_screen(device), key
     p_clip, p_screen = scratch("clip", n_vertices, wp.vec4), scratch("screen", n_vertices, wp.vec4d)
-    inside = scratch("inside", n_vertices, wp.int32)
+    behind = scratch("behind", 1, wp.int32)
+    behind.zero_()
     launch_chunks(clip.clip_vertices_kernel, n_vertices, [arrays["vertices"], cam.view_proj, width, height, p_clip,
-                                                          p_screen, inside], device, threads)
-    split_faces = np.empty(0, np.int32)  # faces clipped to a quad: a second slot each
-    if not inside.numpy().all():  # only a vertex behind the near plane can split a face
-        split = scratch("split", n_faces, wp.int32)
-        launch_chunks(clip.split_kernel, n_faces, [arrays["faces"], p_clip, split], device, threads)
-        split_faces = np.flatnonzero(split.numpy()).astype(np.int32)
-    extra_slot = np.full(n_faces, -1, np.int32)
-    extra_slot[split_faces] = n_faces + np.arange(split_faces.size, dtype=np.int32)
-    n_slots = n_faces + split_faces.size
+                                                          p_screen, behind], device, threads)
+    extra = wp.empty(0, dtype=wp.int32, device=device)  # only a vertex behind the near plane can split a face
+    n_split = 0
+    if behind.numpy()[0]:
+        extra, n_split = split_slots(compiled, p_clip, threads)
+    n_slots = n_faces + n_split
     tris = resolve.ScreenW()
     tris.screen = scratch("tris.screen", (n_slots, 3), wp.vec4d)
     tris.weight = scratch("tris.weight", (n_slots, 3), wp.vec3)
     tris.facing = scratch("tris.facing", n_slots, wp.int32)
-    tris.face = wp.array(np.concatenate([np.arange(n_faces, dtype=np.int32), split_faces]), dtype=wp.int32,
-                         device=device, copy=False)  # copy=False: on the CPU no second copy of the index
+    tris.face = scratch("tris.face", n_slots, wp.int32)
     rows = scratch("rows", (n_slots, 4), wp.int32)  # each slot's box: first / last sample row and column
-    extra = wp.array(extra_slot, dtype=wp.int32, device=device, copy=False)
-    launch_chunks(clip.assemble_kernel, n_faces, [arrays["faces"], p_clip, p_screen, cull, width, height, extra,
-                                                  tris.screen, tris.weight, tris.facing, rows], device, threads)
-    rows_np = rows.numpy()
-    check_raster_work(coverage_tests(rows_np, width, height), n_slots, "render", RenderError)
     bands = band_plan(height, device, threads)
-    binned = dict(zip(bands, bin_rows(rows_np, bands, height)))
+    band_of_row = band_rows(bands, height, device)
+    counts = scratch("bin counts", (part_count(n_faces, device, threads), len(bands)), wp.int32)
+    tests = scratch("bin tests", counts.shape[0], wp.int64)
+    counts.zero_()
+    tests.zero_()
+    launch_parts(clip.assemble_kernel, n_faces, [
+        arrays["faces"], p_clip, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
+        tris.face, band_of_row, counts, tests], device, threads)
+    check_raster_work(int(tests.numpy().sum()), n_slots, "render", RenderError)
+    starts, cursor = bin_starts(counts.numpy())
+    binned = scratch("binned", 1 << int(starts[-1]).bit_length(), wp.int32)  # a power of two: kept between frames
+    launch_parts(coverage.bin_kernel, n_faces, [
+        extra, rows, width, height, band_of_row, wp.array(cursor, dtype=wp.int32, device=device), binned], device,
+        threads)
+    band_index = {band: k for k, band in enumerate(bands)}
 
     def raster_band(begin, end):
-        slots = binned[(begin, end)]
-        if slots.size:
-            chunk = slots.size if device == "cpu" else 1  # a band is one thread's work on the CPU
-            wp.launch(coverage.raster_kernel, dim=(slots.size + chunk - 1) // chunk, inputs=[
-                chunk, begin, end, wp.array(slots, dtype=wp.int32, device=device), tris.screen, width, key],
-                device=device)
+        first, last = int(starts[band_index[(begin, end)]]), int(starts[band_index[(begin, end)] + 1])
+        if last > first:
+            chunk = last - first if device == "cpu" else 1  # a band is one thread's work on the CPU
+            wp.launch(coverage.raster_kernel, dim=(last - first + chunk - 1) // chunk, inputs=[
+                chunk, begin, end, binned[first:last], tris.screen, width, key], device=device)
+        if then is not None:
+            then(tris, key, begin, end)
 
     run_bands(raster_band, bands, threads)
     return tris, key
@@ -164,15 +183,21 @@ def shading_points(compiled, mesh, cam, shading: int, samples, threads: int | No
     return points, n_points
 
 
-def empty_lit(device: str, n_points: int, n_lights: int, n_samples: int, record: bool) -> shade.LitW:
-    """Stage 6's outputs; the per-light records and per-sample texels only when `record` (else 1 element)."""
+def empty_lit(compiled, n_points: int, n_samples: int, record: bool) -> shade.LitW:
+    """Stage 6's outputs; the per-light records and per-sample texels only when `record` (else 1
+    element, and the colours in arrays kept for the next frame)."""
+    device, n_lights = compiled.device, max(len(compiled.scene.lights), 1)
     rows = n_points if record else 1
     lit = shade.LitW()
     lit.light_dir = wp.zeros((rows, n_lights), dtype=wp.vec3, device=device)  # zero where nothing is lit
     lit.light_dist = wp.zeros((rows, n_lights), dtype=float, device=device)
     lit.visibility = wp.zeros((rows, n_lights), dtype=float, device=device)
-    lit.color = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
-    lit.factor = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
+    if record:
+        lit.color = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
+        lit.factor = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
+    else:
+        lit.color = compiled.scratch("lit.color", max(n_points, 1), wp.vec3)
+        lit.factor = compiled.scratch("lit.factor", max(n_points, 1), wp.vec3)
     lit.texel = wp.zeros(n_samples if record else 1, dtype=wp.vec3, device=device)
     return lit
 
@@ -181,7 +206,7 @@ def light_points(compiled, lighting, points, n_points: int, n_samples: int, poin
                  threads: int | None = None) -> shade.LitW:
     """Stage 6 for the G-buffer: light every point, recording per light its direction, distance
     and visibility (and the texture factor under flat / Gouraud, the texel per sample under Phong)."""
-    lit = empty_lit(compiled.device, n_points, max(len(compiled.scene.lights), 1), n_samples, True)
+    lit = empty_lit(compiled, n_points, n_samples, True)
     launch_chunks(shade.light_points_kernel, n_points, [points, lighting, points_are_samples, 1, lit],
                   compiled.device, threads)
     return lit
@@ -200,28 +225,36 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     start = time.perf_counter()
     cam = camera_struct(scene.camera, width, height)
     mesh, lighting = raster_mesh(compiled), lighting_struct(compiled, settings)
-    image = wp.empty(width * height, dtype=wp.vec3, device=device)
+    image = host_empty(width * height, wp.vec3, device)  # returned: fresh memory every frame
     background, fog = wp.vec3(*scene.background), fog_struct(scene.fog)
 
-    # Stages 1-3: clip space, clipping, z-buffer (`zbuffer`).
-    tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)
-    if not gbuffer:  # stages 5-6 for the flat / Gouraud points visible samples read, then 4, 6 (Phong), 7 fused
+    if not gbuffer:  # stages 1-3 (then 5-6 for the flat / Gouraud points visible samples read), 4, 6, 7 fused
         n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading, 0)
         needed = compiled.scratch("needed", n_points, wp.int32)
         needed.zero_()
-        if n_points:
-            launch_row_loops(shade.seen_points_kernel, height, [
-                width, key, tris, compiled.arrays["faces"], compiled.vertices.shape[0], shading, needed], device,
-                threads)
-        lit = empty_lit(device, n_points, max(len(scene.lights), 1), 0, False)
+
+        def seen_points(tris, key, begin: int, end: int) -> None:  # the band's keys are final: flag what they see
+            wp.launch(shade.seen_points_kernel, dim=end - begin, inputs=[
+                begin, width, key, tris, compiled.arrays["faces"], compiled.vertices.shape[0], shading, needed],
+                device=device)
+
+        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads, seen_points if n_points else None)
+        lit = empty_lit(compiled, n_points, 0, False)
         launch_chunks(shade.light_mesh_points_kernel, n_points, [mesh, cam, shading, lighting, needed, lit], device,
                       threads)
+        bad = compiled.scratch("nonfinite rows", height, wp.int32)
         launch_row_loops(shade.image_kernel, height, [
             key, tris, mesh, cam, lighting, lit, perspective_correct, shading, int(clamp_colors), background, fog,
-            image], device, threads)
+            image, bad], device, threads)
+        mark_key_cleared(compiled, key)  # image_kernel reset every key it read
         pixels = box_downsample(image.numpy().reshape(height, width, 3), side)
-        return Frame(image=pixels, buffers=None, stats=frame_stats(compiled, start, pixels, width * height, n_points))
+        nonfinite = int(bad.numpy().sum())  # non-finite samples; with spp > 1 count the pixels they reach
+        if nonfinite and side > 1:
+            nonfinite = nonfinite_pixels(pixels)
+        return Frame(image=pixels, buffers=None, stats=frame_stats(compiled, start, nonfinite, width * height,
+                                                                   n_points))
 
+    tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)  # stages 1-3
     # Stage 4: the per-sample G-buffer.
     samples = empty_points(width * height, device)
     out = resolve.GBufferW()
@@ -231,6 +264,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     launch_row_loops(resolve.resolve_kernel, height, [
         key, tris, mesh, compiled.materials, cam, perspective_correct, shading, compiled.vertices.shape[0], out,
         samples], device, threads)
+    mark_key_cleared(compiled, key)  # resolve_kernel reset every key it read
 
     # Stages 5-6: shading points, lit.
     points, n_points = shading_points(compiled, mesh, cam, shading, samples, threads)
@@ -243,14 +277,14 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         1 - points_are_samples, background, fog, image], device, threads)
     pixels = box_downsample(image.numpy().reshape(height, width, 3), side)
     gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors)
-    stats = frame_stats(compiled, start, pixels, width * height, n_points)
+    stats = frame_stats(compiled, start, nonfinite_pixels(pixels), width * height, n_points)
     stats["covered_samples"] = int(gbuffer.mask.sum())
     return Frame(image=pixels, buffers=gbuffer, stats=stats)
 
 
-def frame_stats(compiled, start: float, pixels: np.ndarray, n_samples: int, n_points: int) -> dict:
+def frame_stats(compiled, start: float, nonfinite: int, n_samples: int, n_points: int) -> dict:
     return {"method": "raster", "seconds": time.perf_counter() - start, "triangles": compiled.faces.shape[0],
-            "samples": n_samples, "shading_points": n_points, "nonfinite_pixels": nonfinite_pixels(pixels)}
+            "samples": n_samples, "shading_points": n_points, "nonfinite_pixels": nonfinite}
 
 
 

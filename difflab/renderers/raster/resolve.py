@@ -268,6 +268,7 @@ def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW
     """Stage 4 at sample (i, j): its G-buffer entries (empty ones where nothing covers it)."""
     s = i * cam.width + j
     k = key[s]
+    key[s] = NO_HIT  # the next frame's z-buffer starts cleared
     if k == NO_HIT:
         samples.material[s] = -1
         out.face[s] = -1
