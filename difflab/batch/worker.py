@@ -20,7 +20,8 @@ from ..errors import DifflabError, FitError
 
 NO_FIT = ("empty_mask", "nonfinite_target")  # result codes that mean no fit was made: a failed job
 VOLATILE = ("seconds", "timings")  # report fields that change from run to run (kept apart from the report)
-M_MMAP_THRESHOLD = -3  # glibc's mallopt parameter number
+M_TRIM_THRESHOLD = -1  # glibc's mallopt parameter numbers
+M_MMAP_THRESHOLD = -3
 MMAP_THRESHOLD = 32 << 20  # bytes: glibc's own ceiling for its adaptive mmap threshold (64-bit)
 
 
@@ -92,19 +93,21 @@ def outcome_of(spec: dict, threads: int | None = None) -> dict:
 
 @functools.cache
 def adaptive_allocator() -> bool:
-    """Undo the fixed mmap threshold of a process started with $MALLOC_TRIM_THRESHOLD_ set (Dask's
-    nanny sets it to 64 KiB in every worker): glibc then stops adapting its mmap threshold, so each
-    array over 128 KiB a fit makes is mapped and unmapped afresh, page-faulting every time; a fit ran
-    ~35 ms in a Dask worker against ~27 ms once this is set (issue 13). Sets the threshold to
-    MMAP_THRESHOLD once per process (the trim threshold stays); True when set. Results do not depend
-    on it."""
+    """Undo the fixed allocator thresholds of a process started with $MALLOC_TRIM_THRESHOLD_ set
+    (Dask's nanny sets it to 64 KiB in every worker): glibc then stops adapting its thresholds, so
+    each array over 128 KiB a fit makes is mapped and unmapped afresh, and each free leaving over
+    64 KiB at the top of the heap hands it back to the system, to be faulted in again by the next
+    array: ~400 page faults a fit against 6 in a plain process (24x24 fits of experiments/bench/
+    batch.py; ~35 -> ~25 ms a fit, issue 13). Sets the mmap threshold to MMAP_THRESHOLD and the trim
+    threshold to twice that (glibc's own adaptive ceilings), once per process; True when set.
+    Results do not depend on it."""
     if "MALLOC_TRIM_THRESHOLD_" not in os.environ or "MALLOC_MMAP_THRESHOLD_" in os.environ:
         return False
     try:
         mallopt = ctypes.CDLL(None).mallopt  # glibc only
     except (OSError, AttributeError):
         return False
-    return bool(mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD))
+    return bool(mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(mallopt(M_TRIM_THRESHOLD, 2 * MMAP_THRESHOLD))
 
 
 def run_job(spec: dict, files: dict | None = None, threads: int | None = None) -> dict:
