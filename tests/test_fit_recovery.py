@@ -208,5 +208,5 @@ def test_a_textured_material_goes_through_the_ray_tree(tmp_path):
     result = fit_material(scene, [target], "red", ("kd",), init={"kd": [0.5, 0.3, 0.2]})
     assert result.model == "raytrace" and result.converged
     np.testing.assert_allclose(result.params["kd"], TRUTH["kd"], rtol=1e-4)
-    with pytest.raises(FitError, match="texture_fit"):
+    with pytest.raises(FitError, match="add .texture. to params"):
         fit_material(scene, [target], "red", method="raster")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -20,8 +21,15 @@ from .problem import robust
 from .result import FitResult
 from .setup import Setup
 from .options import FitOptions
+from .matfree import check_solver
 from .solvers import SUCCESSFUL, run
 from .stats import QUANTISATION_SIGMA, fit_statistics, jacobian, poorly_determined, psnr, standard_errors
+from .texels import texel_coverage
+
+
+@eqx.filter_jit
+def _weighted(problem, values):
+    return problem.weighted(values)
 
 
 def report(setup: Setup, x, result: str, steps: int, history: list, options: FitOptions, timings: dict,
@@ -42,21 +50,29 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         start = time.perf_counter()
         values = setup.values(x)
         flat = layout.flatten(values)
+        used = np.concatenate([np.asarray(v.sqrt_weight, np.float64).reshape(-1) for v in setup.problem.views]) > 0
+        matrix_free = options.matrix_free(layout.size)
         with jax.enable_x64(setup.x64):
-            jac, r = jacobian(setup.problem, jnp.asarray(flat, setup.dtype), solved)
+            at = jnp.asarray(flat, setup.dtype)
+            if matrix_free:  # no Jacobian is formed: no covariance (stderr nan)
+                jac, r = None, np.asarray(_weighted(setup.problem, at), np.float64)
+            else:  # the solver's (r, J) end with the texture prior's rows: cut to the pixels'
+                jac, r = jacobian(setup.problem, at, None if solved is None else
+                                  tuple(np.asarray(a)[:used.size] for a in solved))
             rho = np.asarray(robust(setup.problem.loss, jnp.asarray(r), setup.problem.loss_scale), np.float64)
+            seen = {k: c > options.visible_threshold for k, c in texel_coverage(setup.problem, at, used).items()}
         loss = float(0.5 * np.sum(np.square(rho)))
         residuals = setup.residual_images(r)
-        used = np.concatenate([np.asarray(v.sqrt_weight, np.float64).reshape(-1) for v in setup.problem.views]) > 0
-        jac, r = jac[used], r[used]
-        finite = bool(np.all(np.isfinite(flat)) and np.isfinite(loss) and np.all(np.isfinite(jac)))
+        jac, r = (None if jac is None else jac[used]), r[used]
+        finite = bool(np.all(np.isfinite(flat)) and np.isfinite(loss) and (jac is None or np.all(np.isfinite(jac))))
         sigma = setup.noise([res * np.sqrt(v.weight) for res, v in zip(residuals, setup.views)]) if finite else \
             float("nan")
         if finite:
-            st = fit_statistics(jac, r, setup.censored, sigma)
+            st = fit_statistics(jac, r, setup.censored, sigma, layout.size)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], QUANTISATION_SIGMA ** 2)))
-            flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol)
+            flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol) if jac is not None \
+                else [key for key, on in seen.items() if not on.all()]
             chi2, mismatch = st["chi2"], st["mismatch"]
         else:
             stderr = {p.key: np.full(p.size, np.nan) for p in layout}
@@ -70,7 +86,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                         seconds=timings.get("solve", 0.0), converged=bool(result == SUCCESSFUL and finite),
                         result=result, history=list(history), poorly_determined=flagged, sigma=float(sigma),
                         chi2=float(chi2), model_mismatch=bool(mismatch),
-                        at_bound=[p.key for p in layout if np.any(on_bound[p.key])], residuals=residuals,
+                        at_bound=[p.key for p in layout if np.any(on_bound[p.key])], residuals=residuals, seen=seen,
                         timings={**timings, "stats": time.perf_counter() - start}, **common)
     if options.throw and not out.converged:
         raise FitError(f"fit did not converge: {out.result} after {out.steps} steps (loss {out.loss:.4g})")
@@ -81,6 +97,7 @@ def run_fit(setup: Setup, options: FitOptions, setup_seconds: float) -> FitResul
     """Solve a prepared fit and report it (the precheck's result code, without solving, when the
     fit cannot be made)."""
     timings = {"setup": setup_seconds}
+    check_solver(options, setup.layout)
     code = setup.precheck()
     if code is not None:
         return report(setup, None, code, 0, [], options, timings)
@@ -100,10 +117,11 @@ def solve(setup: Setup, options=None, **option_fields) -> FitResult:
 
 def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, options=None, per_channel=True,
         bounded=False, loss="l2", loss_scale=0.05, masks=None, weights=None, init=None, sigma=None, ceiling=None,
-        max_depth=None, spp=None, device="cpu", threads=None, **option_fields) -> FitResult:
+        smoothness=0.0, max_depth=None, spp=None, device="cpu", threads=None, **option_fields) -> FitResult:
     """Fit material coefficients (and light intensities) so the rendered images match targets.
 
         minimise  sum_views sum_pixels  rho( sqrt(w) (min(model(params), ceiling) - target) )^2
+                  [+ smoothness sum_texture_neighbours |T_a - T_b|^2]
 
     where model re-forms the image in JAX from what Warp recorded once per view: the G-buffer
     ("raster") or the ray tree ("raytrace"; reflections, refractions, Beer absorption), chosen from
@@ -123,18 +141,24 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
             "absorption" (RGB) -- for every fitted material, or "name.kind" for one -- and
             "intensity" (every light's) or "lights[i].intensity"; a tuple or "ka,kd". A generic
             kr (kt, absorption) applies only where kr (kt) starts > 0: the tree has no such rays
-            otherwise.
+            otherwise. "texture": the texels of the material's image texture (H_t x W_t x 3
+            unknowns, the G-buffer image model with Phong shading, filters "nearest" /
+            "bilinear"), alone or beside the other kinds; more than `FitOptions` DENSE_MAX
+            entries are solved matrix-free ("lm", "gauss_newton", "dogleg", "adam").
         method: "raster", "raytrace" or None (from the scene).
         options: a `FitOptions` (solver, max_steps, tolerances, precision, progress, throw, ...);
             its fields may also be given as keywords (`solver="varpro"`, `x64=False`).
         per_channel: RGB values per channel (False: one grey value each). bounded: ka, kd, ks <= 1.
         loss: "l2", "huber" or "cauchy" (`loss_scale`: the residual size where they turn robust).
         masks: per target (H, W) bool (True: the pixel counts); weights: per target (H, W[, 3]) >= 0.
-        init: name -> starting value, overriding the scene's.
+        init: name -> starting value, overriding the scene's (a texture: an (H_t, W_t, 3) image,
+            row 0 at the top, which also sets the texel grid, or a value for every texel).
         sigma: the targets' pixel noise (linear units); default: estimated (see `fit.stats`).
         ceiling: the value where the targets clip (censored pixels: the model need only reach it);
             default: 1.0 for 8/16-bit targets, detected from ties at the maximum for float data;
             False: none.
+        smoothness: weight of a first-difference prior on fitted texels (0: none); it also fills
+            texels that no pixel sees.
         max_depth, spp: the ray tree's depth and samples per pixel (default: the scene's).
         device: where Warp renders ("cpu" or "cuda"). threads: CPU threads for the render.
     Returns:
@@ -145,7 +169,7 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
     start = time.perf_counter()
     setup = Setup(scene, targets, materials, params, method=method, per_channel=per_channel, bounded=bounded, loss=loss,
                   loss_scale=loss_scale, masks=masks, weights=weights, init=init, sigma=sigma, ceiling=ceiling,
-                  x64=options.x64, max_depth=max_depth, spp=spp, device=device, threads=threads)
+                  smoothness=smoothness, x64=options.x64, max_depth=max_depth, spp=spp, device=device, threads=threads)
     return run_fit(setup, options, time.perf_counter() - start)
 
 

@@ -16,7 +16,8 @@ class MaterialTable(NamedTuple):
     ka, ka2, kd, kd2, ks (M, 3); n, m, f0, kr, kt (M,); absorption (M, 3) per unit length;
     texture_target (M,) int32: the TARGET_* id of the coefficient an image texture modulates (-1:
     none). ka2 / kd2 are the checker's second cell (equal to ka / kd without a checker, as in
-    `warp_model.material_struct`). `lighting.jax_model.surface_material` reads the local part.
+    `warp_model.material_struct`). texels: (T, 3) the fitted textures' texels stacked (`texels.py`;
+    None when no texture is fitted). `lighting.jax_model.surface_material` reads the local part.
     """
 
     ka: jnp.ndarray
@@ -31,6 +32,7 @@ class MaterialTable(NamedTuple):
     kt: jnp.ndarray
     absorption: jnp.ndarray
     texture_target: jnp.ndarray
+    texels: jnp.ndarray | None = None
 
     @classmethod
     def from_scene(cls, materials, dtype=jnp.float32) -> MaterialTable:

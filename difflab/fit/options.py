@@ -10,6 +10,8 @@ from dataclasses import dataclass, fields
 from ..errors import FitError
 
 SOLVERS = ("lm", "gauss_newton", "dogleg", "bfgs", "adam", "varpro")
+LINEAR_SOLVERS = ("auto", "dense", "cg")
+DENSE_MAX = 256  # "auto": the most fitted entries solved with a dense Jacobian (more: matrix-free CG)
 DEFAULT_TOL = {True: (1e-8, 1e-10), False: (1e-5, 1e-7)}  # (rtol, atol) by x64
 
 
@@ -22,7 +24,13 @@ class FitOptions:
     x64: compute in float64 (else float32). history: record the loss per step. progress: show a
     progress bar (None: only when stderr is a terminal). throw: raise FitError for a failed fit
     instead of returning it. rel_tol, abs_tol: a parameter is poorly determined when its standard
-    error at the noise floor exceeds rel_tol |value| + abs_tol.
+    error at the noise floor exceeds rel_tol |value| + abs_tol. linear_solver: how the
+    least-squares solvers ("lm", "gauss_newton", "dogleg") solve each step's normal equations:
+    "dense" (the Jacobian formed, a Cholesky solve), "cg" (matrix-free conjugate gradients on
+    J^T J, J v and J^T v by autodiff: for a texture's many texels), "auto" ("cg" above DENSE_MAX
+    fitted entries); cg_steps: the most CG iterations per step. visible_threshold: a fitted texel
+    counts as seen when the pixels used change by more than this per unit texel, summed
+    (`FitResult.seen`).
     """
 
     solver: str = "lm"
@@ -36,13 +44,20 @@ class FitOptions:
     throw: bool = False
     rel_tol: float = 0.1
     abs_tol: float = 1e-3
+    linear_solver: str = "auto"
+    cg_steps: int = 500
+    visible_threshold: float = 1e-3
 
     def __post_init__(self):
         if self.solver not in SOLVERS:
             raise FitError(f"solver: unknown solver {self.solver!r}; known: {', '.join(SOLVERS)}")
-        if not (isinstance(self.max_steps, int) and not isinstance(self.max_steps, bool) and self.max_steps >= 1):
-            raise FitError(f"max_steps: must be an integer >= 1, got {self.max_steps!r}")
-        for name in ("rtol", "atol", "learning_rate", "rel_tol", "abs_tol"):
+        if self.linear_solver not in LINEAR_SOLVERS:
+            raise FitError(f"linear_solver: expected one of {', '.join(LINEAR_SOLVERS)}, got {self.linear_solver!r}")
+        for name in ("max_steps", "cg_steps"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+                raise FitError(f"{name}: must be an integer >= 1, got {value!r}")
+        for name in ("rtol", "atol", "learning_rate", "rel_tol", "abs_tol", "visible_threshold"):
             value = getattr(self, name)
             if value is None and name in ("rtol", "atol"):
                 continue
@@ -70,6 +85,10 @@ class FitOptions:
         default_rtol, default_atol = DEFAULT_TOL[self.x64]
         return (default_rtol if self.rtol is None else float(self.rtol),
                 default_atol if self.atol is None else float(self.atol))
+
+    def matrix_free(self, size: int) -> bool:
+        """Whether a fit of `size` entries solves its normal equations matrix-free (CG)."""
+        return self.linear_solver == "cg" or (self.linear_solver == "auto" and size > DENSE_MAX)
 
     def show_progress(self) -> bool:
         return sys.stderr.isatty() if self.progress is None else self.progress

@@ -8,6 +8,8 @@ layout of the fitted values in one flat vector.
     absorption  RGB      [0, inf)                   the value        (ray tree only)
     f0          1        [0, 1]                     the value
     n, m        1        [e^-12, e^12]              log(value)
+    texture     H_t W_t 3 [0, inf)                  the value        (texels of a material's image
+                                                                      texture; G-buffer, Phong only)
 
 The box-constrained Levenberg-Marquardt solver (`lm.py`) works on x inside its bounds, so a
 coefficient whose best value is 0 lands on 0. The unconstrained solvers (optimistix's and Adam) see
@@ -35,7 +37,8 @@ LOG_RANGE = (-12.0, 12.0)
 class Kind:
     """A parameter kind: rgb (an RGB triple, or one grey value); lower / upper bounds in scene units;
     log: the solver coordinate is log(value); tree: needs the ray-tree image model; linear: the
-    image is affine in it (variable projection solves it exactly)."""
+    image is affine in it (variable projection solves it exactly); texels: one entry per texel and
+    channel of the material's texture (`texels.py`)."""
 
     rgb: bool
     lower: float
@@ -43,6 +46,7 @@ class Kind:
     log: bool = False
     tree: bool = False
     linear: bool = False
+    texels: bool = False
 
 
 KINDS = {
@@ -51,6 +55,7 @@ KINDS = {
     "m": Kind(False, math.exp(LOG_RANGE[0]), math.exp(LOG_RANGE[1]), log=True), "f0": Kind(False, 0.0, 1.0),
     "kr": Kind(False, 0.0, 1.0, tree=True), "kt": Kind(False, 0.0, 1.0, tree=True),
     "absorption": Kind(True, 0.0, INF, tree=True), "intensity": Kind(True, 0.0, INF),
+    "texture": Kind(True, 0.0, INF, linear=True, texels=True),
 }
 MATERIAL_KINDS = tuple(k for k in KINDS if k != "intensity")
 COLOR_PARAMS = ("ka", "kd", "ks")
@@ -65,7 +70,8 @@ START_FLOOR = 1e-2  # an unconstrained solver starting at a bound 0 starts here 
 class Param:
     """One fitted quantity. key: its name in `FitResult.params` ("kd", "red.kd" when several
     materials are fitted, "lights[0].intensity"); kind: a key of `KINDS`; index: material id or
-    light index; size: 3 (RGB) or 1; lower / upper: bounds in scene units."""
+    light index; size: 3 (RGB) or 1, H_t W_t 3 for a texture; lower / upper: bounds in scene units;
+    shape: (H_t, W_t) of a texture (entries in texture orientation, row 0 = v 0), else None."""
 
     key: str
     kind: str
@@ -73,6 +79,7 @@ class Param:
     size: int
     lower: float
     upper: float
+    shape: tuple | None = None
 
     @property
     def rgb(self) -> bool:
@@ -157,7 +164,7 @@ class Layout:
         return out
 
 
-def _names(value, argument: str) -> tuple[str, ...]:
+def name_list(value, argument: str) -> tuple[str, ...]:
     """A name, a comma-separated string or a sequence of names, as a tuple (FitError otherwise)."""
     if isinstance(value, str):
         return tuple(part.strip() for part in value.split(",") if part.strip())
@@ -172,7 +179,7 @@ def fitted_materials(scene, materials) -> tuple[str, ...]:
     if materials is None:
         used = {obj.material for obj in scene.objects}
         return tuple(name for name in names if name in used)
-    chosen = _names(materials, "material")
+    chosen = name_list(materials, "material")
     if not chosen or len(set(chosen)) != len(chosen):
         raise FitError(f"material: expected one or more distinct names, got {list(chosen)}")
     for name in chosen:
@@ -190,12 +197,14 @@ def _traced(mat, kind: str) -> bool:
     return True
 
 
-def build_layout(scene, materials, params, *, tree: bool, per_channel=True, bounded=False) -> Layout:
+def build_layout(scene, materials, params, *, tree: bool, per_channel=True, bounded=False,
+                 texture_shapes=None) -> Layout:
     """The fitted parameters of `materials` (names): "kd" means every fitted material's (kr only
     where kr > 0 at the start, kt and absorption only where kt > 0), "red.kd" one material's;
-    "intensity" every light's, "lights[i].intensity" one light's. `tree`: the image model is the ray
-    tree (kr, kt, absorption allowed). Raises FitError naming the offending parameter."""
-    params = _names(params, "params")
+    "intensity" every light's, "lights[i].intensity" one light's; "texture" the texels of each fitted
+    material's texture, `texture_shapes` name -> (H_t, W_t). `tree`: the image model is the ray
+    tree (kr, kt, absorption allowed; no texels). Raises FitError naming the offending parameter."""
+    params = name_list(params, "params")
     if not params:
         raise FitError(f"params: nothing to fit (give some of {', '.join(KINDS)})")
     if len(set(params)) != len(params):
@@ -218,6 +227,9 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
             raise FitError(f"params: unknown parameter {p!r}; {where}")
         if KINDS[kind].tree and not tree:
             raise FitError(f"params: {p!r} needs the ray-traced image model (method='raytrace')")
+        if KINDS[kind].texels and tree:
+            raise FitError(f"params: {p!r} needs the G-buffer image model (method='raster'): the recorded ray "
+                           "tree keeps texel values, not texture coordinates")
         if head and not _traced(scene.materials[head], kind):
             weight = "kr" if kind == "kr" else "kt"
             raise FitError(f"params: {p!r}: {head}.{weight} is 0 at the start, so the recorded ray tree has no "
@@ -232,8 +244,13 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
             if (name, kind) in wanted:
                 spec = KINDS[kind]
                 upper = 1.0 if bounded and kind in COLOR_PARAMS else spec.upper
+                if spec.texels and name not in (texture_shapes or {}):
+                    raise FitError(f"params: {kind!r}: material {name!r} has no image texture; give it one in "
+                                   "the scene (its file sets the texel grid and the start values)")
+                shape = tuple(texture_shapes[name]) if spec.texels else None
+                size = 3 * shape[0] * shape[1] if spec.texels else 3 if spec.rgb and per_channel else 1
                 layout.append(Param(f"{name}.{kind}" if qualify else kind, kind, scene.material_names.index(name),
-                                    3 if spec.rgb and per_channel else 1, spec.lower, upper))
+                                    size, spec.lower, upper, shape))
     for i in sorted(set(lights)):
         layout.append(Param(f"lights[{i}].intensity", "intensity", i, 3 if per_channel else 1, 0.0, INF))
     if not layout:
@@ -242,8 +259,12 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
     return Layout(tuple(layout))
 
 
-def scene_value(scene, param: Param) -> np.ndarray:
-    """The parameter's value in the scene (grey: the mean of the RGB triple), shape (size,)."""
+def scene_value(scene, param: Param, textures=None) -> np.ndarray:
+    """The parameter's value in the scene (grey: the mean of the RGB triple), shape (size,); a
+    texture's from `textures` (material name -> (H_t, W_t, 3) image, row 0 at the top)."""
+    if param.shape is not None:
+        image = np.asarray(textures[scene.material_names[param.index]], np.float64)
+        return np.flipud(image).reshape(-1)
     if param.kind == "intensity":
         raw = scene.lights[param.index].intensity
     else:
@@ -252,9 +273,12 @@ def scene_value(scene, param: Param) -> np.ndarray:
     return raw if param.size == raw.size else np.full(param.size, raw.mean())
 
 
-def public_value(param: Param, value) -> float | list:
-    """A value as the scene file writes it: an RGB list for RGB kinds, else a float."""
+def public_value(param: Param, value) -> float | list | np.ndarray:
+    """A value as the scene file writes it: an RGB list for RGB kinds, a float for scalars, and an
+    (H_t, W_t, 3) float32 image (row 0 at the top, as `load_texture`) for a texture."""
     value = np.asarray(value, np.float64).reshape(-1)
+    if param.shape is not None:
+        return np.flipud(value.reshape(param.shape + (3,))).astype(np.float32)
     if param.rgb:
         return [float(x) for x in np.broadcast_to(value, (3,))]
     return float(value[0])

@@ -6,7 +6,8 @@ the target), the materials' base values, where the fitted values go, and the res
 over every channel of the pixels that count in every view (in the mask, weight > 0, influenced by a
 fitted parameter). c is the target's ceiling: a pixel recorded at the ceiling (a clipped highlight)
 only says the model reaches it, so the model is clipped there too (c = inf for unclipped targets).
-rho is the identity (l2) or rescales r so that r^2 is the Huber or Cauchy loss of r. The residuals
+rho is the identity (l2) or rescales r so that r^2 is the Huber or Cauchy loss of r. A texture's
+smoothness prior (`texels.smoothness_residuals`) is appended after the pixels' entries. The residuals
 are not divided by their count: J^T J then grows with the image, and the damping of the
 Levenberg-Marquardt solver is small against it from the first step.
 """
@@ -19,6 +20,7 @@ import numpy as np
 
 from ..lighting.jax_model import LightsJ
 from .materials import MaterialTable
+from .texels import smoothness_residuals
 
 LOSSES = ("l2", "huber", "cauchy")
 TABLE_KINDS = ("ka", "kd", "ks", "n", "m", "f0", "kr", "kt", "absorption")
@@ -40,16 +42,22 @@ class ViewJ(eqx.Module):
 
 def value_index(layout, n_materials: int, n_lights: int) -> dict:
     """kind -> int32 array of the flat-vector entry each material (or light) field takes (-1: the
-    base value stays): (M, 3) for RGB kinds, (M,) for scalars, (P, 3) for "intensity"."""
+    base value stays): (M, 3) for RGB kinds, (M,) for scalars, (P, 3) for "intensity", and
+    "texels" (T, 3) for the fitted textures' texels stacked in layout order (`MaterialTable.texels`)."""
     index = {k: np.full((n_materials, 3) if k in ("ka", "kd", "ks", "absorption") else (n_materials,), -1, np.int32)
              for k in TABLE_KINDS}
     index["intensity"] = np.full((n_lights, 3), -1, np.int32)
-    offset = 0
+    offset, texels = 0, []
     for p in layout:
         entries = np.arange(offset, offset + p.size)
-        target = index[p.kind]
-        target[p.index] = np.broadcast_to(entries, (3,)) if target.ndim == 2 else entries[0]
+        if p.shape is not None:
+            texels.append(entries.reshape(-1, 3).astype(np.int32))
+        else:
+            target = index[p.kind]
+            target[p.index] = np.broadcast_to(entries, (3,)) if target.ndim == 2 else entries[0]
         offset += p.size
+    if texels:
+        index["texels"] = np.concatenate(texels)
     return index
 
 
@@ -74,8 +82,9 @@ def robust(kind: str, r, scale):
 
 class Problem(eqx.Module):
     """Everything the residuals need. Arrays are leaves (one compiled solve serves any targets of
-    the same shapes); the parameter layout and the loss are static. Values travel as one flat
-    vector in layout order (`params.Layout`)."""
+    the same shapes); the parameter layout, the loss and a texture's smoothness weight are static.
+    Values travel as one flat vector in layout order (`params.Layout`); `index` says where they go in
+    the material table (`value_index`, and "texels" when a texture is fitted)."""
 
     views: tuple
     table: MaterialTable
@@ -84,10 +93,11 @@ class Problem(eqx.Module):
     loss_scale: jnp.ndarray
     layout: object = eqx.field(static=True)
     loss: str = eqx.field(static=True)
+    smoothness: float = eqx.field(static=True, default=0.0)
 
     def materials(self, values) -> MaterialTable:
         """The table with the flat values written in (a checker's ka2 / kd2 stay)."""
-        return self.table._replace(**{k: _put(self.index[k], values, getattr(self.table, k)) for k in TABLE_KINDS})
+        return self.table._replace(**{k: _put(index, values, getattr(self.table, k)) for k, index in self.index.items()})
 
     def images(self, values) -> tuple:
         """The model's pixels (U, 3) of each view for flat values in scene units."""
@@ -106,7 +116,9 @@ class Problem(eqx.Module):
 
     def residuals(self, x):
         """What the least-squares solvers see, for solver coordinates x (`Layout.values`)."""
-        return robust(self.loss, self.weighted(self.layout.values(x)), self.loss_scale)
+        values = self.layout.values(x)
+        data = robust(self.loss, self.weighted(values), self.loss_scale)
+        return jnp.concatenate([data, smoothness_residuals(self.layout, values, self.smoothness)])
 
     def with_targets(self, targets) -> Problem:
         """The same problem with other targets, one (U, 3) array per view."""

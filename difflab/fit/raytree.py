@@ -31,9 +31,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..lighting.jax_model import (LightsJ, lights_to_jax, safe_pow, shade, sum_axis, surface_material,
-                                  textured_material)
-from ..lighting.warp_model import SPECULAR_MODELS, TEXTURE_TARGET_IDS
+from ..lighting.jax_model import LightsJ, lights_to_jax, safe_pow, shade, sum_axis, textured_surface
+from ..lighting.warp_model import SPECULAR_MODELS
 from ..renderers.raytrace.tree import REFLECTED
 from .materials import MaterialTable
 from .shading import PointsJ
@@ -187,13 +186,7 @@ def local_colors(tree: TreeJ, mats: MaterialTable, lights: LightsJ, ambient, bac
     p = tree.points
     has_material = p.material >= 0
     mat_id = jnp.where(has_material, p.material, 0)
-    mat = surface_material(mats, mat_id, p.cell)
-    if tree.texel is not None:
-        target = mats.texture_target[mat_id]
-        for t in sorted(set(TEXTURE_TARGET_IDS.values())):
-            textured = textured_material(mat, t, tree.texel)
-            on = (target == t)[:, None]
-            mat = mat._replace(**{k: jnp.where(on, getattr(textured, k), getattr(mat, k)) for k in ("ka", "kd", "ks")})
+    mat = textured_surface(mats, mat_id, p.cell, tree.texel)
     color = shade(mat, tree.specular, p.normal, p.view, lights, p.light_dir, p.light_dist,
                   node_visibility(tree, mats.kt), ambient)
     return jnp.where(has_material[:, None], color, background)

@@ -5,10 +5,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from ..errors import FitError
+from ..io import save_image
 
 
 def _json_number(x):
@@ -17,8 +19,10 @@ def _json_number(x):
 
 
 def _json(value):
+    """A number or an array (any shape: nested lists) with non-finite entries as None."""
     if isinstance(value, (list, tuple, np.ndarray)):
-        return [_json(v) for v in np.asarray(value, np.float64).reshape(-1)]
+        value = np.asarray(value, np.float64)
+        return [_json(v) for v in value] if value.ndim > 1 else [_json_number(v) for v in value]
     return _json_number(value)
 
 
@@ -29,13 +33,15 @@ class FitResult:
     model explains the targets.
 
     params: name -> fitted value in scene units (RGB lists for ka / kd / ks / light intensities,
-        floats for n, m, f0); names are "kd", ..., or "<material>.kd" when several materials were
-        fitted, and "lights[i].intensity".
+        floats for n, m, f0, an (H_t, W_t, 3) float32 image for a texture, row 0 at the top); names
+        are "kd", ..., or "<material>.kd" when several materials were fitted, and
+        "lights[i].intensity".
     stderr: name -> standard error (same shapes; inf where the data do not determine it; nan when
-        no fit was made). They assume the image model holds (see `fit.stats`): with
-        `model_mismatch` set they understate the real error.
+        no fit was made, and for every parameter of a matrix-free fit, which forms no covariance).
+        They assume the image model holds (see `fit.stats`): with `model_mismatch` set they
+        understate the real error.
     loss: the solvers' objective 0.5 sum r^2 at the solution, summed over the channels of the pixels
-        used (for the l2 loss: half the weighted sum of squared errors).
+        used (for the l2 loss: half the weighted sum of squared errors; a texture prior excluded).
     psnr: 10 log10(1 / MSE) of the fit over the pixels used (dB, peak 1): those in the masks that
         show a fitted material.
     steps: solver steps. seconds: wall time of the solve (compilation included on a first call).
@@ -44,7 +50,8 @@ class FitResult:
         "nonlinear_divergence", "nonfinite", ...) or difflab's ("empty_mask": no pixel of the fitted
         material lies in the masks; "nonfinite_target": NaN / inf target pixels inside the masks).
     history: the loss at the point each solver step evaluated (rejected trial points included).
-    poorly_determined: names whose value the images do not pin down (see `fit.stats`).
+    poorly_determined: names whose value the images do not pin down (see `fit.stats`; in a
+        matrix-free fit: the textures with texels that no pixel sees).
     initial: the starting values (same shapes as params). solver: the solver's name.
     timings: seconds per phase ("setup": G-buffers / ray trees and arrays; "solve"; "stats").
     model: the image model fitted through: "raster" (the G-buffer) or "raytrace" (the recorded ray
@@ -54,7 +61,8 @@ class FitResult:
     at_bound: names with a value (some channel) on a bound (ks = 0 for a matte target).
     censored: target pixel channels at the target's ceiling (clipped highlights), fitted as "at
         least the ceiling". residuals: per view (H, W, 3) float32 model - target on the pixels
-        used (0 elsewhere).
+        used (0 elsewhere). seen: texture name -> (H_t, W_t) bool, the texels the pixels used
+        constrain (`FitOptions.visible_threshold`).
     """
 
     params: dict
@@ -77,6 +85,7 @@ class FitResult:
     at_bound: list = field(default_factory=list)
     censored: int = 0
     residuals: list = field(default_factory=list, repr=False, compare=False)
+    seen: dict = field(default_factory=dict, repr=False, compare=False)
     scene: object = field(default=None, repr=False, compare=False)
     layout: tuple = field(default=(), repr=False, compare=False)
 
@@ -85,8 +94,37 @@ class FitResult:
         """Converged, and the image model explains the targets (no mismatch flag)."""
         return self.converged and not self.model_mismatch
 
-    def to_scene(self):
-        """The scene with the fitted values written back (materials, and lights where fitted)."""
+    @property
+    def n_params(self) -> int:
+        """The number of fitted entries (an RGB value counts 3, a texture H_t W_t 3)."""
+        return int(sum(p.size for p in self.layout))
+
+    @property
+    def rmse(self) -> float:
+        """Root of the mean squared weighted error over the pixels used: 10^(-psnr / 20)."""
+        return 10.0 ** (-self.psnr / 20.0)
+
+    def _texture_key(self) -> str:
+        keys = [p.key for p in self.layout if p.shape is not None]
+        if len(keys) != 1:
+            raise FitError(f"texture: this result fitted {len(keys)} textures ({', '.join(keys) or 'none'}); read "
+                           "params[name] and seen[name]")
+        return keys[0]
+
+    @property
+    def texture(self) -> np.ndarray:
+        """The one fitted texture, (H_t, W_t, 3) float32 linear, row 0 at the top."""
+        return self.params[self._texture_key()]
+
+    @property
+    def visible(self) -> np.ndarray:
+        """(H_t, W_t) bool: the texels of the one fitted texture that the views constrain."""
+        return self.seen[self._texture_key()]
+
+    def to_scene(self, folder=None):
+        """The scene with the fitted values written back (materials, and lights where fitted); a
+        fitted texture is saved as `folder`/<material>_texture.npy (linear float32, atomically) and
+        the material points to it (FitError without a folder)."""
         if self.scene is None:
             raise FitError("to_scene: this result carries no scene")
         scene = self.scene
@@ -97,6 +135,12 @@ class FitResult:
             value = self.params[p.key]
             if p.kind == "intensity":
                 lights[p.index] = dataclasses.replace(lights[p.index], intensity=tuple(value))
+            elif p.shape is not None:
+                if folder is None:
+                    raise FitError(f"to_scene: {p.key!r} is a fitted texture; give folder= to save its texels")
+                name = names[p.index]
+                path = save_image(Path(folder) / f"{name}_texture.npy", value)
+                materials[name] = dataclasses.replace(materials[name], texture=str(path))
             else:
                 name = names[p.index]
                 new = tuple(value) if isinstance(value, list) else float(value)
@@ -106,9 +150,9 @@ class FitResult:
     def to_dict(self) -> dict:
         """A JSON-able summary (non-finite numbers become null)."""
         return {
-            "params": {k: (_json(v) if isinstance(v, list) else _json_number(v)) for k, v in self.params.items()},
-            "stderr": {k: (_json(v) if isinstance(v, list) else _json_number(v)) for k, v in self.stderr.items()},
-            "initial": {k: (_json(v) if isinstance(v, list) else _json_number(v)) for k, v in self.initial.items()},
+            "params": {k: _json(v) for k, v in self.params.items()},
+            "stderr": {k: _json(v) for k, v in self.stderr.items()},
+            "initial": {k: _json(v) for k, v in self.initial.items()},
             "loss": _json_number(self.loss), "psnr": _json_number(self.psnr), "steps": self.steps,
             "seconds": self.seconds, "converged": self.converged, "result": self.result, "solver": self.solver,
             "poorly_determined": list(self.poorly_determined), "history": [_json_number(x) for x in self.history],
@@ -121,6 +165,12 @@ class FitResult:
         """A plain-text table: name, value +- stderr (per channel), and a flag for poorly determined."""
         rows = [f"{'parameter':<22} {'value ± stderr':<60}"]
         for key, value in self.params.items():
+            if isinstance(value, np.ndarray):  # a texture: its size and how much of it the views see
+                seen = self.seen.get(key)
+                share = f", {100.0 * seen.mean():.1f} % seen" if seen is not None else ""
+                rows.append(f"{key:<22} {value.shape[1]}x{value.shape[0]} texels, mean {value.mean(axis=(0, 1))}"
+                            f"{share}")
+                continue
             err = self.stderr.get(key)
             values = value if isinstance(value, list) else [value]
             errs = err if isinstance(err, list) else [err] * len(values)

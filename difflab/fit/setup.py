@@ -6,7 +6,8 @@ The image model: "raytrace" re-forms the Whitted ray tracer's image from each vi
 tree (`raytree.py`), "raster" the rasterizer's from its G-buffer (`shading.py`). Unless told, the
 scene decides: the ray tree when the scene is ray-traced, when any material it uses has kr or kt > 0
 (reflections or transparent shadows can carry a fitted material's colour to other pixels), or when a
-fitted material has an image texture; else the G-buffer.
+fitted material has an image texture; else the G-buffer. Texels are fitted through the G-buffer
+(`texels.py`: the ray tree records texel values, not texture coordinates).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from .raytree import TreeModel, tree_influence
 from .shading import GBufferModel, influence
 from .stats import FLOAT_SIGMA, QUANTISATION_SIGMA, estimate_sigma
 from .targets import prepared_targets
+from .texels import TexelSource, texture_starts, wants_texels
 
 METHODS = ("raster", "raytrace")
 CENSOR_MIN_TIES = 3  # float targets: ties at the maximum (this many, under half the values) mark a ceiling
@@ -54,15 +56,21 @@ class View:
     used: np.ndarray
 
 
-def choose_method(scene, materials, method) -> str:
-    """The image model: `method` when given, else from the scene (see the module docstring)."""
+def choose_method(scene, materials, method, texels=False) -> str:
+    """The image model: `method` when given, else from the scene (see the module docstring);
+    `texels`: a texture is fitted (the G-buffer, refused where the scene needs the ray tree)."""
     if method is not None:
         if method not in METHODS:
             raise FitError(f"method: expected one of {', '.join(METHODS)} (or None: from the scene), got {method!r}")
         return method
     used = {obj.material for obj in scene.objects}
     if scene.render.method == "raytrace" or any(scene.materials[m].kr > 0 or scene.materials[m].kt > 0 for m in used):
+        if texels:
+            raise FitError("params: texels are fitted through the rasterizer's G-buffer, but the scene is ray traced "
+                           "or has kr / kt > 0; pass method='raster' if the rasterizer's image models the targets")
         return "raytrace"
+    if texels:
+        return "raster"
     if any(scene.materials[m].texture is not None for m in materials):
         return "raytrace"
     return "raster"
@@ -80,6 +88,8 @@ def apply_init(scene, materials, init):
         where = f"init[{key!r}]"
         if not isinstance(key, str):
             raise FitError(f"{where}: names are strings")
+        if KINDS.get(key.rpartition(".")[2], KINDS["ka"]).texels:
+            continue  # a texture's start: `texels.texture_starts`
         try:
             array = np.asarray(value, np.float64).reshape(-1)
         except (TypeError, ValueError):
@@ -118,6 +128,15 @@ def _check_number(value, name, *, allow_none=False):
     return float(value)
 
 
+def _check_smoothness(value, textures) -> float:
+    """The texture prior's weight: a finite number >= 0, and 0 unless a texture is fitted."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
+        raise FitError(f"smoothness: must be a finite number >= 0, got {value!r}")
+    if value > 0 and not textures:
+        raise FitError("smoothness: a prior on texels, but no 'texture' is among the params")
+    return float(value)
+
+
 class Setup:
     """A fit prepared (see the module docstring). Attributes: scene (start values written in),
     materials, method, layout, initial (key -> value), x0 (solver coordinates), views, used_pixels,
@@ -125,7 +144,8 @@ class Setup:
 
     def __init__(self, scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None,
                  per_channel=True, bounded=False, loss="l2", loss_scale=0.05, masks=None, weights=None, init=None,
-                 sigma=None, ceiling=None, x64=True, max_depth=None, spp=None, device="cpu", threads=None):
+                 sigma=None, ceiling=None, smoothness=0.0, x64=True, max_depth=None, spp=None, device="cpu",
+                 threads=None):
         if loss not in LOSSES:
             raise FitError(f"loss: unknown loss {loss!r}; known: {', '.join(LOSSES)}")
         loss_scale = _check_number(loss_scale, "loss_scale")
@@ -140,18 +160,24 @@ class Setup:
         except DifflabError as exc:
             raise FitError(f"scene: {exc}") from None
         self.materials = fitted_materials(scene, materials)
-        self.method = choose_method(scene, self.materials, method)
+        texels = wants_texels(params)
+        self.method = choose_method(scene, self.materials, method, texels)
         self.scene = scene = apply_init(scene, self.materials, init)  # a tree is recorded at the start values
+        self.textures = texture_starts(scene, self.materials, init) if texels else {}
         self.layout: Layout = build_layout(scene, self.materials, params, tree=self.method == "raytrace",
-                                           per_channel=per_channel, bounded=bounded)
+                                           per_channel=per_channel, bounded=bounded,
+                                           texture_shapes={k: v.shape[:2] for k, v in self.textures.items()})
         self._check_init_keys(init)
+        self.smoothness = _check_smoothness(smoothness, self.textures)
+        self.texel_source = TexelSource.from_layout(self.layout, scene)
         if self.method == "raster":
-            textured = [m for m in self.materials if scene.materials[m].texture is not None]
+            fitted = {scene.material_names[p.index] for p in self.layout if p.shape is not None}
+            textured = [m for m in self.materials if scene.materials[m].texture is not None and m not in fitted]
             if textured:
                 raise FitError(f"material: {', '.join(textured)} has an image texture, which the G-buffer image "
-                               "model does not carry; fit with method='raytrace', or fit the texture itself with "
-                               "difflab.fit.texture_fit.fit_texture")
-        self.initial = {p.key: scene_value(scene, p) for p in self.layout}
+                               "model carries only when its texels are fitted; fit with method='raytrace', or add "
+                               "'texture' to params")
+        self.initial = {p.key: scene_value(scene, p, self.textures) for p in self.layout}
         self.x0 = self.layout.x_of(self.layout.flatten(self.initial))
         self.views = self._record(targets, masks, weights, ceiling, max_depth, spp, device, threads)
         self.used_pixels = int(sum(int(v.used.sum()) for v in self.views))
@@ -193,7 +219,7 @@ class Setup:
         out._target_statistics()
         if init is not None:
             scene = apply_init(self.scene, self.materials, init)
-            out.initial = {p.key: scene_value(scene, p) for p in self.layout}
+            out.initial = {p.key: scene_value(scene, p, self.textures) for p in self.layout}
             out.x0 = self.layout.x_of(self.layout.flatten(out.initial))
         with jax.enable_x64(self.x64):
             out.problem = self.problem.with_targets(
@@ -247,7 +273,7 @@ class Setup:
     def _model(self, view: View, pixels):
         if self.method == "raytrace":
             return TreeModel.build(view.record, pixels, view.scene.background, self.dtype)
-        return GBufferModel.build(view.record, pixels, self.dtype)
+        return GBufferModel.build(view.record, pixels, self.dtype, self.texel_source)
 
     def _view(self, view: View, pixels, index) -> ViewJ:
         lights = lights_to_jax(view.scene.lights, self.dtype)
@@ -263,10 +289,13 @@ class Setup:
     def _problem(self, loss, loss_scale) -> Problem:
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         views = tuple(self._view(v, np.flatnonzero(v.used), index["intensity"]) for v in self.views)
-        return Problem(views=views, table=MaterialTable.from_scene(self.scene.materials.values(), self.dtype),
-                       ambient=jnp.asarray(self.scene.ambient, self.dtype),
+        table = MaterialTable.from_scene(self.scene.materials.values(), self.dtype)
+        if "texels" in index:  # the values write every row; the start fills them for the shapes
+            table = table._replace(texels=jnp.zeros(index["texels"].shape, self.dtype))
+        return Problem(views=views, table=table, ambient=jnp.asarray(self.scene.ambient, self.dtype),
                        index={k: jnp.asarray(v) for k, v in index.items() if k != "intensity"},
-                       loss_scale=jnp.asarray(loss_scale, self.dtype), layout=self.layout, loss=loss)
+                       loss_scale=jnp.asarray(loss_scale, self.dtype), layout=self.layout, loss=loss,
+                       smoothness=self.smoothness)
 
     def precheck(self) -> str | None:
         """A result code when the fit cannot be made (non-finite target values under the masks, or

@@ -20,9 +20,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..lighting.jax_model import LightsJ, fog_factor, lights_to_jax, shade, sum_axis, surface_material
+from ..lighting.jax_model import LightsJ, fog_factor, lights_to_jax, shade, sum_axis, textured_surface
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS
 from .materials import MaterialTable
+from .texels import point_texels
 
 
 class PointsJ(NamedTuple):
@@ -120,11 +121,12 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
     return points, comp, formation, point_ids
 
 
-def point_colors(points: PointsJ, table: MaterialTable, lights: LightsJ, ambient, specular: int):
-    """The illumination model at each point with its material (`jax_model.surface_material`); 0
-    where a point has no material. Returns (N, 3)."""
+def point_colors(points: PointsJ, table: MaterialTable, lights: LightsJ, ambient, specular: int, texel=None):
+    """The illumination model at each point with its material (`jax_model.textured_surface`: a
+    point's `texel` (N, 3), when given, modulating its texture's target); 0 where a point has no
+    material. Returns (N, 3)."""
     has_material = points.material >= 0
-    mat = surface_material(table, jnp.where(has_material, points.material, 0), points.cell)
+    mat = textured_surface(table, jnp.where(has_material, points.material, 0), points.cell, texel)
     color = shade(mat, specular, points.normal, points.view, lights, points.light_dir, points.light_dist,
                   points.visibility, ambient)
     return jnp.where(has_material[:, None], color, 0.0)
@@ -189,19 +191,31 @@ def influence(gbuffer, material_ids, any_surface: bool) -> np.ndarray:
 
 class GBufferModel(eqx.Module):
     """The G-buffer image model of U pixels: their shading points, composition and formation
-    (`pixel_arrays`). `pixels` is the (U, 3) image for given materials, lights and ambient."""
+    (`pixel_arrays`), and -- when texels are fitted -- each point's taps into the table's stacked
+    texels (rows (R, K), -1: none; tap_weight (R, K); see `texels.py`). `pixels` is the (U, 3) image
+    for given materials, lights and ambient."""
 
     points: PointsJ
     comp: ComposeJ
     formation: Formation = eqx.field(static=True)
+    taps: jnp.ndarray | None = None
+    tap_weight: jnp.ndarray | None = None
 
     @classmethod
-    def build(cls, gbuffer, pixels, dtype) -> GBufferModel:
-        points, comp, formation, _ = pixel_arrays(gbuffer, pixels, dtype)
-        return cls(points=points, comp=comp, formation=formation)
+    def build(cls, gbuffer, pixels, dtype, texels=None) -> GBufferModel:
+        """`texels`: a `texels.TexelSource` for the fitted textures, or None."""
+        points, comp, formation, point_ids = pixel_arrays(gbuffer, pixels, dtype)
+        if texels is None:
+            return cls(points=points, comp=comp, formation=formation)
+        rows, weight = texels.taps(gbuffer, point_ids)
+        if point_ids.size == 0:  # the dummy point of `pixel_arrays`
+            rows, weight = np.full((1, 4), -1, np.int32), np.zeros((1, 4))
+        return cls(points=points, comp=comp, formation=formation, taps=jnp.asarray(rows),
+                   tap_weight=jnp.asarray(np.asarray(weight, np.float64), dtype))
 
     def pixels(self, table: MaterialTable, lights: LightsJ, ambient):
-        return compose(point_colors(self.points, table, lights, ambient, self.formation.specular), self.comp,
+        texel = None if self.taps is None else point_texels(table.texels, self.taps, self.tap_weight)
+        return compose(point_colors(self.points, table, lights, ambient, self.formation.specular, texel), self.comp,
                        self.formation)
 
 

@@ -3,8 +3,10 @@
 "lm" is difflab's box-constrained Levenberg-Marquardt (`lm.py`) on the bounded values themselves;
 "varpro" solves ka, kd, ks exactly inside an "lm" search over the rest (`varpro.py`); "gauss_newton",
 "dogleg", "bfgs" (optimistix) and "adam" (optax through optimistix) run on unconstrained coordinates
-mapped into the bounds (`params.Layout.x_from_free`). Failure is a value: each run returns a result
-code name and never raises here.
+mapped into the bounds (`params.Layout.x_from_free`). Fits with many entries (a texture's texels)
+solve each step's normal equations matrix-free by conjugate gradients (`matfree.py`,
+`FitOptions.linear_solver`). Failure is a value: each run returns a result code name and never
+raises here.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import numpy as np
 
 from . import lm
 from .cache import enable_compilation_cache
+from .matfree import normal_cg, solve_box_cg
 from .options import SOLVERS, FitOptions  # noqa: F401  (SOLVERS: re-exported)
 
 enable_compilation_cache()
@@ -86,17 +89,19 @@ class LossRecorder:
 RECORDER = LossRecorder()
 
 
-def optimistix_solver(name: str, rtol: float, atol: float, learning_rate: float, history: bool):
-    """An optimistix solver by name ("gauss_newton", "dogleg", "bfgs", "adam"). optimistix and optax
-    are imported here, on first use: the default solver needs neither."""
+def optimistix_solver(name: str, rtol: float, atol: float, learning_rate: float, history: bool, linear_solver=None):
+    """An optimistix solver by name ("gauss_newton", "dogleg", "bfgs", "adam"); `linear_solver` (a
+    lineax solver) replaces the least-squares solvers' default. optimistix and optax are imported
+    here, on first use: the default solver needs neither."""
     import optax
     import optimistix as optx
 
     verbose = RECORDER if history else False
+    inner = {} if linear_solver is None else {"linear_solver": linear_solver}
     if name == "gauss_newton":
-        return optx.GaussNewton(rtol=rtol, atol=atol, verbose=verbose)
+        return optx.GaussNewton(rtol=rtol, atol=atol, verbose=verbose, **inner)
     if name == "dogleg":
-        return optx.Dogleg(rtol=rtol, atol=atol, verbose=verbose)
+        return optx.Dogleg(rtol=rtol, atol=atol, verbose=verbose, **inner)
     if name == "bfgs":
         return optx.BFGS(rtol=rtol, atol=atol, verbose=verbose)
     return optx.OptaxMinimiser(optax.adam(learning_rate), rtol=rtol, atol=atol, verbose=verbose)
@@ -145,7 +150,13 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
     dtype = problem.ambient.dtype
     lower, upper = (jnp.asarray(b, dtype) for b in problem.layout.bounds())
     progress = Progress(options.max_steps, label) if options.show_progress() else None
+    matrix_free = options.matrix_free(problem.layout.size)
     try:
+        if options.solver == "lm" and matrix_free:
+            x, code, steps, history = solve_box_cg(problem, jnp.asarray(x0, dtype), lower, upper, options.max_steps,
+                                                   rtol, atol, options.cg_steps, progress)
+            history = np.asarray(history, np.float64)[:int(steps)].tolist() if options.history else []
+            return Solved(np.asarray(x, np.float64), lm.CODES[int(code)], int(steps), history)
         if options.solver == "lm":
             x, code, steps, history, r, jac = lm.solve_box(problem, jnp.asarray(x0, dtype), lower, upper,
                                                            options.max_steps, rtol, atol, progress)
@@ -157,7 +168,8 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
             from .varpro import run_varpro
 
             return Solved(*run_varpro(problem, x0, options, progress))
-        solver = optimistix_solver(options.solver, rtol, atol, options.learning_rate, options.history)
+        inner = normal_cg(rtol, atol, options.cg_steps) if matrix_free else None
+        solver = optimistix_solver(options.solver, rtol, atol, options.learning_rate, options.history, inner)
         z0 = jnp.asarray(problem.layout.free_from_x(x0), dtype)
         if options.history:
             RECORDER.start()

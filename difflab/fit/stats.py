@@ -111,16 +111,18 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
     return np.where(finite, np.sqrt(np.where(finite, np.maximum(diag, 0.0), 0.0) * sigma2), np.inf)
 
 
-def fit_statistics(jac: np.ndarray, r: np.ndarray, censored: int, sigma: float) -> dict:
+def fit_statistics(jac: np.ndarray | None, r: np.ndarray, censored: int, sigma: float, size: int = 0) -> dict:
     """s2 = sse / dof (dof = N - p, N uncensored entries), chi2 = s2 / sigma^2 (reduced), the
-    mismatch flag (chi2 above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and diag (J^T J)^-1 (p,)."""
-    p = jac.shape[1]
+    mismatch flag (chi2 above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and diag (J^T J)^-1 (p,);
+    jac None (a matrix-free fit of p = `size` entries): diag nan, no covariance is formed."""
+    p = jac.shape[1] if jac is not None else size
     sse = float(np.sum(r * r))
     dof = max(r.size - censored - p, 1)
     s2 = sse / dof
     chi2 = s2 / (sigma * sigma) if sigma > 0 else math.inf
     mismatch = bool(chi2 > max(MISMATCH_CHI2, 1.0 + 5.0 * math.sqrt(2.0 / dof)))
-    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": np.diag(covariance_unscaled(jac))}
+    diag = np.diag(covariance_unscaled(jac)) if jac is not None else np.full(p, np.nan)
+    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": diag}
 
 
 def poorly_determined(layout, values: dict, stderr_floor: dict, rel_tol=0.1, abs_tol=1e-3) -> list[str]:

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..vocabulary import (BECKMANN_MIN_COS, BLINN, DIRECTIONAL, FOG_EXP, FOG_EXP2, FOG_LINEAR, LIGHT_TYPES, PHONG,
-                          SPOT, TARGET_KA, TARGET_KD)
+                          SPOT, TARGET_KA, TARGET_KD, TEXTURE_TARGET_IDS)
 
 
 class LightsJ(NamedTuple):
@@ -153,6 +153,21 @@ def surface_material(table, material_id, cell) -> MaterialJ:
                      kd=jnp.where(second, table.kd2[material_id], table.kd[material_id]),
                      ks=table.ks[material_id], n=table.n[material_id], m=table.m[material_id],
                      f0=table.f0[material_id])
+
+
+def textured_surface(table, material_id, cell, texel) -> MaterialJ:
+    """`surface_material` with each point's texture value `texel` (..., 3) multiplying the
+    coefficient its material's texture targets (`table.texture_target`, -1: none); texel None: no
+    texture anywhere."""
+    mat = surface_material(table, material_id, cell)
+    if texel is None:
+        return mat
+    target = table.texture_target[material_id]
+    for t in sorted(set(TEXTURE_TARGET_IDS.values())):
+        textured = textured_material(mat, t, texel)
+        on = (target == t)[..., None]
+        mat = mat._replace(**{k: jnp.where(on, getattr(textured, k), getattr(mat, k)) for k in ("ka", "kd", "ks")})
+    return mat
 
 
 def _target_name(target: int) -> str:

@@ -1,0 +1,115 @@
+"""Matrix-free solves, for fits with too many entries for a dense Jacobian (a texture's texels).
+
+"lm" becomes the box-constrained Levenberg-Marquardt of `lm.py` with the step's normal equations
+solved by conjugate gradients instead of a Cholesky factorisation of J^T J:
+
+    (J_F^T J_F + lambda s I) dx = -J_F^T r         over the free entries F (fixed ones: dx = 0)
+
+where J v and J^T v come from one `jax.linearize` per step (never the N x p matrix), s is the
+curvature of the loss along the first gradient (|J g|^2 / |g|^2, so lambda is relative to the
+problem's scale) and an entry is fixed when it sits on a bound and the gradient pushes it outward.
+The step is projected onto the box; lambda follows Nielsen's rule, and the stopping tests are
+`lm.py`'s. "gauss_newton" and "dogleg" use optimistix's solvers with lineax's CG on the normal
+equations (`normal_cg`). A step costs one linearisation, up to `cg_steps` pairs of J v / J^T v, and
+one residual evaluation.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ..errors import FitError
+from .lm import LAMBDA0, MAX_STEPS, NONFINITE, RUNNING, SUCCESSFUL
+
+DENSE_SOLVERS = ("bfgs", "varpro")  # keep p x p matrices (BFGS's inverse Hessian) or dense Jacobians
+
+
+def check_solver(options, layout) -> None:
+    """FitError when the fit is matrix-free and its solver needs dense p x p matrices."""
+    if options.matrix_free(layout.size) and options.solver in DENSE_SOLVERS:
+        raise FitError(f"solver: {options.solver!r} forms dense {layout.size} x {layout.size} matrices; a fit of "
+                       f"{layout.size} entries (texels) is solved matrix-free by 'lm', 'gauss_newton', 'dogleg' or "
+                       "'adam' (or set linear_solver='dense' to force it)")
+
+
+def normal_cg(rtol: float, atol: float, cg_steps: int):
+    """lineax's conjugate gradients on the normal equations J^T J dx = -J^T r (matrix-free)."""
+    import lineax as lx
+
+    return lx.Normal(lx.CG(rtol=rtol, atol=atol, max_steps=cg_steps))
+
+
+class State(NamedTuple):
+    x: jnp.ndarray
+    loss: jnp.ndarray
+    lam: jnp.ndarray
+    nu: jnp.ndarray
+    scale: jnp.ndarray
+    step: jnp.ndarray
+    code: jnp.ndarray
+    history: jnp.ndarray
+
+
+def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_steps: int, progress=None):
+    """Minimise 0.5 |fn(x, args)|^2 over lower <= x <= upper without forming the Jacobian.
+
+    Arguments and returns as `lm.box_lm`, without r and J: (x, code index into `lm.CODES`, steps,
+    history); cg_steps: the most CG iterations per step (tolerance rtol on the CG residual)."""
+    dtype = x0.dtype
+    x0 = jnp.clip(x0, lower, upper)
+    r0 = fn(x0, args)
+    loss0 = 0.5 * jnp.sum(r0 * r0)
+    state = State(x0, loss0, jnp.asarray(LAMBDA0, dtype), jnp.asarray(2.0, dtype), jnp.asarray(0.0, dtype),
+                  jnp.asarray(0), jnp.where(jnp.isfinite(loss0), RUNNING, NONFINITE),
+                  jnp.full(max_steps, jnp.nan, dtype))
+
+    def body(s: State) -> State:
+        r, jvp = jax.linearize(lambda y: fn(y, args), s.x)
+        vjp = jax.linear_transpose(jvp, s.x)
+        g = vjp(r)[0]
+        free = ~(((s.x <= lower) & (g > 0)) | ((s.x >= upper) & (g < 0)))
+        g_free = jnp.where(free, g, 0.0)
+        jg = jvp(g_free)
+        gg = jnp.sum(g_free * g_free)
+        scale = jnp.where(s.scale > 0, s.scale, jnp.where(gg > 0, jnp.sum(jg * jg) / jnp.where(gg > 0, gg, 1.0), 1.0))
+
+        def normal(v):
+            v_free = jnp.where(free, v, 0.0)
+            return jnp.where(free, vjp(jvp(v_free))[0] + s.lam * scale * v_free, v)
+
+        dx, _ = jax.scipy.sparse.linalg.cg(normal, -g_free, tol=rtol, maxiter=cg_steps)
+        dx = jnp.where(jnp.isfinite(dx), dx, 0.0)
+        x_new = jnp.clip(s.x + dx, lower, upper)
+        d = x_new - s.x
+        jd = jvp(d)
+        r_new = fn(x_new, args)
+        loss_new = 0.5 * jnp.sum(r_new * r_new)
+        accept = jnp.isfinite(loss_new) & (loss_new < s.loss)
+        predicted = -(g @ d + 0.5 * jnp.sum(jd * jd))
+        rho = (s.loss - loss_new) / jnp.where(predicted > 0, predicted, 1.0)
+        lam = jnp.where(accept, s.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), s.lam * s.nu)
+        nu = jnp.where(accept, 2.0, 2.0 * s.nu)
+        small_step = jnp.all(jnp.abs(d) <= atol + rtol * jnp.abs(s.x))
+        tol_loss = rtol * s.loss + atol * atol
+        small_change = ((s.loss - loss_new) <= tol_loss) & (predicted <= tol_loss)
+        step = s.step + 1
+        code = jnp.where(small_step | (accept & small_change), SUCCESSFUL,
+                         jnp.where(step >= max_steps, MAX_STEPS, RUNNING))
+        loss = jnp.where(accept, loss_new, s.loss)
+        if progress is not None:
+            jax.debug.callback(progress, step, loss)
+        return State(jnp.where(accept, x_new, s.x), loss, lam, nu, scale, step, code, s.history.at[s.step].set(loss))
+
+    out = jax.lax.while_loop(lambda s: s.code == RUNNING, body, state)
+    return out.x, out.code, out.step, out.history
+
+
+@eqx.filter_jit
+def solve_box_cg(problem, x0, lower, upper, max_steps, rtol, atol, cg_steps, progress=None):
+    """`box_lm_cg` on a `Problem`'s residuals, compiled once per problem structure and settings."""
+    return box_lm_cg(lambda x, p: p.residuals(x), x0, lower, upper, problem, max_steps=max_steps, rtol=rtol, atol=atol,
+                     cg_steps=cg_steps, progress=progress)

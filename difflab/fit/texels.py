@@ -1,0 +1,198 @@
+"""Texels as fitted parameters: a material's image texture, one unknown per texel and channel.
+
+On a Phong G-buffer every shading point is a sample with texture coordinates uv, and the texture
+value the rasterizer multiplied into the point's coefficient (`texture_target`: ka, kd or ks) is a
+fixed linear combination of texels -- the filter's taps at uv:
+
+    texel(point) = sum_k w_k T[i_k]          (per channel; `texture_taps`, the Warp sampler's rules)
+
+so the image stays affine in T and the fit's Jacobian is sparse (4 bilinear taps per sample). The
+taps are built once per view (`TexelSource.taps`); the texels travel in the flat parameter vector
+(texture orientation: row 0 = v 0, as the Warp texture store) and into `MaterialTable.texels`,
+where `shading.GBufferModel` reads them. Filters: "nearest" and "bilinear" (level 0; the
+magnification filters). An optional smoothness prior adds sqrt(smoothness) times the differences of
+neighbouring texels to the residuals (`smoothness_residuals`), which also fills texels no view sees.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..errors import DifflabError, FitError
+from ..renderers.texture.store import load_texture
+from .params import KINDS, name_list
+
+FIT_FILTERS = ("nearest", "bilinear")
+
+
+def texture_taps(uv: np.ndarray, shape: tuple[int, int], filter: str, wrap: str) -> tuple[np.ndarray, np.ndarray]:
+    """Texel indices and weights (N, K) of `filter` at level 0 of an (H_t, W_t) texture for uv (N, 2),
+    with the Warp kernel's conventions (`renderers.texture.sampling`: texel centres at half-integers,
+    wrap on the integer index); indices are row * W_t + column, row 0 at v = 0."""
+    h, w = shape
+    uv = np.asarray(uv, np.float32)
+    if filter == "nearest":
+        col = np.floor(uv[:, 0] * np.float32(w))
+        row = np.floor(uv[:, 1] * np.float32(h))
+        return (wrap_np(row, h, wrap) * w + wrap_np(col, w, wrap))[:, None], np.ones((uv.shape[0], 1), np.float32)
+    if filter != "bilinear":
+        raise FitError(f"filter: texture fitting supports {FIT_FILTERS}, got {filter!r}")
+    x = uv[:, 0] * np.float32(w) - np.float32(0.5)
+    y = uv[:, 1] * np.float32(h) - np.float32(0.5)
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    cols = [wrap_np(x0, w, wrap), wrap_np(x0 + 1, w, wrap)]
+    rows = [wrap_np(y0, h, wrap), wrap_np(y0 + 1, h, wrap)]
+    index = np.stack([rows[0] * w + cols[0], rows[0] * w + cols[1], rows[1] * w + cols[0], rows[1] * w + cols[1]], 1)
+    weight = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], 1)
+    return index, weight.astype(np.float32)
+
+
+def wrap_np(i: np.ndarray, n: int, wrap: str) -> np.ndarray:
+    """`renderers.texture.sampling.wrap_index` in numpy: integer-valued float indices -> [0, n - 1]."""
+    i = np.where(np.isfinite(i), i, 0.0).astype(np.float64)
+    if wrap == "clamp":
+        i = np.clip(i, 0, n - 1)
+    elif wrap == "mirror":
+        i = np.mod(i, 2 * n)
+        i = np.where(i >= n, 2 * n - 1 - i, i)
+    else:
+        i = np.mod(i, n)
+    return np.clip(i, 0, n - 1).astype(np.int64)
+
+
+def wants_texels(params) -> bool:
+    """Whether `params` (the engine's argument) names a texture."""
+    try:
+        names = name_list(params, "params")
+    except FitError:
+        return False  # build_layout reports it
+    return any(KINDS.get(name.rpartition(".")[2], KINDS["ka"]).texels for name in names)
+
+
+def texture_starts(scene, materials, init) -> dict:
+    """Material name -> its start texels (H_t, W_t, 3) float64, row 0 at the top, for the fitted
+    materials with an image texture: `init["texture"]` / `init["name.texture"]` when given (an image,
+    which also sets the texel grid, or a number / RGB triple filling the file's grid), else the
+    texture file. Raises FitError naming the argument."""
+    starts = {}
+    for name in materials:
+        mat = scene.materials[name]
+        if mat.texture is None:
+            continue
+        if mat.filter not in FIT_FILTERS:
+            raise FitError(f"materials[{name!r}].filter: texture fitting supports {FIT_FILTERS} (level 0), "
+                           f"got {mat.filter!r}")
+        key = next((k for k in (f"{name}.texture", "texture") if k in (init or {})), None)
+        value = None if key is None else init[key]
+        if value is not None and np.ndim(value) == 3:
+            image = np.asarray(value, np.float64)
+            if image.shape[2] != 3 or min(image.shape[:2]) < 1:
+                raise FitError(f"init[{key!r}]: expected an (H_t, W_t, 3) texture, got shape {image.shape}")
+        else:
+            try:
+                image = np.asarray(load_texture(mat.texture), np.float64)
+            except DifflabError as exc:
+                raise FitError(f"materials[{name!r}].texture: {exc}") from None
+            if value is not None:
+                fill = np.asarray(value, np.float64).reshape(-1)
+                if fill.size not in (1, 3):
+                    raise FitError(f"init[{key!r}]: expected a number, an RGB triple or an (H_t, W_t, 3) texture, "
+                                   f"got shape {np.shape(value)}")
+                image = np.broadcast_to(fill, image.shape).copy()
+        if not np.all(np.isfinite(image)) or np.any(image < 0):
+            raise FitError(f"init[{key!r}]: texels must be finite and >= 0")
+        starts[name] = image
+    return starts
+
+
+def texel_blocks(layout) -> dict:
+    """Material id -> (first row in the stacked texels, (H_t, W_t)) of each fitted texture, in
+    layout order."""
+    blocks, row = {}, 0
+    for p in layout:
+        if p.shape is not None:
+            blocks[p.index] = (row, p.shape)
+            row += p.shape[0] * p.shape[1]
+    return blocks
+
+
+@dataclass(frozen=True)
+class TexelSource:
+    """Where each G-buffer shading point reads its texels: material id -> (first stacked row,
+    (H_t, W_t), filter, wrap), for the materials whose texture is fitted."""
+
+    blocks: dict
+
+    @classmethod
+    def from_layout(cls, layout, scene) -> TexelSource | None:
+        mats = list(scene.materials.values())
+        blocks = {i: (row, shape, mats[i].filter, mats[i].wrap) for i, (row, shape) in texel_blocks(layout).items()}
+        return cls(blocks) if blocks else None
+
+    def taps(self, gbuffer, point_ids) -> tuple[np.ndarray, np.ndarray]:
+        """(rows (R, K) int32 into the stacked texels, -1 where the point reads no fitted texture;
+        weights (R, K)) for the points `point_ids` of a Phong G-buffer (point i = sample i)."""
+        if gbuffer.shading != "phong":
+            raise FitError(f"params: fitting texels needs Phong shading (a shading point per sample), the targets "
+                           f"are rendered with {gbuffer.shading!r}")
+        point_ids = np.asarray(point_ids, np.int64)
+        material = gbuffer.points.material[point_ids] if point_ids.size else np.zeros(0, np.int32)
+        uv = gbuffer.uv.reshape(-1, 2)[point_ids] if point_ids.size else np.zeros((0, 2), np.float32)
+        rows = np.full((point_ids.size, 4), -1, np.int32)
+        weights = np.zeros((point_ids.size, 4), np.float32)
+        for mat_id, (first, shape, filter, wrap) in self.blocks.items():
+            on = material == mat_id
+            index, weight = texture_taps(uv[on], shape, filter, wrap)
+            rows[on, :index.shape[1]] = first + index
+            weights[on, :weight.shape[1]] = weight
+        return rows, weights
+
+
+def point_texels(texels, rows, weights):
+    """(R, 3) texel value of each point: its taps' weighted sum of the stacked `texels` (T, 3), 1
+    where it reads none (its coefficient unmodulated)."""
+    value = jnp.sum(weights[..., None] * texels[jnp.maximum(rows, 0)], axis=1)
+    return jnp.where(jnp.any(rows >= 0, axis=1)[:, None], value, 1.0)
+
+
+def smoothness_residuals(layout, values, smoothness: float):
+    """sqrt(smoothness) times the horizontal and vertical neighbour differences of every fitted
+    texture (flat; empty when smoothness is 0): 0.5 |.|^2 is the first-difference prior."""
+    parts, offset = [], 0
+    for p in layout:
+        if p.shape is not None and smoothness > 0.0:
+            grid = values[offset:offset + p.size].reshape(p.shape + (3,))
+            scale = jnp.sqrt(jnp.asarray(smoothness, values.dtype))
+            parts += [scale * (grid[:, 1:] - grid[:, :-1]).reshape(-1), scale * (grid[1:] - grid[:-1]).reshape(-1)]
+        offset += p.size
+    return jnp.concatenate(parts) if parts else jnp.zeros(0, values.dtype)
+
+
+@eqx.filter_jit
+def _column_sums(problem, values, ones):
+    _, pullback = jax.vjp(problem.weighted, values)
+    return pullback(ones)[0]
+
+
+def texel_coverage(problem, values, used) -> dict:
+    """Texture key -> (H_t, W_t) float64, image orientation: the column sums of the Jacobian of the
+    weighted residuals over the residual entries `used` (N,) bool, averaged over the channels -- how
+    much the pixels used change per unit texel, summed (0: no pixel sees the texel)."""
+    layout = problem.layout
+    if not any(p.shape is not None for p in layout):
+        return {}
+    ones = jnp.asarray(np.asarray(used, np.float64), values.dtype)
+    sums = np.asarray(_column_sums(problem, values, ones), np.float64)
+    out, offset = {}, 0
+    for p in layout:
+        if p.shape is not None:
+            grid = sums[offset:offset + p.size].reshape(p.shape + (3,)).mean(axis=-1)
+            out[p.key] = np.flipud(grid)
+        offset += p.size
+    return out
