@@ -69,7 +69,8 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             float("nan")
         if finite:
             st = fit_statistics(jac, r, setup.censored, sigma, layout.size)
-            stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]))
+            stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if jac is not None else
+                                      np.full(layout.size, np.nan))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], QUANTISATION_SIGMA ** 2)))
             flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol) if jac is not None \
                 else [key for key, on in seen.items() if not on.all()]

@@ -22,6 +22,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..errors import FitError
+from .options import DENSE_MAX
 from .params import SCENE_PARAMS
 from .setup import Setup
 from .stats import QUANTISATION_SIGMA, SINGULAR_RCOND, covariance_unscaled, jacobian, poorly_determined
@@ -105,6 +107,9 @@ def _cells(values, fmt) -> str:
 def column_names(layout) -> tuple:
     names = []
     for p in layout:
+        if p.shape is not None:  # texel (row, column) in texture orientation (row 0 = v 0), channel
+            names.extend(f"{p.key}[{i},{j}].{c}" for i in range(p.shape[0]) for j in range(p.shape[1]) for c in CHANNELS)
+            continue
         names.extend([f"{p.key}[{c}]" for c in CHANNELS] if p.size == 3 else [p.key])
     return tuple(names)
 
@@ -113,6 +118,9 @@ def identifiability(setup: Setup, values: dict | None = None, *, sigma=None, rel
                     n_weakest=3) -> Identifiability:
     """The report for a prepared `Setup` at `values` (key -> value in scene units; default: its start)."""
     layout = setup.layout
+    if layout.size > DENSE_MAX:
+        raise FitError(f"params: identify forms the dense {layout.size} x {layout.size} Gram matrix; at most "
+                       f"{DENSE_MAX} entries (a smaller texture, or fewer params)")
     values = {k: np.asarray(v, np.float64).reshape(-1) for k, v in (values or setup.initial).items()}
     sigma = QUANTISATION_SIGMA if sigma is None else float(sigma)
     with jax.enable_x64(setup.x64):

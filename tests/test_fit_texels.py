@@ -1,0 +1,140 @@
+"""Texels through the one engine: `fit_material(..., params=("texture", ...))` on the G-buffer model,
+solved matrix-free (box LM with CG) for large layouts and densely for small ones."""
+
+import lineax as lx
+import numpy as np
+import optimistix as optx
+import pytest
+from test_texture_fit import quad_scene
+
+from difflab import FitError, render, render_frame
+from difflab.fit import FitOptions, Setup, fit_material, identify, solve
+from difflab.fit.texture_fit import fit_texture, texture_view
+
+SHAPE = (12, 12)  # 432 unknowns: above DENSE_MAX, so "auto" is matrix-free
+
+
+@pytest.fixture(scope="module")
+def known(tmp_path_factory):
+    """A 12 x 12 random texture on a quad (ks 0.3, n 20) and its 40 x 40 render."""
+    texels = np.random.default_rng(7).uniform(0.1, 0.9, SHAPE + (3,)).astype(np.float32)
+    path = tmp_path_factory.mktemp("texels") / "truth.npy"
+    np.save(path, texels)
+    scene = quad_scene(path, size=40)
+    return texels, scene, render(scene)
+
+
+def test_texels_are_recovered_through_fit_material(known):
+    texels, scene, target = known
+    result = fit_material(scene, target, "m", ("texture",), init={"texture": 0.5})
+    assert result.model == "raster" and result.converged and result.result == "successful"
+    assert result.n_params == 12 * 12 * 3 and result.params["texture"].shape == SHAPE + (3,)
+    assert result.visible.all()  # the quad fills the view: every texel is seen
+    assert np.abs(result.texture - texels).max() < 1e-5  # float32 render: error ~1e-7 measured
+    assert result.psnr > 100 and not result.model_mismatch
+    assert np.isnan(result.stderr["texture"]).all()  # matrix-free: no covariance is formed
+    assert result.poorly_determined == []
+
+
+def test_texels_with_specular_scalars_in_one_fit(known):
+    """ks and n beside the kd texture's texels: all recovered from a perturbed start."""
+    texels, scene, target = known
+    result = fit_material(scene, target, "m", ("texture", "ks", "n"),
+                          init={"texture": 0.5, "ks": [0.2, 0.2, 0.2], "n": 12.0})
+    assert result.converged
+    np.testing.assert_allclose(result.params["ks"], [0.3, 0.3, 0.3], rtol=1e-4)
+    np.testing.assert_allclose(result.params["n"], 20.0, rtol=1e-4)
+    assert np.abs(result.texture - texels).max() < 1e-4
+
+
+def test_the_engine_agrees_with_optimistix_lm_normal_cg(known):
+    """The previous texture solver -- optimistix's Levenberg-Marquardt with lineax CG on the normal
+    equations, unbounded texels -- on the same problem gives the same texels; a dense solve of a
+    small texture agrees with the CG one and has finite standard errors."""
+    texels, scene, target = known
+    setup = Setup(scene, target, "m", ("texture",), init={"texture": 0.5})
+    ours = solve(setup)
+    method = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10, linear_solver=lx.Normal(lx.CG(rtol=1e-10, atol=1e-10,
+                                                                                           max_steps=500)))
+    import jax
+
+    with jax.enable_x64(True):
+        sol = optx.least_squares(lambda x, p: p.residuals(x), method, jax.numpy.asarray(setup.x0), args=setup.problem,
+                                 max_steps=50, throw=False)
+        theirs = np.flipud(np.asarray(sol.value).reshape(SHAPE + (3,)))
+    assert np.abs(ours.texture - theirs).max() < 1e-6
+
+    small = Setup(scene, target, "m", ("texture",), init={"texture": np.full((6, 6, 3), 0.5)})
+    dense, cg = solve(small, linear_solver="dense"), solve(small, linear_solver="cg")
+    assert dense.converged and cg.converged
+    assert np.abs(dense.texture - cg.texture).max() < 1e-7
+    assert np.all(np.isfinite(dense.stderr["texture"])) and np.isnan(cg.stderr["texture"]).all()
+
+
+def test_fit_texture_is_a_front_end_and_to_scene_saves_the_texels(known, tmp_path):
+    texels, scene, target = known
+    frame = render_frame(scene)
+    view = texture_view(frame.gbuffer, target, scene, "m", SHAPE)
+    result = fit_texture([view], SHAPE, init=0.5)
+    assert result.converged and result.model == "raster"
+    with pytest.raises(FitError, match="folder"):
+        result.to_scene()
+    fitted = result.to_scene(tmp_path)
+    assert fitted.materials["m"].texture == str(tmp_path / "m_texture.npy")
+    np.testing.assert_allclose(render(fitted), target, atol=1e-5)
+
+
+def test_unseen_texels_are_flagged(known):
+    texels, scene, target = known
+    mask = np.zeros(target.shape[:2], bool)
+    mask[:, :20] = True  # the left half of the image: the right texels are unseen
+    result = fit_material(scene, target, "m", ("texture",), masks=mask, init={"texture": 0.5})
+    assert result.converged and 0.3 < result.visible.mean() < 0.7
+    assert result.poorly_determined == ["texture"]
+    assert np.abs(result.texture - texels)[result.visible].max() < 1e-4
+    np.testing.assert_allclose(result.texture[~result.visible], 0.5)
+
+
+@pytest.mark.parametrize("case, kwargs, match", [
+    ("no texture", {"material": "plain"}, r"params: 'texture': material 'plain' has no image texture"),
+    ("ray tree", {"method": "raytrace"}, r"params: 'texture' needs the G-buffer image model"),
+    ("gouraud", {"render": {"shading": "gouraud"}}, r"params: fitting texels needs Phong shading"),
+    ("trilinear", {"filter": "trilinear"}, r"materials\['m'\]\.filter: texture fitting supports"),
+    ("init shape", {"init": {"texture": np.ones((4, 4, 2))}}, r"init\['texture'\]: expected an \(H_t, W_t, 3\)"),
+    ("init negative", {"init": {"texture": -1.0}}, r"init\['texture'\]: texels must be finite and >= 0"),
+    ("smoothness", {"smoothness": -1.0}, r"smoothness: must be a finite number >= 0"),
+    ("bfgs", {"solver": "bfgs"}, r"solver: 'bfgs' forms dense 432 x 432 matrices"),
+    ("linear solver", {"linear_solver": "qr"}, r"linear_solver: expected one of auto, dense, cg"),
+    ("cg steps", {"cg_steps": 0}, r"cg_steps: must be an integer >= 1"),
+])
+def test_bad_texel_fits_raise_fit_error_naming_the_argument(known, case, kwargs, match):
+    texels, scene, target = known
+    d = scene.to_dict()
+    d["materials"]["plain"] = {"kd": 0.5}
+    if "filter" in kwargs:
+        d["materials"]["m"]["filter"] = kwargs.pop("filter")
+    if "render" in kwargs:
+        d["render"].update(kwargs.pop("render"))
+    from difflab import Scene
+
+    material = kwargs.pop("material", "m")
+    with pytest.raises(FitError, match=match):
+        fit_material(Scene.from_dict(d), target, material, ("texture",), **kwargs)
+
+
+def test_smoothness_without_a_texture_and_bad_front_end_arguments(known):
+    texels, scene, target = known
+    with pytest.raises(FitError, match="smoothness: a prior on texels, but no 'texture'"):
+        fit_material(scene, target, "m", ("ks",), smoothness=1.0, method="raytrace")
+    with pytest.raises(FitError, match="views: need at least one view"):
+        fit_texture([], SHAPE)
+    frame = render_frame(scene)
+    with pytest.raises(FitError, match=r"shape: expected \(H_t, W_t\), two integers >= 1, got \(0, 4\)"):
+        texture_view(frame.gbuffer, target, scene, "m", (0, 4))
+    with pytest.raises(FitError, match="wrap: texture fitting supports"):
+        texture_view(frame.gbuffer, target, scene, "m", SHAPE, wrap="spiral")
+    with pytest.raises(FitError, match="init: expected a number, an RGB triple or an"):
+        fit_texture([texture_view(frame.gbuffer, target, scene, "m", SHAPE)], SHAPE, init=np.ones((3, 3)))
+    assert FitOptions(linear_solver="cg").matrix_free(3) and not FitOptions().matrix_free(256)
+    with pytest.raises(FitError, match="params: identify forms the dense 432 x 432 Gram matrix"):
+        identify(scene, target, "m", ("texture",), method="raster")
