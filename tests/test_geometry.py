@@ -574,24 +574,70 @@ def test_load_mesh_reads_leading_zeros_and_crlf_lines(tmp_path):
     assert loaded.faces.tolist() == [[0, 1, 2]] and loaded.vertices[1].tolist() == [1, 0, 0]
 
 
-def test_a_bare_obj_is_read_without_trimesh_as_trimesh_reads_it(tmp_path, monkeypatch):
-    """Only `v`, `f a b c`, comment and blank lines: numpy reads it, to trimesh's result exactly
-    (every vertex in file order, an unused one kept; no normals or uvs)."""
-    import trimesh
+def obj_file(layout: str, *, vt_columns=2, unused=None, extra_lines=(), quads=False, seed=3) -> str:
+    """OBJ text with `layout` corners (a, a/t, a//n, a/t/n): 8 random vertices, 6 uvs, 7 normals,
+    10 triangles (or quads) with random uv / normal indices (so a vertex meets several: trimesh
+    picks one), comment, o / g / s / mtllib / usemtl lines; vertex `unused` used by no face."""
+    rng = np.random.default_rng(seed)
+    vertices, uvs, normals = rng.normal(size=(8, 3)), rng.random((6, vt_columns)), rng.normal(size=(7, 3))
+    used = [k for k in range(8) if k != unused]
+    faces = rng.choice(used, size=(10, 4 if quads else 3))
+    faces[:2, :3] = np.reshape(used[:6], (2, 3))
+    faces[2, :len(used) - 6] = used[6:]
+    tex, norm = rng.integers(0, 6, faces.shape), rng.integers(0, 7, faces.shape)
+    corner = {"a": "{0}", "a/t": "{0}/{1}", "a//n": "{0}//{2}", "a/t/n": "{0}/{1}/{2}"}[layout]
+    lines = ["# a test", "mtllib none.mtl", "o thing", *[f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in vertices],
+             *["vt " + " ".join(f"{u:.17g}" for u in uv) for uv in uvs],
+             *[f"vn {x:.17g} {y:.17g} {z:.17g}" for x, y, z in normals], "s off", "g part", "usemtl none", "",
+             *["f " + " ".join(corner.format(a + 1, b + 1, c + 1) for a, b, c in zip(*row))
+               for row in zip(faces, tex, norm)], *extra_lines]
+    return "\n".join(lines) + "\n"
 
+
+def same_mesh(a, b) -> bool:
+    return all((x is None and y is None) or (x is not None and y is not None and x.shape == y.shape
+                                              and np.array_equal(x, y))
+               for x, y in [(a.vertices, b.vertices), (a.faces, b.faces), (a.normals, b.normals), (a.uvs, b.uvs)])
+
+
+@pytest.mark.parametrize("layout", ["a", "a/t", "a//n", "a/t/n"])
+@pytest.mark.parametrize("variant", ["plain", "uvw", "crlf", "unused last vertex"])
+def test_common_obj_layouts_are_read_by_numpy_as_trimesh_reads_them(tmp_path, monkeypatch, layout, variant):
+    """Triangles with a, a/t, a//n or a/t/n corners (with comment, o / g / s / mtllib / one usemtl
+    lines, 3-number `vt` lines, CRLF line ends, a last vertex no face uses): numpy's reading
+    (`obj_text`) is trimesh's exactly (vertices up to the last used one when corners carry uv or
+    normal indices; per vertex the uv / normal trimesh picks among its corners'), trimesh unasked."""
     from difflab.geometry import loading
 
-    rng = np.random.default_rng(3)
-    vertices = rng.normal(size=(7, 3))
-    faces = rng.integers(0, 6, size=(9, 3))  # vertex 7 is used by no face
-    path = tmp_path / "bare.obj"
-    path.write_text("# bare\r\n" + "".join(f"v {x:.17g} {y:.17g} {z:.17g}\r\n" for x, y, z in vertices) + "\n"
-                    + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces))
-    reference = trimesh.load(path, process=False, maintain_order=True)
+    text = obj_file(layout, vt_columns=3 if variant == "uvw" else 2, unused=7 if variant == "unused last vertex" else None)
+    path = tmp_path / "m.obj"
+    path.write_bytes(text.replace("\n", "\r\n").encode() if variant == "crlf" else text.encode())
+    reference = loading._trimesh_load(str(path), None)
     monkeypatch.setattr(loading, "_trimesh_load", lambda *args: pytest.fail("trimesh was asked"))
     loaded = load_mesh(path)
-    assert np.array_equal(loaded.vertices, reference.vertices) and np.array_equal(loaded.faces, reference.faces)
-    assert np.array_equal(loaded.vertices, vertices) and loaded.normals is None and loaded.uvs is None
+    assert same_mesh(loaded, reference)
+    assert (loaded.normals is not None) == ("n" in layout) and (loaded.uvs is not None) == ("t" in layout)
+    assert loaded.n_vertices == (7 if variant == "unused last vertex" and layout != "a" else 8)
+
+
+@pytest.mark.parametrize("case", ["quads", "two materials", "unused vertex with normals", "negative index"])
+def test_other_obj_layouts_are_left_to_trimesh(tmp_path, monkeypatch, case):
+    """Quads, several materials, a vertex no face uses before the last (trimesh then drops the
+    normals) and negative indices: trimesh reads these, and load_mesh gives its mesh."""
+    from difflab.geometry import loading
+
+    text = {"quads": obj_file("a//n", quads=True), "two materials": obj_file("a", extra_lines=["usemtl b", "f 1 2 3"]),
+            "unused vertex with normals": obj_file("a//n", unused=2),
+            "negative index": obj_file("a", extra_lines=["f -1 -2 -3"])}[case]
+    path = tmp_path / "m.obj"
+    path.write_text(text)
+    asked = []
+    trimesh_load = loading._trimesh_load
+    monkeypatch.setattr(loading, "_trimesh_load", lambda *args: asked.append(1) or trimesh_load(*args))
+    loaded = load_mesh(path)
+    assert asked and same_mesh(loaded, trimesh_load(str(path), None))
+    if case == "unused vertex with normals":
+        assert loaded.normals is None and loaded.n_vertices == 8
 
 
 @pytest.mark.parametrize("name", sorted(BAD_FILES))

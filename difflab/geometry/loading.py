@@ -4,9 +4,10 @@ writes a `TriMesh` as OBJ.
 trimesh is lenient: it may drop faces that index past the vertex list or read a garbage file as an
 empty scene. For OBJ files we therefore check the raw text (vertex values, every `f` index, at least
 one face) so each problem is reported, with the path and line, instead of silently repaired: a
-file in the plain layout (`v x y z`, triangle `f a b c`) is vouched for by vectorised byte checks and
-by trimesh reading exactly as many vertices and triangles as it has; anything else is scanned line
-by line.
+file in the plain layout (`v x y z`, triangle `f a b c`, see `obj_text`) is vouched for by
+vectorised byte checks and by its reading giving exactly as many vertices and triangles as it has
+lines; anything else is scanned line by line. The common plain layouts are read by numpy
+(`obj_text.read_obj`) to what trimesh gives for them; trimesh reads the rest.
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ from __future__ import annotations
 import io
 import math
 import os
-import re
 import warnings
 from pathlib import Path
 
@@ -25,6 +25,7 @@ from difflab.io import write_text_atomic
 from difflab.limits import MAX_COORD, MESH_FILE_BYTES, require_memory
 
 from .mesh import TriMesh, concatenate
+from .obj_text import read_obj
 
 
 def _read_obj(path: str) -> bytes:
@@ -33,60 +34,6 @@ def _read_obj(path: str) -> bytes:
             return handle.read()
     except OSError as exc:
         raise MeshError(f"{path}: cannot read mesh file: {exc}") from None
-
-
-VERTEX_CHARS = b"0123456789.eE+- \r\n"  # a plain `v x y z` line, once its key is removed
-FACE_CHARS = b"0123456789/ \r\n"  # a plain `f a b c` line with positive indices
-PLAIN_OBJ_KEYS = (b"v ", b"f ", b"vn ", b"vt ", b"o ", b"g ", b"s ", b"usemtl ", b"mtllib ", b"#")  # line starts kept
-BARE_OBJ_KEYS = (b"v ", b"f ", b"#")
-
-
-def _plain_obj(data: bytes) -> tuple[bytes, bytes, bool] | None:
-    """The `v` and `f` lines (keys removed, joined by newlines) of an OBJ text in the plain layout
-    trimesh reads without dropping or reinterpreting anything: only `v x y z` lines of numbers,
-    triangle `f a b c` lines of positive indices (optionally `a/b/c`), comments and `vn` / `vt` / `o`
-    / `g` / `s` / `usemtl` / `mtllib` lines; and whether it is *bare*: nothing but `v`, `f a b c`,
-    comment and blank lines (`_bare_obj_mesh` reads those). None for anything else, which
-    `_scan_obj_lines` then checks line by line."""
-    lines = data.split(b"\n")  # one pass in C; the filters below touch each line once
-    vertex_text, face_text = (b"\n".join([line for line in lines if line.startswith(key)])[2:].replace(b"\n" + key,
-                                                                                                      b"\n")
-                              for key in (b"v ", b"f "))
-    n_vertices, n_faces = _line_count(vertex_text), _line_count(face_text)
-    known = all(line.startswith(PLAIN_OBJ_KEYS) or line in (b"", b"\r") for line in lines)
-    if (not n_faces or not known or vertex_text.translate(None, VERTEX_CHARS)
-            or face_text.translate(None, FACE_CHARS) or b"  " in vertex_text or b"  " in face_text
-            or vertex_text.count(b" ") != 2 * n_vertices or face_text.count(b" ") != 2 * n_faces
-            or _has_zero_index(face_text)):
-        return None
-    bare = b"/" not in face_text and all(line.startswith(BARE_OBJ_KEYS) or line in (b"", b"\r") for line in lines)
-    return vertex_text, face_text, bare
-
-
-def _line_count(text: bytes) -> int:
-    return text.count(b"\n") + bool(text)
-
-
-def _bare_obj_mesh(vertex_text: bytes, face_text: bytes, path: str) -> TriMesh | None:
-    """A bare OBJ's mesh (see `_plain_obj`) parsed with numpy: what trimesh gives for it (every vertex
-    in file order, faces 0-based, no normals or uvs). None where a number does not parse or an index
-    is out of range: trimesh's reading and the line scan then report it."""
-    try:
-        vertices = np.array(vertex_text.split(), dtype=np.float64).reshape(-1, 3)
-        faces = np.array(face_text.split(), dtype=np.int64).reshape(-1, 3) - 1
-    except ValueError:
-        return None
-    if faces.max() >= len(vertices):
-        return None
-    return TriMesh(vertices, faces, None, None, name=path)
-
-
-def _has_zero_index(face_text: bytes) -> bool:
-    """Whether a vertex index (a corner's first number) of these plain face lines is 0."""
-    text = b" " + face_text.replace(b"\n", b" ").replace(b"\r", b" ") + b" "
-    if b" 00" in text:  # leading zeros: the regex (rare; slower)
-        return re.search(rb" 0+[ /]", text) is not None
-    return b" 0 " in text or b" 0/" in text
 
 
 def _scan_obj_lines(lines: list[str], path: str) -> None:
@@ -198,17 +145,19 @@ def load_mesh(path) -> TriMesh:
         raise MeshError(f"{path}: not a file")
     require_memory(os.path.getsize(path) * MESH_FILE_BYTES, f"{path}: loading a mesh file of "
                    f"{os.path.getsize(path)} bytes", MeshError)
-    plain = None
+    text = None  # an OBJ file's text, as `read_obj` finds it
     if path.lower().endswith(".obj"):
         data = _read_obj(path)
-        plain = _plain_obj(data)
-        if plain is None:
+        text = read_obj(data)
+        if not text.plain:
             _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)
-    mesh = _bare_obj_mesh(*plain[:2], path) if plain is not None and plain[2] else None
-    if mesh is None:
-        mesh = _trimesh_load(path, data if plain is not None else None)
-    if plain is not None and ((mesh.n_vertices, mesh.n_faces) != tuple(map(_line_count, plain[:2]))  # dropped, split
-                              or not np.all(np.abs(mesh.vertices) <= MAX_COORD)):  # or a value is out of range
+    if text is not None and text.arrays is not None:
+        mesh = TriMesh(*text.arrays, name=path)
+    else:
+        mesh = _trimesh_load(path, data if text is not None and text.plain else None)
+    if text is not None and text.plain and (
+            (mesh.n_vertices, mesh.n_faces) != (text.n_vertex_lines, text.n_face_lines)  # dropped, split
+            or not np.all(np.abs(mesh.vertices) <= MAX_COORD)):  # or a value is out of range
         _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)  # names the line
     if not np.all(np.isfinite(mesh.vertices)):
         raise MeshError(f"{path}: vertex coordinates are not finite")

@@ -262,19 +262,17 @@ def ray_epsilon(camera, mesh_vertices: np.ndarray, spheres) -> float:
     return RAY_EPSILON_SCALE * max(1.0, float(np.linalg.norm(points.max(0) - points.min(0))))
 
 
-def ray_geometry(arrays: dict, soup: dict, n_mesh_faces: int, spheres, planes, epsilon: float, device: str):
+def ray_geometry(arrays: dict, mesh_vertices: np.ndarray, spheres, planes, epsilon: float, device: str):
     """The ray-traceable scene's spheres and planes, and its mesh faces' ids; the BVH over the faces
-    is built when a ray first needs it (`CompiledScene.traceable`), geom.mesh is 0 until then."""
+    is built when a ray first needs it (`CompiledScene.traceable`), geom.mesh is 0 until then.
+    `mesh_vertices`: the vertices the mesh faces use (MeshError unless finite)."""
     def arr(values, dtype):
         return wp.array(np.ascontiguousarray(values), dtype=dtype, device=device)
 
     geom = SceneGeomW()
     geom.mesh = wp.uint64(0)
-    if n_mesh_faces:
-        used = np.zeros(soup["vertices"].shape[0], bool)
-        used[soup["faces"][:n_mesh_faces].ravel()] = True
-        if not np.all(np.isfinite(soup["vertices"][used])):
-            raise MeshError("mesh vertices are not finite after transforming")
+    if not np.all(np.isfinite(mesh_vertices)):
+        raise MeshError("mesh vertices are not finite after transforming")
     geom.face_material, geom.face_object = arrays["face_material"], arrays["face_object"]
     geom.sphere_center = arr(np.array([s.center for s, _, _ in spheres], np.float32).reshape(-1, 3), wp.vec3)
     geom.sphere_radius = arr(np.array([s.radius for s, _, _ in spheres], np.float32), float)
@@ -312,14 +310,17 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     n_mesh_faces = sum(m.faces.shape[0] for m, _, _ in mesh_parts)
     n_mesh_vertices = sum(m.vertices.shape[0] for m, _, _ in mesh_parts)
     faces = soup["faces"]
-    epsilon = ray_epsilon(scene.camera, soup["vertices"][faces[:n_mesh_faces].ravel()], spheres)
+    used = np.zeros(soup["vertices"].shape[0], bool)  # the vertices of the mesh faces, each once
+    used[faces[:n_mesh_faces].ravel()] = True
+    mesh_vertices = soup["vertices"][used]
+    epsilon = ray_epsilon(scene.camera, mesh_vertices, spheres)
     dtypes = {"vertices": wp.vec3, "normals": wp.vec3, "uvs": wp.vec2, "faces": wp.int32, "face_material": wp.int32,
               "face_object": wp.int32, "face_normal": wp.vec3, "vertex_material": wp.int32, "vertex_object": wp.int32}
     # on the CPU the device arrays alias the soup's (copy=False): one copy of the mesh in memory
     arrays = {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device, copy=False)
               for name, dtype in dtypes.items()}
     arrays["faces"] = arrays["faces"].reshape((faces.shape[0], 3))
-    geom = ray_geometry(arrays, soup, n_mesh_faces, spheres, planes, epsilon, device)
+    geom = ray_geometry(arrays, mesh_vertices, spheres, planes, epsilon, device)
     ordered = [scene.materials[name] for name in scene.material_names]
     textures, texture_ids = scene_textures(ordered, device)
     return CompiledScene(

@@ -6,9 +6,11 @@ shading, Blinn specular, one point light, no shadows, warm (kernels compiled, sc
 and difflab on one thread, interleaved, so a machine shared with other work loads all three alike;
 the table gives medians, difflab / Mesa per row on wall time and on CPU time (all threads of the
 process: less sensitive to other work on the machine), the 1 -> all-cores speed-up, compile time, the
-PSNR of difflab's 8-bit image against Mesa's (the same picture), and the peak resident memory of a
-fresh process that loads, compiles and renders the 1080p 1M-triangle frame. Writes
-experiments/results/bench_raster.json with the machine's load average before and after.
+PSNR of difflab's 8-bit image against Mesa's (the same picture), the peak resident memory of a
+fresh process that loads, compiles and renders the 1080p 1M-triangle frame, and the load + compile
+time of the largest sphere written as an OBJ file with `vn` normals (`f a//n` corners) and without
+(bare `v` / `f a b c`: vertex normals computed). Writes experiments/results/bench_raster.json with
+the machine's load average before and after.
 
     python experiments/bench/raster.py            # full
     python experiments/bench/raster.py --small    # quick check (10k triangles, 160x120)
@@ -23,6 +25,7 @@ import resource
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -30,6 +33,7 @@ import numpy as np
 import warp
 
 import difflab
+from difflab.geometry import TriMesh, save_mesh
 from difflab.io import write_json_atomic
 from difflab.renderers.compile import object_mesh
 from difflab.renderers.launch import cpu_threads
@@ -78,6 +82,23 @@ def peak_memory_mib(resolution: int, width: int, height: int) -> float:
     for _ in range(2):
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return int(out.stdout.strip().splitlines()[-1]) / 1024.0
+
+
+def obj_load_seconds(resolution: int, repeats: int) -> dict:
+    """Median seconds of `compile_scene` for the sphere of `resolution` read from an OBJ file, with
+    `vn` normals and bare (process CPU seconds beside: less sensitive to other work)."""
+    mesh = object_mesh(sphere_scene(resolution, 64, 48).objects[0])
+    out = {}
+    with tempfile.TemporaryDirectory() as folder:
+        for label, written in [("obj_with_vn", mesh), ("obj_bare", TriMesh(mesh.vertices, mesh.faces))]:
+            path = save_mesh(Path(folder) / f"{label}.obj", written)
+            scene = sphere_scene(resolution, 640, 480).to_dict()
+            scene["objects"] = [{"type": "mesh", "file": str(path), "material": "m"}]
+            scene = difflab.Scene.from_dict(scene)
+            times = [timed(lambda: difflab.compile_scene(scene))[:2] for _ in range(repeats)]
+            out[label] = {"seconds": statistics.median(t for t, _ in times),
+                          "cpu_seconds": statistics.median(c for _, c in times), "bytes": path.stat().st_size}
+    return out
 
 
 def bench_row(label: str, resolution: int, width: int, height: int, repeats: int, threads: int) -> dict:
@@ -134,10 +155,15 @@ def main(argv=None) -> int:
     width, height = sizes[-1]
     peak = peak_memory_mib(max(meshes.values()), width, height)
     print(f"peak RSS of a fresh process rendering the {width}x{height} {list(meshes)[-1]} frame: {peak:.0f} MiB")
+    obj = obj_load_seconds(max(meshes.values()), min(args.repeats, 3))
+    for label, row in obj.items():
+        print(f"load + compile of the {list(meshes)[-1]}-triangle sphere as {label} ({row['bytes'] / 2 ** 20:.0f} MiB): "
+              f"{row['seconds']:.2f} s (CPU {row['cpu_seconds']:.2f} s)")
     if why_not:
         print(f"Mesa not measured: {why_not}")
     result = {"benchmark": "raster_vs_mesa", "statistic": "median", "repeats": args.repeats, "interleaved": True,
-              "threads": threads, "rows": rows, "peak_rss_mib": peak, "mesa": why_not or "OSMesa llvmpipe",
+              "threads": threads, "rows": rows, "peak_rss_mib": peak, "obj_load": obj,
+              "mesa": why_not or "OSMesa llvmpipe",
               "load_average_before": load_before, "load_average_after": os.getloadavg(),
               "versions": {"difflab": difflab.__version__, "warp": warp.config.version,
                            "python": platform.python_version()},
