@@ -49,7 +49,7 @@ def check_applies(method: str, given: dict) -> None:
 
 
 def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None,
-                 width=None, height=None, threads=None, item_buffer=False, light_buffer=False, **options) -> Frame:
+                 width=None, height=None, threads=None, item_buffer=None, light_buffer=False, **options) -> Frame:
     """Render a scene and return the `Frame` (image and G-buffer; the ray tree for ray tracing).
 
     Arguments:
@@ -62,10 +62,11 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
         width, height: override the camera's image size (not with a CompiledScene, which is
             tessellated for its camera: compile the resized scene instead).
         threads: CPU worker threads (default: all cores, or $DIFFLAB_THREADS).
-        item_buffer, light_buffer: ray-tracer speed-ups that leave the image unchanged: primary
-            visibility from the rasterizer's z-buffer (needs "grid" sampling), and shadow rays that
-            test only the candidates of their light-buffer cell (Haines and Greenberg). Their costs
-            are in `frame.stats`. RenderError with the rasterizer.
+        item_buffer, light_buffer: ray-tracer speed-ups that leave the image unchanged: the primary
+            rays' mesh hits from the rasterizer's z-buffer (needs "grid" sampling; None, the
+            default: on wherever it applies, False: every primary ray through the BVH), and shadow
+            rays that test only the candidates of their light-buffer cell (Haines and Greenberg).
+            Their costs are in `frame.stats`. True with the rasterizer: RenderError.
 
     Raises RenderError before allocating a render over the memory or ray budget (`difflab.limits`),
     and instead of returning non-finite pixels (naming the scene's largest numbers).
@@ -78,7 +79,7 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
 
 
 def render(scene, *, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None,
-           width=None, height=None, threads=None, item_buffer=False, light_buffer=False, **options):
+           width=None, height=None, threads=None, item_buffer=None, light_buffer=False, **options):
     """Render a scene (or a `CompiledScene`) to a numpy (H, W, 3) float32 linear RGB image; the
     keyword-only options are those of `render_frame`. Only the image is formed (no G-buffer, no
     recorded ray tree)."""

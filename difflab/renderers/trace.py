@@ -110,7 +110,7 @@ def no_hit(t_max: float):
     return hit
 
 
-@wp.func
+@wp.func(inline=True)
 def surface_hit(geom: SceneGeomW, kind: int, index: int, t: float, origin: wp.vec3, direction: wp.vec3):
     """The hit on sphere / plane / triangle `index` at t: its object, material and geometric normal
     (a triangle's normal, u and v are left for the caller, which has them from its intersection)."""
@@ -132,9 +132,10 @@ def surface_hit(geom: SceneGeomW, kind: int, index: int, t: float, origin: wp.ve
 
 
 @wp.func
-def closest_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: float, t_max: float,
-                ignore_object: int):
-    """The nearest surface with t_min < t < t_max along a unit ray, skipping object `ignore_object`."""
+def analytic_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: float, t_max: float,
+                 ignore_object: int):
+    """The nearest sphere or plane with t_min < t < t_max along a unit ray, skipping object
+    `ignore_object`: only its t, kind and index (`finish_hit` completes it)."""
     hit = no_hit(t_max)
     for k in range(geom.sphere_center.shape[0]):
         if geom.sphere_object[k] != ignore_object:
@@ -150,17 +151,44 @@ def closest_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: fl
                 hit.t = t
                 hit.kind = HIT_PLANE
                 hit.index = k
-    if geom.mesh != wp.uint64(0):
-        query = wp.mesh_query_ray(geom.mesh, origin + t_min * direction, direction, hit.t - t_min)
-        if query.result and geom.face_object[query.face] != ignore_object:
-            out = surface_hit(geom, HIT_TRIANGLE, query.face, query.t + t_min, origin, direction)
-            out.u = query.u
-            out.v = query.v
-            out.normal = wp.normalize(query.normal)
-            return out
+    return hit
+
+
+@wp.func
+def triangle_hit(geom: SceneGeomW, face: int, t: float, u: float, v: float, normal: wp.vec3, origin: wp.vec3,
+                 direction: wp.vec3):
+    """The hit on mesh triangle `face` as `mesh_query_ray` reports it (t, u, v, unit winding normal)."""
+    out = surface_hit(geom, HIT_TRIANGLE, face, t, origin, direction)
+    out.u = u
+    out.v = v
+    out.normal = wp.normalize(normal)
+    return out
+
+
+@wp.func
+def finish_hit(geom: SceneGeomW, hit: HitW, origin: wp.vec3, direction: wp.vec3):
+    """An `analytic_hit` (or a miss) with its object, material and normal."""
     if hit.kind == HIT_NONE:
         return hit
     return surface_hit(geom, hit.kind, hit.index, hit.t, origin, direction)
+
+
+@wp.func
+def mesh_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: float, hit: HitW, ignore_object: int):
+    """The nearest mesh triangle before `hit` (an `analytic_hit`) through the BVH, else `hit` finished."""
+    if geom.mesh != wp.uint64(0):
+        query = wp.mesh_query_ray(geom.mesh, origin + t_min * direction, direction, hit.t - t_min)
+        if query.result and geom.face_object[query.face] != ignore_object:
+            return triangle_hit(geom, query.face, query.t + t_min, query.u, query.v, query.normal, origin, direction)
+    return finish_hit(geom, hit, origin, direction)
+
+
+@wp.func
+def closest_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: float, t_max: float,
+                ignore_object: int):
+    """The nearest surface with t_min < t < t_max along a unit ray, skipping object `ignore_object`."""
+    return mesh_hit(geom, origin, direction, t_min, analytic_hit(geom, origin, direction, t_min, t_max, ignore_object),
+                    ignore_object)
 
 
 @wp.func

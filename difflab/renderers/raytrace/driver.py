@@ -30,7 +30,7 @@ from ...vocabulary import FRESNEL_MODES, SPECULAR_MODELS
 from ..camera import camera_struct
 from ..frame import Frame, box_downsample
 from ..launch import launch_row_loops, load_kernels
-from .itembuffer import item_buffer, item_struct
+from .itembuffer import asked_bvh, item_buffer, item_struct
 from .lightbuffer import build_light_buffer, no_light_buffer
 from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, TraceOutW, TraceParamsW, \
     whitted_kernel
@@ -52,6 +52,7 @@ class Traced:
     depth_histogram: list  # rays traced at depth 1, 2, ...
     tree: RayTree | None
     shadow_tests: int = 0  # candidates the light buffer's shadow rays tested (0 without one)
+    asked_bvh: int = 0  # samples whose primary ray the item buffer left to the BVH (ambiguous hints)
 
 
 def sample_points(width: int, height: int, side: int, sampling: str = "grid") -> np.ndarray:
@@ -70,8 +71,9 @@ def sample_points(width: int, height: int, side: int, sampling: str = "grid") ->
     return np.stack([x, y], axis=-1).astype(np.float32)
 
 
-def trace_params(scene, settings, record: bool, spread: float) -> TraceParamsW:
+def trace_params(scene, settings, record: bool, spread: float, side: int) -> TraceParamsW:
     params = TraceParamsW()
+    params.side = int(side)
     params.max_depth = int(settings.max_depth)
     params.shadows = int(settings.shadows)
     params.transparent = int(settings.transparent_shadows)
@@ -107,16 +109,24 @@ def scene_struct(compiled, light_buffer=None) -> SceneW:
     return out
 
 
-def trace_points(compiled, settings, points: np.ndarray, threads: int | None = None, *, record: bool = False,
-                 item=None, pixel_size: tuple[int, int] | None = None, light_buffer=None) -> Traced:
+def trace_points(compiled, settings, points: np.ndarray | None, threads: int | None = None, *, side: int = 0,
+                 record: bool = False, item=None, pixel_size: tuple[int, int] | None = None,
+                 light_buffer=None) -> Traced:
     """Trace one ray tree per raster point of `points` (rows, cols, 2), in pixels of the camera's
-    image (or of `pixel_size` = (width, height)). `item`: an `ItemBufferW` on the same grid;
-    `light_buffer`: a `lightbuffer.LightBuffer` for the shadow rays."""
+    image (or of `pixel_size` = (width, height)); with `points` None, per sample of the regular
+    grid of `side` x `side` samples per pixel ("grid" `sample_points`, computed by the kernel).
+    `item`: an `ItemBufferW` on the same grid; `light_buffer`: a `lightbuffer.LightBuffer` for the
+    shadow rays."""
     scene, device = compiled.scene, compiled.device
     kernel = whitted_kernel(settings.max_depth)
     load_kernels(device, kernel)
-    rows, cols = points.shape[:2]
     width, height = pixel_size or (scene.camera.width, scene.camera.height)
+    if points is None:
+        rows, cols = height * side, width * side
+        points = np.zeros((1, 1, 2), np.float32)  # not read
+    else:
+        rows, cols = points.shape[:2]
+        side = 0
     cam = camera_struct(scene.camera, width, height)
     n_lights = len(scene.lights)
     shape = (rows, cols)
@@ -129,16 +139,17 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
 
     def launch(params, tree) -> TraceOutW:
         out = TraceOutW()
-        out.color = wp.zeros(shape, dtype=wp.vec3, device=device)
-        out.fog = wp.zeros(shape, dtype=float, device=device)
-        out.node_count = wp.zeros(shape, dtype=wp.int32, device=device)
+        out.color = wp.empty(shape, dtype=wp.vec3, device=device)  # every element written by the kernel
+        out.fog = wp.empty(shape, dtype=float, device=device)
+        out.node_count = wp.empty(shape, dtype=wp.int32, device=device)
         out.rays = wp.zeros((rows, 4), dtype=wp.int32, device=device)
         out.depth_hist = wp.zeros((rows, settings.max_depth), dtype=wp.int32, device=device)
         launch_row_loops(kernel, rows, [wp_points, cam, scene_w, params, item, tree, out], device, threads)
         return out
 
-    out = launch(trace_params(scene, settings, False, spread), empty_tree(shape, 0, 0, device))
+    out = launch(trace_params(scene, settings, False, spread, side), empty_tree(shape, 0, 0, device))
     shadow_tests = int(light_buffer.warp.tests.numpy()[0]) if light_buffer is not None else 0
+    asked = asked_bvh(item)
     counts = out.node_count.numpy()
     ray_counts = out.rays.numpy().astype(np.int64).sum(axis=0)
     stats_rays = {"primary": int(ray_counts[COUNT_PRIMARY]), "shadow": int(ray_counts[COUNT_SHADOW]),
@@ -149,14 +160,15 @@ def trace_points(compiled, settings, points: np.ndarray, threads: int | None = N
     if record:
         crossings = count_crossings(scene, settings)
         wp_tree, offsets = sized_tree(counts, n_lights, len(scene.materials) if crossings else 0, device)
-        launch(trace_params(scene, settings, True, spread), wp_tree)
-        tree = tree_to_numpy(wp_tree, offsets, n_lights, fog, scene, settings, points.shape[:2], crossings)
+        launch(trace_params(scene, settings, True, spread, side), wp_tree)
+        tree = tree_to_numpy(wp_tree, offsets, n_lights, fog, scene, settings, shape, crossings)
     return Traced(color=out.color.numpy(), fog=fog, node_count=counts, rays=stats_rays,
-                  depth_histogram=histogram, tree=tree, shadow_tests=shadow_tests)
+                  depth_histogram=histogram, tree=tree, shadow_tests=shadow_tests,
+                  asked_bvh=asked)
 
 
 def raytrace(compiled, settings, threads: int | None = None, *, record_tree: bool = True,
-             use_item_buffer: bool = False, use_light_buffer: bool = False,
+             use_item_buffer: bool | None = None, use_light_buffer: bool = False,
              light_buffer_resolution: int | None = None) -> Frame:
     """Ray-trace a compiled scene under `settings` (a scene `RenderSettings`).
 
@@ -166,8 +178,10 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
             specular, adaptive_threshold are used.
         threads: CPU worker threads (default: all cores, or $DIFFLAB_THREADS).
         record_tree: also record the ray tree (a second pass over the same trees).
-        use_item_buffer: primary visibility from the rasterizer's z-buffer (`rt_itembuffer`); needs
-            "grid" sampling, whose samples are the rasterizer's.
+        use_item_buffer: the primary rays' mesh hits from the rasterizer's z-buffer (`itembuffer.py`:
+            the BVH's own hits, the BVH asked where the z-buffer is ambiguous); needs "grid"
+            sampling, whose samples are the rasterizer's. None (default): on wherever it applies
+            (grid sampling and mesh triangles in the scene); False: every primary ray asks the BVH.
         use_light_buffer: shadow rays to point and spot lights test only the candidates of their
             light-buffer cell (`lightbuffer.py`), built for this render with
             `light_buffer_resolution` cells per cube-face edge (None: scaled to the mesh size);
@@ -185,21 +199,25 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
     if use_item_buffer and settings.sampling != "grid":
         raise RenderError(f"sampling: the item buffer holds the rasterizer's regular sample grid; it needs "
                           f"sampling 'grid', got {settings.sampling!r}")
+    if use_item_buffer is None:
+        use_item_buffer = settings.sampling == "grid" and compiled.n_mesh_faces > 0
     start = time.perf_counter()
-    points = sample_points(width, height, side, settings.sampling)
+    points = None if settings.sampling == "grid" else sample_points(width, height, side, settings.sampling)
     item = item_buffer(compiled, width * side, height * side, threads) if use_item_buffer else None
     built = time.perf_counter()
     lights = build_light_buffer(compiled, light_buffer_resolution) if use_light_buffer else None
     built = time.perf_counter() - built
-    traced = trace_points(compiled, settings, points, threads, record=record_tree, item=item, light_buffer=lights)
+    traced = trace_points(compiled, settings, points, threads, side=side, record=record_tree, item=item,
+                          light_buffer=lights)
     image = box_downsample(traced.color, side)
     seconds = time.perf_counter() - start
     total_rays = sum(traced.rays.values())
-    stats = {"method": "raytrace", "seconds": seconds, "samples": int(points.shape[0] * points.shape[1]),
+    stats = {"method": "raytrace", "seconds": seconds, "samples": int(traced.color.shape[0] * traced.color.shape[1]),
              "spp": settings.spp, "sampling": settings.sampling, "max_depth": settings.max_depth,
              "rays": dict(traced.rays), "total_rays": total_rays, "rays_per_second": total_rays / max(seconds, 1e-9),
              "depth_histogram": traced.depth_histogram, "nodes": int(traced.node_count.sum()),
-             "item_buffer": bool(use_item_buffer), "recorded_tree": bool(record_tree),
+             "item_buffer": bool(use_item_buffer), "item_buffer_asked_bvh": traced.asked_bvh,
+             "recorded_tree": bool(record_tree),
              "nonfinite_pixels": nonfinite_pixels(image)}
     if lights is not None:
         stats.update(light_buffer_seconds=built, light_buffer_entries=lights.entries, shadow_tests=traced.shadow_tests)

@@ -1,114 +1,165 @@
 """The item buffer (Weghorst, Hooper and Greenberg 1984; the lecture's "speeding up ray tracing"):
-primary visibility from the rasterizer's z-buffer instead of primary rays through the BVH.
+primary visibility of the mesh triangles from the rasterizer's z-buffer instead of the BVH.
 
-The rasterizer's stages 1-3 (clip, assemble, z-buffer) run on the sample grid and leave, per sample,
-the nearest face. That face names what the primary ray sees: a mesh triangle, or (for the faces that
-tessellate spheres and planes) the analytic object behind them. The ray tracer then intersects its
-primary ray with that one surface only -- exactly, so the hit point and normal are the ray tracer's
-own. Where the hinted surface is missed (a sample on a tessellated silhouette or a shared edge), the
-primary ray falls back to the full `closest_hit`; where the z-buffer is empty the ray sees the
-background. The image therefore equals the ray-traced one except on silhouettes, where the
-tessellation and the exact surface disagree by less than half a sample.
+The rasterizer's stages 1-3 (clip, assemble, z-buffer) run over the mesh triangles only, on the
+sample grid, and leave per sample the nearest triangle (its *hint*). A primary ray then finds
+
+- the nearest sphere or plane exactly, as every ray does (`trace.analytic_hit`);
+- the nearest mesh triangle before it from its hint A, intersected with the BVH's own watertight
+  test (Woop, Benthin and Wald 2013: the same t, u, v bits as `mesh_query_ray`), *provided the hint
+  is unambiguous*: A is hit with every barycentric at least BARY_MARGIN (so no triangle sharing
+  an edge or vertex with A is), and none of the hints of the four neighbouring samples (the
+  triangles visible around the sample, which is where a triangle the z-buffer's snapped coverage
+  left out would show) is hit at or before A. An empty hint is unambiguous when none of the
+  neighbours' triangles is hit before the far end.
+
+An ambiguous sample asks the BVH (`trace.mesh_hit`), so the hit is the BVH's own everywhere --
+except where a triangle no sample of the 3 x 3 neighbourhood sees (thinner than a sample) crosses
+the sample within the rasterizer's fixed-point snapping, or where two surfaces coincide (z-fighting,
+which the BVH too resolves by rounding). The near and far planes are the ray's own (it starts on
+the near plane and ends at the far one, where the rasterizer clips).
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
 from ..._warp import wp
 from ..camera import camera_struct
+from ..raster.coverage import NO_HIT
 from ..raster.driver import zbuffer
-from ..trace import (HIT_NONE, HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, SceneGeomW, closest_hit, no_hit, ray_plane,
-                    ray_sphere, ray_triangle, surface_hit)
+from ..trace import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triangle_hit
 
 wp.set_module_options({"enable_backward": False})
 
-BARY_TOLERANCE = 1.0e-5  # barycentric slack accepting a hinted triangle at a sample on its edge
+BARY_MARGIN = 1.0e-4  # a hint hit closer than this (in barycentrics) to an edge of its triangle asks the BVH
+SLOT_BITS = wp.constant(wp.int64(4294967295))  # the z-buffer key's low 32 bits: the screen slot
+NEIGHBOUR_DI = wp.constant(wp.vec4i(-1, 1, 0, 0))  # the four neighbouring samples: up, down, left, right
+NEIGHBOUR_DJ = wp.constant(wp.vec4i(0, 0, -1, 1))
 
 
 @wp.struct
 class ItemBufferW:
-    """Per-sample primary hints: `kind` (HIT_NONE / TRIANGLE / SPHERE / PLANE) and `index` (face,
-    sphere or plane index). `use` = 0 turns the item buffer off (primary rays are traced)."""
+    """The mesh triangles' z-buffer on the sample grid (`rows` x `cols`): `key` per sample (NO_HIT or
+    depth << 32 | slot) and `slot_face`, the triangle of each slot. `use` = 0: no item buffer (every
+    primary ray asks the BVH)."""
 
     use: int
-    kind: wp.array2d(dtype=wp.int32)
-    index: wp.array2d(dtype=wp.int32)
+    rows: int
+    cols: int
+    key: wp.array(dtype=wp.int64)
+    slot_face: wp.array(dtype=wp.int32)
+    asked: wp.array(dtype=wp.int32)  # per row: the ambiguous samples, whose mesh hit came from the BVH
     vertices: wp.array(dtype=wp.vec3)
     faces: wp.array2d(dtype=wp.int32)
+
+
+@wp.func_native("""
+float t = 0.0f, u = 0.0f, v = 0.0f, sign = 0.0f;
+if (wp::intersect_ray_tri_woop(start, dir, a, b, c, t, u, v, sign, nullptr))
+    return wp::vec4(t, u, v, 1.0f);
+return wp::vec4(0.0f, 0.0f, 0.0f, 0.0f);
+""")
+def woop_triangle(start: wp.vec3, dir: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.vec4:
+    """`mesh_query_ray`'s triangle test (Warp's intersect_ray_tri_woop): (t, u, v, 1) on a hit, else 0."""
+    ...
+
+
+@wp.func
+def hint(item: ItemBufferW, i: int, j: int):
+    """The mesh triangle nearest at sample (i, j) in the z-buffer; -1: none, or (i, j) off the grid."""
+    if i < 0 or i >= item.rows or j < 0 or j >= item.cols:
+        return -1
+    key = item.key[i * item.cols + j]
+    if key == NO_HIT:
+        return -1
+    return item.slot_face[int(key & SLOT_BITS)]
+
+
+@wp.func
+def test_face(item: ItemBufferW, face: int, origin: wp.vec3, direction: wp.vec3):
+    """`woop_triangle` against mesh triangle `face`."""
+    return woop_triangle(origin, direction, item.vertices[item.faces[face, 0]], item.vertices[item.faces[face, 1]],
+                         item.vertices[item.faces[face, 2]])
+
+
+@wp.func
+def before(item: ItemBufferW, face: int, origin: wp.vec3, direction: wp.vec3, t_limit: float):
+    """Whether mesh triangle `face` is hit at 0 <= t <= t_limit."""
+    hit = test_face(item, face, origin, direction)
+    return hit[3] > 0.0 and hit[0] >= 0.0 and hit[0] <= t_limit
+
+
+@wp.func
+def ask_bvh(geom: SceneGeomW, item: ItemBufferW, i: int, origin: wp.vec3, direction: wp.vec3, found: HitW):
+    """An ambiguous sample of row i: its mesh hit from the BVH, counted."""
+    item.asked[i] = item.asked[i] + 1
+    return mesh_hit(geom, origin, direction, 0.0, found, -1)
 
 
 @wp.func
 def hinted_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: wp.vec3,
                t_max: float):
-    """The primary hit of sample (i, j) from its item-buffer hint; `closest_hit` if the hint misses."""
-    kind = item.kind[i, j]
-    k = item.index[i, j]
-    if kind == HIT_NONE:
-        return no_hit(t_max)
-    if kind == HIT_TRIANGLE:
-        a = item.vertices[item.faces[k, 0]]
-        b = item.vertices[item.faces[k, 1]]
-        c = item.vertices[item.faces[k, 2]]
-        t, b1, b2 = ray_triangle(origin, direction, a, b, c)
-        if t > 0.0 and t < t_max and b1 >= -BARY_TOLERANCE and b2 >= -BARY_TOLERANCE \
-                and b1 + b2 <= 1.0 + BARY_TOLERANCE:
-            hit = surface_hit(geom, HIT_TRIANGLE, k, t, origin, direction)
-            hit.normal = wp.normalize(wp.cross(b - a, c - a))
-            hit.u = 1.0 - b1 - b2  # Warp's mesh_query_ray convention: p = u a + v b + (1 - u - v) c
-            hit.v = b1
-            return hit
-    else:
-        t = float(-1.0)
-        if kind == HIT_SPHERE:
-            t = ray_sphere(origin, direction, geom.sphere_center[k], geom.sphere_radius[k], 0.0)
+    """`closest_hit(geom, origin, direction, 0, t_max, -1)` of sample (i, j)'s primary ray, the mesh
+    part from the item buffer where its hint is unambiguous (module doc), else from the BVH."""
+    found = analytic_hit(geom, origin, direction, 0.0, t_max, -1)
+    face = hint(item, i, j)
+    best = wp.vec4(0.0)
+    t_limit = found.t  # hints hit at or before this make the sample ambiguous
+    if face >= 0:
+        best = test_face(item, face, origin, direction)
+        u = best[1]
+        v = best[2]
+        if best[3] == 0.0 or u < BARY_MARGIN or v < BARY_MARGIN or 1.0 - u - v < BARY_MARGIN:
+            return ask_bvh(geom, item, i, origin, direction, found)
+        if best[0] < found.t:  # mesh_query_ray keeps 0 <= t < max_t; woop's t is >= 0
+            t_limit = best[0]
         else:
-            t = ray_plane(origin, direction, geom.plane_point[k], geom.plane_normal[k], 0.0)
-        if t > 0.0 and t < t_max:
-            return surface_hit(geom, kind, k, t, origin, direction)
-    return closest_hit(geom, origin, direction, 0.0, t_max, -1)
-
-
-def visible_faces(compiled, width: int, height: int, threads: int | None = None) -> np.ndarray:
-    """Nearest face per sample of a width x height grid (-1: empty), from the rasterizer's
-    clip / assemble / z-buffer stages (no back-face culling)."""
-    tris, key = zbuffer(compiled, camera_struct(compiled.scene.camera, width, height), 0, threads)
-    keys = key.numpy()
-    empty = keys == np.iinfo(np.int64).max
-    faces = np.full(keys.shape, -1, np.int32)
-    faces[~empty] = tris.face.numpy()[keys[~empty] & 0xFFFFFFFF]  # the key's low 32 bits hold the slot
-    return faces.reshape(height, width)
+            face = -1  # the sphere or plane is in front
+    tested = int(-1)  # the last neighbour's triangle tested (neighbours mostly repeat one)
+    for k in range(4):
+        other = hint(item, i + NEIGHBOUR_DI[k], j + NEIGHBOUR_DJ[k])
+        if other >= 0 and other != face and other != tested:
+            if before(item, other, origin, direction, t_limit):
+                return ask_bvh(geom, item, i, origin, direction, found)
+            tested = other
+    if face >= 0:
+        a = item.vertices[item.faces[face, 0]]
+        return triangle_hit(geom, face, best[0], best[1], best[2],
+                            wp.normalize(wp.cross(item.vertices[item.faces[face, 1]] - a,
+                                                  item.vertices[item.faces[face, 2]] - a)), origin, direction)
+    return finish_hit(geom, found, origin, direction)
 
 
 def item_buffer(compiled, width: int, height: int, threads: int | None = None) -> ItemBufferW:
-    """The item buffer of a width x height sample grid: per sample, which surface the primary ray hits."""
-    faces = visible_faces(compiled, width, height, threads)
-    kind = np.full(faces.shape, HIT_NONE, np.int32)
-    index = np.full(faces.shape, -1, np.int32)
-    covered = faces >= 0
-    mesh = covered & (faces < compiled.n_mesh_faces)
-    kind[mesh], index[mesh] = HIT_TRIANGLE, faces[mesh]
-    analytic = covered & ~mesh
-    if analytic.any():
-        objects = compiled.face_object[faces[analytic]]
-        lookup_kind = np.full(len(compiled.scene.objects), HIT_NONE, np.int32)
-        lookup_index = np.full(len(compiled.scene.objects), -1, np.int32)
-        for hit_kind, owners in [(HIT_SPHERE, compiled.geom.sphere_object), (HIT_PLANE, compiled.geom.plane_object)]:
-            owners = owners.numpy()
-            lookup_kind[owners], lookup_index[owners] = hit_kind, np.arange(owners.size, dtype=np.int32)
-        kind[analytic], index[analytic] = lookup_kind[objects], lookup_index[objects]
-    return item_struct(compiled, kind, index)
+    """The item buffer of a width x height sample grid: the z-buffer of the mesh triangles (the first
+    `n_mesh_faces` of the compiled scene, and their vertices), no back-face culling."""
+    n_faces, n_vertices = compiled.n_mesh_faces, compiled.n_mesh_vertices
+    arrays = dict(compiled.arrays, faces=compiled.arrays["faces"][:n_faces],
+                  vertices=compiled.arrays["vertices"][:n_vertices])
+    meshes = replace(compiled, faces=compiled.faces[:n_faces], vertices=compiled.vertices[:n_vertices], arrays=arrays)
+    tris, key = zbuffer(meshes, camera_struct(compiled.scene.camera, width, height), 0, threads)
+    return item_struct(compiled, height, width, key, tris.face)
 
 
-def item_struct(compiled, kind: np.ndarray | None = None, index: np.ndarray | None = None) -> ItemBufferW:
-    """An `ItemBufferW` from per-sample (kind, index) arrays; without them, a disabled one."""
+def asked_bvh(item: ItemBufferW) -> int:
+    """How many samples' mesh hits came from the BVH (ambiguous hints)."""
+    return int(item.asked.numpy().astype(np.int64).sum()) if item.use else 0
+
+
+def item_struct(compiled, rows: int = 0, cols: int = 0, key=None, slot_face=None) -> ItemBufferW:
+    """An `ItemBufferW` of a z-buffer `key` and its `slot_face`; without them, a disabled one."""
     device = compiled.device
     out = ItemBufferW()
-    out.use = int(kind is not None)
-    if kind is None:
-        kind = index = np.zeros((1, 1), np.int32)
-    out.kind = wp.array(kind, dtype=wp.int32, device=device)
-    out.index = wp.array(index, dtype=wp.int32, device=device)
+    out.use = int(key is not None)
+    out.rows, out.cols = rows, cols
+    if key is None:
+        key = wp.empty(1, dtype=wp.int64, device=device)
+        slot_face = wp.empty(1, dtype=wp.int32, device=device)
+    out.key, out.slot_face = key, slot_face
+    out.asked = wp.zeros(max(rows, 1), dtype=wp.int32, device=device)
     out.vertices = compiled.arrays["vertices"]
     out.faces = compiled.arrays["faces"]
     return out

@@ -63,6 +63,7 @@ class TraceParamsW:
     record: int
     count_crossings: int  # record the materials transparent shadow rays cross
     spread: float  # texture footprint: a sample's width per unit path length, 2 tan(fov_y / 2) / rows
+    side: int  # > 0: the regular grid of `side` x `side` samples per pixel; 0: the samples are `points`
 
 
 @wp.struct
@@ -77,6 +78,16 @@ class TraceOutW:
 
 
 @wp.func
+def sample_xy(points: wp.array2d(dtype=wp.vec2), side: int, i: int, j: int):
+    """Raster position of sample (i, j): `driver.sample_points`' grid pattern for side > 0 (computed
+    as it does, in float64: the same float32 values), else read from `points`."""
+    if side > 0:
+        half = wp.float64(0.5)
+        return wp.vec2(float((wp.float64(j) + half) / wp.float64(side)), float((wp.float64(i) + half) / wp.float64(side)))
+    return points[i, j]
+
+
+@wp.func(inline=True)
 def trace_ray(geom: SceneGeomW, item: ItemBufferW, out: TraceOutW, ray: RayW, i: int, j: int, t_far: float):
     """The nearest hit of a popped ray (the primary one up to the far plane, through the item buffer
     when it is on), counted in the statistics of row i."""
@@ -93,7 +104,7 @@ def trace_ray(geom: SceneGeomW, item: ItemBufferW, out: TraceOutW, ray: RayW, i:
     return closest_hit(geom, ray.origin, ray.direction, 0.0, wp.inf, ray.skip)
 
 
-@wp.func
+@wp.func(inline=True)
 def shade_hit(geom: SceneGeomW, lights: wp.array(dtype=LightW), materials: wp.array(dtype=MaterialW),
               buffer: LightBufferW, vertices: wp.array(dtype=wp.vec3), faces: wp.array2d(dtype=wp.int32),
               params: TraceParamsW, hit: HitW, surf: SurfaceW, rec: LightRecW, k: int, rays: wp.array2d(dtype=wp.int32),
@@ -131,86 +142,86 @@ def worth_tracing(weight: wp.vec3, threshold: float):
 
 
 def make_whitted_kernel(stack_size: int):
-    """The walk (`trace_sample`) and its kernel for trees whose stack never holds more than `stack_size`
+    """The walk (`trace_row`) and its kernel for trees whose stack never holds more than `stack_size`
     rays: a depth-first walk to depth D holds at most D (at most one pending sibling per level,
     plus the two children just pushed), and the stack is allocated and cleared per sample, so a
     shallow render should not pay for MAX_DEPTH_LIMIT entries."""
 
     @wp.func
-    def trace_sample(points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW, params: TraceParamsW,
-                     item: ItemBufferW, tree: TreeW, out: TraceOutW, i: int, j: int):
-        """Walk sample (i, j)'s ray tree: its colour, fog blend and node count into `out`."""
-        xy = points[i, j]
-        origin, direction = primary_ray(cam, xy[0], xy[1])
-        t_far = (params.far - wp.dot(origin - cam.eye, cam.forward)) / wp.dot(direction, cam.forward)
-        base = int(0)
-        if params.record == 1:
-            base = tree.offset[i, j]
-        stack = wp.zeros(shape=stack_size, dtype=RayW)
-        rec = light_arrays(tree)
-        stack[0] = new_ray(origin, origin, direction, wp.vec3(1.0), 0.0, 1, -1, PRIMARY, -1, -1)
-        sp = int(1)
-        count = int(0)
-        total = wp.vec3(0.0)
-        fog_f = float(1.0)
-
-        while sp > 0:
-            sp = sp - 1
-            ray = stack[sp]
-            node = count
-            count = count + 1
-            hit = trace_ray(scene.geom, item, out, ray, i, j, t_far)
-            distance = wp.inf
-            if hit.kind != HIT_NONE:
-                distance = wp.length(ray.origin + hit.t * ray.direction - ray.start)  # from the surface, not the offset
-            w = ray.weight
-            if ray.medium >= 0:  # Beer absorption along this ray inside its medium
-                w = wp.cw_mul(w, beer(scene.materials[ray.medium].absorption, distance))
+    def trace_row(points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW, params: TraceParamsW,
+                  item: ItemBufferW, tree: TreeW, out: TraceOutW, i: int):
+        """Walk the ray tree of every sample (i, j) of row i: its colour, fog blend and node count into
+        `out`. (One call per row: a CPU call copies its struct arguments, once per row this way.)"""
+        for j in range(out.color.shape[1]):
+            xy = sample_xy(points, params.side, i, j)
+            origin, direction = primary_ray(cam, xy[0], xy[1])
+            t_far = (params.far - wp.dot(origin - cam.eye, cam.forward)) / wp.dot(direction, cam.forward)
+            base = int(0)
             if params.record == 1:
-                record_ray(tree, base, node, i * points.shape[1] + j, ray, hit, distance)
-            if hit.kind == HIT_NONE:
-                total = total + wp.cw_mul(w, params.background)
+                base = tree.offset[i, j]
+            stack = wp.zeros(shape=stack_size, dtype=RayW)
+            rec = light_arrays(tree)
+            stack[0] = new_ray(origin, origin, direction, wp.vec3(1.0), 0.0, 1, -1, PRIMARY, -1, -1)
+            sp = int(1)
+            count = int(0)
+            total = wp.vec3(0.0)
+            fog_f = float(1.0)
+
+            while sp > 0:
+                sp = sp - 1
+                ray = stack[sp]
+                node = count
+                count = count + 1
+                hit = trace_ray(scene.geom, item, out, ray, i, j, t_far)
+                distance = wp.inf
+                if hit.kind != HIT_NONE:
+                    distance = wp.length(ray.origin + hit.t * ray.direction - ray.start)  # from the surface
+                w = ray.weight
+                if ray.medium >= 0:  # Beer absorption along this ray inside its medium
+                    w = wp.cw_mul(w, beer(scene.materials[ray.medium].absorption, distance))
                 if params.record == 1:
-                    tree.local[base + node] = params.background
-                continue
+                    record_ray(tree, base, node, i * out.color.shape[1] + j, ray, hit, distance)
+                if hit.kind == HIT_NONE:
+                    total = total + wp.cw_mul(w, params.background)
+                    if params.record == 1:
+                        tree.local[base + node] = params.background
+                    continue
 
-            surf = surface_at(scene, cam, hit, ray, xy, int(ray.kind == PRIMARY), params.spread)
-            if ray.kind == PRIMARY:
-                fog_f = fog_blend(params.fog, wp.dot(surf.p - cam.eye, cam.forward))
-            local = shade_hit(scene.geom, scene.lights, scene.materials, scene.light_buffer, scene.mesh.vertices,
-                              scene.mesh.faces, params, hit, surf, rec, base + node, out.rays, i)
-            total = total + wp.cw_mul(w, local)
-            if params.record == 0 and ray.depth >= params.max_depth:
-                continue  # a leaf nobody records: no split to compute
-            split = fresnel_split(ray.direction, surf, params.fresnel)
-            if params.record == 1:
-                record_surface(tree, base + node, surf, local, split)
+                surf = surface_at(scene, cam, hit, ray, xy, int(ray.kind == PRIMARY), params.spread)
+                if ray.kind == PRIMARY:
+                    fog_f = fog_blend(params.fog, wp.dot(surf.p - cam.eye, cam.forward))
+                local = shade_hit(scene.geom, scene.lights, scene.materials, scene.light_buffer, scene.mesh.vertices,
+                                  scene.mesh.faces, params, hit, surf, rec, base + node, out.rays, i)
+                total = total + wp.cw_mul(w, local)
+                if params.record == 0 and ray.depth >= params.max_depth:
+                    continue  # a leaf nobody records: no split to compute
+                split = fresnel_split(ray.direction, surf, params.fresnel)
+                if params.record == 1:
+                    record_surface(tree, base + node, surf, local, split)
 
-            if ray.depth < params.max_depth:  # refracted child pushed first, so the reflected one is walked first
-                w_t = w * (surf.mat.kt * split.f_t)
-                if split.refracts == 1 and worth_tracing(w_t, params.threshold):
-                    medium = int(-1)
-                    if surf.entering == 1:
-                        medium = hit.material
-                    stack[sp] = child_ray(scene.geom, ray, node, hit, surf, split.t_dir, w_t, REFRACTED, medium)
-                    sp = sp + 1
-                w_r = w * (surf.mat.kr * split.f_r)
-                if worth_tracing(w_r, params.threshold):
-                    r_dir = reflect(ray.direction, surf.normal)
-                    stack[sp] = child_ray(scene.geom, ray, node, hit, surf, r_dir, w_r, REFLECTED, ray.medium)
-                    sp = sp + 1
+                if ray.depth < params.max_depth:  # refracted child pushed first: the reflected one is walked first
+                    w_t = w * (surf.mat.kt * split.f_t)
+                    if split.refracts == 1 and worth_tracing(w_t, params.threshold):
+                        medium = int(-1)
+                        if surf.entering == 1:
+                            medium = hit.material
+                        stack[sp] = child_ray(scene.geom, ray, node, hit, surf, split.t_dir, w_t, REFRACTED, medium)
+                        sp = sp + 1
+                    w_r = w * (surf.mat.kr * split.f_r)
+                    if worth_tracing(w_r, params.threshold):
+                        r_dir = reflect(ray.direction, surf.normal)
+                        stack[sp] = child_ray(scene.geom, ray, node, hit, surf, r_dir, w_r, REFLECTED, ray.medium)
+                        sp = sp + 1
 
-        out.fog[i, j] = fog_f
-        out.color[i, j] = fog_f * total + (1.0 - fog_f) * params.fog.color
-        out.node_count[i, j] = count
+            out.fog[i, j] = fog_f
+            out.color[i, j] = fog_f * total + (1.0 - fog_f) * params.fog.color
+            out.node_count[i, j] = count
 
     @wp.kernel(module="unique", enable_backward=False)
     def whitted_kernel(row0: int, points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW,
                        params: TraceParamsW, item: ItemBufferW, tree: TreeW, out: TraceOutW):
-        """One row of samples per thread (on the CPU the arguments are read once per row)."""
-        i = row0 + wp.tid()
-        for j in range(points.shape[1]):
-            trace_sample(points, cam, scene, params, item, tree, out, i, j)
+        """One row of samples per thread."""
+        trace_row(points, cam, scene, params, item, tree, out, row0 + wp.tid())
 
     return whitted_kernel
 

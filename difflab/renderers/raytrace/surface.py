@@ -108,7 +108,7 @@ def new_ray(start: wp.vec3, origin: wp.vec3, direction: wp.vec3, weight: wp.vec3
     return ray
 
 
-@wp.func
+@wp.func(inline=True)
 def shading_normal(mesh: MeshDataW, hit: HitW):
     """Unit shading normal at a hit: interpolated vertex normals on triangles, else the geometric one."""
     if hit.kind != HIT_TRIANGLE:
@@ -158,7 +158,7 @@ def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3
     return sample_texture(scene.textures, mat.texture, uv, duv_dx, duv_dy, mat.texture_filter, mat.texture_wrap)
 
 
-@wp.func
+@wp.func(inline=True)
 def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, xy: wp.vec2, primary: int, spread: float):
     """The surface `ray` meets at `hit` (not a miss): two-sided normals, checker cell, texture."""
     surf = SurfaceW()
