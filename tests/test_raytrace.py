@@ -225,19 +225,6 @@ def test_primary_hits_and_phong_image_agree_with_the_rasterizer(compare_images):
     compare_images(frame.image[keep], raster.image[keep], atol=1e-3, name="phong_parity")
 
 
-def test_item_buffer_gives_the_same_image():
-    d = mixed_scene(max_depth=3, spp=4)
-    d["materials"]["floor"] = dict(d["materials"]["floor"], kr=0.3)
-    scene = Scene.from_dict(d)
-    compiled = compile_scene(scene)
-    full = raytrace(compiled, scene.render, 2, record_tree=False)
-    item = raytrace(compiled, scene.render, 2, record_tree=False, use_item_buffer=True)
-    differ = np.abs(full.image - item.image).max(-1) > 1e-5
-    assert differ.mean() < 0.02, differ.sum()  # silhouettes only
-    np.testing.assert_allclose(item.image[~differ], full.image[~differ], atol=1e-5)
-    assert item.stats["rays"] == pytest.approx(full.stats["rays"], rel=0.02)
-
-
 # 3. The ray tree ----------------------------------------------------------------------------------
 
 

@@ -52,7 +52,7 @@ class Traced:
     depth_histogram: list  # rays traced at depth 1, 2, ...
     tree: RayTree | None
     shadow_tests: int = 0  # candidates the light buffer's shadow rays tested (0 without one)
-    asked_bvh: int = 0  # samples whose primary ray the item buffer left to the BVH (ambiguous hints)
+    asked_bvh: int = 0  # samples whose primary mesh hit the item buffer left to the BVH (ambiguous hints)
 
 
 def sample_points(width: int, height: int, side: int, sampling: str = "grid") -> np.ndarray:
@@ -149,7 +149,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
 
     out = launch(trace_params(scene, settings, False, spread, side), empty_tree(shape, 0, 0, device))
     shadow_tests = int(light_buffer.warp.tests.numpy()[0]) if light_buffer is not None else 0
-    asked = asked_bvh(item)
+    asked = asked_bvh(item)  # read before the recording pass adds its own
     counts = out.node_count.numpy()
     ray_counts = out.rays.numpy().astype(np.int64).sum(axis=0)
     stats_rays = {"primary": int(ray_counts[COUNT_PRIMARY]), "shadow": int(ray_counts[COUNT_SHADOW]),

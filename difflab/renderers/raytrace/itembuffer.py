@@ -35,6 +35,9 @@ from ..trace import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triang
 wp.set_module_options({"enable_backward": False})
 
 BARY_MARGIN = 1.0e-4  # a hint hit closer than this (in barycentrics) to an edge of its triangle asks the BVH
+PLANE_SLACK = 1.0e-4  # relative: a neighbour's plane met this close behind the hit counts as in front
+NO_TRIANGLE = wp.constant(-1)  # resolve_hint: no mesh triangle before the nearest sphere / plane (if any)
+ASK_BVH = wp.constant(-2)  # resolve_hint: an ambiguous hint, the BVH finds the mesh hit
 SLOT_BITS = wp.constant(wp.int64(4294967295))  # the z-buffer key's low 32 bits: the screen slot
 NEIGHBOUR_DI = wp.constant(wp.vec4i(-1, 1, 0, 0))  # the four neighbouring samples: up, down, left, right
 NEIGHBOUR_DJ = wp.constant(wp.vec4i(0, 0, -1, 1))
@@ -43,17 +46,18 @@ NEIGHBOUR_DJ = wp.constant(wp.vec4i(0, 0, -1, 1))
 @wp.struct
 class ItemBufferW:
     """The mesh triangles' z-buffer on the sample grid (`rows` x `cols`): `key` per sample (NO_HIT or
-    depth << 32 | slot) and `slot_face`, the triangle of each slot. `use` = 0: no item buffer (every
-    primary ray asks the BVH)."""
+    depth << 32 | slot) and `slot_face`, the triangle of each slot; and the mesh itself. `use` = 0:
+    no item buffer (every primary ray asks the BVH)."""
 
     use: int
     rows: int
     cols: int
     key: wp.array(dtype=wp.int64)
     slot_face: wp.array(dtype=wp.int32)
-    asked: wp.array(dtype=wp.int32)  # per row: the ambiguous samples, whose mesh hit came from the BVH
     vertices: wp.array(dtype=wp.vec3)
     faces: wp.array2d(dtype=wp.int32)
+    face_normal: wp.array(dtype=wp.vec3)  # unit
+    asked: wp.array(dtype=wp.int32)  # per row: the ambiguous samples, whose mesh hit came from the BVH
 
 
 @wp.func_native("""
@@ -79,63 +83,79 @@ def hint(item: ItemBufferW, i: int, j: int):
 
 
 @wp.func
-def test_face(item: ItemBufferW, face: int, origin: wp.vec3, direction: wp.vec3):
-    """`woop_triangle` against mesh triangle `face`."""
-    return woop_triangle(origin, direction, item.vertices[item.faces[face, 0]], item.vertices[item.faces[face, 1]],
-                         item.vertices[item.faces[face, 2]])
+def corner(item: ItemBufferW, face: int, k: int):
+    return item.vertices[item.faces[face, k]]
 
 
 @wp.func
-def before(item: ItemBufferW, face: int, origin: wp.vec3, direction: wp.vec3, t_limit: float):
-    """Whether mesh triangle `face` is hit at 0 <= t <= t_limit."""
-    hit = test_face(item, face, origin, direction)
-    return hit[3] > 0.0 and hit[0] >= 0.0 and hit[0] <= t_limit
+def shares_vertex(item: ItemBufferW, face: int, other: int):
+    """Whether mesh triangles `face` and `other` have a vertex in common (neighbours in the mesh)."""
+    for k in range(3):
+        v = item.faces[other, k]
+        if v == item.faces[face, 0] or v == item.faces[face, 1] or v == item.faces[face, 2]:
+            return True
+    return False
 
 
 @wp.func
-def ask_bvh(geom: SceneGeomW, item: ItemBufferW, i: int, origin: wp.vec3, direction: wp.vec3, found: HitW):
-    """An ambiguous sample of row i: its mesh hit from the BVH, counted."""
-    item.asked[i] = item.asked[i] + 1
-    return mesh_hit(geom, origin, direction, 0.0, found, -1)
+def plane_before(item: ItemBufferW, face: int, origin: wp.vec3, direction: wp.vec3, t_limit: float):
+    """Whether the ray meets the plane of mesh triangle `face` at 0 <= t <= t_limit (1 + PLANE_SLACK)."""
+    normal = item.face_normal[face]
+    d_n = wp.dot(direction, normal)
+    if d_n == 0.0:
+        return False
+    t = wp.dot(corner(item, face, 0) - origin, normal) / d_n
+    return t >= 0.0 and t <= t_limit * (1.0 + PLANE_SLACK)
 
 
 @wp.func
-def hinted_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: wp.vec3,
-               t_max: float):
-    """`closest_hit(geom, origin, direction, 0, t_max, -1)` of sample (i, j)'s primary ray, the mesh
-    part from the item buffer where its hint is unambiguous (module doc), else from the BVH."""
-    found = analytic_hit(geom, origin, direction, 0.0, t_max, -1)
+def resolve_hint(item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: wp.vec3, found: HitW):
+    """The mesh part of sample (i, j)'s primary hit before `found` (its nearest sphere or plane, or a
+    miss at the far plane): (triangle, NO_TRIANGLE or ASK_BVH; (t, u, v)) from its hint (module doc)."""
     face = hint(item, i, j)
     best = wp.vec4(0.0)
-    t_limit = found.t  # hints hit at or before this make the sample ambiguous
+    t_limit = found.t  # a neighbour's triangle whose plane is met before this makes the sample ambiguous
     if face >= 0:
-        best = test_face(item, face, origin, direction)
+        best = woop_triangle(origin, direction, corner(item, face, 0), corner(item, face, 1), corner(item, face, 2))
         u = best[1]
         v = best[2]
         if best[3] == 0.0 or u < BARY_MARGIN or v < BARY_MARGIN or 1.0 - u - v < BARY_MARGIN:
-            return ask_bvh(geom, item, i, origin, direction, found)
+            return ASK_BVH, wp.vec3(0.0)
         if best[0] < found.t:  # mesh_query_ray keeps 0 <= t < max_t; woop's t is >= 0
             t_limit = best[0]
         else:
-            face = -1  # the sphere or plane is in front
+            face = NO_TRIANGLE  # the sphere or plane is in front
     tested = int(-1)  # the last neighbour's triangle tested (neighbours mostly repeat one)
     for k in range(4):
         other = hint(item, i + NEIGHBOUR_DI[k], j + NEIGHBOUR_DJ[k])
         if other >= 0 and other != face and other != tested:
-            if before(item, other, origin, direction, t_limit):
-                return ask_bvh(geom, item, i, origin, direction, found)
+            if face < 0 or not shares_vertex(item, face, other):
+                if plane_before(item, other, origin, direction, t_limit):
+                    return ASK_BVH, wp.vec3(0.0)
             tested = other
-    if face >= 0:
-        a = item.vertices[item.faces[face, 0]]
-        return triangle_hit(geom, face, best[0], best[1], best[2],
-                            wp.normalize(wp.cross(item.vertices[item.faces[face, 1]] - a,
-                                                  item.vertices[item.faces[face, 2]] - a)), origin, direction)
-    return finish_hit(geom, found, origin, direction)
+    return face, wp.vec3(best[0], best[1], best[2])
+
+
+@wp.func
+def item_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: wp.vec3, t_max: float):
+    """`closest_hit(geom, origin, direction, 0, t_max, -1)` of sample (i, j)'s primary ray, bit for
+    bit, its mesh part from the item buffer (the BVH where the sample is ambiguous, counted)."""
+    found = analytic_hit(geom, origin, direction, 0.0, t_max, -1)
+    face, tuv = resolve_hint(item, i, j, origin, direction, found)
+    if face == ASK_BVH:
+        item.asked[i] = item.asked[i] + 1
+        return mesh_hit(geom, origin, direction, 0.0, found, -1)
+    if face == NO_TRIANGLE:
+        return finish_hit(geom, found, origin, direction)
+    a = corner(item, face, 0)
+    normal = wp.normalize(wp.cross(corner(item, face, 1) - a, corner(item, face, 2) - a))  # as mesh_query_ray's
+    return triangle_hit(geom, face, tuv[0], tuv[1], tuv[2], normal, origin, direction)
 
 
 def item_buffer(compiled, width: int, height: int, threads: int | None = None) -> ItemBufferW:
     """The item buffer of a width x height sample grid: the z-buffer of the mesh triangles (the first
-    `n_mesh_faces` of the compiled scene, and their vertices), no back-face culling."""
+    `n_mesh_faces` of the compiled scene, and their vertices), no back-face culling. It lives in the
+    rasterizer's per-frame arrays of `compiled`: valid until this thread's next z-buffer of it."""
     n_faces, n_vertices = compiled.n_mesh_faces, compiled.n_mesh_vertices
     arrays = dict(compiled.arrays, faces=compiled.arrays["faces"][:n_faces],
                   vertices=compiled.arrays["vertices"][:n_vertices])
@@ -145,7 +165,7 @@ def item_buffer(compiled, width: int, height: int, threads: int | None = None) -
 
 
 def asked_bvh(item: ItemBufferW) -> int:
-    """How many samples' mesh hits came from the BVH (ambiguous hints)."""
+    """How many samples' mesh hits the item buffer left to the BVH (ambiguous hints)."""
     return int(item.asked.numpy().astype(np.int64).sum()) if item.use else 0
 
 
@@ -159,7 +179,8 @@ def item_struct(compiled, rows: int = 0, cols: int = 0, key=None, slot_face=None
         key = wp.empty(1, dtype=wp.int64, device=device)
         slot_face = wp.empty(1, dtype=wp.int32, device=device)
     out.key, out.slot_face = key, slot_face
-    out.asked = wp.zeros(max(rows, 1), dtype=wp.int32, device=device)
     out.vertices = compiled.arrays["vertices"]
     out.faces = compiled.arrays["faces"]
+    out.face_normal = compiled.arrays["face_normal"]
+    out.asked = wp.zeros(max(rows, 1), dtype=wp.int32, device=device)
     return out

@@ -1,4 +1,5 @@
-"""The Whitted ray tracer's kernel: one thread per sample walks its ray tree depth first.
+"""The Whitted ray tracer's kernel: one thread per row of samples walks each sample's ray tree
+depth first (a row per call: on the CPU a call copies its struct arguments).
 
 Warp has no recursion, so the tree is walked with an explicit stack of pending rays (`RayW`).
 Depth-first order keeps the stack within `max_depth` entries: at most one pending sibling per
@@ -16,9 +17,10 @@ traced when its weight is 0, when its depth would pass `max_depth` (it then cont
 -- Hall's adaptive control -- when the largest channel of its weight before its own absorption is
 below `threshold`.
 
-Shadow rays are cast as the rasterizer casts them: to lights on the front side of the geometric
-normal (a light behind it is left to the model's N.L gating), transparent occluders multiplying by
-kt when `transparent` is set -- through the BVH, or through the light buffer's candidate lists
+A primary ray's mesh hit comes from the item buffer (`itembuffer.py`: the rasterizer's z-buffer,
+the same hit as the BVH's) when the kernel is given one. Shadow rays are cast as the rasterizer
+casts them: to lights on the front side of the geometric normal (a light behind it is left to the
+model's N.L gating), transparent occluders multiplying by kt when `transparent` is set -- through the BVH, or through the light buffer's candidate lists
 (`lightbuffer.py`) when the scene struct carries one.
 
 With `record` set, the same walk writes every node into the flat arrays of `record.TreeW` at the
@@ -32,13 +34,14 @@ from ..._warp import wp
 
 from ...lighting.warp_model import FogW, LightW, MaterialW, ambient_term, fog_blend, light_term, light_vector
 from ...vocabulary import MAX_DEPTH_LIMIT
-from ..camera import CameraW, primary_ray
+from ..camera import CameraW
 from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, light_visibility
-from .itembuffer import ItemBufferW, hinted_hit
+from .itembuffer import ItemBufferW, item_hit
 from .lightbuffer import LightBufferW, buffered_visibility
 from .optics import beer, reflect
 from .record import LightRecW, TreeW, light_arrays, record_light, record_ray, record_surface
-from .surface import RayW, SceneW, SurfaceW, child_ray, fresnel_split, new_ray, skip_object, surface_at
+from .surface import RayW, SceneW, SurfaceW, child_ray, fresnel_split, new_ray, primary_sample, skip_object, \
+    surface_at
 from .tree import PRIMARY, REFLECTED, REFRACTED
 
 wp.set_module_options({"enable_backward": False})
@@ -77,16 +80,6 @@ class TraceOutW:
     depth_hist: wp.array2d(dtype=wp.int32)  # (rows, max_depth): rays traced per depth
 
 
-@wp.func
-def sample_xy(points: wp.array2d(dtype=wp.vec2), side: int, i: int, j: int):
-    """Raster position of sample (i, j): `driver.sample_points`' grid pattern for side > 0 (computed
-    as it does, in float64: the same float32 values), else read from `points`."""
-    if side > 0:
-        half = wp.float64(0.5)
-        return wp.vec2(float((wp.float64(j) + half) / wp.float64(side)), float((wp.float64(i) + half) / wp.float64(side)))
-    return points[i, j]
-
-
 @wp.func(inline=True)
 def trace_ray(geom: SceneGeomW, item: ItemBufferW, out: TraceOutW, ray: RayW, i: int, j: int, t_far: float):
     """The nearest hit of a popped ray (the primary one up to the far plane, through the item buffer
@@ -95,7 +88,7 @@ def trace_ray(geom: SceneGeomW, item: ItemBufferW, out: TraceOutW, ray: RayW, i:
     if ray.kind == PRIMARY:
         wp.atomic_add(out.rays, i, COUNT_PRIMARY, 1)
         if item.use == 1:
-            return hinted_hit(geom, item, i, j, ray.origin, ray.direction, t_far)
+            return item_hit(geom, item, i, j, ray.origin, ray.direction, t_far)
         return closest_hit(geom, ray.origin, ray.direction, 0.0, t_far, -1)
     if ray.kind == REFLECTED:
         wp.atomic_add(out.rays, i, COUNT_REFLECTED, 1)
@@ -153,9 +146,7 @@ def make_whitted_kernel(stack_size: int):
         """Walk the ray tree of every sample (i, j) of row i: its colour, fog blend and node count into
         `out`. (One call per row: a CPU call copies its struct arguments, once per row this way.)"""
         for j in range(out.color.shape[1]):
-            xy = sample_xy(points, params.side, i, j)
-            origin, direction = primary_ray(cam, xy[0], xy[1])
-            t_far = (params.far - wp.dot(origin - cam.eye, cam.forward)) / wp.dot(direction, cam.forward)
+            xy, origin, direction, t_far = primary_sample(points, params.side, cam, params.far, i, j)
             base = int(0)
             if params.record == 1:
                 base = tree.offset[i, j]

@@ -18,7 +18,7 @@ from ..._warp import wp
 
 from ...lighting.warp_model import LightW, MaterialW, checker_cell, surface_material, textured_material
 from ...vocabulary import FRESNEL_NONE
-from ..camera import CameraW
+from ..camera import CameraW, primary_ray
 from ..texture.sampling import TexturesW, cone_footprint, pixel_footprint, plane_uv, plane_uv_derivatives, \
     sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
 from ..trace import HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, HitW, SceneGeomW
@@ -106,6 +106,26 @@ def new_ray(start: wp.vec3, origin: wp.vec3, direction: wp.vec3, weight: wp.vec3
     ray.medium = medium
     ray.skip = skip
     return ray
+
+
+@wp.func
+def sample_xy(points: wp.array2d(dtype=wp.vec2), side: int, i: int, j: int):
+    """Raster position of sample (i, j): `driver.sample_points`' grid pattern for side > 0 (computed
+    as it does, in float64: the same float32 values), else read from `points`."""
+    if side > 0:
+        half = wp.float64(0.5)
+        step = wp.float64(side)
+        return wp.vec2(float((wp.float64(j) + half) / step), float((wp.float64(i) + half) / step))
+    return points[i, j]
+
+
+@wp.func
+def primary_sample(points: wp.array2d(dtype=wp.vec2), side: int, cam: CameraW, far: float, i: int, j: int):
+    """Sample (i, j)'s raster position, its primary ray's origin (on the near plane) and unit
+    direction, and the ray's t at the far plane (where the rasterizer clips too)."""
+    xy = sample_xy(points, side, i, j)
+    origin, direction = primary_ray(cam, xy[0], xy[1])
+    return xy, origin, direction, (far - wp.dot(origin - cam.eye, cam.forward)) / wp.dot(direction, cam.forward)
 
 
 @wp.func(inline=True)
