@@ -21,7 +21,8 @@ from test_fit_helpers import scene_dict
 
 from difflab import fit_many
 from difflab.batch.manifest import load_manifest, parse_line
-from difflab.batch.runners import cluster_render_threads
+from difflab.batch import runners
+from difflab.batch.runners import TASK_SECONDS, cluster_render_threads, task_size
 from difflab.batch.store import Store
 from difflab.batch.worker import adaptive_allocator, outcome_of
 from difflab.errors import DifflabError, ManifestError, OutputError
@@ -269,6 +270,19 @@ def test_cluster_render_threads_share_each_hosts_cores(monkeypatch):
         cluster_render_threads(cluster)
 
 
+@pytest.mark.parametrize("seconds_per_job, remaining, slots, size", [
+    (None, 100, 2, 1),  # nothing measured yet: one job a task
+    (0.025, 100, 2, 20),  # 0.5 s of 25 ms fits
+    (0.025, 10, 2, 3),  # the tail: ceil(10 / (2 threads x 2 tasks))
+    (0.025, 1, 8, 1),
+    (2.0, 100, 2, 1),  # fits longer than a task's aim: one a task
+    (0.0, 9, 1, 5),  # instant fits: the equal share of the remaining ones
+])
+def test_task_size_fills_task_seconds_and_shrinks_at_the_tail(seconds_per_job, remaining, slots, size):
+    assert TASK_SECONDS == 0.5
+    assert task_size(seconds_per_job, remaining, slots) == size
+
+
 def _kill_a_busy_worker(client, killed: list) -> None:
     """Wait until a worker is running a task, then SIGKILL its process (the nanny starts a new one)."""
     pids = client.run(os.getpid)
@@ -298,5 +312,9 @@ def test_dask_cluster_with_a_worker_killed_gives_the_same_files(reference, tmp_p
         assert summary.ran == 12 and snapshot(tmp_path / "paths") == snapshot(out)
         if platform.libc_ver()[0] == "glibc":  # the workers' mmap threshold was freed of Dask's fixed one
             assert all(client.run(adaptive_allocator).values())
-        fit_many(manifest, tmp_path / "bytes", client=client, inline=True, quiet=True)
+        client.wait_for_workers(2)  # the killed worker's replacement
+        monkeypatch.setattr(runners, "TASK_SECONDS", 60.0)  # so that the tasks' sizes depend on no timing
+        with distributed.get_task_stream(client) as tasks:
+            fit_many(manifest, tmp_path / "bytes", client=client, inline=True, quiet=True)
         assert snapshot(tmp_path / "bytes") == snapshot(out)
+        assert len(tasks.data) == 10  # 12 jobs: 4 of one job (2 threads x 2), then 2, 2, 1, 1, 1, 1 (task_size)

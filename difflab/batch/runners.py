@@ -9,11 +9,16 @@ from __future__ import annotations
 
 import os
 import signal
+import statistics
 import threading
 import time
 
 from ..limits import env_count
-from .worker import pack, run_job
+from .worker import pack, run_job, run_jobs
+
+TASK_SECONDS = 0.5  # s of fitting a cluster task aims at: Dask's own cost per task (10-20 ms of CPU over
+#                     client, scheduler and worker on 2 loaded cores, issue 13) then stays within a few %
+TASKS_PER_THREAD = 2  # cluster tasks in flight per worker thread: one running, one ready behind it
 
 
 def _lost(error: str) -> dict:
@@ -83,33 +88,66 @@ def local_jobs(jobs, workers: int):
     pool.shutdown()
 
 
+def cluster_slots(client) -> int:
+    """The task threads of all the cluster's workers (1 when no worker is up yet)."""
+    return max(1, sum(worker["nthreads"] for worker in client.scheduler_info()["workers"].values()))
+
+
+def task_size(seconds_per_job: float | None, remaining: int, slots: int) -> int:
+    """Jobs in the next cluster task (guided self-scheduling): as many as fill TASK_SECONDS at the
+    median seconds per job measured so far (1 while none is measured), and at most an equal share of
+    the `remaining` jobs over the tasks in flight on `slots` threads, so that the last tasks shrink
+    and the threads finish together."""
+    if seconds_per_job is None:
+        return 1
+    share = -(-remaining // (slots * TASKS_PER_THREAD))
+    return max(1, min(share, int(TASK_SECONDS / max(seconds_per_job, 1e-6))))
+
+
 def cluster_jobs(jobs, client, inline: bool = False, retries: int = 2):
     """Run `jobs` as tasks on a Dask cluster through `client` (a `distributed.Client`).
 
     Workers read the inputs by path (a shared filesystem) or, with `inline`, receive the bytes of the
     scene file, targets and masks (files the scene refers to, meshes and textures, are still read by
-    path). A task whose worker dies is rescheduled by Dask; `retries` re-runs a task that raised.
-    Each job is one task with a deterministic key, so a result comes back once per job. Its Warp
-    render uses `cluster_render_threads(client)` threads, as in the local pool: a Dask worker does not
-    share the cores out by itself, and two workers on two cores each rendering on every core took
-    32-41 ms a fit against the local pool's 25 ms (issue 13).
+    path). A task runs one or several jobs in turn (`worker.run_jobs`; `task_size`): a task costs Dask
+    10-20 ms of CPU over client, scheduler and worker, as much as a small fit, so tasks are sized from
+    the measured fit time to TASK_SECONDS, TASKS_PER_THREAD in flight per worker thread. A task whose
+    worker dies is rescheduled by Dask; `retries` re-runs a task that raised. Each task has a
+    deterministic key, so a job's result comes back once. Its Warp renders use
+    `cluster_render_threads(client)` threads, as in the local pool: a Dask worker does not share the
+    cores out by itself, and two workers on two cores each rendering on every core took 32-41 ms a
+    fit against the local pool's 25 ms (issue 13).
     """
     from dask.base import tokenize
     from distributed import as_completed
 
-    threads = cluster_render_threads(client)
-    futures = {}
-    for job in jobs:
-        files = pack(job.spec) if inline else None
-        key = f"difflab-fit-{job.name}-{tokenize(job.spec, inline)}"
-        futures[client.submit(run_job, job.spec, files, threads, key=key, retries=retries, pure=False)] = job
+    threads, slots = cluster_render_threads(client), cluster_slots(client)
+    todo, seconds, futures = list(reversed(jobs)), [], {}
+    running = as_completed()
+
+    def submit():
+        size = task_size(statistics.median(seconds) if seconds else None, len(todo), slots)
+        chunk = [todo.pop() for _ in range(min(size, len(todo)))]
+        specs = [job.spec for job in chunk]
+        key = f"difflab-fits-{chunk[0].name}-{tokenize(specs, inline)}"
+        files = [pack(spec) if inline else None for spec in specs]
+        future = client.submit(run_jobs, specs, files, threads, key=key, retries=retries, pure=False)
+        futures[future] = chunk
+        running.add(future)
+
     try:
-        for future in as_completed(futures):
+        for _ in range(min(len(todo), slots * TASKS_PER_THREAD)):
+            submit()
+        for future in running:
+            chunk = futures.pop(future)
             try:
-                outcome = future.result()
+                outcomes = future.result()
+                seconds.extend(outcome["seconds"] for outcome in outcomes)
             except Exception as exc:  # lost beyond Dask's retries (KilledWorker, ...)
-                outcome = _lost(f"cluster: {type(exc).__name__}: {exc}")
-            yield futures[future], outcome
+                outcomes = [_lost(f"cluster: {type(exc).__name__}: {exc}")] * len(chunk)
+            if todo:
+                submit()
+            yield from zip(chunk, outcomes)
     except BaseException:
         client.cancel(list(futures))
         raise

@@ -121,3 +121,8 @@ def run_job(spec: dict, files: dict | None = None, threads: int | None = None) -
     else:
         outcome = outcome_of(spec, threads)
     return {**outcome, "seconds": time.perf_counter() - start}
+
+
+def run_jobs(specs: list, files: list, threads: int | None = None) -> list:
+    """A cluster task: `run_job` for each spec in turn, with its packed files (or None), in a list."""
+    return [run_job(spec, packed, threads) for spec, packed in zip(specs, files)]
