@@ -46,6 +46,20 @@ def float_barycentrics(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, i: int, j: int)
 
 
 @wp.func
+def depth_gradient(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d):
+    """(dz/dx, dz/dy) of z_ndc over raster space in triangle s0 s1 s2 (float64, unsnapped): the
+    barycentric blend of the corners' z_ndc is affine, z = z0 + dz/dx (x - x0) + dz/dy (y - y0),
+    with dz/dx = -sum_k z_k (y_{k+2} - y_{k+1}) / A and dz/dy = sum_k z_k (x_{k+2} - x_{k+1}) / A
+    (A: twice the signed area, as `edge_values` sums). Zero for a sliver (A = 0: z = z0)."""
+    area = (s1[0] - s0[0]) * (s2[1] - s0[1]) - (s1[1] - s0[1]) * (s2[0] - s0[0])
+    if area == wp.float64(0.0):
+        return wp.float64(0.0), wp.float64(0.0)
+    dz_dx = -(s0[2] * (s2[1] - s1[1]) + s1[2] * (s0[1] - s2[1]) + s2[2] * (s1[1] - s0[1])) / area
+    dz_dy = (s0[2] * (s2[0] - s1[0]) + s1[2] * (s0[0] - s2[0]) + s2[2] * (s1[0] - s0[0])) / area
+    return dz_dx, dz_dy
+
+
+@wp.func
 def covers(b: wp.int64, owned: bool):
     """A sample is on the inner side of an edge, or exactly on an edge its triangle owns."""
     return b > wp.int64(0) or (b == wp.int64(0) and owned)
@@ -75,6 +89,7 @@ def raster_slot(slot: int, row_begin: int, row_end: int, screen: wp.array2d(dtyp
     own0 = owns_edge(x1, y1, x2, y2)
     own1 = owns_edge(x2, y2, x0, y0)
     own2 = owns_edge(x0, y0, x1, y1)
+    dz_dx, dz_dy = depth_gradient(s0, s1, s2)  # z_ndc is affine in screen space: its plane
     step = wp.int64(SUBPIXEL)
     centre = wp.int64(SAMPLE_CENTRE)
     px = wp.int64(j_lo) * step + centre
@@ -83,10 +98,10 @@ def raster_slot(slot: int, row_begin: int, row_end: int, screen: wp.array2d(dtyp
         b0 = edge(x1, y1, x2, y2, px, py)  # exact integer edge functions, stepped along the row
         b1 = edge(x2, y2, x0, y0, px, py)
         b2 = edge(x0, y0, x1, y1, px, py)
+        z_row = s0[2] + dz_dy * (wp.float64(i) + wp.float64(0.5) - s0[1])
         for j in range(j_lo, j_hi + 1):
             if covers(b0, own0) and covers(b1, own1) and covers(b2, own2):
-                b = float_barycentrics(s0, s1, s2, i, j)
-                z_ndc = float(b[0] * s0[2] + b[1] * s1[2] + b[2] * s2[2])  # z_ndc is affine in screen space
+                z_ndc = float(z_row + dz_dx * (wp.float64(j) + wp.float64(0.5) - s0[0]))
                 if z_ndc >= -1.0 and z_ndc <= 1.0:
                     depth = wp.int64((z_ndc + 1.0) * 0.5 * DEPTH_LEVELS)
                     wp.atomic_min(key, i * width + j, depth * wp.int64(4294967296) + wp.int64(slot))

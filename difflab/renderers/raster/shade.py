@@ -139,10 +139,12 @@ def seen_points_kernel(row0: int, width: int, key: wp.array(dtype=wp.int64), tri
     copies of the face's vertices on the side it shows (Gouraud: front v, back V + v); one row of
     samples per thread. Every write is a 1, so rows sharing a point may write it in any order."""
     i = row0 + wp.tid()
+    last = int(-1)  # the slot of the sample before: its points are flagged already
     for j in range(width):
         k = key[i * width + j]
-        if k != NO_HIT:
-            slot = int(k % wp.int64(4294967296))
+        slot = int(k % wp.int64(4294967296))
+        if k != NO_HIT and slot != last:
+            last = slot
             f = tris.face[slot]
             if shading == FLAT:
                 needed[f] = 1
