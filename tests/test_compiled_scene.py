@@ -46,7 +46,7 @@ def test_compiled_scene_renders_every_setting_as_a_fresh_scene_does(no_compiling
 def test_frames_of_one_compiled_scene_keep_their_images_and_threads_do_not_share_scratch(no_compiling):
     """A compiled scene reuses its per-frame arrays (`scratch`): an earlier frame's image stays as it
     was, a different sample grid (spp) reallocates them, and threads rendering it at once each get
-    their own."""
+    their own (frames sharing the band threads, whose lit-point caches they take turns with, too)."""
     from concurrent.futures import ThreadPoolExecutor
 
     compiled = compile_scene(SCENE)
@@ -54,11 +54,13 @@ def test_frames_of_one_compiled_scene_keep_their_images_and_threads_do_not_share
     first = [render(compiled, threads=1, **case) for case in cases]
     kept = [image.copy() for image in first]
     again = [render(compiled, threads=1, **case) for case in reversed(cases)][::-1]
-    with ThreadPoolExecutor(max_workers=4) as pool:
+    with ThreadPoolExecutor(max_workers=4) as pool:  # frames at once, each on one thread or sharing the band pool
         threaded = list(pool.map(lambda case: render(compiled, threads=1, **case), cases * 3))
+        banded = list(pool.map(lambda case: render(compiled, threads=2, **case), cases * 3))
     for k, case in enumerate(cases):
         assert np.array_equal(first[k], kept[k]) and np.array_equal(again[k], kept[k]), case
         assert all(np.array_equal(threaded[k + j * len(cases)], kept[k]) for j in range(3)), case
+        assert all(np.array_equal(banded[k + j * len(cases)], kept[k]) for j in range(3)), case
 
 
 def test_every_frame_starts_from_a_cleared_zbuffer_whatever_ran_before(no_compiling):

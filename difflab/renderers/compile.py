@@ -67,15 +67,18 @@ class CompiledScene:
         """The same device data under `scene`: the compiled scene with other render settings."""
         return replace(self, scene=scene)
 
-    def scratch(self, name: str, shape, dtype) -> wp.array:
+    def scratch(self, name: str, shape, dtype, fill=None) -> wp.array:
         """A device array `name` for one frame's intermediate results, kept for this compiled scene's
         next frame (fresh memory costs a page fault per 4 KiB on every frame). It holds whatever the
-        last frame left; one set per thread, so threads rendering the same compiled scene never share."""
+        last frame left (`fill` when new); one set per thread, so threads rendering the same
+        compiled scene never share."""
         shape = (shape,) if isinstance(shape, int) else tuple(shape)
         pool = self.scratch_pool()
         array = pool.get(name)
         if array is None or array.shape != shape or array.dtype != dtype:
             array = pool[name] = host_empty(shape, dtype, self.device)
+            if fill is not None:
+                array.fill_(fill)
         return array
 
     def scratch_pool(self) -> dict:

@@ -8,10 +8,12 @@ Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
 2. `assemble_kernel`       clip each triangle against the near plane (z_clip >= -w_clip) into at most
                            two triangles, divide by w, map to raster space, snap to 1/256 sample
                            (fixed point), drop degenerate ones, cull back faces on request.
-3. `raster_kernel`         for every sample centre inside a triangle (exact integer edge functions with
-                           a top-left-style fill rule: a shared edge's samples go to exactly one
-                           triangle) write min(depth, triangle) into a 64-bit visibility key: the
-                           z-buffer test and a deterministic tie-break in one atomic.
+3. `raster_kernel`         per band of rows, the triangles `assemble_kernel` counted and `bin_kernel`
+                           listed there: for every sample centre inside a triangle (exact integer
+                           edge functions with a top-left-style fill rule: a shared edge's samples go
+                           to exactly one triangle) write min(depth, triangle) into a 64-bit
+                           visibility key: the z-buffer test and a deterministic tie-break in one
+                           atomic.
 4. `resolve_kernel`        per sample: barycentrics of the winning triangle, perspective-correct
                            (b_k / w_k renormalised) or affine, the original triangle's weights, and the
                            surface there (position, normal, uv, material, depth) — the G-buffer.
@@ -23,7 +25,9 @@ Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
 7. `compose_kernel`        per sample: the weighted colours of its points (gouraud: the vertex colours
                            interpolated, optionally clamped to [0, 1] first), background, fog.
 
-`render` (no G-buffer) runs stages 1-3, then `seen_points_kernel` flags the flat / Gouraud points
-visible samples read, `light_mesh_points_kernel` lights only those (5-6), and `image_kernel` fuses 4,
-6 (Phong) and 7 per sample.
+`render` (no G-buffer) runs stages 1-3, then `image_kernel` fuses 4-7 per sample: Phong's points are
+its samples; a flat / Gouraud point is lit when a sample first reads it, into a cache of the CPU
+thread (`shade.PointCacheW`), so only the points visible samples read are lit, with no pass of
+their own. The image kernel also resets the keys it reads, so the next frame's z-buffer starts
+cleared.
 """

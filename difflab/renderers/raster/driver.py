@@ -7,6 +7,7 @@ read); with gbuffer=False, what `render` asks for, stages 4, 6 and 7 run fused p
 
 from __future__ import annotations
 
+import itertools
 import time
 
 import numpy as np
@@ -21,7 +22,7 @@ from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
 from ..launch import (band_plan, host_empty, launch_chunks, launch_parts, launch_row_loops, load_kernels,
-                      part_count, run_bands)
+                      parallel_bands, part_count, run_bands)
 
 
 def empty_points(count: int, device: str) -> resolve.PointsW:
@@ -104,14 +105,13 @@ def split_slots(compiled, p_clip: wp.array, threads: int | None) -> tuple[wp.arr
     return wp.array(extra_slot, dtype=wp.int32, device=device), split_faces.size
 
 
-def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
+def zbuffer(compiled, cam, cull: int, threads: int | None = None):
     """Stages 1-3 on the sample grid of `cam`: clip space, near-plane clipping, and the z-buffer.
 
     Returns the clipped screen triangles (a `ScreenW`: a slot per face, and one more per face clipped
     to a quad) and the visibility key per sample (NO_HIT, or depth << 32 | slot of the nearest
     triangle). Vertices and faces are transformed in parts on all cores; assembling counts the slots
-    meeting each band of rows, `bin_kernel` lists them, and each band rasterizes only its list, then
-    calls `then(tris, key, begin, end)` when given (the band's keys are final there)."""
+    meeting each band of rows, `bin_kernel` lists them, and each band rasterizes only its list."""
     device, arrays = compiled.device, compiled.arrays
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     width, height = cam.width, cam.height
@@ -158,8 +158,6 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
             chunk = last - first if device == "cpu" else 1  # a band is one thread's work on the CPU
             wp.launch(coverage.raster_kernel, dim=(last - first + chunk - 1) // chunk, inputs=[
                 chunk, begin, end, binned[first:last], tris.screen, width, key], device=device)
-        if then is not None:
-            then(tris, key, begin, end)
 
     run_bands(raster_band, bands, threads)
     return tris, key
@@ -183,30 +181,35 @@ def shading_points(compiled, mesh, cam, shading: int, samples, threads: int | No
     return points, n_points
 
 
-def empty_lit(compiled, n_points: int, n_samples: int, record: bool) -> shade.LitW:
-    """Stage 6's outputs; the per-light records and per-sample texels only when `record` (else 1
-    element, and the colours in arrays kept for the next frame)."""
-    device, n_lights = compiled.device, max(len(compiled.scene.lights), 1)
-    rows = n_points if record else 1
+def empty_lit(device: str, n_points: int, n_lights: int, n_samples: int) -> shade.LitW:
+    """Stage 6's outputs for the G-buffer: per point and light, direction, distance, visibility;
+    per point its colour and texture factor; per sample its texel."""
     lit = shade.LitW()
-    lit.light_dir = wp.zeros((rows, n_lights), dtype=wp.vec3, device=device)  # zero where nothing is lit
-    lit.light_dist = wp.zeros((rows, n_lights), dtype=float, device=device)
-    lit.visibility = wp.zeros((rows, n_lights), dtype=float, device=device)
-    if record:
-        lit.color = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
-        lit.factor = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
-    else:
-        lit.color = compiled.scratch("lit.color", max(n_points, 1), wp.vec3)
-        lit.factor = compiled.scratch("lit.factor", max(n_points, 1), wp.vec3)
-    lit.texel = wp.zeros(n_samples if record else 1, dtype=wp.vec3, device=device)
+    lit.light_dir = wp.zeros((n_points, n_lights), dtype=wp.vec3, device=device)  # zero where nothing is lit
+    lit.light_dist = wp.zeros((n_points, n_lights), dtype=float, device=device)
+    lit.visibility = wp.zeros((n_points, n_lights), dtype=float, device=device)
+    lit.color = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
+    lit.factor = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
+    lit.texel = wp.zeros(n_samples, dtype=wp.vec3, device=device)
     return lit
+
+
+def point_cache(compiled, n_points: int, frame: int) -> shade.PointCacheW:
+    """The calling thread's cache of lit flat / Gouraud points (`shade.PointCacheW`) for `frame`:
+    arrays kept between frames, stamps zeroed when allocated (frame numbers start at 1)."""
+    cache = shade.PointCacheW()
+    cache.color = compiled.scratch("cache.color", max(n_points, 1), wp.vec3)
+    cache.factor = compiled.scratch("cache.factor", max(n_points, 1), wp.vec3)
+    cache.stamp = compiled.scratch("cache.stamp", max(n_points, 1), wp.int32, fill=0)
+    cache.frame = frame
+    return cache
 
 
 def light_points(compiled, lighting, points, n_points: int, n_samples: int, points_are_samples: int,
                  threads: int | None = None) -> shade.LitW:
     """Stage 6 for the G-buffer: light every point, recording per light its direction, distance
     and visibility (and the texture factor under flat / Gouraud, the texel per sample under Phong)."""
-    lit = empty_lit(compiled, n_points, n_samples, True)
+    lit = empty_lit(compiled.device, n_points, max(len(compiled.scene.lights), 1), n_samples)
     launch_chunks(shade.light_points_kernel, n_points, [points, lighting, points_are_samples, 1, lit],
                   compiled.device, threads)
     return lit
@@ -228,24 +231,21 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     image = host_empty(width * height, wp.vec3, device)  # returned: fresh memory every frame
     background, fog = wp.vec3(*scene.background), fog_struct(scene.fog)
 
-    if not gbuffer:  # stages 1-3 (then 5-6 for the flat / Gouraud points visible samples read), 4, 6, 7 fused
+    if not gbuffer:  # stages 1-3, then 4-7 fused (flat / Gouraud points lit on first use)
         n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading, 0)
-        needed = compiled.scratch("needed", n_points, wp.int32)
-        needed.zero_()
-
-        def seen_points(tris, key, begin: int, end: int) -> None:  # the band's keys are final: flag what they see
-            wp.launch(shade.seen_points_kernel, dim=end - begin, inputs=[
-                begin, width, key, tris, compiled.arrays["faces"], compiled.vertices.shape[0], shading, needed],
-                device=device)
-
-        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads, seen_points if n_points else None)
-        lit = empty_lit(compiled, n_points, 0, False)
-        launch_chunks(shade.light_mesh_points_kernel, n_points, [mesh, cam, shading, lighting, needed, lit], device,
-                      threads)
+        frame = next(compiled.built.setdefault("frames", itertools.count(1)))  # this frame's cache stamp
+        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)
+        if device != "cpu":  # one cache for the GPU's threads: lit before any is read
+            launch_chunks(shade.light_mesh_points_kernel, n_points, [
+                mesh, cam, shading, lighting, point_cache(compiled, n_points, frame)], device, threads)
         bad = compiled.scratch("nonfinite rows", height, wp.int32)
-        launch_row_loops(shade.image_kernel, height, [
-            key, tris, mesh, cam, lighting, lit, perspective_correct, shading, int(clamp_colors), background, fog,
-            image, bad], device, threads)
+
+        def image_band(begin: int, end: int) -> None:  # the cache of the thread running the band
+            wp.launch(shade.image_kernel, dim=end - begin, inputs=[
+                begin, key, tris, mesh, cam, lighting, point_cache(compiled, n_points, frame), perspective_correct,
+                shading, int(clamp_colors), background, fog, image, bad], device=device)
+
+        parallel_bands(image_band, height, device, threads)
         mark_key_cleared(compiled, key)  # image_kernel reset every key it read
         pixels = box_downsample(image.numpy().reshape(height, width, 3), side)
         nonfinite = int(bad.numpy().sum())  # non-finite samples; with spp > 1 count the pixels they reach

@@ -5,8 +5,10 @@ the colour from the one illumination model. Stage 7 (`compose_kernel`), per samp
 colours of its points (gouraud: the vertex colours interpolated, optionally clamped to [0, 1]
 first), the texture per fragment under flat / Gouraud, background and fog.
 
-`image_kernel` is stages 4, 6 (for Phong's per-sample points) and 7 fused per sample, with the same
-functions, for renders that need only the image: nothing of the G-buffer is stored.
+`image_kernel` is stages 4, 6 and 7 fused per sample, with the same functions, for renders that
+need only the image: nothing of the G-buffer is stored. Phong's points are its samples, lit there;
+flat / Gouraud points are lit on a sample's first use into a cache of the CPU thread (see
+`PointCacheW`), so only the points visible samples read are lit, in one pass over the samples.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from ..._warp import wp
 
 from ...lighting.warp_model import (FogW, LightW, MaterialW, ambient_term, fog_blend, light_term, light_vector,
                                    surface_material, target_only, textured_material)
-from ...vocabulary import FLAT, FOG_NONE, PHONG_SHADING
+from ...vocabulary import FOG_NONE, PHONG_SHADING
 from ..camera import CameraW
 from ..texture.sampling import TexturesW, sample_texture
 from ..trace import SceneGeomW, light_visibility
@@ -131,44 +133,37 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
         light_into(points, lighting, points_are_samples, record, lit, k)
 
 
-@wp.kernel
-def seen_points_kernel(row0: int, width: int, key: wp.array(dtype=wp.int64), tris: ScreenW,
-                       faces: wp.array2d(dtype=wp.int32), n_vertices: int, shading: int,
-                       needed: wp.array(dtype=wp.int32)):
-    """needed[k] = 1 for every flat / Gouraud point a visible sample reads: its face (flat), or the
-    copies of the face's vertices on the side it shows (Gouraud: front v, back V + v); one row of
-    samples per thread. Every write is a 1, so rows sharing a point may write it in any order."""
-    i = row0 + wp.tid()
-    last = int(-1)  # the slot of the sample before: its points are flagged already
-    for j in range(width):
-        k = key[i * width + j]
-        slot = int(k % wp.int64(4294967296))
-        if k != NO_HIT and slot != last:
-            last = slot
-            f = tris.face[slot]
-            if shading == FLAT:
-                needed[f] = 1
-            else:
-                offset = 0
-                if tris.facing[slot] < 0:
-                    offset = n_vertices
-                for c in range(3):
-                    needed[faces[f, c] + offset] = 1
+@wp.struct
+class PointCacheW:
+    """The flat / Gouraud shading points `render` lights on first use, one cache per CPU thread:
+    point k's colour and texture factor (as `light_point` gives them) hold for this frame where
+    stamp[k] == frame (a number no other frame of the compiled scene has)."""
+
+    color: wp.array(dtype=wp.vec3)
+    factor: wp.array(dtype=wp.vec3)
+    stamp: wp.array(dtype=wp.int32)
+    frame: int
+
+
+@wp.func
+def cache_point(cache: PointCacheW, mesh: RasterMeshW, cam: CameraW, shading: int, lighting: LightingW, k: int):
+    """Stages 5 and 6 for flat / Gouraud point k into `cache`, unless this frame lit it there."""
+    if cache.stamp[k] != cache.frame:
+        color, factor = light_point(mesh_point(mesh, lighting.materials, cam, shading, k), lighting, 0, wp.vec3(0.0),
+                                    LitW(), k, 0)
+        cache.color[k] = color
+        cache.factor[k] = factor
+        cache.stamp[k] = cache.frame
 
 
 @wp.kernel
 def light_mesh_points_kernel(begin: int, end: int, chunk: int, mesh: RasterMeshW, cam: CameraW, shading: int,
-                             lighting: LightingW, needed: wp.array(dtype=wp.int32), lit: LitW):
-    """Stages 5 and 6 fused for flat / Gouraud points [begin, end) (`render`: nothing recorded), only
-    those a visible sample reads (`needed`; the others are left unset, no sample reads them)."""
+                             lighting: LightingW, cache: PointCacheW):
+    """Every flat / Gouraud point [begin, end) into `cache` before the image is formed (CUDA, where
+    the image kernel's threads would share one cache)."""
     first = begin + wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, end)):
-        if needed[k] == 0:
-            continue
-        point = mesh_point(mesh, lighting.materials, cam, shading, k)
-        color, factor = light_point(point, lighting, 0, wp.vec3(0.0), lit, k, 0)
-        lit.color[k] = color
-        lit.factor[k] = factor
+        cache_point(cache, mesh, cam, shading, lighting, k)
 
 
 @wp.func
@@ -189,12 +184,13 @@ def blend_points(values: wp.array(dtype=wp.vec3), index: wp.vec3i, w: wp.vec3, c
 
 
 @wp.func
-def fragment_color(lit: LitW, index: wp.vec3i, w: wp.vec3, clamp_colors: int, texel: wp.vec3, per_fragment: int):
-    """A sample's colour from its points: sum_k w_k colour_k, plus texel * sum_k w_k factor_k for a
-    textured material under flat / Gouraud shading (`per_fragment`)."""
-    out = blend_points(lit.color, index, w, clamp_colors)
+def fragment_color(color: wp.array(dtype=wp.vec3), factor: wp.array(dtype=wp.vec3), index: wp.vec3i, w: wp.vec3,
+                   clamp_colors: int, texel: wp.vec3, per_fragment: int):
+    """A sample's colour from its points' colours and texture factors: sum_k w_k colour_k, plus
+    texel * sum_k w_k factor_k for a textured material under flat / Gouraud shading (`per_fragment`)."""
+    out = blend_points(color, index, w, clamp_colors)
     if per_fragment == 1:
-        out = out + wp.cw_mul(texel, blend_points(lit.factor, index, w, clamp_colors))
+        out = out + wp.cw_mul(texel, blend_points(factor, index, w, clamp_colors))
     return out
 
 
@@ -212,7 +208,7 @@ def compose_into(samples: PointsW, depth: wp.array(dtype=float), point_index: wp
     if textured == 1:
         texel = texel_at(lighting, mat_id, samples.uv[s], samples.duv_dx[s], samples.duv_dy[s])
         lit.texel[s] = texel
-    out = fragment_color(lit, point_index[s], point_weight[s], clamp_colors, texel, textured)
+    out = fragment_color(lit.color, lit.factor, point_index[s], point_weight[s], clamp_colors, texel, textured)
     f = fog_blend(fog, depth[s])
     image[s] = f * out + (1.0 - f) * fog.color
 
@@ -230,10 +226,11 @@ def compose_kernel(row0: int, width: int, samples: PointsW, depth: wp.array(dtyp
 
 
 @wp.func
-def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, lighting: LightingW, lit: LitW,
-                 perspective_correct: int, shading: int, clamp_colors: int, fog: FogW, i: int, j: int, s: int):
+def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, lighting: LightingW,
+                 cache: PointCacheW, perspective_correct: int, shading: int, clamp_colors: int, fog: FogW, i: int,
+                 j: int, s: int):
     """The colour of covered sample (i, j) (index s) as `compose_kernel` gives it from the G-buffer.
-    Under flat / Gouraud shading `lit` holds the points lit by stage 6."""
+    Under flat / Gouraud shading its points are lit into `cache` on first use."""
     sample = SampleW()
     p = wp.vec3(0.0)
     if shading == PHONG_SHADING:  # the whole surface point, lit here
@@ -251,22 +248,24 @@ def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, 
         texel = texel_at(lighting, mat_id, uv, duv_dx, duv_dy)
     out = wp.vec3(0.0)
     if shading == PHONG_SHADING:
-        out, unused = light_point(sample.point, lighting, 1, texel, lit, 0, 0)
+        out, unused = light_point(sample.point, lighting, 1, texel, LitW(), 0, 0)
     else:
         index, weight = sample_points(sample, mesh, shading, s, mesh.vertices.shape[0])
-        out = fragment_color(lit, index, weight, clamp_colors, texel, textured)
+        for c in range(3):
+            cache_point(cache, mesh, cam, shading, lighting, index[c])
+        out = fragment_color(cache.color, cache.factor, index, weight, clamp_colors, texel, textured)
     f = fog_blend(fog, wp.dot(p - cam.eye, cam.forward))
     return f * out + (1.0 - f) * fog.color
 
 
 @wp.kernel
 def image_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW, cam: CameraW,
-                 lighting: LightingW, lit: LitW, perspective_correct: int, shading: int, clamp_colors: int,
+                 lighting: LightingW, cache: PointCacheW, perspective_correct: int, shading: int, clamp_colors: int,
                  background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3), nonfinite: wp.array(dtype=wp.int32)):
-    """Stages 4, 6 (Phong) and 7 fused, one row of samples per thread (the kernel's arguments are
-    read once per row): the image `compose_kernel` gives from the G-buffer, without storing it.
-    Each key read is reset to NO_HIT (the next frame's z-buffer starts cleared); nonfinite[i]
-    counts row i's samples with a NaN or infinite channel."""
+    """Stages 4, 6 (Phong; flat / Gouraud points on first use) and 7 fused, one row of samples per
+    thread (the kernel's arguments are read once per row): the image `compose_kernel` gives from
+    the G-buffer, without storing it. Each key read is reset to NO_HIT (the next frame's z-buffer
+    starts cleared); nonfinite[i] counts row i's samples with a NaN or infinite channel."""
     i = row0 + wp.tid()
     bad = int(0)
     for j in range(cam.width):
@@ -276,7 +275,7 @@ def image_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: 
             image[s] = background
         else:
             key[s] = NO_HIT
-            c = image_sample(k, tris, mesh, cam, lighting, lit, perspective_correct, shading, clamp_colors, fog, i,
+            c = image_sample(k, tris, mesh, cam, lighting, cache, perspective_correct, shading, clamp_colors, fog, i,
                              j, s)
             image[s] = c
             if not (wp.isfinite(c[0]) and wp.isfinite(c[1]) and wp.isfinite(c[2])):
