@@ -87,7 +87,7 @@ class SampleW:
     point: PointW
 
 
-@wp.func
+@wp.func(inline=True)
 def make_point(p: wp.vec3, normal: wp.vec3, geo: wp.vec3, view: wp.vec3, mat: int,
                materials: wp.array(dtype=MaterialW), obj: int, analytic: bool):
     """A shading point, with its checker cell and the object its shadow rays skip (convex analytic ones)."""
@@ -171,7 +171,7 @@ def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=
     return dx[0] * ua + dx[1] * ub + dx[2] * uc, dy[0] * ua + dy[1] * ub + dy[2] * uc
 
 
-@wp.func
+@wp.func(inline=True)
 def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: int, j: int):
     """Which face covered sample (i, j) sees (its visibility key is `key`) and with what weights:
     barycentrics of the winning slot, perspective-correct (b_k / w_k renormalised) or affine, carried
@@ -192,7 +192,7 @@ def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: in
     return sample
 
 
-@wp.func
+@wp.func(inline=True)
 def sample_position(sample: SampleW, mesh: RasterMeshW):
     """The world-space point a sample sees."""
     f = sample.face
@@ -201,7 +201,7 @@ def sample_position(sample: SampleW, mesh: RasterMeshW):
         + wb[2] * mesh.vertices[mesh.faces[f, 2]]
 
 
-@wp.func
+@wp.func(inline=True)
 def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: wp.array(dtype=MaterialW),
                    cam: CameraW, perspective_correct: int, shading: int, i: int, j: int):
     """`sample_weights` and the surface point there (shading normal: the face's under flat shading,
@@ -233,7 +233,7 @@ def sample_uv(sample: SampleW, tris: ScreenW, mesh: RasterMeshW, perspective_cor
     return wb[0] * uv0 + wb[1] * uv1 + wb[2] * uv2, duv_dx, duv_dy
 
 
-@wp.func
+@wp.func(inline=True)
 def sample_points(sample: SampleW, mesh: RasterMeshW, shading: int, s: int, n_vertices: int):
     """Which three shading points make sample s's colour (indices, weights): itself (phong), its face
     (flat), or its face's vertices (gouraud; the back-face copies after the first n_vertices)."""
@@ -305,7 +305,7 @@ def resolve_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh
         resolve_into(key, tris, mesh, materials, cam, perspective_correct, shading, n_vertices, out, samples, i, j)
 
 
-@wp.func
+@wp.func(inline=True)
 def mesh_point(mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), cam: CameraW, shading: int, k: int):
     """Shading point k of flat or Gouraud shading. Flat: face k's centroid, with the face normal
     turned toward the viewer. Gouraud: two points per vertex, the front copy (k < V) with the vertex

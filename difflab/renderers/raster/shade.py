@@ -55,7 +55,7 @@ class LitW:
     texel: wp.array(dtype=wp.vec3)  # per sample: the texture value there
 
 
-@wp.func
+@wp.func(inline=True)
 def light_point(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3, lit: LitW, k: int, record: int):
     """ka Ia + sum_p s_p light_term_p at a point (recording L_p, d_p, s_p as point k when asked).
 
@@ -145,7 +145,7 @@ class PointCacheW:
     frame: int
 
 
-@wp.func
+@wp.func(inline=True)
 def cache_point(cache: PointCacheW, mesh: RasterMeshW, cam: CameraW, shading: int, lighting: LightingW, k: int):
     """Stages 5 and 6 for flat / Gouraud point k into `cache`, unless this frame lit it there."""
     if cache.stamp[k] != cache.frame:
@@ -166,12 +166,12 @@ def light_mesh_points_kernel(begin: int, end: int, chunk: int, mesh: RasterMeshW
         cache_point(cache, mesh, cam, shading, lighting, k)
 
 
-@wp.func
+@wp.func(inline=True)
 def clamp01(c: wp.vec3):
     return wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
 
 
-@wp.func
+@wp.func(inline=True)
 def blend_points(values: wp.array(dtype=wp.vec3), index: wp.vec3i, w: wp.vec3, clamp_colors: int):
     """sum_k w_k values[index_k], each value clamped to [0, 1] first when asked (OpenGL)."""
     out = wp.vec3(0.0)
@@ -183,7 +183,7 @@ def blend_points(values: wp.array(dtype=wp.vec3), index: wp.vec3i, w: wp.vec3, c
     return out
 
 
-@wp.func
+@wp.func(inline=True)
 def fragment_color(color: wp.array(dtype=wp.vec3), factor: wp.array(dtype=wp.vec3), index: wp.vec3i, w: wp.vec3,
                    clamp_colors: int, texel: wp.vec3, per_fragment: int):
     """A sample's colour from its points' colours and texture factors: sum_k w_k colour_k, plus
@@ -225,7 +225,7 @@ def compose_kernel(row0: int, width: int, samples: PointsW, depth: wp.array(dtyp
                      fog, image, i * width + j)
 
 
-@wp.func
+@wp.func(inline=True)
 def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, lighting: LightingW,
                  cache: PointCacheW, perspective_correct: int, shading: int, clamp_colors: int, fog: FogW, i: int,
                  j: int, s: int):
