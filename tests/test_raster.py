@@ -304,3 +304,14 @@ def test_the_image_path_lights_only_the_points_visible_samples_read(shading):
     copies = gouraud.point_index[gouraud.mask] >= len(gouraud.points.position) // 2  # back copies after the V fronts
     assert copies.any() and not copies.all()  # both sides of the surface are seen
     assert np.array_equal(render(scene, shading=shading), frame.image)
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+def test_a_scene_without_objects_renders_its_background(threads):
+    """No triangles: the image pass still runs on every band (and the G-buffer is empty)."""
+    scene = scene_dict([], {}, background=[0.2, 0.3, 0.4])
+    image = render(scene, threads=threads)
+    assert image.shape == (32, 32, 3) and np.array_equal(image, np.broadcast_to(np.float32([0.2, 0.3, 0.4]), image.shape))
+    frame = render_frame(scene, threads=threads)
+    assert np.array_equal(frame.image, image) and not frame.gbuffer.mask.any()
+    assert np.array_equal(render(scene, method="raytrace", threads=threads), image)

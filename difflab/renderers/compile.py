@@ -322,7 +322,6 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     # on the CPU the device arrays alias the soup's (copy=False): one copy of the mesh in memory
     arrays = {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device, copy=False)
               for name, dtype in dtypes.items()}
-    arrays["faces"] = arrays["faces"].reshape((faces.shape[0], 3))
     geom = ray_geometry(arrays, mesh_vertices, spheres, planes, epsilon, device)
     ordered = [scene.materials[name] for name in scene.material_names]
     textures, texture_ids = scene_textures(ordered, device)

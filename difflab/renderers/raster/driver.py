@@ -105,20 +105,25 @@ def split_slots(compiled, p_clip: wp.array, threads: int | None) -> tuple[wp.arr
     return wp.array(extra_slot, dtype=wp.int32, device=device), split_faces.size
 
 
-def zbuffer(compiled, cam, cull: int, threads: int | None = None):
+def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
     """Stages 1-3 on the sample grid of `cam`: clip space, near-plane clipping, and the z-buffer.
 
     Returns the clipped screen triangles (a `ScreenW`: a slot per face, and one more per face clipped
     to a quad) and the visibility key per sample (NO_HIT, or depth << 32 | slot of the nearest
     triangle). Vertices and faces are transformed in parts on all cores; assembling counts the slots
-    meeting each band of rows, `bin_kernel` lists them, and each band rasterizes only its list."""
+    meeting each band of rows, `bin_kernel` lists them, and each band rasterizes only its list, then
+    calls `then(tris, key, begin, end)` when given: the band's keys are final there, and its rows
+    need no other band's."""
     device, arrays = compiled.device, compiled.arrays
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     width, height = cam.width, cam.height
     scratch = compiled.scratch  # arrays kept between frames: no fresh pages to fault in
     key = cleared_key(compiled, width * height)
-    if not n_faces:
-        return empty_screen(device), key
+    if not n_faces:  # nothing to draw; `then` still sees every band
+        tris = empty_screen(device)
+        if then is not None:
+            parallel_bands(lambda begin, end: then(tris, key, begin, end), height, device, threads)
+        return tris, key
     p_clip, p_screen = scratch("clip", n_vertices, wp.vec4), scratch("screen", n_vertices, wp.vec4d)
     behind = scratch("behind", 1, wp.int32)
     behind.zero_()
@@ -158,6 +163,8 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None):
             chunk = last - first if device == "cpu" else 1  # a band is one thread's work on the CPU
             wp.launch(coverage.raster_kernel, dim=(last - first + chunk - 1) // chunk, inputs=[
                 chunk, begin, end, binned[first:last], tris.screen, width, key], device=device)
+        if then is not None:
+            then(tris, key, begin, end)
 
     run_bands(raster_band, bands, threads)
     return tris, key
@@ -234,18 +241,17 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     if not gbuffer:  # stages 1-3, then 4-7 fused (flat / Gouraud points lit on first use)
         n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading, 0)
         frame = next(compiled.built.setdefault("frames", itertools.count(1)))  # this frame's cache stamp
-        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)
         if device != "cpu":  # one cache for the GPU's threads: lit before any is read
             launch_chunks(shade.light_mesh_points_kernel, n_points, [
                 mesh, cam, shading, lighting, point_cache(compiled, n_points, frame)], device, threads)
         bad = compiled.scratch("nonfinite rows", height, wp.int32)
 
-        def image_band(begin: int, end: int) -> None:  # the cache of the thread running the band
+        def image_band(tris, key, begin: int, end: int) -> None:  # right after the band's z-buffer, its thread's cache
             wp.launch(shade.image_kernel, dim=end - begin, inputs=[
                 begin, key, tris, mesh, cam, lighting, point_cache(compiled, n_points, frame), perspective_correct,
                 shading, int(clamp_colors), background, fog, image, bad], device=device)
 
-        parallel_bands(image_band, height, device, threads)
+        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads, image_band)
         mark_key_cleared(compiled, key)  # image_kernel reset every key it read
         pixels = box_downsample(image.numpy().reshape(height, width, 3), side)
         nonfinite = int(bad.numpy().sum())  # non-finite samples; with spp > 1 count the pixels they reach
