@@ -1,7 +1,8 @@
 """The ray tracer's peers for `raytrace.py`: Mitsuba 3's `scene.ray_intersect` on the same rays, and
 POV-Ray 3.7 on the same Whitted scene (spheres, a checkered plane, point lights, mirror and glass).
 
-    mitsuba_rays_per_second(obj_path, origins, directions, repeats)  # None when Mitsuba is missing
+    trace, variant = mitsuba_tracer(obj_path, origins, directions)  # (None, None) when Mitsuba is missing
+    wall, cpu = trace()                                             # one timed ray_intersect of all rays
     povray_seconds(scene, repeats)                                   # None when povray is missing
 """
 
@@ -34,13 +35,14 @@ def mitsuba_variant() -> str | None:
     return None
 
 
-def mitsuba_rays_per_second(obj_path: Path, origins: np.ndarray, directions: np.ndarray, repeats: int):
-    """Median rays per second (wall) and per CPU-second (all of the process's threads) of
-    `scene.ray_intersect` (closest hit, t and primitive index evaluated) over the given (N, 3) rays,
-    and the variant used; (None, None, None) without Mitsuba."""
+def mitsuba_tracer(obj_path: Path, origins: np.ndarray, directions: np.ndarray):
+    """A function timing one `scene.ray_intersect` (closest hit, t and primitive index evaluated) of
+    the given (N, 3) rays, returning (wall, CPU) seconds (CPU: all of the process's threads), already
+    called once (the first call JIT-compiles the kernel); and the variant used. (None, None) without
+    Mitsuba."""
     variant = mitsuba_variant()
     if variant is None:
-        return None, None, None
+        return None, None
     import drjit as dr
     import mitsuba as mi
 
@@ -48,16 +50,16 @@ def mitsuba_rays_per_second(obj_path: Path, origins: np.ndarray, directions: np.
     rays = mi.Ray3f(o=mi.Point3f(*[origins[:, k].astype(np.float32) for k in range(3)]),
                     d=mi.Vector3f(*[directions[:, k].astype(np.float32) for k in range(3)]))
     dr.eval(rays)
-    times, cpu = [], []
-    for _ in range(repeats + 1):  # the first call JIT-compiles the kernel
+
+    def trace() -> tuple[float, float]:
         start, start_cpu = time.perf_counter(), time.process_time()
         hit = scene.ray_intersect(rays)
         dr.eval(hit.t, hit.prim_index)
         dr.sync_thread()
-        times.append(time.perf_counter() - start)
-        cpu.append(time.process_time() - start_cpu)
-    n = origins.shape[0]
-    return n / statistics.median(times[1:]), n / statistics.median(cpu[1:]), variant
+        return time.perf_counter() - start, time.process_time() - start_cpu
+
+    trace()
+    return trace, variant
 
 
 def pov_vec(v) -> str:

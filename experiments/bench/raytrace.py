@@ -1,9 +1,11 @@
 """Ray tracer against its peers, side by side in one run: Mitsuba 3 and POV-Ray 3.7.
 
-1. Primary rays: an 81,920-triangle icosphere filling a 1024x1024 view, depth 1, no shadows, shading
-   included (`difflab.render` of a compiled scene: no ray tree recorded), against Mitsuba's
-   `scene.ray_intersect` on the same rays (closest hit only; llvm_ad_rgb when Mitsuba's LLVM backend
-   loads, else scalar_rgb, named in the output). Rays per second, medians, interleaved repeats.
+1. Primary rays: an 81,920-triangle icosphere filling a 1024x1024 view, depth 1, no shadows. difflab:
+   the whole `difflab.render` of a compiled scene (its default: primary mesh hits from the item
+   buffer, the BVH's bit for bit; shading; the image; no ray tree), and the same with every primary
+   ray through the BVH (item_buffer=False). Mitsuba: `scene.ray_intersect` alone on the same rays
+   (closest hit only, no shading; llvm_ad_rgb when Mitsuba's LLVM backend loads, else scalar_rgb,
+   named in the output). Rays per second, medians, interleaved repeats.
 2. Whitted scenes: spheres (mirror, glass, diffuse) over a checkered plane, two point lights with
    shadows, depth 5, against POV-Ray rendering the same scene exported to SDL (no anti-aliasing,
    same thread count; its wall time includes parsing, as difflab's includes compiling the scene).
@@ -86,10 +88,10 @@ def primary_rays(camera, size: int) -> tuple[np.ndarray, np.ndarray]:
     return np.broadcast_to(np.asarray(camera.eye, float), directions.shape).copy(), directions
 
 
-def timed_render(scene, threads: int) -> tuple[float, float]:
+def timed_render(scene, threads: int, **options) -> tuple[float, float]:
     """Wall seconds and CPU seconds (all threads of this process) of one `difflab.render`."""
     start, start_cpu = time.perf_counter(), time.process_time()
-    difflab.render(scene, threads=threads)
+    difflab.render(scene, threads=threads, **options)
     return time.perf_counter() - start, time.process_time() - start_cpu
 
 
@@ -98,25 +100,40 @@ def medians(pairs) -> tuple[float, float]:
 
 
 def primary_case(size: int, repeats: int, threads: int) -> dict:
+    """difflab's whole `render` of the frame (the item buffer -- the default --, shading, the image)
+    and the same with every primary ray through the BVH (item_buffer=False), against Mitsuba's
+    `ray_intersect` alone (no shading, no image), repeats interleaved."""
     with tempfile.TemporaryDirectory() as folder:
         obj_path = Path(folder) / "icosphere.obj"
         trimesh.creation.icosphere(subdivisions=6, radius=1.0).export(obj_path)
         scene = icosphere_scene(obj_path, size)
         compiled = difflab.compile_scene(scene)
-        difflab.render(compiled, threads=threads)  # warm-up: kernels compiled and loaded
-        ours = [timed_render(compiled, threads) for _ in range(repeats)]
-        single = [timed_render(compiled, 1) for _ in range(repeats)]
+        frame = difflab.render_frame(compiled, threads=threads)  # warm-up: kernels compiled and loaded, BVH built
+        difflab.render(compiled, threads=threads, item_buffer=False)
         origins, directions = primary_rays(scene.camera, size)
-        mitsuba, mitsuba_cpu, variant = peers.mitsuba_rays_per_second(obj_path, origins, directions, repeats)
+        mitsuba, variant = peers.mitsuba_tracer(obj_path, origins, directions)
+        ours, bvh, single, theirs = [], [], [], []
+        for _ in range(repeats):
+            ours.append(timed_render(compiled, threads))
+            bvh.append(timed_render(compiled, threads, item_buffer=False))
+            single.append(timed_render(compiled, 1))
+            if mitsuba is not None:
+                theirs.append(mitsuba())
     rays = size * size
     wall, cpu = medians(ours)
     row = {"case": "icosphere primary rays", "triangles": int(compiled.n_mesh_faces), "size": size, "rays": rays,
+           "compared": "difflab: the whole difflab.render of the frame (item buffer, shading, image); "
+                       "Mitsuba: scene.ray_intersect alone (closest hit, no shading)",
            "difflab_rays_per_second": rays / wall, "difflab_rays_per_cpu_second": rays / cpu,
            "difflab_1_thread_rays_per_second": rays / medians(single)[0],
-           "mitsuba_variant": variant, "mitsuba_rays_per_second": mitsuba, "mitsuba_rays_per_cpu_second": mitsuba_cpu}
-    if mitsuba:
-        row["difflab_over_mitsuba"] = row["difflab_rays_per_second"] / mitsuba
-        row["difflab_over_mitsuba_cpu"] = row["difflab_rays_per_cpu_second"] / mitsuba_cpu
+           "difflab_bvh_rays_per_second": rays / medians(bvh)[0],
+           "difflab_bvh_rays_per_cpu_second": rays / medians(bvh)[1],
+           "item_buffer_asked_bvh": frame.stats["item_buffer_asked_bvh"],
+           "mitsuba_variant": variant, "mitsuba_rays_per_second": None, "mitsuba_rays_per_cpu_second": None}
+    if theirs:
+        row["mitsuba_rays_per_second"], row["mitsuba_rays_per_cpu_second"] = (rays / m for m in medians(theirs))
+        row["difflab_over_mitsuba"] = row["difflab_rays_per_second"] / row["mitsuba_rays_per_second"]
+        row["difflab_over_mitsuba_cpu"] = row["difflab_rays_per_cpu_second"] / row["mitsuba_rays_per_cpu_second"]
     return row
 
 
@@ -149,10 +166,12 @@ def main(argv=None) -> int:
     width, height = (160, 120) if args.small else (640, 480)
     load_before = os.getloadavg()
     primary = primary_case(size, args.repeats, threads)
-    print(f"icosphere ({primary['triangles']} tris) {size}^2 primary rays: difflab "
-          f"{primary['difflab_rays_per_second'] / 1e6:.2f} Mrays/s ({threads} threads; "
-          f"{primary['difflab_1_thread_rays_per_second'] / 1e6:.2f} on 1; "
-          f"{primary['difflab_rays_per_cpu_second'] / 1e6:.2f} per CPU-s), Mitsuba ray_intersect "
+    print(f"icosphere ({primary['triangles']} tris) {size}^2 primary rays, difflab's whole render (item buffer, "
+          f"shading, image) vs Mitsuba's ray_intersect alone: difflab {primary['difflab_rays_per_second'] / 1e6:.2f} "
+          f"Mrays/s ({threads} threads; {primary['difflab_1_thread_rays_per_second'] / 1e6:.2f} on 1; "
+          f"{primary['difflab_rays_per_cpu_second'] / 1e6:.2f} per CPU-s; BVH only "
+          f"{primary['difflab_bvh_rays_per_second'] / 1e6:.2f}, {primary['item_buffer_asked_bvh']} samples asked "
+          f"the BVH), Mitsuba "
           + (f"{primary['mitsuba_rays_per_second'] / 1e6:.2f} Mrays/s ({primary['mitsuba_variant']}; "
              f"{primary['mitsuba_rays_per_cpu_second'] / 1e6:.2f} per CPU-s): difflab / Mitsuba "
              f"{primary['difflab_over_mitsuba']:.2f} (wall), {primary['difflab_over_mitsuba_cpu']:.2f} (CPU)"

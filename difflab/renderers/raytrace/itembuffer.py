@@ -8,16 +8,20 @@ sample grid, and leave per sample the nearest triangle (its *hint*). A primary r
 - the nearest mesh triangle before it from its hint A, intersected with the BVH's own watertight
   test (Woop, Benthin and Wald 2013: the same t, u, v bits as `mesh_query_ray`), *provided the hint
   is unambiguous*: A is hit with every barycentric at least BARY_MARGIN (so no triangle sharing
-  an edge or vertex with A is), and none of the hints of the four neighbouring samples (the
-  triangles visible around the sample, which is where a triangle the z-buffer's snapped coverage
-  left out would show) is hit at or before A. An empty hint is unambiguous when none of the
-  neighbours' triangles is hit before the far end.
+  an edge or vertex with A is), and no triangle among the hints of the four neighbouring samples
+  (where a triangle that the z-buffer's snapped coverage left out at this sample shows) that does
+  not share a vertex with A is `nearer`: hit at or before A, or with its plane met clearly (by
+  PLANE_GAP) before A -- a nearer surface next to the sample, such as the one behind a crack the
+  rasterizer leaves where a shared edge runs exactly through sample centres. An empty hint (or a
+  hint behind the sphere or plane) is unambiguous when no neighbour's triangle is nearer than the
+  far plane (or that sphere or plane).
 
 An ambiguous sample asks the BVH (`trace.mesh_hit`), so the hit is the BVH's own everywhere --
 except where a triangle no sample of the 3 x 3 neighbourhood sees (thinner than a sample) crosses
-the sample within the rasterizer's fixed-point snapping, or where two surfaces coincide (z-fighting,
-which the BVH too resolves by rounding). The near and far planes are the ray's own (it starts on
-the near plane and ends at the far one, where the rasterizer clips).
+the sample within the rasterizer's fixed-point snapping, where a crack hides a surface less than
+PLANE_GAP in front of the one it shows, or where two surfaces coincide (z-fighting, which the BVH
+too resolves by rounding). The near and far planes are the ray's own (it starts on the near plane
+and ends at the far one, where the rasterizer clips).
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from ..trace import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triang
 wp.set_module_options({"enable_backward": False})
 
 BARY_MARGIN = 1.0e-4  # a hint hit closer than this (in barycentrics) to an edge of its triangle asks the BVH
-PLANE_SLACK = 1.0e-4  # relative: a neighbour's plane met this close behind the hit counts as in front
+PLANE_GAP = 1.0e-3  # relative depth gap telling a neighbour's plane from the hit's (see `nearer`)
 NO_TRIANGLE = wp.constant(-1)  # resolve_hint: no mesh triangle before the nearest sphere / plane (if any)
 ASK_BVH = wp.constant(-2)  # resolve_hint: an ambiguous hint, the BVH finds the mesh hit
 SLOT_BITS = wp.constant(wp.int64(4294967295))  # the z-buffer key's low 32 bits: the screen slot
@@ -98,14 +102,22 @@ def shares_vertex(item: ItemBufferW, face: int, other: int):
 
 
 @wp.func
-def plane_before(item: ItemBufferW, face: int, origin: wp.vec3, direction: wp.vec3, t_limit: float):
-    """Whether the ray meets the plane of mesh triangle `face` at 0 <= t <= t_limit (1 + PLANE_SLACK)."""
+def nearer(item: ItemBufferW, face: int, origin: wp.vec3, direction: wp.vec3, t_limit: float):
+    """Whether mesh triangle `face` may be what the ray meets first, before t_limit: its plane is met
+    clearly before (a nearer surface next to the sample: a crack, or an occluder's edge), or the
+    triangle itself is hit at 0 <= t <= t_limit (`woop_triangle`, asked only when the plane is
+    met within PLANE_GAP of t_limit)."""
     normal = item.face_normal[face]
     d_n = wp.dot(direction, normal)
     if d_n == 0.0:
         return False
     t = wp.dot(corner(item, face, 0) - origin, normal) / d_n
-    return t >= 0.0 and t <= t_limit * (1.0 + PLANE_SLACK)
+    if t < 0.0 or t > t_limit * (1.0 + PLANE_GAP):
+        return False
+    if t < t_limit * (1.0 - PLANE_GAP):
+        return True
+    hit = woop_triangle(origin, direction, corner(item, face, 0), corner(item, face, 1), corner(item, face, 2))
+    return hit[3] > 0.0 and hit[0] <= t_limit
 
 
 @wp.func
@@ -114,7 +126,7 @@ def resolve_hint(item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: 
     miss at the far plane): (triangle, NO_TRIANGLE or ASK_BVH; (t, u, v)) from its hint (module doc)."""
     face = hint(item, i, j)
     best = wp.vec4(0.0)
-    t_limit = found.t  # a neighbour's triangle whose plane is met before this makes the sample ambiguous
+    t_limit = found.t  # a neighbour's triangle met before this makes the sample ambiguous
     if face >= 0:
         best = woop_triangle(origin, direction, corner(item, face, 0), corner(item, face, 1), corner(item, face, 2))
         u = best[1]
@@ -130,7 +142,7 @@ def resolve_hint(item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: 
         other = hint(item, i + NEIGHBOUR_DI[k], j + NEIGHBOUR_DJ[k])
         if other >= 0 and other != face and other != tested:
             if face < 0 or not shares_vertex(item, face, other):
-                if plane_before(item, other, origin, direction, t_limit):
+                if nearer(item, other, origin, direction, t_limit):
                     return ASK_BVH, wp.vec3(0.0)
             tested = other
     return face, wp.vec3(best[0], best[1], best[2])
