@@ -145,13 +145,13 @@ def make_whitted_kernel(stack_size: int):
                   item: ItemBufferW, tree: TreeW, out: TraceOutW, i: int):
         """Walk the ray tree of every sample (i, j) of row i: its colour, fog blend and node count into
         `out`. (One call per row: a CPU call copies its struct arguments, once per row this way.)"""
+        rec = light_arrays(tree)
         for j in range(out.color.shape[1]):
             xy, origin, direction, t_far = primary_sample(points, params.side, cam, params.far, i, j)
             base = int(0)
             if params.record == 1:
                 base = tree.offset[i, j]
             stack = wp.zeros(shape=stack_size, dtype=RayW)
-            rec = light_arrays(tree)
             stack[0] = new_ray(origin, origin, direction, wp.vec3(1.0), 0.0, 1, -1, PRIMARY, -1, -1)
             sp = int(1)
             count = int(0)
@@ -164,9 +164,9 @@ def make_whitted_kernel(stack_size: int):
                 node = count
                 count = count + 1
                 hit = trace_ray(scene.geom, item, out, ray, i, j, t_far)
-                distance = wp.inf
-                if hit.kind != HIT_NONE:
-                    distance = wp.length(ray.origin + hit.t * ray.direction - ray.start)  # from the surface
+                distance = wp.inf  # from the surface (not the offset origin); Beer's law and the record need it
+                if hit.kind != HIT_NONE and (ray.medium >= 0 or params.record == 1):
+                    distance = wp.length(ray.origin + hit.t * ray.direction - ray.start)
                 w = ray.weight
                 if ray.medium >= 0:  # Beer absorption along this ray inside its medium
                     w = wp.cw_mul(w, beer(scene.materials[ray.medium].absorption, distance))
@@ -190,19 +190,21 @@ def make_whitted_kernel(stack_size: int):
                 if params.record == 1:
                     record_surface(tree, base + node, surf, local, split)
 
-                if ray.depth < params.max_depth:  # refracted child pushed first: the reflected one is walked first
-                    w_t = w * (surf.mat.kt * split.f_t)
-                    if split.refracts == 1 and worth_tracing(w_t, params.threshold):
-                        medium = int(-1)
-                        if surf.entering == 1:
-                            medium = hit.material
-                        stack[sp] = child_ray(scene.geom, ray, node, hit, surf, split.t_dir, w_t, REFRACTED, medium)
-                        sp = sp + 1
-                    w_r = w * (surf.mat.kr * split.f_r)
-                    if worth_tracing(w_r, params.threshold):
-                        r_dir = reflect(ray.direction, surf.normal)
-                        stack[sp] = child_ray(scene.geom, ray, node, hit, surf, r_dir, w_r, REFLECTED, ray.medium)
-                        sp = sp + 1
+                if wp.static(stack_size > 1):  # (a one-ray stack is max_depth 1: no children)
+                    if ray.depth < params.max_depth:  # refracted child pushed first: the reflected one is walked first
+                        w_t = w * (surf.mat.kt * split.f_t)
+                        if split.refracts == 1 and worth_tracing(w_t, params.threshold):
+                            medium = int(-1)
+                            if surf.entering == 1:
+                                medium = hit.material
+                            stack[sp] = child_ray(scene.geom, ray, node, hit, surf, split.t_dir, w_t, REFRACTED,
+                                                  medium)
+                            sp = sp + 1
+                        w_r = w * (surf.mat.kr * split.f_r)
+                        if worth_tracing(w_r, params.threshold):
+                            r_dir = reflect(ray.direction, surf.normal)
+                            stack[sp] = child_ray(scene.geom, ray, node, hit, surf, r_dir, w_r, REFLECTED, ray.medium)
+                            sp = sp + 1
 
             out.fog[i, j] = fog_f
             out.color[i, j] = fog_f * total + (1.0 - fog_f) * params.fog.color
