@@ -32,6 +32,7 @@ import numpy as np
 
 from ..._warp import wp
 from ..camera import camera_struct
+from ..launch import launch_row_loops, load_kernels
 from ..raster.coverage import NO_HIT
 from ..raster.driver import zbuffer
 from ..trace import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triangle_hit
@@ -49,15 +50,12 @@ NEIGHBOUR_DJ = wp.constant(wp.vec4i(0, 0, -1, 1))
 
 @wp.struct
 class ItemBufferW:
-    """The mesh triangles' z-buffer on the sample grid (`rows` x `cols`): `key` per sample (NO_HIT or
-    depth << 32 | slot) and `slot_face`, the triangle of each slot; and the mesh itself. `use` = 0:
-    no item buffer (every primary ray asks the BVH)."""
+    """Per sample of the `rows` x `cols` grid, the mesh triangle nearest in the z-buffer (-1: none),
+    in `face` with a border of -1 one sample wide (sample (i, j) at face[i + 1, j + 1]); and the mesh
+    itself. `use` = 0: no item buffer (every primary ray asks the BVH)."""
 
     use: int
-    rows: int
-    cols: int
-    key: wp.array(dtype=wp.int64)
-    slot_face: wp.array(dtype=wp.int32)
+    face: wp.array2d(dtype=wp.int32)
     vertices: wp.array(dtype=wp.vec3)
     faces: wp.array2d(dtype=wp.int32)
     face_normal: wp.array(dtype=wp.vec3)  # unit
@@ -77,13 +75,23 @@ def woop_triangle(start: wp.vec3, dir: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.ve
 
 @wp.func
 def hint(item: ItemBufferW, i: int, j: int):
-    """The mesh triangle nearest at sample (i, j) in the z-buffer; -1: none, or (i, j) off the grid."""
-    if i < 0 or i >= item.rows or j < 0 or j >= item.cols:
-        return -1
-    key = item.key[i * item.cols + j]
-    if key == NO_HIT:
-        return -1
-    return item.slot_face[int(key & SLOT_BITS)]
+    """The mesh triangle nearest at sample (i, j) in the z-buffer; -1: none, or (i, j) just off the grid."""
+    return item.face[i + 1, j + 1]
+
+
+@wp.kernel
+def hints_kernel(row0: int, key: wp.array(dtype=wp.int64), slot_face: wp.array(dtype=wp.int32),
+                 face: wp.array2d(dtype=wp.int32)):
+    """Row row0 + tid of the bordered `face` grid from the z-buffer's keys (depth << 32 | slot, or NO_HIT)."""
+    i = row0 + wp.tid()
+    cols = face.shape[1] - 2
+    for c in range(face.shape[1]):
+        f = int(-1)
+        if i >= 1 and i < face.shape[0] - 1 and c >= 1 and c <= cols:
+            k = key[(i - 1) * cols + c - 1]
+            if k != NO_HIT:
+                f = slot_face[int(k & SLOT_BITS)]
+        face[i, c] = f
 
 
 @wp.func
@@ -92,13 +100,13 @@ def corner(item: ItemBufferW, face: int, k: int):
 
 
 @wp.func
-def shares_vertex(item: ItemBufferW, face: int, other: int):
-    """Whether mesh triangles `face` and `other` have a vertex in common (neighbours in the mesh)."""
-    for k in range(3):
-        v = item.faces[other, k]
-        if v == item.faces[face, 0] or v == item.faces[face, 1] or v == item.faces[face, 2]:
-            return True
-    return False
+def shares_vertex(corners: wp.vec3i, faces: wp.array2d(dtype=wp.int32), other: int):
+    """Whether mesh triangle `other` has one of the vertices `corners` (a neighbour in the mesh)."""
+    a = faces[other, 0]
+    b = faces[other, 1]
+    c = faces[other, 2]
+    return (a == corners[0] or a == corners[1] or a == corners[2] or b == corners[0] or b == corners[1]
+            or b == corners[2] or c == corners[0] or c == corners[1] or c == corners[2])
 
 
 @wp.func
@@ -125,10 +133,13 @@ def resolve_hint(item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: 
     """The mesh part of sample (i, j)'s primary hit before `found` (its nearest sphere or plane, or a
     miss at the far plane): (triangle, NO_TRIANGLE or ASK_BVH; (t, u, v)) from its hint (module doc)."""
     face = hint(item, i, j)
+    corners = wp.vec3i(-1, -1, -1)  # the hint's vertices (none: -1)
     best = wp.vec4(0.0)
     t_limit = found.t  # a neighbour's triangle met before this makes the sample ambiguous
     if face >= 0:
-        best = woop_triangle(origin, direction, corner(item, face, 0), corner(item, face, 1), corner(item, face, 2))
+        corners = wp.vec3i(item.faces[face, 0], item.faces[face, 1], item.faces[face, 2])
+        best = woop_triangle(origin, direction, item.vertices[corners[0]], item.vertices[corners[1]],
+                             item.vertices[corners[2]])
         u = best[1]
         v = best[2]
         if best[3] == 0.0 or u < BARY_MARGIN or v < BARY_MARGIN or 1.0 - u - v < BARY_MARGIN:
@@ -136,15 +147,18 @@ def resolve_hint(item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: 
         if best[0] < found.t:  # mesh_query_ray keeps 0 <= t < max_t; woop's t is >= 0
             t_limit = best[0]
         else:
-            face = NO_TRIANGLE  # the sphere or plane is in front
-    tested = int(-1)  # the last neighbour's triangle tested (neighbours mostly repeat one)
+            face = NO_TRIANGLE  # the sphere or plane is in front: every neighbour's triangle is checked
+            corners = wp.vec3i(-1, -1, -1)
+    ambiguous = bool(False)
+    tested = int(-1)  # the last neighbour's triangle checked (neighbours mostly repeat one)
     for k in range(4):
         other = hint(item, i + NEIGHBOUR_DI[k], j + NEIGHBOUR_DJ[k])
         if other >= 0 and other != face and other != tested:
-            if face < 0 or not shares_vertex(item, face, other):
-                if nearer(item, other, origin, direction, t_limit):
-                    return ASK_BVH, wp.vec3(0.0)
             tested = other
+            if not shares_vertex(corners, item.faces, other):
+                ambiguous = ambiguous or nearer(item, other, origin, direction, t_limit)
+    if ambiguous:
+        return ASK_BVH, wp.vec3(0.0)
     return face, wp.vec3(best[0], best[1], best[2])
 
 
@@ -166,14 +180,16 @@ def item_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.vec
 
 def item_buffer(compiled, width: int, height: int, threads: int | None = None) -> ItemBufferW:
     """The item buffer of a width x height sample grid: the z-buffer of the mesh triangles (the first
-    `n_mesh_faces` of the compiled scene, and their vertices), no back-face culling. It lives in the
-    rasterizer's per-frame arrays of `compiled`: valid until this thread's next z-buffer of it."""
+    `n_mesh_faces` of the compiled scene, and their vertices), no back-face culling."""
     n_faces, n_vertices = compiled.n_mesh_faces, compiled.n_mesh_vertices
     arrays = dict(compiled.arrays, faces=compiled.arrays["faces"][:n_faces],
                   vertices=compiled.arrays["vertices"][:n_vertices])
     meshes = replace(compiled, faces=compiled.faces[:n_faces], vertices=compiled.vertices[:n_vertices], arrays=arrays)
     tris, key = zbuffer(meshes, camera_struct(compiled.scene.camera, width, height), 0, threads)
-    return item_struct(compiled, height, width, key, tris.face)
+    face = compiled.scratch("item buffer", (height + 2, width + 2), wp.int32)  # every element written below
+    load_kernels(compiled.device, hints_kernel)
+    launch_row_loops(hints_kernel, height + 2, [key, tris.face, face], compiled.device, threads)
+    return item_struct(compiled, face)
 
 
 def asked_bvh(item: ItemBufferW) -> int:
@@ -181,18 +197,14 @@ def asked_bvh(item: ItemBufferW) -> int:
     return int(item.asked.numpy().astype(np.int64).sum()) if item.use else 0
 
 
-def item_struct(compiled, rows: int = 0, cols: int = 0, key=None, slot_face=None) -> ItemBufferW:
-    """An `ItemBufferW` of a z-buffer `key` and its `slot_face`; without them, a disabled one."""
+def item_struct(compiled, face=None) -> ItemBufferW:
+    """An `ItemBufferW` of a bordered `face` grid; without it, a disabled one."""
     device = compiled.device
     out = ItemBufferW()
-    out.use = int(key is not None)
-    out.rows, out.cols = rows, cols
-    if key is None:
-        key = wp.empty(1, dtype=wp.int64, device=device)
-        slot_face = wp.empty(1, dtype=wp.int32, device=device)
-    out.key, out.slot_face = key, slot_face
+    out.use = int(face is not None)
+    out.face = face if face is not None else wp.empty((1, 1), dtype=wp.int32, device=device)
     out.vertices = compiled.arrays["vertices"]
     out.faces = compiled.arrays["faces"]
     out.face_normal = compiled.arrays["face_normal"]
-    out.asked = wp.zeros(max(rows, 1), dtype=wp.int32, device=device)
+    out.asked = wp.zeros(max(out.face.shape[0] - 2, 1), dtype=wp.int32, device=device)
     return out
