@@ -92,6 +92,12 @@ def test_render_uses_the_item_buffer_where_it_applies_and_any_thread_count_agree
     mesh_scene = Scene.from_dict(mixed_scene(max_depth=2))
     frame = difflab.render_frame(mesh_scene, method="raytrace", threads=1)
     assert frame.stats["item_buffer"]
+    # the item buffer shares the rasterizer's per-frame arrays of a compiled scene: both keep working
+    compiled = difflab.compile_scene(mesh_scene)
+    rastered = difflab.render(compiled, method="raster")
+    np.testing.assert_array_equal(difflab.render(compiled, method="raytrace", threads=1), frame.image)
+    np.testing.assert_array_equal(difflab.render(compiled, method="raster"), rastered)
+    np.testing.assert_array_equal(difflab.render(compiled, method="raytrace", threads=1), frame.image)
     np.testing.assert_array_equal(difflab.render(mesh_scene, method="raytrace", threads=2), frame.image)
     np.testing.assert_array_equal(difflab.render(mesh_scene, method="raytrace", item_buffer=False), frame.image)
     spheres_only = scene_dict([{"type": "sphere", "center": [0, 0, 0], "radius": 0.5, "material": "m"}], {"m": {}})

@@ -29,7 +29,7 @@ from ...lighting.warp_model import fog_struct
 from ...vocabulary import FRESNEL_MODES, SPECULAR_MODELS
 from ..camera import camera_struct
 from ..frame import Frame, box_downsample
-from ..launch import launch_row_loops, load_kernels
+from ..launch import host_empty, launch_row_loops, load_kernels
 from .itembuffer import asked_bvh, item_buffer, item_struct
 from .lightbuffer import build_light_buffer, no_light_buffer
 from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, TraceOutW, TraceParamsW, \
@@ -43,7 +43,8 @@ STRATIFIED_SEED = 20240917
 
 @dataclass(frozen=True)
 class Traced:
-    """What one launch over an array of sample points returns (numpy, on the points' grid)."""
+    """What one launch over an array of sample points returns (numpy, on the points' grid). `fog` and
+    `node_count` live in the compiled scene's per-frame arrays: valid until its next trace on this thread."""
 
     color: np.ndarray  # (rows, cols, 3) float32
     fog: np.ndarray  # (rows, cols) float32
@@ -139,9 +140,9 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
 
     def launch(params, tree) -> TraceOutW:
         out = TraceOutW()
-        out.color = wp.empty(shape, dtype=wp.vec3, device=device)  # every element written by the kernel
-        out.fog = wp.empty(shape, dtype=float, device=device)
-        out.node_count = wp.empty(shape, dtype=wp.int32, device=device)
+        out.color = host_empty(shape, wp.vec3, device)  # every element written by the kernel
+        out.fog = compiled.scratch("trace.fog", shape, wp.float32)  # read before this render returns
+        out.node_count = compiled.scratch("trace.node_count", shape, wp.int32)
         out.rays = wp.zeros((rows, 4), dtype=wp.int32, device=device)
         out.depth_hist = wp.zeros((rows, settings.max_depth), dtype=wp.int32, device=device)
         launch_row_loops(kernel, rows, [wp_points, cam, scene_w, params, item, tree, out], device, threads)

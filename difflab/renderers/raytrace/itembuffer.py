@@ -34,7 +34,7 @@ from ..._warp import wp
 from ..camera import camera_struct
 from ..launch import launch_row_loops, load_kernels
 from ..raster.coverage import NO_HIT
-from ..raster.driver import zbuffer
+from ..raster.driver import mark_key_cleared, zbuffer
 from ..trace import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triangle_hit
 
 wp.set_module_options({"enable_backward": False})
@@ -82,7 +82,8 @@ def hint(item: ItemBufferW, i: int, j: int):
 @wp.kernel
 def hints_kernel(row0: int, key: wp.array(dtype=wp.int64), slot_face: wp.array(dtype=wp.int32),
                  face: wp.array2d(dtype=wp.int32)):
-    """Row row0 + tid of the bordered `face` grid from the z-buffer's keys (depth << 32 | slot, or NO_HIT)."""
+    """Row row0 + tid of the bordered `face` grid from the z-buffer's keys (depth << 32 | slot, or
+    NO_HIT), each key reset to NO_HIT once read (the rasterizer's next z-buffer starts cleared)."""
     i = row0 + wp.tid()
     cols = face.shape[1] - 2
     for c in range(face.shape[1]):
@@ -91,6 +92,7 @@ def hints_kernel(row0: int, key: wp.array(dtype=wp.int64), slot_face: wp.array(d
             k = key[(i - 1) * cols + c - 1]
             if k != NO_HIT:
                 f = slot_face[int(k & SLOT_BITS)]
+                key[(i - 1) * cols + c - 1] = NO_HIT
         face[i, c] = f
 
 
@@ -189,6 +191,7 @@ def item_buffer(compiled, width: int, height: int, threads: int | None = None) -
     face = compiled.scratch("item buffer", (height + 2, width + 2), wp.int32)  # every element written below
     load_kernels(compiled.device, hints_kernel)
     launch_row_loops(hints_kernel, height + 2, [key, tris.face, face], compiled.device, threads)
+    mark_key_cleared(compiled, key)
     return item_struct(compiled, face)
 
 
