@@ -10,6 +10,7 @@ from jax.test_util import check_grads
 from test_fit_helpers import make_scene, target_of
 
 from difflab.fit import Setup, shade_gbuffer
+from difflab.fit.shading import pixel_arrays
 from difflab.renderers.api import render_frame
 
 LIGHTS = [
@@ -80,7 +81,7 @@ def test_gradient_in_n_is_finite_everywhere(specular, n):
     """Points with N.L <= 0 and with R.V <= 0 are in view; the gradient in n stays finite."""
     side = [{"type": "point", "position": [-3, 1, 4], "intensity": [1, 1, 1], "attenuation": [1, 0, 0]}]
     setup = _setup(("ks", "n"), size=16, specular=specular, lights=side)
-    points = setup.problem.views[0].model.points
+    points, _, _, _ = pixel_arrays(setup.views[0].record, np.flatnonzero(setup.views[0].used))
     normal, l_dir = np.asarray(points.normal), np.asarray(points.light_dir)[:, 0]
     v_dir = np.asarray(points.view)
     n_dot_l = np.sum(normal * l_dir, axis=-1)

@@ -87,12 +87,12 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
             targets = tuple(jnp.stack([elements[b].problem.views[i].target for b in todo])
                             for i in range(len(setup.views)))
             out = lm.solve_box_batch(setup.problem, x0, targets, lower, upper, options.max_steps, rtol, atol)
-            x, codes, steps, history, r, jac = (np.asarray(a) for a in out)
+            x, codes, steps, history, r, gram = (np.asarray(a) for a in out)
             for i, b in enumerate(todo):
                 hist = history[i, :steps[i]].tolist() if options.history else []
                 name = lm.CODES[int(codes[i])]
                 solved[b] = Solved(x[i].astype(np.float64), name, int(steps[i]), hist,
-                                   None if name == "nonfinite" else (r[i], jac[i]))
+                                   None if name == "nonfinite" else (r[i], gram[i]))
         else:
             quiet = FitOptions.make(options, progress=False)
             bar = _bar(len(todo), options)

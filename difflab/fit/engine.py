@@ -23,7 +23,7 @@ from .setup import Setup
 from .options import FitOptions
 from .matfree import check_solver
 from .solvers import SUCCESSFUL, run
-from .stats import QUANTISATION_SIGMA, fit_statistics, jacobian, poorly_determined, psnr, standard_errors
+from .stats import QUANTISATION_SIGMA, fit_statistics, normal_matrix, poorly_determined, psnr, standard_errors
 from .texels import texel_coverage
 
 
@@ -36,7 +36,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
            solved=None) -> FitResult:
     """The FitResult of a solve at solver coordinates x (None: no fit was made): values in scene
     units, standard errors, noise, chi-square, flags; raises FitError for a failure when
-    `options.throw`. `solved`: the solver's (r, J) at x, when it has them."""
+    `options.throw`. `solved`: the solver's (r, J^T J) at x, when it has them."""
     layout = setup.layout
     public = lambda values: {p.key: public_value(p, values[p.key]) for p in layout}  # noqa: E731
     common = dict(steps=steps, solver=options.solver, initial=public(setup.initial), scene=setup.scene, layout=layout,
@@ -50,29 +50,29 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         start = time.perf_counter()
         values = setup.values(x)
         flat = layout.flatten(values)
-        used = np.concatenate([np.asarray(v.sqrt_weight, np.float64).reshape(-1) for v in setup.problem.views]) > 0
+        used = setup.weighted_entries
         matrix_free = options.matrix_free(layout.size)
         with jax.enable_x64(setup.x64):
             at = jnp.asarray(flat, setup.dtype)
             if matrix_free:  # no Jacobian is formed: no covariance (stderr nan)
-                jac, r = None, np.asarray(_weighted(setup.problem, at), np.float64)
-            else:  # the solver's (r, J) end with the texture prior's rows: cut to the pixels'
-                jac, r = jacobian(setup.problem, at, None if solved is None else
-                                  tuple(np.asarray(a)[:used.size] for a in solved))
-            rho = np.asarray(robust(setup.problem.loss, jnp.asarray(r), setup.problem.loss_scale), np.float64)
+                gram, r = None, np.asarray(_weighted(setup.problem, at), np.float64)
+            else:
+                gram, r = normal_matrix(setup.problem, at, solved)
+            rho = r if setup.problem.loss == "l2" else \
+                np.asarray(robust(setup.problem.loss, jnp.asarray(r), setup.problem.loss_scale), np.float64)
             seen = {k: c > options.visible_threshold for k, c in texel_coverage(setup.problem, at, used).items()}
         loss = float(0.5 * np.sum(np.square(rho)))
         residuals = setup.residual_images(r)
-        jac, r = (None if jac is None else jac[used]), r[used]
-        finite = bool(np.all(np.isfinite(flat)) and np.isfinite(loss) and (jac is None or np.all(np.isfinite(jac))))
+        r = r[used]
+        finite = bool(np.all(np.isfinite(flat)) and np.isfinite(loss) and (gram is None or np.all(np.isfinite(gram))))
         sigma = setup.noise([res * np.sqrt(v.weight) for res, v in zip(residuals, setup.views)]) if finite else \
             float("nan")
         if finite:
-            st = fit_statistics(jac, r, setup.censored, sigma, layout.size)
-            stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if jac is not None else
+            st = fit_statistics(gram, r, setup.censored, sigma, layout.size)
+            stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if gram is not None else
                                       np.full(layout.size, np.nan))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], QUANTISATION_SIGMA ** 2)))
-            flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol) if jac is not None \
+            flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol) if gram is not None \
                 else [key for key, on in seen.items() if not on.all()]
             chi2, mismatch = st["chi2"], st["mismatch"]
         else:
@@ -82,7 +82,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                 result = "nonfinite"
         lo, hi = layout.bounds()
         on_bound = layout.unflatten((x <= lo) | (x >= hi))
-        weight_total = float(sum(np.sum(np.asarray(v.sqrt_weight, np.float64) ** 2) for v in setup.problem.views))
+        weight_total = setup.weight_total
         out = FitResult(params=public(values), stderr=public(stderr), loss=loss, psnr=psnr(r, weight_total),
                         seconds=timings.get("solve", 0.0), converged=bool(result == SUCCESSFUL and finite),
                         result=result, history=list(history), poorly_determined=flagged, sigma=float(sigma),
@@ -130,7 +130,9 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
     refraction and the tree's shape stay fixed.
 
     Arguments:
-        scene: a Scene, a scene dict or a scene file path. Its values (with `init`) are the start.
+        scene: a Scene, a scene dict, a scene file path, or a `CompiledScene` (`compile_scene`: the
+            views with its camera and light positions render their G-buffer / ray tree from it,
+            nothing rebuilt). Its values (with `init`) are the start.
         targets: an image ((H, W, 3) linear float array; uint8 / uint16 arrays are sRGB code values
             and decoded; or a file: 8-bit files are sRGB-decoded), or a list of images and/or
             (image, overrides) pairs, overrides a dict with a whole "camera" block and/or a whole

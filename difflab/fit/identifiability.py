@@ -26,7 +26,7 @@ from ..errors import FitError
 from .options import DENSE_MAX
 from .params import SCENE_PARAMS
 from .setup import Setup
-from .stats import QUANTISATION_SIGMA, SINGULAR_RCOND, covariance_unscaled, jacobian, poorly_determined
+from .stats import QUANTISATION_SIGMA, SINGULAR_RCOND, covariance_unscaled, normal_matrix, poorly_determined
 
 CHANNELS = ("r", "g", "b")
 
@@ -124,16 +124,16 @@ def identifiability(setup: Setup, values: dict | None = None, *, sigma=None, rel
     values = {k: np.asarray(v, np.float64).reshape(-1) for k, v in (values or setup.initial).items()}
     sigma = QUANTISATION_SIGMA if sigma is None else float(sigma)
     with jax.enable_x64(setup.x64):
-        jac, _ = jacobian(setup.problem, jnp.asarray(layout.flatten(values), setup.dtype))
-    norms = np.linalg.norm(jac, axis=0)
-    scaled = jac / np.where(norms > 0, norms, 1.0)
-    eigval, eigvec = np.linalg.eigh(scaled.T @ scaled)
+        gram, r = normal_matrix(setup.problem, jnp.asarray(layout.flatten(values), setup.dtype))
+    norms = np.sqrt(np.maximum(np.diagonal(gram), 0.0))
+    scale = 1.0 / np.where(norms > 0, norms, 1.0)
+    eigval, eigvec = np.linalg.eigh(gram * np.outer(scale, scale))
     top = max(float(eigval.max(initial=0.0)), 1e-300)
     singular = eigval <= SINGULAR_RCOND * top  # a zero column (a parameter no pixel sees) is one of these
     rank = int(np.count_nonzero(~singular))
-    n = jac.shape[1]
+    n = gram.shape[0]
     condition = float(top / eigval.min()) if rank == n and n and eigval.min() > 0 else math.inf
-    cov = covariance_unscaled(jac)
+    cov = covariance_unscaled(gram)
     diag = np.diag(cov)
     stderr, offset = {}, 0
     for p in layout:
@@ -150,7 +150,7 @@ def identifiability(setup: Setup, values: dict | None = None, *, sigma=None, rel
     flagged = poorly_determined(layout, values, stderr, rel_tol, abs_tol)
     return Identifiability(keys=tuple(p.key for p in layout), columns=names, values=values, stderr=stderr,
                            sigma=sigma, rank=rank, n_columns=n, condition=condition, eigenvalues=eigval,
-                           weakest=weakest, undetermined=flagged, residuals=int(jac.shape[0]),
+                           weakest=weakest, undetermined=flagged, residuals=int(r.shape[0]),
                            views=len(setup.views))
 
 

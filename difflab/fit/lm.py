@@ -1,7 +1,8 @@
 """Box-constrained (projected) Levenberg-Marquardt: the default solver.
 
-Each step forms J (forward mode, one column per parameter entry) and r at the current point x and
-solves the damped normal equations over the free entries
+Each step forms r, J^T J and J^T r at the current point x (`normal_equations.linearise`: by forward
+mode, or in closed form where the image is a sum of known parts) and solves the damped normal
+equations over the free entries
 
     (J^T J + lambda D) dx = -J^T r,     D = diag(J^T J) (floored),
 
@@ -15,7 +16,7 @@ accepted step lowered the loss -- and the linear model predicted it would lower 
 rtol of itself (MINPACK's xtol / ftol tests); "nonlinear_max_steps_reached" after max_steps;
 "nonfinite" when the loss at the start is not finite. A trial step whose loss is not finite is
 rejected like any step that does not lower the loss, so the point returned always has a finite
-loss (a fit with an infinite loss is never successful). Each step costs one Jacobian and one
+loss (a fit with an infinite loss is never successful). Each step costs one linearisation and one
 p x p Cholesky solve, as a plain Gauss-Newton step does.
 """
 
@@ -28,6 +29,8 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 
+from .normal_equations import linearise
+
 CODES = ("successful", "nonlinear_max_steps_reached", "nonfinite")
 SUCCESSFUL, MAX_STEPS, NONFINITE = 0, 1, 2
 LAMBDA0 = 1e-3
@@ -37,7 +40,8 @@ RUNNING = -1
 class State(NamedTuple):
     x: jnp.ndarray
     r: jnp.ndarray
-    jac: jnp.ndarray
+    a: jnp.ndarray
+    g: jnp.ndarray
     loss: jnp.ndarray
     lam: jnp.ndarray
     nu: jnp.ndarray
@@ -46,37 +50,31 @@ class State(NamedTuple):
     history: jnp.ndarray
 
 
-def _linearise(fn, x, args):
-    r, jvp = jax.linearize(lambda y: fn(y, args), x)
-    jac = jax.vmap(jvp, out_axes=1)(jnp.eye(x.shape[0], dtype=x.dtype))
-    return r, jac
-
-
-def box_lm(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=None):
-    """Minimise 0.5 |fn(x, args)|^2 over lower <= x <= upper.
+def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=None):
+    """Minimise 0.5 |r(x)|^2 over lower <= x <= upper.
 
     Arguments:
-        fn: residual function (p,) -> (N,), differentiable.
+        linearise: (x (p,), args) -> (r (N,), J^T J (p, p), J^T r (p,)) at x
+            (`normal_equations.linearise`, or `normal_equations.dense` of any residual function).
         x0: (p,) start (clipped into the box); lower, upper: (p,) bounds (+-inf allowed).
         max_steps: the most steps (static); rtol, atol: the stopping tolerances above.
         progress: None, or a host callable (step, loss) called after each step.
     Returns:
         (x, code index into CODES, steps, history (max_steps,) the loss after each step (NaN beyond),
-        r (N,) and J (N, p) at x).
+        r (N,) and J^T J (p, p) at x).
     """
     dtype = x0.dtype
     x0 = jnp.clip(x0, lower, upper)
     p = x0.shape[0]
-    n = jax.eval_shape(lambda y: fn(y, args), x0).shape[0]
+    n = jax.eval_shape(lambda y: linearise(y, args), x0)[0].shape[0]
     # Step -1 only evaluates the start (so the model is linearised in one place of the program).
-    state = State(x0, jnp.zeros(n, dtype), jnp.zeros((n, p), dtype), jnp.asarray(jnp.inf, dtype),
+    state = State(x0, jnp.zeros(n, dtype), jnp.zeros((p, p), dtype), jnp.zeros(p, dtype), jnp.asarray(jnp.inf, dtype),
                   jnp.asarray(LAMBDA0, dtype), jnp.asarray(2.0, dtype), jnp.asarray(-1), jnp.asarray(RUNNING),
                   jnp.full(max_steps, jnp.nan, dtype))
 
     def body(s: State) -> State:
         first = s.step < 0
-        g = s.jac.T @ s.r
-        a = s.jac.T @ s.jac
+        g, a = s.g, s.a
         fixed = first | ((s.x <= lower) & (g > 0)) | ((s.x >= upper) & (g < 0))
         diag = jnp.diagonal(a)
         floor = 1e-9 * jnp.max(diag) + 1e-20  # a parameter no pixel sees still gets a (huge) damping
@@ -87,7 +85,7 @@ def box_lm(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=N
         dx = jnp.where(jnp.isfinite(dx), dx, 0.0)
         x_new = jnp.clip(s.x + dx, lower, upper)
         d = x_new - s.x
-        r_new, j_new = _linearise(fn, x_new, args)
+        r_new, a_new, g_new = linearise(x_new, args)
         loss_new = 0.5 * jnp.sum(r_new * r_new)
         finite = jnp.isfinite(loss_new)
         accept = finite & ((loss_new < s.loss) | first)
@@ -109,16 +107,17 @@ def box_lm(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=N
         if progress is not None:
             jax.debug.callback(progress, step, loss)
         history = jnp.where(first, s.history, s.history.at[jnp.maximum(s.step, 0)].set(loss))
-        return State(keep(x_new, s.x), keep(r_new, s.r), keep(j_new, s.jac), loss, lam, nu, step, code, history)
+        return State(keep(x_new, s.x), keep(r_new, s.r), keep(a_new, s.a), keep(g_new, s.g), loss, lam, nu, step,
+                     code, history)
 
     out = jax.lax.while_loop(lambda s: s.code == RUNNING, body, state)
-    return out.x, out.code, out.step, out.history, out.r, out.jac
+    return out.x, out.code, out.step, out.history, out.r, out.a
 
 
 @eqx.filter_jit
 def solve_box(problem, x0, lower, upper, max_steps, rtol, atol, progress=None):
     """`box_lm` on a `Problem`'s residuals, compiled once per problem structure and max_steps."""
-    return box_lm(lambda x, p: p.residuals(x), x0, lower, upper, problem, max_steps=max_steps, rtol=rtol, atol=atol,
+    return box_lm(linearise, x0, lower, upper, problem, max_steps=max_steps, rtol=rtol, atol=atol,
                   progress=progress)
 
 
@@ -126,7 +125,7 @@ def solve_box(problem, x0, lower, upper, max_steps, rtol, atol, progress=None):
 def solve_box_batch(problem, x0, targets, lower, upper, max_steps, rtol, atol):
     """Many `box_lm` solves at once, `jax.vmap` over starts x0 (B, p) and per-view targets (B, U, 3)."""
     def one(x0_b, targets_b):
-        return box_lm(lambda x, p: p.residuals(x), x0_b, lower, upper, problem.with_targets(targets_b),
+        return box_lm(linearise, x0_b, lower, upper, problem.with_targets(targets_b),
                       max_steps=max_steps, rtol=rtol, atol=atol)
 
     return jax.vmap(one)(x0, targets)

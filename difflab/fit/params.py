@@ -118,8 +118,9 @@ class Layout:
         return np.where(log, np.log(np.where(log, lo, 1.0)), lo), np.where(log, np.log(np.where(log, hi, 1.0)), hi)
 
     def values(self, x):
-        """Solver coordinates x -> values in scene units (JAX)."""
-        return jnp.where(self.entries("log") > 0, jnp.exp(x), x)
+        """Solver coordinates x -> values in scene units (numpy for a numpy x, else JAX)."""
+        xp = np if isinstance(x, np.ndarray) else jnp
+        return xp.where(self.entries("log") > 0, xp.exp(x), x)
 
     def x_of(self, values) -> np.ndarray:
         """Values (flat, scene units) -> x inside the bounds (numpy)."""

@@ -24,6 +24,8 @@ import numpy as np
 from ..errors import DifflabError, FitError
 from ..lighting.jax_model import lights_to_jax
 from ..renderers.api import as_scene, render_frame
+from ..renderers.compile import CompiledScene
+from ..renderers.launch import resolve_device
 from .materials import MaterialTable
 from .params import DEFAULT_PARAMS, KINDS, LIGHT_PARAM, SCENE_PARAMS, Layout, build_layout, fitted_materials, scene_value
 from .problem import LOSSES, Problem, ViewJ, value_index
@@ -155,8 +157,9 @@ class Setup:
         for name, flag in (("per_channel", per_channel), ("bounded", bounded), ("x64", x64)):
             if not isinstance(flag, bool):
                 raise FitError(f"{name}: must be True or False, got {flag!r}")
+        self.compiled = scene if isinstance(scene, CompiledScene) else None
         try:
-            scene = as_scene(scene)
+            scene = scene.scene if self.compiled is not None else as_scene(scene)
         except DifflabError as exc:
             raise FitError(f"scene: {exc}") from None
         self.materials = fitted_materials(scene, materials)
@@ -250,7 +253,7 @@ class Setup:
         views = []
         for view_scene, image, file_ceiling, mask, weight, nonfinite in prepared_targets(self.scene, targets, masks,
                                                                                           weights, render):
-            frame = render_frame(view_scene, device=device, threads=threads)
+            frame = render_frame(self._compiled_for(view_scene, device) or view_scene, device=device, threads=threads)
             if self.method == "raytrace":
                 record = frame.ray_tree
                 tree_ids = range(len(self.scene.materials)) if all_surfaces else ids
@@ -270,10 +273,22 @@ class Setup:
                               scene=view_scene, used=used))
         return views
 
-    def _model(self, view: View, pixels):
+    def _compiled_for(self, view_scene, device):
+        """The compiled scene given, under the view's scene, when it holds the view's geometry (same
+        camera, light positions and device: the G-buffer does not depend on the coefficients), else
+        None (the view is compiled when rendered)."""
+        compiled = self.compiled
+        if compiled is None or compiled.device != resolve_device(device):
+            return None
+        placed = lambda lights: [(l.type, l.position, l.direction) for l in lights]  # noqa: E731, E741
+        if view_scene.camera != compiled.scene.camera or placed(view_scene.lights) != placed(compiled.scene.lights):
+            return None
+        return compiled.with_scene(view_scene)
+
+    def _model(self, view: View, pixels, lights):
         if self.method == "raytrace":
             return TreeModel.build(view.record, pixels, view.scene.background, self.dtype)
-        return GBufferModel.build(view.record, pixels, self.dtype, self.texel_source)
+        return GBufferModel.build(view.record, pixels, lights, self.dtype, self.texel_source)
 
     def _view(self, view: View, pixels, index) -> ViewJ:
         lights = lights_to_jax(view.scene.lights, self.dtype)
@@ -282,11 +297,14 @@ class Setup:
         shared = min(count, index.shape[0])
         intensity_index[:shared] = index[:shared]
         f = lambda x: jnp.asarray(np.asarray(x, np.float64), self.dtype)  # noqa: E731
-        return ViewJ(model=self._model(view, pixels), lights=lights, target=f(view.target.reshape(-1, 3)[pixels]),
+        return ViewJ(model=self._model(view, pixels, lights), lights=lights, target=f(view.target.reshape(-1, 3)[pixels]),
                      sqrt_weight=f(np.sqrt(view.weight.reshape(-1, 3)[pixels])), ceiling=f(view.ceiling),
                      intensity_index=jnp.asarray(intensity_index))
 
     def _problem(self, loss, loss_scale) -> Problem:
+        weights = [v.weight.reshape(-1, 3)[np.flatnonzero(v.used)] for v in self.views]
+        self.weighted_entries = np.concatenate([(w > 0).reshape(-1) for w in weights])  # residual entries that count
+        self.weight_total = float(sum(np.sum(w) for w in weights))
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         views = tuple(self._view(v, np.flatnonzero(v.used), index["intensity"]) for v in self.views)
         table = MaterialTable.from_scene(self.scene.materials.values(), self.dtype)
@@ -310,20 +328,19 @@ class Setup:
         """Per view (H, W, 3) float32 plain residuals min(model, ceiling) - target from the flat
         weighted residuals r (0 outside the pixels used and where the weight is 0)."""
         out, offset = [], 0
-        for view, jview in zip(self.views, self.problem.views):
-            sqrt_w = np.asarray(jview.sqrt_weight, np.float64)
+        for view in self.views:
+            pixels = np.flatnonzero(view.used)
+            sqrt_w = np.sqrt(view.weight.reshape(-1, 3)[pixels])
             part = np.asarray(r[offset:offset + sqrt_w.size], np.float64).reshape(sqrt_w.shape)
             offset += sqrt_w.size
             full = np.zeros(view.target.shape, np.float32)
-            full.reshape(-1, 3)[np.flatnonzero(view.used)] = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w,
-                                                                                                   1.0), 0.0)
+            full.reshape(-1, 3)[pixels] = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w, 1.0), 0.0)
             out.append(full)
         return out
 
     def values(self, x) -> dict:
         """Solver coordinates -> key -> (size,) values in scene units."""
-        with jax.enable_x64(True):
-            return self.layout.unflatten(np.asarray(self.layout.values(jnp.asarray(x, jnp.float64))))
+        return self.layout.unflatten(self.layout.values(np.asarray(x, np.float64)))
 
     def render(self, values: dict | None = None) -> list[np.ndarray]:
         """Each view's whole image (H, W, 3) float32 from its image model at `values` (key -> value in

@@ -9,7 +9,11 @@ background where nothing was hit, OpenGL fog by depth, and finally an spp_side x
 Here the colours of the points come from `lighting.jax_model.shade` -- the one illumination model --
 and the rest of the composition is repeated in `jax.numpy`. Only materials and light intensities are
 inputs: geometry, visibility and the light directions are fixed by the G-buffer, so an optimisation
-loop shades the same points again and again without running Warp (DESIGN.md, invariant 3).
+loop shades the same points again and again without running Warp (DESIGN.md, invariant 3). What the
+geometry alone decides (per point and light: falloff times visibility times N.L, the specular lobe's
+cosine and its logarithm; `jax_model.LightGeometry`) is computed once, when the model is built, and
+a pixel that is exactly one point's colour (one sample, weight 1, no fog or clamping: Phong and flat
+shading at spp 1) skips the composition, so each evaluation is a few operations per point and light.
 """
 
 from __future__ import annotations
@@ -17,10 +21,12 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..lighting.jax_model import LightsJ, fog_factor, lights_to_jax, shade, sum_axis, textured_surface
+from ..lighting.jax_model import (LightGeometry, LightsJ, fog_factor, light_geometry, lights_to_jax, shade_geometry,
+                                  sum_axis, textured_surface)
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS
 from .materials import MaterialTable
 from .texels import point_texels
@@ -62,11 +68,13 @@ class ComposeJ(NamedTuple):
 
 class Formation(NamedTuple):
     """The static (hashable) settings of image formation: specular model (int), fog mode (int),
-    and whether Gouraud vertex colours are clamped to [0, 1]."""
+    whether Gouraud vertex colours are clamped to [0, 1], and direct: each pixel is its own point's
+    colour (the points are in pixel order; no composition)."""
 
     specular: int
     fog_mode: int
     clamp_colors: bool
+    direct: bool = False
 
 
 def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, ComposeJ, Formation, np.ndarray]:
@@ -90,45 +98,51 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
     index = np.where(mask[..., None], gbuffer.point_index[rows, cols], 0)
     weight = np.where(mask[..., None], gbuffer.point_weight[rows, cols], 0.0)
     pts = gbuffer.points
-    point_ids = np.unique(index[mask]) if mask.any() else np.zeros(0, np.int64)
-    point_ids = point_ids[point_ids < pts.material.shape[0]]
-    local = np.searchsorted(point_ids, index).clip(0, max(point_ids.size - 1, 0))
-
-    def f(x):
-        return jnp.asarray(np.asarray(x, np.float64), dtype=dtype)
-
-    if point_ids.size:
-        dist = pts.light_dist[point_ids]
-        points = PointsJ(normal=f(pts.normal[point_ids]), view=f(pts.view[point_ids]),
-                         material=jnp.asarray(pts.material[point_ids], jnp.int32),
-                         cell=jnp.asarray(pts.cell[point_ids], jnp.int32), light_dir=f(pts.light_dir[point_ids]),
-                         light_dist=f(np.where(np.isfinite(dist), dist, np.inf)),
-                         visibility=f(pts.visibility[point_ids]))
-    else:  # nothing hit: one dummy point with no material (colour 0), never used
-        n_lights = pts.light_dir.shape[1] if pts.light_dir.ndim == 3 else 0
-        points = PointsJ(normal=f(np.zeros((1, 3))), view=f(np.zeros((1, 3))), material=jnp.full(1, -1, jnp.int32),
-                         cell=jnp.zeros(1, jnp.int32), light_dir=f(np.zeros((1, n_lights, 3))),
-                         light_dist=f(np.ones((1, n_lights))), visibility=f(np.zeros((1, n_lights))))
     mode, color, start, end, density = gbuffer.fog
-    comp = ComposeJ(
-        mask=jnp.asarray(mask), depth=f(np.where(mask, gbuffer.depth[rows, cols], 0.0)),
-        point_index=jnp.asarray(local, jnp.int32), point_weight=f(weight),
-        background=f(gbuffer.background), fog_color=f(color), fog_start=f(start), fog_end=f(end),
-        fog_density=f(density),
-    )
     formation = Formation(specular=SPECULAR_MODELS[gbuffer.specular], fog_mode=int(mode),
                           clamp_colors=bool(gbuffer.clamp_vertex_colors))
+    if (side == 1 and mask.all() and formation.fog_mode == FOG_NONE and not formation.clamp_colors
+            and np.all(weight[:, 0] == (1.0, 0.0, 0.0)) and np.all(index[:, 0, 0] < pts.material.shape[0])):
+        # each pixel is one point's colour: the points, in pixel order, are the pixels
+        point_ids = index[:, 0, 0]
+        local = np.broadcast_to(np.arange(point_ids.size)[:, None, None], index.shape)
+        formation = formation._replace(direct=True)
+    else:
+        point_ids = np.unique(index[mask]) if mask.any() else np.zeros(0, np.int64)
+        point_ids = point_ids[point_ids < pts.material.shape[0]]
+        local = np.searchsorted(point_ids, index).clip(0, max(point_ids.size - 1, 0))
+    real = np.dtype(dtype)
+    if point_ids.size:
+        dist = pts.light_dist[point_ids]
+        points = PointsJ(normal=pts.normal[point_ids], view=pts.view[point_ids], material=pts.material[point_ids],
+                         cell=pts.cell[point_ids], light_dir=pts.light_dir[point_ids],
+                         light_dist=np.where(np.isfinite(dist), dist, np.inf), visibility=pts.visibility[point_ids])
+    else:  # nothing hit: one dummy point with no material (colour 0), never used
+        n_lights = pts.light_dir.shape[1] if pts.light_dir.ndim == 3 else 0
+        points = PointsJ(normal=np.zeros((1, 3)), view=np.zeros((1, 3)), material=np.full(1, -1),
+                         cell=np.zeros(1), light_dir=np.zeros((1, n_lights, 3)), light_dist=np.ones((1, n_lights)),
+                         visibility=np.zeros((1, n_lights)))
+    points = points._replace(**{k: np.asarray(getattr(points, k), real) for k in ("normal", "view", "light_dir",
+                                                                                  "light_dist", "visibility")},
+                             material=np.asarray(points.material, np.int32), cell=np.asarray(points.cell, np.int32))
+    comp = ComposeJ(mask=mask, depth=np.where(mask, gbuffer.depth[rows, cols], 0.0).astype(real),
+                    point_index=np.asarray(local, np.int32), point_weight=weight.astype(real),
+                    background=np.asarray(gbuffer.background, real), fog_color=np.asarray(color, real),
+                    fog_start=np.asarray(start, real), fog_end=np.asarray(end, real),
+                    fog_density=np.asarray(density, real))
+    points, comp = jax.device_put((points, comp))  # one transfer
     return points, comp, formation, point_ids
 
 
-def point_colors(points: PointsJ, table: MaterialTable, lights: LightsJ, ambient, specular: int, texel=None):
-    """The illumination model at each point with its material (`jax_model.textured_surface`: a
-    point's `texel` (N, 3), when given, modulating its texture's target); 0 where a point has no
-    material. Returns (N, 3)."""
-    has_material = points.material >= 0
-    mat = textured_surface(table, jnp.where(has_material, points.material, 0), points.cell, texel)
-    color = shade(mat, specular, points.normal, points.view, lights, points.light_dir, points.light_dist,
-                  points.visibility, ambient)
+def point_colors(material, cell, geometry: LightGeometry, table: MaterialTable, intensity, ambient, specular: int,
+                 texel=None):
+    """The illumination model (`jax_model.shade_geometry`) at points with material ids `material`
+    (N,) (-1: none, colour 0), checker cells `cell` (N,), their `LightGeometry` (N, P) and texture
+    values `texel` (N, 3) modulating their texture's target (`jax_model.textured_surface`; None:
+    none); intensity (P, 3). Returns (N, 3)."""
+    has_material = material >= 0
+    mat = textured_surface(table, jnp.where(has_material, material, 0), cell, texel)
+    color = shade_geometry(mat, specular, geometry, intensity, ambient)
     return jnp.where(has_material[:, None], color, 0.0)
 
 
@@ -168,7 +182,7 @@ def shade_gbuffer(gbuffer, materials, lights, ambient=None, *, dtype=jnp.float32
     ambient = jnp.asarray(gbuffer.ambient if ambient is None else ambient, dtype)
     side = int(gbuffer.spp_side)
     shape = (gbuffer.mask.shape[0] // side, gbuffer.mask.shape[1] // side, 3)
-    return _pixels_jit(GBufferModel.build(gbuffer, None, dtype), table, lights, ambient).reshape(shape)
+    return _pixels_jit(GBufferModel.build(gbuffer, None, lights, dtype), table, lights, ambient).reshape(shape)
 
 
 def influence(gbuffer, material_ids, any_surface: bool) -> np.ndarray:
@@ -190,33 +204,46 @@ def influence(gbuffer, material_ids, any_surface: bool) -> np.ndarray:
 
 
 class GBufferModel(eqx.Module):
-    """The G-buffer image model of U pixels: their shading points, composition and formation
+    """The G-buffer image model of U pixels: their points' material ids, checker cells and
+    `LightGeometry` under the lights it was built for, the composition and the formation
     (`pixel_arrays`), and -- when texels are fitted -- each point's taps into the table's stacked
     texels (rows (R, K), -1: none; tap_weight (R, K); see `texels.py`). `pixels` is the (U, 3) image
-    for given materials, lights and ambient."""
+    for given materials, light intensities (the lights' other fields are those it was built with)
+    and ambient."""
 
-    points: PointsJ
+    material: jnp.ndarray
+    cell: jnp.ndarray
+    geometry: LightGeometry
     comp: ComposeJ
     formation: Formation = eqx.field(static=True)
     taps: jnp.ndarray | None = None
     tap_weight: jnp.ndarray | None = None
 
     @classmethod
-    def build(cls, gbuffer, pixels, dtype, texels=None) -> GBufferModel:
+    def build(cls, gbuffer, pixels, lights: LightsJ, dtype, texels=None) -> GBufferModel:
         """`texels`: a `texels.TexelSource` for the fitted textures, or None."""
         points, comp, formation, point_ids = pixel_arrays(gbuffer, pixels, dtype)
-        if texels is None:
-            return cls(points=points, comp=comp, formation=formation)
-        rows, weight = texels.taps(gbuffer, point_ids)
-        if point_ids.size == 0:  # the dummy point of `pixel_arrays`
-            rows, weight = np.full((1, 4), -1, np.int32), np.zeros((1, 4))
-        return cls(points=points, comp=comp, formation=formation, taps=jnp.asarray(rows),
-                   tap_weight=jnp.asarray(np.asarray(weight, np.float64), dtype))
+        geometry = _geometry_jit(points, lights, formation.specular)
+        taps = tap_weight = None
+        if texels is not None:
+            rows, weight = texels.taps(gbuffer, point_ids)
+            if point_ids.size == 0:  # the dummy point of `pixel_arrays`
+                rows, weight = np.full((1, 4), -1, np.int32), np.zeros((1, 4))
+            taps, tap_weight = jnp.asarray(rows), jnp.asarray(np.asarray(weight, np.float64), dtype)
+        return cls(material=points.material, cell=points.cell, geometry=geometry, comp=comp, formation=formation,
+                   taps=taps, tap_weight=tap_weight)
 
     def pixels(self, table: MaterialTable, lights: LightsJ, ambient):
         texel = None if self.taps is None else point_texels(table.texels, self.taps, self.tap_weight)
-        return compose(point_colors(self.points, table, lights, ambient, self.formation.specular, texel), self.comp,
-                       self.formation)
+        colors = point_colors(self.material, self.cell, self.geometry, table, lights.intensity, ambient,
+                              self.formation.specular, texel)
+        return colors if self.formation.direct else compose(colors, self.comp, self.formation)
+
+
+@eqx.filter_jit
+def _geometry_jit(points: PointsJ, lights: LightsJ, specular: int):
+    return light_geometry(specular, points.normal, points.view, lights, points.light_dir, points.light_dist,
+                          points.visibility)
 
 
 @eqx.filter_jit

@@ -30,8 +30,8 @@ SUCCESSFUL = "successful"
 
 class Solved(NamedTuple):
     """A solve's outcome: x (p,) solver coordinates, result code name, steps, loss history, and
-    linearised = (r, J) at x (residuals and Jacobian in solver coordinates) when the solver has
-    them ("lm"), else None."""
+    linearised = (r, J^T J) at x (residuals and their normal matrix in solver coordinates) when the
+    solver has them ("lm"), else None."""
 
     x: np.ndarray
     result: str
@@ -158,12 +158,12 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
             history = np.asarray(history, np.float64)[:int(steps)].tolist() if options.history else []
             return Solved(np.asarray(x, np.float64), lm.CODES[int(code)], int(steps), history)
         if options.solver == "lm":
-            x, code, steps, history, r, jac = lm.solve_box(problem, jnp.asarray(x0, dtype), lower, upper,
+            x, code, steps, history, r, gram = lm.solve_box(problem, jnp.asarray(x0, dtype), lower, upper,
                                                            options.max_steps, rtol, atol, progress)
             steps = int(steps)
             history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
             name = lm.CODES[int(code)]  # a non-finite start leaves r, J unset
-            return Solved(np.asarray(x, np.float64), name, steps, history, None if name == "nonfinite" else (r, jac))
+            return Solved(np.asarray(x, np.float64), name, steps, history, None if name == "nonfinite" else (r, gram))
         if options.solver == "varpro":
             from .varpro import run_varpro
 

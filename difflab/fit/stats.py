@@ -21,8 +21,8 @@ Standard errors are those of linearised least squares, in scene units, and assum
 
     cov = s^2 (J^T J)^-1,   s^2 = sum_i r_i^2 / (N - p)
 
-with J the Jacobian of the plain weighted residuals with respect to the values (jax.jacfwd through
-the value -> image map). Directions of J^T J that are numerically singular (after scaling its
+with J the Jacobian of the plain weighted residuals with respect to the values (J^T J from the
+solver, or `normal_equations.linearise`). Directions of J^T J that are numerically singular (after scaling its
 columns to unit norm) give an infinite standard error to every parameter they involve.
 
 A parameter is *poorly determined* when, even at a noise floor of one 8-bit quantisation step, its
@@ -40,26 +40,36 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .normal_equations import dense, linearise
+
 QUANTISATION_SIGMA = 1.0 / (255.0 * math.sqrt(12.0))
 FLOAT_SIGMA = 1e-5
 MISMATCH_CHI2 = 2.0
 MIN_NOISE_PIXELS = 48  # pixel channels
 SINGULAR_RCOND = 1e-12
-LAPLACIAN = np.array([[1.0, -2.0, 1.0], [-2.0, 4.0, -2.0], [1.0, -2.0, 1.0]])
 
 
 def estimate_sigma(images, used_maps, *, interior=True) -> float | None:
     """The robust Laplacian noise estimate of (H, W, 3) images over their used pixels -- only those
-    whose 3 x 3 neighbourhood is used, when `interior` -- or None with fewer than MIN_NOISE_PIXELS."""
+    whose 3 x 3 neighbourhood is used, when `interior` -- or None with fewer than MIN_NOISE_PIXELS.
+    (The Laplacian kernel is [1 -2 1]^T [1 -2 1]: applied as two second differences, over the used
+    pixels' bounding box.)"""
     values = []
     for image, used in zip(images, used_maps):
-        h, w = used.shape
-        if h < 3 or w < 3:
+        rows, cols = np.flatnonzero(used.any(axis=1)), np.flatnonzero(used.any(axis=0))
+        if rows.size == 0 or used.shape[0] < 3 or used.shape[1] < 3:
+            continue
+        top, left = max(rows[0] - 1, 0), max(cols[0] - 1, 0)  # the box, one pixel wider (non-interior case)
+        box = (slice(top, min(rows[-1] + 2, used.shape[0])), slice(left, min(cols[-1] + 2, used.shape[1])))
+        used, image = used[box], np.asarray(image, np.float64)[box]
+        if used.shape[0] < 3 or used.shape[1] < 3:
             continue
         centre = used[1:-1, 1:-1]
         if interior:
-            centre = np.logical_and.reduce([used[i:h - 2 + i, j:w - 2 + j] for i in range(3) for j in range(3)])
-        lap = sum(LAPLACIAN[i, j] * image[i:h - 2 + i, j:w - 2 + j] for i in range(3) for j in range(3))
+            across = used[:, :-2] & used[:, 1:-1] & used[:, 2:]
+            centre = across[:-2] & across[1:-1] & across[2:]
+        rows2 = image[:-2] - 2.0 * image[1:-1] + image[2:]
+        lap = rows2[:, :-2] - 2.0 * rows2[:, 1:-1] + rows2[:, 2:]
         values.append(np.abs(lap[centre]).reshape(-1))
     values = np.concatenate(values) if values else np.zeros(0)
     values = values[np.isfinite(values)]
@@ -67,33 +77,39 @@ def estimate_sigma(images, used_maps, *, interior=True) -> float | None:
 
 
 @eqx.filter_jit
-def _linearised(problem, values):
-    r, jvp = jax.linearize(problem.weighted, values)
-    return r, jax.vmap(jvp, out_axes=1)(jnp.eye(values.shape[0], dtype=values.dtype))
+def _normal_matrix(problem, values):
+    """(J^T J, r) of the plain weighted residuals with respect to the values."""
+    if problem.loss == "l2" and not problem.smoothness:  # residuals(x) = weighted(values(x)): by parts if it applies
+        x = jnp.where(problem.layout.entries("log") > 0, jnp.log(values), values)
+        r, gram, _ = linearise(x, problem)
+        scale = jnp.where(problem.layout.entries("log") > 0, values, 1.0)
+        return gram / (scale[:, None] * scale[None, :]), r
+    r, gram, _ = dense(lambda v, p: p.weighted(v), values, problem)
+    return gram, r
 
 
-def jacobian(problem, values, solved=None) -> tuple[np.ndarray, np.ndarray]:
-    """(J (N, p) float64, r (N,)) of the plain weighted residuals with respect to the flat values,
-    over all residual entries: from `solved` = (r, J with respect to the solver coordinates x) when
-    the solver returned them for the l2 loss (d value / d x = value for log coordinates), else
-    computed (one compiled call)."""
-    if solved is not None and problem.loss == "l2":
-        r, jac_x = (np.asarray(a, np.float64) for a in solved)
+def normal_matrix(problem, values, solved=None) -> tuple[np.ndarray, np.ndarray]:
+    """(J^T J (p, p) float64, r (N,)) of the plain weighted residuals r, J their Jacobian with
+    respect to the flat values, over all residual entries: from `solved` = (r, J^T J with respect
+    to the solver coordinates x) when the solver returned them for the l2 loss without a texture
+    prior (d value / d x = value for log coordinates), else computed (one compiled call)."""
+    if solved is not None and problem.loss == "l2" and not problem.smoothness:  # no prior rows in the solver's
+        r, gram_x = (np.asarray(a, np.float64) for a in solved)
         log = problem.layout.entries("log") > 0
-        values = np.asarray(values, np.float64)
-        return jac_x / np.where(log, values, 1.0), r
-    r, jac = _linearised(problem, values)
-    return np.asarray(jac, np.float64), np.asarray(r, np.float64)
+        scale = np.where(log, np.asarray(values, np.float64), 1.0)
+        return gram_x / np.outer(scale, scale), r
+    gram, r = _normal_matrix(problem, values)
+    return np.asarray(gram, np.float64), np.asarray(r, np.float64)
 
 
-def covariance_unscaled(jac: np.ndarray) -> np.ndarray:
-    """(J^T J)^-1 with singular directions given infinite variance. Returns (p, p); the diagonal
-    is inf for parameters that a singular direction involves."""
-    p = jac.shape[1]
-    norms = np.linalg.norm(jac, axis=0)
+def covariance_unscaled(gram: np.ndarray) -> np.ndarray:
+    """(J^T J)^-1 from J^T J (p, p), with singular directions given infinite variance. Returns
+    (p, p); the diagonal is inf for parameters that a singular direction involves."""
+    p = gram.shape[0]
+    norms = np.sqrt(np.maximum(np.diagonal(gram), 0.0))
     zero = norms == 0
     scale = np.where(zero, 1.0, 1.0 / np.where(zero, 1.0, norms))
-    jtj = (jac * scale).T @ (jac * scale)
+    jtj = gram * np.outer(scale, scale)
     eigval, eigvec = np.linalg.eigh(jtj)
     top = max(float(eigval.max(initial=0.0)), 1e-300)
     singular = eigval <= SINGULAR_RCOND * top
@@ -111,17 +127,18 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
     return np.where(finite, np.sqrt(np.where(finite, np.maximum(diag, 0.0), 0.0) * sigma2), np.inf)
 
 
-def fit_statistics(jac: np.ndarray | None, r: np.ndarray, censored: int, sigma: float, size: int = 0) -> dict:
-    """s2 = sse / dof (dof = N - p, N uncensored entries), chi2 = s2 / sigma^2 (reduced), the
-    mismatch flag (chi2 above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and diag (J^T J)^-1 (p,);
-    jac None (a matrix-free fit of p = `size` entries): diag nan, no covariance is formed."""
-    p = jac.shape[1] if jac is not None else size
+def fit_statistics(gram: np.ndarray | None, r: np.ndarray, censored: int, sigma: float, size: int = 0) -> dict:
+    """s2 = sse / dof (dof = N - p, N uncensored entries of r), chi2 = s2 / sigma^2 (reduced), the
+    mismatch flag (chi2 above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and diag (J^T J)^-1 (p,)
+    from gram = J^T J (p, p); gram None (a matrix-free fit of p = `size` entries): diag nan, no
+    covariance is formed."""
+    p = gram.shape[0] if gram is not None else size
     sse = float(np.sum(r * r))
     dof = max(r.size - censored - p, 1)
     s2 = sse / dof
     chi2 = s2 / (sigma * sigma) if sigma > 0 else math.inf
     mismatch = bool(chi2 > max(MISMATCH_CHI2, 1.0 + 5.0 * math.sqrt(2.0 / dof)))
-    diag = np.diag(covariance_unscaled(jac)) if jac is not None else np.full(p, np.nan)
+    diag = np.diag(covariance_unscaled(gram)) if gram is not None else np.full(p, np.nan)
     return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": diag}
 
 

@@ -13,6 +13,8 @@ solution, which brings it onto its bound 0.
 
 from __future__ import annotations
 
+from functools import partial
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -20,6 +22,7 @@ import numpy as np
 
 from ..errors import FitError
 from . import lm
+from .normal_equations import dense
 from .params import KINDS
 
 RIDGE = {True: 1e-13, False: 1e-6}  # relative ridge on the scaled normal equations, by x64
@@ -73,7 +76,7 @@ def _solve_reduced(problem, x0, lower, upper, max_steps, rtol, atol, progress):
     def reduced(theta, p):
         return solve_linear(p, x0.at[nonlinear].set(theta))[1]
 
-    theta, code, steps, history, _, _ = lm.box_lm(reduced, x0[nonlinear], lower[nonlinear], upper[nonlinear], problem,
+    theta, code, steps, history, _, _ = lm.box_lm(partial(dense, reduced), x0[nonlinear], lower[nonlinear], upper[nonlinear], problem,
                                             max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)
     x, _ = solve_linear(problem, x0.at[nonlinear].set(theta))
     return x, code, steps, history

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..vocabulary import (BECKMANN_MIN_COS, BLINN, DIRECTIONAL, FOG_EXP, FOG_EXP2, FOG_LINEAR, LIGHT_TYPES, PHONG,
-                          SPOT, TARGET_KA, TARGET_KD, TEXTURE_TARGET_IDS)
+                          SPOT, TARGET_KA, TARGET_KD, TEXTURE_TARGET_IDS, TORRANCE)
 
 
 class LightsJ(NamedTuple):
@@ -65,11 +65,20 @@ def normalize(x):
     return x * jnp.where(positive, 1.0 / jnp.sqrt(jnp.where(positive, sq, 1.0)), 0.0)
 
 
+def safe_log(x):
+    """log x where x > 0, else 0 (the logarithm `power_of` takes)."""
+    return jnp.log(jnp.where(x > 0.0, x, 1.0))
+
+
+def power_of(x, log_x, n):
+    """x^n for x >= 0 from x and log_x = `safe_log(x)`, with C's pow at 0 (0^0 = 1, 0^n = 0) and
+    finite gradients in x and n. (A caller that raises fixed x to many n keeps log_x.)"""
+    return jnp.where(x > 0.0, jnp.exp(n * log_x), jnp.where(n == 0.0, 1.0, 0.0))
+
+
 def safe_pow(x, n):
     """x^n for x >= 0 with C's pow at 0 (0^0 = 1, 0^n = 0) and finite gradients in x and n."""
-    positive = x > 0.0
-    powered = jnp.exp(n * jnp.log(jnp.where(positive, x, 1.0)))
-    return jnp.where(positive, powered, jnp.where(n == 0.0, 1.0, 0.0))
+    return power_of(x, safe_log(x), n)
 
 
 def light_vector(light: LightsJ, p):
@@ -93,27 +102,52 @@ def light_falloff(light: LightsJ, l, d):
     return jnp.where(directional, 1.0, att)
 
 
+class LobeGeometry(NamedTuple):
+    """What the specular lobe reads from the geometry alone (`lobe_geometry`): cos = max(R.V, 0)
+    (Phong) or max(N.H, 0) (Blinn, Torrance) and log_cos = `safe_log(cos)`; for Torrance only (else
+    None): valid (N.V > 0 and N.H > BECKMANN_MIN_COS), cos2 = N.H^2 (1 where not valid), sin2 =
+    |N x H|^2, n_dot_v (1 where not valid) and schlick = (1 - max(V.H, 0))^5."""
+
+    cos: jnp.ndarray
+    log_cos: jnp.ndarray
+    valid: jnp.ndarray | None = None
+    cos2: jnp.ndarray | None = None
+    sin2: jnp.ndarray | None = None
+    n_dot_v: jnp.ndarray | None = None
+    schlick: jnp.ndarray | None = None
+
+
+def lobe_geometry(model: int, normal, v, l) -> LobeGeometry:
+    """The geometric inputs of the specular lobe of `model` (a Python int) at unit N, V, L."""
+    if model == PHONG:
+        r = 2.0 * dot(normal, l)[..., None] * normal - l
+        cos = jnp.maximum(dot(r, v), 0.0)
+        return LobeGeometry(cos, safe_log(cos))
+    h = normalize(l + v)
+    cos = jnp.maximum(dot(normal, h), 0.0)
+    if model == BLINN:
+        return LobeGeometry(cos, safe_log(cos))
+    n_dot_v = dot(normal, v)
+    valid = (n_dot_v > 0.0) & (cos > BECKMANN_MIN_COS)
+    axis = jnp.cross(normal, h)
+    return LobeGeometry(cos, safe_log(cos), valid=valid, cos2=jnp.where(valid, cos * cos, 1.0),
+                        sin2=dot(axis, axis),  # not 1 - cos2: that cancels near the peak
+                        n_dot_v=jnp.where(valid, n_dot_v, 1.0), schlick=(1.0 - jnp.maximum(dot(v, h), 0.0)) ** 5)
+
+
+def lobe(model: int, g: LobeGeometry, n, m, f0):
+    """The specular lobe of `model` from its geometry: cos^n (Phong, Blinn), or Torrance-Sparrow's
+    F D / (4 N.V) with Beckmann D (roughness m) and Schlick's F (f0)."""
+    if model != TORRANCE:
+        return power_of(g.cos, g.log_cos, n)
+    beckmann = jnp.exp(-g.sin2 / (g.cos2 * m * m)) / (math.pi * m * m * g.cos2 * g.cos2)
+    fresnel = f0 + (1.0 - f0) * g.schlick
+    return jnp.where(g.valid, fresnel * beckmann / (4.0 * g.n_dot_v), 0.0)
+
+
 def specular_factor(model: int, normal, v, l, n, m, f0):
     """S: the specular lobe of the chosen model (a Python int); 0 where N.L <= 0."""
-    n_dot_l = dot(normal, l)
-    if model == PHONG:
-        r = 2.0 * n_dot_l[..., None] * normal - l
-        lobe = safe_pow(jnp.maximum(dot(r, v), 0.0), n)
-    else:
-        h = normalize(l + v)
-        n_dot_h = jnp.maximum(dot(normal, h), 0.0)
-        if model == BLINN:
-            lobe = safe_pow(n_dot_h, n)
-        else:
-            n_dot_v = dot(normal, v)
-            valid = (n_dot_v > 0.0) & (n_dot_h > BECKMANN_MIN_COS)
-            cos2 = jnp.where(valid, n_dot_h * n_dot_h, 1.0)
-            axis = jnp.cross(normal, h)
-            sin2 = dot(axis, axis)  # not 1 - cos2: that cancels near the peak
-            beckmann = jnp.exp(-sin2 / (cos2 * m * m)) / (math.pi * m * m * cos2 * cos2)
-            fresnel = f0 + (1.0 - f0) * (1.0 - jnp.maximum(dot(v, h), 0.0)) ** 5
-            lobe = jnp.where(valid, fresnel * beckmann / (4.0 * jnp.where(valid, n_dot_v, 1.0)), 0.0)
-    return jnp.where(n_dot_l > 0.0, lobe, 0.0)
+    return jnp.where(dot(normal, l) > 0.0, lobe(model, lobe_geometry(model, normal, v, l), n, m, f0), 0.0)
 
 
 def light_term(light: LightsJ, mat: MaterialJ, model: int, normal, v, l, d):
@@ -187,6 +221,47 @@ def fog_factor(mode: int, z, start, end, density):
     return jnp.clip(f, 0.0, 1.0)
 
 
+class LightGeometry(NamedTuple):
+    """Per point and light (..., P), what neither the material nor the light's intensity changes:
+    diffuse = s att spot max(N.L, 0), weight = s att spot [N.L > 0] (s: visibility) and the specular
+    lobe's geometry. `shade_geometry` turns it into colours for any coefficients and intensities."""
+
+    diffuse: jnp.ndarray
+    weight: jnp.ndarray
+    lobe: LobeGeometry
+
+
+def light_geometry(model: int, normal, v, lights: LightsJ, l, d, visibility) -> LightGeometry:
+    """The `LightGeometry` of points: normal, v (..., 3); l (..., P, 3), d, visibility (..., P)."""
+    n_dot_l = dot(normal[..., None, :], l)
+    s = visibility * light_falloff(lights, l, d)
+    return LightGeometry(diffuse=s * jnp.maximum(n_dot_l, 0.0), weight=jnp.where(n_dot_l > 0.0, s, 0.0),
+                         lobe=lobe_geometry(model, normal[..., None, :], v[..., None, :], l))
+
+
+def shade_parts(mat: MaterialJ, model: int, geometry: LightGeometry, intensity, ambient):
+    """The local model's three parts, each (..., 3): Ia, sum_p Ip diffuse_p and sum_p Ip weight_p S_p
+    (S_p under mat's n, m, f0), so that colour = ka Ia + kd (sum_p Ip diffuse_p) + ks (sum_p Ip weight_p
+    S_p): the colour is linear in ka, kd and ks. intensity (P, 3)."""
+    shape = geometry.diffuse.shape[:-1] + (3,)
+    spec = geometry.weight * lobe(model, geometry.lobe, jnp.expand_dims(mat.n, -1), jnp.expand_dims(mat.m, -1),
+                                  jnp.expand_dims(mat.f0, -1))
+    return (jnp.broadcast_to(ambient, shape), sum_axis(intensity * geometry.diffuse[..., None], -2),
+            sum_axis(intensity * spec[..., None], -2))
+
+
+def shade_geometry(mat: MaterialJ, model: int, geometry: LightGeometry, intensity, ambient):
+    """ka Ia + sum_p Ip (kd diffuse_p + ks weight_p S_p): the local model on a `LightGeometry`;
+    intensity (P, 3). Returns (..., 3)."""
+    return combine_parts(mat, shade_parts(mat, model, geometry, intensity, ambient))
+
+
+def combine_parts(mat: MaterialJ, parts):
+    """ka Ia + kd D + ks S from `shade_parts`' (Ia, D, S)."""
+    ambient_part, diffuse, specular = parts
+    return mat.ka * ambient_part + mat.kd * diffuse + mat.ks * specular
+
+
 def shade(mat: MaterialJ, model: int, normal, v, lights: LightsJ, l, d, visibility, ambient):
     """The whole local model at points: ka Ia + sum_p s_p light_term_p.
 
@@ -199,9 +274,8 @@ def shade(mat: MaterialJ, model: int, normal, v, lights: LightsJ, l, d, visibili
     Returns:
         (..., 3) linear RGB radiance.
     """
-    per_light = MaterialJ(*(jnp.expand_dims(jnp.asarray(field), -2 if i < 3 else -1) for i, field in enumerate(mat)))
-    terms = light_term(lights, per_light, model, normal[..., None, :], v[..., None, :], l, d)
-    return ambient_term(mat, ambient) + sum_axis(visibility[..., None] * terms, -2)
+    return shade_geometry(mat, model, light_geometry(model, normal, v, lights, l, d, visibility), lights.intensity,
+                          ambient)
 
 
 def lights_to_jax(lights, dtype=jnp.float32) -> LightsJ:

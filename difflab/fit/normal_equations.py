@@ -1,0 +1,115 @@
+"""The residuals and the Gauss-Newton normal equations at a point: what each step of the box
+Levenberg-Marquardt solver (`lm.py`) and the statistics at the solution (`stats.py`) need,
+
+    r (N,),   A = J^T J (p, p),   g = J^T r (p,)      (J = dr/dx, x the solver coordinates)
+
+Two ways to the same numbers:
+
+- dense (`dense`): J by forward-mode autodiff (one column per entry), then two products. Any
+  residual function: robust losses, light intensities, the ray tree, composed pixels.
+- by parts (`by_parts`), for the l2 loss on G-buffer views whose pixels are single points
+  (`shading.Formation.direct`: Phong or flat shading at spp 1) with only ka, kd, ks, n, m, f0
+  fitted (no texels, no prior rows). The colour is ka Ia + kd D + ks S(n, m, f0) (`jax_model.shade_parts`), so J's columns
+  are known in closed form: sqrt(w) Ia, sqrt(w) D and sqrt(w) S for the linear coefficients
+  (ka, kd only where the checker cell is the first: the second takes ka2, kd2), sqrt(w) ks dS/dt
+  for t = n, m, f0 (one forward-mode tangent each), and 0 where a pixel is censored (the model is
+  above the ceiling). A row (a pixel channel) touches only its own material's entries of its own
+  channel, so J^T J is summed per material and channel from q x q blocks (q: the fitted kinds)
+  and never formed as a dense (N, p) J: a few passes over the pixels per step.
+
+`linearise` picks the second when it applies (a static property of the problem).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..lighting.jax_model import combine_parts, shade_parts, surface_material
+from .shading import GBufferModel
+
+SLOTS = ("ka", "kd", "ks", "n", "m", "f0")
+LINEAR = ("ka", "kd", "ks")
+
+
+def dense(fn, x, args):
+    """(r, J^T J, J^T r) of residuals fn(x, args), J by forward mode."""
+    r, jvp = jax.linearize(lambda y: fn(y, args), x)
+    jac = jax.vmap(jvp, out_axes=1)(jnp.eye(x.shape[0], dtype=x.dtype))
+    return r, jac.T @ jac, jac.T @ r
+
+
+def by_parts_applies(problem) -> bool:
+    """Whether `by_parts` can linearise the problem (see the module docstring)."""
+    return (problem.loss == "l2" and not problem.smoothness and all(p.kind in SLOTS for p in problem.layout)
+            and all(isinstance(v.model, GBufferModel) and v.model.formation.direct and v.model.taps is None
+                    for v in problem.views))
+
+
+def slot_columns(layout, n_materials: int) -> tuple[tuple, dict]:
+    """(the fitted kinds among SLOTS, in order; material id -> (3, q) int array: the flat-vector
+    entry each channel's slot takes, layout.size where that material's kind is not fitted)."""
+    from .problem import value_index
+
+    index = value_index(layout, n_materials, 0)
+    slots = tuple(k for k in SLOTS if any(p.kind == k for p in layout))
+    columns = {}
+    for m in sorted({p.index for p in layout}):
+        cols = np.stack([np.broadcast_to(index[k][m], (3,)) for k in slots], axis=-1)
+        columns[m] = np.where(cols >= 0, cols, layout.size)
+    return slots, columns
+
+
+def by_parts(problem, x):
+    """(r, J^T J, J^T r) in closed form (see the module docstring); `by_parts_applies(problem)`."""
+    layout = problem.layout
+    values = layout.values(x)
+    table = problem.materials(values)
+    slots, columns = slot_columns(layout, table.ka.shape[0])
+    p = layout.size
+    gram = jnp.zeros((p + 1, p + 1), x.dtype)  # row / column p collects what is not fitted
+    grad = jnp.zeros(p + 1, x.dtype)
+    residuals = []
+    for view in problem.views:
+        model = view.model
+        has_material = model.material >= 0
+        mat = surface_material(table, jnp.where(has_material, model.material, 0), model.cell)
+
+        def parts(n, m, f0):
+            return shade_parts(mat._replace(n=n, m=m, f0=f0), model.formation.specular, model.geometry,
+                               view.lights.intensity, problem.ambient)
+
+        ambient_part, diffuse, specular = parts(mat.n, mat.m, mat.f0)
+        image = jnp.where(has_material[:, None], combine_parts(mat, (ambient_part, diffuse, specular)), 0.0)
+        r = view.sqrt_weight * (jnp.minimum(image, view.ceiling) - view.target)
+        live = view.sqrt_weight * (has_material[:, None] & (image < view.ceiling))  # 0 where censored
+        first_cell = (model.cell != 1)[:, None]
+        column = {"ka": live * ambient_part * first_cell, "kd": live * diffuse * first_cell, "ks": live * specular}
+        for kind in slots:
+            if kind not in LINEAR:
+                tangent = {k: jnp.zeros_like(mat.n) for k in ("n", "m", "f0")}
+                tangent[kind] = jnp.ones_like(mat.n)
+                _, d_spec = jax.jvp(lambda n, m, f0: parts(n, m, f0)[2], (mat.n, mat.m, mat.f0),
+                                    (tangent["n"], tangent["m"], tangent["f0"]))
+                column[kind] = live * mat.ks * d_spec
+        v = [column[k] for k in slots]  # q of (U, 3)
+        q = len(slots)
+        for m, cols in columns.items():
+            w = [jnp.where((model.material == m)[:, None], c, 0.0) for c in v]
+            # per channel, the q x q block of this material's rows: sums of products over the pixels
+            block = [[jnp.sum(w[i] * v[j], axis=0) if i <= j else None for j in range(q)] for i in range(q)]
+            block = jnp.stack([jnp.stack([block[min(i, j)][max(i, j)] for j in range(q)], -1) for i in range(q)], -2)
+            gram = gram.at[cols[:, :, None], cols[:, None, :]].add(block)
+            grad = grad.at[cols].add(jnp.stack([jnp.sum(c * r, axis=0) for c in w], axis=-1))
+        residuals.append(r.reshape(-1))
+    scale = jnp.where(layout.entries("log") > 0, values, 1.0)  # d value / d x
+    return (jnp.concatenate(residuals), scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p])
+
+
+def linearise(x, problem):
+    """(r, J^T J, J^T r) of `problem.residuals` at solver coordinates x, by parts where that
+    applies, else dense."""
+    if by_parts_applies(problem):
+        return by_parts(problem, x)
+    return dense(lambda y, prob: prob.residuals(y), x, problem)

@@ -1,0 +1,111 @@
+"""The normal equations by parts (closed-form J^T J for single-point G-buffer pixels) against the
+dense forward-mode ones, and the solver on each: the same numbers, the same steps."""
+
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from test_fit_helpers import TRUTH, make_scene, perturbed, target_of
+
+from difflab import compile_scene
+from difflab.fit import Setup, fit_material
+from difflab.fit import lm
+from difflab.fit.normal_equations import by_parts, by_parts_applies, dense, linearise
+
+BRIGHT = [{"type": "point", "position": [2, 3, 3], "intensity": [2.5, 2.5, 2.5], "attenuation": [1, 0, 0]},
+          {"type": "directional", "direction": [-1, -1, -0.5], "intensity": [0.3, 0.2, 0.5]}]
+
+
+def residuals(x, problem):
+    return problem.residuals(x)
+
+
+def _both(setup, scale=0.8):
+    """(by parts, dense) linearisations at the start's values scaled by `scale` (log entries too)."""
+    with jax.enable_x64(True):
+        x = jnp.asarray(setup.layout.x_of(setup.layout.flatten(setup.initial) * scale))
+        fast = jax.jit(by_parts)(setup.problem, x)
+        slow = jax.jit(partial(dense, residuals))(x, setup.problem)
+    return [np.asarray(a) for a in fast], [np.asarray(a) for a in slow]
+
+
+@pytest.mark.parametrize("shading,specular,materials,params,per_channel,ceiling", [
+    ("phong", "phong", ("red", "floor"), ("ka", "kd", "ks", "n"), True, None),  # two materials, checker cells
+    ("phong", "blinn", ("red",), ("kd", "ks", "n"), False, None),  # grey values
+    ("flat", "torrance", ("red",), ("ks", "m", "f0"), True, None),
+    ("phong", "phong", ("red",), ("ka", "kd", "ks", "n"), True, 1.0),  # clipped highlight: censored rows
+])
+def test_by_parts_equals_dense(shading, specular, materials, params, per_channel, ceiling):
+    scene = make_scene(size=20, shading=shading, specular=specular, lights=BRIGHT)
+    target = np.minimum(target_of(scene), ceiling) if ceiling else target_of(scene)
+    setup = Setup(scene, [target], list(materials), params, per_channel=per_channel, ceiling=ceiling or False)
+    assert by_parts_applies(setup.problem)
+    if ceiling:
+        assert setup.censored > 0
+    if "floor" in materials:
+        assert set(np.asarray(setup.problem.views[0].model.cell).tolist()) == {0, 1}  # both checker cells in view
+    (r, a, g), (r_d, a_d, g_d) = _both(setup)
+    np.testing.assert_allclose(r, r_d, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(a, a_d, rtol=0, atol=1e-11 * np.abs(a_d).max())
+    np.testing.assert_allclose(g, g_d, rtol=0, atol=1e-11 * np.abs(g_d).max())
+    assert np.abs(g_d).max() > 0
+
+
+@pytest.mark.parametrize("kwargs,fit_kwargs", [
+    ({"shading": "gouraud"}, {}),  # a pixel mixes three vertex colours
+    ({"spp": 4}, {}),  # a pixel is the mean of 4 samples
+    ({"fog": {"mode": "linear", "color": [0.5, 0.5, 0.5], "start": 3, "end": 20}}, {}),
+    ({}, {"loss": "huber"}),
+    ({}, {"params": ("kd", "intensity")}),
+])
+def test_dense_where_by_parts_does_not_apply(kwargs, fit_kwargs):
+    scene = make_scene(size=12, **kwargs)
+    setup = Setup(scene, [target_of(scene)], "red", **{"params": ("kd", "ks", "n"), **fit_kwargs})
+    assert not by_parts_applies(setup.problem)
+    with jax.enable_x64(True):
+        x = jnp.asarray(setup.x0)
+        ours = jax.jit(linearise)(x, setup.problem)
+        theirs = jax.jit(partial(dense, residuals))(x, setup.problem)
+    for u, v in zip(ours, theirs):
+        np.testing.assert_array_equal(np.asarray(u), np.asarray(v))
+
+
+@pytest.mark.parametrize("truth", [TRUTH, {**TRUTH, "ks": [0.0, 0.0, 0.0]}])
+def test_solver_by_parts_takes_the_dense_solvers_steps(truth):
+    """Recovery from a 30 % perturbed start, and a matte target (ks truly 0): the box LM on the
+    closed-form normal equations takes the same steps to the same point as on forward-mode ones."""
+    scene = make_scene(size=24, red=truth)
+    start = perturbed({**truth, "ks": [0.5, 0.4, 0.3]})
+    setup = Setup(scene, [target_of(scene)], "red", init=start)
+    with jax.enable_x64(True):
+        lower, upper = (jnp.asarray(b) for b in setup.layout.bounds())
+        x0 = jnp.asarray(setup.x0)
+        fast = lm.solve_box(setup.problem, x0, lower, upper, 64, 1e-8, 1e-10)
+        slow = jax.jit(partial(lm.box_lm, partial(dense, residuals), max_steps=64, rtol=1e-8, atol=1e-10))(
+            x0, lower, upper, setup.problem)
+    x, code, steps = (np.asarray(v) for v in fast[:3])
+    assert lm.CODES[int(code)] == "successful" and int(steps) == int(slow[2]) and int(steps) <= 25
+    np.testing.assert_allclose(x, np.asarray(slow[0]), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(fast[5]), np.asarray(slow[5]), rtol=1e-9, atol=1e-12)  # J^T J at x
+    values = setup.values(x)
+    matte = max(truth["ks"]) == 0.0
+    for key in ("ka", "kd") + (("ks",) if matte else ("ks", "n")):  # a matte target says nothing of n
+        np.testing.assert_allclose(values[key], truth[key], rtol=1e-4, atol=0 if matte and key == "ks" else 1e-7)
+
+
+def test_a_compiled_scene_fits_as_the_scene_does():
+    """A CompiledScene renders the views with its camera and lights; a view with another camera
+    is compiled for itself. The results equal those from the Scene."""
+    scene = make_scene(size=16, red=TRUTH)
+    target = target_of(scene)
+    other = scene.camera.to_dict() | {"eye": [0.5, 1.4, 4.0]}
+    moved = target_of(scene.with_overrides(camera=other))
+    start = perturbed(TRUTH)
+    for targets in ([target], [target, (moved, {"camera": other})]):
+        plain = fit_material(scene, targets, "red", init=start, history=False)
+        compiled = fit_material(compile_scene(scene), targets, "red", init=start, history=False)
+        assert compiled.converged and compiled.steps == plain.steps
+        for key in plain.params:
+            np.testing.assert_array_equal(compiled.params[key], plain.params[key])
