@@ -315,3 +315,16 @@ def test_a_scene_without_objects_renders_its_background(threads):
     frame = render_frame(scene, threads=threads)
     assert np.array_equal(frame.image, image) and not frame.gbuffer.mask.any()
     assert np.array_equal(render(scene, method="raytrace", threads=threads), image)
+
+
+def test_a_surface_on_the_far_plane_is_drawn_behind_nearer_ones():
+    """z_ndc = 1 (the far plane, included) keys the deepest depth, 2^31 - 1: it once rounded up to
+    2^31 in float32, overflowed the 64-bit key and hid everything nearer."""
+    def quad(z, half, material):
+        return {"type": "mesh", "vertices": [[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]],
+                "faces": [[0, 1, 2], [0, 2, 3]], "material": material}
+
+    scene = scene_dict([quad(0.0, 0.5, "near"), quad(-15.0, 3.0, "far")],  # the camera's far plane: z = 5 - 20
+                       {"near": {"ka": [1, 0, 0], "kd": 0}, "far": {"ka": [0, 0, 1], "kd": 0}}, ambient=(1, 1, 1))
+    image = render(scene)
+    assert image[16, 16].tolist() == [1, 0, 0] and image[0, 0].tolist() == [0, 0, 1]

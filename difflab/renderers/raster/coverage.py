@@ -15,7 +15,7 @@ from .clip import SUBPIXEL, drawn_rows, edge, owns_edge, snap
 
 wp.set_module_options({"enable_backward": False})
 
-DEPTH_LEVELS = 2147483647.0  # depth quantisation of the visibility key (31 bits)
+DEPTH_SCALE = wp.constant(wp.float64(0.5 * 2147483647.0))  # key depth (z_ndc + 1) x this: [-1, 1] -> [0, 2^31 - 1]
 NO_HIT = wp.constant(wp.int64(9223372036854775807))
 SAMPLE_CENTRE = SUBPIXEL // 2  # a sample centre, in fixed-point steps from its sample's corner
 
@@ -101,9 +101,9 @@ def raster_slot(slot: int, row_begin: int, row_end: int, screen: wp.array2d(dtyp
         z_row = s0[2] + dz_dy * (wp.float64(i) + wp.float64(0.5) - s0[1])
         for j in range(j_lo, j_hi + 1):
             if covers(b0, own0) and covers(b1, own1) and covers(b2, own2):
-                z_ndc = float(z_row + dz_dx * (wp.float64(j) + wp.float64(0.5) - s0[0]))
-                if z_ndc >= -1.0 and z_ndc <= 1.0:
-                    depth = wp.int64((z_ndc + 1.0) * 0.5 * DEPTH_LEVELS)
+                z_ndc = z_row + dz_dx * (wp.float64(j) + wp.float64(0.5) - s0[0])
+                if z_ndc >= wp.float64(-1.0) and z_ndc <= wp.float64(1.0):  # in float64: z = 1 keys 2^31 - 1
+                    depth = wp.int64((z_ndc + wp.float64(1.0)) * DEPTH_SCALE)
                     wp.atomic_min(key, i * width + j, depth * wp.int64(4294967296) + wp.int64(slot))
             b0 = b0 - (y2 - y1) * step
             b1 = b1 - (y0 - y2) * step
