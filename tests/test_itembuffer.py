@@ -92,12 +92,24 @@ def test_render_uses_the_item_buffer_where_it_applies_and_any_thread_count_agree
     mesh_scene = Scene.from_dict(mixed_scene(max_depth=2))
     frame = difflab.render_frame(mesh_scene, method="raytrace", threads=1)
     assert frame.stats["item_buffer"]
-    # the item buffer shares the rasterizer's per-frame arrays of a compiled scene: both keep working
+    # the item buffer shares the rasterizer's per-frame arrays of a compiled scene, and is kept for the
+    # next render of the same sample grid: rasterizing, other settings and other grids in between
     compiled = difflab.compile_scene(mesh_scene)
     rastered = difflab.render(compiled, method="raster")
-    np.testing.assert_array_equal(difflab.render(compiled, method="raytrace", threads=1), frame.image)
+    first = difflab.render_frame(compiled, method="raytrace", threads=1)
+    np.testing.assert_array_equal(first.image, frame.image)
     np.testing.assert_array_equal(difflab.render(compiled, method="raster"), rastered)
-    np.testing.assert_array_equal(difflab.render(compiled, method="raytrace", threads=1), frame.image)
+    again = difflab.render_frame(compiled, method="raytrace", threads=1)
+    assert not first.stats["item_buffer_kept"] and again.stats["item_buffer_kept"]
+    np.testing.assert_array_equal(again.image, frame.image)
+    fine = difflab.render_frame(compiled, method="raytrace", spp=4)
+    assert not fine.stats["item_buffer_kept"]
+    np.testing.assert_array_equal(fine.image, difflab.render(mesh_scene, method="raytrace", spp=4, item_buffer=False))
+    shallow = difflab.render_frame(compiled, method="raytrace", max_depth=1)
+    assert not shallow.stats["item_buffer_kept"]  # back to the 1-sample grid
+    np.testing.assert_array_equal(shallow.image, difflab.render(mesh_scene, method="raytrace", max_depth=1,
+                                                                item_buffer=False))
+    assert difflab.render_frame(compiled, method="raytrace", threads=2).stats["item_buffer_kept"]
     np.testing.assert_array_equal(difflab.render(mesh_scene, method="raytrace", threads=2), frame.image)
     np.testing.assert_array_equal(difflab.render(mesh_scene, method="raytrace", item_buffer=False), frame.image)
     spheres_only = scene_dict([{"type": "sphere", "center": [0, 0, 0], "radius": 0.5, "material": "m"}], {"m": {}})

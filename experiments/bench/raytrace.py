@@ -2,8 +2,9 @@
 
 1. Primary rays: an 81,920-triangle icosphere filling a 1024x1024 view, depth 1, no shadows. difflab:
    the whole `difflab.render` of a compiled scene (its default: primary mesh hits from the item
-   buffer, the BVH's bit for bit; shading; the image; no ray tree), and the same with every primary
-   ray through the BVH (item_buffer=False). Mitsuba: `scene.ray_intersect` alone on the same rays
+   buffer, the BVH's bit for bit; shading; the image; no ray tree), with the item buffer kept from
+   the last render of the view (as the BVH is kept) and made anew (a new view's first frame), and
+   with every primary ray through the BVH (item_buffer=False). Mitsuba: `scene.ray_intersect` alone on the same rays
    (closest hit only, no shading; llvm_ad_rgb when Mitsuba's LLVM backend loads, else scalar_rgb,
    named in the output). Rays per second, medians, interleaved repeats.
 2. Whitted scenes: spheres (mirror, glass, diffuse) over a checkered plane, two point lights with
@@ -38,6 +39,7 @@ import difflab
 from difflab.io import write_json_atomic
 from difflab.renderers.camera import camera_frame
 from difflab.renderers.launch import cpu_threads
+from difflab.renderers.raytrace.itembuffer import forget_item_buffer
 
 sys.path.insert(0, str(Path(__file__).parent))
 import peers  # noqa: E402
@@ -100,8 +102,9 @@ def medians(pairs) -> tuple[float, float]:
 
 
 def primary_case(size: int, repeats: int, threads: int) -> dict:
-    """difflab's whole `render` of the frame (the item buffer -- the default --, shading, the image)
-    and the same with every primary ray through the BVH (item_buffer=False), against Mitsuba's
+    """difflab's whole `render` of the frame (the item buffer -- the default --, shading, the image),
+    with the item buffer kept from the previous render of this view (as the BVH is) and made anew
+    (a new view), and with every primary ray through the BVH (item_buffer=False), against Mitsuba's
     `ray_intersect` alone (no shading, no image), repeats interleaved."""
     with tempfile.TemporaryDirectory() as folder:
         obj_path = Path(folder) / "icosphere.obj"
@@ -112,9 +115,11 @@ def primary_case(size: int, repeats: int, threads: int) -> dict:
         difflab.render(compiled, threads=threads, item_buffer=False)
         origins, directions = primary_rays(scene.camera, size)
         mitsuba, variant = peers.mitsuba_tracer(obj_path, origins, directions)
-        ours, bvh, single, theirs = [], [], [], []
+        ours, new_view, bvh, single, theirs = [], [], [], [], []
         for _ in range(repeats):
             ours.append(timed_render(compiled, threads))
+            forget_item_buffer(compiled)
+            new_view.append(timed_render(compiled, threads))
             bvh.append(timed_render(compiled, threads, item_buffer=False))
             single.append(timed_render(compiled, 1))
             if mitsuba is not None:
@@ -122,10 +127,13 @@ def primary_case(size: int, repeats: int, threads: int) -> dict:
     rays = size * size
     wall, cpu = medians(ours)
     row = {"case": "icosphere primary rays", "triangles": int(compiled.n_mesh_faces), "size": size, "rays": rays,
-           "compared": "difflab: the whole difflab.render of the frame (item buffer, shading, image); "
-                       "Mitsuba: scene.ray_intersect alone (closest hit, no shading)",
+           "compared": "difflab: the whole difflab.render of the frame (item buffer, shading, image) of a compiled "
+                       "scene (BVH and the view's item buffer kept from the previous render; new_view: item buffer "
+                       "made anew); Mitsuba: scene.ray_intersect alone (closest hit, no shading)",
            "difflab_rays_per_second": rays / wall, "difflab_rays_per_cpu_second": rays / cpu,
            "difflab_1_thread_rays_per_second": rays / medians(single)[0],
+           "difflab_new_view_rays_per_second": rays / medians(new_view)[0],
+           "difflab_new_view_rays_per_cpu_second": rays / medians(new_view)[1],
            "difflab_bvh_rays_per_second": rays / medians(bvh)[0],
            "difflab_bvh_rays_per_cpu_second": rays / medians(bvh)[1],
            "item_buffer_asked_bvh": frame.stats["item_buffer_asked_bvh"],
@@ -134,6 +142,9 @@ def primary_case(size: int, repeats: int, threads: int) -> dict:
         row["mitsuba_rays_per_second"], row["mitsuba_rays_per_cpu_second"] = (rays / m for m in medians(theirs))
         row["difflab_over_mitsuba"] = row["difflab_rays_per_second"] / row["mitsuba_rays_per_second"]
         row["difflab_over_mitsuba_cpu"] = row["difflab_rays_per_cpu_second"] / row["mitsuba_rays_per_cpu_second"]
+        row["difflab_new_view_over_mitsuba"] = row["difflab_new_view_rays_per_second"] / row["mitsuba_rays_per_second"]
+        row["difflab_new_view_over_mitsuba_cpu"] = (row["difflab_new_view_rays_per_cpu_second"]
+                                                    / row["mitsuba_rays_per_cpu_second"])
     return row
 
 
@@ -169,12 +180,15 @@ def main(argv=None) -> int:
     print(f"icosphere ({primary['triangles']} tris) {size}^2 primary rays, difflab's whole render (item buffer, "
           f"shading, image) vs Mitsuba's ray_intersect alone: difflab {primary['difflab_rays_per_second'] / 1e6:.2f} "
           f"Mrays/s ({threads} threads; {primary['difflab_1_thread_rays_per_second'] / 1e6:.2f} on 1; "
-          f"{primary['difflab_rays_per_cpu_second'] / 1e6:.2f} per CPU-s; BVH only "
-          f"{primary['difflab_bvh_rays_per_second'] / 1e6:.2f}, {primary['item_buffer_asked_bvh']} samples asked "
-          f"the BVH), Mitsuba "
+          f"{primary['difflab_rays_per_cpu_second'] / 1e6:.2f} per CPU-s; new view (item buffer made anew) "
+          f"{primary['difflab_new_view_rays_per_second'] / 1e6:.2f}, "
+          f"{primary['difflab_new_view_rays_per_cpu_second'] / 1e6:.2f} per CPU-s; BVH only {primary['difflab_bvh_rays_per_second'] / 1e6:.2f}; "
+          f"{primary['item_buffer_asked_bvh']} samples asked the BVH), Mitsuba "
           + (f"{primary['mitsuba_rays_per_second'] / 1e6:.2f} Mrays/s ({primary['mitsuba_variant']}; "
              f"{primary['mitsuba_rays_per_cpu_second'] / 1e6:.2f} per CPU-s): difflab / Mitsuba "
-             f"{primary['difflab_over_mitsuba']:.2f} (wall), {primary['difflab_over_mitsuba_cpu']:.2f} (CPU)"
+             f"{primary['difflab_over_mitsuba']:.2f} (wall), {primary['difflab_over_mitsuba_cpu']:.2f} (CPU); "
+             f"new view {primary['difflab_new_view_over_mitsuba']:.2f} (wall), "
+             f"{primary['difflab_new_view_over_mitsuba_cpu']:.2f} (CPU)"
              if primary["mitsuba_rays_per_second"] else "not installed"), flush=True)
     whitted = [whitted_case(width, height, glass, args.repeats, threads) for glass in (False, True)]
     for row in whitted:

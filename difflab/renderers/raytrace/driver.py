@@ -54,6 +54,7 @@ class Traced:
     tree: RayTree | None
     shadow_tests: int = 0  # candidates the light buffer's shadow rays tested (0 without one)
     asked_bvh: int = 0  # samples whose primary mesh hit the item buffer left to the BVH (ambiguous hints)
+    nonfinite_samples: int = 0  # samples whose colour is not finite
 
 
 def sample_points(width: int, height: int, side: int, sampling: str = "grid") -> np.ndarray:
@@ -145,6 +146,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         out.node_count = compiled.scratch("trace.node_count", shape, wp.int32)
         out.rays = wp.zeros((rows, 4), dtype=wp.int32, device=device)
         out.depth_hist = wp.zeros((rows, settings.max_depth), dtype=wp.int32, device=device)
+        out.nonfinite = wp.empty(rows, dtype=wp.int32, device=device)
         launch_row_loops(kernel, rows, [wp_points, cam, scene_w, params, item, tree, out], device, threads)
         return out
 
@@ -165,7 +167,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         tree = tree_to_numpy(wp_tree, offsets, n_lights, fog, scene, settings, shape, crossings)
     return Traced(color=out.color.numpy(), fog=fog, node_count=counts, rays=stats_rays,
                   depth_histogram=histogram, tree=tree, shadow_tests=shadow_tests,
-                  asked_bvh=asked)
+                  asked_bvh=asked, nonfinite_samples=int(out.nonfinite.numpy().sum()))
 
 
 def raytrace(compiled, settings, threads: int | None = None, *, record_tree: bool = True,
@@ -204,7 +206,7 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
         use_item_buffer = settings.sampling == "grid" and compiled.n_mesh_faces > 0
     start = time.perf_counter()
     points = None if settings.sampling == "grid" else sample_points(width, height, side, settings.sampling)
-    item = item_buffer(compiled, width * side, height * side, threads) if use_item_buffer else None
+    item, kept = item_buffer(compiled, width * side, height * side, threads) if use_item_buffer else (None, False)
     built = time.perf_counter()
     lights = build_light_buffer(compiled, light_buffer_resolution) if use_light_buffer else None
     built = time.perf_counter() - built
@@ -217,9 +219,10 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
              "spp": settings.spp, "sampling": settings.sampling, "max_depth": settings.max_depth,
              "rays": dict(traced.rays), "total_rays": total_rays, "rays_per_second": total_rays / max(seconds, 1e-9),
              "depth_histogram": traced.depth_histogram, "nodes": int(traced.node_count.sum()),
-             "item_buffer": bool(use_item_buffer), "item_buffer_asked_bvh": traced.asked_bvh,
+             "item_buffer": bool(use_item_buffer), "item_buffer_kept": kept,
+             "item_buffer_asked_bvh": traced.asked_bvh,
              "recorded_tree": bool(record_tree),
-             "nonfinite_pixels": nonfinite_pixels(image)}
+             "nonfinite_pixels": nonfinite_pixels(image) if traced.nonfinite_samples else 0}
     if lights is not None:
         stats.update(light_buffer_seconds=built, light_buffer_entries=lights.entries, shadow_tests=traced.shadow_tests)
     return Frame(image=image, buffers=None, stats=stats, ray_tree=traced.tree)

@@ -43,6 +43,7 @@ BARY_MARGIN = 1.0e-4  # a hint hit closer than this (in barycentrics) to an edge
 PLANE_GAP = 1.0e-3  # relative depth gap telling a neighbour's plane from the hit's (see `nearer`)
 NO_TRIANGLE = wp.constant(-1)  # resolve_hint: no mesh triangle before the nearest sphere / plane (if any)
 ASK_BVH = wp.constant(-2)  # resolve_hint: an ambiguous hint, the BVH finds the mesh hit
+ITEM_BUFFER_VIEW = "item buffer of"  # scratch-pool note: the (camera, width, height) the kept item buffer shows
 SLOT_BITS = wp.constant(wp.int64(4294967295))  # the z-buffer key's low 32 bits: the screen slot
 NEIGHBOUR_DI = wp.constant(wp.vec4i(-1, 1, 0, 0))  # the four neighbouring samples: up, down, left, right
 NEIGHBOUR_DJ = wp.constant(wp.vec4i(0, 0, -1, 1))
@@ -180,19 +181,31 @@ def item_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.vec
     return triangle_hit(geom, face, tuv[0], tuv[1], tuv[2], normal, origin, direction)
 
 
-def item_buffer(compiled, width: int, height: int, threads: int | None = None) -> ItemBufferW:
+def item_buffer(compiled, width: int, height: int, threads: int | None = None) -> tuple[ItemBufferW, bool]:
     """The item buffer of a width x height sample grid: the z-buffer of the mesh triangles (the first
-    `n_mesh_faces` of the compiled scene, and their vertices), no back-face culling."""
+    `n_mesh_faces` of the compiled scene, and their vertices), no back-face culling. Like the BVH it
+    is kept with the compiled scene (whose geometry and camera are fixed), in this thread's per-frame
+    arrays: a later render of the same sample grid reuses it. Returns it and whether it was kept."""
+    pool, view = compiled.scratch_pool(), (compiled.scene.camera, width, height)
+    face = compiled.scratch("item buffer", (height + 2, width + 2), wp.int32)  # every element written below
+    if pool.get(ITEM_BUFFER_VIEW) == view:
+        return item_struct(compiled, face), True
+    pool.pop(ITEM_BUFFER_VIEW, None)  # until the new one is complete
     n_faces, n_vertices = compiled.n_mesh_faces, compiled.n_mesh_vertices
     arrays = dict(compiled.arrays, faces=compiled.arrays["faces"][:n_faces],
                   vertices=compiled.arrays["vertices"][:n_vertices])
     meshes = replace(compiled, faces=compiled.faces[:n_faces], vertices=compiled.vertices[:n_vertices], arrays=arrays)
     tris, key = zbuffer(meshes, camera_struct(compiled.scene.camera, width, height), 0, threads)
-    face = compiled.scratch("item buffer", (height + 2, width + 2), wp.int32)  # every element written below
     load_kernels(compiled.device, hints_kernel)
     launch_row_loops(hints_kernel, height + 2, [key, tris.face, face], compiled.device, threads)
     mark_key_cleared(compiled, key)
-    return item_struct(compiled, face)
+    pool[ITEM_BUFFER_VIEW] = view
+    return item_struct(compiled, face), False
+
+
+def forget_item_buffer(compiled) -> None:
+    """Drop this thread's kept item buffer of `compiled`: the next render makes it again."""
+    compiled.scratch_pool().pop(ITEM_BUFFER_VIEW, None)
 
 
 def asked_bvh(item: ItemBufferW) -> int:

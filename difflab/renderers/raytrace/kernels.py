@@ -78,6 +78,7 @@ class TraceOutW:
     node_count: wp.array2d(dtype=wp.int32)
     rays: wp.array2d(dtype=wp.int32)  # (rows, 4): rays traced per COUNT_* kind
     depth_hist: wp.array2d(dtype=wp.int32)  # (rows, max_depth): rays traced per depth
+    nonfinite: wp.array(dtype=wp.int32)  # per row: samples whose colour is not finite
 
 
 @wp.func(inline=True)
@@ -146,6 +147,7 @@ def make_whitted_kernel(stack_size: int):
         """Walk the ray tree of every sample (i, j) of row i: its colour, fog blend and node count into
         `out`. (One call per row: a CPU call copies its struct arguments, once per row this way.)"""
         rec = light_arrays(tree)
+        nonfinite = int(0)
         for j in range(out.color.shape[1]):
             xy, origin, direction, t_far = primary_sample(points, params.side, cam, params.far, i, j)
             base = int(0)
@@ -207,8 +209,12 @@ def make_whitted_kernel(stack_size: int):
                             sp = sp + 1
 
             out.fog[i, j] = fog_f
-            out.color[i, j] = fog_f * total + (1.0 - fog_f) * params.fog.color
+            color = fog_f * total + (1.0 - fog_f) * params.fog.color
+            out.color[i, j] = color
             out.node_count[i, j] = count
+            if not wp.isfinite(color):
+                nonfinite = nonfinite + 1
+        out.nonfinite[i] = nonfinite
 
     @wp.kernel(module="unique", enable_backward=False)
     def whitted_kernel(row0: int, points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW,
