@@ -60,9 +60,12 @@ def depth_gradient(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d):
 
 
 @wp.func
-def covers(b: wp.int64, owned: bool):
-    """A sample is on the inner side of an edge, or exactly on an edge its triangle owns."""
-    return b > wp.int64(0) or (b == wp.int64(0) and owned)
+def edge_threshold(owned: bool):
+    """The least edge value b covering a sample: on the inner side (b > 0), or exactly on an edge
+    the triangle owns (b = 0)."""
+    if owned:
+        return wp.int64(0)
+    return wp.int64(1)
 
 
 @wp.func
@@ -86,9 +89,9 @@ def raster_slot(slot: int, row_begin: int, row_end: int, screen: wp.array2d(dtyp
     y1 = snap(s1[1])
     x2 = snap(s2[0])
     y2 = snap(s2[1])
-    own0 = owns_edge(x1, y1, x2, y2)
-    own1 = owns_edge(x2, y2, x0, y0)
-    own2 = owns_edge(x0, y0, x1, y1)
+    t0 = edge_threshold(owns_edge(x1, y1, x2, y2))  # covered: every b_k >= t_k
+    t1 = edge_threshold(owns_edge(x2, y2, x0, y0))
+    t2 = edge_threshold(owns_edge(x0, y0, x1, y1))
     dz_dx, dz_dy = depth_gradient(s0, s1, s2)  # z_ndc is affine in screen space: its plane
     step = wp.int64(SUBPIXEL)
     centre = wp.int64(SAMPLE_CENTRE)
@@ -100,7 +103,7 @@ def raster_slot(slot: int, row_begin: int, row_end: int, screen: wp.array2d(dtyp
         b2 = edge(x0, y0, x1, y1, px, py)
         z_row = s0[2] + dz_dy * (wp.float64(i) + wp.float64(0.5) - s0[1])
         for j in range(j_lo, j_hi + 1):
-            if covers(b0, own0) and covers(b1, own1) and covers(b2, own2):
+            if ((b0 - t0) | (b1 - t1) | (b2 - t2)) >= wp.int64(0):  # no sign bit: all three cover
                 z_ndc = z_row + dz_dx * (wp.float64(j) + wp.float64(0.5) - s0[0])
                 if z_ndc >= wp.float64(-1.0) and z_ndc <= wp.float64(1.0):  # in float64: z = 1 keys 2^31 - 1
                     depth = wp.int64((z_ndc + wp.float64(1.0)) * DEPTH_SCALE)
