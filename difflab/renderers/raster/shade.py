@@ -167,6 +167,13 @@ def light_mesh_points_kernel(begin: int, end: int, chunk: int, mesh: RasterMeshW
 
 
 @wp.func(inline=True)
+def finite3(c: wp.vec3):
+    """Whether all three channels are finite: c_k * 0 is 0 for finite c_k, NaN for inf or NaN
+    (cheaper than three isfinite calls, and no sum to overflow)."""
+    return c[0] * 0.0 + c[1] * 0.0 + c[2] * 0.0 == 0.0
+
+
+@wp.func(inline=True)
 def clamp01(c: wp.vec3):
     return wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
 
@@ -194,6 +201,16 @@ def fragment_color(color: wp.array(dtype=wp.vec3), factor: wp.array(dtype=wp.vec
     return out
 
 
+@wp.func(inline=True)
+def fogged(fog: FogW, color: wp.vec3, z: float):
+    """`color` at eye distance z blended toward the fog colour, f C + (1 - f) C_fog (`fog_blend`);
+    without fog, `color` as it is."""
+    if fog.mode == FOG_NONE:
+        return color
+    f = fog_blend(fog, z)
+    return f * color + (1.0 - f) * fog.color
+
+
 @wp.func
 def compose_into(samples: PointsW, depth: wp.array(dtype=float), point_index: wp.array(dtype=wp.vec3i),
                  point_weight: wp.array(dtype=wp.vec3), lit: LitW, lighting: LightingW, clamp_colors: int,
@@ -208,9 +225,8 @@ def compose_into(samples: PointsW, depth: wp.array(dtype=float), point_index: wp
     if textured == 1:
         texel = texel_at(lighting, mat_id, samples.uv[s], samples.duv_dx[s], samples.duv_dy[s])
         lit.texel[s] = texel
-    out = fragment_color(lit.color, lit.factor, point_index[s], point_weight[s], clamp_colors, texel, textured)
-    f = fog_blend(fog, depth[s])
-    image[s] = f * out + (1.0 - f) * fog.color
+    image[s] = fogged(fog, fragment_color(lit.color, lit.factor, point_index[s], point_weight[s], clamp_colors, texel,
+                                          textured), depth[s])
 
 
 @wp.kernel
@@ -254,8 +270,7 @@ def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, 
         for c in range(3):
             cache_point(cache, mesh, cam, shading, lighting, index[c])
         out = fragment_color(cache.color, cache.factor, index, weight, clamp_colors, texel, textured)
-    f = fog_blend(fog, wp.dot(p - cam.eye, cam.forward))
-    return f * out + (1.0 - f) * fog.color
+    return fogged(fog, out, wp.dot(p - cam.eye, cam.forward))
 
 
 @wp.kernel
@@ -278,6 +293,6 @@ def image_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: 
             c = image_sample(k, tris, mesh, cam, lighting, cache, perspective_correct, shading, clamp_colors, fog, i,
                              j, s)
             image[s] = c
-            if not (wp.isfinite(c[0]) and wp.isfinite(c[1]) and wp.isfinite(c[2])):
+            if not finite3(c):
                 bad += 1
     nonfinite[i] = bad
