@@ -57,6 +57,7 @@ class ItemBufferW:
 
     use: int
     face: wp.array2d(dtype=wp.int32)
+    edge: wp.array2d(dtype=wp.uint8)  # per sample: 1 where the neighbours' hints must be checked (`edges_kernel`)
     vertices: wp.array(dtype=wp.vec3)
     faces: wp.array2d(dtype=wp.int32)
     face_normal: wp.array(dtype=wp.vec3)  # unit
@@ -95,6 +96,25 @@ def hints_kernel(row0: int, key: wp.array(dtype=wp.int64), slot_face: wp.array(d
                 f = slot_face[int(k & SLOT_BITS)]
                 key[(i - 1) * cols + c - 1] = NO_HIT
         face[i, c] = f
+
+
+@wp.kernel
+def edges_kernel(row0: int, face: wp.array2d(dtype=wp.int32), faces: wp.array2d(dtype=wp.int32),
+                 edge: wp.array2d(dtype=wp.uint8)):
+    """Row row0 + tid of `edge`: 1 where a neighbouring sample's hint is a triangle that `resolve_hint`
+    must check -- one sharing no vertex with the sample's own hint (any one, for a sample with none)."""
+    i = row0 + wp.tid()
+    for j in range(edge.shape[1]):
+        own = face[i + 1, j + 1]
+        corners = wp.vec3i(-1, -1, -1)
+        if own >= 0:
+            corners = wp.vec3i(faces[own, 0], faces[own, 1], faces[own, 2])
+        flag = wp.uint8(0)
+        for k in range(4):
+            other = face[i + 1 + NEIGHBOUR_DI[k], j + 1 + NEIGHBOUR_DJ[k]]
+            if other >= 0 and other != own and not shares_vertex(corners, faces, other):
+                flag = wp.uint8(1)
+        edge[i, j] = flag
 
 
 @wp.func
@@ -151,7 +171,9 @@ def resolve_hint(item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: 
             t_limit = best[0]
         else:
             face = NO_TRIANGLE  # the sphere or plane is in front: every neighbour's triangle is checked
-            corners = wp.vec3i(-1, -1, -1)
+            corners = wp.vec3i(-2, -2, -2)  # (no vertex has a negative index)
+    if item.edge[i, j] == wp.uint8(0) and corners[0] != -2:
+        return face, wp.vec3(best[0], best[1], best[2])  # no neighbour's hint to check (`edges_kernel`)
     ambiguous = bool(False)
     tested = int(-1)  # the last neighbour's triangle checked (neighbours mostly repeat one)
     for k in range(4):
@@ -188,19 +210,21 @@ def item_buffer(compiled, width: int, height: int, threads: int | None = None) -
     arrays: a later render of the same sample grid reuses it. Returns it and whether it was kept."""
     pool, view = compiled.scratch_pool(), (compiled.scene.camera, width, height)
     face = compiled.scratch("item buffer", (height + 2, width + 2), wp.int32)  # every element written below
+    edge = compiled.scratch("item buffer edges", (height, width), wp.uint8)
     if pool.get(ITEM_BUFFER_VIEW) == view:
-        return item_struct(compiled, face), True
+        return item_struct(compiled, face, edge), True
     pool.pop(ITEM_BUFFER_VIEW, None)  # until the new one is complete
     n_faces, n_vertices = compiled.n_mesh_faces, compiled.n_mesh_vertices
     arrays = dict(compiled.arrays, faces=compiled.arrays["faces"][:n_faces],
                   vertices=compiled.arrays["vertices"][:n_vertices])
     meshes = replace(compiled, faces=compiled.faces[:n_faces], vertices=compiled.vertices[:n_vertices], arrays=arrays)
     tris, key = zbuffer(meshes, camera_struct(compiled.scene.camera, width, height), 0, threads)
-    load_kernels(compiled.device, hints_kernel)
+    load_kernels(compiled.device, hints_kernel, edges_kernel)
     launch_row_loops(hints_kernel, height + 2, [key, tris.face, face], compiled.device, threads)
     mark_key_cleared(compiled, key)
+    launch_row_loops(edges_kernel, height, [face, arrays["faces"], edge], compiled.device, threads)
     pool[ITEM_BUFFER_VIEW] = view
-    return item_struct(compiled, face), False
+    return item_struct(compiled, face, edge), False
 
 
 def forget_item_buffer(compiled) -> None:
@@ -213,12 +237,13 @@ def asked_bvh(item: ItemBufferW) -> int:
     return int(item.asked.numpy().astype(np.int64).sum()) if item.use else 0
 
 
-def item_struct(compiled, face=None) -> ItemBufferW:
-    """An `ItemBufferW` of a bordered `face` grid; without it, a disabled one."""
+def item_struct(compiled, face=None, edge=None) -> ItemBufferW:
+    """An `ItemBufferW` of a bordered `face` grid and its `edge` flags; without them, a disabled one."""
     device = compiled.device
     out = ItemBufferW()
     out.use = int(face is not None)
     out.face = face if face is not None else wp.empty((1, 1), dtype=wp.int32, device=device)
+    out.edge = edge if edge is not None else wp.empty((1, 1), dtype=wp.uint8, device=device)
     out.vertices = compiled.arrays["vertices"]
     out.faces = compiled.arrays["faces"]
     out.face_normal = compiled.arrays["face_normal"]
