@@ -84,13 +84,12 @@ class TraceOutW:
 @wp.func(inline=True)
 def trace_ray(geom: SceneGeomW, item: ItemBufferW, out: TraceOutW, ray: RayW, i: int, j: int, t_far: float):
     """The nearest hit of a popped ray (the primary one up to the far plane, through the item buffer
-    when it is on), counted in the statistics of row i."""
-    wp.atomic_add(out.depth_hist, i, ray.depth - 1, 1)
+    when it is on), counted in the statistics of row i (a primary ray by `trace_row`, once a row)."""
     if ray.kind == PRIMARY:
-        wp.atomic_add(out.rays, i, COUNT_PRIMARY, 1)
         if item.use == 1:
             return item_hit(geom, item, i, j, ray.origin, ray.direction, t_far)
         return closest_hit(geom, ray.origin, ray.direction, 0.0, t_far, -1)
+    wp.atomic_add(out.depth_hist, i, ray.depth - 1, 1)
     if ray.kind == REFLECTED:
         wp.atomic_add(out.rays, i, COUNT_REFLECTED, 1)
     else:
@@ -215,6 +214,8 @@ def make_whitted_kernel(stack_size: int):
             if not wp.isfinite(color):
                 nonfinite = nonfinite + 1
         out.nonfinite[i] = nonfinite
+        out.rays[i, COUNT_PRIMARY] = out.color.shape[1]  # a primary ray per sample, all at depth 1
+        out.depth_hist[i, 0] = out.color.shape[1]
 
     @wp.kernel(module="unique", enable_backward=False)
     def whitted_kernel(row0: int, points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW,

@@ -111,8 +111,10 @@ def new_ray(start: wp.vec3, origin: wp.vec3, direction: wp.vec3, weight: wp.vec3
 @wp.func
 def sample_xy(points: wp.array2d(dtype=wp.vec2), side: int, i: int, j: int):
     """Raster position of sample (i, j): `driver.sample_points`' grid pattern for side > 0 (computed
-    as it does, in float64: the same float32 values), else read from `points`."""
-    if side > 0:
+    as it does, in float64: the same float32 values), else (side 0) read from `points`."""
+    if side == 1:  # the same values: j + 0.5 is exact in float32 (j < 2^23)
+        return wp.vec2(float(j) + 0.5, float(i) + 0.5)
+    if side > 1:
         half = wp.float64(0.5)
         step = wp.float64(side)
         return wp.vec2(float((wp.float64(j) + half) / step), float((wp.float64(i) + half) / step))
