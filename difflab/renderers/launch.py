@@ -192,13 +192,15 @@ def part_count(n: int, device: str, threads: int | None = None) -> int:
     return len(band_plan(n, device, threads))
 
 
-def host_empty(shape, dtype, device: str) -> wp.array:
-    """An uninitialised device array; on the CPU in numpy's memory, which asks the kernel for
-    transparent huge pages on large arrays (a page fault per 2 MiB instead of per 4 KiB: ~1 ms
-    instead of ~10 ms to first write a 1920x1080 RGB float image)."""
+def host_empty(shape, dtype, device: str, zeroed: bool = False) -> wp.array:
+    """An uninitialised (or, `zeroed`, zero) device array; on the CPU in numpy's memory, which asks
+    the kernel for transparent huge pages on large arrays (a page fault per 2 MiB instead of per
+    4 KiB: ~1 ms instead of ~10 ms to first write a 1920x1080 RGB float image). Zeroed memory
+    that large comes fresh from the kernel, zero already: what is never written costs nothing."""
     if not device.startswith("cpu"):
-        return wp.empty(shape, dtype=dtype, device=device)
+        return (wp.zeros if zeroed else wp.empty)(shape, dtype=dtype, device=device)
     shape = (shape,) if isinstance(shape, int) else tuple(shape)
     scalar = getattr(dtype, "_wp_scalar_type_", dtype)  # a vector / matrix type's scalar, else dtype itself
-    host = np.empty(shape + tuple(getattr(dtype, "_shape_", ())), dtype=wp.dtype_to_numpy(scalar))
+    host = (np.zeros if zeroed else np.empty)(shape + tuple(getattr(dtype, "_shape_", ())),
+                                              dtype=wp.dtype_to_numpy(scalar))
     return wp.array(host, dtype=dtype, device=device, copy=False)

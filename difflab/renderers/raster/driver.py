@@ -235,7 +235,8 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     start = time.perf_counter()
     cam = camera_struct(scene.camera, width, height)
     mesh, lighting = raster_mesh(compiled), lighting_struct(compiled, settings)
-    image = host_empty(width * height, wp.vec3, device)  # returned: fresh memory every frame
+    black = not any(scene.background)  # a zeroed image needs no background written (`render`)
+    image = host_empty(width * height, wp.vec3, device, zeroed=black and not gbuffer)  # fresh every frame
     background, fog = wp.vec3(*scene.background), fog_struct(scene.fog)
 
     if not gbuffer:  # stages 1-3, then 4-7 fused (flat / Gouraud points lit on first use)
@@ -249,7 +250,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         def image_band(tris, key, begin: int, end: int) -> None:  # right after the band's z-buffer, its thread's cache
             wp.launch(shade.image_kernel, dim=end - begin, inputs=[
                 begin, key, tris, mesh, cam, lighting, point_cache(compiled, n_points, frame), perspective_correct,
-                shading, int(clamp_colors), background, fog, image, bad], device=device)
+                shading, int(clamp_colors), int(not black), background, fog, image, bad], device=device)
 
         tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads, image_band)
         mark_key_cleared(compiled, key)  # image_kernel reset every key it read

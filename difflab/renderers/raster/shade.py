@@ -276,18 +276,21 @@ def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, 
 @wp.kernel
 def image_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW, cam: CameraW,
                  lighting: LightingW, cache: PointCacheW, perspective_correct: int, shading: int, clamp_colors: int,
-                 background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3), nonfinite: wp.array(dtype=wp.int32)):
+                 paint_background: int, background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3),
+                 nonfinite: wp.array(dtype=wp.int32)):
     """Stages 4, 6 (Phong; flat / Gouraud points on first use) and 7 fused, one row of samples per
     thread (the kernel's arguments are read once per row): the image `compose_kernel` gives from
-    the G-buffer, without storing it. Each key read is reset to NO_HIT (the next frame's z-buffer
-    starts cleared); nonfinite[i] counts row i's samples with a NaN or infinite channel."""
+    the G-buffer, without storing it; uncovered samples get `background` unless `paint_background`
+    is 0 (a zeroed image, black background). Each key read is reset to NO_HIT (the next frame's
+    z-buffer starts cleared); nonfinite[i] counts row i's samples with a NaN or infinite channel."""
     i = row0 + wp.tid()
     bad = int(0)
     for j in range(cam.width):
         s = i * cam.width + j
         k = key[s]
         if k == NO_HIT:
-            image[s] = background
+            if paint_background == 1:
+                image[s] = background
         else:
             key[s] = NO_HIT
             c = image_sample(k, tris, mesh, cam, lighting, cache, perspective_correct, shading, clamp_colors, fog, i,
