@@ -30,8 +30,8 @@ from difflab.io import write_json_atomic
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 MESHES = {"10k": 13, "100k": 40}  # teapot resolution r gives ~64 r^2 triangles
-VARIANTS = {"none": {}, "item": {"item_buffer": True}, "light": {"light_buffer": True},
-            "both": {"item_buffer": True, "light_buffer": True}}
+VARIANTS = {"none": {"item_buffer": False}, "item": {"item_buffer": True},
+            "light": {"item_buffer": False, "light_buffer": True}, "both": {"item_buffer": True, "light_buffer": True}}
 
 
 def lecture_scene(resolution: int, width: int, height: int) -> difflab.Scene:
