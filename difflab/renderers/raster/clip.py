@@ -48,7 +48,7 @@ def to_screen(c: wp.vec4, width: int, height: int):
 
 @wp.func
 def snap(x: wp.float64):
-    return wp.int64(wp.round(x * wp.float64(SUBPIXEL)))
+    return wp.int64(wp.rint(x * wp.float64(SUBPIXEL)))  # to nearest, ties to even: one instruction
 
 
 @wp.func
