@@ -1,14 +1,15 @@
 """Texels through the one engine: `fit_material(..., params=("texture", ...))` on the G-buffer model,
 solved matrix-free (box LM with CG) for large layouts and densely for small ones."""
 
+import jax
 import lineax as lx
 import numpy as np
 import optimistix as optx
 import pytest
 from test_texture_fit import quad_scene
 
-from difflab import FitError, render, render_frame
-from difflab.fit import FitOptions, Setup, fit_material, identify, solve
+from difflab import FitError, Scene, render, render_frame
+from difflab.fit import FitOptions, Setup, fit_batch, fit_material, identify, solve
 from difflab.fit.texture_fit import fit_texture, texture_view
 
 SHAPE = (12, 12)  # 432 unknowns: above DENSE_MAX, so "auto" is matrix-free
@@ -56,7 +57,6 @@ def test_the_engine_agrees_with_optimistix_lm_normal_cg(known):
     ours = solve(setup)
     method = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10, linear_solver=lx.Normal(lx.CG(rtol=1e-10, atol=1e-10,
                                                                                            max_steps=500)))
-    import jax
 
     with jax.enable_x64(True):
         sol = optx.least_squares(lambda x, p: p.residuals(x), method, jax.numpy.asarray(setup.x0), args=setup.problem,
@@ -115,7 +115,6 @@ def test_bad_texel_fits_raise_fit_error_naming_the_argument(known, case, kwargs,
         d["materials"]["m"]["filter"] = kwargs.pop("filter")
     if "render" in kwargs:
         d["render"].update(kwargs.pop("render"))
-    from difflab import Scene
 
     material = kwargs.pop("material", "m")
     with pytest.raises(FitError, match=match):
@@ -138,3 +137,19 @@ def test_smoothness_without_a_texture_and_bad_front_end_arguments(known):
     assert FitOptions(linear_solver="cg").matrix_free(3) and not FitOptions().matrix_free(256)
     with pytest.raises(FitError, match="params: identify forms the dense 432 x 432 Gram matrix"):
         identify(scene, target, "m", ("texture",), method="raster")
+
+
+def test_a_batch_of_texture_targets_loops_over_one_matrix_free_solve(known, tmp_path):
+    """fit_batch with texels: the vmapped dense LM is skipped (432 unknowns), each target is fitted
+    by the same compiled matrix-free solve and recovers its own texture."""
+
+    texels, scene, target = known
+    other = np.ascontiguousarray(texels[::-1, ::-1])
+    np.save(tmp_path / "other.npy", other)
+    d = scene.to_dict()
+    d["materials"]["m"]["texture"] = str(tmp_path / "other.npy")
+
+    results = fit_batch(scene, [target, render(Scene.from_dict(d))], "m", ("texture",), init={"texture": 0.5})
+    assert [r.result for r in results] == ["successful", "successful"]
+    assert np.abs(results[0].texture - texels).max() < 1e-5
+    assert np.abs(results[1].texture - other).max() < 1e-5

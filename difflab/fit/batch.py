@@ -4,7 +4,8 @@ prepared `Setup` and one compiled solve.
 - `vmap=True` (solver "lm"): `jax.vmap` over the box Levenberg-Marquardt solve. Every element runs
   until the slowest has terminated (a vmapped `while_loop` keeps stepping, masked, until all are
   done); each element keeps its own result code and step count.
-- `vmap=False` (or another solver): a loop over the same compiled solve, with a progress bar.
+- `vmap=False` (or another solver, or a matrix-free fit of many texels): a loop over the same
+  compiled solve, with a progress bar.
 
 A target that cannot be fitted (non-finite values under the mask) gets its own failed result; the
 others are fitted as usual.
@@ -21,13 +22,14 @@ import numpy as np
 from ..errors import FitError
 from . import lm
 from .engine import report
+from .matfree import check_solver
 from .params import DEFAULT_PARAMS
 from .setup import Setup
 from .options import FitOptions
 from .solvers import Solved, run
 
 SETUP_KEYWORDS = ("method", "per_channel", "bounded", "loss", "loss_scale", "masks", "weights", "sigma", "ceiling",
-                  "max_depth", "spp", "device", "threads")
+                  "smoothness", "max_depth", "spp", "device", "threads")
 
 
 def _element_init(init, count: int, b: int):
@@ -76,11 +78,12 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
     elements = [setup] + [setup.retarget([_decoded(image, setup, b)], _element_init(init, count, b))
                           for b, image in enumerate(images) if b > 0]
     timings = {"setup": time.perf_counter() - start}
+    check_solver(options, setup.layout)
     t0 = time.perf_counter()
     solved = [None] * count
     todo = [b for b in range(count) if elements[b].precheck() is None]
     with jax.enable_x64(setup.x64):
-        if vmap and options.solver == "lm" and todo:
+        if vmap and options.solver == "lm" and not options.matrix_free(setup.layout.size) and todo:
             rtol, atol = options.tolerances()
             lower, upper = (jnp.asarray(v, setup.dtype) for v in setup.layout.bounds())
             x0 = jnp.asarray(np.stack([elements[b].x0 for b in todo]), setup.dtype)

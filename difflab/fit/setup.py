@@ -222,7 +222,12 @@ class Setup:
         out._target_statistics()
         if init is not None:
             scene = apply_init(self.scene, self.materials, init)
-            out.initial = {p.key: scene_value(scene, p, self.textures) for p in self.layout}
+            textures = texture_starts(scene, self.materials, init) if self.textures else {}
+            for name, image in textures.items():
+                if image.shape != self.textures[name].shape:
+                    raise FitError(f"init: the {name!r} texture's start is {image.shape}, the fit's texels "
+                                   f"{self.textures[name].shape}")
+            out.initial = {p.key: scene_value(scene, p, textures) for p in self.layout}
             out.x0 = self.layout.x_of(self.layout.flatten(out.initial))
         with jax.enable_x64(self.x64):
             out.problem = self.problem.with_targets(
