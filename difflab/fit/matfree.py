@@ -3,15 +3,17 @@
 "lm" becomes the box-constrained Levenberg-Marquardt of `lm.py` with the step's normal equations
 solved by conjugate gradients instead of a Cholesky factorisation of J^T J:
 
-    (J_F^T J_F + lambda s I) dx = -J_F^T r         over the free entries F (fixed ones: dx = 0)
+    (J_F^T J_F + lambda D) dx = -J_F^T r         over the free entries F (fixed ones: dx = 0)
 
-where J v and J^T v come from one `jax.linearize` per step (never the N x p matrix), s is the
-curvature of the loss along the first gradient (|J g|^2 / |g|^2, so lambda is relative to the
-problem's scale) and an entry is fixed when it sits on a bound and the gradient pushes it outward.
-The step is projected onto the box; lambda follows Nielsen's rule, and the stopping tests are
-`lm.py`'s. "gauss_newton" and "dogleg" use optimistix's solvers with lineax's CG on the normal
-equations (`normal_cg`). A step costs one linearisation, up to `cg_steps` pairs of J v / J^T v, and
-one residual evaluation.
+where J v and J^T v come from one `jax.linearize` per step (never the N x p matrix) and an entry is
+fixed when it sits on a bound and the gradient pushes it outward. D is diag(J^T J) for the few
+entries beside the texels (their columns formed each step: ks, n, ...) and s = |J g|^2 / |g|^2, the
+curvature along the first gradient, for the texels (whose columns are alike); CG is preconditioned
+by D + lambda D (Jacobi), so the texels and the scalars converge together. CG stops when its
+residual is below atol + rtol |J^T r| (as lineax's). The step is projected onto the box; lambda
+follows Nielsen's rule, and the stopping tests are `lm.py`'s. "gauss_newton" and "dogleg" use
+optimistix's solvers with lineax's CG on the normal equations (`normal_cg`). A step costs one
+linearisation, up to `cg_steps` pairs of J v / J^T v, and one residual evaluation.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ..errors import FitError
 from .lm import LAMBDA0, MAX_STEPS, NONFINITE, RUNNING, SUCCESSFUL
@@ -54,12 +57,15 @@ class State(NamedTuple):
     history: jnp.ndarray
 
 
-def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_steps: int, progress=None):
+def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_steps: int, exact=(), progress=None):
     """Minimise 0.5 |fn(x, args)|^2 over lower <= x <= upper without forming the Jacobian.
 
     Arguments and returns as `lm.box_lm`, without r and J: (x, code index into `lm.CODES`, steps,
-    history); cg_steps: the most CG iterations per step (tolerance rtol on the CG residual)."""
+    history); cg_steps: the most CG iterations per step (until the CG residual is below
+    atol + rtol |J^T r|); exact: indices of the few entries (not texels) whose
+    Jacobian columns are formed each step, to scale them (Jacobi) -- the rest share s."""
     dtype = x0.dtype
+    exact = np.asarray(exact, np.int64)
     x0 = jnp.clip(x0, lower, upper)
     r0 = fn(x0, args)
     loss0 = 0.5 * jnp.sum(r0 * r0)
@@ -76,12 +82,22 @@ def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_step
         jg = jvp(g_free)
         gg = jnp.sum(g_free * g_free)
         scale = jnp.where(s.scale > 0, s.scale, jnp.where(gg > 0, jnp.sum(jg * jg) / jnp.where(gg > 0, gg, 1.0), 1.0))
+        diag = jnp.full_like(s.x, scale)
+        if exact.size:  # the few entries beside the texels: their exact columns' squared norms
+            columns = jax.vmap(jvp)(jnp.eye(s.x.shape[0], dtype=dtype)[exact])
+            diag = diag.at[exact].set(jnp.maximum(jnp.sum(columns * columns, axis=1), 1e-12 * scale))
+        damping = s.lam * diag
 
         def normal(v):
             v_free = jnp.where(free, v, 0.0)
-            return jnp.where(free, vjp(jvp(v_free))[0] + s.lam * scale * v_free, v)
+            return jnp.where(free, vjp(jvp(v_free))[0] + damping * v_free, v)
 
-        dx, _ = jax.scipy.sparse.linalg.cg(normal, -g_free, tol=rtol, maxiter=cg_steps)
+        def jacobi(v):
+            return jnp.where(free, v / (diag + damping), v)
+
+        # CG until its residual is below atol + rtol |g| (as lineax's CG): near the solution rounding
+        # would keep it from the relative test alone.
+        dx, _ = jax.scipy.sparse.linalg.cg(normal, -g_free, tol=rtol, atol=atol, maxiter=cg_steps, M=jacobi)
         dx = jnp.where(jnp.isfinite(dx), dx, 0.0)
         x_new = jnp.clip(s.x + dx, lower, upper)
         d = x_new - s.x
@@ -102,7 +118,8 @@ def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_step
         loss = jnp.where(accept, loss_new, s.loss)
         if progress is not None:
             jax.debug.callback(progress, step, loss)
-        return State(jnp.where(accept, x_new, s.x), loss, lam, nu, scale, step, code, s.history.at[s.step].set(loss))
+        return State(jnp.where(accept, x_new, s.x), loss, lam, nu, scale, step, code,
+                     s.history.at[s.step].set(loss))
 
     out = jax.lax.while_loop(lambda s: s.code == RUNNING, body, state)
     return out.x, out.code, out.step, out.history
@@ -111,5 +128,6 @@ def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_step
 @eqx.filter_jit
 def solve_box_cg(problem, x0, lower, upper, max_steps, rtol, atol, cg_steps, progress=None):
     """`box_lm_cg` on a `Problem`'s residuals, compiled once per problem structure and settings."""
+    exact = np.flatnonzero(np.concatenate([np.full(p.size, p.shape is None) for p in problem.layout]))
     return box_lm_cg(lambda x, p: p.residuals(x), x0, lower, upper, problem, max_steps=max_steps, rtol=rtol, atol=atol,
-                     cg_steps=cg_steps, progress=progress)
+                     cg_steps=cg_steps, exact=exact, progress=progress)

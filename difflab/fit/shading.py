@@ -135,13 +135,13 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
 
 
 def point_colors(material, cell, geometry: LightGeometry, table: MaterialTable, intensity, ambient, specular: int,
-                 texel=None):
+                 texel=None, targets=None):
     """The illumination model (`jax_model.shade_geometry`) at points with material ids `material`
     (N,) (-1: none, colour 0), checker cells `cell` (N,), their `LightGeometry` (N, P) and texture
-    values `texel` (N, 3) modulating their texture's target (`jax_model.textured_surface`; None:
-    none); intensity (P, 3). Returns (N, 3)."""
+    values `texel` (N, 3) modulating their texture's target, one of the TARGET_* ids `targets`
+    (`jax_model.textured_surface`; None: none / all); intensity (P, 3). Returns (N, 3)."""
     has_material = material >= 0
-    mat = textured_surface(table, jnp.where(has_material, material, 0), cell, texel)
+    mat = textured_surface(table, jnp.where(has_material, material, 0), cell, texel, targets)
     color = shade_geometry(mat, specular, geometry, intensity, ambient)
     return jnp.where(has_material[:, None], color, 0.0)
 
@@ -207,7 +207,8 @@ class GBufferModel(eqx.Module):
     """The G-buffer image model of U pixels: their points' material ids, checker cells and
     `LightGeometry` under the lights it was built for, the composition and the formation
     (`pixel_arrays`), and -- when texels are fitted -- each point's taps into the table's stacked
-    texels (rows (R, K), -1: none; tap_weight (R, K); see `texels.py`). `pixels` is the (U, 3) image
+    texels (rows (R, K), -1: none; tap_weight (R, K); targets: the TARGET_* ids those textures
+    modulate; see `texels.py`). `pixels` is the (U, 3) image
     for given materials, light intensities (the lights' other fields are those it was built with)
     and ambient."""
 
@@ -218,6 +219,7 @@ class GBufferModel(eqx.Module):
     formation: Formation = eqx.field(static=True)
     taps: jnp.ndarray | None = None
     tap_weight: jnp.ndarray | None = None
+    targets: tuple | None = eqx.field(static=True, default=None)
 
     @classmethod
     def build(cls, gbuffer, pixels, lights: LightsJ, dtype, texels=None) -> GBufferModel:
@@ -231,12 +233,12 @@ class GBufferModel(eqx.Module):
                 rows, weight = np.full((1, 4), -1, np.int32), np.zeros((1, 4))
             taps, tap_weight = jnp.asarray(rows), jnp.asarray(np.asarray(weight, np.float64), dtype)
         return cls(material=points.material, cell=points.cell, geometry=geometry, comp=comp, formation=formation,
-                   taps=taps, tap_weight=tap_weight)
+                   taps=taps, tap_weight=tap_weight, targets=None if texels is None else texels.targets)
 
     def pixels(self, table: MaterialTable, lights: LightsJ, ambient):
         texel = None if self.taps is None else point_texels(table.texels, self.taps, self.tap_weight)
         colors = point_colors(self.material, self.cell, self.geometry, table, lights.intensity, ambient,
-                              self.formation.specular, texel)
+                              self.formation.specular, texel, self.targets)
         return colors if self.formation.direct else compose(colors, self.comp, self.formation)
 
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import DifflabError, FitError
 from ..renderers.texture.store import load_texture
+from ..vocabulary import TEXTURE_TARGET_IDS
 from .params import KINDS, name_list
 
 FIT_FILTERS = ("nearest", "bilinear")
@@ -125,15 +126,18 @@ def texel_blocks(layout) -> dict:
 @dataclass(frozen=True)
 class TexelSource:
     """Where each G-buffer shading point reads its texels: material id -> (first stacked row,
-    (H_t, W_t), filter, wrap), for the materials whose texture is fitted."""
+    (H_t, W_t), filter, wrap), for the materials whose texture is fitted; targets: the TARGET_* ids
+    their textures modulate."""
 
     blocks: dict
+    targets: tuple
 
     @classmethod
     def from_layout(cls, layout, scene) -> TexelSource | None:
         mats = list(scene.materials.values())
         blocks = {i: (row, shape, mats[i].filter, mats[i].wrap) for i, (row, shape) in texel_blocks(layout).items()}
-        return cls(blocks) if blocks else None
+        targets = tuple(sorted({TEXTURE_TARGET_IDS[mats[i].texture_target] for i in blocks}))
+        return cls(blocks, targets) if blocks else None
 
     def taps(self, gbuffer, point_ids) -> tuple[np.ndarray, np.ndarray]:
         """(rows (R, K) int32 into the stacked texels, -1 where the point reads no fitted texture;

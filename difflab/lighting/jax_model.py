@@ -189,15 +189,15 @@ def surface_material(table, material_id, cell) -> MaterialJ:
                      f0=table.f0[material_id])
 
 
-def textured_surface(table, material_id, cell, texel) -> MaterialJ:
+def textured_surface(table, material_id, cell, texel, targets=None) -> MaterialJ:
     """`surface_material` with each point's texture value `texel` (..., 3) multiplying the
     coefficient its material's texture targets (`table.texture_target`, -1: none); texel None: no
-    texture anywhere."""
+    texture anywhere; `targets`: the TARGET_* ids that can occur (default: all)."""
     mat = surface_material(table, material_id, cell)
     if texel is None:
         return mat
     target = table.texture_target[material_id]
-    for t in sorted(set(TEXTURE_TARGET_IDS.values())):
+    for t in sorted(set(TEXTURE_TARGET_IDS.values()) if targets is None else targets):
         textured = textured_material(mat, t, texel)
         on = (target == t)[..., None]
         mat = mat._replace(**{k: jnp.where(on, getattr(textured, k), getattr(mat, k)) for k in ("ka", "kd", "ks")})
