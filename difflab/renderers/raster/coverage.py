@@ -114,12 +114,23 @@ def raster_slot(slot: int, row_begin: int, row_end: int, screen: wp.array2d(dtyp
 
 
 @wp.kernel
-def raster_kernel(chunk: int, row_begin: int, row_end: int, slots: wp.array(dtype=wp.int32),
-                  screen: wp.array2d(dtype=wp.vec4d), width: int, key: wp.array(dtype=wp.int64)):
-    """The triangles binned to rows [row_begin, row_end), `chunk` consecutive ones per thread."""
+def raster_kernel(chunk: int, row_begin: int, row_end: int, slots: wp.array(dtype=wp.int32), n_all: int,
+                  rows: wp.array2d(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d), width: int, height: int,
+                  key: wp.array(dtype=wp.int64)):
+    """The triangles binned to rows [row_begin, row_end), `chunk` consecutive ones per thread; with
+    `slots` empty (a single band: nothing binned), the slots of [0, n_all) whose box holds samples."""
     first = wp.tid() * chunk
-    for k in range(first, wp.min(first + chunk, slots.shape[0])):
-        raster_slot(slots[k], row_begin, row_end, screen, width, key)
+    binned = slots.shape[0] > 0
+    n = n_all
+    if binned:
+        n = slots.shape[0]
+    for k in range(first, wp.min(first + chunk, n)):
+        if binned:
+            raster_slot(slots[k], row_begin, row_end, screen, width, key)
+        else:
+            top, bottom, unused = drawn_rows(k, rows, width, height)
+            if top <= bottom:
+                raster_slot(k, row_begin, row_end, screen, width, key)
 
 
 @wp.func

@@ -150,19 +150,23 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
         arrays["faces"], p_clip, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
         tris.face, band_of_row, counts, tests], device, threads)
     check_raster_work(int(tests.numpy().sum()), n_slots, "render", RenderError)
-    starts, cursor = bin_starts(counts.numpy())
-    binned = scratch("binned", 1 << int(starts[-1]).bit_length(), wp.int32)  # a power of two: kept between frames
-    launch_parts(coverage.bin_kernel, n_faces, [
-        extra, rows, width, height, band_of_row, wp.array(cursor, dtype=wp.int32, device=device), binned], device,
-        threads)
     band_index = {band: k for k, band in enumerate(bands)}
+    binned = wp.empty(0, dtype=wp.int32, device=device)  # one band: it draws every slot, nothing is binned
+    starts = np.array([0, n_slots])
+    if len(bands) > 1:
+        starts, cursor = bin_starts(counts.numpy())
+        binned = scratch("binned", 1 << int(starts[-1]).bit_length(), wp.int32)  # a power of two: kept between frames
+        launch_parts(coverage.bin_kernel, n_faces, [
+            extra, rows, width, height, band_of_row, wp.array(cursor, dtype=wp.int32, device=device), binned], device,
+            threads)
 
     def raster_band(begin, end):
         first, last = int(starts[band_index[(begin, end)]]), int(starts[band_index[(begin, end)] + 1])
         if last > first:
             chunk = last - first if device == "cpu" else 1  # a band is one thread's work on the CPU
             wp.launch(coverage.raster_kernel, dim=(last - first + chunk - 1) // chunk, inputs=[
-                chunk, begin, end, binned[first:last], tris.screen, width, key], device=device)
+                chunk, begin, end, binned[first:last] if binned.shape[0] else binned, n_slots, rows, tris.screen, width,
+                height, key], device=device)
         if then is not None:
             then(tris, key, begin, end)
 
