@@ -143,16 +143,19 @@ def refuse_overwrite(*paths, force: bool = False) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike):
+def atomic_path(path: str | os.PathLike, *, sweep: bool = True):
     """Yield a temporary path in the folder of `path` (made if missing); rename it onto `path` only
     if the block succeeds.
 
     A writer that fails midway leaves the old file (if any) untouched and no temporary behind; one
     killed by SIGTERM / SIGHUP removes its temporary; one killed by SIGKILL leaves it, and the next
-    write of the same path removes it.
+    write of the same path removes it (`remove_stale_temps`, a listing of the folder). `sweep=False`
+    skips that listing, for a writer that swept the folder itself once before writing many files into
+    it (a batch's output folder: N writes, N listings of up to N files, took ~10 ms a file at 5000).
     """
     path = check_output_path(path, create_parent=True)
-    remove_stale_temps(path)
+    if sweep:
+        remove_stale_temps(path)
     _install_signal_cleanup()
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=TMP_MARK + path.suffix, dir=path.parent)
     _LIVE.add(tmp)
@@ -193,15 +196,15 @@ def read_regular_file(path: str | os.PathLike, max_bytes: int, error: type[Diffl
     return data
 
 
-def write_text_atomic(path: str | os.PathLike, text: str) -> None:
-    """Write a text file atomically."""
-    with atomic_path(path) as tmp:
+def write_text_atomic(path: str | os.PathLike, text: str, *, sweep: bool = True) -> None:
+    """Write a text file atomically (`atomic_path`)."""
+    with atomic_path(path, sweep=sweep) as tmp:
         tmp.write_text(text)
 
 
-def write_json_atomic(path: str | os.PathLike, data) -> None:
-    """Write `data` as indented JSON, atomically."""
-    write_text_atomic(path, json.dumps(data, indent=2) + "\n")
+def write_json_atomic(path: str | os.PathLike, data, *, sweep: bool = True) -> None:
+    """Write `data` as indented JSON, atomically (`atomic_path`)."""
+    write_text_atomic(path, json.dumps(data, indent=2) + "\n", sweep=sweep)
 
 
 def _as_image(image) -> np.ndarray:

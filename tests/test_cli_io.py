@@ -11,7 +11,7 @@ from PIL import Image
 from conftest import scene_dict
 from difflab import DifflabError, load_image, save_image
 from difflab.cli import main
-from difflab.io import linear_to_srgb, srgb_to_linear, write_json_atomic
+from difflab.io import TMP_MARK, linear_to_srgb, srgb_to_linear, write_json_atomic
 
 
 def tiny_scene(tmp_path, **changes):
@@ -71,6 +71,17 @@ def test_a_writer_failing_midway_leaves_the_old_file(tmp_path, monkeypatch):
     assert target.stat().st_mode & 0o044  # readable by others, like a plain open() would make it
     write_json_atomic(tmp_path / "x.json", {"a": 1})
     assert json.loads((tmp_path / "x.json").read_text()) == {"a": 1}
+
+
+def test_a_killed_writers_temporary_is_removed_by_the_next_write_unless_swept_already(tmp_path):
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    stale = tmp_path / f".x.json.{int(dead.stdout)}.k1ll{TMP_MARK}.json"  # as a writer killed by SIGKILL leaves it
+    stale.write_text("{")
+    write_json_atomic(tmp_path / "x.json", {"a": 1}, sweep=False)  # the caller swept the folder itself
+    assert stale.exists()
+    write_json_atomic(tmp_path / "x.json", {"a": 2})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.json"]
+    assert json.loads((tmp_path / "x.json").read_text()) == {"a": 2}
 
 
 def test_render_command_writes_png_and_linear_npy(tmp_path, capsys):

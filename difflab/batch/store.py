@@ -11,7 +11,8 @@
 
 Only the process that owns the folder writes to it, one file at a time, each through a temporary file
 renamed into place: an interrupted run leaves complete files or none (a process killed mid-write can
-leave a hidden temporary, which the next run removes). One run per output folder at a time; a
+leave a hidden temporary, which the next run removes: opening the folder sweeps it once, so that each
+write need not list the folder again). One run per output folder at a time; a
 non-empty folder that is not a batch's is not written into without `force`.
 """
 
@@ -91,14 +92,16 @@ class Store:
     def _record(self, job: Job, outcome: dict) -> None:
         if outcome["ok"]:
             self._file("failures", job.name).unlink(missing_ok=True)
-            write_json_atomic(self._file("scenes", job.name), outcome["scene"])
-            write_json_atomic(self._file("reports", job.name), {"name": job.name, "job": job.spec, **outcome["report"]})
+            write_json_atomic(self._file("scenes", job.name), outcome["scene"], sweep=False)
+            write_json_atomic(self._file("reports", job.name), {"name": job.name, "job": job.spec, **outcome["report"]},
+                              sweep=False)
         else:
             self._file("reports", job.name).unlink(missing_ok=True)
             self._file("scenes", job.name).unlink(missing_ok=True)
             write_json_atomic(self._file("failures", job.name),
-                              {"name": job.name, "job": job.spec, "error": outcome["error"]})
-        write_json_atomic(self._file("timing", job.name), {"name": job.name, "seconds": outcome["seconds"]})
+                              {"name": job.name, "job": job.spec, "error": outcome["error"]}, sweep=False)
+        write_json_atomic(self._file("timing", job.name), {"name": job.name, "seconds": outcome["seconds"]},
+                          sweep=False)
 
     def record_invalid(self, invalid: list[Invalid]) -> None:
         """Write one failure per invalid line, and drop those of lines that are no longer invalid."""
