@@ -96,3 +96,18 @@ def test_gradient_in_n_is_finite_everywhere(specular, n):
             x = jnp.asarray(setup.x0).at[-1].set(x_n)
             g = jax.grad(lambda x: jnp.sum(setup.problem.residuals(x) ** 2))(x)
             assert np.all(np.isfinite(np.asarray(g)))
+
+
+@pytest.mark.parametrize("shading", ["phong", "flat"])
+def test_single_point_pixels_skip_the_composition(shading):
+    """Phong and flat shading at spp 1 without fog: each pixel is one point's colour (`direct`), and
+    the model's pixels still equal Warp's."""
+    scene = make_scene(size=20, shading=shading, lights=LIGHTS)
+    frame = render_frame(scene)
+    setup = Setup(scene, [frame.image], ("red", "floor"), ("kd", "ks", "n"))
+    model = setup.problem.views[0].model
+    assert model.formation.direct and model.comp is None
+    pixels = np.flatnonzero(setup.views[0].used)
+    with jax.enable_x64(True):
+        image = setup.problem.images(setup.layout.values(jnp.asarray(setup.x0)))[0]
+    np.testing.assert_allclose(np.asarray(image), frame.image.reshape(-1, 3)[pixels], atol=1e-5, rtol=0)

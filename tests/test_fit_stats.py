@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from difflab.fit.stats import MISMATCH_CHI2, fit_statistics, standard_errors
+from difflab.fit.stats import MISMATCH_CHI2, estimate_sigma, fit_statistics, standard_errors
 from difflab.fit.solvers import result_name
 
 
@@ -49,3 +49,24 @@ def test_optimistix_results_are_named():
     assert result_name(optx.RESULTS.successful) == "successful"
     assert result_name(optx.RESULTS.nonlinear_max_steps_reached) == "nonlinear_max_steps_reached"
     assert result_name(optx.RESULTS.nonfinite) == "nonfinite"
+
+
+@pytest.mark.parametrize("interior", [True, False])
+def test_noise_estimate_is_the_robust_laplacian_over_the_used_pixels(interior):
+    """1.4826 median |L| / 6 with L the 3 x 3 Laplacian [1 -2 1; -2 4 -2; 1 -2 1], over the used
+    pixels whose neighbourhood is used (interior) or that are not on the image border."""
+    rng = np.random.default_rng(4)
+    kernel = np.outer([1.0, -2.0, 1.0], [1.0, -2.0, 1.0])
+    image = rng.normal(size=(23, 31, 3))
+    used = rng.random((23, 31)) < 0.8
+    used[:, :3] = False  # the used box does not reach the left side
+    h, w = used.shape
+    centre = np.zeros_like(used)
+    centre[1:-1, 1:-1] = used[1:-1, 1:-1]
+    if interior:
+        centre[1:-1, 1:-1] = np.logical_and.reduce([used[i:h - 2 + i, j:w - 2 + j] for i in range(3) for j in range(3)])
+    lap = np.zeros_like(image)
+    lap[1:-1, 1:-1] = sum(kernel[i, j] * image[i:h - 2 + i, j:w - 2 + j] for i in range(3) for j in range(3))
+    want = 1.4826 * np.median(np.abs(lap[centre])) / 6.0
+    assert estimate_sigma([image], [used], interior=interior) == pytest.approx(want, rel=1e-12)
+    assert estimate_sigma([image], [np.zeros_like(used)], interior=interior) is None  # too few pixels

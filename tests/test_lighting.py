@@ -223,3 +223,14 @@ def test_zero_length_vectors_give_zero_not_nan():
     assert np.all(np.isfinite(np.asarray(g)))
     assert float(jm.safe_pow(jnp.asarray(0.0), jnp.asarray(0.0))) == 1.0
     assert float(jm.safe_pow(jnp.asarray(0.0), jnp.asarray(2.0))) == 0.0
+
+
+@pytest.mark.parametrize("rows", [1, 3, jm.SELECT_ROWS, jm.SELECT_ROWS + 1])
+def test_table_rows_by_selects_equal_the_gather(rows):
+    """Short tables are read by a chain of selects, long ones by a gather: both give column[index]."""
+    rng = np.random.default_rng(rows)
+    for shape in ((rows,), (rows, 3)):
+        column = jnp.asarray(rng.normal(size=shape))
+        index = jnp.asarray(rng.integers(0, rows, size=(7, 5)))
+        np.testing.assert_array_equal(np.asarray(jm.table_row(column, index)), np.asarray(column)[np.asarray(index)])
+

@@ -63,10 +63,9 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             seen = {k: c > options.visible_threshold for k, c in texel_coverage(setup.problem, at, used).items()}
         loss = float(0.5 * np.sum(np.square(rho)))
         residuals = setup.residual_images(r)
-        r = r[used]
         finite = bool(np.all(np.isfinite(flat)) and np.isfinite(loss) and (gram is None or np.all(np.isfinite(gram))))
-        sigma = setup.noise([res * np.sqrt(v.weight) for res, v in zip(residuals, setup.views)]) if finite else \
-            float("nan")
+        sigma = setup.noise(setup.residual_images(r, weighted=True)) if finite else float("nan")
+        r = r[used]
         if finite:
             st = fit_statistics(gram, r, setup.censored, sigma, layout.size)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if gram is not None else

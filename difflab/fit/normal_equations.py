@@ -9,13 +9,14 @@ Two ways to the same numbers:
   residual function: robust losses, light intensities, the ray tree, composed pixels.
 - by parts (`by_parts`), for the l2 loss on G-buffer views whose pixels are single points
   (`shading.Formation.direct`: Phong or flat shading at spp 1) with only ka, kd, ks, n, m, f0
-  fitted (no texels, no prior rows). The colour is ka Ia + kd D + ks S(n, m, f0) (`jax_model.shade_parts`), so J's columns
-  are known in closed form: sqrt(w) Ia, sqrt(w) D and sqrt(w) S for the linear coefficients
-  (ka, kd only where the checker cell is the first: the second takes ka2, kd2), sqrt(w) ks dS/dt
-  for t = n, m, f0 (one forward-mode tangent each), and 0 where a pixel is censored (the model is
-  above the ceiling). A row (a pixel channel) touches only its own material's entries of its own
-  channel, so J^T J is summed per material and channel from q x q blocks (q: the fitted kinds)
-  and never formed as a dense (N, p) J: a few passes over the pixels per step.
+  fitted (no texels, no prior rows). The colour is ka Ia + kd D + ks S(n, m, f0)
+  (`jax_model.shade_parts`), so J's columns are known in closed form: sqrt(w) Ia, sqrt(w) D and
+  sqrt(w) S for the linear coefficients (ka, kd only where the checker cell is the first: the
+  second takes ka2, kd2), sqrt(w) ks dS/dt for t = n, m, f0 (one forward-mode tangent each), and 0
+  where a pixel is censored (the model is above the ceiling). A row (a pixel channel) touches only
+  its own material's entries of its own channel, so J^T J is summed per material and channel from
+  q x q blocks (q: the fitted kinds; one (U, 3 (q + 1))^T (U, 3 (q + 1)) product per material)
+  and never formed as a dense (N, p) J.
 
 `linearise` picks the second when it applies (a static property of the problem).
 """
@@ -93,15 +94,16 @@ def by_parts(problem, x):
                 _, d_spec = jax.jvp(lambda n, m, f0: parts(n, m, f0)[2], (mat.n, mat.m, mat.f0),
                                     (tangent["n"], tangent["m"], tangent["f0"]))
                 column[kind] = live * mat.ks * d_spec
-        v = [column[k] for k in slots]  # q of (U, 3)
         q = len(slots)
-        for m, cols in columns.items():
-            w = [jnp.where((model.material == m)[:, None], c, 0.0) for c in v]
-            # per channel, the q x q block of this material's rows: sums of products over the pixels
-            block = [[jnp.sum(w[i] * v[j], axis=0) if i <= j else None for j in range(q)] for i in range(q)]
-            block = jnp.stack([jnp.stack([block[min(i, j)][max(i, j)] for j in range(q)], -1) for i in range(q)], -2)
-            gram = gram.at[cols[:, :, None], cols[:, None, :]].add(block)
-            grad = grad.at[cols].add(jnp.stack([jnp.sum(c * r, axis=0) for c in w], axis=-1))
+        w = jnp.stack([column[k] for k in slots] + [r], axis=-1).reshape(r.shape[0], 3 * (q + 1))  # channel-major
+        channel = np.arange(3)
+        for material, cols in columns.items():
+            # this material's rows, every product of two columns summed over the pixels in one product
+            # (the cross-channel ones are not used); per channel the q x q block and J^T r
+            products = (jnp.where((model.material == material)[:, None], w, 0.0).T @ w).reshape(3, q + 1, 3, q + 1)
+            blocks = products[channel, :, channel, :]  # (3, q + 1, q + 1)
+            gram = gram.at[cols[:, :, None], cols[:, None, :]].add(blocks[:, :q, :q])
+            grad = grad.at[cols].add(blocks[:, :q, q])
         residuals.append(r.reshape(-1))
     scale = jnp.where(layout.entries("log") > 0, values, 1.0)  # d value / d x
     return (jnp.concatenate(residuals), scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p])

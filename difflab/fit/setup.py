@@ -193,8 +193,8 @@ class Setup:
     def _target_statistics(self):
         """nonfinite, censored (used values at the ceiling) and the noise floor of the targets."""
         self.nonfinite = int(sum(v.nonfinite for v in self.views))
-        self.censored = int(sum(int(np.count_nonzero((v.target >= v.ceiling) & v.used[..., None]
-                                                     & (v.weight > 0))) for v in self.views))
+        self.censored = int(sum(int(np.count_nonzero((v.target >= v.ceiling) & v.used[..., None] & (v.weight > 0)))
+                                for v in self.views if np.isfinite(v.ceiling)))
         self.sigma_floor = QUANTISATION_SIGMA if any(v.quantised for v in self.views) else FLOAT_SIGMA
 
     def noise(self, residual_images) -> float:
@@ -202,7 +202,8 @@ class Setup:
         solution (from the targets where too few pixels allow), floored (see `stats`)."""
         if self.sigma_given is not None:
             return self.sigma_given
-        clean = [v.used & ~np.any(v.target >= v.ceiling, axis=-1) for v in self.views]
+        clean = [v.used & ~np.any(v.target >= v.ceiling, axis=-1) if np.isfinite(v.ceiling) else v.used
+                 for v in self.views]
         estimate = estimate_sigma(residual_images, clean)
         if estimate is None:
             estimate = estimate_sigma([v.target for v in self.views], clean, interior=False)
@@ -301,10 +302,12 @@ class Setup:
         intensity_index = np.full((count, 3), -1, np.int32)
         shared = min(count, index.shape[0])
         intensity_index[:shared] = index[:shared]
-        f = lambda x: jnp.asarray(np.asarray(x, np.float64), self.dtype)  # noqa: E731
-        return ViewJ(model=self._model(view, pixels, lights), lights=lights, target=f(view.target.reshape(-1, 3)[pixels]),
-                     sqrt_weight=f(np.sqrt(view.weight.reshape(-1, 3)[pixels])), ceiling=f(view.ceiling),
-                     intensity_index=jnp.asarray(intensity_index))
+        real = np.dtype(self.dtype)
+        target, sqrt_weight, ceiling, intensity_index = jax.device_put((  # one transfer
+            view.target.reshape(-1, 3)[pixels].astype(real), np.sqrt(view.weight.reshape(-1, 3)[pixels]).astype(real),
+            np.asarray(view.ceiling, real), intensity_index))
+        return ViewJ(model=self._model(view, pixels, lights), lights=lights, target=target, sqrt_weight=sqrt_weight,
+                     ceiling=ceiling, intensity_index=intensity_index)
 
     def _problem(self, loss, loss_scale) -> Problem:
         weights = [v.weight.reshape(-1, 3)[np.flatnonzero(v.used)] for v in self.views]
@@ -315,10 +318,12 @@ class Setup:
         table = MaterialTable.from_scene(self.scene.materials.values(), self.dtype)
         if "texels" in index:  # the values write every row; the start fills them for the shapes
             table = table._replace(texels=jnp.zeros(index["texels"].shape, self.dtype))
-        return Problem(views=views, table=table, ambient=jnp.asarray(self.scene.ambient, self.dtype),
-                       index={k: jnp.asarray(v) for k, v in index.items() if k != "intensity"},
-                       loss_scale=jnp.asarray(loss_scale, self.dtype), layout=self.layout, loss=loss,
-                       smoothness=self.smoothness)
+        real = np.dtype(self.dtype)
+        ambient, index, loss_scale = jax.device_put((np.asarray(self.scene.ambient, real),
+                                                     {k: v for k, v in index.items() if k != "intensity"},
+                                                     np.asarray(loss_scale, real)))
+        return Problem(views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
+                       layout=self.layout, loss=loss, smoothness=self.smoothness)
 
     def precheck(self) -> str | None:
         """A result code when the fit cannot be made (non-finite target values under the masks, or
@@ -329,17 +334,20 @@ class Setup:
             return "empty_mask"
         return None
 
-    def residual_images(self, r) -> list[np.ndarray]:
-        """Per view (H, W, 3) float32 plain residuals min(model, ceiling) - target from the flat
-        weighted residuals r (0 outside the pixels used and where the weight is 0)."""
+    def residual_images(self, r, weighted=False) -> list[np.ndarray]:
+        """Per view (H, W, 3) float32 plain residuals min(model, ceiling) - target (`weighted`: times
+        sqrt(weight), as r is) from the flat weighted residuals r (0 outside the pixels used and
+        where the weight is 0)."""
         out, offset = [], 0
         for view in self.views:
             pixels = np.flatnonzero(view.used)
-            sqrt_w = np.sqrt(view.weight.reshape(-1, 3)[pixels])
-            part = np.asarray(r[offset:offset + sqrt_w.size], np.float64).reshape(sqrt_w.shape)
-            offset += sqrt_w.size
+            part = np.asarray(r[offset:offset + 3 * pixels.size], np.float64).reshape(-1, 3)
+            offset += 3 * pixels.size
+            if not weighted:
+                sqrt_w = np.sqrt(view.weight.reshape(-1, 3)[pixels])
+                part = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w, 1.0), 0.0)
             full = np.zeros(view.target.shape, np.float32)
-            full.reshape(-1, 3)[pixels] = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w, 1.0), 0.0)
+            full.reshape(-1, 3)[pixels] = part
             out.append(full)
         return out
 

@@ -18,6 +18,7 @@ shading at spp 1) skips the composition, so each evaluation is a few operations 
 
 from __future__ import annotations
 
+from functools import partial
 from typing import NamedTuple
 
 import equinox as eqx
@@ -77,7 +78,7 @@ class Formation(NamedTuple):
     direct: bool = False
 
 
-def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, ComposeJ, Formation, np.ndarray]:
+def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, ComposeJ | None, Formation, np.ndarray]:
     """The G-buffer cut down to what `pixels` need, as JAX arrays.
 
     Arguments:
@@ -86,17 +87,21 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
     Returns:
         (points, composition, formation, point_ids): only the R shading points the pixels' samples
         use (point_ids (R,) are their indices in `gbuffer.points`), and the composition of the U
-        pixels with point indices renumbered into them.
+        pixels with point indices renumbered into them (None when `formation.direct`: pixel i is
+        point i).
     """
     side = int(gbuffer.spp_side)
     height, width = gbuffer.mask.shape[0] // side, gbuffer.mask.shape[1] // side
     pixels = np.arange(height * width) if pixels is None else np.asarray(pixels, np.int64).reshape(-1)
-    row, col = np.divmod(pixels, width)
-    di, dj = (x.reshape(-1) for x in np.meshgrid(np.arange(side), np.arange(side), indexing="ij"))
-    rows, cols = row[:, None] * side + di, col[:, None] * side + dj  # (U, S) sample coordinates
-    mask = np.asarray(gbuffer.mask, bool)[rows, cols]
-    index = np.where(mask[..., None], gbuffer.point_index[rows, cols], 0)
-    weight = np.where(mask[..., None], gbuffer.point_weight[rows, cols], 0.0)
+    if side == 1:
+        samples = pixels[:, None]  # (U, S) flat sample indices
+    else:
+        row, col = np.divmod(pixels, width)
+        di, dj = (x.reshape(-1) for x in np.meshgrid(np.arange(side), np.arange(side), indexing="ij"))
+        samples = (row[:, None] * side + di) * (width * side) + col[:, None] * side + dj
+    mask = np.asarray(gbuffer.mask, bool).reshape(-1)[samples]
+    index = np.where(mask[..., None], gbuffer.point_index.reshape(-1, 3)[samples], 0)
+    weight = np.where(mask[..., None], gbuffer.point_weight.reshape(-1, 3)[samples], 0.0)
     pts = gbuffer.points
     mode, color, start, end, density = gbuffer.fog
     formation = Formation(specular=SPECULAR_MODELS[gbuffer.specular], fog_mode=int(mode),
@@ -105,7 +110,7 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
             and np.all(weight[:, 0] == (1.0, 0.0, 0.0)) and np.all(index[:, 0, 0] < pts.material.shape[0])):
         # each pixel is one point's colour: the points, in pixel order, are the pixels
         point_ids = index[:, 0, 0]
-        local = np.broadcast_to(np.arange(point_ids.size)[:, None, None], index.shape)
+        local = None
         formation = formation._replace(direct=True)
     else:
         point_ids = np.unique(index[mask]) if mask.any() else np.zeros(0, np.int64)
@@ -125,11 +130,11 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
     points = points._replace(**{k: np.asarray(getattr(points, k), real) for k in ("normal", "view", "light_dir",
                                                                                   "light_dist", "visibility")},
                              material=np.asarray(points.material, np.int32), cell=np.asarray(points.cell, np.int32))
-    comp = ComposeJ(mask=mask, depth=np.where(mask, gbuffer.depth[rows, cols], 0.0).astype(real),
-                    point_index=np.asarray(local, np.int32), point_weight=weight.astype(real),
-                    background=np.asarray(gbuffer.background, real), fog_color=np.asarray(color, real),
-                    fog_start=np.asarray(start, real), fog_end=np.asarray(end, real),
-                    fog_density=np.asarray(density, real))
+    comp = None if formation.direct else ComposeJ(
+        mask=mask, depth=np.where(mask, gbuffer.depth.reshape(-1)[samples], 0.0).astype(real),
+        point_index=np.asarray(local, np.int32), point_weight=weight.astype(real),
+        background=np.asarray(gbuffer.background, real), fog_color=np.asarray(color, real),
+        fog_start=np.asarray(start, real), fog_end=np.asarray(end, real), fog_density=np.asarray(density, real))
     points, comp = jax.device_put((points, comp))  # one transfer
     return points, comp, formation, point_ids
 
@@ -215,7 +220,7 @@ class GBufferModel(eqx.Module):
     material: jnp.ndarray
     cell: jnp.ndarray
     geometry: LightGeometry
-    comp: ComposeJ
+    comp: ComposeJ | None
     formation: Formation = eqx.field(static=True)
     taps: jnp.ndarray | None = None
     tap_weight: jnp.ndarray | None = None
@@ -242,7 +247,7 @@ class GBufferModel(eqx.Module):
         return colors if self.formation.direct else compose(colors, self.comp, self.formation)
 
 
-@eqx.filter_jit
+@partial(jax.jit, static_argnums=2)
 def _geometry_jit(points: PointsJ, lights: LightsJ, specular: int):
     return light_geometry(specular, points.normal, points.view, lights, points.light_dir, points.light_dist,
                           points.visibility)

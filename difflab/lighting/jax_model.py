@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -182,11 +183,28 @@ def surface_material(table, material_id, cell) -> MaterialJ:
     """The coefficients at shading points, as `warp_model.surface_material`: material `material_id`
     (int array, >= 0) of a stacked table (fields ka, kd, ks, ka2, kd2 (M, 3); n, m, f0 (M,)), with a
     checker's second cell (cell == 1) taking ka2 / kd2."""
-    second = (cell == 1)[..., None]
-    return MaterialJ(ka=jnp.where(second, table.ka2[material_id], table.ka[material_id]),
-                     kd=jnp.where(second, table.kd2[material_id], table.kd[material_id]),
-                     ks=table.ks[material_id], n=table.n[material_id], m=table.m[material_id],
-                     f0=table.f0[material_id])
+    material_id = jnp.asarray(material_id)
+    second = (jnp.asarray(cell) == 1)[..., None]
+    row = lambda column: table_row(column, material_id)  # noqa: E731
+    return MaterialJ(ka=jnp.where(second, row(table.ka2), row(table.ka)),
+                     kd=jnp.where(second, row(table.kd2), row(table.kd)),
+                     ks=row(table.ks), n=row(table.n), m=row(table.m), f0=row(table.f0))
+
+
+SELECT_ROWS = 16  # tables of up to this many rows are read by a chain of selects
+
+
+def table_row(column, index):
+    """column[index] for a table column (M, ...) and an int array index in [0, M): a chain of
+    selects when M <= SELECT_ROWS (XLA's CPU gather costs more per point than a few compares:
+    ~2x for a whole G-buffer image model), else a gather."""
+    if not 0 < column.shape[0] <= SELECT_ROWS:
+        return column[index]
+    trailing = (1,) * (column.ndim - 1)
+    out = jnp.broadcast_to(column[0], index.shape + column.shape[1:])
+    for m in range(1, column.shape[0]):
+        out = jnp.where((index == m).reshape(index.shape + trailing), column[m], out)
+    return out
 
 
 def textured_surface(table, material_id, cell, texel, targets=None) -> MaterialJ:
@@ -279,13 +297,15 @@ def shade(mat: MaterialJ, model: int, normal, v, lights: LightsJ, l, d, visibili
 
 
 def lights_to_jax(lights, dtype=jnp.float32) -> LightsJ:
-    """Scene lights as a `LightsJ` of arrays (P may be 0)."""
+    """Scene lights as a `LightsJ` of arrays (P may be 0), moved to the device in one transfer."""
+    real = np.dtype(dtype)
+
     def column(values, shape):
-        return jnp.asarray(np.asarray(values, dtype=np.float64).reshape(shape), dtype=dtype)
+        return np.asarray(values, dtype=np.float64).reshape(shape).astype(real)
 
     count = len(lights)
-    return LightsJ(
-        kind=jnp.asarray([LIGHT_TYPES[light.type] for light in lights], dtype=jnp.int32).reshape(count),
+    return jax.device_put(LightsJ(
+        kind=np.asarray([LIGHT_TYPES[light.type] for light in lights], dtype=np.int32).reshape(count),
         position=column([light.position or (0.0, 0.0, 0.0) for light in lights], (count, 3)),
         direction=column([light.direction or (0.0, -1.0, 0.0) for light in lights], (count, 3)),
         intensity=column([light.intensity for light in lights], (count, 3)),
@@ -293,4 +313,4 @@ def lights_to_jax(lights, dtype=jnp.float32) -> LightsJ:
         cos_cutoff=column([math.cos(math.radians(light.cutoff_deg)) if light.type == "spot" else -2.0
                            for light in lights], (count,)),
         exponent=column([light.exponent for light in lights], (count,)),
-    )
+    ))
