@@ -58,6 +58,28 @@ def edge(ax: wp.int64, ay: wp.int64, bx: wp.int64, by: wp.int64, px: wp.int64, p
 
 
 @wp.func
+def on_grid(x: wp.float64):
+    """x on the fixed-point grid the edge functions test (exact: SUBPIXEL is a power of two)."""
+    return wp.float64(snap(x)) / wp.float64(SUBPIXEL)
+
+
+@wp.func
+def sample_box(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d):
+    """(first row, last row, first column, last column) of the sample centres (j + 0.5, i + 0.5) in
+    the bounding box of the *snapped* triangle: a box from the unsnapped corners can miss a row or
+    column that an edge snapped onto a sample centre covers (a crack between two triangles)."""
+    half = wp.float64(0.5)
+    x0 = on_grid(s0[0])
+    x1 = on_grid(s1[0])
+    x2 = on_grid(s2[0])
+    y0 = on_grid(s0[1])
+    y1 = on_grid(s1[1])
+    y2 = on_grid(s2[1])
+    return wp.vec4i(int(wp.ceil(wp.min(y0, wp.min(y1, y2)) - half)), int(wp.floor(wp.max(y0, wp.max(y1, y2)) - half)),
+                    int(wp.ceil(wp.min(x0, wp.min(x1, x2)) - half)), int(wp.floor(wp.max(x0, wp.max(x1, x2)) - half)))
+
+
+@wp.func
 def owns_edge(ax: wp.int64, ay: wp.int64, bx: wp.int64, by: wp.int64):
     """Fill rule for samples exactly on edge a->b: the edge's direction lies in a fixed half-plane,
     so of two triangles sharing the edge (traversing it in opposite directions) exactly one owns it."""
@@ -80,11 +102,11 @@ def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: w
     if cull == 1 and side < 0:
         return
     facing[slot] = side
-    half = wp.float64(0.5)
-    rows[slot, 0] = int(wp.ceil(wp.min(s0[1], wp.min(s1[1], s2[1])) - half))
-    rows[slot, 1] = int(wp.floor(wp.max(s0[1], wp.max(s1[1], s2[1])) - half))
-    rows[slot, 2] = int(wp.ceil(wp.min(s0[0], wp.min(s1[0], s2[0])) - half))  # its box's sample columns
-    rows[slot, 3] = int(wp.floor(wp.max(s0[0], wp.max(s1[0], s2[0])) - half))
+    box = sample_box(s0, s1, s2)
+    rows[slot, 0] = box[0]
+    rows[slot, 1] = box[1]
+    rows[slot, 2] = box[2]  # its box's sample columns
+    rows[slot, 3] = box[3]
     screen[slot, 0] = s0
     weight[slot, 0] = w0
     if side > 0:

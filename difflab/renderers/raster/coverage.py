@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from ..._warp import wp
 
-from .clip import SUBPIXEL, drawn_rows, edge, owns_edge, snap
+from .clip import SUBPIXEL, drawn_rows, edge, owns_edge, sample_box, snap
 
 wp.set_module_options({"enable_backward": False})
 
@@ -75,12 +75,11 @@ def raster_slot(slot: int, row_begin: int, row_end: int, screen: wp.array2d(dtyp
     s0 = screen[slot, 0]
     s1 = screen[slot, 1]
     s2 = screen[slot, 2]
-    # Sample (i, j) is centred at (j + 0.5, i + 0.5): the candidates lie in the bounding box.
-    half = wp.float64(0.5)
-    j_lo = wp.max(int(wp.ceil(wp.min(s0[0], wp.min(s1[0], s2[0])) - half)), 0)
-    j_hi = wp.min(int(wp.floor(wp.max(s0[0], wp.max(s1[0], s2[0])) - half)), width - 1)
-    i_lo = wp.max(int(wp.ceil(wp.min(s0[1], wp.min(s1[1], s2[1])) - half)), row_begin)
-    i_hi = wp.min(int(wp.floor(wp.max(s0[1], wp.max(s1[1], s2[1])) - half)), row_end - 1)
+    box = sample_box(s0, s1, s2)  # the candidates: samples in the snapped triangle's bounding box
+    j_lo = wp.max(box[2], 0)
+    j_hi = wp.min(box[3], width - 1)
+    i_lo = wp.max(box[0], row_begin)
+    i_hi = wp.min(box[1], row_end - 1)
     if j_lo > j_hi or i_lo > i_hi:
         return
     x0 = snap(s0[0])
