@@ -20,7 +20,7 @@ import numpy as np
 
 from ..lighting.jax_model import LightsJ
 from .materials import MaterialTable
-from .texels import smoothness_residuals
+from .texels import smoothness_residuals, stacked_texels
 
 LOSSES = ("l2", "huber", "cauchy")
 TABLE_KINDS = ("ka", "kd", "ks", "n", "m", "f0", "kr", "kt", "absorption")
@@ -42,22 +42,18 @@ class ViewJ(eqx.Module):
 
 def value_index(layout, n_materials: int, n_lights: int) -> dict:
     """kind -> int32 array of the flat-vector entry each material (or light) field takes (-1: the
-    base value stays): (M, 3) for RGB kinds, (M,) for scalars, (P, 3) for "intensity", and
-    "texels" (T, 3) for the fitted textures' texels stacked in layout order (`MaterialTable.texels`)."""
+    base value stays): (M, 3) for RGB kinds, (M,) for scalars, (P, 3) for "intensity" (a texture's
+    texels are contiguous slices: `texels.stacked_texels`)."""
     index = {k: np.full((n_materials, 3) if k in ("ka", "kd", "ks", "absorption") else (n_materials,), -1, np.int32)
              for k in TABLE_KINDS}
     index["intensity"] = np.full((n_lights, 3), -1, np.int32)
-    offset, texels = 0, []
+    offset = 0
     for p in layout:
-        entries = np.arange(offset, offset + p.size)
-        if p.shape is not None:
-            texels.append(entries.reshape(-1, 3).astype(np.int32))
-        else:
+        if p.shape is None:
+            entries = np.arange(offset, offset + p.size)
             target = index[p.kind]
             target[p.index] = np.broadcast_to(entries, (3,)) if target.ndim == 2 else entries[0]
         offset += p.size
-    if texels:
-        index["texels"] = np.concatenate(texels)
     return index
 
 
@@ -84,7 +80,7 @@ class Problem(eqx.Module):
     """Everything the residuals need. Arrays are leaves (one compiled solve serves any targets of
     the same shapes); the parameter layout, the loss and a texture's smoothness weight are static.
     Values travel as one flat vector in layout order (`params.Layout`); `index` says where they go in
-    the material table (`value_index`, and "texels" when a texture is fitted)."""
+    the material table (`value_index`; fitted texels: `texels.stacked_texels`)."""
 
     views: tuple
     table: MaterialTable
@@ -97,7 +93,9 @@ class Problem(eqx.Module):
 
     def materials(self, values) -> MaterialTable:
         """The table with the flat values written in (a checker's ka2 / kd2 stay)."""
-        return self.table._replace(**{k: _put(index, values, getattr(self.table, k)) for k, index in self.index.items()})
+        table = self.table._replace(**{k: _put(index, values, getattr(self.table, k)) for k, index in self.index.items()})
+        texels = stacked_texels(self.layout, values)
+        return table if texels is None else table._replace(texels=texels)
 
     def images(self, values) -> tuple:
         """The model's pixels (U, 3) of each view for flat values in scene units."""

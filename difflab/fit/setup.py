@@ -316,8 +316,6 @@ class Setup:
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         views = tuple(self._view(v, np.flatnonzero(v.used), index["intensity"]) for v in self.views)
         table = MaterialTable.from_scene(self.scene.materials.values(), self.dtype)
-        if "texels" in index:  # the values write every row; the start fills them for the shapes
-            table = table._replace(texels=jnp.zeros(index["texels"].shape, self.dtype))
         real = np.dtype(self.dtype)
         ambient, index, loss_scale = jax.device_put((np.asarray(self.scene.ambient, real),
                                                      {k: v for k, v in index.items() if k != "intensity"},

@@ -158,6 +158,17 @@ class TexelSource:
         return rows, weights
 
 
+def stacked_texels(layout, values):
+    """(T, 3) the fitted textures' texels in layout order -- static slices of the flat values (no
+    gather) -- or None without a texture."""
+    parts, offset = [], 0
+    for p in layout:
+        if p.shape is not None:
+            parts.append(values[offset:offset + p.size].reshape(-1, 3))
+        offset += p.size
+    return jnp.concatenate(parts) if parts else None
+
+
 def point_texels(texels, rows, weights):
     """(R, 3) texel value of each point: its taps' weighted sum of the stacked `texels` (T, 3), 1
     where it reads none (its coefficient unmodulated)."""
