@@ -76,51 +76,62 @@ def median_time(fn, repeats: int) -> float:
     return statistics.median(times)
 
 
-def per_step(scene, target, start, x64: bool, repeats: int) -> dict:
-    """The engine's LM against a plain JAX Jacobian + Cholesky step on the same problem. The per-step
-    cost is marginal -- (t(long solve) - t(short solve)) / (its extra steps), tolerances 0 so that
-    the solve keeps stepping -- so the fixed cost of a call does not count; runs are interleaved
-    with the plain step's so that a busy machine slows both alike."""
+def per_step(scene, target, start, repeats: int) -> list[dict]:
+    """The engine's LM against a plain JAX Jacobian + Cholesky step on the same problem, in float64
+    and float32. The per-step cost is marginal -- (t(long solve) - t(short solve)) / (its extra
+    steps), tolerances 0 so that the solve keeps stepping -- so the fixed cost of a call does not
+    count; every timing is interleaved (short, long, plain step, whole solve; float64, float32) so
+    that a busy machine slows all alike."""
     import jax
     import jax.numpy as jnp
     import jax.scipy.linalg as jsl
 
     from difflab.fit import Setup, solve
 
-    setup = Setup(scene, [target], "red", init=start, x64=x64)
-    first = time.perf_counter()
-    result = solve(setup, history=False, progress=False)
-    first = time.perf_counter() - first
+    @jax.jit
+    def plain(problem, x):
+        r = problem.residuals(x)
+        jac = jax.jacfwd(problem.residuals)(x)
+        a = jac.T @ jac + 1e-3 * jnp.diag(jnp.diagonal(jac.T @ jac))
+        return x + jsl.cho_solve(jsl.cho_factor(a), -jac.T @ r)
 
-    def timed(steps):
+    runs = {}
+    for x64 in (True, False):
+        setup = Setup(scene, [target], "red", init=start, x64=x64)
+        first = time.perf_counter()
+        result = solve(setup, history=False, progress=False)
+        runs[x64] = {"setup": setup, "result": result, "first": time.perf_counter() - first, "short": [],
+                     "long": [], "base": [], "solves": []}
+
+    def timed(setup, steps):
         out = solve(setup, max_steps=steps, rtol=0.0, atol=0.0, history=False, progress=False)
         return out.seconds, out.steps
 
-    with jax.enable_x64(x64):
-        problem, x0 = setup.problem, jnp.asarray(setup.x0, setup.dtype)
+    def plain_time(setup):
+        with jax.enable_x64(setup.x64):
+            x0 = jnp.asarray(setup.x0, setup.dtype)
+            return median_time(lambda: jax.block_until_ready(plain(setup.problem, x0)), 3)
 
-        @jax.jit
-        def plain(problem, x):
-            r = problem.residuals(x)
-            jac = jax.jacfwd(problem.residuals)(x)
-            a = jac.T @ jac + 1e-3 * jnp.diag(jnp.diagonal(jac.T @ jac))
-            return x + jsl.cho_solve(jsl.cho_factor(a), -jac.T @ r)
-
-        jax.block_until_ready(plain(problem, x0))
-        timed(3), timed(12)  # compile both lengths
-        short, long, base, solves = [], [], [], []
-        for _ in range(max(repeats, 5)):
-            short.append(timed(3))
-            long.append(timed(12))
-            base.append(median_time(lambda: jax.block_until_ready(plain(problem, x0)), 3))
-            solves.append(solve(setup, history=False, progress=False).seconds)
-    extra = long[0][1] - short[0][1]
-    step = (statistics.median(t for t, _ in long) - statistics.median(t for t, _ in short)) / max(extra, 1)
-    baseline = statistics.median(base)
-    err = rel_error(result.params, TRUTH)
-    return {"x64": x64, "result": result.result, "steps": result.steps, "first_call_s": first,
-            "solve_s": statistics.median(solves), "step_s": step, "plain_step_s": baseline,
-            "step_ratio": step / baseline, "max_rel_error": max(err.values()), "used_pixels": setup.used_pixels}
+    for run in runs.values():  # compile every length
+        timed(run["setup"], 3), timed(run["setup"], 12), plain_time(run["setup"])
+    for _ in range(max(repeats, 5)):
+        for run in runs.values():
+            run["short"].append(timed(run["setup"], 3))
+            run["long"].append(timed(run["setup"], 12))
+            run["base"].append(plain_time(run["setup"]))
+            run["solves"].append(solve(run["setup"], history=False, progress=False).seconds)
+    out = []
+    for x64, run in runs.items():
+        extra = run["long"][0][1] - run["short"][0][1]
+        step = (statistics.median(t for t, _ in run["long"]) - statistics.median(t for t, _ in run["short"])) / \
+            max(extra, 1)
+        baseline = statistics.median(run["base"])
+        err = rel_error(run["result"].params, TRUTH)
+        out.append({"x64": x64, "result": run["result"].result, "steps": run["result"].steps,
+                    "first_call_s": run["first"], "solve_s": statistics.median(run["solves"]), "step_s": step,
+                    "plain_step_s": baseline, "step_ratio": step / baseline, "max_rel_error": max(err.values()),
+                    "used_pixels": run["setup"].used_pixels})
+    return out
 
 
 def fresh_process(scene, target, cache_dir: str | None) -> dict:
@@ -295,7 +306,7 @@ def main(argv=None) -> int:
                       "batches; a fresh process; Mitsuba 3 on its own target", "seed": SEED, "size": size,
               "repeats": repeats, "versions": versions()}
     if "steps" in sections:
-        report["per_step"] = [per_step(scene, target, start, x64, repeats) for x64 in (True, False)]
+        report["per_step"] = per_step(scene, target, start, repeats)
         fit_material(scene, [target], "red", init=start, history=False, progress=False)
         report["warm_fit_material_s"] = median_time(
             lambda: fit_material(scene, [target], "red", init=start, history=False, progress=False), repeats)
