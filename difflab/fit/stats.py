@@ -60,7 +60,7 @@ def estimate_sigma(images, used_maps, *, interior=True) -> float | None:
             continue
         top, left = max(rows[0] - 1, 0), max(cols[0] - 1, 0)  # the box, one pixel wider (non-interior case)
         box = (slice(top, min(rows[-1] + 2, used.shape[0])), slice(left, min(cols[-1] + 2, used.shape[1])))
-        used, image = used[box], np.asarray(image, np.float64)[box]
+        used, image = used[box], np.asarray(image)[box]  # in its own precision (float32 residual images)
         if used.shape[0] < 3 or used.shape[1] < 3:
             continue
         centre = used[1:-1, 1:-1]
