@@ -111,9 +111,9 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
     Returns the clipped screen triangles (a `ScreenW`: a slot per face, and one more per face clipped
     to a quad) and the visibility key per sample (NO_HIT, or depth << 32 | slot of the nearest
     triangle). Vertices and faces are transformed in parts on all cores; assembling counts the slots
-    meeting each band of rows, `bin_kernel` lists them, and each band rasterizes only its list, then
-    calls `then(tris, key, begin, end)` when given: the band's keys are final there, and its rows
-    need no other band's."""
+    meeting each band of rows, `bin_kernel` lists them (with a single band, every slot is its), and
+    each band rasterizes only its list, then calls `then(tris, key, begin, end)` when given: the
+    band's keys are final there, and its rows need no other band's."""
     device, arrays = compiled.device, compiled.arrays
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     width, height = cam.width, cam.height
