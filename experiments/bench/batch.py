@@ -1,27 +1,34 @@
 """Batch throughput: fits per minute at 1, 2, 4, 8 jobs in flight, locally and on a Dask LocalCluster.
 
 A manifest of J small fits (a sphere's ka, kd, ks, n from one SxS target each, every target with its
-own kd) runs through `difflab.fit_many` on local worker processes and on a `distributed.LocalCluster`
-of as many single-threaded worker processes, the two back to back at each number in flight, R times
-over (medians reported: the machine may be shared, and the load average is printed beside them). For
-each it reports the wall time of the whole batch (worker start-up and first compilation included) and
-the steady rate (fits finished after the first one, over the time from the first result to the
-last), beside one warm fit: the median time of a fit inside the lone worker of the 1-in-flight local
-runs (each worker's first, compiling, job left out), and, for reference, the same job function timed
-in this process. From those:
+own kd; 200 by default, the issue's batch) runs through `difflab.fit_many` on local worker processes
+and on a `distributed.LocalCluster` of as many single-threaded worker processes, the two back to back
+at each number in flight, R times over (medians reported: the machine may be shared, and the load
+average is printed beside them). For each it reports the wall time of the whole batch (worker
+start-up and first compilation included) and the steady rate (fits finished after the first one,
+over the time from the first result to the last), beside one warm fit: the median time of a fit
+inside the lone worker of the 1-in-flight local runs (each worker's first, compiling, job left out),
+and, for reference, the same job function timed in this process. From those:
 
     ideal rate        = cores / warm fit time                  (fits/s: every core busy with warm fits)
     per-job overhead  = in-flight / steady rate - warm fit time  (s: what a job costs beyond its fit)
     dask / local      = steady rates at the same number in flight, and best against best
+    cpu ms/fit        = CPU time of all the run's processes (client, scheduler, workers) per fit, over
+                        the steady part; cpu vs local = local's over Dask's: the rate ratio to expect
+                        where the batch has the cores to itself (on a shared machine the rates follow
+                        the load, the CPU times much less)
     core-seconds/job  = min(in-flight, cores) / steady rate    (the cluster's best run)
     projection(N)     = N x cores / core-seconds per job      -- a projection from the measured cost,
                         not a measurement: machines like this one, the scheduler's own limit (about
                         1 ms per task, 60,000 tasks/min; a task holds several fits, see
-                        difflab.batch.runners.task_size) and the shared filesystem left out.
+                        difflab.batch.runners.task_size) and the shared filesystem left out
+    client cap        = 1 / CPU time of this process per fit  (fits/s: the one client receives and
+                        writes every result, whatever the cluster; a LocalCluster's scheduler and
+                        nannies run in it too, so this cap is low)
 
 Writes experiments/results/bench_batch.json and prints a table.
 
-    python experiments/bench/batch.py              # 64 fits of 24x24, 1/2/4/8 in flight, 3 repeats
+    python experiments/bench/batch.py              # 200 fits of 24x24, 1/2/4/8 in flight, 3 repeats
     python experiments/bench/batch.py --small      # 24 fits of 16x16, 1/2/4 in flight, 3 repeats
 """
 
@@ -92,7 +99,8 @@ class TreeCpu:
     """CPU seconds of this process and all its descendants (pool workers; Dask nannies and workers),
     sampled every `interval` s on a thread while a batch runs (the process list refreshed each
     `refresh` s). `between(t0, t1)`: the CPU spent from the first sample at or after t0 to the last
-    at or before t1, and that span. Needs psutil (a dependency of distributed); None without it."""
+    at or before t1 (all processes, and this one alone: the client, with a LocalCluster's scheduler),
+    and that span. Needs psutil (a dependency of distributed)."""
 
     def __init__(self, interval: float = 0.05, refresh: float = 0.5):
         import psutil
@@ -115,7 +123,8 @@ class TreeCpu:
                     total += times.user + times.system + times.children_user + times.children_system
                 except self.psutil.Error:
                     pass
-            self.samples.append((now, total))
+            own = me.cpu_times()
+            self.samples.append((now, total, own.user + own.system))
 
     def close(self) -> None:
         self.stop.set()
@@ -123,7 +132,9 @@ class TreeCpu:
 
     def between(self, t0: float, t1: float):
         inside = [s for s in self.samples if t0 <= s[0] <= t1]
-        return (inside[-1][1] - inside[0][1], inside[0][0], inside[-1][0]) if len(inside) >= 2 else None
+        if len(inside) < 2:
+            return None
+        return inside[-1][1] - inside[0][1], inside[-1][2] - inside[0][2], inside[0][0], inside[-1][0]
 
 
 def run_batch(manifest: Path, out: Path, in_flight: int, **where) -> dict:
@@ -148,10 +159,10 @@ def run_batch(manifest: Path, out: Path, in_flight: int, **where) -> dict:
     steady = (len(finished) - 1) / (finished[-1] - finished[0])
     fits = sorted(json.loads(p.read_text())["seconds"] for p in (out / "timing").glob("*.json"))[:-in_flight]
     span = cpu.between(finished[0], finished[-1]) if cpu is not None else None
-    done = sum(span[1] < t <= span[2] for t in finished) if span else 0
+    done = sum(span[2] < t <= span[3] for t in finished) if span else 0
     return {"in_flight": in_flight, "wall_s": wall, "jobs_per_min": 60 * len(finished) / wall,
             "steady_jobs_per_min": 60 * steady, "fit_in_worker_median_s": statistics.median(fits),
-            "cpu_per_job_s": span[0] / done if done else None,
+            "cpu_per_job_s": span[0] / done if done else None, "client_cpu_per_job_s": span[1] / done if done else None,
             "converged": summary.counts["converged"], "jobs": summary.ran}
 
 
@@ -166,7 +177,8 @@ def dask_batch(manifest: Path, out: Path, in_flight: int) -> dict:
 
 def medians(runs: list[dict]) -> dict:
     """One row of the runs of a (backend, in flight): the median of each measured figure."""
-    keys = ("wall_s", "jobs_per_min", "steady_jobs_per_min", "fit_in_worker_median_s", "cpu_per_job_s")
+    keys = ("wall_s", "jobs_per_min", "steady_jobs_per_min", "fit_in_worker_median_s", "cpu_per_job_s",
+            "client_cpu_per_job_s")
     return {**runs[0], **{k: statistics.median(r[k] for r in runs) if None not in (r[k] for r in runs) else None
                           for k in keys},
             "steady_jobs_per_min_runs": [r["steady_jobs_per_min"] for r in runs],
@@ -183,7 +195,7 @@ def main(argv=None) -> int:
     parser.add_argument("--no-cluster", action="store_true", help="skip the Dask LocalCluster runs")
     parser.add_argument("--out", type=Path, default=RESULTS / "bench_batch.json")
     args = parser.parse_args(argv)
-    jobs = args.jobs or (24 if args.small else 64)
+    jobs = args.jobs or (24 if args.small else 200)
     size = args.size or (16 if args.small else 24)
     in_flight = [int(x) for x in (args.in_flight or ("1,2,4" if args.small else "1,2,4,8")).split(",")]
     backends = ("local",) if args.no_cluster else ("local", "dask")
@@ -225,6 +237,8 @@ def main(argv=None) -> int:
     core_seconds = (min(best["dask"]["in_flight"], cores) * 60 / best["dask"]["steady_jobs_per_min"]
                     if "dask" in best else None)
     projection = ({str(m): 60 * m * cores / core_seconds for m in (1, 2, 4, 8, 16, 32)} if core_seconds else {})
+    client_cpu = best["dask"]["client_cpu_per_job_s"] if "dask" in best else None
+    client_cap = 60 / client_cpu if client_cpu else None  # fits/min one client can receive and write
 
     print(f"batch of {jobs} fits ({size}x{size}, ka/kd/ks/n), {cores} cores, medians of {args.repeats} runs; "
           f"load average {load_before[0]:.1f} before, {load_after[0]:.1f} after")
@@ -242,6 +256,9 @@ def main(argv=None) -> int:
     if projection:
         print("projection (not measured) for N machines of " + f"{cores} cores: "
               + ", ".join(f"N={m}: {rate:.0f}/min" for m, rate in projection.items()))
+    if client_cap:
+        print(f"but one client, which receives and writes every result, spent {client_cpu * 1e3:.1f} ms of CPU a fit "
+              f"(the LocalCluster's scheduler in its process): at most ~{client_cap:.0f} fits/min whatever the cluster")
     import dask
     import jax
     import warp
@@ -255,6 +272,7 @@ def main(argv=None) -> int:
         "projection_fits_per_min_by_machines": projection,
         "core_seconds_per_job": core_seconds,
         "projection_note": "N x cores / core-seconds per job of the best Dask run; not measured",
+        "client_cpu_per_job_s": client_cpu, "client_cap_fits_per_min": client_cap,
         "versions": {"python": platform.python_version(), "jax": jax.__version__, "warp": warp.__version__,
                      "dask": dask.__version__}})
     print(f"wrote {args.out}")
