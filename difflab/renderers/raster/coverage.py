@@ -54,8 +54,9 @@ def depth_gradient(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d):
     area = (s1[0] - s0[0]) * (s2[1] - s0[1]) - (s1[1] - s0[1]) * (s2[0] - s0[0])
     if area == wp.float64(0.0):
         return wp.float64(0.0), wp.float64(0.0)
-    dz_dx = -(s0[2] * (s2[1] - s1[1]) + s1[2] * (s0[1] - s2[1]) + s2[2] * (s1[1] - s0[1])) / area
-    dz_dy = (s0[2] * (s2[0] - s1[0]) + s1[2] * (s0[0] - s2[0]) + s2[2] * (s1[0] - s0[0])) / area
+    inv_area = wp.float64(1.0) / area  # one division per triangle
+    dz_dx = -(s0[2] * (s2[1] - s1[1]) + s1[2] * (s0[1] - s2[1]) + s2[2] * (s1[1] - s0[1])) * inv_area
+    dz_dy = (s0[2] * (s2[0] - s1[0]) + s1[2] * (s0[0] - s2[0]) + s2[2] * (s1[0] - s0[0])) * inv_area
     return dz_dx, dz_dy
 
 
