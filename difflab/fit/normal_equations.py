@@ -98,9 +98,12 @@ def by_parts(problem, x):
         w = jnp.stack([column[k] for k in slots] + [r], axis=-1).reshape(r.shape[0], 3 * (q + 1))  # channel-major
         channel = np.arange(3)
         for material, cols in columns.items():
+            if material not in model.material_ids:
+                continue
             # this material's rows, every product of two columns summed over the pixels in one product
             # (the cross-channel ones are not used); per channel the q x q block and J^T r
-            products = (jnp.where((model.material == material)[:, None], w, 0.0).T @ w).reshape(3, q + 1, 3, q + 1)
+            mine = w if model.material_ids == (material,) else jnp.where((model.material == material)[:, None], w, 0.0)
+            products = (mine.T @ w).reshape(3, q + 1, 3, q + 1)
             blocks = products[channel, :, channel, :]  # (3, q + 1, q + 1)
             gram = gram.at[cols[:, :, None], cols[:, None, :]].add(blocks[:, :q, :q])
             grad = grad.at[cols].add(blocks[:, :q, q])

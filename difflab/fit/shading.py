@@ -213,9 +213,9 @@ class GBufferModel(eqx.Module):
     `LightGeometry` under the lights it was built for, the composition and the formation
     (`pixel_arrays`), and -- when texels are fitted -- each point's taps into the table's stacked
     texels (rows (R, K), -1: none; tap_weight (R, K); targets: the TARGET_* ids those textures
-    modulate; see `texels.py`). `pixels` is the (U, 3) image
-    for given materials, light intensities (the lights' other fields are those it was built with)
-    and ambient."""
+    modulate; see `texels.py`); material_ids: the distinct material ids among its points (static).
+    `pixels` is the (U, 3) image for given materials, light intensities (the lights' other fields
+    are those it was built with) and ambient."""
 
     material: jnp.ndarray
     cell: jnp.ndarray
@@ -225,6 +225,7 @@ class GBufferModel(eqx.Module):
     taps: jnp.ndarray | None = None
     tap_weight: jnp.ndarray | None = None
     targets: tuple | None = eqx.field(static=True, default=None)
+    material_ids: tuple = eqx.field(static=True, default=())
 
     @classmethod
     def build(cls, gbuffer, pixels, lights: LightsJ, dtype, texels=None) -> GBufferModel:
@@ -237,8 +238,10 @@ class GBufferModel(eqx.Module):
             if point_ids.size == 0:  # the dummy point of `pixel_arrays`
                 rows, weight = np.full((1, 4), -1, np.int32), np.zeros((1, 4))
             taps, tap_weight = jnp.asarray(rows), jnp.asarray(np.asarray(weight, np.float64), dtype)
+        ids = tuple(int(m) for m in np.unique(gbuffer.points.material[point_ids])) if point_ids.size else (-1,)
         return cls(material=points.material, cell=points.cell, geometry=geometry, comp=comp, formation=formation,
-                   taps=taps, tap_weight=tap_weight, targets=None if texels is None else texels.targets)
+                   taps=taps, tap_weight=tap_weight, targets=None if texels is None else texels.targets,
+                   material_ids=ids)
 
     def pixels(self, table: MaterialTable, lights: LightsJ, ambient):
         texel = None if self.taps is None else point_texels(table.texels, self.taps, self.tap_weight)
