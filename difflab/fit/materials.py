@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -36,12 +37,13 @@ class MaterialTable(NamedTuple):
 
     @classmethod
     def from_scene(cls, materials, dtype=jnp.float32) -> MaterialTable:
-        """From scene `Material`s in material-id order."""
+        """From scene `Material`s in material-id order (moved to the device in one transfer)."""
         materials = list(materials)
+        real = np.dtype(dtype)
 
         def stack(get, shape):
             values = np.asarray([get(mat) for mat in materials], np.float64).reshape((len(materials),) + shape)
-            return jnp.asarray(values, dtype=dtype)
+            return values.astype(real)
 
         def field(name, shape):
             return stack(lambda mat: getattr(mat, name), shape)
@@ -51,7 +53,7 @@ class MaterialTable(NamedTuple):
                          (3,))
 
         targets = [TEXTURE_TARGET_IDS[m.texture_target] if m.texture is not None else -1 for m in materials]
-        return cls(ka=field("ka", (3,)), kd=field("kd", (3,)), ks=field("ks", (3,)), n=field("n", ()),
-                   m=field("m", ()), f0=field("f0", ()), ka2=second("ka2"), kd2=second("kd2"), kr=field("kr", ()),
-                   kt=field("kt", ()), absorption=field("absorption", (3,)),
-                   texture_target=jnp.asarray(targets, jnp.int32).reshape(-1))
+        return jax.device_put(cls(
+            ka=field("ka", (3,)), kd=field("kd", (3,)), ks=field("ks", (3,)), n=field("n", ()), m=field("m", ()),
+            f0=field("f0", ()), ka2=second("ka2"), kd2=second("kd2"), kr=field("kr", ()), kt=field("kt", ()),
+            absorption=field("absorption", (3,)), texture_target=np.asarray(targets, np.int32).reshape(-1)))
