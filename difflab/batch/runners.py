@@ -1,8 +1,9 @@
 """Where a batch's fits run: worker processes on this machine, or a Dask cluster.
 
-Both are generators of (job, outcome) in the order the fits finish, outcomes as `worker.run_job`
-returns them; the caller writes them (`store.Store.record`). Closing a generator early (Ctrl-C, an
-error in the caller) stops its workers / cancels its tasks, so nothing runs on behind the caller.
+Both are generators of (job, outcome) in the order the fits finish (a cluster task's fits together),
+outcomes as `worker.run_job` returns them; the caller writes them (`store.Store.record`). Closing a
+generator early (Ctrl-C, an error in the caller) stops its workers / cancels its tasks, so nothing
+runs on behind the caller.
 """
 
 from __future__ import annotations
