@@ -78,10 +78,11 @@ def median_time(fn, repeats: int) -> float:
 
 def per_step(scene, target, start, repeats: int) -> list[dict]:
     """The engine's LM against a plain JAX Jacobian + Cholesky step on the same problem, in float64
-    and float32. The per-step cost is marginal -- (t(long solve) - t(short solve)) / (its extra
-    steps), tolerances 0 so that the solve keeps stepping -- so the fixed cost of a call does not
-    count; every timing is interleaved (short, long, plain step, whole solve; float64, float32) so
-    that a busy machine slows all alike."""
+    and float32. The per-step cost is marginal -- (t(long solve) - t(1-step solve)) / (its extra
+    steps), tolerances 0 so that the solve keeps stepping until a step changes nothing (float32
+    gets there after ~7 steps, float64 runs all 12) -- so the fixed cost of a call does not count;
+    every timing is interleaved (short, long, plain step, whole solve; float64, float32) so that a
+    busy machine slows all alike."""
     import jax
     import jax.numpy as jnp
     import jax.scipy.linalg as jsl
@@ -113,10 +114,10 @@ def per_step(scene, target, start, repeats: int) -> list[dict]:
             return median_time(lambda: jax.block_until_ready(plain(setup.problem, x0)), 3)
 
     for run in runs.values():  # compile every length
-        timed(run["setup"], 3), timed(run["setup"], 12), plain_time(run["setup"])
-    for _ in range(max(repeats, 5)):
+        timed(run["setup"], 1), timed(run["setup"], 12), plain_time(run["setup"])
+    for _ in range(max(repeats, 7)):
         for run in runs.values():
-            run["short"].append(timed(run["setup"], 3))
+            run["short"].append(timed(run["setup"], 1))
             run["long"].append(timed(run["setup"], 12))
             run["base"].append(plain_time(run["setup"]))
             run["solves"].append(solve(run["setup"], history=False, progress=False).seconds)
@@ -129,7 +130,8 @@ def per_step(scene, target, start, repeats: int) -> list[dict]:
         err = rel_error(run["result"].params, TRUTH)
         out.append({"x64": x64, "result": run["result"].result, "steps": run["result"].steps,
                     "first_call_s": run["first"], "solve_s": statistics.median(run["solves"]), "step_s": step,
-                    "plain_step_s": baseline, "step_ratio": step / baseline, "max_rel_error": max(err.values()),
+                    "extra_steps": extra, "plain_step_s": baseline, "step_ratio": step / baseline,
+                    "max_rel_error": max(err.values()),
                     "used_pixels": run["setup"].used_pixels})
     return out
 
