@@ -18,6 +18,7 @@ linearisation, up to `cg_steps` pairs of J v / J^T v, and one residual evaluatio
 
 from __future__ import annotations
 
+from functools import partial
 from typing import NamedTuple
 
 import equinox as eqx
@@ -27,6 +28,7 @@ import numpy as np
 
 from ..errors import FitError
 from .lm import LAMBDA0, MAX_STEPS, NONFINITE, RUNNING, SUCCESSFUL
+from .texels import smoothness_residuals
 
 DENSE_SOLVERS = ("bfgs", "varpro")  # keep p x p matrices (BFGS's inverse Hessian) or dense Jacobians
 
@@ -57,15 +59,18 @@ class State(NamedTuple):
     history: jnp.ndarray
 
 
-def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_steps: int, exact=(), progress=None):
+def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_steps: int, exact=(), linearise=None,
+              progress=None):
     """Minimise 0.5 |fn(x, args)|^2 over lower <= x <= upper without forming the Jacobian.
 
     Arguments and returns as `lm.box_lm`, without r and J: (x, code index into `lm.CODES`, steps,
     history); cg_steps: the most CG iterations per step (until the CG residual is below
     atol + rtol |J^T r|); exact: indices of the few entries (not texels) whose
-    Jacobian columns are formed each step, to scale them (Jacobi) -- the rest share s."""
+    Jacobian columns are formed each step, to scale them (Jacobi) -- the rest share s; linearise:
+    (x, args) -> (r, J v, J^T u, the exact entries' columns (E, N)) at x (default `linearisation`)."""
     dtype = x0.dtype
     exact = np.asarray(exact, np.int64)
+    linearise = linearise or partial(linearisation, fn, exact)
     x0 = jnp.clip(x0, lower, upper)
     r0 = fn(x0, args)
     loss0 = 0.5 * jnp.sum(r0 * r0)
@@ -74,9 +79,8 @@ def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_step
                   jnp.full(max_steps, jnp.nan, dtype))
 
     def body(s: State) -> State:
-        r, jvp = jax.linearize(lambda y: fn(y, args), s.x)
-        vjp = jax.linear_transpose(jvp, s.x)
-        g = vjp(r)[0]
+        r, jvp, vjp, columns = linearise(s.x, args)
+        g = vjp(r)
         free = ~(((s.x <= lower) & (g > 0)) | ((s.x >= upper) & (g < 0)))
         g_free = jnp.where(free, g, 0.0)
         jg = jvp(g_free)
@@ -84,13 +88,12 @@ def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_step
         scale = jnp.where(s.scale > 0, s.scale, jnp.where(gg > 0, jnp.sum(jg * jg) / jnp.where(gg > 0, gg, 1.0), 1.0))
         diag = jnp.full_like(s.x, scale)
         if exact.size:  # the few entries beside the texels: their exact columns' squared norms
-            columns = jax.vmap(jvp)(jnp.eye(s.x.shape[0], dtype=dtype)[exact])
             diag = diag.at[exact].set(jnp.maximum(jnp.sum(columns * columns, axis=1), 1e-12 * scale))
         damping = s.lam * diag
 
         def normal(v):
             v_free = jnp.where(free, v, 0.0)
-            return jnp.where(free, vjp(jvp(v_free))[0] + damping * v_free, v)
+            return jnp.where(free, vjp(jvp(v_free)) + damping * v_free, v)
 
         def jacobi(v):
             return jnp.where(free, v / (diag + damping), v)
@@ -125,9 +128,81 @@ def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_step
     return out.x, out.code, out.step, out.history
 
 
+def linearisation(fn, exact, x, args):
+    """r, J v, J^T u and the `exact` entries' Jacobian columns (E, N) of fn(., args) at x, from one
+    `jax.linearize` (each product runs the linearised model)."""
+    r, jvp = jax.linearize(lambda y: fn(y, args), x)
+    transpose = jax.linear_transpose(jvp, x)
+    columns = jax.vmap(jvp)(jnp.eye(x.shape[0], dtype=x.dtype)[exact]) if exact.size else None
+    return r, jvp, lambda u: transpose(u)[0], columns
+
+
+def texel_linearisation(x, problem):
+    """`linearisation` of a `Problem` with fitted texels, in the image's affine form in the texels.
+
+    The texels reach the residuals only through each view's point texture values P (the filter's
+    taps, `texels.point_texels`) and the smoothness prior S, so with E the other entries (ks, n, ...)
+
+        J v = dr/dP (taps v_T) + S v_T + J_E v_E.
+
+    dr/dP comes from one linearisation in P (x fixed; the shading's partials stored once per step);
+    when every view is `direct` (pixel i is point i) it is diagonal -- a point's channel is affine
+    in its own texel value -- and is kept as one gain per residual, dr/dP(1), so a product is the
+    texture lookups times a gain (and their transpose, a scatter-add of the taps). J_E's few columns
+    are formed once per step. Same J as `linearisation`, without running the shading per product."""
+    layout = problem.layout
+    texel = np.concatenate([np.full(p.size, p.shape is not None) for p in layout])
+    tex, exact = np.flatnonzero(texel), np.flatnonzero(~texel)
+    points = problem.point_texels(layout.values(x))
+    r, through = jax.linearize(lambda t: problem.residuals(x, t), points)
+
+    def texel_terms(xt):
+        values = layout.values(x.at[tex].set(xt))
+        return problem.point_texels(values), smoothness_residuals(layout, values, problem.smoothness)
+
+    (_, smooth), taps = jax.linearize(texel_terms, x[tex])
+    taps_t = jax.linear_transpose(taps, x[tex])
+    n_data = r.shape[0] - smooth.shape[0]
+    if all(getattr(getattr(view.model, "formation", None), "direct", False) for view in problem.views):
+        gain = through(tuple(jnp.ones_like(t) for t in points))[:n_data]
+        ends = np.cumsum([t.size for t in points])[:-1]
+
+        def data_jvp(dp):
+            return gain * jnp.concatenate([t.reshape(-1) for t in dp])
+
+        def data_vjp(u):
+            return tuple(part.reshape(t.shape) for part, t in zip(jnp.split(gain * u, ends), points))
+    else:
+        through_t = jax.linear_transpose(through, points)
+
+        def data_jvp(dp):
+            return through(dp)[:n_data]
+
+        def data_vjp(u):
+            return through_t(jnp.concatenate([u, jnp.zeros_like(smooth)]))[0]
+
+    columns = None
+    if exact.size:
+        _, direct = jax.linearize(lambda xe: problem.residuals(x.at[exact].set(xe), points), x[exact])
+        columns = jax.vmap(direct)(jnp.eye(exact.size, dtype=x.dtype))
+
+    def jvp(v):
+        dp, ds = taps(v[tex])
+        out = jnp.concatenate([data_jvp(dp), ds])
+        return out if columns is None else out + columns.T @ v[exact]
+
+    def vjp(u):
+        out = jnp.zeros_like(x).at[tex].set(taps_t((data_vjp(u[:n_data]), u[n_data:]))[0])
+        return out if columns is None else out.at[exact].set(columns @ u)
+
+    return r, jvp, vjp, columns
+
+
 @eqx.filter_jit
 def solve_box_cg(problem, x0, lower, upper, max_steps, rtol, atol, cg_steps, progress=None):
     """`box_lm_cg` on a `Problem`'s residuals, compiled once per problem structure and settings."""
     exact = np.flatnonzero(np.concatenate([np.full(p.size, p.shape is None) for p in problem.layout]))
+    texels = any(p.shape is not None for p in problem.layout)
     return box_lm_cg(lambda x, p: p.residuals(x), x0, lower, upper, problem, max_steps=max_steps, rtol=rtol, atol=atol,
-                     cg_steps=cg_steps, exact=exact, progress=progress)
+                     cg_steps=cg_steps, exact=exact, linearise=texel_linearisation if texels else None,
+                     progress=progress)

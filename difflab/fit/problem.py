@@ -97,25 +97,32 @@ class Problem(eqx.Module):
         texels = stacked_texels(self.layout, values)
         return table if texels is None else table._replace(texels=texels)
 
-    def images(self, values) -> tuple:
-        """The model's pixels (U, 3) of each view for flat values in scene units."""
+    def point_texels(self, values) -> tuple:
+        """Each view's points' texture values (R, 3) for flat values (fitted texels only)."""
+        texels = stacked_texels(self.layout, values)
+        return tuple(view.model.point_texels(texels) for view in self.views)
+
+    def images(self, values, texels=None) -> tuple:
+        """The model's pixels (U, 3) of each view for flat values in scene units; `texels`: each
+        view's points' texture values (default: `point_texels(values)`)."""
         table = self.materials(values)
         out = []
-        for view in self.views:
+        for i, view in enumerate(self.views):
             lights = view.lights._replace(intensity=_put(view.intensity_index, values, view.lights.intensity))
-            out.append(view.model.pixels(table, lights, self.ambient))
+            out.append(view.model.pixels(table, lights, self.ambient, *(() if texels is None else (texels[i],))))
         return tuple(out)
 
-    def weighted(self, values):
+    def weighted(self, values, texels=None):
         """sqrt(w) (min(model, ceiling) - target) of every view, flattened (N,): the plain residuals
         in image units (no robust loss)."""
         return jnp.concatenate([(view.sqrt_weight * (jnp.minimum(image, view.ceiling) - view.target)).reshape(-1)
-                                for view, image in zip(self.views, self.images(values))])
+                                for view, image in zip(self.views, self.images(values, texels))])
 
-    def residuals(self, x):
-        """What the least-squares solvers see, for solver coordinates x (`Layout.values`)."""
+    def residuals(self, x, texels=None):
+        """What the least-squares solvers see, for solver coordinates x (`Layout.values`); `texels`
+        as `images` (the texels' entries of x then reach only the smoothness prior)."""
         values = self.layout.values(x)
-        data = robust(self.loss, self.weighted(values), self.loss_scale)
+        data = robust(self.loss, self.weighted(values, texels), self.loss_scale)
         return jnp.concatenate([data, smoothness_residuals(self.layout, values, self.smoothness)])
 
     def with_targets(self, targets) -> Problem:

@@ -243,8 +243,14 @@ class GBufferModel(eqx.Module):
                    taps=taps, tap_weight=tap_weight, targets=None if texels is None else texels.targets,
                    material_ids=ids)
 
-    def pixels(self, table: MaterialTable, lights: LightsJ, ambient):
-        texel = None if self.taps is None else point_texels(table.texels, self.taps, self.tap_weight)
+    def point_texels(self, texels):
+        """(R, 3) each point's texture value from the stacked `texels` (its filter taps)."""
+        return point_texels(texels, self.taps, self.tap_weight)
+
+    def pixels(self, table: MaterialTable, lights: LightsJ, ambient, texel=None):
+        """`texel` (R, 3): the points' texture values (default: `point_texels(table.texels)`)."""
+        if texel is None and self.taps is not None:
+            texel = self.point_texels(table.texels)
         colors = point_colors(self.material, self.cell, self.geometry, table, lights.intensity, ambient,
                               self.formation.specular, texel, self.targets)
         return colors if self.formation.direct else compose(colors, self.comp, self.formation)
