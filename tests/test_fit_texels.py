@@ -10,6 +10,7 @@ from test_texture_fit import quad_scene
 
 from difflab import FitError, Scene, render, render_frame
 from difflab.fit import FitOptions, Setup, fit_batch, fit_material, identify, solve
+from difflab.fit.matfree import linearisation, texel_linearisation
 from difflab.fit.texture_fit import fit_texture, texture_view
 
 SHAPE = (12, 12)  # 432 unknowns: above DENSE_MAX, so "auto" is matrix-free
@@ -153,3 +154,30 @@ def test_a_batch_of_texture_targets_loops_over_one_matrix_free_solve(known, tmp_
     assert [r.result for r in results] == ["successful", "successful"]
     assert np.abs(results[0].texture - texels).max() < 1e-5
     assert np.abs(results[1].texture - other).max() < 1e-5
+
+
+@pytest.mark.parametrize("params, kwargs", [
+    (("texture",), {"smoothness": 0.3, "loss": "huber"}),  # one gain per residual (pixel i = point i)
+    (("texture", "ks", "n"), {"init": {"texture": 0.5, "ks": [0.2, 0.25, 0.3], "n": 12.0}}),  # + formed columns
+    (("texture", "n"), {"spp": 4}),  # pixels composed from 4 samples: the linearised composition
+])
+def test_the_affine_texel_products_equal_autodiff(known, params, kwargs):
+    """The solver's texel-fit Jacobian products (taps times the shading's partials, `texel_linearisation`)
+    equal jax.linearize's of the whole residual function, in float64."""
+    _, scene, target = known
+    kwargs = {"init": {"texture": 0.5}, **kwargs}
+    setup = Setup(scene, target, "m", params, **kwargs)
+    problem = setup.problem
+    rng = np.random.default_rng(5)
+    with jax.enable_x64(True):
+        x = jax.numpy.asarray(setup.x0 + rng.uniform(-0.05, 0.05, setup.x0.shape))
+        exact = np.flatnonzero(np.concatenate([np.full(p.size, p.shape is None) for p in problem.layout]))
+        r, jvp, vjp, columns = linearisation(lambda y, p: p.residuals(y), exact, x, problem)
+        fast = texel_linearisation(x, problem)
+        v, u = rng.normal(size=x.shape), rng.normal(size=r.shape)
+        assert r.dtype == np.float64 and np.abs(fast[0] - r).max() <= 1e-14 * np.abs(r).max()
+        for ours, theirs in [(fast[1](v), jvp(v)), (fast[2](u), vjp(u))]:
+            assert np.abs(ours - theirs).max() <= 1e-12 * np.abs(theirs).max()
+        assert (columns is None) == (fast[3] is None) == (exact.size == 0)
+        if columns is not None:
+            assert np.abs(fast[3] - columns).max() <= 1e-12 * np.abs(columns).max()

@@ -154,7 +154,6 @@ def texel_linearisation(x, problem):
     texel = np.concatenate([np.full(p.size, p.shape is not None) for p in layout])
     tex, exact = np.flatnonzero(texel), np.flatnonzero(~texel)
     points = problem.point_texels(layout.values(x))
-    r, through = jax.linearize(lambda t: problem.residuals(x, t), points)
 
     def texel_terms(xt):
         values = layout.values(x.at[tex].set(xt))
@@ -162,9 +161,9 @@ def texel_linearisation(x, problem):
 
     (_, smooth), taps = jax.linearize(texel_terms, x[tex])
     taps_t = jax.linear_transpose(taps, x[tex])
-    n_data = r.shape[0] - smooth.shape[0]
     if all(getattr(getattr(view.model, "formation", None), "direct", False) for view in problem.views):
-        gain = through(tuple(jnp.ones_like(t) for t in points))[:n_data]
+        r, gain = jax.jvp(lambda t: problem.residuals(x, t), (points,), (tuple(jnp.ones_like(t) for t in points),))
+        gain = gain[:r.shape[0] - smooth.shape[0]]
         ends = np.cumsum([t.size for t in points])[:-1]
 
         def data_jvp(dp):
@@ -173,6 +172,7 @@ def texel_linearisation(x, problem):
         def data_vjp(u):
             return tuple(part.reshape(t.shape) for part, t in zip(jnp.split(gain * u, ends), points))
     else:
+        r, through = jax.linearize(lambda t: problem.residuals(x, t), points)
         through_t = jax.linear_transpose(through, points)
 
         def data_jvp(dp):
@@ -181,6 +181,7 @@ def texel_linearisation(x, problem):
         def data_vjp(u):
             return through_t(jnp.concatenate([u, jnp.zeros_like(smooth)]))[0]
 
+    n_data = r.shape[0] - smooth.shape[0]
     columns = None
     if exact.size:
         _, direct = jax.linearize(lambda xe: problem.residuals(x.at[exact].set(xe), points), x[exact])
