@@ -10,7 +10,8 @@ from test_texture_fit import quad_scene
 
 from difflab import FitError, Scene, render, render_frame
 from difflab.fit import FitOptions, Setup, fit_batch, fit_material, identify, solve
-from difflab.fit.matfree import linearisation, texel_linearisation
+from difflab.fit.matfree import linearisation
+from difflab.fit.texels import texel_linearisation
 from difflab.fit.texture_fit import fit_texture, texture_view
 
 SHAPE = (12, 12)  # 432 unknowns: above DENSE_MAX, so "auto" is matrix-free

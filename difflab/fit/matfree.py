@@ -5,10 +5,12 @@ solved by conjugate gradients instead of a Cholesky factorisation of J^T J:
 
     (J_F^T J_F + lambda D) dx = -J_F^T r         over the free entries F (fixed ones: dx = 0)
 
-where J v and J^T v come from one `jax.linearize` per step (never the N x p matrix) and an entry is
-fixed when it sits on a bound and the gradient pushes it outward. D is diag(J^T J) for the few
-entries beside the texels (their columns formed each step: ks, n, ...) and s = |J g|^2 / |g|^2, the
-curvature along the first gradient, for the texels (whose columns are alike); CG is preconditioned
+where J v and J^T v come from one linearisation per step (never the N x p matrix; for texels the
+image's affine form, `texels.texel_linearisation`: per product the texture lookups times one gain
+per residual, not the shading model) and an entry is fixed when it sits on a bound and the gradient
+pushes it outward. D is diag(J^T J) for the few entries beside the texels (their columns formed
+each step: ks, n, ...) and s = |J g|^2 / |g|^2, the curvature along the first gradient, for the
+texels (whose columns are alike); CG is preconditioned
 by D + lambda D (Jacobi), so the texels and the scalars converge together. CG stops when its
 residual is below atol + rtol |J^T r| (as lineax's). The step is projected onto the box; lambda
 follows Nielsen's rule, and the stopping tests are `lm.py`'s. "gauss_newton" and "dogleg" use
@@ -28,7 +30,7 @@ import numpy as np
 
 from ..errors import FitError
 from .lm import LAMBDA0, MAX_STEPS, NONFINITE, RUNNING, SUCCESSFUL
-from .texels import smoothness_residuals
+from .texels import texel_linearisation
 
 DENSE_SOLVERS = ("bfgs", "varpro")  # keep p x p matrices (BFGS's inverse Hessian) or dense Jacobians
 
@@ -130,73 +132,11 @@ def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_step
 
 def linearisation(fn, exact, x, args):
     """r, J v, J^T u and the `exact` entries' Jacobian columns (E, N) of fn(., args) at x, from one
-    `jax.linearize` (each product runs the linearised model)."""
+    `jax.linearize` (each product runs the linearised model; texels: `texels.texel_linearisation`)."""
     r, jvp = jax.linearize(lambda y: fn(y, args), x)
     transpose = jax.linear_transpose(jvp, x)
     columns = jax.vmap(jvp)(jnp.eye(x.shape[0], dtype=x.dtype)[exact]) if exact.size else None
     return r, jvp, lambda u: transpose(u)[0], columns
-
-
-def texel_linearisation(x, problem):
-    """`linearisation` of a `Problem` with fitted texels, in the image's affine form in the texels.
-
-    The texels reach the residuals only through each view's point texture values P (the filter's
-    taps, `texels.point_texels`) and the smoothness prior S, so with E the other entries (ks, n, ...)
-
-        J v = dr/dP (taps v_T) + S v_T + J_E v_E.
-
-    dr/dP comes from one linearisation in P (x fixed; the shading's partials stored once per step);
-    when every view is `direct` (pixel i is point i) it is diagonal -- a point's channel is affine
-    in its own texel value -- and is kept as one gain per residual, dr/dP(1), so a product is the
-    texture lookups times a gain (and their transpose, a scatter-add of the taps). J_E's few columns
-    are formed once per step. Same J as `linearisation`, without running the shading per product."""
-    layout = problem.layout
-    texel = np.concatenate([np.full(p.size, p.shape is not None) for p in layout])
-    tex, exact = np.flatnonzero(texel), np.flatnonzero(~texel)
-    points = problem.point_texels(layout.values(x))
-
-    def texel_terms(xt):
-        values = layout.values(x.at[tex].set(xt))
-        return problem.point_texels(values), smoothness_residuals(layout, values, problem.smoothness)
-
-    (_, smooth), taps = jax.linearize(texel_terms, x[tex])
-    taps_t = jax.linear_transpose(taps, x[tex])
-    if all(getattr(getattr(view.model, "formation", None), "direct", False) for view in problem.views):
-        r, gain = jax.jvp(lambda t: problem.residuals(x, t), (points,), (tuple(jnp.ones_like(t) for t in points),))
-        gain = gain[:r.shape[0] - smooth.shape[0]]
-        ends = np.cumsum([t.size for t in points])[:-1]
-
-        def data_jvp(dp):
-            return gain * jnp.concatenate([t.reshape(-1) for t in dp])
-
-        def data_vjp(u):
-            return tuple(part.reshape(t.shape) for part, t in zip(jnp.split(gain * u, ends), points))
-    else:
-        r, through = jax.linearize(lambda t: problem.residuals(x, t), points)
-        through_t = jax.linear_transpose(through, points)
-
-        def data_jvp(dp):
-            return through(dp)[:n_data]
-
-        def data_vjp(u):
-            return through_t(jnp.concatenate([u, jnp.zeros_like(smooth)]))[0]
-
-    n_data = r.shape[0] - smooth.shape[0]
-    columns = None
-    if exact.size:
-        _, direct = jax.linearize(lambda xe: problem.residuals(x.at[exact].set(xe), points), x[exact])
-        columns = jax.vmap(direct)(jnp.eye(exact.size, dtype=x.dtype))
-
-    def jvp(v):
-        dp, ds = taps(v[tex])
-        out = jnp.concatenate([data_jvp(dp), ds])
-        return out if columns is None else out + columns.T @ v[exact]
-
-    def vjp(u):
-        out = jnp.zeros_like(x).at[tex].set(taps_t((data_vjp(u[:n_data]), u[n_data:]))[0])
-        return out if columns is None else out.at[exact].set(columns @ u)
-
-    return r, jvp, vjp, columns
 
 
 @eqx.filter_jit

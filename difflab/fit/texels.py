@@ -16,6 +16,7 @@ neighbouring texels to the residuals (`smoothness_residuals`), which also fills 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import equinox as eqx
@@ -189,10 +190,73 @@ def smoothness_residuals(layout, values, smoothness: float):
     return jnp.concatenate(parts) if parts else jnp.zeros(0, values.dtype)
 
 
+def texel_linearisation(x, problem):
+    """r, J v, J^T u and the other entries' columns (E, N) of a `Problem`'s residuals at solver
+    coordinates x (`matfree.linearisation`'s), in the image's affine form in the texels.
+
+    The texels reach the residuals only through each view's point texture values P (the filter's
+    taps, `texels.point_texels`) and the smoothness prior S, so with E the other entries (ks, n, ...)
+
+        J v = dr/dP (taps v_T) + S v_T + J_E v_E.
+
+    dr/dP comes from one linearisation in P (x fixed; the shading's partials stored once per step);
+    when every view is `direct` (pixel i is point i) it is diagonal -- a point's channel is affine
+    in its own texel value -- and is kept as one gain per residual, dr/dP(1), so a product is the
+    texture lookups times a gain (and their transpose, a scatter-add of the taps). J_E's few columns
+    are formed once per step. Same J as jax.linearize's, without running the shading per product."""
+    layout = problem.layout
+    texel = np.concatenate([np.full(p.size, p.shape is not None) for p in layout])
+    tex, exact = np.flatnonzero(texel), np.flatnonzero(~texel)
+    points = problem.point_texels(layout.values(x))
+
+    def texel_terms(xt):
+        values = layout.values(x.at[tex].set(xt))
+        return problem.point_texels(values), smoothness_residuals(layout, values, problem.smoothness)
+
+    (_, smooth), taps = jax.linearize(texel_terms, x[tex])
+    taps_t = jax.linear_transpose(taps, x[tex])
+    if all(getattr(getattr(view.model, "formation", None), "direct", False) for view in problem.views):
+        r, gain = jax.jvp(lambda t: problem.residuals(x, t), (points,), (tuple(jnp.ones_like(t) for t in points),))
+        gain = gain[:gain.shape[0] - smooth.shape[0]]  # the prior's entries: 0
+        ends = np.cumsum([t.size for t in points])[:-1]
+
+        def data_jvp(dp):
+            return gain * jnp.concatenate([t.reshape(-1) for t in dp])
+
+        def data_vjp(u):
+            return tuple(part.reshape(t.shape) for part, t in zip(jnp.split(gain * u, ends), points))
+    else:
+        r, through = jax.linearize(lambda t: problem.residuals(x, t), points)
+        through_t = jax.linear_transpose(through, points)
+
+        def data_jvp(dp):
+            return through(dp)[:n_data]
+
+        def data_vjp(u):
+            return through_t(jnp.concatenate([u, jnp.zeros_like(smooth)]))[0]
+
+    n_data = r.shape[0] - smooth.shape[0]
+    columns = None
+    if exact.size:
+        _, direct = jax.linearize(lambda xe: problem.residuals(x.at[exact].set(xe), points), x[exact])
+        columns = jax.vmap(direct)(jnp.eye(exact.size, dtype=x.dtype))
+
+    def jvp(v):
+        dp, ds = taps(v[tex])
+        out = jnp.concatenate([data_jvp(dp), ds])
+        return out if columns is None else out + columns.T @ v[exact]
+
+    def vjp(u):
+        out = jnp.zeros_like(x).at[tex].set(taps_t((data_vjp(u[:n_data]), u[n_data:]))[0])
+        return out if columns is None else out.at[exact].set(columns @ u)
+
+    return r, jvp, vjp, columns
+
+
 @eqx.filter_jit
-def _column_sums(problem, values, ones):
-    _, pullback = jax.vjp(problem.weighted, values)
-    return pullback(ones)[0]
+def _column_sums(problem, x, used):
+    plain = dataclasses.replace(problem, loss="l2", smoothness=0.0)  # its residuals: `Problem.weighted`
+    return texel_linearisation(x, plain)[2](used)
 
 
 def texel_coverage(problem, values, used) -> dict:
@@ -202,8 +266,9 @@ def texel_coverage(problem, values, used) -> dict:
     layout = problem.layout
     if not any(p.shape is not None for p in layout):
         return {}
+    x = jnp.asarray(layout.x_of(np.asarray(values, np.float64)), values.dtype)  # texels: x = values
     ones = jnp.asarray(np.asarray(used, np.float64), values.dtype)
-    sums = np.asarray(_column_sums(problem, values, ones), np.float64)
+    sums = np.asarray(_column_sums(problem, x, ones), np.float64)
     out, offset = {}, 0
     for p in layout:
         if p.shape is not None:
