@@ -15,6 +15,7 @@ from ..._warp import wp
 wp.set_module_options({"enable_backward": False})
 
 SUBPIXEL = 256  # fixed-point steps per sample
+SAMPLE_CENTRE = SUBPIXEL // 2  # a sample centre, in fixed-point steps from its sample's corner
 GUARD = 4194304.0  # |raster coordinate| clamp (samples) keeping int64 edge products exact
 
 
@@ -58,25 +59,24 @@ def edge(ax: wp.int64, ay: wp.int64, bx: wp.int64, by: wp.int64, px: wp.int64, p
 
 
 @wp.func
-def on_grid(x: wp.float64):
-    """x on the fixed-point grid the edge functions test (exact: SUBPIXEL is a power of two)."""
-    return wp.float64(snap(x)) / wp.float64(SUBPIXEL)
+def first_centre(lo: wp.int64):
+    """The first sample index whose centre (index * SUBPIXEL + SAMPLE_CENTRE, fixed point) is >= lo."""
+    return int(wp.ceil(wp.float64(lo - wp.int64(SAMPLE_CENTRE)) / wp.float64(SUBPIXEL)))
 
 
 @wp.func
-def sample_box(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d):
-    """(first row, last row, first column, last column) of the sample centres (j + 0.5, i + 0.5) in
-    the bounding box of the *snapped* triangle: a box from the unsnapped corners can miss a row or
-    column that an edge snapped onto a sample centre covers (a crack between two triangles)."""
-    half = wp.float64(0.5)
-    x0 = on_grid(s0[0])
-    x1 = on_grid(s1[0])
-    x2 = on_grid(s2[0])
-    y0 = on_grid(s0[1])
-    y1 = on_grid(s1[1])
-    y2 = on_grid(s2[1])
-    return wp.vec4i(int(wp.ceil(wp.min(y0, wp.min(y1, y2)) - half)), int(wp.floor(wp.max(y0, wp.max(y1, y2)) - half)),
-                    int(wp.ceil(wp.min(x0, wp.min(x1, x2)) - half)), int(wp.floor(wp.max(x0, wp.max(x1, x2)) - half)))
+def last_centre(hi: wp.int64):
+    """The last sample index whose centre is <= hi (fixed point)."""
+    return int(wp.floor(wp.float64(hi - wp.int64(SAMPLE_CENTRE)) / wp.float64(SUBPIXEL)))
+
+
+@wp.func
+def sample_box(x0: wp.int64, y0: wp.int64, x1: wp.int64, y1: wp.int64, x2: wp.int64, y2: wp.int64):
+    """(first row, last row, first column, last column) of the sample centres in the bounding box of
+    the snapped triangle, the one the edge functions test (a box from the unsnapped corners can miss
+    a row or column that an edge snapped onto a sample centre covers: a crack between triangles)."""
+    return wp.vec4i(first_centre(wp.min(y0, wp.min(y1, y2))), last_centre(wp.max(y0, wp.max(y1, y2))),
+                    first_centre(wp.min(x0, wp.min(x1, x2))), last_centre(wp.max(x0, wp.max(x1, x2))))
 
 
 @wp.func
@@ -92,7 +92,13 @@ def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: w
          rows: wp.array2d(dtype=wp.int32)):
     """Store one screen triangle, wound so its integer area is positive; facing +1 front, -1 back,
     0 not drawn (degenerate, or culled); and the rows of sample centres it may cover, for binning."""
-    area = edge(snap(s0[0]), snap(s0[1]), snap(s1[0]), snap(s1[1]), snap(s2[0]), snap(s2[1]))
+    x0 = snap(s0[0])
+    y0 = snap(s0[1])
+    x1 = snap(s1[0])
+    y1 = snap(s1[1])
+    x2 = snap(s2[0])
+    y2 = snap(s2[1])
+    area = edge(x0, y0, x1, y1, x2, y2)
     facing[slot] = 0
     if area == wp.int64(0):
         return
@@ -102,7 +108,7 @@ def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: w
     if cull == 1 and side < 0:
         return
     facing[slot] = side
-    box = sample_box(s0, s1, s2)
+    box = sample_box(x0, y0, x1, y1, x2, y2)
     rows[slot, 0] = box[0]
     rows[slot, 1] = box[1]
     rows[slot, 2] = box[2]  # its box's sample columns

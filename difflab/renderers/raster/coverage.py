@@ -11,13 +11,12 @@ from __future__ import annotations
 
 from ..._warp import wp
 
-from .clip import SUBPIXEL, drawn_rows, edge, owns_edge, sample_box, snap
+from .clip import SAMPLE_CENTRE, SUBPIXEL, drawn_rows, edge, owns_edge, sample_box, snap
 
 wp.set_module_options({"enable_backward": False})
 
 DEPTH_SCALE = wp.constant(wp.float64(0.5 * 2147483647.0))  # key depth (z_ndc + 1) x this: [-1, 1] -> [0, 2^31 - 1]
 NO_HIT = wp.constant(wp.int64(9223372036854775807))
-SAMPLE_CENTRE = SUBPIXEL // 2  # a sample centre, in fixed-point steps from its sample's corner
 
 
 @wp.func
@@ -76,19 +75,19 @@ def raster_slot(slot: int, row_begin: int, row_end: int, screen: wp.array2d(dtyp
     s0 = screen[slot, 0]
     s1 = screen[slot, 1]
     s2 = screen[slot, 2]
-    box = sample_box(s0, s1, s2)  # the candidates: samples in the snapped triangle's bounding box
-    j_lo = wp.max(box[2], 0)
-    j_hi = wp.min(box[3], width - 1)
-    i_lo = wp.max(box[0], row_begin)
-    i_hi = wp.min(box[1], row_end - 1)
-    if j_lo > j_hi or i_lo > i_hi:
-        return
     x0 = snap(s0[0])
     y0 = snap(s0[1])
     x1 = snap(s1[0])
     y1 = snap(s1[1])
     x2 = snap(s2[0])
     y2 = snap(s2[1])
+    box = sample_box(x0, y0, x1, y1, x2, y2)  # the candidates: samples in the snapped triangle's box
+    j_lo = wp.max(box[2], 0)
+    j_hi = wp.min(box[3], width - 1)
+    i_lo = wp.max(box[0], row_begin)
+    i_hi = wp.min(box[1], row_end - 1)
+    if j_lo > j_hi or i_lo > i_hi:
+        return
     t0 = edge_threshold(owns_edge(x1, y1, x2, y2))  # covered: every b_k >= t_k
     t1 = edge_threshold(owns_edge(x2, y2, x0, y0))
     t2 = edge_threshold(owns_edge(x0, y0, x1, y1))
