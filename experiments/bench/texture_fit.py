@@ -1,8 +1,8 @@
 """Benchmark of texel fits (`fit_texture`, the one engine's matrix-free box LM), every figure measured
 in the same run.
 
-1. One CG product pair (J v then J^T u) of the solver, float64, on the problem of each size: the
-   texels in the image's affine form (`matfree.texel_linearisation`: the points' gains times the
+1. One CG product pair (J v then J^T u) of the solver, float64, on the first view of each size: the
+   texels in the image's affine form (`texels.texel_linearisation`: the points' gains times the
    filter taps) against the whole shading model linearised (`matfree.linearisation`, jax.linearize
    of the residuals) -- medians of the repeats, and their ratio.
 2. Whole `fit_texture` calls from a fresh process per tree: the first call (JIT compilation, the
@@ -87,7 +87,8 @@ def products(size: int, pixels: int, repeats: int) -> dict:
 
     from difflab import render
     from difflab.fit import Setup
-    from difflab.fit.matfree import linearisation, texel_linearisation
+    from difflab.fit.matfree import linearisation
+    from difflab.fit.texels import texel_linearisation
 
     with tempfile.TemporaryDirectory() as folder, jax.enable_x64(True):
         _, views = quad_views(size, pixels, Path(folder))
