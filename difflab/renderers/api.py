@@ -7,7 +7,7 @@ from ..guards import check_image, check_render, check_threads
 from ..scene import Scene
 from .compile import CompiledScene, as_scene, compile_scene
 from .frame import Frame
-from .launch import resolve_device
+from .launch import raster_threads, resolve_device
 
 RENDER_OVERRIDES = ("method", "shading", "specular", "shadows", "max_depth", "spp", "fresnel",
                     "transparent_shadows", "clamp_vertex_colors", "interpolation", "cull_backfaces",
@@ -61,7 +61,8 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
         device: "cpu" (default) or "cuda[:N]"; a CompiledScene renders on its own device.
         width, height: override the camera's image size (not with a CompiledScene, which is
             tessellated for its camera: compile the resized scene instead).
-        threads: CPU worker threads (default: all cores, or $DIFFLAB_THREADS).
+        threads: CPU worker threads (default: $DIFFLAB_THREADS, else all cores; a rasterized
+            frame of up to 256^2 samples on one: `launch.raster_threads`).
         item_buffer, light_buffer: ray-tracer speed-ups that leave the image unchanged: the primary
             rays' mesh hits from the rasterizer's z-buffer (needs "grid" sampling; None, the
             default: on wherever it applies, False: every primary ray through the BVH), and shadow
@@ -113,7 +114,9 @@ def draw(scene, overrides: dict, device, width, height, threads, keep: bool, spe
             raise RenderError("item_buffer / light_buffer: speed-ups of the ray tracer; use method='raytrace'")
         from .raster.driver import rasterize
 
-        frame = rasterize(compiled, settings, threads, gbuffer=keep)
+        camera = compiled.scene.camera
+        samples = camera.width * camera.height * settings.spp_side ** 2
+        frame = rasterize(compiled, settings, raster_threads(threads, samples), gbuffer=keep)
     else:
         from .raytrace.driver import raytrace
 
