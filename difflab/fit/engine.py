@@ -64,7 +64,8 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         loss = float(0.5 * np.sum(np.square(rho)))
         residuals = setup.residual_images(r)
         finite = bool(np.all(np.isfinite(flat)) and np.isfinite(loss) and (gram is None or np.all(np.isfinite(gram))))
-        sigma = setup.noise(setup.residual_images(r, weighted=True)) if finite else float("nan")
+        weighted = residuals if setup.unit_weights else setup.residual_images(r, weighted=True)
+        sigma = setup.noise(weighted) if finite else float("nan")
         r = r[used]
         if finite:
             st = fit_statistics(gram, r, setup.censored, sigma, layout.size)

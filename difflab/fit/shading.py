@@ -86,7 +86,8 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
         pixels: (U,) flat pixel indices (row * width + column); default: every pixel, in order.
     Returns:
         (points, composition, formation, point_ids): only the R shading points the pixels' samples
-        use (point_ids (R,) are their indices in `gbuffer.points`), and the composition of the U
+        use (point_ids (R,) are their indices in `gbuffer.points`; real fields in the G-buffer's own
+        precision, float32: a jitted user casts them exactly), and the composition of the U
         pixels with point indices renumbered into them (None when `formation.direct`: pixel i is
         point i).
     """
@@ -99,15 +100,19 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
         row, col = np.divmod(pixels, width)
         di, dj = (x.reshape(-1) for x in np.meshgrid(np.arange(side), np.arange(side), indexing="ij"))
         samples = (row[:, None] * side + di) * (width * side) + col[:, None] * side + dj
-    mask = np.asarray(gbuffer.mask, bool).reshape(-1)[samples]
-    index = np.where(mask[..., None], gbuffer.point_index.reshape(-1, 3)[samples], 0)
-    weight = np.where(mask[..., None], gbuffer.point_weight.reshape(-1, 3)[samples], 0.0)
+    take = lambda array, *channels: np.take(array.reshape(-1, *channels), samples, axis=0)  # noqa: E731 (numpy's
+    mask = take(np.asarray(gbuffer.mask, bool))  # fast gather: several times an index expression's speed)
+    index = take(gbuffer.point_index, 3)
+    weight = take(gbuffer.point_weight, 3)
+    if not mask.all():  # an empty sample's points are not read
+        index, weight = np.where(mask[..., None], index, 0), np.where(mask[..., None], weight, 0.0)
     pts = gbuffer.points
     mode, color, start, end, density = gbuffer.fog
     formation = Formation(specular=SPECULAR_MODELS[gbuffer.specular], fog_mode=int(mode),
                           clamp_colors=bool(gbuffer.clamp_vertex_colors))
     if (side == 1 and mask.all() and formation.fog_mode == FOG_NONE and not formation.clamp_colors
-            and np.all(weight[:, 0] == (1.0, 0.0, 0.0)) and np.all(index[:, 0, 0] < pts.material.shape[0])):
+            and np.all(weight[:, 0, 0] == 1.0) and not np.any(weight[:, 0, 1:])
+            and index[:, 0, 0].max(initial=0) < pts.material.shape[0]):
         # each pixel is one point's colour: the points, in pixel order, are the pixels
         point_ids = index[:, 0, 0]
         local = None
@@ -118,20 +123,16 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
         local = np.searchsorted(point_ids, index).clip(0, max(point_ids.size - 1, 0))
     real = np.dtype(dtype)
     if point_ids.size:
-        dist = pts.light_dist[point_ids]
-        points = PointsJ(normal=pts.normal[point_ids], view=pts.view[point_ids], material=pts.material[point_ids],
-                         cell=pts.cell[point_ids], light_dir=pts.light_dir[point_ids],
-                         light_dist=np.where(np.isfinite(dist), dist, np.inf), visibility=pts.visibility[point_ids])
+        points = PointsJ(*(np.take(getattr(pts, k), point_ids, axis=0) for k in PointsJ._fields))
+        points = points._replace(light_dist=np.where(np.isfinite(points.light_dist), points.light_dist, np.inf))
     else:  # nothing hit: one dummy point with no material (colour 0), never used
         n_lights = pts.light_dir.shape[1] if pts.light_dir.ndim == 3 else 0
         points = PointsJ(normal=np.zeros((1, 3)), view=np.zeros((1, 3)), material=np.full(1, -1),
                          cell=np.zeros(1), light_dir=np.zeros((1, n_lights, 3)), light_dist=np.ones((1, n_lights)),
                          visibility=np.zeros((1, n_lights)))
-    points = points._replace(**{k: np.asarray(getattr(points, k), real) for k in ("normal", "view", "light_dir",
-                                                                                  "light_dist", "visibility")},
-                             material=np.asarray(points.material, np.int32), cell=np.asarray(points.cell, np.int32))
+    points = points._replace(material=np.asarray(points.material, np.int32), cell=np.asarray(points.cell, np.int32))
     comp = None if formation.direct else ComposeJ(
-        mask=mask, depth=np.where(mask, gbuffer.depth.reshape(-1)[samples], 0.0).astype(real),
+        mask=mask, depth=np.where(mask, take(gbuffer.depth), 0.0).astype(real),
         point_index=np.asarray(local, np.int32), point_weight=weight.astype(real),
         background=np.asarray(gbuffer.background, real), fog_color=np.asarray(color, real),
         fog_start=np.asarray(start, real), fog_end=np.asarray(end, real), fog_density=np.asarray(density, real))
@@ -238,7 +239,8 @@ class GBufferModel(eqx.Module):
             if point_ids.size == 0:  # the dummy point of `pixel_arrays`
                 rows, weight = np.full((1, 4), -1, np.int32), np.zeros((1, 4))
             taps, tap_weight = jnp.asarray(rows), jnp.asarray(np.asarray(weight, np.float64), dtype)
-        ids = tuple(int(m) for m in np.unique(gbuffer.points.material[point_ids])) if point_ids.size else (-1,)
+        present = np.bincount(gbuffer.points.material[point_ids] + 1) if point_ids.size else np.ones(1)
+        ids = tuple(int(m) - 1 for m in np.flatnonzero(present))  # the distinct ids (-1: none), sorted
         return cls(material=points.material, cell=points.cell, geometry=geometry, comp=comp, formation=formation,
                    taps=taps, tap_weight=tap_weight, targets=None if texels is None else texels.targets,
                    material_ids=ids)
@@ -258,6 +260,9 @@ class GBufferModel(eqx.Module):
 
 @partial(jax.jit, static_argnums=2)
 def _geometry_jit(points: PointsJ, lights: LightsJ, specular: int):
+    real = lambda field: field.astype(lights.intensity.dtype)  # noqa: E731 (float32 G-buffer values, exactly)
+    points = points._replace(**{k: real(getattr(points, k)) for k in ("normal", "view", "light_dir", "light_dist",
+                                                                      "visibility")})
     return light_geometry(specular, points.normal, points.view, lights, points.light_dir, points.light_dist,
                           points.visibility)
 

@@ -69,9 +69,10 @@ def estimate_sigma(images, used_maps, *, interior=True) -> float | None:
             centre = across[:-2] & across[1:-1] & across[2:]
         rows2 = image[:-2] - 2.0 * image[1:-1] + image[2:]
         lap = rows2[:, :-2] - 2.0 * rows2[:, 1:-1] + rows2[:, 2:]
-        values.append(np.abs(lap[centre]).reshape(-1))
+        values.append(np.abs(np.compress(centre.reshape(-1), lap.reshape(centre.size, -1), axis=0)).reshape(-1))
     values = np.concatenate(values) if values else np.zeros(0)
-    values = values[np.isfinite(values)]
+    if not np.isfinite(values).all():
+        values = values[np.isfinite(values)]
     return float(1.4826 * np.median(values) / 6.0) if values.size >= MIN_NOISE_PIXELS else None
 
 

@@ -51,8 +51,8 @@ def normalise_targets(targets) -> list[tuple[object, dict]]:
 
 
 def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
-    """(image (H, W, 3) float64 linear, its ceiling: 1.0 for 8-bit image files, None for float
-    data)."""
+    """(image (H, W, 3) linear floats -- an array in its own precision, float64 from a file --, its
+    ceiling: 1.0 for 8-bit image files, None for float data)."""
     if _is_path(item):
         try:
             image = load_image(item)
@@ -71,7 +71,7 @@ def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
                        "ceiling=1.0 for its clipped highlights")
     if image.dtype.kind != "f":
         raise FitError(f"{where}: an image of dtype {image.dtype} is refused; give linear RGB floats")
-    return image.astype(np.float64), None
+    return image, None
 
 
 def per_view(values, count: int, name: str) -> list:
@@ -120,14 +120,12 @@ def view_mask(value, shape, where) -> np.ndarray:
 
 
 def view_weight(value, shape, where) -> np.ndarray:
-    """A view's non-negative per-pixel weights broadcast to (H, W, 3) (None: all 1)."""
-    if value is None:
-        return np.ones(shape + (3,))
+    """A view's non-negative per-pixel weights (an array) broadcast to (H, W, 3)."""
     weight = _numeric(value, where)
     if weight.ndim == 2:
         weight = weight[..., None]
     try:
-        weight = np.broadcast_to(weight, shape + (3,)).copy()
+        weight = np.broadcast_to(weight, shape + (3,))  # read-only: the caller's product is the copy
     except ValueError:
         raise FitError(f"{where}: expected shape {shape} or {shape + (3,)}, got {np.shape(value)}") from None
     if not np.all(np.isfinite(weight)) or np.any(weight < 0):
@@ -138,8 +136,9 @@ def view_weight(value, shape, where) -> np.ndarray:
 def prepared_targets(scene, targets, masks, weights, render: dict):
     """For each target: (its view's scene, target image, ceiling, mask, weight, count of non-finite
     masked values). A view's scene is `scene` with the target's camera / lights override and the
-    `render` settings; the target must have that camera's size. Non-finite target values are zeroed
-    (and counted, so that the fit reports them)."""
+    `render` settings; the target must have that camera's size. The target is float64, 0 outside the
+    mask and where its values are not finite (those inside the mask are counted, so that the fit
+    reports them); the weight (H, W, 3) float64, 0 outside the mask."""
     items = normalise_targets(targets)
     masks = per_view(masks, len(items), "masks")
     weights = per_view(weights, len(items), "weights")
@@ -157,7 +156,9 @@ def prepared_targets(scene, targets, masks, weights, render: dict):
             raise FitError(f"{where}: the image is {width}x{height} (width x height) but its view's camera renders "
                            f"{camera.width}x{camera.height}; resize the target or set the camera's width / height")
         mask = view_mask(mask, (height, width), f"masks[{i}]")
-        weight = view_weight(weight, (height, width), f"weights[{i}]") * mask[..., None]
-        finite = np.isfinite(image)
-        nonfinite = int(np.count_nonzero(~finite & mask[..., None]))
-        yield view_scene, np.where(finite & mask[..., None], image, 0.0), ceiling, mask, weight, nonfinite
+        mask3 = np.repeat(mask.reshape(-1), 3).reshape(height, width, 3)  # (numpy broadcasts over 3 slowly)
+        weight = mask3.astype(np.float64) if weight is None else view_weight(weight, (height, width),
+                                                                             f"weights[{i}]") * mask3
+        inside = np.isfinite(image) & mask3
+        nonfinite = 3 * int(np.count_nonzero(mask)) - int(np.count_nonzero(inside))
+        yield view_scene, np.where(inside, image, np.float64(0.0)), ceiling, mask, weight, nonfinite

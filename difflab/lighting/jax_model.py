@@ -47,7 +47,8 @@ class MaterialJ(NamedTuple):
 
 
 def dot(a, b):
-    return jnp.sum(a * b, axis=-1)
+    """a . b over the trailing axis (as a chain of adds: see `sum_axis`)."""
+    return sum_axis(a * b, -1)
 
 
 def sum_axis(x, axis: int):
