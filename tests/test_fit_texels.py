@@ -163,8 +163,9 @@ def test_a_batch_of_texture_targets_loops_over_one_matrix_free_solve(known, tmp_
     (("texture", "n"), {"spp": 4}),  # pixels composed from 4 samples: the linearised composition
 ])
 def test_the_affine_texel_products_equal_autodiff(known, params, kwargs):
-    """The solver's texel-fit Jacobian products (taps times the shading's partials, `texel_linearisation`)
-    equal jax.linearize's of the whole residual function, in float64."""
+    """A texel fit's Jacobian products (taps times the shading's partials: `texel_linearisation`, and
+    the derivative of `Problem.residuals` every solver linearises) equal jax.linearize's of the whole
+    model's residuals, in float64."""
     _, scene, target = known
     kwargs = {"init": {"texture": 0.5}, **kwargs}
     setup = Setup(scene, target, "m", params, **kwargs)
@@ -173,12 +174,13 @@ def test_the_affine_texel_products_equal_autodiff(known, params, kwargs):
     with jax.enable_x64(True):
         x = jax.numpy.asarray(setup.x0 + rng.uniform(-0.05, 0.05, setup.x0.shape))
         exact = np.flatnonzero(np.concatenate([np.full(p.size, p.shape is None) for p in problem.layout]))
-        r, jvp, vjp, columns = linearisation(lambda y, p: p.residuals(y), exact, x, problem)
-        fast = texel_linearisation(x, problem)
+        r, jvp, vjp, columns = linearisation(lambda y, p: p.residuals(y, p.point_texels(p.layout.values(y))), exact,
+                                             x, problem)  # the whole model, no custom derivative
         v, u = rng.normal(size=x.shape), rng.normal(size=r.shape)
-        assert r.dtype == np.float64 and np.abs(fast[0] - r).max() <= 1e-14 * np.abs(r).max()
-        for ours, theirs in [(fast[1](v), jvp(v)), (fast[2](u), vjp(u))]:
-            assert np.abs(ours - theirs).max() <= 1e-12 * np.abs(theirs).max()
-        assert (columns is None) == (fast[3] is None) == (exact.size == 0)
-        if columns is not None:
-            assert np.abs(fast[3] - columns).max() <= 1e-12 * np.abs(columns).max()
+        for fast in (texel_linearisation(x, problem), linearisation(lambda y, p: p.residuals(y), exact, x, problem)):
+            assert r.dtype == np.float64 and np.abs(fast[0] - r).max() <= 1e-14 * np.abs(r).max()
+            for ours, theirs in [(fast[1](v), jvp(v)), (fast[2](u), vjp(u))]:
+                assert np.abs(ours - theirs).max() <= 1e-12 * np.abs(theirs).max()
+            assert (columns is None) == (fast[3] is None) == (exact.size == 0)
+            if columns is not None:
+                assert np.abs(fast[3] - columns).max() <= 1e-12 * np.abs(columns).max()

@@ -6,8 +6,8 @@ solved by conjugate gradients instead of a Cholesky factorisation of J^T J:
     (J_F^T J_F + lambda D) dx = -J_F^T r         over the free entries F (fixed ones: dx = 0)
 
 where J v and J^T v come from one linearisation per step (never the N x p matrix; for texels the
-image's affine form, `texels.texel_linearisation`: per product the texture lookups times one gain
-per residual, not the shading model) and an entry is fixed when it sits on a bound and the gradient
+image's affine form, `texels.affine_residuals`: per product the texture lookups times one gain per
+residual, not the shading model) and an entry is fixed when it sits on a bound and the gradient
 pushes it outward. D is diag(J^T J) for the few entries beside the texels (their columns formed
 each step: ks, n, ...) and s = |J g|^2 / |g|^2, the curvature along the first gradient, for the
 texels (whose columns are alike); CG is preconditioned
@@ -20,7 +20,6 @@ linearisation, up to `cg_steps` pairs of J v / J^T v, and one residual evaluatio
 
 from __future__ import annotations
 
-from functools import partial
 from typing import NamedTuple
 
 import equinox as eqx
@@ -30,7 +29,6 @@ import numpy as np
 
 from ..errors import FitError
 from .lm import LAMBDA0, MAX_STEPS, NONFINITE, RUNNING, SUCCESSFUL
-from .texels import texel_linearisation
 
 DENSE_SOLVERS = ("bfgs", "varpro")  # keep p x p matrices (BFGS's inverse Hessian) or dense Jacobians
 
@@ -61,18 +59,15 @@ class State(NamedTuple):
     history: jnp.ndarray
 
 
-def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_steps: int, exact=(), linearise=None,
-              progress=None):
+def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_steps: int, exact=(), progress=None):
     """Minimise 0.5 |fn(x, args)|^2 over lower <= x <= upper without forming the Jacobian.
 
     Arguments and returns as `lm.box_lm`, without r and J: (x, code index into `lm.CODES`, steps,
     history); cg_steps: the most CG iterations per step (until the CG residual is below
     atol + rtol |J^T r|); exact: indices of the few entries (not texels) whose
-    Jacobian columns are formed each step, to scale them (Jacobi) -- the rest share s; linearise:
-    (x, args) -> (r, J v, J^T u, the exact entries' columns (E, N)) at x (default `linearisation`)."""
+    Jacobian columns are formed each step, to scale them (Jacobi) -- the rest share s."""
     dtype = x0.dtype
     exact = np.asarray(exact, np.int64)
-    linearise = linearise or partial(linearisation, fn, exact)
     x0 = jnp.clip(x0, lower, upper)
     r0 = fn(x0, args)
     loss0 = 0.5 * jnp.sum(r0 * r0)
@@ -81,7 +76,7 @@ def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_step
                   jnp.full(max_steps, jnp.nan, dtype))
 
     def body(s: State) -> State:
-        r, jvp, vjp, columns = linearise(s.x, args)
+        r, jvp, vjp, columns = linearisation(fn, exact, s.x, args)
         g = vjp(r)
         free = ~(((s.x <= lower) & (g > 0)) | ((s.x >= upper) & (g < 0)))
         g_free = jnp.where(free, g, 0.0)
@@ -132,7 +127,8 @@ def box_lm_cg(fn, x0, lower, upper, args, *, max_steps: int, rtol, atol, cg_step
 
 def linearisation(fn, exact, x, args):
     """r, J v, J^T u and the `exact` entries' Jacobian columns (E, N) of fn(., args) at x, from one
-    `jax.linearize` (each product runs the linearised model; texels: `texels.texel_linearisation`)."""
+    `jax.linearize` (each product runs the linearised model; for texels its affine form,
+    `texels.affine_residuals`)."""
     r, jvp = jax.linearize(lambda y: fn(y, args), x)
     transpose = jax.linear_transpose(jvp, x)
     columns = jax.vmap(jvp)(jnp.eye(x.shape[0], dtype=x.dtype)[exact]) if exact.size else None
@@ -143,7 +139,5 @@ def linearisation(fn, exact, x, args):
 def solve_box_cg(problem, x0, lower, upper, max_steps, rtol, atol, cg_steps, progress=None):
     """`box_lm_cg` on a `Problem`'s residuals, compiled once per problem structure and settings."""
     exact = np.flatnonzero(np.concatenate([np.full(p.size, p.shape is None) for p in problem.layout]))
-    texels = any(p.shape is not None for p in problem.layout)
     return box_lm_cg(lambda x, p: p.residuals(x), x0, lower, upper, problem, max_steps=max_steps, rtol=rtol, atol=atol,
-                     cg_steps=cg_steps, exact=exact, linearise=texel_linearisation if texels else None,
-                     progress=progress)
+                     cg_steps=cg_steps, exact=exact, progress=progress)

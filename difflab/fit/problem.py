@@ -20,7 +20,7 @@ import numpy as np
 
 from ..lighting.jax_model import LightsJ
 from .materials import MaterialTable
-from .texels import smoothness_residuals, stacked_texels
+from .texels import affine_residuals, smoothness_residuals, stacked_texels
 
 LOSSES = ("l2", "huber", "cauchy")
 TABLE_KINDS = ("ka", "kd", "ks", "n", "m", "f0", "kr", "kt", "absorption")
@@ -120,7 +120,10 @@ class Problem(eqx.Module):
 
     def residuals(self, x, texels=None):
         """What the least-squares solvers see, for solver coordinates x (`Layout.values`); `texels`
-        as `images` (the texels' entries of x then reach only the smoothness prior)."""
+        as `images` (the texels' entries of x then reach only the smoothness prior); without them a
+        texel fit's residuals are `texels.affine_residuals` (the same values, a faster derivative)."""
+        if texels is None and any(p.shape is not None for p in self.layout):
+            return affine_residuals(x, problem=self)
         values = self.layout.values(x)
         data = robust(self.loss, self.weighted(values, texels), self.loss_scale)
         return jnp.concatenate([data, smoothness_residuals(self.layout, values, self.smoothness)])

@@ -203,7 +203,8 @@ def texel_linearisation(x, problem):
     when every view is `direct` (pixel i is point i) it is diagonal -- a point's channel is affine
     in its own texel value -- and is kept as one gain per residual, dr/dP(1), so a product is the
     texture lookups times a gain (and their transpose, a scatter-add of the taps). J_E's few columns
-    are formed once per step. Same J as jax.linearize's, without running the shading per product."""
+    are formed once per step. Same J as jax.linearize's, without running the shading per product
+    (`affine_residuals` makes it the derivative of `Problem.residuals`)."""
     layout = problem.layout
     texel = np.concatenate([np.full(p.size, p.shape is not None) for p in layout])
     tex, exact = np.flatnonzero(texel), np.flatnonzero(~texel)
@@ -251,6 +252,20 @@ def texel_linearisation(x, problem):
         return out if columns is None else out.at[exact].set(columns @ u)
 
     return r, jvp, vjp, columns
+
+
+@eqx.filter_custom_jvp
+def affine_residuals(x, *, problem):
+    """`Problem.residuals` of a texel fit at solver coordinates x, with its derivative in the image's
+    affine form (`texel_linearisation`): jax.linearize, jvp, grad and jacfwd of it -- every solver's
+    J v and J^T u -- apply the taps times the gains instead of running the shading model."""
+    return problem.residuals(x, problem.point_texels(problem.layout.values(x)))
+
+
+@affine_residuals.def_jvp
+def _affine_residuals_jvp(primals, tangents, *, problem):
+    r, jvp, _, _ = texel_linearisation(primals[0], problem)
+    return r, jvp(tangents[0])
 
 
 @eqx.filter_jit

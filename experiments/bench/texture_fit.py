@@ -3,9 +3,11 @@ in the same run.
 
 1. One CG product pair (J v then J^T u) of the solver, float64, on the first view of each size: the
    texels in the image's affine form (`texels.texel_linearisation`: the points' gains times the
-   filter taps) against the whole shading model linearised (`matfree.linearisation`, jax.linearize
-   of the residuals) -- medians of the repeats, and their ratio.
-2. Whole `fit_texture` calls from a fresh process per tree: the first call (JIT compilation, the
+   filter taps; the derivative every solver gets from `Problem.residuals`) against the whole shading
+   model linearised (`matfree.linearisation` of the residuals computed without that derivative)
+   -- medians of the repeats, and their ratio.
+2. Whole `fit_texture` calls ("lm"; `--solver gauss_newton` for optimistix's, whose CG products are
+   the same) from a fresh process per tree: the first call (JIT compilation, the
    persistent cache switched off) and the warm calls after it; with `--old TREE` the same script
    runs on another checkout (e.g. a worktree of 02a8271, the dedicated texture solver before the
    engine) in processes interleaved with this tree's, and the table gives new / old ratios.
@@ -65,7 +67,7 @@ def quad_views(size: int, pixels: int, folder: Path):
     return texels, views
 
 
-def worker(size: int, pixels: int, repeats: int) -> dict:
+def worker(size: int, pixels: int, repeats: int, solver: str) -> dict:
     """In this process (the tree on sys.path): the first and the warm fit_texture calls."""
     from difflab.fit.texture_fit import fit_texture
 
@@ -74,7 +76,7 @@ def worker(size: int, pixels: int, repeats: int) -> dict:
         times = []
         for _ in range(repeats + 1):
             start = time.perf_counter()
-            result = fit_texture(views, (size, size), init=0.5)
+            result = fit_texture(views, (size, size), init=0.5, solver=solver)
             times.append(time.perf_counter() - start)
     return {"first_s": times[0], "warm_s": statistics.median(times[1:]), "steps": int(result.steps),
             "result": result.result, "max_error": float(np.abs(result.texture - texels)[result.visible].max())}
@@ -96,8 +98,12 @@ def products(size: int, pixels: int, repeats: int) -> dict:
         x = jnp.asarray(setup.x0)
         v = jnp.asarray(np.random.default_rng(0).normal(size=x.shape))
         none = np.zeros(0, np.int64)
+
+        def whole_model(y, q):  # the residuals without their custom derivative (`texels.affine_residuals`)
+            return q.residuals(y, q.point_texels(q.layout.values(y)))
+
         forms = {"affine": texel_linearisation,
-                 "linearised": lambda x, p: linearisation(lambda y, q: q.residuals(y), none, x, p)}
+                 "linearised": lambda x, p: linearisation(whole_model, none, x, p)}
         out = {}
         for name, form in forms.items():
             def run(p, x, v, k, form=form):  # k normalised J^T J products after one linearisation
@@ -118,10 +124,10 @@ def products(size: int, pixels: int, repeats: int) -> dict:
     return out
 
 
-def child(tree: Path, size: int, pixels: int, repeats: int) -> dict:
+def child(tree: Path, size: int, pixels: int, repeats: int, solver: str) -> dict:
     """`worker` in a fresh process with `tree` first on the path and no compilation cache."""
     env = {**os.environ, "PYTHONPATH": str(tree), "DIFFLAB_CACHE_DIR": "off", "MPLBACKEND": "Agg"}
-    out = subprocess.run([sys.executable, __file__, "--worker", str(size), str(pixels), str(repeats)], env=env,
+    out = subprocess.run([sys.executable, __file__, "--worker", str(size), str(pixels), str(repeats), solver], env=env,
                          capture_output=True, text=True, check=True, cwd=tree).stdout
     return json.loads(out.strip().splitlines()[-1])
 
@@ -132,20 +138,23 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=None)
     parser.add_argument("--old", type=Path, default=None, help="another checkout to compare with")
     parser.add_argument("--out", type=Path, default=RESULTS / "bench_texture_fit.json")
-    parser.add_argument("--worker", type=int, nargs=3, help=argparse.SUPPRESS)
+    parser.add_argument("--solver", default="lm", choices=("lm", "gauss_newton"))
+    parser.add_argument("--worker", nargs=4, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
-        print(json.dumps(worker(*args.worker)))
+        size, pixels, repeats, solver = args.worker
+        print(json.dumps(worker(int(size), int(pixels), int(repeats), solver)))
         return
     repeats = args.repeats or (2 if args.small else 3)
     sizes = SIZES[:1] if args.small else SIZES
     trees = {"new": HERE, **({"old": args.old.resolve()} if args.old else {})}
-    report = {"load": os.getloadavg(), "repeats": repeats, "sizes": []}
-    print(f"load {os.getloadavg()[0]:.1f}; medians of {repeats}; first call without the compilation cache")
+    report = {"load": os.getloadavg(), "repeats": repeats, "solver": args.solver, "sizes": []}
+    print(f"load {os.getloadavg()[0]:.1f}; medians of {repeats}; solver {args.solver}; first call without the "
+          "compilation cache")
     for size, pixels in sizes:
         row = {"texels": size, "pixels": pixels, "unknowns": 3 * size * size, **products(size, pixels, repeats)}
         for name, tree in trees.items():  # fresh processes, interleaved: a busy machine slows both alike
-            row[name] = child(tree, size, pixels, repeats)
+            row[name] = child(tree, size, pixels, repeats, args.solver)
         report["sizes"].append(row)
         line = (f"{size:>4}^2 texels, 2 x {pixels}^2 px: J v + J^T u {row['affine_ms']:.2f} ms affine vs "
                 f"{row['linearised_ms']:.2f} ms linearised ({row['linearised_ms'] / row['affine_ms']:.1f}x); "
