@@ -94,10 +94,11 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
     return out
 
 
-def run_fit(setup: Setup, options: FitOptions, setup_seconds: float) -> FitResult:
+def run_fit(setup: Setup, options: FitOptions, timings: dict) -> FitResult:
     """Solve a prepared fit and report it (the precheck's result code, without solving, when the
-    fit cannot be made)."""
-    timings = {"setup": setup_seconds}
+    fit cannot be made); `timings`: the preparation's seconds ("setup", "render"), the solve's and
+    the report's are added."""
+    timings = dict(timings)
     check_solver(options, setup.layout)
     code = setup.precheck()
     if code is not None:
@@ -113,7 +114,7 @@ def solve(setup: Setup, options=None, **option_fields) -> FitResult:
     """Solve a prepared `Setup` (again: its compiled solve is reused) and report it; `options` and
     keywords as `fit`'s (the precision is the setup's)."""
     options = FitOptions.make(options, **{**option_fields, "x64": setup.x64})
-    return run_fit(setup, options, 0.0)
+    return run_fit(setup, options, {"setup": 0.0})
 
 
 def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, options=None, per_channel=True,
@@ -173,7 +174,7 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
     setup = Setup(scene, targets, materials, params, method=method, per_channel=per_channel, bounded=bounded, loss=loss,
                   loss_scale=loss_scale, masks=masks, weights=weights, init=init, sigma=sigma, ceiling=ceiling,
                   smoothness=smoothness, x64=options.x64, max_depth=max_depth, spp=spp, device=device, threads=threads)
-    return run_fit(setup, options, time.perf_counter() - start)
+    return run_fit(setup, options, {"setup": time.perf_counter() - start, "render": setup.render_seconds})
 
 
 def fit_material(scene, targets, material=None, params=DEFAULT_PARAMS, **kwargs) -> FitResult:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import time
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -153,7 +154,8 @@ def _check_smoothness(value, textures) -> float:
 class Setup:
     """A fit prepared (see the module docstring). Attributes: scene (start values written in),
     materials, method, layout, initial (key -> value), x0 (solver coordinates), views, used_pixels,
-    nonfinite, censored, sigma_given, sigma_floor, x64, dtype, problem."""
+    nonfinite, censored, sigma_given, sigma_floor, x64, dtype, problem, render_seconds (the Warp
+    renders' wall time)."""
 
     def __init__(self, scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None,
                  per_channel=True, bounded=False, loss="l2", loss_scale=0.05, masks=None, weights=None, init=None,
@@ -267,10 +269,12 @@ class Setup:
         ids = sorted({p.index for p in self.layout if p.kind != "intensity"})
         all_surfaces = any(p.kind == "intensity" for p in self.layout)
         crossing = sorted({p.index for p in self.layout if p.kind == "kt"})
-        views = []
+        views, self.render_seconds = [], 0.0
         for view_scene, image, file_ceiling, mask, weight, nonfinite in prepared_targets(self.scene, targets, masks,
                                                                                           weights, render):
+            start = time.perf_counter()
             frame = render_frame(self._compiled_for(view_scene, device) or view_scene, device=device, threads=threads)
+            self.render_seconds += time.perf_counter() - start
             if self.method == "raytrace":
                 record = frame.ray_tree
                 tree_ids = range(len(self.scene.materials)) if all_surfaces else ids

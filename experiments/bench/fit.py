@@ -228,7 +228,8 @@ def mitsuba_comparison(size: int, iterations: int, repeats: int) -> dict:
 
     mitsuba = {"iterations": iterations, "seconds": trace[-1][0], "final_max_rel_error": trace[-1][1],
                "time_to_1pct_s": time_to(1e-2), "time_to_0.1pct_s": time_to(1e-3)}
-    return {"mitsuba": mitsuba, "difflab": difflab_on_mitsuba_target(size, target_np, repeats)}
+    difflab = difflab_on_mitsuba_target(size, target_np, repeats)
+    return {"mitsuba": mitsuba, "difflab": difflab, "load_1min": os.getloadavg()[0]}
 
 
 def difflab_on_mitsuba_target(size: int, target: np.ndarray, repeats: int) -> dict:
@@ -271,6 +272,7 @@ def difflab_on_mitsuba_target(size: int, target: np.ndarray, repeats: int) -> di
     return {"result": result.result, "steps": result.steps, "first_call_s": first, "wall_s": wall,
             "solve_s": statistics.median(r.timings["solve"] for r in results),
             "setup_s": statistics.median(r.timings["setup"] for r in results),
+            "render_s": statistics.median(r.timings["render"] for r in results),
             "stats_s": statistics.median(r.timings["stats"] for r in results),
             "kd_times_pi": (np.asarray(result.params["kd"]) * np.pi).tolist(), "kd_max_rel_error": float(kd_error.max()),
             "ks": result.params["ks"], "at_bound": result.at_bound, "chi2": result.chi2}
@@ -360,13 +362,13 @@ def print_report(report: dict) -> None:
         print(f"Mitsuba 3 Adam ({m['iterations']} iterations, {m['seconds']:.1f} s): 1 % at "
               f"{fmt(m['time_to_1pct_s'])}, 0.1 % at {fmt(m['time_to_0.1pct_s'])}; difflab kd, ks, n on the same "
               f"target: {d['steps']} steps, {d['wall_s']:.4f} s warm (of which G-buffer and arrays "
-              f"{d['setup_s']:.4f} s, solve {d['solve_s']:.4f} s, statistics {d['stats_s']:.4f} s; "
+              f"{d['setup_s']:.4f} s -- the Warp render {d['render_s']:.4f} s --, solve {d['solve_s']:.4f} s, statistics {d['stats_s']:.4f} s; "
               f"{d['first_call_s']:.1f} s first call), kd x pi "
               f"within {d['kd_max_rel_error'] * 100:.2f} % of the reflectance, ks max {max(d['ks']):.2g} "
               f"(at bound: {d['at_bound']})")
         if mitsuba["mitsuba_1pct_over_difflab_warm"]:
             print(f"difflab warm fit / Mitsuba time to 1 %: 1/{mitsuba['mitsuba_1pct_over_difflab_warm']:.1f} "
-                  f"(goal: 1/50 or less)")
+                  f"(goal: 1/50 or less; load average {mitsuba['load_1min']:.1f} after the run)")
     elif mitsuba is not None:
         print(f"Mitsuba: {mitsuba}")
 
