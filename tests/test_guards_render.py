@@ -9,7 +9,7 @@ from conftest import scene_dict
 from difflab import MeshError, RenderError, Scene, TextureError, compile_scene, limits, render, render_frame
 from difflab.geometry import load_mesh
 from difflab.guards import check_image, check_render, likely_causes, tree_shape
-from difflab.renderers.launch import cpu_threads
+from difflab.renderers.launch import RASTER_POOL_MIN_SAMPLES, cpu_threads, raster_threads
 from difflab.renderers.raytrace.record import sized_tree
 from difflab.renderers.texture.store import TextureStore
 
@@ -142,6 +142,22 @@ def test_difflab_threads_must_be_a_positive_integer(monkeypatch):
         monkeypatch.setenv("DIFFLAB_THREADS", bad)
         with pytest.raises(limits.DifflabError, match=rf"^DIFFLAB_THREADS: expected a positive integer, got '{bad}'$"):
             render(scene())
+
+
+def test_a_small_rasterized_frame_runs_on_one_thread_unless_told(monkeypatch):
+    """The default for a frame under RASTER_POOL_MIN_SAMPLES samples is one thread; larger frames,
+    an explicit `threads` and $DIFFLAB_THREADS keep their own count; the image is the same."""
+    monkeypatch.delenv("DIFFLAB_THREADS", raising=False)
+    assert RASTER_POOL_MIN_SAMPLES == 256 * 256 + 1
+    assert raster_threads(None, 256 * 256) == 1
+    assert raster_threads(None, 256 * 256 + 1) is None
+    assert raster_threads(2, 64) == 2
+    monkeypatch.setenv("DIFFLAB_THREADS", "2")
+    assert raster_threads(None, 64) is None  # cpu_threads() then reads the variable
+    small = scene(camera={"eye": [0, 0, 5], "target": [0, 0, 0], "width": 24, "height": 16})
+    image = render(small)
+    assert (image > 0).any(axis=-1).sum() > 50  # the sphere is drawn
+    assert np.array_equal(image, render(small, threads=3))
 
 
 def test_the_triangles_of_a_whole_scene_are_priced_as_they_are_built(monkeypatch):

@@ -94,9 +94,10 @@ def cpu_threads() -> int:
     return env_count("DIFFLAB_THREADS", max(1, os.cpu_count() or 1))
 
 
-# A rasterized frame of at most this many samples runs on one thread: its bands' launches and the
-# pool's hand-offs cost more than they save (2-core machine, medians of 7, load 4: 64^2 2.5 ms on
-# one thread vs 4.4 on the pool, 128^2 3.6 vs 10.9, 256^2 7.7 vs 14.3, 512^2 44.5 vs 45.2).
+# A rasterized frame of fewer samples than this runs on one thread: its bands' launches and the
+# pool's hand-offs cost more than they save (2-core machine, medians of 7, one thread vs the pool:
+# load 4: 64^2 2.5 vs 4.4 ms, 128^2 3.6 vs 10.9, 256^2 7.7 vs 14.3, 512^2 44.5 vs 45.2; load 1:
+# 256^2 ~8 vs 11.4, 512^2 24.3 vs 19.9 -- the pool's win starts between the two).
 RASTER_POOL_MIN_SAMPLES = 256 * 256 + 1
 
 
