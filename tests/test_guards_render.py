@@ -154,9 +154,9 @@ def test_a_small_rasterized_frame_runs_on_one_thread_unless_told(monkeypatch):
     assert raster_threads(2, 64) == 2
     monkeypatch.setenv("DIFFLAB_THREADS", "2")
     assert raster_threads(None, 64) is None  # cpu_threads() then reads the variable
-    small = scene(camera={"eye": [0, 0, 5], "target": [0, 0, 0], "width": 24, "height": 16})
+    small = scene(camera={"eye": [0, 0, 5], "target": [0, 0, 0], "width": 48, "height": 32})
     image = render(small)
-    assert (image > 0).any(axis=-1).sum() > 50  # the sphere is drawn
+    assert (image > 0).any(axis=-1).sum() > 100  # the sphere is drawn
     assert np.array_equal(image, render(small, threads=3))
 
 
