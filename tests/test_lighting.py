@@ -105,11 +105,18 @@ def test_warp_and_jax_models_agree_on_random_inputs(model):
                                 j_l, mat.n, mat.m, mat.f0)
     j_term = jm.light_term(lj, mat, MODELS[model], jnp.asarray(normal, jnp.float32), jnp.asarray(v, jnp.float32),
                            j_l, j_d)
-    for name, a, b in [("l", w_l, j_l), ("d", w_d, j_d), ("falloff", w_falloff, j_falloff),
-                       ("spec", w_spec, j_spec), ("term", w_term, j_term)]:
+    # float32 on both sides, summed in different orders: an ulp of cos becomes n ulps of cos^n, so the
+    # specular terms get a relative tolerance of 4 n eps on top of 1e-5 (n = 170: 8e-5)
+    n_ulps = 1e-5 + 4.0 * np.finfo(np.float32).eps * np.array([m.n for m in mats])
+    for name, a, b, rtol in [("l", w_l, j_l, 1e-5), ("d", w_d, j_d, 1e-5), ("falloff", w_falloff, j_falloff, 1e-5),
+                             ("spec", w_spec, j_spec, n_ulps), ("term", w_term, j_term, n_ulps[:, None])]:
         b = np.asarray(b)
         assert np.all(np.isfinite(b) | np.isinf(a)), name
-        np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5, err_msg=name)
+        finite = np.isfinite(a) & np.isfinite(b)
+        assert np.array_equal(a[~finite], b[~finite]), name
+        rtol = np.broadcast_to(rtol, a.shape)[finite]
+        excess = np.abs(a[finite] - b[finite]) - (1e-5 + rtol * np.abs(b[finite]))
+        assert np.all(excess <= 0.0), f"{name}: worst excess {excess.max():.3g}"
 
 
 def lambert_phong_reference(theta_deg, view_deg, ka, kd, ks, n, ia, il):
