@@ -127,12 +127,12 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
     return np.where(finite, np.sqrt(np.where(finite, np.maximum(diag, 0.0), 0.0) * sigma2), np.inf)
 
 
-def fit_statistics(gram: np.ndarray | None, r: np.ndarray, censored: int, sigma: float, size: int = 0) -> dict:
-    """s2 = sse / dof (dof = N - p, N uncensored entries of r), chi2 = s2 / sigma^2 (reduced), the
-    mismatch flag (chi2 above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and diag (J^T J)^-1 (p,)
-    from gram = J^T J (p, p); gram None (a matrix-free fit of p = `size` entries): diag nan, no
+def fit_statistics(gram: np.ndarray | None, r: np.ndarray, censored: int, sigma: float, size: int) -> dict:
+    """s2 = sse / dof (dof = N - p, N uncensored entries of r, p = `size` fitted entries), chi2 =
+    s2 / sigma^2 (reduced), the mismatch flag (chi2 above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))),
+    and diag (J^T J)^-1 (p,) from gram = J^T J (p, p); gram None (a matrix-free fit): diag nan, no
     covariance is formed."""
-    p = gram.shape[0] if gram is not None else size
+    p = size
     sse = float(np.sum(r * r))
     dof = max(r.size - censored - p, 1)
     s2 = sse / dof
