@@ -61,11 +61,11 @@ def pixel_size_at(camera, distance: float, height: int) -> float:
 
 def camera_struct(camera, width: int, height: int) -> CameraW:
     """The `CameraW` for a sample grid of width x height."""
-    _, _, forward = camera_frame(camera)
-    view_proj = projection_matrix(camera, width, height) @ view_matrix(camera)
+    view = view_matrix(camera)
+    view_proj = projection_matrix(camera, width, height) @ view
     out = CameraW()
     out.eye = wp.vec3(*camera.eye)
-    out.forward = wp.vec3(*forward)
+    out.forward = wp.vec3(*(-view[2, :3]))  # as camera_frame's
     out.view_proj = wp.mat44(*view_proj.astype(np.float32).ravel())
     out.inv_view_proj = wp.mat44(*np.linalg.inv(view_proj).astype(np.float32).ravel())
     out.perspective = 1 if camera.projection == "perspective" else 0
