@@ -23,7 +23,8 @@ def available() -> str | None:
         from OpenGL import GL, osmesa  # noqa: F401
         osmesa.OSMesaCreateContextExt  # noqa: B018 - raises when libOSMesa is missing
     except Exception as exc:  # pragma: no cover - depends on the machine
-        return f"OSMesa is not available ({exc})"
+        return (f"OSMesa is not available ({exc}): the OpenGL reference needs libOSMesa "
+                "(`apt-get install libosmesa6`) and PyOpenGL (in the test extra)")
     return None
 
 
