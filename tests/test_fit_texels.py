@@ -99,7 +99,7 @@ def test_unseen_texels_are_flagged(known):
 
 @pytest.mark.parametrize("case, kwargs, match", [
     ("no texture", {"material": "plain"}, r"params: 'texture': material 'plain' has no image texture"),
-    ("ray tree", {"method": "raytrace"}, r"params: 'texture' needs the G-buffer image model"),
+    ("ray tree mipmap", {"method": "raytrace", "filter": "mipmap"}, r"materials\['m'\]\.filter: texture fitting supp"),
     ("gouraud", {"render": {"shading": "gouraud"}}, r"params: fitting texels needs Phong shading"),
     ("trilinear", {"filter": "trilinear"}, r"materials\['m'\]\.filter: texture fitting supports"),
     ("init shape", {"init": {"texture": np.ones((4, 4, 2))}}, r"init\['texture'\]: expected an \(H_t, W_t, 3\)"),

@@ -9,7 +9,7 @@ layout of the fitted values in one flat vector.
     f0          1        [0, 1]                     the value
     n, m        1        [e^-12, e^12]              log(value)
     texture     H_t W_t 3 [0, inf)                  the value        (texels of a material's image
-                                                                      texture; G-buffer, Phong only)
+                                                                      texture; G-buffer (Phong) or ray tree)
 
 The box-constrained Levenberg-Marquardt solver (`lm.py`) works on x inside its bounds, so a
 coefficient whose best value is 0 lands on 0. The unconstrained solvers (optimistix's and Adam) see
@@ -204,7 +204,7 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
     where kr > 0 at the start, kt and absorption only where kt > 0), "red.kd" one material's;
     "intensity" every light's, "lights[i].intensity" one light's; "texture" the texels of each fitted
     material's texture, `texture_shapes` name -> (H_t, W_t). `tree`: the image model is the ray
-    tree (kr, kt, absorption allowed; no texels). Raises FitError naming the offending parameter."""
+    tree (kr, kt, absorption allowed). Raises FitError naming the offending parameter."""
     params = name_list(params, "params")
     if not params:
         raise FitError(f"params: nothing to fit (give some of {', '.join(KINDS)})")
@@ -228,9 +228,6 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
             raise FitError(f"params: unknown parameter {p!r}; {where}")
         if KINDS[kind].tree and not tree:
             raise FitError(f"params: {p!r} needs the ray-traced image model (method='raytrace')")
-        if KINDS[kind].texels and tree:
-            raise FitError(f"params: {p!r} needs the G-buffer image model (method='raster'): the recorded ray "
-                           "tree keeps texel values, not texture coordinates")
         if head and not _traced(scene.materials[head], kind):
             weight = "kr" if kind == "kr" else "kt"
             raise FitError(f"params: {p!r}: {head}.{weight} is 0 at the start, so the recorded ray tree has no "

@@ -1,5 +1,5 @@
 """The ray-traced image in JAX from a recorded ray tree: differentiable in every material's ka, kd, ks,
-n (m, f0), kr, kt and absorption, with the tree -- where every ray goes and what it hits -- fixed.
+n (m, f0), kr, kt, absorption and texels, with the tree -- where every ray goes and what it hits -- fixed.
 
 The Whitted ray tracer records every node of every sample's tree (`renderers.raytrace.tree.RayTree`). A
 sample is the weighted sum of its nodes' local colours:
@@ -12,6 +12,8 @@ sample is the weighted sum of its nodes' local colours:
     beer = exp(-absorption[medium] * distance)          (1 outside any medium)
     local = the one illumination model (`lighting.jax_model.shade`; a texture modulates its target)
             with the shadow rays' visibility prod_m kt_m ^ crossings_m; background where nothing was hit
+    texel = the recorded texture value, or -- where the node's material has fitted texels -- the
+            filter's taps at the node's recorded uv (`texels.point_texels`, as the G-buffer's samples)
 
 formed here and nowhere else (the renderer records the tree; `evaluate_tree` re-forms its image).
 Nodes are put in level order (by depth, then sample, then their recorded order), so each level's
@@ -36,6 +38,7 @@ from ..lighting.warp_model import SPECULAR_MODELS
 from ..renderers.raytrace.tree import REFLECTED
 from .materials import MaterialTable
 from .shading import PointsJ
+from .texels import point_texels
 
 __all__ = ["TreeModel", "TreeJ", "tree_to_jax", "tree_pixels", "tree_image", "evaluate_tree",
            "tree_influence"]
@@ -45,8 +48,10 @@ class TreeJ(eqx.Module):
     """A ray tree (or the part of it that U pixels need) as JAX arrays, nodes in level order.
 
     points: every node's shading inputs (`PointsJ`; material -1 where the ray hit nothing).
-    texel: (N, 3) the texture value at each node (modulating its material's texture target), or
-        None when no node has one.
+    texel: (N, 3) the recorded texture value at each node (modulating its material's texture
+        target), or None when no node has one.
+    taps, tap_weight: (N, K) each node's filter taps into the fitted texels (`texels.TexelSource`;
+        rows -1 where the node reads none: its recorded texel stays), or None when none is fitted.
     crossings: (N, P, M) how many surfaces of each material each shadow ray crossed (transparent
         shadows), or None when no shadow ray crossed any.
     parent_local: (N,) index of the node's parent within the level above (0 for roots).
@@ -61,6 +66,8 @@ class TreeJ(eqx.Module):
 
     points: PointsJ
     texel: jnp.ndarray | None
+    taps: jnp.ndarray | None
+    tap_weight: jnp.ndarray | None
     crossings: jnp.ndarray | None
     parent_local: jnp.ndarray
     edge_material: jnp.ndarray
@@ -105,13 +112,14 @@ def tree_influence(tree, material_ids, crossing_ids=()) -> np.ndarray:
     return per_sample[tree_pixels(tree)].any(axis=-1)
 
 
-def tree_to_jax(tree, pixels=None, dtype=jnp.float32) -> TreeJ:
+def tree_to_jax(tree, pixels=None, dtype=jnp.float32, texels=None) -> TreeJ:
     """The nodes that `pixels` need, in level order, as a `TreeJ`.
 
     Arguments:
         tree: a `renderers.raytrace.tree.RayTree`.
         pixels: (U,) flat pixel indices (row * width + column); default: every pixel, in order.
         dtype: float dtype of the arrays (float64 needs x64 enabled).
+        texels: a `texels.TexelSource` of the fitted textures (their taps at the nodes' uv), or None.
     Returns:
         a `TreeJ` whose `tree_image` is (U, 3), the pixels in the order given.
     """
@@ -154,11 +162,15 @@ def tree_to_jax(tree, pixels=None, dtype=jnp.float32) -> TreeJ:
                      light_dist=f(np.where(np.isfinite(dist), dist, np.inf)),
                      visibility=f(tree.visibility[order]))
     crossings = tree.crossings[order]
-    texel = getattr(tree, "texel", None)
-    texel = None if texel is None or not np.any(texel) else texel[order]
+    texel = tree.texel[order] if np.any(tree.texel) else None  # (0, 3) without textures
+    taps = tap_weight = None
+    if texels is not None:
+        rows, weight = texels.taps_at(tree.material[order], tree.uv[order])
+        taps, tap_weight = jnp.asarray(rows), f(weight)
     fog = tree.sample_fog[per_pixel.reshape(-1)]
     return TreeJ(
-        points=points, texel=None if texel is None else f(texel), crossings=f(crossings) if crossings.any() else None,
+        points=points, texel=None if texel is None else f(texel), taps=taps, tap_weight=tap_weight,
+        crossings=f(crossings) if crossings.any() else None,
         parent_local=jnp.asarray(parent_local, jnp.int32), edge_material=jnp.asarray(edge_material, jnp.int32),
         edge_fresnel=f(edge_fresnel), edge_reflected=jnp.asarray(kind == REFLECTED),
         medium=jnp.asarray(tree.medium[order], jnp.int32), distance=f(np.where(finite, distance, 0.0)),
@@ -179,14 +191,23 @@ def node_visibility(tree: TreeJ, kt):
     return jnp.where(crossed & (vis > 0.0), product, vis)
 
 
-def local_colors(tree: TreeJ, mats: MaterialTable, lights: LightsJ, ambient, background):
+def node_texels(tree: TreeJ, texels):
+    """(N, 3) each node's texture value: its taps' weighted sum of the stacked fitted `texels`
+    (T, 3) where it reads them, else the recorded value (None: no node is textured)."""
+    if tree.taps is None:
+        return tree.texel
+    return point_texels(texels, tree.taps, tree.tap_weight, 1.0 if tree.texel is None else tree.texel)
+
+
+def local_colors(tree: TreeJ, mats: MaterialTable, lights: LightsJ, ambient, background, texel=None):
     """(N, 3) local colour of every node: the illumination model (`jax_model.shade`) with the node's
-    material (`jax_model.surface_material`; a texture modulating its target coefficient) and the
-    shadow rays' visibility under the current kt; background where the ray hit nothing."""
+    material (`jax_model.surface_material`; a texture modulating its target coefficient: `texel`
+    (N, 3), default `node_texels(tree, mats.texels)`) and the shadow rays' visibility under the
+    current kt; background where the ray hit nothing."""
     p = tree.points
     has_material = p.material >= 0
     mat_id = jnp.where(has_material, p.material, 0)
-    mat = textured_surface(mats, mat_id, p.cell, tree.texel)
+    mat = textured_surface(mats, mat_id, p.cell, node_texels(tree, mats.texels) if texel is None else texel)
     color = shade(mat, tree.specular, p.normal, p.view, lights, p.light_dir, p.light_dist,
                   node_visibility(tree, mats.kt), ambient)
     return jnp.where(has_material[:, None], color, background)
@@ -208,16 +229,17 @@ def node_factors(tree: TreeJ, mats: MaterialTable):
     return edge[:, None] * beer
 
 
-def tree_image(tree: TreeJ, mats: MaterialTable, lights: LightsJ, ambient, background, local=None):
+def tree_image(tree: TreeJ, mats: MaterialTable, lights: LightsJ, ambient, background, local=None, texel=None):
     """The pixels (U, 3) of the tree for these materials (linear RGB, as the Warp ray tracer forms them).
 
     Arguments:
         tree: a `TreeJ` (from `tree_to_jax`).
         mats: a `MaterialTable`; lights: the view's `LightsJ`; ambient, background: (3,).
         local: optional (N, 3) node colours to use instead of shading the nodes.
+        texel: optional (N, 3) node texture values (`local_colors`).
     """
     if local is None:
-        local = local_colors(tree, mats, lights, ambient, background)
+        local = local_colors(tree, mats, lights, ambient, background, texel)
     factors = node_factors(tree, mats)
     n_samples = tree.fog.shape[0]
     total = jnp.zeros((n_samples, 3), factors.dtype)
@@ -237,18 +259,25 @@ def tree_image(tree: TreeJ, mats: MaterialTable, lights: LightsJ, ambient, backg
 
 
 class TreeModel(eqx.Module):
-    """The ray-tree image model of U pixels: their part of the recorded tree and the view's
-    background. `pixels` is the (U, 3) image for given materials, lights and ambient."""
+    """The ray-tree image model of U pixels: their part of the recorded tree (with the nodes' taps
+    into fitted texels) and the view's background. `pixels` is the (U, 3) image for given
+    materials, lights and ambient."""
 
     tree: TreeJ
     background: jnp.ndarray
 
     @classmethod
-    def build(cls, tree, pixels, background, dtype) -> TreeModel:
-        return cls(tree=tree_to_jax(tree, pixels, dtype), background=jnp.asarray(background, dtype))
+    def build(cls, tree, pixels, background, dtype, texels=None) -> TreeModel:
+        """`texels`: a `texels.TexelSource` for the fitted textures, or None."""
+        return cls(tree=tree_to_jax(tree, pixels, dtype, texels), background=jnp.asarray(background, dtype))
 
-    def pixels(self, table: MaterialTable, lights: LightsJ, ambient):
-        return tree_image(self.tree, table, lights, ambient, self.background)
+    def point_texels(self, texels):
+        """(N, 3) each node's texture value from the stacked `texels` (`node_texels`)."""
+        return node_texels(self.tree, texels)
+
+    def pixels(self, table: MaterialTable, lights: LightsJ, ambient, texel=None):
+        """`texel` (N, 3): the nodes' texture values (default: `point_texels(table.texels)`)."""
+        return tree_image(self.tree, table, lights, ambient, self.background, texel=texel)
 
 
 @jax.jit

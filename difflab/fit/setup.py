@@ -6,8 +6,9 @@ The image model: "raytrace" re-forms the Whitted ray tracer's image from each vi
 tree (`raytree.py`), "raster" the rasterizer's from its G-buffer (`shading.py`). Unless told, the
 scene decides: the ray tree when the scene is ray-traced, when any material it uses has kr or kt > 0
 (reflections or transparent shadows can carry a fitted material's colour to other pixels), or when a
-fitted material has an image texture; else the G-buffer. Texels are fitted through the G-buffer
-(`texels.py`: the ray tree records texel values, not texture coordinates).
+fitted material has an image texture whose texels are not fitted; else the G-buffer. Fitted texels
+go with that image model (`texels.py`: the G-buffer's samples and the ray tree's nodes both carry
+the uv their texture was read at).
 """
 
 from __future__ import annotations
@@ -72,16 +73,13 @@ def take_pixels(image, pixels) -> np.ndarray:
 
 def choose_method(scene, materials, method, texels=False) -> str:
     """The image model: `method` when given, else from the scene (see the module docstring);
-    `texels`: a texture is fitted (the G-buffer, refused where the scene needs the ray tree)."""
+    `texels`: a texture is fitted (the G-buffer, unless the scene needs the ray tree)."""
     if method is not None:
         if method not in METHODS:
             raise FitError(f"method: expected one of {', '.join(METHODS)} (or None: from the scene), got {method!r}")
         return method
     used = {obj.material for obj in scene.objects}
     if scene.render.method == "raytrace" or any(scene.materials[m].kr > 0 or scene.materials[m].kt > 0 for m in used):
-        if texels:
-            raise FitError("params: texels are fitted through the rasterizer's G-buffer, but the scene is ray traced "
-                           "or has kr / kt > 0; pass method='raster' if the rasterizer's image models the targets")
         return "raytrace"
     if texels:
         return "raster"
@@ -309,7 +307,7 @@ class Setup:
 
     def _model(self, view: View, pixels, lights):
         if self.method == "raytrace":
-            return TreeModel.build(view.record, pixels, view.scene.background, self.dtype)
+            return TreeModel.build(view.record, pixels, view.scene.background, self.dtype, self.texel_source)
         return GBufferModel.build(view.record, pixels, lights, self.dtype, self.texel_source)
 
     def _view(self, view: View, pixels, index) -> ViewJ:

@@ -1,16 +1,18 @@
 """Texels as fitted parameters: a material's image texture, one unknown per texel and channel.
 
-On a Phong G-buffer every shading point is a sample with texture coordinates uv, and the texture
-value the rasterizer multiplied into the point's coefficient (`texture_target`: ka, kd or ks) is a
-fixed linear combination of texels -- the filter's taps at uv:
+On a Phong G-buffer every shading point is a sample with texture coordinates uv -- and in a recorded
+ray tree every node that hit a textured surface has its uv (`RayTree.uv`) -- and the texture value
+the renderer multiplied into the point's coefficient (`texture_target`: ka, kd or ks) is a fixed
+linear combination of texels, the filter's taps at uv:
 
     texel(point) = sum_k w_k T[i_k]          (per channel; `texture_taps`, the Warp sampler's rules)
 
-so the image stays affine in T and the fit's Jacobian is sparse (4 bilinear taps per sample). The
-taps are built once per view (`TexelSource.taps`); the texels travel in the flat parameter vector
-(texture orientation: row 0 = v 0, as the Warp texture store) and into `MaterialTable.texels`,
-where `shading.GBufferModel` reads them. Filters: "nearest" and "bilinear" (level 0; the
-magnification filters). An optional smoothness prior adds sqrt(smoothness) times the differences of
+so the image stays affine in T (a ray tree's node weights do not depend on it) and the fit's
+Jacobian is sparse (4 bilinear taps per point). The taps are built once per view
+(`TexelSource.taps_at`); the texels travel in the flat parameter vector (texture orientation: row 0
+= v 0, as the Warp texture store) and into `MaterialTable.texels`, where `shading.GBufferModel` and
+`raytree.TreeModel` read them. Filters: "nearest" and "bilinear" (level 0; the magnification
+filters, which need no footprint). An optional smoothness prior adds sqrt(smoothness) times the differences of
 neighbouring texels to the residuals (`smoothness_residuals`), which also fills texels no view sees.
 """
 
@@ -141,16 +143,21 @@ class TexelSource:
         return cls(blocks, targets) if blocks else None
 
     def taps(self, gbuffer, point_ids) -> tuple[np.ndarray, np.ndarray]:
-        """(rows (R, K) int32 into the stacked texels, -1 where the point reads no fitted texture;
-        weights (R, K)) for the points `point_ids` of a Phong G-buffer (point i = sample i)."""
+        """`taps_at` the points `point_ids` of a Phong G-buffer (point i = sample i)."""
         if gbuffer.shading != "phong":
             raise FitError(f"params: fitting texels needs Phong shading (a shading point per sample), the targets "
-                           f"are rendered with {gbuffer.shading!r}")
+                           f"are rendered with {gbuffer.shading!r}; or fit through the ray tree (method='raytrace')")
         point_ids = np.asarray(point_ids, np.int64)
         material = gbuffer.points.material[point_ids] if point_ids.size else np.zeros(0, np.int32)
         uv = gbuffer.uv.reshape(-1, 2)[point_ids] if point_ids.size else np.zeros((0, 2), np.float32)
-        rows = np.full((point_ids.size, 4), -1, np.int32)
-        weights = np.zeros((point_ids.size, 4), np.float32)
+        return self.taps_at(material, uv)
+
+    def taps_at(self, material, uv) -> tuple[np.ndarray, np.ndarray]:
+        """(rows (R, K) int32 into the stacked texels, -1 where the point reads no fitted texture;
+        weights (R, K)) for R points with material ids `material` (R,) that read their textures at
+        `uv` (R, 2): G-buffer samples or ray-tree nodes."""
+        rows = np.full((material.size, 4), -1, np.int32)
+        weights = np.zeros((material.size, 4), np.float32)
         for mat_id, (first, shape, filter, wrap) in self.blocks.items():
             on = material == mat_id
             index, weight = texture_taps(uv[on], shape, filter, wrap)
@@ -170,11 +177,11 @@ def stacked_texels(layout, values):
     return jnp.concatenate(parts) if parts else None
 
 
-def point_texels(texels, rows, weights):
-    """(R, 3) texel value of each point: its taps' weighted sum of the stacked `texels` (T, 3), 1
-    where it reads none (its coefficient unmodulated)."""
+def point_texels(texels, rows, weights, other=1.0):
+    """(R, 3) texel value of each point: its taps' weighted sum of the stacked `texels` (T, 3);
+    `other` ((R, 3) or a number) where it reads none (1: its coefficient unmodulated)."""
     value = jnp.sum(weights[..., None] * texels[jnp.maximum(rows, 0)], axis=1)
-    return jnp.where(jnp.any(rows >= 0, axis=1)[:, None], value, 1.0)
+    return jnp.where(jnp.any(rows >= 0, axis=1)[:, None], value, other)
 
 
 def smoothness_residuals(layout, values, smoothness: float):

@@ -34,7 +34,7 @@ from .itembuffer import asked_bvh, item_buffer, item_struct
 from .lightbuffer import build_light_buffer, no_light_buffer
 from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, TraceOutW, TraceParamsW, \
     whitted_kernel
-from .record import empty_tree, sized_tree, tree_to_numpy
+from .record import empty_tree, has_textures, sized_tree, tree_to_numpy
 from .surface import MeshDataW, SceneW
 from .tree import RayTree
 
@@ -162,7 +162,8 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
     tree = None
     if record:
         crossings = count_crossings(scene, settings)
-        wp_tree, offsets = sized_tree(counts, n_lights, len(scene.materials) if crossings else 0, device)
+        wp_tree, offsets = sized_tree(counts, n_lights, len(scene.materials) if crossings else 0, device,
+                                      has_textures(scene))
         launch(trace_params(scene, settings, True, spread, side), wp_tree)
         tree = tree_to_numpy(wp_tree, offsets, n_lights, fog, scene, settings, shape, crossings)
     return Traced(color=out.color.numpy(), fog=fog, node_count=counts, rays=stats_rays,

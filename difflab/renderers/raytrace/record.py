@@ -2,7 +2,9 @@
 
 The recording pass runs the same walk as the image pass, with every sample's nodes written at the
 sample's offset (`TreeW.offset`, from the node counts of the image pass, so the arrays are sized
-exactly). See `tree.RayTree` for the meaning of every field.
+exactly). See `tree.RayTree` for the meaning of every field. The texture fields (uv, texel) take
+memory only in scenes with an image texture (`has_textures`); elsewhere they are one element, never
+written.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ class TreeW:
     view: wp.array(dtype=wp.vec3)
     local: wp.array(dtype=wp.vec3)
     texel: wp.array(dtype=wp.vec3)  # the texture value the node's material took (textured materials)
+    uv: wp.array(dtype=wp.vec2)  # where it read its texture (textured materials)
     fresnel: wp.array(dtype=float)
     fresnel_r: wp.array(dtype=float)
     fresnel_t: wp.array(dtype=float)
@@ -104,15 +107,24 @@ def record_surface(tree: TreeW, k: int, surf: SurfaceW, local: wp.vec3, split: S
     tree.normal[k] = surf.normal
     tree.view[k] = surf.view
     tree.local[k] = local
-    tree.texel[k] = surf.texel
+    if surf.mat.texture >= 0:  # (the texture arrays hold every node only in scenes with textures)
+        tree.texel[k] = surf.texel
+        tree.uv[k] = surf.uv
     tree.fresnel[k] = split.fresnel
     tree.fresnel_r[k] = split.f_r
     tree.fresnel_t[k] = split.f_t
 
 
-def empty_tree(shape: tuple[int, int], n_nodes: int, n_lights: int, device: str, n_materials: int = 0) -> TreeW:
+def has_textures(scene) -> bool:
+    """Whether some material of `scene` has an image texture (the tree then records uv and texels)."""
+    return any(mat.texture is not None for mat in scene.materials.values())
+
+
+def empty_tree(shape: tuple[int, int], n_nodes: int, n_lights: int, device: str, n_materials: int = 0,
+               textured: bool = False) -> TreeW:
     """Device arrays for n_nodes nodes (at least one element each, so that Warp accepts them);
-    `crossings` has a material axis of n_materials (1 when not recorded)."""
+    `crossings` has a material axis of n_materials (1 when not recorded); texel and uv hold every
+    node only when `textured`."""
     n, p = max(n_nodes, 1), max(n_lights, 1)
     tree = TreeW()
     tree.offset = wp.zeros(shape, dtype=wp.int32, device=device)
@@ -120,8 +132,10 @@ def empty_tree(shape: tuple[int, int], n_nodes: int, n_lights: int, device: str,
         setattr(tree, name, wp.zeros(n, dtype=wp.int32, device=device))
     for name in ("distance", "fresnel", "fresnel_r", "fresnel_t"):
         setattr(tree, name, wp.zeros(n, dtype=float, device=device))
-    for name in ("position", "normal", "view", "local", "texel"):
+    for name in ("position", "normal", "view", "local"):
         setattr(tree, name, wp.zeros(n, dtype=wp.vec3, device=device))
+    tree.texel = wp.zeros(n if textured else 1, dtype=wp.vec3, device=device)
+    tree.uv = wp.zeros(n if textured else 1, dtype=wp.vec2, device=device)
     tree.light_dir = wp.zeros((n, p), dtype=wp.vec3, device=device)
     tree.light_dist = wp.zeros((n, p), dtype=float, device=device)
     tree.visibility = wp.zeros((n, p), dtype=float, device=device)
@@ -129,13 +143,15 @@ def empty_tree(shape: tuple[int, int], n_nodes: int, n_lights: int, device: str,
     return tree
 
 
-def sized_tree(counts: np.ndarray, n_lights: int, n_materials: int, device: str) -> tuple[TreeW, np.ndarray]:
-    """A `TreeW` sized for per-sample node `counts` (rows, cols), and the (S + 1,) int64 offsets."""
+def sized_tree(counts: np.ndarray, n_lights: int, n_materials: int, device: str,
+               textured: bool = False) -> tuple[TreeW, np.ndarray]:
+    """A `TreeW` sized for per-sample node `counts` (rows, cols), and the (S + 1,) int64 offsets
+    (`textured`: as `empty_tree`)."""
     offsets = np.zeros(counts.size + 1, np.int64)
     np.cumsum(counts.ravel(), out=offsets[1:])
     n_nodes = int(offsets[-1])
     check_tree(n_nodes, n_lights, n_lights * n_materials)
-    tree = empty_tree(counts.shape, n_nodes, n_lights, device, n_materials)
+    tree = empty_tree(counts.shape, n_nodes, n_lights, device, n_materials, textured)
     tree.offset = wp.array(offsets[:-1].reshape(counts.shape).astype(np.int32), dtype=wp.int32, device=device)
     return tree, offsets
 
@@ -152,6 +168,10 @@ def tree_to_numpy(wp_tree: TreeW, offsets: np.ndarray, n_lights: int, fog, scene
         crossed = get("crossings")[:, :n_lights].astype(np.uint8)  # at most MAX_SHADOW_CROSSINGS each
     else:
         crossed = np.zeros((n_nodes, n_lights, len(scene.materials)), np.uint8)
+    if has_textures(scene):
+        texture = {"texel": get("texel"), "uv": get("uv")}
+    else:
+        texture = {"texel": np.zeros((0, 3), np.float32), "uv": np.zeros((0, 2), np.float32)}
     side = grid[0] // scene.camera.height
     return RayTree(
         image_shape=(scene.camera.height, scene.camera.width), grid_shape=tuple(grid), spp_side=side,
@@ -160,7 +180,7 @@ def tree_to_numpy(wp_tree: TreeW, offsets: np.ndarray, n_lights: int, fog, scene
         fog_color=np.asarray(fog_params(scene.fog)[1], np.float32),
         **{name: get(name) for name in ("sample", "parent", "kind", "depth", "material", "object", "face", "cell",
                                         "medium", "distance", "position", "normal", "view", "fresnel", "fresnel_r",
-                                        "fresnel_t", "local", "texel")},
+                                        "fresnel_t", "local")}, **texture,
         light_dir=get("light_dir")[:, :n_lights], light_dist=get("light_dist")[:, :n_lights],
         visibility=get("visibility")[:, :n_lights], crossings=crossed,
     )

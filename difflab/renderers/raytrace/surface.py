@@ -76,6 +76,7 @@ class SurfaceW:
     view: wp.vec3  # unit direction back along the incoming ray
     entering: int  # 1 where the ray hit the side the stored normal points to
     cell: int  # checker cell 0 / 1
+    uv: wp.vec2  # where a textured material read its texture (`hit_texel`), else 0
     texel: wp.vec3  # the texture value a textured material took, else 0
     mat: MaterialW
 
@@ -147,8 +148,8 @@ def shading_normal(mesh: MeshDataW, hit: HitW):
 @wp.func
 def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3, geo: wp.vec3, d: wp.vec3,
               xy: wp.vec2, primary: int, path: float, spread: float):
-    """The texture value at a hit. uv: interpolated vertex uvs (triangles), the plane's world axes,
-    or the sphere's (lon / 2 pi, lat / pi). Footprint: a primary ray's pixel footprint on the tangent
+    """uv and the texture value at a hit. uv: interpolated vertex uvs (triangles), the plane's world
+    axes, or the sphere's (lon / 2 pi, lat / pi). Footprint: a primary ray's pixel footprint on the tangent
     plane (as the rasterizer's derivatives), a secondary ray's cone of width spread x path length
     from the eye (the pixel cone carried along the path, ignoring curvature)."""
     dpdx = wp.vec3(0.0)
@@ -177,7 +178,7 @@ def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3
         center = scene.geom.sphere_center[hit.index]
         uv = sphere_uv(p, center)
         duv_dx, duv_dy = sphere_uv_derivatives(p, center, dpdx, dpdy)
-    return sample_texture(scene.textures, mat.texture, uv, duv_dx, duv_dy, mat.texture_filter, mat.texture_wrap)
+    return uv, sample_texture(scene.textures, mat.texture, uv, duv_dx, duv_dy, mat.texture_filter, mat.texture_wrap)
 
 
 @wp.func(inline=True)
@@ -198,9 +199,12 @@ def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, xy: wp.vec2, p
     if base.checker_size > 0.0:
         surf.cell = checker_cell(surf.p, surf.geo, base.checker_size)
     surf.mat = surface_material(base, surf.cell)
+    surf.uv = wp.vec2(0.0)
     surf.texel = wp.vec3(0.0)
     if surf.mat.texture >= 0:
-        surf.texel = hit_texel(scene, surf.mat, cam, hit, surf.p, surf.geo, d, xy, primary, ray.path + hit.t, spread)
+        uv, texel = hit_texel(scene, surf.mat, cam, hit, surf.p, surf.geo, d, xy, primary, ray.path + hit.t, spread)
+        surf.uv = uv
+        surf.texel = texel
         surf.mat = textured_material(surf.mat, surf.mat.texture_target, surf.texel)
     return surf
 

@@ -60,6 +60,11 @@ class RayTree:
       local       (N, 3) float32: the node's local colour as rendered (background for misses).
       texel       (N, 3) float32: the texture value a textured material took at the node (it multiplies
                   the coefficient named by the material's texture_target), else 0.
+      uv          (N, 2) float32: the texture coordinates it was read at (`surface.hit_texel`), else 0;
+                  with the material's texture, filter and wrap they locate the nearest / bilinear taps
+                  whose texels a fit varies (`difflab.fit.texels`; the footprint of the mip-mapped
+                  filters is not recorded). texel and uv are (0, 3) / (0, 2) in a scene without image
+                  textures (no memory spent on them).
 
     Per sample: `sample_fog` (S,) float32 fog blend f of the primary hit (1 where none) and
     `fog_color` (3,): the sample is f * sum + (1 - f) * fog_color.
@@ -101,6 +106,7 @@ class RayTree:
     fresnel_t: np.ndarray
     local: np.ndarray
     texel: np.ndarray
+    uv: np.ndarray
 
     @property
     def n_nodes(self) -> int:
