@@ -56,7 +56,8 @@ def render_at(setup, texels, ks=(0.3, 0.3, 0.3)) -> np.ndarray:
 @pytest.mark.parametrize("filter", ["nearest", "bilinear"])
 def test_tree_image_at_other_texels_equals_warp(tmp_path, filter, compare_images):
     """Recorded with texture A, re-formed at texture B (and another ks): Warp's render with B, to
-    float32 rounding (<= 1e-6 measured 2.8e-7), mirror pixels that show the floor included."""
+    float32 rounding (measured 7.2e-7 for both filters; 2.8e-7 on the mirror's pixels), mirror
+    pixels that show the floor included."""
     a, b = random_texels(1), random_texels(2)
     recorded = textured_scene(tmp_path, a, filter)
     frame = render_frame(recorded)
@@ -64,14 +65,14 @@ def test_tree_image_at_other_texels_equals_warp(tmp_path, filter, compare_images
     assert tree.uv.shape == (tree.n_nodes, 2) and tree.texel.shape == (tree.n_nodes, 3)
     setup = Setup(recorded, frame.image, "m", ("texture", "ks"))
     assert setup.method == "raytrace"
-    compare_images(render_at(setup, a), frame.image, atol=1e-6, name=f"{filter}_a")
+    compare_images(render_at(setup, a), frame.image, atol=2e-6, name=f"{filter}_a")
 
     np.save(tmp_path / "b.npy", b)
     d = recorded.to_dict()
     d["materials"]["m"].update(texture=str(tmp_path / "b.npy"), ks=[0.5] * 3)
     want = render_frame(Scene.from_dict(d))
     got = render_at(setup, b, ks=(0.5, 0.5, 0.5))
-    compare_images(got, want.image, atol=1e-6, name=f"{filter}_b")
+    compare_images(got, want.image, atol=2e-6, name=f"{filter}_b")
     reflected = mirror_pixels(tree, recorded) & (np.abs(want.image - frame.image).max(axis=-1) > 1e-2)
     assert reflected.sum() >= 20  # the mirror's pixels change with the floor's texels
 
@@ -94,7 +95,7 @@ def test_fit_material_recovers_texels_and_ks_through_the_tree(tmp_path, filter):
     result = fit_material(scene, target, "m", ("texture", "ks"), init={"texture": 0.5, "ks": [0.2] * 3})
     assert result.model == "raytrace" and result.converged and not result.model_mismatch
     assert result.visible.all()  # the floor repeats the texture: every texel is seen
-    assert np.abs(result.texture - truth).max() < 1e-5  # measured 6e-8 (bilinear), 1.5e-8 (nearest)
+    assert np.abs(result.texture - truth).max() < 1e-5  # measured 6e-8 (bilinear), 1.5e-8 (nearest), 4 steps
     np.testing.assert_allclose(result.params["ks"], 0.3, rtol=1e-5)
     assert np.all(np.isfinite(result.stderr["texture"]))  # dense: a covariance is formed
 
@@ -106,7 +107,7 @@ def test_a_large_texture_is_fitted_matrix_free_through_the_tree(tmp_path):
     result = fit_material(scene, target, "m", ("texture",), init={"texture": 0.5})
     assert result.model == "raytrace" and result.converged and result.n_params == 432
     assert np.isnan(result.stderr["texture"]).all()  # matrix-free: no covariance is formed
-    assert result.visible.all() and np.abs(result.texture - truth).max() < 1e-5
+    assert result.visible.all() and np.abs(result.texture - truth).max() < 1e-5  # measured 1.3e-7, 6 steps
 
 
 def test_the_mirror_alone_recovers_the_texels_it_reflects(tmp_path):
@@ -129,7 +130,7 @@ def test_the_mirror_alone_recovers_the_texels_it_reflects(tmp_path):
     expected = np.flipud(expected)  # image orientation, as `visible`
     assert 5 <= expected.sum() < 64
     np.testing.assert_array_equal(result.visible, expected)
-    assert np.abs(result.texture - truth)[expected].max() < 1e-5
+    assert np.abs(result.texture - truth)[expected].max() < 1e-5  # measured 1.2e-7 (34 texels, 120 pixels)
     np.testing.assert_allclose(result.texture[~expected], 0.5)
 
 
@@ -163,7 +164,7 @@ def test_texel_gradients_match_warp_finite_differences(tmp_path):
             moved.append((t[7 - row, col, channel], image))
         (up, image_up), (down, image_down) = moved
         fd = (image_up - image_down).reshape(-1, 3)[pixels] / (up - down)
-        assert np.abs(jac[..., entry] - fd).max() < 1e-5  # float32 renders: measured 2e-6
+        assert np.abs(jac[..., entry] - fd).max() < 1e-5  # float32 renders: measured 3.0e-7, 1.7e-7
     assert np.abs(fd[mirror]).max() > 0.1  # the second texel reaches the mirror's pixels
 
     rng = np.random.default_rng(0)
@@ -178,3 +179,15 @@ def test_texel_gradients_match_warp_finite_differences(tmp_path):
         assert np.abs(fast[2](u) - vjp(u)).max() <= 1e-12 * np.abs(vjp(u)).max()
         check_grads(lambda t: problem.images(t)[0], (jnp.asarray(values),), order=1,
                                   modes=("fwd", "rev"), atol=1e-5, rtol=1e-5)
+
+
+def test_choose_method_sends_texels_with_the_scene_s_image_model(tmp_path):
+    from difflab.fit.setup import choose_method
+    from test_texture_fit import quad_scene
+
+    traced = textured_scene(tmp_path, random_texels(1))
+    quad = quad_scene(tmp_path / "floor.npy", size=16)
+    assert choose_method(traced, ("m",), None, texels=True) == "raytrace"
+    assert choose_method(quad, ("m",), None, texels=True) == "raster"
+    assert choose_method(quad, ("m",), None, texels=False) == "raytrace"  # an unfitted texture: the tree carries it
+    assert choose_method(traced, ("m",), "raster", texels=True) == "raster"

@@ -146,8 +146,9 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
             "intensity" (every light's) or "lights[i].intensity"; a tuple or "ka,kd". A generic
             kr (kt, absorption) applies only where kr (kt) starts > 0: the tree has no such rays
             otherwise. "texture": the texels of the material's image texture (H_t x W_t x 3
-            unknowns, the G-buffer image model with Phong shading, filters "nearest" /
-            "bilinear"), alone or beside the other kinds; more than `FitOptions` DENSE_MAX
+            unknowns; filters "nearest" / "bilinear"; through either image model: the G-buffer
+            with Phong shading, or the ray tree, whose nodes keep the uv their texture was read
+            at, so texels seen in mirrors count), alone or beside the other kinds; more than `FitOptions` DENSE_MAX
             entries are solved matrix-free ("lm", "gauss_newton", "dogleg", "adam").
         method: "raster", "raytrace" or None (from the scene).
         options: a `FitOptions` (solver, max_steps, tolerances, precision, progress, throw, ...);
