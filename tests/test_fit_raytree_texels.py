@@ -11,7 +11,7 @@ from conftest import scene_dict
 from jax.test_util import check_grads
 
 from difflab import Scene, render_frame
-from difflab.fit import Setup, fit_material
+from difflab.fit import Setup, fit_batch, fit_material
 from difflab.fit.matfree import linearisation
 from difflab.fit.texels import texel_linearisation
 
@@ -44,8 +44,10 @@ def random_texels(seed, shape=(8, 8)):
 
 
 def mirror_pixels(tree, scene) -> np.ndarray:
-    """(H, W) bool: pixels whose primary ray hits the mirror (spp 1)."""
-    return tree.material[tree.primary()] == scene.material_index("mirror")
+    """(H, W) bool: pixels where a primary ray hits the mirror."""
+    hits = tree.material[tree.primary()] == scene.material_index("mirror")
+    side = tree.spp_side
+    return hits.reshape(H, side, W, side).any(axis=(1, 3))
 
 
 def render_at(setup, texels, ks=(0.3, 0.3, 0.3)) -> np.ndarray:
@@ -53,26 +55,26 @@ def render_at(setup, texels, ks=(0.3, 0.3, 0.3)) -> np.ndarray:
     return setup.render({"texture": np.flipud(texels).reshape(-1), "ks": ks})[0]
 
 
-@pytest.mark.parametrize("filter", ["nearest", "bilinear"])
-def test_tree_image_at_other_texels_equals_warp(tmp_path, filter, compare_images):
+@pytest.mark.parametrize("filter, spp", [("nearest", 1), ("bilinear", 1), ("bilinear", 4)])
+def test_tree_image_at_other_texels_equals_warp(tmp_path, filter, spp, compare_images):
     """Recorded with texture A, re-formed at texture B (and another ks): Warp's render with B, to
-    float32 rounding (measured 7.2e-7 for both filters; 2.8e-7 on the mirror's pixels), mirror
-    pixels that show the floor included."""
+    float32 rounding (measured 7.2e-7 for both filters at spp 1; 2.8e-7 on the mirror's pixels),
+    mirror pixels that show the floor included."""
     a, b = random_texels(1), random_texels(2)
-    recorded = textured_scene(tmp_path, a, filter)
+    recorded = textured_scene(tmp_path, a, filter).with_overrides(render={"spp": spp})
     frame = render_frame(recorded)
     tree = frame.ray_tree
     assert tree.uv.shape == (tree.n_nodes, 2) and tree.texel.shape == (tree.n_nodes, 3)
     setup = Setup(recorded, frame.image, "m", ("texture", "ks"))
     assert setup.method == "raytrace"
-    compare_images(render_at(setup, a), frame.image, atol=2e-6, name=f"{filter}_a")
+    compare_images(render_at(setup, a), frame.image, atol=2e-6, name=f"{filter}_{spp}_a")
 
     np.save(tmp_path / "b.npy", b)
     d = recorded.to_dict()
     d["materials"]["m"].update(texture=str(tmp_path / "b.npy"), ks=[0.5] * 3)
     want = render_frame(Scene.from_dict(d))
     got = render_at(setup, b, ks=(0.5, 0.5, 0.5))
-    compare_images(got, want.image, atol=2e-6, name=f"{filter}_b")
+    compare_images(got, want.image, atol=2e-6, name=f"{filter}_{spp}_b")
     reflected = mirror_pixels(tree, recorded) & (np.abs(want.image - frame.image).max(axis=-1) > 1e-2)
     assert reflected.sum() >= 20  # the mirror's pixels change with the floor's texels
 
@@ -108,6 +110,18 @@ def test_a_large_texture_is_fitted_matrix_free_through_the_tree(tmp_path):
     assert result.model == "raytrace" and result.converged and result.n_params == 432
     assert np.isnan(result.stderr["texture"]).all()  # matrix-free: no covariance is formed
     assert result.visible.all() and np.abs(result.texture - truth).max() < 1e-5  # measured 1.3e-7, 6 steps
+
+
+def test_a_batch_of_targets_recovers_each_texture_through_the_tree(tmp_path):
+    a, b = random_texels(1), random_texels(2)
+    scene = textured_scene(tmp_path, a)
+    np.save(tmp_path / "b.npy", b)
+    d = scene.to_dict()
+    d["materials"]["m"]["texture"] = str(tmp_path / "b.npy")
+    results = fit_batch(scene, [render_frame(scene).image, render_frame(Scene.from_dict(d)).image], "m",
+                        ("texture",), init={"texture": 0.5})
+    assert [(r.result, r.model) for r in results] == [("successful", "raytrace")] * 2
+    assert np.abs(results[0].texture - a).max() < 1e-5 and np.abs(results[1].texture - b).max() < 1e-5  # 6e-8
 
 
 def test_the_mirror_alone_recovers_the_texels_it_reflects(tmp_path):
