@@ -148,8 +148,9 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
             otherwise. "texture": the texels of the material's image texture (H_t x W_t x 3
             unknowns; filters "nearest" / "bilinear"; through either image model: the G-buffer
             with Phong shading, or the ray tree, whose nodes keep the uv their texture was read
-            at, so texels seen in mirrors count), alone or beside the other kinds; more than `FitOptions` DENSE_MAX
-            entries are solved matrix-free ("lm", "gauss_newton", "dogleg", "adam").
+            at, so texels seen in mirrors count), alone or beside the other kinds; more than
+            `FitOptions` DENSE_MAX entries are solved matrix-free ("lm", "gauss_newton", "dogleg",
+            "adam").
         method: "raster", "raytrace" or None (from the scene).
         options: a `FitOptions` (solver, max_steps, tolerances, precision, progress, throw, ...);
             its fields may also be given as keywords (`solver="varpro"`, `x64=False`).

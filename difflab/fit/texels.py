@@ -12,8 +12,9 @@ Jacobian is sparse (4 bilinear taps per point). The taps are built once per view
 (`TexelSource.taps_at`); the texels travel in the flat parameter vector (texture orientation: row 0
 = v 0, as the Warp texture store) and into `MaterialTable.texels`, where `shading.GBufferModel` and
 `raytree.TreeModel` read them. Filters: "nearest" and "bilinear" (level 0; the magnification
-filters, which need no footprint). An optional smoothness prior adds sqrt(smoothness) times the differences of
-neighbouring texels to the residuals (`smoothness_residuals`), which also fills texels no view sees.
+filters, which need no footprint). An optional smoothness prior adds sqrt(smoothness) times the
+differences of neighbouring texels to the residuals (`smoothness_residuals`), which also fills
+texels no view sees.
 """
 
 from __future__ import annotations
