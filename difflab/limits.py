@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import os
 import resource
+from time import monotonic
 
 from .errors import DifflabError
 
@@ -132,8 +133,24 @@ def _vm_size() -> int:
         return 0
 
 
+#: Seconds `available_bytes` reuses its last reading: reading /proc and /sys costs ~0.15-0.45 ms, a
+#: sizeable part of a small frame rendered again and again (a fit's views), while what a frame
+#: may use changes little in that time.
+AVAILABLE_MAX_AGE = 0.5
+_available = (-math.inf, 0)  # (monotonic() of the reading, bytes)
+
+
 def available_bytes() -> int:
-    """Memory this process can still allocate (bytes): see the module doc. Unknown limits are ignored."""
+    """Memory this process can still allocate (bytes): see the module doc, as read at most
+    AVAILABLE_MAX_AGE seconds ago. Unknown limits are ignored."""
+    global _available
+    now = monotonic()
+    if now - _available[0] > AVAILABLE_MAX_AGE:
+        _available = (now, _read_available())
+    return _available[1]
+
+
+def _read_available() -> int:
     candidates = [_meminfo("MemAvailable")]
     for limit_path, usage_path in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
                                    ("/sys/fs/cgroup/memory/memory.limit_in_bytes",

@@ -2,6 +2,7 @@
 (a tiny field of view, an eye at 1e30, a vertex at 1e39) are refused with the field that causes them."""
 
 import json
+import math
 import subprocess
 import sys
 import textwrap
@@ -45,6 +46,18 @@ def test_an_address_space_limit_lowers_the_available_memory():
     """)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert 0.9 < float(out.stdout) <= 1.0
+
+
+def test_available_memory_is_read_again_only_after_its_max_age(monkeypatch):
+    readings, clock = iter([5 * 2 ** 30, 3 * 2 ** 30]), [100.0]
+    monkeypatch.setattr(limits, "_read_available", lambda: next(readings))
+    monkeypatch.setattr(limits, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(limits, "_available", (-math.inf, 0))
+    assert limits.available_bytes() == 5 * 2 ** 30
+    clock[0] += limits.AVAILABLE_MAX_AGE  # not older than the max age yet: the same reading
+    assert limits.available_bytes() == 5 * 2 ** 30
+    clock[0] += 0.01
+    assert limits.available_bytes() == 3 * 2 ** 30
 
 
 def test_require_memory_names_the_request_and_the_setting(monkeypatch):
