@@ -117,10 +117,12 @@ def nonfinite_pixels(pixels: np.ndarray) -> int:
     return int(np.count_nonzero(~np.isfinite(pixels).all(axis=-1)))
 
 
-def check_image(image: np.ndarray, scene, bad: int | None = None) -> None:
+def check_image(image: np.ndarray | None, scene, bad: int | None = None) -> None:
     """RenderError if `image` has NaN or infinite values, with their count and the likely cause;
-    `bad`: that count when the renderer has it already (else the image is scanned)."""
+    `bad`: that count when the renderer has it already (else the image is scanned; None: a frame
+    without image, `bad` given)."""
     bad = nonfinite_pixels(image) if bad is None else bad
     if bad:
-        raise RenderError(f"render: {bad} of {image.shape[0] * image.shape[1]} pixels are not finite (float32 "
+        total = scene.camera.width * scene.camera.height if image is None else image.shape[0] * image.shape[1]
+        raise RenderError(f"render: {bad} of {total} pixels are not finite (float32 "
                           f"overflow); the largest numbers in the scene: {likely_causes(scene)}")

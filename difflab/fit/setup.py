@@ -271,7 +271,8 @@ class Setup:
         for view_scene, image, file_ceiling, mask, weight, nonfinite in prepared_targets(self.scene, targets, masks,
                                                                                           weights, render):
             start = time.perf_counter()
-            frame = render_frame(self._compiled_for(view_scene, device) or view_scene, device=device, threads=threads)
+            frame = render_frame(self._compiled_for(view_scene, device) or view_scene, device=device, threads=threads,
+                                 image=False)
             self.render_seconds += time.perf_counter() - start
             if self.method == "raytrace":
                 record = frame.ray_tree

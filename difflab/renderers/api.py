@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from ..errors import RenderError
 from ..guards import check_image, check_render, check_threads
 from ..scene import Scene
@@ -49,7 +51,8 @@ def check_applies(method: str, given: dict) -> None:
 
 
 def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None,
-                 width=None, height=None, threads=None, item_buffer=None, light_buffer=False, **options) -> Frame:
+                 width=None, height=None, threads=None, item_buffer=None, light_buffer=False, image=True,
+                 **options) -> Frame:
     """Render a scene and return the `Frame` (image and G-buffer; the ray tree for ray tracing).
 
     Arguments:
@@ -68,6 +71,9 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
             default: on wherever it applies, False: every primary ray through the BVH), and shadow
             rays that test only the candidates of their light-buffer cell (Haines and Greenberg).
             Their costs are in `frame.stats`. True with the rasterizer: RenderError.
+        image: False for the G-buffer (or ray tree) alone: `frame.image` is then None, and a
+            Phong-shaded rasterized frame skips forming it (stage 7; its samples' colours are in
+            the G-buffer's points). The G-buffer is the same either way.
 
     Raises RenderError before allocating a render over the memory or ray budget (`difflab.limits`),
     and instead of returning non-finite pixels (naming the scene's largest numbers).
@@ -75,8 +81,11 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
     Returns: a `Frame`. A ray-traced frame has no G-buffer (`frame.gbuffer` raises) but its
     recorded `ray_tree`, whose root nodes are the primary hits.
     """
+    if not isinstance(image, bool):
+        raise RenderError(f"image: expected True or False, got {image!r}")
     overrides = dict(options, method=method, shading=shading, specular=specular, max_depth=max_depth, spp=spp)
-    return draw(scene, overrides, device, width, height, threads, keep=True, speedups=(item_buffer, light_buffer))
+    return draw(scene, overrides, device, width, height, threads, keep=True, speedups=(item_buffer, light_buffer),
+                image=image)
 
 
 def render(scene, *, method=None, shading=None, specular=None, max_depth=None, spp=None, device=None,
@@ -89,9 +98,10 @@ def render(scene, *, method=None, shading=None, specular=None, max_depth=None, s
                 speedups=(item_buffer, light_buffer)).image
 
 
-def draw(scene, overrides: dict, device, width, height, threads, keep: bool, speedups=(False, False)) -> Frame:
+def draw(scene, overrides: dict, device, width, height, threads, keep: bool, speedups=(False, False),
+         image: bool = True) -> Frame:
     """The frame of `scene` under `overrides`; `keep`: also its G-buffer or recorded ray tree;
-    `speedups`: (item buffer, light buffer) for the ray tracer."""
+    `speedups`: (item buffer, light buffer) for the ray tracer; `image`: False to return none."""
     threads = check_threads(threads)
     if isinstance(scene, CompiledScene):
         compiled = scene
@@ -116,11 +126,11 @@ def draw(scene, overrides: dict, device, width, height, threads, keep: bool, spe
 
         camera = compiled.scene.camera
         samples = camera.width * camera.height * settings.spp_side ** 2
-        frame = rasterize(compiled, settings, raster_threads(threads, samples), gbuffer=keep)
+        frame = rasterize(compiled, settings, raster_threads(threads, samples), gbuffer=keep, image=image)
     else:
         from .raytrace.driver import raytrace
 
         frame = raytrace(compiled, settings, threads, record_tree=keep, use_item_buffer=speedups[0],
                          use_light_buffer=speedups[1])
     check_image(frame.image, compiled.scene, frame.stats["nonfinite_pixels"])  # no NaN / inf is returned
-    return frame
+    return frame if image or frame.image is None else replace(frame, image=None)

@@ -9,6 +9,7 @@ x_raster = (x_ndc + 1) W / 2, y_raster = (1 - y_ndc) H / 2. Pixel (i, j) has its
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -59,8 +60,11 @@ def pixel_size_at(camera, distance: float, height: int) -> float:
     return camera.ortho_height / height
 
 
+@functools.lru_cache(maxsize=64)
 def camera_struct(camera, width: int, height: int) -> CameraW:
-    """The `CameraW` for a sample grid of width x height."""
+    """The `CameraW` for a sample grid of width x height (a scene `Camera`: frozen, so each one's
+    struct is built once and shared -- read-only -- by later frames of that camera: ~0.3 ms of a
+    small frame)."""
     view = view_matrix(camera)
     view_proj = projection_matrix(camera, width, height) @ view
     out = CameraW()

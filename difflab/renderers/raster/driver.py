@@ -1,7 +1,8 @@
 """The rasterizer's driver: allocate once per frame, launch the stages (see the package doc), return a Frame.
 
 `rasterize(..., gbuffer=True)` keeps every stage's output (the G-buffer `render_frame` and the fits
-read); with gbuffer=False, what `render` asks for, stages 4, 6 and 7 run fused per sample
+read; under Phong shading stages 4 and 6 in one pass, and stage 7 only when the image is asked for);
+with gbuffer=False, what `render` asks for, stages 4, 6 and 7 run fused per sample
 (`shade.image_kernel`) and store nothing but the image.
 """
 
@@ -25,13 +26,15 @@ from ..launch import (band_plan, host_empty, launch_chunks, launch_parts, launch
                       parallel_bands, part_count, run_bands)
 
 
-def empty_points(count: int, device: str) -> resolve.PointsW:
-    """Arrays for `count` shading points, zeroed (uncovered samples keep zeros in the G-buffer)."""
+def empty_points(compiled, name: str, count: int, zeroed: bool) -> resolve.PointsW:
+    """Arrays for `count` shading points (`CompiledScene.reusable`: from an earlier frame when free),
+    zeroed when asked (`resolve_kernel` writes every field of its samples; flat / Gouraud points keep
+    zero uv and derivatives)."""
     points = resolve.PointsW()
-    for name, dtype in [("position", wp.vec3), ("normal", wp.vec3), ("geo_normal", wp.vec3), ("view", wp.vec3),
-                        ("material", wp.int32), ("cell", wp.int32), ("ignore", wp.int32), ("uv", wp.vec2),
-                        ("duv_dx", wp.vec2), ("duv_dy", wp.vec2)]:
-        setattr(points, name, wp.zeros(count, dtype=dtype, device=device))
+    for field, dtype in [("position", wp.vec3), ("normal", wp.vec3), ("geo_normal", wp.vec3), ("view", wp.vec3),
+                         ("material", wp.int32), ("cell", wp.int32), ("ignore", wp.int32), ("uv", wp.vec2),
+                         ("duv_dx", wp.vec2), ("duv_dy", wp.vec2)]:
+        setattr(points, field, compiled.reusable(f"{name}.{field}", count, dtype, zeroed))
     return points
 
 
@@ -184,27 +187,29 @@ def point_count(compiled, shading: int, n_samples: int) -> int:
     return compiled.faces.shape[0] if shading == FLAT else 2 * compiled.vertices.shape[0]
 
 
-def shading_points(compiled, mesh, cam, shading: int, samples, threads: int | None = None):
-    """Stage 5: the points where the model is evaluated (`samples` themselves under Phong shading)."""
-    if shading == PHONG_SHADING:
-        return samples, samples.material.shape[0]
+def mesh_points(compiled, mesh, cam, shading: int, threads: int | None = None):
+    """Stage 5 under flat or Gouraud shading: the points where the model is evaluated (Phong's are
+    its samples, see `rasterize`), and how many."""
     n_points = point_count(compiled, shading, 0)
-    points = empty_points(n_points, compiled.device)
+    points = empty_points(compiled, "points", n_points, zeroed=True)
     launch_chunks(resolve.mesh_points_kernel, n_points, [mesh, compiled.materials, cam, shading, points],
                   compiled.device, threads)
     return points, n_points
 
 
-def empty_lit(device: str, n_points: int, n_lights: int, n_samples: int) -> shade.LitW:
-    """Stage 6's outputs for the G-buffer: per point and light, direction, distance, visibility;
-    per point its colour and texture factor; per sample its texel."""
-    lit = shade.LitW()
-    lit.light_dir = wp.zeros((n_points, n_lights), dtype=wp.vec3, device=device)  # zero where nothing is lit
-    lit.light_dist = wp.zeros((n_points, n_lights), dtype=float, device=device)
-    lit.visibility = wp.zeros((n_points, n_lights), dtype=float, device=device)
-    lit.color = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
-    lit.factor = wp.empty(max(n_points, 1), dtype=wp.vec3, device=device)
-    lit.texel = wp.zeros(n_samples, dtype=wp.vec3, device=device)
+def empty_lit(compiled, n_points: int, n_samples: int, points_are_samples: int) -> shade.LitW:
+    """Stage 6's outputs for the G-buffer (`CompiledScene.reusable`): per point and light, direction,
+    distance, visibility (one zero column without lights); per point its colour and texture factor;
+    per sample its texel (written by stage 6 when the points are the samples, else by stage 7 on
+    textured samples only: zero elsewhere). `light_into` writes the rest of every point."""
+    n_lights = len(compiled.scene.lights)
+    lit, array = shade.LitW(), compiled.reusable
+    lit.light_dir = array("lit.light_dir", (n_points, max(n_lights, 1)), wp.vec3, not n_lights)
+    lit.light_dist = array("lit.light_dist", (n_points, max(n_lights, 1)), wp.float32, not n_lights)
+    lit.visibility = array("lit.visibility", (n_points, max(n_lights, 1)), wp.float32, not n_lights)
+    lit.color = array("lit.color", max(n_points, 1), wp.vec3)
+    lit.factor = array("lit.factor", max(n_points, 1), wp.vec3)
+    lit.texel = array("lit.texel", n_samples, wp.vec3, not points_are_samples)
     return lit
 
 
@@ -219,19 +224,21 @@ def point_cache(compiled, n_points: int, frame: int) -> shade.PointCacheW:
     return cache
 
 
-def light_points(compiled, lighting, points, n_points: int, n_samples: int, points_are_samples: int,
-                 threads: int | None = None) -> shade.LitW:
-    """Stage 6 for the G-buffer: light every point, recording per light its direction, distance
-    and visibility (and the texture factor under flat / Gouraud, the texel per sample under Phong)."""
-    lit = empty_lit(compiled.device, n_points, max(len(compiled.scene.lights), 1), n_samples)
-    launch_chunks(shade.light_points_kernel, n_points, [points, lighting, points_are_samples, 1, lit],
-                  compiled.device, threads)
+def light_mesh_points(compiled, lighting, points, n_points: int, n_samples: int,
+                      threads: int | None = None) -> shade.LitW:
+    """Stage 6 for the G-buffer under flat or Gouraud shading: light every point, recording per
+    light its direction, distance and visibility, and the texture factor."""
+    lit = empty_lit(compiled, n_points, n_samples, points_are_samples=0)
+    launch_chunks(shade.light_points_kernel, n_points, [points, lighting, 0, 1, lit], compiled.device, threads)
     return lit
 
 
-def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool = True) -> Frame:
+def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool = True, image: bool = True) -> Frame:
     """Render a compiled scene with the rasterizer under `settings` (a scene RenderSettings); keep
-    the G-buffer in the Frame when `gbuffer` (see the module doc)."""
+    the G-buffer in the Frame when `gbuffer` (see the module doc). With `image` False (G-buffer
+    only) the frame's image is None and, under Phong shading, stage 7 is not run: a sample's colour
+    is its point's, so the non-finite count comes from the points' colours. Flat / Gouraud frames
+    still compose (that pass also samples their textures into the G-buffer)."""
     scene, device = compiled.scene, compiled.device
     side = settings.spp_side  # the scene validated spp and the sample budget
     width, height = scene.camera.width * side, scene.camera.height * side
@@ -243,7 +250,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     cam = camera_struct(scene.camera, width, height)
     mesh, lighting = raster_mesh(compiled), lighting_struct(compiled, settings)
     black = not any(scene.background)  # a zeroed image needs no background written (`render`)
-    image = host_empty(width * height, wp.vec3, device, zeroed=black and not gbuffer)  # fresh every frame
+    canvas = host_empty(width * height, wp.vec3, device, zeroed=black and not gbuffer)  # fresh every frame
     background, fog = wp.vec3(*scene.background), fog_struct(scene.fog)
 
     if not gbuffer:  # stages 1-3, then 4-7 fused (flat / Gouraud points lit on first use)
@@ -257,11 +264,11 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         def image_band(tris, key, begin: int, end: int) -> None:  # right after the band's z-buffer, its thread's cache
             wp.launch(shade.image_kernel, dim=end - begin, inputs=[
                 begin, key, tris, mesh, cam, lighting, point_cache(compiled, n_points, frame), perspective_correct,
-                shading, int(clamp_colors), int(not black), background, fog, image, bad], device=device)
+                shading, int(clamp_colors), int(not black), background, fog, canvas, bad], device=device)
 
         tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads, image_band)
         mark_key_cleared(compiled, key)  # image_kernel reset every key it read
-        pixels = box_downsample(image.numpy().reshape(height, width, 3), side)
+        pixels = box_downsample(canvas.numpy().reshape(height, width, 3), side)
         nonfinite = int(bad.numpy().sum())  # non-finite samples; with spp > 1 count the pixels they reach
         if nonfinite and side > 1:
             nonfinite = nonfinite_pixels(pixels)
@@ -270,30 +277,38 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
 
     tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)  # stages 1-3
     # Stage 4: the per-sample G-buffer.
-    samples = empty_points(width * height, device)
+    samples = empty_points(compiled, "samples", width * height, zeroed=False)
     out = resolve.GBufferW()
-    for name, dtype in [("face", wp.int32), ("bary", wp.vec3), ("depth", float), ("uv", wp.vec2),
+    for name, dtype in [("face", wp.int32), ("bary", wp.vec3), ("depth", wp.float32), ("uv", wp.vec2),
                         ("object", wp.int32), ("point_index", wp.vec3i), ("point_weight", wp.vec3)]:
-        setattr(out, name, wp.empty(width * height, dtype=dtype, device=device))
-    launch_row_loops(resolve.resolve_kernel, height, [
-        key, tris, mesh, compiled.materials, cam, perspective_correct, shading, compiled.vertices.shape[0], out,
-        samples], device, threads)
-    mark_key_cleared(compiled, key)  # resolve_kernel reset every key it read
-
-    # Stages 5-6: shading points, lit.
-    points, n_points = shading_points(compiled, mesh, cam, shading, samples, threads)
+        setattr(out, name, compiled.reusable(f"gbuffer.{name}", width * height, dtype))
     points_are_samples = int(shading == PHONG_SHADING)
-    lit = light_points(compiled, lighting, points, n_points, width * height, points_are_samples, threads)
+    if points_are_samples:  # stages 4-6 in one pass: each sample resolved, then lit as its own point
+        points, n_points = samples, width * height
+        lit = empty_lit(compiled, n_points, n_points, points_are_samples)
+        launch_row_loops(shade.phong_gbuffer_kernel, height, [
+            key, tris, mesh, cam, perspective_correct, out, samples, lighting, lit], device, threads)
+    else:
+        launch_row_loops(resolve.resolve_kernel, height, [
+            key, tris, mesh, compiled.materials, cam, perspective_correct, shading, compiled.vertices.shape[0], out,
+            samples], device, threads)
+        points, n_points = mesh_points(compiled, mesh, cam, shading, threads)  # stages 5-6
+        lit = light_mesh_points(compiled, lighting, points, n_points, width * height, threads)
+    mark_key_cleared(compiled, key)  # stage 4 reset every key it read
 
-    # Stage 7: compose samples, then filter to pixels.
-    launch_row_loops(shade.compose_kernel, height, [
-        width, samples, out.depth, out.point_index, out.point_weight, lit, lighting, int(clamp_colors),
-        1 - points_are_samples, background, fog, image], device, threads)
-    pixels = box_downsample(image.numpy().reshape(height, width, 3), side)
+    composed = image or not points_are_samples
+    if composed:  # Stage 7: compose samples (on the CUDA device before the G-buffer is copied out)
+        launch_row_loops(shade.compose_kernel, height, [
+            width, samples, out.depth, out.point_index, out.point_weight, lit, lighting, int(clamp_colors),
+            1 - points_are_samples, background, fog, canvas], device, threads)
     gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors)
+    # then filter to pixels (Phong without stage 7: a sample's colour is its point's, fogged, so the
+    # pixels are not finite exactly where these are not)
+    samples_rgb = (canvas.numpy() if composed else gbuffer.points.color).reshape(height, width, 3)
+    pixels = box_downsample(samples_rgb, side)
     stats = frame_stats(compiled, start, nonfinite_pixels(pixels), width * height, n_points)
     stats["covered_samples"] = int(gbuffer.mask.sum())
-    return Frame(image=pixels, buffers=gbuffer, stats=stats)
+    return Frame(image=pixels if image else None, buffers=gbuffer, stats=stats)
 
 
 def frame_stats(compiled, start: float, nonfinite: int, n_samples: int, n_points: int) -> dict:

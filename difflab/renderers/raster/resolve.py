@@ -269,8 +269,13 @@ def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW
     s = i * cam.width + j
     k = key[s]
     key[s] = NO_HIT  # the next frame's z-buffer starts cleared
-    if k == NO_HIT:
-        samples.material[s] = -1
+    if k == NO_HIT:  # every field written: the buffers are not cleared before
+        nothing = PointW()
+        nothing.material = -1
+        store_point(samples, s, nothing)
+        samples.uv[s] = wp.vec2(0.0)
+        samples.duv_dx[s] = wp.vec2(0.0)
+        samples.duv_dy[s] = wp.vec2(0.0)
         out.face[s] = -1
         out.object[s] = -1
         out.depth[s] = wp.inf

@@ -5,6 +5,9 @@ the colour from the one illumination model. Stage 7 (`compose_kernel`), per samp
 colours of its points (gouraud: the vertex colours interpolated, optionally clamped to [0, 1]
 first), the texture per fragment under flat / Gouraud, background and fog.
 
+`phong_gbuffer_kernel` is stages 4 and 6 in one pass for the G-buffer under Phong shading (each
+sample resolved, then lit as its own point: what `resolve_kernel` then `light_points_kernel` store).
+
 `image_kernel` is stages 4, 6 and 7 fused per sample, with the same functions, for renders that
 need only the image: nothing of the G-buffer is stored. Phong's points are its samples, lit there;
 flat / Gouraud points are lit on a sample's first use into a cache of the CPU thread (see
@@ -22,7 +25,8 @@ from ..camera import CameraW
 from ..texture.sampling import TexturesW, sample_texture
 from ..trace import SceneGeomW, light_visibility
 from .coverage import NO_HIT
-from .resolve import (PointsW, PointW, RasterMeshW, SampleW, ScreenW, load_point, mesh_point, resolve_sample,
+from .resolve import (GBufferW, PointsW, PointW, RasterMeshW, SampleW, ScreenW, load_point, mesh_point, resolve_into,
+                      resolve_sample,
                       sample_points, sample_position, sample_uv, sample_weights)
 
 wp.set_module_options({"enable_backward": False})
@@ -112,8 +116,15 @@ def light_into(points: PointsW, lighting: LightingW, points_are_samples: int, re
     `record` keeps each light's direction, distance and visibility (the G-buffer's)."""
     lit.factor[k] = wp.vec3(0.0)
     point = load_point(points, k)
-    if point.material < 0:
+    if point.material < 0:  # every output zero (the buffers are not cleared before)
         lit.color[k] = wp.vec3(0.0)
+        if record == 1:
+            for q in range(lit.light_dir.shape[1]):
+                lit.light_dir[k, q] = wp.vec3(0.0)
+                lit.light_dist[k, q] = 0.0
+                lit.visibility[k, q] = 0.0
+        if points_are_samples == 1:
+            lit.texel[k] = wp.vec3(0.0)
         return
     texel = wp.vec3(0.0)
     if points_are_samples == 1:
@@ -131,6 +142,18 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
     first = begin + wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, end)):
         light_into(points, lighting, points_are_samples, record, lit, k)
+
+
+@wp.kernel
+def phong_gbuffer_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW, cam: CameraW,
+                         perspective_correct: int, out: GBufferW, samples: PointsW, lighting: LightingW, lit: LitW):
+    """Stages 4 and 6 under Phong shading, one row of samples per thread: each sample resolved (its
+    G-buffer entries, `resolve_into`), then lit as its own shading point (`light_into`)."""
+    i = row0 + wp.tid()
+    for j in range(cam.width):
+        resolve_into(key, tris, mesh, lighting.materials, cam, perspective_correct, PHONG_SHADING,
+                     mesh.vertices.shape[0], out, samples, i, j)
+        light_into(samples, lighting, 1, 1, lit, i * cam.width + j)
 
 
 @wp.struct

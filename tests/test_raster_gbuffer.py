@@ -1,0 +1,122 @@
+"""The rasterizer's G-buffer without the image (`render_frame(..., image=False)`, what fits render),
+and the frame buffers a compiled scene reuses once no frame holds them."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from conftest import scene_dict
+from difflab import RenderError, compile_scene, render_frame, save_image
+from difflab.renderers.camera import camera_struct
+from difflab.scene import Scene
+
+LIGHTS = [{"type": "point", "position": [2, 3, 4], "intensity": [0.9, 0.8, 0.7]},
+          {"type": "directional", "direction": [1, -1, -1], "intensity": [0.3, 0.3, 0.3]}]
+CAMERA = {"eye": [0.5, 1.0, 4.0], "target": [0, 0, 0], "fov_y": 40, "width": 24, "height": 20}
+
+
+def fields(gbuffer) -> dict:
+    """Every array of a G-buffer (its shading points' too) and its other fields, by name."""
+    out = {}
+    for f in dataclasses.fields(gbuffer):
+        value = getattr(gbuffer, f.name)
+        if f.name == "points":
+            out.update({f"points.{p.name}": getattr(value, p.name) for p in dataclasses.fields(value)})
+        else:
+            out[f.name] = value
+    return out
+
+
+def assert_same_gbuffer(got, want):
+    got, want = fields(got), fields(want)
+    assert got.keys() == want.keys()
+    for name, value in want.items():
+        if isinstance(value, np.ndarray):
+            assert got[name].dtype == value.dtype and np.array_equal(got[name], value, equal_nan=True), name
+        else:
+            assert repr(got[name]) == repr(value), name
+
+
+def textured_scene(tmp_path, shading: str, spp: int) -> Scene:
+    texture = tmp_path / "texture.png"
+    save_image(texture, np.random.default_rng(3).random((8, 8, 3)).astype(np.float32))
+    materials = {"ball": {"ka": 0.1, "kd": [0.6, 0.3, 0.2], "ks": 0.4, "n": 20},
+                 "floor": {"kd": 0.7, "texture": str(texture)}}
+    objects = [{"type": "sphere", "center": [0, 0.2, 0], "radius": 0.7, "material": "ball"},
+               {"type": "plane", "point": [0, -0.5, 0], "normal": [0, 1, 0], "material": "floor"}]
+    return Scene.from_dict(scene_dict(objects, materials, camera=CAMERA, lights=LIGHTS, ambient=(0.2, 0.2, 0.2),
+                                      background=[0.1, 0.2, 0.3],
+                                      render={"shading": shading, "spp": spp, "shadows": True}))
+
+
+@pytest.mark.parametrize("shading", ["phong", "flat", "gouraud"])
+@pytest.mark.parametrize("spp", [1, 4])
+def test_the_image_less_frame_has_the_full_frames_gbuffer_field_by_field(tmp_path, shading, spp):
+    compiled = compile_scene(textured_scene(tmp_path, shading, spp))
+    full = render_frame(compiled)
+    bare = render_frame(compiled, image=False)
+    assert bare.image is None and full.image.shape == (20, 24, 3)
+    assert_same_gbuffer(bare.gbuffer, full.gbuffer)
+    assert {k: v for k, v in bare.stats.items() if k != "seconds"} == \
+        {k: v for k, v in full.stats.items() if k != "seconds"}
+    assert bare.gbuffer.mask.any() and (bare.gbuffer.material == 1).any()  # the ball and the textured floor seen
+
+
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+def test_image_false_drops_the_image_of_either_renderer(tmp_path, method):
+    frame = render_frame(textured_scene(tmp_path, "phong", 1), method=method, image=False)
+    assert frame.image is None and frame.stats["method"] == method
+
+
+def test_image_must_be_a_bool(tmp_path):
+    with pytest.raises(RenderError, match=r"^image: expected True or False, got 'no'$"):
+        render_frame(textured_scene(tmp_path, "phong", 1), image="no")
+
+
+@pytest.mark.parametrize("shading, spp", [("phong", 1), ("phong", 4), ("flat", 1)])
+def test_a_non_finite_image_less_frame_is_refused_as_the_full_one(shading, spp):
+    scene = Scene.from_dict(scene_dict([{"type": "sphere", "center": [0, 0, 0], "radius": 0.8, "material": "m"}],
+                                       {"m": {"kd": 3e38, "ks": 3e38}}, lights=LIGHTS[:1],
+                                       render={"shading": shading, "spp": spp}))
+    messages = []
+    for image in (True, False):
+        with pytest.raises(RenderError, match=r"^render: \d+ of 1024 pixels are not finite \(float32 overflow\)") \
+                as caught:
+            render_frame(scene, image=image)
+        messages.append(str(caught.value))
+    assert messages[0] == messages[1]
+
+
+def test_a_kept_gbuffer_survives_later_frames_of_other_views(tmp_path):
+    scene = textured_scene(tmp_path, "phong", 1)
+    compiled = compile_scene(scene)
+    first = render_frame(compiled, image=False).gbuffer
+    kept = {name: np.copy(value) for name, value in fields(first).items() if isinstance(value, np.ndarray)}
+    moved = scene.with_overrides(camera=dict(CAMERA, eye=[-1.5, 0.5, 3.0]))
+    second = render_frame(compiled.with_scene(moved), image=False).gbuffer
+    assert not np.array_equal(second.position, first.position)  # another view
+    for name, value in kept.items():
+        assert np.array_equal(fields(first)[name], value, equal_nan=True), name
+    assert_same_gbuffer(first, render_frame(scene, image=False).gbuffer)  # and it is still view 1's
+
+
+def test_a_dropped_frames_buffers_are_reused_by_the_next_frame(tmp_path):
+    compiled = compile_scene(textured_scene(tmp_path, "phong", 1))
+    address = lambda frame: frame.gbuffer.position.__array_interface__["data"][0]  # noqa: E731
+    frame = render_frame(compiled, image=False)
+    first = address(frame)
+    del frame
+    again = render_frame(compiled, image=False)
+    assert address(again) == first  # no fresh memory to fault in
+    view = again.gbuffer.position[3:5]
+    del again
+    assert address(render_frame(compiled, image=False)) != first  # a view still holds the old one
+    assert view.shape == (2, 24, 3)
+
+
+def test_camera_struct_is_built_once_per_camera_and_grid(tmp_path):
+    camera = textured_scene(tmp_path, "phong", 1).camera
+    assert camera_struct(camera, 24, 20) is camera_struct(camera, 24, 20)
+    assert camera_struct(camera, 48, 40) is not camera_struct(camera, 24, 20)
+    assert camera_struct(camera, 48, 40).width == 48
