@@ -150,7 +150,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         launch_row_loops(kernel, rows, [wp_points, cam, scene_w, params, item, tree, out], device, threads)
         return out
 
-    out = launch(trace_params(scene, settings, False, spread, side), empty_tree(shape, 0, 0, device))
+    out = launch(trace_params(scene, settings, False, spread, side), empty_tree((1, 1), 0, 0, device))  # not read
     shadow_tests = int(light_buffer.warp.tests.numpy()[0]) if light_buffer is not None else 0
     asked = asked_bvh(item)  # read before the recording pass adds its own
     counts = out.node_count.numpy()
@@ -207,7 +207,8 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
         use_item_buffer = settings.sampling == "grid" and compiled.n_mesh_faces > 0
     start = time.perf_counter()
     points = None if settings.sampling == "grid" else sample_points(width, height, side, settings.sampling)
-    item, kept = item_buffer(compiled, width * side, height * side, threads) if use_item_buffer else (None, False)
+    item, kept, culled = (item_buffer(compiled, width * side, height * side, threads) if use_item_buffer
+                          else (None, False, False))
     built = time.perf_counter()
     lights = build_light_buffer(compiled, light_buffer_resolution) if use_light_buffer else None
     built = time.perf_counter() - built
@@ -220,7 +221,7 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
              "spp": settings.spp, "sampling": settings.sampling, "max_depth": settings.max_depth,
              "rays": dict(traced.rays), "total_rays": total_rays, "rays_per_second": total_rays / max(seconds, 1e-9),
              "depth_histogram": traced.depth_histogram, "nodes": int(traced.node_count.sum()),
-             "item_buffer": bool(use_item_buffer), "item_buffer_kept": kept,
+             "item_buffer": bool(use_item_buffer), "item_buffer_kept": kept, "item_buffer_culled": culled,
              "item_buffer_asked_bvh": traced.asked_bvh,
              "recorded_tree": bool(record_tree),
              "nonfinite_pixels": nonfinite_pixels(image) if traced.nonfinite_samples else 0}

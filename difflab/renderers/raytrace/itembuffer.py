@@ -16,10 +16,18 @@ sample grid, and leave per sample the nearest triangle (its *hint*). A primary r
   hint behind the sphere or plane) is unambiguous when no neighbour's triangle is nearer than the
   far plane (or that sphere or plane).
 
-Per view, `hints_kernel` decodes the z-buffer into a grid of hints and `edges_kernel` flags the
+Per view, `hints_kernel` decodes the z-buffer into a grid of hints and `edge_row` flags the
 samples with a neighbour's hint to check (a triangle sharing no vertex with the sample's: occluding
 edges, cracks, silhouettes -- under 1 % of a smooth mesh's samples); the others skip the checks.
 Like the BVH, the item buffer is kept with the compiled scene (per thread, camera and sample grid).
+
+The z-buffer leaves back faces out (`culls_back_faces`) when the mesh triangles are the closed,
+outward-facing surfaces of solids (`geometry.closed_outward`) lying beyond the near plane: a primary
+ray then starts outside every solid, so the first triangle it meets is one it enters, a front face,
+and the back faces change no hint -- except on a mesh that passes through itself (which is not
+tested: a self-intersection can turn a region inside out) or, as without culling, on triangles
+thinner than the fixed-point snapping (whose snapped winding may flip). Otherwise every triangle
+is drawn.
 
 An ambiguous sample asks the BVH (`trace.mesh_hit`), so the hit is the BVH's own everywhere --
 except where a triangle no sample of the 3 x 3 neighbourhood sees (thinner than a sample) crosses
@@ -31,13 +39,15 @@ and ends at the far one, where the rasterizer clips).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import replace
 
 import numpy as np
 
 from ..._warp import wp
-from ..camera import camera_struct
-from ..launch import launch_row_loops, load_kernels
+from ...geometry import closed_outward
+from ..camera import camera_frame, camera_struct
+from ..launch import load_kernels
 from ..raster.coverage import NO_HIT
 from ..raster.driver import mark_key_cleared, zbuffer
 from ..trace import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triangle_hit
@@ -48,7 +58,9 @@ BARY_MARGIN = 1.0e-4  # a hint hit closer than this (in barycentrics) to an edge
 PLANE_GAP = 1.0e-3  # relative depth gap telling a neighbour's plane from the hit's (see `nearer`)
 NO_TRIANGLE = wp.constant(-1)  # resolve_hint: no mesh triangle before the nearest sphere / plane (if any)
 ASK_BVH = wp.constant(-2)  # resolve_hint: an ambiguous hint, the BVH finds the mesh hit
-ITEM_BUFFER_VIEW = "item buffer of"  # scratch-pool note: the (camera, width, height) the kept item buffer shows
+ITEM_BUFFER_VIEW = "item buffer of"  # scratch-pool note: ((camera, width, height), culled) of the kept item buffer
+SOLID_MESHES = "solid meshes"  # compiled.built: the mesh vertices' bounding box when `closed_outward`, else None
+NEAR_MARGIN = 1.0e-4  # back faces are culled when the meshes lie this far (relative) beyond the near plane
 SLOT_BITS = wp.constant(wp.int64(4294967295))  # the z-buffer key's low 32 bits: the screen slot
 NEIGHBOUR_DI = wp.constant(wp.vec4i(-1, 1, 0, 0))  # the four neighbouring samples: up, down, left, right
 NEIGHBOUR_DJ = wp.constant(wp.vec4i(0, 0, -1, 1))
@@ -62,7 +74,7 @@ class ItemBufferW:
 
     use: int
     face: wp.array2d(dtype=wp.int32)
-    edge: wp.array2d(dtype=wp.uint8)  # per sample: 1 where the neighbours' hints must be checked (`edges_kernel`)
+    edge: wp.array2d(dtype=wp.uint8)  # per sample: 1 where the neighbours' hints must be checked (`edge_row`)
     vertices: wp.array(dtype=wp.vec3)
     faces: wp.array2d(dtype=wp.int32)
     face_normal: wp.array(dtype=wp.vec3)  # unit
@@ -142,7 +154,7 @@ def resolve_hint(item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: 
             face = NO_TRIANGLE  # the sphere or plane is in front: every neighbour's triangle is checked
             corners = wp.vec3i(-2, -2, -2)  # (no vertex has a negative index)
     if item.edge[i, j] == wp.uint8(0) and corners[0] != -2:
-        return face, wp.vec3(best[0], best[1], best[2])  # no neighbour's hint to check (`edges_kernel`)
+        return face, wp.vec3(best[0], best[1], best[2])  # no neighbour's hint to check (`edge_row`)
     ambiguous = bool(False)
     tested = int(-1)  # the last neighbour's triangle checked (neighbours mostly repeat one)
     for k in range(4):
@@ -175,26 +187,27 @@ def item_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.vec
 @wp.kernel
 def hints_kernel(row0: int, key: wp.array(dtype=wp.int64), slot_face: wp.array(dtype=wp.int32),
                  face: wp.array2d(dtype=wp.int32)):
-    """Row row0 + tid of the bordered `face` grid from the z-buffer's keys (depth << 32 | slot, or
-    NO_HIT), each key reset to NO_HIT once read (the rasterizer's next z-buffer starts cleared)."""
+    """Sample row row0 + tid of the bordered `face` grid (its row row0 + tid + 1, border columns
+    included) from the z-buffer's keys (depth << 32 | slot, or NO_HIT), each key reset to NO_HIT once
+    read (the rasterizer's next z-buffer starts cleared)."""
     i = row0 + wp.tid()
     cols = face.shape[1] - 2
-    for c in range(face.shape[1]):
+    face[i + 1, 0] = -1
+    face[i + 1, cols + 1] = -1
+    for j in range(cols):
         f = int(-1)
-        if i >= 1 and i < face.shape[0] - 1 and c >= 1 and c <= cols:
-            k = key[(i - 1) * cols + c - 1]
-            if k != NO_HIT:
-                f = slot_face[int(k & SLOT_BITS)]
-                key[(i - 1) * cols + c - 1] = NO_HIT
-        face[i, c] = f
+        k = key[i * cols + j]
+        if k != NO_HIT:
+            f = slot_face[int(k & SLOT_BITS)]
+            key[i * cols + j] = NO_HIT
+        face[i + 1, j + 1] = f
 
 
-@wp.kernel
-def edges_kernel(row0: int, face: wp.array2d(dtype=wp.int32), faces: wp.array2d(dtype=wp.int32),
-                 edge: wp.array2d(dtype=wp.uint8)):
-    """Row row0 + tid of `edge`: 1 where a neighbouring sample's hint is a triangle that `resolve_hint`
-    must check -- one sharing no vertex with the sample's own hint (any one, for a sample with none)."""
-    i = row0 + wp.tid()
+@wp.func
+def edge_row(i: int, face: wp.array2d(dtype=wp.int32), faces: wp.array2d(dtype=wp.int32),
+             edge: wp.array2d(dtype=wp.uint8)):
+    """Row i of `edge`: 1 where a neighbouring sample's hint is a triangle that `resolve_hint` must
+    check -- one sharing no vertex with the sample's own hint (any one, for a sample with none)."""
     for j in range(edge.shape[1]):
         own = face[i + 1, j + 1]
         corners = wp.vec3i(-1, -1, -1)
@@ -208,28 +221,78 @@ def edges_kernel(row0: int, face: wp.array2d(dtype=wp.int32), faces: wp.array2d(
         edge[i, j] = flag
 
 
-def item_buffer(compiled, width: int, height: int, threads: int | None = None) -> tuple[ItemBufferW, bool]:
+@wp.kernel
+def edges_kernel(row0: int, face: wp.array2d(dtype=wp.int32), faces: wp.array2d(dtype=wp.int32),
+                 edge: wp.array2d(dtype=wp.uint8)):
+    """Row row0 + tid of `edge` (`edge_row`)."""
+    edge_row(row0 + wp.tid(), face, faces, edge)
+
+
+@wp.kernel
+def seam_edges_kernel(rows: wp.array(dtype=wp.int32), face: wp.array2d(dtype=wp.int32),
+                      faces: wp.array2d(dtype=wp.int32), edge: wp.array2d(dtype=wp.uint8)):
+    """Row rows[tid] of `edge` (`edge_row`)."""
+    edge_row(rows[wp.tid()], face, faces, edge)
+
+
+def item_buffer(compiled, width: int, height: int, threads: int | None = None) -> tuple[ItemBufferW, bool, bool]:
     """The item buffer of a width x height sample grid: the z-buffer of the mesh triangles (the first
-    `n_mesh_faces` of the compiled scene, and their vertices), no back-face culling. Like the BVH it
-    is kept with the compiled scene (whose geometry and camera are fixed), in this thread's per-frame
-    arrays: a later render of the same sample grid reuses it. Returns it and whether it was kept."""
-    pool, view = compiled.scratch_pool(), (compiled.scene.camera, width, height)
-    face = compiled.scratch("item buffer", (height + 2, width + 2), wp.int32)  # every element written below
+    `n_mesh_faces` of the compiled scene, and their vertices), their back faces left out where
+    `culls_back_faces` allows. Like the BVH it is kept with the compiled scene (whose geometry and
+    camera are fixed), in this thread's per-frame arrays: a later render of the same sample grid
+    reuses it. Returns it, whether it was kept, and whether back faces were left out.
+
+    Each row band of the z-buffer is decoded by its own thread as soon as its keys are final (while
+    they are in its cache): its hints, then the edge flags of the rows whose four neighbours are in
+    the band; the first and last row of each band (a *seam*: a neighbour in the next band) are
+    flagged once every band is done."""
+    pool, view, device = compiled.scratch_pool(), (compiled.scene.camera, width, height), compiled.device
+    face = compiled.scratch("item buffer", (height + 2, width + 2), wp.int32, fill=-1)  # border rows stay -1
     edge = compiled.scratch("item buffer edges", (height, width), wp.uint8)
-    if pool.get(ITEM_BUFFER_VIEW) == view:
-        return item_struct(compiled, face, edge), True
+    kept = pool.get(ITEM_BUFFER_VIEW)
+    if kept is not None and kept[0] == view:
+        return item_struct(compiled, face, edge), True, kept[1]
     pool.pop(ITEM_BUFFER_VIEW, None)  # until the new one is complete
     n_faces, n_vertices = compiled.n_mesh_faces, compiled.n_mesh_vertices
     arrays = dict(compiled.arrays, faces=compiled.arrays["faces"][:n_faces],
                   vertices=compiled.arrays["vertices"][:n_vertices])
     meshes = replace(compiled, faces=compiled.faces[:n_faces], vertices=compiled.vertices[:n_vertices], arrays=arrays)
-    tris, key = zbuffer(meshes, camera_struct(compiled.scene.camera, width, height), 0, threads)
-    load_kernels(compiled.device, hints_kernel, edges_kernel)
-    launch_row_loops(hints_kernel, height + 2, [key, tris.face, face], compiled.device, threads)
-    mark_key_cleared(compiled, key)
-    launch_row_loops(edges_kernel, height, [face, arrays["faces"], edge], compiled.device, threads)
-    pool[ITEM_BUFFER_VIEW] = view
-    return item_struct(compiled, face, edge), False
+    load_kernels(device, hints_kernel, edges_kernel, seam_edges_kernel)
+    seams = set()
+
+    def decode_band(tris, key, begin: int, end: int) -> None:
+        wp.launch(hints_kernel, dim=end - begin, inputs=[begin, key, tris.face, face], device=device)
+        if end - begin > 2:
+            wp.launch(edges_kernel, dim=end - begin - 2, inputs=[begin + 1, face, arrays["faces"], edge], device=device)
+        seams.update((begin, end - 1))
+
+    cull = culls_back_faces(compiled)
+    unused, key = zbuffer(meshes, camera_struct(compiled.scene.camera, width, height), int(cull), threads, decode_band)
+    mark_key_cleared(compiled, key)  # hints_kernel reset every key
+    rows = wp.array(sorted(seams), dtype=wp.int32, device=device)
+    wp.launch(seam_edges_kernel, dim=rows.shape[0], inputs=[rows, face, arrays["faces"], edge], device=device)
+    pool[ITEM_BUFFER_VIEW] = (view, cull)
+    return item_struct(compiled, face, edge), False, cull
+
+
+def culls_back_faces(compiled) -> bool:
+    """Whether the item buffer may leave the mesh triangles' back faces out of its z-buffer: they are
+    the closed surfaces of solids, facing out (`geometry.closed_outward`, asked once per compiled
+    scene), and their bounding box lies beyond the near plane by NEAR_MARGIN (relative to the
+    coordinates' size), so every primary ray starts outside every solid and its first mesh hit,
+    entering one, is a front face (module doc)."""
+    if SOLID_MESHES not in compiled.built:
+        vertices = compiled.arrays["vertices"].numpy()[:compiled.n_mesh_vertices]
+        solid = closed_outward(vertices, compiled.faces[:compiled.n_mesh_faces])
+        compiled.built[SOLID_MESHES] = (vertices.min(axis=0), vertices.max(axis=0)) if solid else None
+    box = compiled.built[SOLID_MESHES]
+    if box is None:
+        return False
+    camera = compiled.scene.camera
+    corners = np.array(list(itertools.product(*zip(*box))), np.float64)
+    eye = np.asarray(camera.eye, np.float64)
+    size = camera.near + np.abs(corners).max() + np.abs(eye).max()
+    return bool(((corners - eye) @ camera_frame(camera)[2]).min() > camera.near + NEAR_MARGIN * size)
 
 
 def forget_item_buffer(compiled) -> None:

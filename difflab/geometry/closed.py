@@ -1,0 +1,62 @@
+"""Whether triangles bound solids from outside: `closed_outward` (the item buffer's back-face culling
+asks it, `renderers/raytrace/itembuffer.py`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+MIN_VOLUME = 1.0e-8  # a piece's volume must pass this times the bounding-box diagonal cubed (rounding: ~1e-16 per face)
+
+
+def closed_outward(vertices, faces) -> bool:
+    """Whether the triangles are the closed, outward-facing surfaces of solids.
+
+    Vertices at bitwise-equal positions are one (a seam's duplicates, whose edges the BVH's watertight
+    triangle test shares too). Then every edge a -> b of a face must be met by exactly one other face,
+    which runs it b -> a (closed, consistently wound, no face repeated or folded flat onto a neighbour
+    with the same winding), no face may repeat a vertex, and every connected piece must enclose a
+    signed volume V = sum over its faces of v0 . (v1 x v2) / 6 above MIN_VOLUME d^3 (d: the bounding
+    box diagonal of all the vertices; a sheet shown on both sides has V ~ 0): its counter-clockwise (front) faces look
+    out. A ray from outside every piece then enters
+    a solid at its first hit, through a front face -- provided no piece passes through itself (a
+    self-intersection can wrap a region inside out, which this does not test). Empty: False."""
+    vertices = np.asarray(vertices, np.float64)
+    faces = np.asarray(faces, np.int64)
+    if not len(faces):
+        return False
+    n, weld = welded(vertices)
+    corners = weld[faces]
+    start, end = corners.reshape(-1), np.roll(corners, -1, axis=1).reshape(-1)  # edge k of face f: k -> k + 1
+    if np.any(start == end):
+        return False
+    edges = np.sort(start * n + end)
+    if np.any(edges[1:] == edges[:-1]):  # an edge run twice the same way
+        return False
+    reverse = end * n + start
+    found = np.minimum(np.searchsorted(edges, reverse), len(edges) - 1)
+    if np.any(edges[found] != reverse):  # an edge run one way only: a border
+        return False
+    v = vertices[faces]
+    volume = np.bincount(pieces(n, start, end)[corners[:, 0]],
+                         np.einsum("fi,fi->f", v[:, 0], np.cross(v[:, 1], v[:, 2])) / 6.0)
+    diagonal = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
+    return bool(np.all(volume > MIN_VOLUME * diagonal ** 3))
+
+
+def welded(vertices: np.ndarray) -> tuple[int, np.ndarray]:
+    """How many distinct positions the (V, 3) vertices have, and each vertex's position number."""
+    order = np.lexsort(vertices.T[::-1])
+    ordered = vertices[order]
+    new = np.r_[True, np.any(ordered[1:] != ordered[:-1], axis=1)]
+    number = np.empty(len(vertices), np.int64)
+    number[order] = np.cumsum(new) - 1
+    return int(new.sum()), number
+
+
+def pieces(n: int, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """The connected piece of each of n vertices joined by edges start[k] - end[k], numbered 0, 1, ..."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    graph = coo_matrix((np.ones(len(start), np.int8), (start, end)), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
