@@ -131,7 +131,7 @@ def surface_hit(geom: SceneGeomW, kind: int, index: int, t: float, origin: wp.ve
     return hit
 
 
-@wp.func
+@wp.func(inline=True)
 def analytic_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: float, t_max: float,
                  ignore_object: int):
     """The nearest sphere or plane with t_min < t < t_max along a unit ray, skipping object
@@ -154,7 +154,7 @@ def analytic_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: f
     return hit
 
 
-@wp.func
+@wp.func(inline=True)
 def triangle_hit(geom: SceneGeomW, face: int, t: float, u: float, v: float, normal: wp.vec3, origin: wp.vec3,
                  direction: wp.vec3):
     """The hit on mesh triangle `face` as `mesh_query_ray` reports it (t, u, v, unit winding normal)."""
@@ -165,7 +165,7 @@ def triangle_hit(geom: SceneGeomW, face: int, t: float, u: float, v: float, norm
     return out
 
 
-@wp.func
+@wp.func(inline=True)
 def finish_hit(geom: SceneGeomW, hit: HitW, origin: wp.vec3, direction: wp.vec3):
     """An `analytic_hit` (or a miss) with its object, material and normal."""
     if hit.kind == HIT_NONE:
@@ -173,7 +173,7 @@ def finish_hit(geom: SceneGeomW, hit: HitW, origin: wp.vec3, direction: wp.vec3)
     return surface_hit(geom, hit.kind, hit.index, hit.t, origin, direction)
 
 
-@wp.func
+@wp.func(inline=True)
 def mesh_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: float, hit: HitW, ignore_object: int):
     """The nearest mesh triangle before `hit` (an `analytic_hit`) through the BVH, else `hit` finished."""
     if geom.mesh != wp.uint64(0):

@@ -92,13 +92,13 @@ def woop_triangle(start: wp.vec3, dir: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.ve
     ...
 
 
-@wp.func
+@wp.func(inline=True)
 def hint(item: ItemBufferW, i: int, j: int):
     """The mesh triangle nearest at sample (i, j) in the z-buffer; -1: none, or (i, j) just off the grid."""
     return item.face[i + 1, j + 1]
 
 
-@wp.func
+@wp.func(inline=True)
 def corner(item: ItemBufferW, face: int, k: int):
     return item.vertices[item.faces[face, k]]
 
@@ -132,7 +132,7 @@ def nearer(item: ItemBufferW, face: int, origin: wp.vec3, direction: wp.vec3, t_
     return hit[3] > 0.0 and hit[0] <= t_limit
 
 
-@wp.func
+@wp.func(inline=True)
 def resolve_hint(item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: wp.vec3, found: HitW):
     """The mesh part of sample (i, j)'s primary hit before `found` (its nearest sphere or plane, or a
     miss at the far plane): (triangle, NO_TRIANGLE or ASK_BVH; (t, u, v)) from its hint (module doc)."""
@@ -168,7 +168,7 @@ def resolve_hint(item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: 
     return face, wp.vec3(best[0], best[1], best[2])
 
 
-@wp.func
+@wp.func(inline=True)
 def item_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: wp.vec3, t_max: float):
     """`closest_hit(geom, origin, direction, 0, t_max, -1)` of sample (i, j)'s primary ray, bit for
     bit, its mesh part from the item buffer (the BVH where the sample is ambiguous, counted)."""
@@ -185,11 +185,12 @@ def item_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.vec
 
 
 @wp.kernel
-def hints_kernel(row0: int, key: wp.array(dtype=wp.int64), slot_face: wp.array(dtype=wp.int32),
+def hints_kernel(row0: int, n_faces: int, key: wp.array(dtype=wp.int64), slot_face: wp.array(dtype=wp.int32),
                  face: wp.array2d(dtype=wp.int32)):
     """Sample row row0 + tid of the bordered `face` grid (its row row0 + tid + 1, border columns
     included) from the z-buffer's keys (depth << 32 | slot, or NO_HIT), each key reset to NO_HIT once
-    read (the rasterizer's next z-buffer starts cleared)."""
+    read (the rasterizer's next z-buffer starts cleared). Slot s < n_faces is face s itself; only
+    the extra slots of faces clipped to quads (after those) look their face up."""
     i = row0 + wp.tid()
     cols = face.shape[1] - 2
     face[i + 1, 0] = -1
@@ -198,7 +199,9 @@ def hints_kernel(row0: int, key: wp.array(dtype=wp.int64), slot_face: wp.array(d
         f = int(-1)
         k = key[i * cols + j]
         if k != NO_HIT:
-            f = slot_face[int(k & SLOT_BITS)]
+            f = int(k & SLOT_BITS)
+            if f >= n_faces:
+                f = slot_face[f]
             key[i * cols + j] = NO_HIT
         face[i + 1, j + 1] = f
 
@@ -261,7 +264,7 @@ def item_buffer(compiled, width: int, height: int, threads: int | None = None) -
     seams = set()
 
     def decode_band(tris, key, begin: int, end: int) -> None:
-        wp.launch(hints_kernel, dim=end - begin, inputs=[begin, key, tris.face, face], device=device)
+        wp.launch(hints_kernel, dim=end - begin, inputs=[begin, n_faces, key, tris.face, face], device=device)
         if end - begin > 2:
             wp.launch(edges_kernel, dim=end - begin - 2, inputs=[begin + 1, face, arrays["faces"], edge], device=device)
         seams.update((begin, end - 1))
