@@ -36,8 +36,9 @@ class MaterialTable(NamedTuple):
     texels: jnp.ndarray | None = None
 
     @classmethod
-    def from_scene(cls, materials, dtype=jnp.float32) -> MaterialTable:
-        """From scene `Material`s in material-id order (moved to the device in one transfer)."""
+    def from_scene(cls, materials, dtype=jnp.float32, *, host: bool = False) -> MaterialTable:
+        """From scene `Material`s in material-id order, moved to the device in one transfer (`host`:
+        numpy arrays, for a caller that moves them with others)."""
         materials = list(materials)
         real = np.dtype(dtype)
 
@@ -53,7 +54,8 @@ class MaterialTable(NamedTuple):
                          (3,))
 
         targets = [TEXTURE_TARGET_IDS[m.texture_target] if m.texture is not None else -1 for m in materials]
-        return jax.device_put(cls(
+        table = cls(
             ka=field("ka", (3,)), kd=field("kd", (3,)), ks=field("ks", (3,)), n=field("n", ()), m=field("m", ()),
             f0=field("f0", ()), ka2=second("ka2"), kd2=second("kd2"), kr=field("kr", ()), kt=field("kt", ()),
-            absorption=field("absorption", (3,)), texture_target=np.asarray(targets, np.int32).reshape(-1)))
+            absorption=field("absorption", (3,)), texture_target=np.asarray(targets, np.int32).reshape(-1))
+        return table if host else jax.device_put(table)

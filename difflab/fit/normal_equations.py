@@ -15,8 +15,8 @@ Two ways to the same numbers:
   second takes ka2, kd2), sqrt(w) ks dS/dt for t = n, m, f0 (one forward-mode tangent each), and 0
   where a pixel is censored (the model is above the ceiling). A row (a pixel channel) touches only
   its own material's entries of its own channel, so J^T J is summed per material and channel from
-  q x q blocks (q: the fitted kinds; one (U, 3 (q + 1))^T (U, 3 (q + 1)) product per material)
-  and never formed as a dense (N, p) J.
+  q x q blocks (q: the fitted kinds; one product of (U, q + 1) columns per channel, batched over the
+  3 channels, per material) and never formed as a dense (N, p) J.
 
 `linearise` picks the second when it applies (a static property of the problem).
 """
@@ -74,8 +74,12 @@ def by_parts(problem, x):
     residuals = []
     for view in problem.views:
         model = view.model
-        has_material = model.material >= 0
-        mat = surface_material(table, jnp.where(has_material, model.material, 0), model.cell)
+        if len(model.material_ids) == 1 and model.material_ids[0] >= 0:  # one material: its row, no per-point lookup
+            has_material = jnp.ones(model.material.shape, bool)
+            mat = surface_material(table, model.material_ids[0], model.cell)
+        else:
+            has_material = model.material >= 0
+            mat = surface_material(table, jnp.where(has_material, model.material, 0), model.cell)
 
         def parts(n, m, f0):
             return shade_parts(mat._replace(n=n, m=m, f0=f0), model.formation.specular, model.geometry,
@@ -95,16 +99,14 @@ def by_parts(problem, x):
                                     (tangent["n"], tangent["m"], tangent["f0"]))
                 column[kind] = live * mat.ks * d_spec
         q = len(slots)
-        w = jnp.stack([column[k] for k in slots] + [r], axis=-1).reshape(r.shape[0], 3 * (q + 1))  # channel-major
-        channel = np.arange(3)
+        w = jnp.stack([column[k].T for k in slots] + [r.T], axis=-1)  # (3 channels, U, q + 1)
         for material, cols in columns.items():
             if material not in model.material_ids:
                 continue
-            # this material's rows, every product of two columns summed over the pixels in one product
-            # (the cross-channel ones are not used); per channel the q x q block and J^T r
+            # this material's rows, per channel every product of two columns summed over the pixels in
+            # one batched product (3, q + 1, q + 1): the q x q block and J^T r
             mine = w if model.material_ids == (material,) else jnp.where((model.material == material)[:, None], w, 0.0)
-            products = (mine.T @ w).reshape(3, q + 1, 3, q + 1)
-            blocks = products[channel, :, channel, :]  # (3, q + 1, q + 1)
+            blocks = jnp.einsum("cui,cuj->cij", mine, w)
             gram = gram.at[cols[:, :, None], cols[:, None, :]].add(blocks[:, :q, :q])
             grad = grad.at[cols].add(blocks[:, :q, q])
         residuals.append(r.reshape(-1))

@@ -31,8 +31,9 @@ from ..renderers.compile import CompiledScene
 from ..renderers.launch import resolve_device
 from .materials import MaterialTable
 from .params import DEFAULT_PARAMS, KINDS, LIGHT_PARAM, SCENE_PARAMS, Layout, build_layout, fitted_materials, scene_value
-from .problem import LOSSES, Problem, ViewJ, value_index
+from .problem import LOSSES, Problem, ViewJ, to_device, value_index
 from .raytree import TreeModel, tree_influence
+from .records import KeptView, view_key, view_store
 from .shading import GBufferModel, influence
 from .stats import FLOAT_SIGMA, QUANTISATION_SIGMA, estimate_sigma
 from .targets import prepared_targets
@@ -48,7 +49,8 @@ class View:
     (H, W) bool; weight (H, W, 3) >= 0 (0 outside the mask); ceiling: where its values clip (inf:
     nowhere); quantised: from an 8-bit image file; nonfinite: non-finite target values inside the
     mask; record: its G-buffer or ray tree; scene: the scene of this view; used (H, W) bool: the
-    pixels the fit reads (`pixels`: their flat indices, in order)."""
+    pixels the fit reads (`pixels`: their flat indices, in order); kept: the `records.KeptView` of
+    the record when it is kept with the compiled scene, else None."""
 
     target: np.ndarray
     mask: np.ndarray
@@ -59,6 +61,7 @@ class View:
     record: object
     scene: object
     used: np.ndarray
+    kept: KeptView | None = None
 
     @cached_property
     def pixels(self) -> np.ndarray:
@@ -268,19 +271,25 @@ class Setup:
         all_surfaces = any(p.kind == "intensity" for p in self.layout)
         crossing = sorted({p.index for p in self.layout if p.kind == "kt"})
         views, self.render_seconds = [], 0.0
+        store = view_store(self.compiled)  # the views kept with the compiled scene (`records.py`)
+        tree_ids = tuple(range(len(self.scene.materials))) if all_surfaces else tuple(ids)
         for view_scene, image, file_ceiling, mask, weight, nonfinite in prepared_targets(self.scene, targets, masks,
                                                                                           weights, render):
-            start = time.perf_counter()
-            frame = render_frame(self._compiled_for(view_scene, device) or view_scene, device=device, threads=threads,
-                                 image=False)
-            self.render_seconds += time.perf_counter() - start
+            key = view_key(view_scene, resolve_device(device)) if store is not None else None
+            kept = store.get(key) if store is not None else None
+            if kept is None:
+                start = time.perf_counter()
+                frame = render_frame(self._compiled_for(view_scene, device) or view_scene, device=device,
+                                     threads=threads, image=False)
+                self.render_seconds += time.perf_counter() - start
+                kept = KeptView(frame.ray_tree if self.method == "raytrace" else frame.gbuffer)
+                if store is not None:
+                    store.put(key, kept)
+            record = kept.record
             if self.method == "raytrace":
-                record = frame.ray_tree
-                tree_ids = range(len(self.scene.materials)) if all_surfaces else ids
-                touched = tree_influence(record, tree_ids, crossing)
+                touched = kept.touched((tree_ids, tuple(crossing)), lambda: tree_influence(record, tree_ids, crossing))
             else:
-                record = frame.gbuffer
-                touched = influence(record, ids, all_surfaces)
+                touched = kept.touched((tuple(ids), all_surfaces), lambda: influence(record, ids, all_surfaces))
             positive = weight > 0
             used = mask & (positive[..., 0] | positive[..., 1] | positive[..., 2]) & touched
             top = ceiling if ceiling is not None else file_ceiling
@@ -291,7 +300,7 @@ class Setup:
                 top = peak if peak > 0 and CENSOR_MIN_TIES <= ties < values.size // 2 else np.inf
             views.append(View(target=image, mask=mask, weight=weight, ceiling=np.inf if top is False else float(top),
                               quantised=file_ceiling is not None, nonfinite=nonfinite, record=record,
-                              scene=view_scene, used=used))
+                              scene=view_scene, used=used, kept=kept if store is not None else None))
         return views
 
     def _compiled_for(self, view_scene, device):
@@ -311,18 +320,25 @@ class Setup:
             return TreeModel.build(view.record, pixels, view.scene.background, self.dtype, self.texel_source)
         return GBufferModel.build(view.record, pixels, lights, self.dtype, self.texel_source)
 
-    def _view(self, view: View, pixels, index) -> ViewJ:
-        lights = lights_to_jax(view.scene.lights, self.dtype)
+    def _view(self, view: View, pixels, index, weight=None) -> ViewJ:
+        """The view on the device for `pixels` (its image model kept with the record when they are
+        the pixels used); `weight`: its (U, 3) weights there, when taken already."""
+        lights = lights_to_jax(view.scene.lights, self.dtype, host=True)
         count = lights.intensity.shape[0]
         intensity_index = np.full((count, 3), -1, np.int32)
         shared = min(count, index.shape[0])
         intensity_index[:shared] = index[:shared]
         real = np.dtype(self.dtype)
-        target, sqrt_weight, ceiling, intensity_index = jax.device_put((  # one transfer
-            take_pixels(view.target, pixels).astype(real), np.sqrt(take_pixels(view.weight, pixels)).astype(real),
+        weight = take_pixels(view.weight, pixels) if weight is None else weight
+        lights, target, sqrt_weight, ceiling, intensity_index = to_device((
+            lights, take_pixels(view.target, pixels).astype(real), np.sqrt(weight).astype(real),
             np.asarray(view.ceiling, real), intensity_index))
-        return ViewJ(model=self._model(view, pixels, lights), lights=lights, target=target, sqrt_weight=sqrt_weight,
-                     ceiling=ceiling, intensity_index=intensity_index)
+        if view.kept is not None and pixels is view.pixels and self.texel_source is None:
+            model = view.kept.model((self.method, real.name), view.used, lambda: self._model(view, pixels, lights))
+        else:
+            model = self._model(view, pixels, lights)
+        return ViewJ(model=model, lights=lights, target=target, sqrt_weight=sqrt_weight, ceiling=ceiling,
+                     intensity_index=intensity_index)
 
     def _problem(self, loss, loss_scale) -> Problem:
         weights = [take_pixels(v.weight, v.pixels) for v in self.views]
@@ -330,12 +346,12 @@ class Setup:
         self.unit_weights = all(np.all(w == 1.0) for w in weights)  # weighted residuals are the plain ones
         self.weight_total = float(sum(np.sum(w) for w in weights))
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
-        views = tuple(self._view(v, v.pixels, index["intensity"]) for v in self.views)
-        table = MaterialTable.from_scene(self.scene.materials.values(), self.dtype)
+        views = tuple(self._view(v, v.pixels, index["intensity"], w) for v, w in zip(self.views, weights))
         real = np.dtype(self.dtype)
-        ambient, index, loss_scale = jax.device_put((np.asarray(self.scene.ambient, real),
-                                                     {k: v for k, v in index.items() if k != "intensity"},
-                                                     np.asarray(loss_scale, real)))
+        table, ambient, index, loss_scale = to_device((
+            MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
+            np.asarray(self.scene.ambient, real), {k: v for k, v in index.items() if k != "intensity"},
+            np.asarray(loss_scale, real)))
         return Problem(views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
                        layout=self.layout, loss=loss, smoothness=self.smoothness)
 

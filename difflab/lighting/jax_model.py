@@ -297,15 +297,16 @@ def shade(mat: MaterialJ, model: int, normal, v, lights: LightsJ, l, d, visibili
                           ambient)
 
 
-def lights_to_jax(lights, dtype=jnp.float32) -> LightsJ:
-    """Scene lights as a `LightsJ` of arrays (P may be 0), moved to the device in one transfer."""
+def lights_to_jax(lights, dtype=jnp.float32, *, host: bool = False) -> LightsJ:
+    """Scene lights as a `LightsJ` of arrays (P may be 0), moved to the device in one transfer
+    (`host`: numpy arrays, for a caller that moves them with others)."""
     real = np.dtype(dtype)
 
     def column(values, shape):
         return np.asarray(values, dtype=np.float64).reshape(shape).astype(real)
 
     count = len(lights)
-    return jax.device_put(LightsJ(
+    arrays = LightsJ(
         kind=np.asarray([LIGHT_TYPES[light.type] for light in lights], dtype=np.int32).reshape(count),
         position=column([light.position or (0.0, 0.0, 0.0) for light in lights], (count, 3)),
         direction=column([light.direction or (0.0, -1.0, 0.0) for light in lights], (count, 3)),
@@ -314,4 +315,5 @@ def lights_to_jax(lights, dtype=jnp.float32) -> LightsJ:
         cos_cutoff=column([math.cos(math.radians(light.cutoff_deg)) if light.type == "spot" else -2.0
                            for light in lights], (count,)),
         exponent=column([light.exponent for light in lights], (count,)),
-    ))
+    )
+    return arrays if host else jax.device_put(arrays)

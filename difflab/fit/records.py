@@ -1,0 +1,105 @@
+"""What a fit keeps of each view with its compiled scene, so that fitting the same view again renders
+nothing and cuts nothing again.
+
+A fit renders each view once -- its G-buffer or its ray tree (`setup.Setup._record`) -- and cuts
+the image model's arrays out of it for the pixels it uses. Neither depends on the start values nor
+on the target:
+
+- the record depends on the compiled scene, the device and the view: its camera, render settings,
+  objects, ambient, background and fog, each light but its intensity, and each material but the
+  coefficients the image model evaluates afresh (ka, kd, ks, n, m, f0; kr, kt and absorption stay
+  in the key: they shape the ray tree and transparent shadows) -- `view_key`;
+- the model arrays, in addition, on the pixels used (masks, weights, the fitted materials), the
+  precision and the fitted textures (a texel fit cuts its model afresh).
+
+So a fit of a `CompiledScene` keeps, in `CompiledScene.built` (shared by its `with_scene` copies),
+the records of its latest KEPT_VIEWS views, with the influence maps found on them and the image
+models of their latest KEPT_MODELS pixel sets. A fit of a plain scene keeps nothing.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import fields
+
+import numpy as np
+
+KEPT_VIEWS = 4
+KEPT_MODELS = 2  # per view
+EVALUATED = frozenset(("ka", "kd", "ks", "n", "m", "f0"))  # what the image models evaluate afresh
+STORE = "fit views"  # the key in CompiledScene.built
+
+
+def view_key(view_scene, device: str) -> tuple:
+    """What a view's record depends on, as a tuple compared with == (see the module docstring)."""
+    materials = tuple((name, tuple(getattr(mat, f.name) for f in fields(mat) if f.name not in EVALUATED))
+                      for name, mat in view_scene.materials.items())
+    lights = tuple(tuple(getattr(light, f.name) for f in fields(light) if f.name != "intensity")
+                   for light in view_scene.lights)
+    return (device, view_scene.camera, view_scene.render, tuple(view_scene.objects), view_scene.ambient,
+            view_scene.background, view_scene.fog, materials, lights)
+
+
+class KeptView:
+    """One view's record (a `GBuffer` or `RayTree`, never written to), the pixels its parameters
+    influence (by what is fitted) and the image models cut from it (by pixels used and precision)."""
+
+    def __init__(self, record):
+        self.record = record
+        self._lock = threading.Lock()
+        self._touched: dict = {}
+        self._models: list = []  # [(key, used, model)], the latest first
+
+    def touched(self, key, find) -> np.ndarray:
+        """The influence map for `key` (what is fitted), found by `find()` on first use."""
+        with self._lock:
+            found = self._touched.get(key)
+        if found is None:
+            found = find()
+            with self._lock:
+                self._touched[key] = found
+        return found
+
+    def model(self, key, used: np.ndarray, build):
+        """The image model for the pixels `used` (H, W) bool and `key` (precision), cut by `build()`
+        on first use."""
+        with self._lock:
+            for kept_key, kept_used, model in self._models:
+                if kept_key == key and np.array_equal(kept_used, used):
+                    return model
+        model = build()
+        with self._lock:
+            self._models.insert(0, (key, used, model))
+            del self._models[KEPT_MODELS:]
+        return model
+
+
+class ViewStore:
+    """The latest KEPT_VIEWS `KeptView`s of one compiled scene by `view_key`."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._views: list = []  # [(key, KeptView)], the latest first
+
+    def get(self, key) -> KeptView | None:
+        with self._lock:
+            for i, (kept_key, view) in enumerate(self._views):
+                if kept_key == key:
+                    self._views.insert(0, self._views.pop(i))
+                    return view
+        return None
+
+    def put(self, key, view: KeptView) -> KeptView:
+        with self._lock:
+            self._views = [(key, view)] + [(k, v) for k, v in self._views if k != key][:KEPT_VIEWS - 1]
+        return view
+
+    def __len__(self):
+        return len(self._views)
+
+
+def view_store(compiled) -> ViewStore | None:
+    """The compiled scene's store of kept views (None without a compiled scene)."""
+    if compiled is None:
+        return None
+    return compiled.built.setdefault(STORE, ViewStore())

@@ -1,0 +1,122 @@
+"""Views kept with a compiled scene (`fit.records`): a view fitted again renders nothing and cuts
+nothing again, and gives exactly what a fresh fit gives -- for another start, target, mask, weights,
+precision or fitted set; another camera, light placement or tree shape is rendered anew."""
+
+import numpy as np
+import pytest
+from test_fit_helpers import TRUTH, make_scene, perturbed, scene_dict, target_of
+
+from difflab import Scene, compile_scene
+from difflab.fit import fit_material
+from difflab.fit.records import KEPT_VIEWS, STORE
+
+SCENE = make_scene(size=16)
+TARGET = target_of(SCENE)
+START, OTHER_START = perturbed(TRUTH), perturbed(TRUTH, factor=0.2, seed=5)
+CAMERA = SCENE.camera.to_dict()
+
+
+def fit(scene, targets, **kwargs):
+    return fit_material(scene, targets, "red", history=False, **kwargs)
+
+
+def assert_same(result, expected):
+    """Bitwise the fresh fit's result: steps, values, loss, noise and flags."""
+    assert (result.result, result.steps, result.at_bound) == (expected.result, expected.steps, expected.at_bound)
+    for key in expected.params:
+        np.testing.assert_array_equal(result.params[key], expected.params[key])
+        np.testing.assert_array_equal(result.stderr[key], expected.stderr[key])
+    assert (result.loss, result.sigma, result.chi2) == (expected.loss, expected.sigma, expected.chi2)
+    np.testing.assert_array_equal(result.residuals[0], expected.residuals[0])
+
+
+def kept_views(compiled) -> int:
+    return len(compiled.built[STORE])
+
+
+def test_a_view_fitted_again_with_another_start_renders_nothing():
+    compiled = compile_scene(SCENE)
+    first = fit(compiled, [TARGET], init=START)
+    again = fit(compiled, [TARGET], init=OTHER_START)
+    assert first.timings["render"] > 0 and again.timings["render"] == 0.0 and kept_views(compiled) == 1
+    assert_same(first, fit(SCENE, [TARGET], init=START))
+    assert_same(again, fit(SCENE, [TARGET], init=OTHER_START))
+
+
+def test_another_target_mask_weights_or_precision_on_a_kept_view_is_the_fresh_fit():
+    compiled = compile_scene(SCENE)
+    fit(compiled, [TARGET], init=START)
+    noisy = TARGET + np.random.default_rng(1).normal(0.0, 0.01, TARGET.shape)
+    half = np.zeros(TARGET.shape[:2], bool)
+    half[:, 4:12] = True
+    ramp = np.linspace(0.5, 2.0, TARGET.shape[1])[None, :].repeat(TARGET.shape[0], axis=0)
+    for kwargs in ({"targets": [noisy]}, {"masks": [half]}, {"weights": [ramp]}, {"x64": False},
+                   {"targets": [noisy], "masks": [half]}):
+        targets = kwargs.pop("targets", [TARGET])
+        again = fit(compiled, targets, init=START, **kwargs)
+        assert again.timings["render"] == 0.0
+        assert_same(again, fit(SCENE, targets, init=START, **kwargs))
+    assert kept_views(compiled) == 1
+
+
+def test_light_intensities_fitted_again_start_from_their_new_values():
+    compiled = compile_scene(SCENE)
+    params = ("kd", "intensity")
+    fit(compiled, [TARGET], params=params, init={"kd": TRUTH["kd"]})
+    start = {"kd": START["kd"], "lights[0].intensity": [0.7, 0.8, 0.9]}
+    again = fit(compiled, [TARGET], params=params, init=start)
+    assert again.timings["render"] == 0.0
+    assert_same(again, fit(SCENE, [TARGET], params=params, init=start))
+
+
+def test_views_kept_side_by_side_stay_intact():
+    """Views A, B, A: the second fit of A reads its own record, untouched by B's render (a record
+    that shared the renderer's scratch memory would now hold B)."""
+    compiled = compile_scene(SCENE)
+    other = CAMERA | {"eye": [0.6, 1.5, 3.8]}
+    moved = target_of(SCENE.with_overrides(camera=other))
+    first = fit(compiled, [TARGET], init=START)
+    fit(compiled, [(moved, {"camera": other})], init=START)
+    again = fit(compiled, [TARGET], init=START)
+    assert again.timings["render"] == 0.0 and kept_views(compiled) == 2
+    assert_same(again, first)
+
+
+def test_another_camera_or_light_placement_is_rendered_and_at_most_kept_views_are_kept():
+    compiled = compile_scene(SCENE)
+    fit(compiled, [TARGET], init=START)
+    lights = [light.to_dict() for light in SCENE.lights]
+    lights[0]["position"] = [2.5, 4.0, 3.5]
+    moved_light = target_of(SCENE.with_overrides(lights=lights))
+    result = fit(compiled, [(moved_light, {"lights": lights})], init=START)
+    assert result.timings["render"] > 0
+    assert_same(result, fit(SCENE, [(moved_light, {"lights": lights})], init=START))
+    cameras = [CAMERA | {"eye": [0.2 * i, 1.2, 4.0]} for i in range(1, KEPT_VIEWS + 1)]
+    for camera in cameras:
+        assert fit(compiled, [(TARGET, {"camera": camera})], init=START).timings["render"] > 0
+    assert kept_views(compiled) == KEPT_VIEWS
+    assert fit(compiled, [(TARGET, {"camera": cameras[-1]})], init=START).timings["render"] == 0.0
+    assert fit(compiled, [TARGET], init=START).timings["render"] > 0  # the oldest view was let go
+
+
+@pytest.fixture(scope="module")
+def mirror():
+    d = scene_dict(size=12, red={"kr": 0.1})
+    d["render"]["method"] = "raytrace"
+    scene = Scene.from_dict(d)
+    return scene, target_of(scene)
+
+
+def test_a_kept_ray_tree_serves_new_coefficient_starts_but_not_a_new_tree_shape(mirror):
+    """The tree's shape follows kr (a reflected child exists where kr > 0): another kr start is
+    recorded anew; another ka / kd / ks / n start reads the kept tree."""
+    scene, target = mirror
+    compiled = compile_scene(scene)
+    params = ("ka", "kd", "ks", "n", "kr")
+    fit(compiled, [target], params=params, init=START)
+    again = fit(compiled, [target], params=params, init=OTHER_START)
+    assert again.model == "raytrace" and again.timings["render"] == 0.0
+    assert_same(again, fit(scene, [target], params=params, init=OTHER_START))
+    new_kr = fit(compiled, [target], params=params, init={**START, "kr": 0.3})
+    assert new_kr.timings["render"] > 0 and kept_views(compiled) == 2
+    assert_same(new_kr, fit(scene, [target], params=params, init={**START, "kr": 0.3}))
