@@ -28,7 +28,8 @@ Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
 With the G-buffer under Phong shading (whose points are its samples), stages 4 and 6 run as one
 pass (`shade.phong_gbuffer_kernel`: each sample resolved, then lit); `render_frame(...,
 image=False)` skips stage 7 there. The G-buffer's arrays come from `CompiledScene.reusable` (the
-last frame's memory when nothing holds it any more), and its kernels write every element.
+last frame's memory when nothing holds it any more), cleared to zero where an empty sample's
+entries are zero; the kernels write the rest.
 
 `render` (no G-buffer) runs stages 1-3, then `image_kernel` fuses 4-7 per sample: Phong's points are
 its samples; a flat / Gouraud point is lit when a sample first reads it, into a cache of the CPU

@@ -8,6 +8,7 @@ with gbuffer=False, what `render` asks for, stages 4, 6 and 7 run fused per samp
 
 from __future__ import annotations
 
+import functools
 import itertools
 import time
 
@@ -26,39 +27,57 @@ from ..launch import (band_plan, host_empty, launch_chunks, launch_parts, launch
                       parallel_bands, part_count, run_bands)
 
 
-def empty_points(compiled, name: str, count: int, zeroed: bool) -> resolve.PointsW:
-    """Arrays for `count` shading points (`CompiledScene.reusable`: from an earlier frame when free),
-    zeroed when asked (`resolve_kernel` writes every field of its samples; flat / Gouraud points keep
-    zero uv and derivatives)."""
+def empty_points(compiled, name: str, count: int) -> resolve.PointsW:
+    """Zeroed arrays for `count` shading points (`CompiledScene.reusable`: an earlier frame's memory
+    when free; the kernels write only what is not zero)."""
     points = resolve.PointsW()
     for field, dtype in [("position", wp.vec3), ("normal", wp.vec3), ("geo_normal", wp.vec3), ("view", wp.vec3),
                          ("material", wp.int32), ("cell", wp.int32), ("ignore", wp.int32), ("uv", wp.vec2),
                          ("duv_dx", wp.vec2), ("duv_dy", wp.vec2)]:
-        setattr(points, field, compiled.reusable(f"{name}.{field}", count, dtype, zeroed))
+        setattr(points, field, compiled.reusable(f"{name}.{field}", count, dtype, zeroed=True))
     return points
 
 
 def raster_mesh(compiled) -> resolve.RasterMeshW:
+    """The compiled triangles as the raster kernels read them (kept with the compiled scene's arrays:
+    copies of it under other render settings share them)."""
+    kept = compiled.built.get("raster mesh")
+    if kept is not None and kept[0] is compiled.arrays:
+        return kept[1]
     mesh = resolve.RasterMeshW()
     for name in ("faces", "vertices", "normals", "uvs", "face_normal", "face_material", "face_object",
                  "vertex_material", "vertex_object"):
         setattr(mesh, name, compiled.arrays[name])
     mesh.n_mesh_faces, mesh.n_mesh_vertices = compiled.n_mesh_faces, compiled.n_mesh_vertices
+    compiled.built["raster mesh"] = (compiled.arrays, mesh)
     return mesh
 
 
 def lighting_struct(compiled, settings) -> shade.LightingW:
+    """The `LightingW` of the compiled scene under `settings`; the last one is kept (a fit's views
+    and an animation's frames ask for the same one again and again)."""
+    key = (settings.specular, settings.shadows, settings.transparent_shadows, tuple(compiled.scene.ambient))
+    arrays = (compiled.lights, compiled.materials, compiled.textures, compiled.geom)
+    kept = compiled.built.get("lighting")
+    if kept is not None and kept[0] == key and all(a is b for a, b in zip(kept[1], arrays)):
+        return kept[2]
     out = shade.LightingW()
     out.lights, out.materials, out.textures = compiled.lights, compiled.materials, compiled.textures.warp
     out.geom = compiled.traceable() if settings.shadows else compiled.geom  # shadow rays need the BVH
     out.specular = SPECULAR_MODELS[settings.specular]
     out.ambient = wp.vec3(*compiled.scene.ambient)
     out.shadows, out.transparent = int(settings.shadows), int(settings.transparent_shadows)
+    compiled.built["lighting"] = (key, arrays, out)
     return out
 
 
 def band_rows(bands: list[tuple[int, int]], height: int, device: str) -> wp.array:
-    """Per sample row, the index of its band."""
+    """Per sample row, the index of its band (kept for later frames of the same plan)."""
+    return _band_rows(tuple(bands), height, device)
+
+
+@functools.lru_cache(maxsize=32)
+def _band_rows(bands: tuple, height: int, device: str) -> wp.array:
     band_of_row = np.repeat(np.arange(len(bands), dtype=np.int32), [b - a for a, b in bands])
     return wp.array(band_of_row[:height], dtype=wp.int32, device=device)
 
@@ -191,25 +210,25 @@ def mesh_points(compiled, mesh, cam, shading: int, threads: int | None = None):
     """Stage 5 under flat or Gouraud shading: the points where the model is evaluated (Phong's are
     its samples, see `rasterize`), and how many."""
     n_points = point_count(compiled, shading, 0)
-    points = empty_points(compiled, "points", n_points, zeroed=True)
+    points = empty_points(compiled, "points", n_points)
     launch_chunks(resolve.mesh_points_kernel, n_points, [mesh, compiled.materials, cam, shading, points],
                   compiled.device, threads)
     return points, n_points
 
 
-def empty_lit(compiled, n_points: int, n_samples: int, points_are_samples: int) -> shade.LitW:
-    """Stage 6's outputs for the G-buffer (`CompiledScene.reusable`): per point and light, direction,
-    distance, visibility (one zero column without lights); per point its colour and texture factor;
-    per sample its texel (written by stage 6 when the points are the samples, else by stage 7 on
-    textured samples only: zero elsewhere). `light_into` writes the rest of every point."""
-    n_lights = len(compiled.scene.lights)
+def empty_lit(compiled, n_points: int, n_samples: int) -> shade.LitW:
+    """Stage 6's outputs for the G-buffer, zeroed (`CompiledScene.reusable`; an empty point's stay
+    zero): per point and light, direction, distance, visibility (one zero column without lights);
+    per point its colour and texture factor; per sample its texel (written by stage 6 when the
+    points are the samples, else by stage 7 on textured samples)."""
+    n_lights = max(len(compiled.scene.lights), 1)
     lit, array = shade.LitW(), compiled.reusable
-    lit.light_dir = array("lit.light_dir", (n_points, max(n_lights, 1)), wp.vec3, not n_lights)
-    lit.light_dist = array("lit.light_dist", (n_points, max(n_lights, 1)), wp.float32, not n_lights)
-    lit.visibility = array("lit.visibility", (n_points, max(n_lights, 1)), wp.float32, not n_lights)
-    lit.color = array("lit.color", max(n_points, 1), wp.vec3)
-    lit.factor = array("lit.factor", max(n_points, 1), wp.vec3)
-    lit.texel = array("lit.texel", n_samples, wp.vec3, not points_are_samples)
+    lit.light_dir = array("lit.light_dir", (n_points, n_lights), wp.vec3, zeroed=True)
+    lit.light_dist = array("lit.light_dist", (n_points, n_lights), wp.float32, zeroed=True)
+    lit.visibility = array("lit.visibility", (n_points, n_lights), wp.float32, zeroed=True)
+    lit.color = array("lit.color", max(n_points, 1), wp.vec3, zeroed=True)
+    lit.factor = array("lit.factor", max(n_points, 1), wp.vec3, zeroed=True)
+    lit.texel = array("lit.texel", n_samples, wp.vec3, zeroed=True)
     return lit
 
 
@@ -228,7 +247,7 @@ def light_mesh_points(compiled, lighting, points, n_points: int, n_samples: int,
                       threads: int | None = None) -> shade.LitW:
     """Stage 6 for the G-buffer under flat or Gouraud shading: light every point, recording per
     light its direction, distance and visibility, and the texture factor."""
-    lit = empty_lit(compiled, n_points, n_samples, points_are_samples=0)
+    lit = empty_lit(compiled, n_points, n_samples)
     launch_chunks(shade.light_points_kernel, n_points, [points, lighting, 0, 1, lit], compiled.device, threads)
     return lit
 
@@ -277,15 +296,16 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
 
     tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)  # stages 1-3
     # Stage 4: the per-sample G-buffer.
-    samples = empty_points(compiled, "samples", width * height, zeroed=False)
+    samples = empty_points(compiled, "samples", width * height)
     out = resolve.GBufferW()
-    for name, dtype in [("face", wp.int32), ("bary", wp.vec3), ("depth", wp.float32), ("uv", wp.vec2),
-                        ("object", wp.int32), ("point_index", wp.vec3i), ("point_weight", wp.vec3)]:
-        setattr(out, name, compiled.reusable(f"gbuffer.{name}", width * height, dtype))
+    for name, dtype, zeroed in [("face", wp.int32, False), ("bary", wp.vec3, True), ("depth", wp.float32, False),
+                                ("uv", wp.vec2, True), ("object", wp.int32, False), ("point_index", wp.vec3i, False),
+                                ("point_weight", wp.vec3, True)]:  # zero where empty, or written everywhere
+        setattr(out, name, compiled.reusable(f"gbuffer.{name}", width * height, dtype, zeroed))
     points_are_samples = int(shading == PHONG_SHADING)
     if points_are_samples:  # stages 4-6 in one pass: each sample resolved, then lit as its own point
         points, n_points = samples, width * height
-        lit = empty_lit(compiled, n_points, n_points, points_are_samples)
+        lit = empty_lit(compiled, n_points, n_points)
         launch_row_loops(shade.phong_gbuffer_kernel, height, [
             key, tris, mesh, cam, perspective_correct, out, samples, lighting, lit], device, threads)
     else:

@@ -265,25 +265,18 @@ class GBufferW:
 def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
                  materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
                  n_vertices: int, out: GBufferW, samples: PointsW, i: int, j: int):
-    """Stage 4 at sample (i, j): its G-buffer entries (empty ones where nothing covers it)."""
+    """Stage 4 at sample (i, j): its G-buffer entries (empty ones where nothing covers it: the
+    non-zero ones only, as `samples` and `out` are zero when the kernel starts)."""
     s = i * cam.width + j
     k = key[s]
-    key[s] = NO_HIT  # the next frame's z-buffer starts cleared
-    if k == NO_HIT:  # every field written: the buffers are not cleared before
-        nothing = PointW()
-        nothing.material = -1
-        store_point(samples, s, nothing)
-        samples.uv[s] = wp.vec2(0.0)
-        samples.duv_dx[s] = wp.vec2(0.0)
-        samples.duv_dy[s] = wp.vec2(0.0)
+    if k == NO_HIT:  # its other entries stay as cleared: zero
+        samples.material[s] = -1
         out.face[s] = -1
         out.object[s] = -1
         out.depth[s] = wp.inf
         out.point_index[s] = wp.vec3i(s, s, s)
-        out.point_weight[s] = wp.vec3(0.0)
-        out.bary[s] = wp.vec3(0.0)
-        out.uv[s] = wp.vec2(0.0)
         return
+    key[s] = NO_HIT  # the next frame's z-buffer starts cleared
     sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j)
     store_point(samples, s, sample.point)
     uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, perspective_correct, i, j)

@@ -113,19 +113,11 @@ def texel_at(lighting: LightingW, mat_id: int, uv: wp.vec2, duv_dx: wp.vec2, duv
 @wp.func
 def light_into(points: PointsW, lighting: LightingW, points_are_samples: int, record: int, lit: LitW, k: int):
     """Stage 6 at point k; under Phong the points are the samples, whose texels are sampled here.
-    `record` keeps each light's direction, distance and visibility (the G-buffer's)."""
-    lit.factor[k] = wp.vec3(0.0)
-    point = load_point(points, k)
-    if point.material < 0:  # every output zero (the buffers are not cleared before)
-        lit.color[k] = wp.vec3(0.0)
-        if record == 1:
-            for q in range(lit.light_dir.shape[1]):
-                lit.light_dir[k, q] = wp.vec3(0.0)
-                lit.light_dist[k, q] = 0.0
-                lit.visibility[k, q] = 0.0
-        if points_are_samples == 1:
-            lit.texel[k] = wp.vec3(0.0)
+    `record` keeps each light's direction, distance and visibility (the G-buffer's). `lit` is zero
+    when the kernel starts: nothing is written for an empty point."""
+    if points.material[k] < 0:
         return
+    point = load_point(points, k)
     texel = wp.vec3(0.0)
     if points_are_samples == 1:
         texel = texel_at(lighting, point.material, points.uv[k], points.duv_dx[k], points.duv_dy[k])
