@@ -115,6 +115,23 @@ def test_a_dropped_frames_buffers_are_reused_by_the_next_frame(tmp_path):
     assert view.shape == (2, 24, 3)
 
 
+@pytest.mark.parametrize("shading", ["phong", "gouraud"])
+def test_what_a_user_wrote_into_a_dropped_gbuffer_does_not_reach_the_next_frame(tmp_path, shading):
+    scene = textured_scene(tmp_path, shading, 1)
+    compiled = compile_scene(scene)
+    frame = render_frame(compiled)
+    address = frame.gbuffer.light_dir.__array_interface__["data"][0]
+    for value in [frame.image, *fields(frame.gbuffer).values()]:
+        if isinstance(value, np.ndarray) and value.flags.writeable:
+            value[...] = 7
+    del frame, value
+    again = render_frame(compiled)
+    assert again.gbuffer.light_dir.__array_interface__["data"][0] == address  # the same memory, written over
+    fresh = render_frame(scene)
+    assert np.array_equal(again.image, fresh.image)
+    assert_same_gbuffer(again.gbuffer, fresh.gbuffer)
+
+
 def test_camera_struct_is_built_once_per_camera_and_grid(tmp_path):
     camera = textured_scene(tmp_path, "phong", 1).camera
     assert camera_struct(camera, 24, 20) is camera_struct(camera, 24, 20)

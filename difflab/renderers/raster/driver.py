@@ -27,14 +27,16 @@ from ..launch import (band_plan, host_empty, launch_chunks, launch_parts, launch
                       parallel_bands, part_count, run_bands)
 
 
-def empty_points(compiled, name: str, count: int) -> resolve.PointsW:
-    """Zeroed arrays for `count` shading points (`CompiledScene.reusable`: an earlier frame's memory
-    when free; the kernels write only what is not zero)."""
+def empty_points(compiled, name: str, count: int, clear: bool) -> resolve.PointsW:
+    """Arrays for `count` shading points (`CompiledScene.reusable`: an earlier frame's memory when
+    free); with `clear`, those an empty sample of the G-buffer leaves zero are zeroed (its material
+    is written, and only covered samples read the kernels' own geo_normal, ignore and uv)."""
     points = resolve.PointsW()
-    for field, dtype in [("position", wp.vec3), ("normal", wp.vec3), ("geo_normal", wp.vec3), ("view", wp.vec3),
-                         ("material", wp.int32), ("cell", wp.int32), ("ignore", wp.int32), ("uv", wp.vec2),
-                         ("duv_dx", wp.vec2), ("duv_dy", wp.vec2)]:
-        setattr(points, field, compiled.reusable(f"{name}.{field}", count, dtype, zeroed=True))
+    for field, dtype, zero in [("position", wp.vec3, True), ("normal", wp.vec3, True), ("geo_normal", wp.vec3, False),
+                               ("view", wp.vec3, True), ("material", wp.int32, False), ("cell", wp.int32, True),
+                               ("ignore", wp.int32, False), ("uv", wp.vec2, False), ("duv_dx", wp.vec2, True),
+                               ("duv_dy", wp.vec2, True)]:
+        setattr(points, field, compiled.reusable(f"{name}.{field}", count, dtype, clear and zero))
     return points
 
 
@@ -210,7 +212,7 @@ def mesh_points(compiled, mesh, cam, shading: int, threads: int | None = None):
     """Stage 5 under flat or Gouraud shading: the points where the model is evaluated (Phong's are
     its samples, see `rasterize`), and how many."""
     n_points = point_count(compiled, shading, 0)
-    points = empty_points(compiled, "points", n_points)
+    points = empty_points(compiled, "points", n_points, clear=False)  # every point written but uv, never read
     launch_chunks(resolve.mesh_points_kernel, n_points, [mesh, compiled.materials, cam, shading, points],
                   compiled.device, threads)
     return points, n_points
@@ -269,7 +271,6 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     cam = camera_struct(scene.camera, width, height)
     mesh, lighting = raster_mesh(compiled), lighting_struct(compiled, settings)
     black = not any(scene.background)  # a zeroed image needs no background written (`render`)
-    canvas = host_empty(width * height, wp.vec3, device, zeroed=black and not gbuffer)  # fresh every frame
     background, fog = wp.vec3(*scene.background), fog_struct(scene.fog)
 
     if not gbuffer:  # stages 1-3, then 4-7 fused (flat / Gouraud points lit on first use)
@@ -279,6 +280,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
             launch_chunks(shade.light_mesh_points_kernel, n_points, [
                 mesh, cam, shading, lighting, point_cache(compiled, n_points, frame)], device, threads)
         bad = compiled.scratch("nonfinite rows", height, wp.int32)
+        canvas = host_empty(width * height, wp.vec3, device, zeroed=black)  # fresh every frame
 
         def image_band(tris, key, begin: int, end: int) -> None:  # right after the band's z-buffer, its thread's cache
             wp.launch(shade.image_kernel, dim=end - begin, inputs=[
@@ -296,7 +298,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
 
     tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)  # stages 1-3
     # Stage 4: the per-sample G-buffer.
-    samples = empty_points(compiled, "samples", width * height)
+    samples = empty_points(compiled, "samples", width * height, clear=True)
     out = resolve.GBufferW()
     for name, dtype, zeroed in [("face", wp.int32, False), ("bary", wp.vec3, True), ("depth", wp.float32, False),
                                 ("uv", wp.vec2, True), ("object", wp.int32, False), ("point_index", wp.vec3i, False),
@@ -318,6 +320,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
 
     composed = image or not points_are_samples
     if composed:  # Stage 7: compose samples (on the CUDA device before the G-buffer is copied out)
+        canvas = compiled.reusable("canvas", width * height, wp.vec3)  # every sample written
         launch_row_loops(shade.compose_kernel, height, [
             width, samples, out.depth, out.point_index, out.point_weight, lit, lighting, int(clamp_colors),
             1 - points_are_samples, background, fog, canvas], device, threads)

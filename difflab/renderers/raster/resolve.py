@@ -71,7 +71,7 @@ class PointsW:
     material: wp.array(dtype=wp.int32)
     cell: wp.array(dtype=wp.int32)
     ignore: wp.array(dtype=wp.int32)
-    uv: wp.array(dtype=wp.vec2)  # texture coordinates (samples only; zero at flat / Gouraud points)
+    uv: wp.array(dtype=wp.vec2)  # texture coordinates (samples only; not written at flat / Gouraud points)
     duv_dx: wp.array(dtype=wp.vec2)  # d(uv)/dx, d(uv)/dy per sample of the sample grid (samples only)
     duv_dy: wp.array(dtype=wp.vec2)
 
