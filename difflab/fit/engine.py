@@ -53,7 +53,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         used = setup.weighted_entries
         matrix_free = options.matrix_free(layout.size)
         with jax.enable_x64(setup.x64):
-            at = jnp.asarray(flat, setup.dtype)
+            at = np.asarray(flat, setup.dtype)  # numpy: moved by the compiled calls that need it
             if matrix_free:  # no Jacobian is formed: no covariance (stderr nan)
                 gram, r = None, np.asarray(_weighted(setup.problem, at), np.float64)
             else:

@@ -17,7 +17,8 @@ rtol of itself (MINPACK's xtol / ftol tests); "nonlinear_max_steps_reached" afte
 "nonfinite" when the loss at the start is not finite. A trial step whose loss is not finite is
 rejected like any step that does not lower the loss, so the point returned always has a finite
 loss (a fit with an infinite loss is never successful). Each step costs one linearisation and one
-p x p Cholesky solve, as a plain Gauss-Newton step does.
+p x p Cholesky solve, as a plain Gauss-Newton step does; the residual vector is not carried from step
+to step (only its loss), but formed once more at the solution.
 """
 
 from __future__ import annotations
@@ -39,7 +40,6 @@ RUNNING = -1
 
 class State(NamedTuple):
     x: jnp.ndarray
-    r: jnp.ndarray
     a: jnp.ndarray
     g: jnp.ndarray
     loss: jnp.ndarray
@@ -66,9 +66,10 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
     dtype = x0.dtype
     x0 = jnp.clip(x0, lower, upper)
     p = x0.shape[0]
-    n = jax.eval_shape(lambda y: linearise(y, args), x0)[0].shape[0]
-    # Step -1 only evaluates the start (so the model is linearised in one place of the program).
-    state = State(x0, jnp.zeros(n, dtype), jnp.zeros((p, p), dtype), jnp.zeros(p, dtype), jnp.asarray(jnp.inf, dtype),
+    # Step -1 only evaluates the start (so the model is linearised in one place of the program). The
+    # residuals are not carried from step to step (only their loss): r at the solution is formed once
+    # at the end.
+    state = State(x0, jnp.zeros((p, p), dtype), jnp.zeros(p, dtype), jnp.asarray(jnp.inf, dtype),
                   jnp.asarray(LAMBDA0, dtype), jnp.asarray(2.0, dtype), jnp.asarray(-1), jnp.asarray(RUNNING),
                   jnp.full(max_steps, jnp.nan, dtype))
 
@@ -107,11 +108,10 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
         if progress is not None:
             jax.debug.callback(progress, step, loss)
         history = jnp.where(first, s.history, s.history.at[jnp.maximum(s.step, 0)].set(loss))
-        return State(keep(x_new, s.x), keep(r_new, s.r), keep(a_new, s.a), keep(g_new, s.g), loss, lam, nu, step,
-                     code, history)
+        return State(keep(x_new, s.x), keep(a_new, s.a), keep(g_new, s.g), loss, lam, nu, step, code, history)
 
     out = jax.lax.while_loop(lambda s: s.code == RUNNING, body, state)
-    return out.x, out.code, out.step, out.history, out.r, out.a
+    return out.x, out.code, out.step, out.history, linearise(out.x, args)[0], out.a
 
 
 @eqx.filter_jit

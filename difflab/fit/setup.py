@@ -16,8 +16,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import time
-from dataclasses import dataclass
-from functools import cached_property
 
 import equinox as eqx
 import jax
@@ -33,7 +31,7 @@ from .materials import MaterialTable
 from .params import DEFAULT_PARAMS, KINDS, LIGHT_PARAM, SCENE_PARAMS, Layout, build_layout, fitted_materials, scene_value
 from .problem import LOSSES, Problem, ViewJ, to_device, value_index
 from .raytree import TreeModel, tree_influence
-from .records import KeptView, view_key, view_store
+from .records import KeptView, View, take_pixels, view_key, view_store
 from .shading import GBufferModel, influence
 from .stats import FLOAT_SIGMA, QUANTISATION_SIGMA, estimate_sigma
 from .targets import prepared_targets
@@ -41,37 +39,6 @@ from .texels import TexelSource, texture_starts, wants_texels
 
 METHODS = ("raster", "raytrace")
 CENSOR_MIN_TIES = 3  # float targets: ties at the maximum (this many, under half the values) mark a ceiling
-
-
-@dataclass(frozen=True)
-class View:
-    """One target and what it was seen with. target (H, W, 3) float64 (0 where masked out); mask
-    (H, W) bool; weight (H, W, 3) >= 0 (0 outside the mask); ceiling: where its values clip (inf:
-    nowhere); quantised: from an 8-bit image file; nonfinite: non-finite target values inside the
-    mask; record: its G-buffer or ray tree; scene: the scene of this view; used (H, W) bool: the
-    pixels the fit reads (`pixels`: their flat indices, in order); kept: the `records.KeptView` of
-    the record when it is kept with the compiled scene, else None."""
-
-    target: np.ndarray
-    mask: np.ndarray
-    weight: np.ndarray
-    ceiling: float
-    quantised: bool
-    nonfinite: int
-    record: object
-    scene: object
-    used: np.ndarray
-    kept: KeptView | None = None
-
-    @cached_property
-    def pixels(self) -> np.ndarray:
-        return np.flatnonzero(self.used)
-
-
-def take_pixels(image, pixels) -> np.ndarray:
-    """(U, 3) rows of an (H, W, 3) image at flat pixel indices (numpy's `take`: several times the
-    speed of an index expression)."""
-    return np.take(image.reshape(-1, 3), pixels, axis=0)
 
 
 def choose_method(scene, materials, method, texels=False) -> str:
@@ -320,9 +287,9 @@ class Setup:
             return TreeModel.build(view.record, pixels, view.scene.background, self.dtype, self.texel_source)
         return GBufferModel.build(view.record, pixels, lights, self.dtype, self.texel_source)
 
-    def _view(self, view: View, pixels, index, weight=None) -> ViewJ:
-        """The view on the device for `pixels` (its image model kept with the record when they are
-        the pixels used); `weight`: its (U, 3) weights there, when taken already."""
+    def _view_arrays(self, view: View, pixels, index, weight=None) -> tuple:
+        """A view's arrays for `pixels`, numpy: (lights, target, sqrt(weight), ceiling,
+        intensity_index) (see `ViewJ`); `weight`: its (U, 3) weights there, when taken already."""
         lights = lights_to_jax(view.scene.lights, self.dtype, host=True)
         count = lights.intensity.shape[0]
         intensity_index = np.full((count, 3), -1, np.int32)
@@ -330,11 +297,16 @@ class Setup:
         intensity_index[:shared] = index[:shared]
         real = np.dtype(self.dtype)
         weight = take_pixels(view.weight, pixels) if weight is None else weight
-        lights, target, sqrt_weight, ceiling, intensity_index = to_device((
-            lights, take_pixels(view.target, pixels).astype(real), np.sqrt(weight).astype(real),
-            np.asarray(view.ceiling, real), intensity_index))
+        return (lights, take_pixels(view.target, pixels).astype(real, copy=False),
+                np.sqrt(weight).astype(real, copy=False), np.asarray(view.ceiling, real), intensity_index)
+
+    def _view(self, view: View, pixels, arrays) -> ViewJ:
+        """The view for `pixels` from its `_view_arrays` on the device, with its image model (kept
+        with the record when they are the pixels used)."""
+        lights, target, sqrt_weight, ceiling, intensity_index = arrays
         if view.kept is not None and pixels is view.pixels and self.texel_source is None:
-            model = view.kept.model((self.method, real.name), view.used, lambda: self._model(view, pixels, lights))
+            key = (self.method, np.dtype(self.dtype).name)
+            model = view.kept.model(key, view.used, lambda: self._model(view, pixels, lights))
         else:
             model = self._model(view, pixels, lights)
         return ViewJ(model=model, lights=lights, target=target, sqrt_weight=sqrt_weight, ceiling=ceiling,
@@ -346,12 +318,13 @@ class Setup:
         self.unit_weights = all(np.all(w == 1.0) for w in weights)  # weighted residuals are the plain ones
         self.weight_total = float(sum(np.sum(w) for w in weights))
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
-        views = tuple(self._view(v, v.pixels, index["intensity"], w) for v, w in zip(self.views, weights))
         real = np.dtype(self.dtype)
-        table, ambient, index, loss_scale = to_device((
+        arrays, table, ambient, index, loss_scale = to_device((  # one transfer
+            [self._view_arrays(v, v.pixels, index["intensity"], w) for v, w in zip(self.views, weights)],
             MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
             np.asarray(self.scene.ambient, real), {k: v for k, v in index.items() if k != "intensity"},
             np.asarray(loss_scale, real)))
+        views = tuple(self._view(v, v.pixels, a) for v, a in zip(self.views, arrays))
         return Problem(views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
                        layout=self.layout, loss=loss, smoothness=self.smoothness)
 
@@ -394,7 +367,8 @@ class Setup:
             index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
             for view in self.views:
                 every = np.arange(view.used.size)
-                full = eqx.tree_at(lambda p: p.views, self.problem, (self._view(view, every, index["intensity"]),))
+                arrays = to_device(self._view_arrays(view, every, index["intensity"]))
+                full = eqx.tree_at(lambda p: p.views, self.problem, (self._view(view, every, arrays),))
                 image = _images_jit(full, jnp.asarray(flat, self.dtype))[0]
                 out.append(np.asarray(image, np.float32).reshape(view.target.shape))
         return out

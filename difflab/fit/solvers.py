@@ -148,17 +148,17 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
     """One solve from solver coordinates x0, a `Solved`."""
     rtol, atol = options.tolerances()
     dtype = problem.ambient.dtype
-    lower, upper = (jnp.asarray(b, dtype) for b in problem.layout.bounds())
+    lower, upper = (np.asarray(b, dtype) for b in problem.layout.bounds())  # numpy: moved with the call
     progress = Progress(options.max_steps, label) if options.show_progress() else None
     matrix_free = options.matrix_free(problem.layout.size)
     try:
         if options.solver == "lm" and matrix_free:
-            x, code, steps, history = solve_box_cg(problem, jnp.asarray(x0, dtype), lower, upper, options.max_steps,
+            x, code, steps, history = solve_box_cg(problem, np.asarray(x0, dtype), lower, upper, options.max_steps,
                                                    rtol, atol, options.cg_steps, progress)
             history = np.asarray(history, np.float64)[:int(steps)].tolist() if options.history else []
             return Solved(np.asarray(x, np.float64), lm.CODES[int(code)], int(steps), history)
         if options.solver == "lm":
-            x, code, steps, history, r, gram = lm.solve_box(problem, jnp.asarray(x0, dtype), lower, upper,
+            x, code, steps, history, r, gram = lm.solve_box(problem, np.asarray(x0, dtype), lower, upper,
                                                            options.max_steps, rtol, atol, progress)
             steps = int(steps)
             history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []

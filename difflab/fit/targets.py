@@ -147,8 +147,9 @@ def prepared_targets(scene, targets, masks, weights, render: dict):
         image, ceiling = load_target(item, where)
         height, width = image.shape[:2]
         try:
-            view_scene = scene.with_overrides(camera=overrides.get("camera"), lights=overrides.get("lights"),
-                                              render=render)
+            same = not overrides and all(getattr(scene.render, k) == v for k, v in render.items())
+            view_scene = scene if same else scene.with_overrides(camera=overrides.get("camera"),
+                                                                 lights=overrides.get("lights"), render=render)
         except DifflabError as exc:
             raise FitError(f"{where}: {exc}") from None
         camera = view_scene.camera
