@@ -278,15 +278,42 @@ def _read_npy(path: Path) -> np.ndarray:
         raise DifflabError(f"{path}: cannot read .npy file ({_why(exc)})") from None
 
 
-def _read_picture(path: Path) -> np.ndarray:
-    """8-bit RGB pixels of an image file Pillow reads; its size (from the header, read lazily by
-    Image.open) is checked against the memory budget before anything is decoded."""
+def _samples16(im, path: Path) -> np.ndarray | None:
+    """The (H, W, 3) uint16 samples of a 16-bit grey or RGB(A) image Pillow opened, or None for
+    other images. Pillow keeps 16-bit grey whole ("I;16") but only the high byte of 16-bit colour
+    samples ("RGB;16B"), so a colour file is decoded twice: with the big-endian unpacker (high
+    bytes) and the little-endian one (which, on the file's big-endian samples, takes the low bytes)."""
+    if im.mode in ("I;16", "I;16B", "I;16L") or (im.mode == "I" and im.format == "PNG"):
+        grey = np.asarray(im).astype(np.uint16)
+        return np.repeat(grey[..., None], 3, axis=-1)
+    raw = im.tile[0][3] if len(im.tile) == 1 and len(im.tile[0]) == 4 else None
+    if im.mode not in ("RGB", "RGBA") or raw not in ("RGB;16B", "RGBA;16B"):
+        return None
+    high = np.asarray(im)[..., :3].astype(np.uint16)
+    with Image.open(path) as again:  # (a loaded image has closed its file)
+        tile = again.tile[0]
+        again.tile = [tile._replace(args=raw[:-1] + "L") if hasattr(tile, "_replace") else (*tile[:3], raw[:-1] + "L")]
+        return high * 256 + np.asarray(again)[..., :3]
+
+
+def _transfer(info: dict) -> float | None:
+    """The file's transfer function from its PNG colour chunks: None for sRGB (an sRGB chunk, or no
+    gAMA chunk), else the file gamma g of its gAMA chunk (samples are linear^g; 1.0: linear)."""
+    gamma = info.get("gamma")
+    return None if "srgb" in info or gamma is None or not gamma > 0 else float(gamma)
+
+
+def _read_picture(path: Path) -> tuple[np.ndarray, float | None]:
+    """(RGB samples (H, W, 3): uint8, or uint16 for a 16-bit PNG; the file's gamma, None for sRGB)
+    of an image file Pillow reads; its size (from the header, read lazily by Image.open) is checked
+    against the memory budget before anything is decoded."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # our budget decides instead
             with Image.open(path) as im:
                 limits.require_image(im.width, im.height, str(path), limits.IMAGE_LOAD_BYTES)
-                return np.asarray(im.convert("RGB"))
+                wide = _samples16(im, path)
+                return (np.asarray(im.convert("RGB")) if wide is None else wide), _transfer(im.info)
     except DifflabError:
         raise
     except Exception as exc:  # Pillow raises OSError, ValueError, SyntaxError, DecompressionBombError, ...
@@ -294,12 +321,16 @@ def _read_picture(path: Path) -> np.ndarray:
 
 
 def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
-    """Read an image as linear float32 (H, W, 3); 8-bit files are sRGB-decoded when `srgb` is true.
+    """Read an image as linear float32 (H, W, 3).
 
     `.npy` files hold linear values (bool / int / uint / float dtypes; an alpha channel is dropped);
-    other files are whatever Pillow reads. Every failure -- missing or not a regular file, bad
-    header, truncated data, a pickled or string array, an image over the memory budget (checked from
-    the header before decoding) -- raises DifflabError naming the path.
+    other files are whatever Pillow reads, 8-bit or 16-bit PNG (all 16 bits kept), their samples
+    s / (2^bits - 1) decoded when `srgb` is true by the file's transfer function: sRGB (IEC
+    61966-2-1), unless a PNG declares a gamma g without an sRGB chunk (linear = s^(1/g); g = 1: the
+    samples are linear, as POV-Ray writes with File_Gamma=1.0). With `srgb` false the samples are
+    read as linear values. Every failure -- missing or not a regular file, bad header, truncated
+    data, a pickled or string array, an image over the memory budget (checked from the header
+    before decoding) -- raises DifflabError naming the path.
     """
     path = file_path(path, "image")
     if not path.exists():
@@ -308,8 +339,13 @@ def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
         raise DifflabError(f"{short_path(path)}: not a regular file")
     if path.suffix.lower() == ".npy":
         return _as_image(_read_npy(path))[..., :3].copy()
-    pixels = _read_picture(path)
-    return (_SRGB_DECODE if srgb else _LINEAR_DECODE)[pixels]  # a 256-entry table: 15 bytes per pixel
+    pixels, gamma = _read_picture(path)
+    if pixels.dtype == np.uint8 and (not srgb or gamma is None):
+        return (_SRGB_DECODE if srgb else _LINEAR_DECODE)[pixels]  # a 256-entry table: 15 bytes per pixel
+    samples = pixels / float(np.iinfo(pixels.dtype).max)
+    if srgb:
+        samples = srgb_to_linear(samples) if gamma is None else samples ** (1.0 / gamma)
+    return samples.astype(np.float32)
 
 
 _LINEAR_DECODE = (np.arange(256) / 255.0).astype(np.float32)
