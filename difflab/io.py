@@ -278,22 +278,42 @@ def _read_npy(path: Path) -> np.ndarray:
         raise DifflabError(f"{path}: cannot read .npy file ({_why(exc)})") from None
 
 
+def _wide(im) -> str | None:
+    """How a 16-bit image Pillow opened (header only) is laid out: "grey" (kept whole, "I;16"),
+    "RGB;16B" / "RGBA;16B" (colour, of which Pillow keeps only the high bytes), or None."""
+    if im.mode in ("I;16", "I;16B", "I;16L") or (im.mode == "I" and im.format == "PNG"):
+        return "grey"
+    raw = im.tile[0][3] if len(im.tile) == 1 and len(im.tile[0]) == 4 else None
+    return raw if im.mode in ("RGB", "RGBA") and raw in ("RGB;16B", "RGBA;16B") else None
+
+
 def _samples16(im, path: Path) -> np.ndarray | None:
     """The (H, W, 3) uint16 samples of a 16-bit grey or RGB(A) image Pillow opened, or None for
-    other images. Pillow keeps 16-bit grey whole ("I;16") but only the high byte of 16-bit colour
-    samples ("RGB;16B"), so a colour file is decoded twice: with the big-endian unpacker (high
-    bytes) and the little-endian one (which, on the file's big-endian samples, takes the low bytes)."""
-    if im.mode in ("I;16", "I;16B", "I;16L") or (im.mode == "I" and im.format == "PNG"):
-        grey = np.asarray(im).astype(np.uint16)
-        return np.repeat(grey[..., None], 3, axis=-1)
-    raw = im.tile[0][3] if len(im.tile) == 1 and len(im.tile[0]) == 4 else None
-    if im.mode not in ("RGB", "RGBA") or raw not in ("RGB;16B", "RGBA;16B"):
+    other images. A colour file is decoded twice: with the big-endian unpacker (high bytes) and the
+    little-endian one (which, on the file's big-endian samples, takes the low bytes)."""
+    raw = _wide(im)
+    if raw is None:
         return None
+    if raw == "grey":
+        return np.repeat(np.asarray(im).astype(np.uint16)[..., None], 3, axis=-1)
     high = np.asarray(im)[..., :3].astype(np.uint16)
     with Image.open(path) as again:  # (a loaded image has closed its file)
         tile = again.tile[0]
         again.tile = [tile._replace(args=raw[:-1] + "L") if hasattr(tile, "_replace") else (*tile[:3], raw[:-1] + "L")]
         return high * 256 + np.asarray(again)[..., :3]
+
+
+def sample_bits(path: str | os.PathLike) -> int | None:
+    """Bits per sample of an image file as `load_image` reads it: 16 for a 16-bit PNG, 8 for other
+    pictures, None for .npy (float data). Reads the header only; DifflabError naming the path."""
+    path = file_path(path, "image")
+    if path.suffix.lower() == ".npy":
+        return None
+    try:
+        with Image.open(path) as im:
+            return 16 if _wide(im) else 8
+    except Exception as exc:
+        raise DifflabError(f"{short_path(path)}: cannot read image ({_why(exc)})") from None
 
 
 def _transfer(info: dict) -> float | None:

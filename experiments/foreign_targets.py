@@ -248,8 +248,8 @@ def figure(panels: list, path: Path) -> None:
 
 
 def write_fixtures(size: int) -> None:
-    """tests/data/foreign: per case its 8-bit PNG (and a 16-bit PNG of a_phong and d_diffuse), the
-    start scene, the POV-Ray source / Mitsuba scene, Mitsuba's masks, and cases.json."""
+    """tests/data/foreign: per case its 8-bit PNG (and 16-bit PNGs of a_phong, sRGB and linear, and
+    of d_diffuse), the start scene, the POV-Ray source / Mitsuba scene, Mitsuba's masks, and cases.json."""
     from difflab.io import write_json_atomic
 
     FIXTURES.mkdir(parents=True, exist_ok=True)
@@ -257,7 +257,8 @@ def write_fixtures(size: int) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for name, case in case_table(size).items():
             files = make_targets(name, case, Path(tmp))
-            keep = [files["png8"]] + ([files["png16"]] if name in ("a_phong", "d_diffuse") else [])
+            keep = [files["png8"]] + [files[f] for f in ("png16", "png16lin") if f in files and
+                                      name in ("a_phong", "d_diffuse")]
             keep += [files["mask"]] if "mask" in files else []
             keep += list(Path(tmp).glob(f"{name}.pov")) + list(Path(tmp).glob(f"{name}.mitsuba.json"))
             for path in keep:

@@ -134,8 +134,9 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
         scene: a Scene, a scene dict, a scene file path, or a `CompiledScene` (`compile_scene`: the
             views with its camera and light positions render their G-buffer / ray tree from it,
             nothing rebuilt). Its values (with `init`) are the start.
-        targets: an image ((H, W, 3) linear float array; uint8 / uint16 arrays are sRGB code values
-            and decoded; or a file: 8-bit files are sRGB-decoded), or a list of images and/or
+        targets: an image ((H, W, 3) linear float array; integer arrays hold sRGB code values and
+            are refused with how to decode them; or a file: 8- and 16-bit PNGs decoded by their
+            transfer function, sRGB unless a gAMA chunk says otherwise), or a list of images and/or
             (image, overrides) pairs, overrides a dict with a whole "camera" block and/or a whole
             "lights" list (scene file format) for that view. Each image must have its view's
             camera size.

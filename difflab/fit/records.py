@@ -79,8 +79,9 @@ class KeptView:
 class View:
     """One target and what it was seen with. target (H, W, 3) float64 (0 where masked out); mask
     (H, W) bool; weight (H, W, 3) >= 0 (0 outside the mask); ceiling: where its values clip (inf:
-    nowhere); quantised: from an 8-bit image file; nonfinite: non-finite target values inside the
-    mask; record: its G-buffer or ray tree; scene: the scene of this view; used (H, W) bool: the
+    nowhere); step: its samples' step (1 / 255 from an 8-bit file, 1 / 65535 from a 16-bit one, 0
+    for float data: the noise floor is step / sqrt(12)); nonfinite: non-finite target values inside
+    the mask; record: its G-buffer or ray tree; scene: the scene of this view; used (H, W) bool: the
     pixels the fit reads (`pixels`: their flat indices, in order); kept: the `KeptView` of
     the record when it is kept with the compiled scene, else None."""
 
@@ -88,7 +89,7 @@ class View:
     mask: np.ndarray
     weight: np.ndarray
     ceiling: float
-    quantised: bool
+    step: float
     nonfinite: int
     record: object
     scene: object

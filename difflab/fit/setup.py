@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 import time
 
 import equinox as eqx
@@ -33,7 +34,7 @@ from .problem import LOSSES, Problem, ViewJ, to_device, value_index
 from .raytree import TreeModel, tree_influence
 from .records import KeptView, View, take_pixels, view_key, view_store
 from .shading import GBufferModel, influence
-from .stats import FLOAT_SIGMA, QUANTISATION_SIGMA, estimate_sigma
+from .stats import FLOAT_SIGMA, estimate_sigma
 from .targets import prepared_targets
 from .texels import TexelSource, texture_starts, wants_texels
 
@@ -176,7 +177,7 @@ class Setup:
         self.nonfinite = int(sum(v.nonfinite for v in self.views))
         self.censored = int(sum(int(np.count_nonzero((v.target >= v.ceiling) & v.used[..., None] & (v.weight > 0)))
                                 for v in self.views if np.isfinite(v.ceiling)))
-        self.sigma_floor = QUANTISATION_SIGMA if any(v.quantised for v in self.views) else FLOAT_SIGMA
+        self.sigma_floor = max(FLOAT_SIGMA, max(v.step for v in self.views) / math.sqrt(12.0))
 
     def noise(self, residual_images) -> float:
         """The pixel noise sigma: given, or estimated from the residual images (H, W, 3) at the
@@ -240,8 +241,8 @@ class Setup:
         views, self.render_seconds = [], 0.0
         store = view_store(self.compiled)  # the views kept with the compiled scene (`records.py`)
         tree_ids = tuple(range(len(self.scene.materials))) if all_surfaces else tuple(ids)
-        for view_scene, image, file_ceiling, mask, weight, nonfinite in prepared_targets(self.scene, targets, masks,
-                                                                                          weights, render):
+        for view_scene, image, step, mask, weight, nonfinite in prepared_targets(self.scene, targets, masks,
+                                                                                 weights, render):
             key = view_key(view_scene, resolve_device(device)) if store is not None else None
             kept = store.get(key) if store is not None else None
             if kept is None:
@@ -259,14 +260,14 @@ class Setup:
                 touched = kept.touched((tuple(ids), all_surfaces), lambda: influence(record, ids, all_surfaces))
             positive = weight > 0
             used = mask & (positive[..., 0] | positive[..., 1] | positive[..., 2]) & touched
-            top = ceiling if ceiling is not None else file_ceiling
+            top = ceiling if ceiling is not None else (1.0 if step else None)  # files saturate at 1
             if top is None:  # float data: a clipped ceiling shows as ties at the maximum
                 values = take_pixels(image, np.flatnonzero(used))
                 peak = float(values.max()) if values.size else 0.0
                 ties = np.count_nonzero(values == peak)
                 top = peak if peak > 0 and CENSOR_MIN_TIES <= ties < values.size // 2 else np.inf
             views.append(View(target=image, mask=mask, weight=weight, ceiling=np.inf if top is False else float(top),
-                              quantised=file_ceiling is not None, nonfinite=nonfinite, record=record,
+                              step=step or 0.0, nonfinite=nonfinite, record=record,
                               scene=view_scene, used=used, kept=kept if store is not None else None))
         return views
 

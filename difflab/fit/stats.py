@@ -7,8 +7,8 @@ whose 3 x 3 neighbourhood is all used and uncensored (L = R * [1 -2 1; -2 4 -2; 
 deviation 6 sigma for white noise). The Laplacian removes what a wrong model leaves smoothly (an
 offset, a gradual shading error), so the estimate sees the noise, not the mismatch. With fewer than
 MIN_NOISE_PIXELS such pixels the targets themselves are used (smooth shading adds a little: an
-upper estimate). It is floored at the targets' quantisation: one 8-bit step / sqrt(12) for
-integer-coded targets, FLOAT_SIGMA for float data (float32 rounding of a render is ~1e-7).
+upper estimate). It is floored at the targets' quantisation: one step / sqrt(12) for targets from
+8- or 16-bit files (`Setup.sigma_floor`), FLOAT_SIGMA for float data (float32 rounding of a render is ~1e-7).
 
     chi2_red = sum_i r_i^2 / (sigma^2 (N - p))
 

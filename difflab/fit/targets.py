@@ -3,9 +3,10 @@ at the boundary.
 
 Image arrays are linear RGB floats. Integer arrays (what Pillow returns: 8-bit sRGB code values) are
 refused with a message saying how to decode them -- never read as linear -- and so are boolean,
-complex and object arrays. Image files are read by `io.load_image` (8-bit files sRGB-decoded); a
-decoded 8-bit file saturates at 1.0: its ceiling, where highlights clip. A target must have its
-view's camera size.
+complex and object arrays. Image files are read by `io.load_image` (8- and 16-bit files decoded by
+their transfer function, sRGB unless a PNG says otherwise); a decoded file saturates at 1.0: its
+ceiling, where highlights clip, and its samples are quantised in steps of 1 / (2^bits - 1). A target
+must have its view's camera size.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import os
 import numpy as np
 
 from ..errors import DifflabError, FitError
-from ..io import load_image
+from ..io import load_image, sample_bits
 
 OVERRIDE_KEYS = ("camera", "lights")
 EIGHT_BIT = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -52,13 +53,14 @@ def normalise_targets(targets) -> list[tuple[object, dict]]:
 
 def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
     """(image (H, W, 3) linear floats -- an array in its own precision, float64 from a file --, its
-    ceiling: 1.0 for 8-bit image files, None for float data)."""
+    sample step: 1 / 255 for 8-bit image files, 1 / 65535 for 16-bit ones (their ceiling is 1.0),
+    None for float data)."""
     if _is_path(item):
         try:
-            image = load_image(item)
+            image, bits = load_image(item), sample_bits(item)
         except DifflabError as exc:
             raise FitError(f"{where}: {exc}") from None
-        return np.asarray(image, np.float64), (None if str(item).lower().endswith(".npy") else 1.0)
+        return np.asarray(image, np.float64), (None if bits is None else 1.0 / (2 ** bits - 1))
     if not isinstance(item, np.ndarray) and not hasattr(item, "__array__"):
         raise FitError(f"{where}: expected an image array or a file path, got {type(item).__name__}")
     image = np.asarray(item)
@@ -134,7 +136,7 @@ def view_weight(value, shape, where) -> np.ndarray:
 
 
 def prepared_targets(scene, targets, masks, weights, render: dict):
-    """For each target: (its view's scene, target image, ceiling, mask, weight, count of non-finite
+    """For each target: (its view's scene, target image, sample step (`load_target`), mask, weight, count of non-finite
     masked values). A view's scene is `scene` with the target's camera / lights override and the
     `render` settings; the target must have that camera's size. The target is float64, 0 outside the
     mask and where its values are not finite (those inside the mask are counted, so that the fit
@@ -144,7 +146,7 @@ def prepared_targets(scene, targets, masks, weights, render: dict):
     weights = per_view(weights, len(items), "weights")
     for i, ((item, overrides), mask, weight) in enumerate(zip(items, masks, weights)):
         where = f"targets[{i}]"
-        image, ceiling = load_target(item, where)
+        image, step = load_target(item, where)
         height, width = image.shape[:2]
         try:
             same = not overrides and all(getattr(scene.render, k) == v for k, v in render.items())
@@ -162,4 +164,4 @@ def prepared_targets(scene, targets, masks, weights, render: dict):
                                                                              f"weights[{i}]") * mask3
         inside = np.isfinite(image) & mask3
         nonfinite = 3 * int(np.count_nonzero(mask)) - int(np.count_nonzero(inside))
-        yield view_scene, np.where(inside, image, np.float64(0.0)), ceiling, mask, weight, nonfinite
+        yield view_scene, np.where(inside, image, np.float64(0.0)), step, mask, weight, nonfinite

@@ -1,0 +1,91 @@
+"""PNG files as other programs write them: 16-bit samples (read whole, not as their high bytes) and
+the colour chunks that say how samples map to light (sRGB, or a gAMA chunk: 1.0 is linear). The
+files are written here byte by byte (PNG: signature, IHDR, optional sRGB / gAMA, IDAT, IEND)."""
+
+import struct
+import zlib
+
+import numpy as np
+import pytest
+
+from difflab import fit_material, load_image
+from difflab.io import sample_bits, save_image, srgb_to_linear
+from difflab.renderers.api import render_frame
+from difflab.scene import Scene
+
+COLOUR_TYPE = {1: 0, 3: 2, 4: 6}  # channels -> PNG colour type (grey, RGB, RGBA)
+
+
+def _chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+
+def write_png(path, samples: np.ndarray, *, srgb_chunk=False, gamma=None):
+    """A PNG of integer samples (H, W, C), 8 or 16 bits by dtype, every row with filter 0."""
+    height, width, channels = samples.shape
+    bits = 16 if samples.dtype == np.uint16 else 8
+    raw = samples.astype(">u2" if bits == 16 else np.uint8).reshape(height, -1).view(np.uint8)
+    rows = np.concatenate([np.zeros((height, 1), np.uint8), raw], axis=1)
+    data = b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, bits, COLOUR_TYPE[channels],
+                                                               0, 0, 0))
+    if srgb_chunk:
+        data += _chunk(b"sRGB", b"\x00")
+    if gamma is not None:
+        data += _chunk(b"gAMA", struct.pack(">I", round(gamma * 100000)))
+    data += _chunk(b"IDAT", zlib.compress(rows.tobytes())) + _chunk(b"IEND", b"")
+    path.write_bytes(data)
+    return path
+
+
+@pytest.fixture()
+def ramp16():
+    rng = np.random.default_rng(3)
+    return rng.integers(0, 65536, size=(5, 7, 3)).astype(np.uint16)
+
+
+@pytest.mark.parametrize("chunks", [{}, {"srgb_chunk": True, "gamma": 0.45455}])
+def test_16_bit_rgb_is_read_whole_and_srgb_decoded(tmp_path, ramp16, chunks):
+    image = load_image(write_png(tmp_path / "a.png", ramp16, **chunks))
+    np.testing.assert_allclose(image, srgb_to_linear(ramp16 / 65535.0), rtol=1e-6, atol=1e-9)
+    assert sample_bits(tmp_path / "a.png") == 16
+
+
+def test_16_bit_linear_rgba_and_grey(tmp_path, ramp16):
+    """gAMA 1.0 without an sRGB chunk: the samples are linear (POV-Ray's File_Gamma=1.0); alpha is
+    dropped; 16-bit grey fills the three channels."""
+    rgba = np.concatenate([ramp16, np.full(ramp16.shape[:2] + (1,), 65535, np.uint16)], axis=-1)
+    np.testing.assert_allclose(load_image(write_png(tmp_path / "l.png", rgba, gamma=1.0)), ramp16 / 65535.0,
+                               rtol=1e-6, atol=1e-9)
+    grey = load_image(write_png(tmp_path / "g.png", ramp16[..., :1]))
+    np.testing.assert_allclose(grey, np.repeat(srgb_to_linear(ramp16[..., :1] / 65535.0), 3, axis=-1), rtol=1e-6)
+    # srgb=False reads every file's samples as linear values (masks)
+    np.testing.assert_allclose(load_image(tmp_path / "g.png", srgb=False)[..., 1], ramp16[..., 0] / 65535.0, rtol=1e-6)
+
+
+def test_8_bit_gamma_chunks(tmp_path):
+    codes = np.arange(0, 256, 5, dtype=np.uint8).reshape(1, -1, 1).repeat(3, axis=-1)
+    np.testing.assert_allclose(load_image(write_png(tmp_path / "lin.png", codes, gamma=1.0)), codes / 255.0,
+                               rtol=1e-6)
+    np.testing.assert_allclose(load_image(write_png(tmp_path / "g22.png", codes, gamma=0.45455)),
+                               (codes / 255.0) ** (1 / 0.45455), rtol=1e-6)  # linear^g stored: s^(1/g) read
+    np.testing.assert_allclose(load_image(write_png(tmp_path / "s.png", codes, srgb_chunk=True, gamma=0.45455)),
+                               srgb_to_linear(codes / 255.0), rtol=1e-6)
+    assert sample_bits(tmp_path / "s.png") == 8 and sample_bits(save_image(tmp_path / "x.npy", codes / 255.0)) is None
+
+
+def test_a_16_bit_target_fits_at_its_own_noise_floor(tmp_path):
+    """A 16-bit sRGB PNG of a difflab render: ka/kd/ks/n recovered to 1e-4 with the noise floored at
+    one 16-bit step / sqrt(12) (not the 8-bit step: that floor hid mismatches 257^2 times smaller
+    in chi-square than the data show)."""
+    d = {"camera": {"eye": [0, 0, 3], "target": [0, 0, 0], "fov_y": 40, "width": 24, "height": 24},
+         "ambient": [0.2, 0.2, 0.2], "lights": [{"type": "point", "position": [2, 2, 3]}],
+         "materials": {"red": {"ka": [0.1, 0.05, 0.02], "kd": [0.6, 0.2, 0.1], "ks": [0.3] * 3, "n": 20.0}},
+         "objects": [{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "red"}]}
+    image = np.clip(render_frame(Scene.from_dict(d)).image, 0.0, 1.0)
+    codes = np.round(np.where(image <= 0.0031308, 12.92 * image, 1.055 * image ** (1 / 2.4) - 0.055) * 65535)
+    target = write_png(tmp_path / "t.png", codes.astype(np.uint16), srgb_chunk=True)
+    start = {"ka": [0.12, 0.04, 0.025], "kd": [0.5, 0.25, 0.08], "ks": [0.35] * 3, "n": 15.0}
+    result = fit_material(Scene.from_dict(d), [target], "red", init=start, progress=False)
+    assert result.ok and result.sigma < 1e-4
+    for key, truth in d["materials"]["red"].items():
+        np.testing.assert_allclose(result.params[key], truth, rtol=1e-3, atol=1e-4)
