@@ -8,7 +8,7 @@ import pytest
 from conftest import scene_dict
 from difflab import MeshError, RenderError, Scene, TextureError, compile_scene, limits, render, render_frame
 from difflab.geometry import load_mesh
-from difflab.guards import check_image, check_render, likely_causes, tree_shape
+from difflab.guards import check_image, check_render, likely_causes, nonfinite_pixels, tree_shape
 from difflab.renderers.launch import RASTER_POOL_MIN_SAMPLES, cpu_threads, raster_threads
 from difflab.renderers.raytrace.record import sized_tree
 from difflab.renderers.texture.store import TextureStore
@@ -96,6 +96,14 @@ def test_check_image_counts_pixels_and_accepts_finite_images():
     image[0, 1, 2], image[1, 1] = np.inf, np.nan
     with pytest.raises(RenderError, match=r"^render: 2 of 6 pixels are not finite"):
         check_image(image, scene())
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nonfinite_pixels_counts_each_kind_and_no_large_finite_value(bad):
+    image = np.full((3, 4, 3), 3e38, np.float32)  # a float64 sum of these is finite, a float32 one is not
+    assert nonfinite_pixels(image) == 0 and nonfinite_pixels(image[:0]) == 0
+    image[0, 1, 2], image[2, 3] = bad, bad
+    assert nonfinite_pixels(image) == 2
 
 
 def test_likely_causes_name_the_largest_numbers_and_a_vanishing_attenuation():
