@@ -34,14 +34,14 @@ def edge_values(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, i: int, j: int):
 
 @wp.func
 def float_barycentrics(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, i: int, j: int):
-    """Screen-space barycentrics (float64) of sample centre (j + 0.5, i + 0.5) in triangle s0 s1 s2.
-    Coverage is decided on the snapped integers; the weights come from the unsnapped float64
-    vertices, so interpolation carries no snapping error."""
+    """Screen-space barycentrics (float64) of sample centre (j + 0.5, i + 0.5) in triangle s0 s1 s2,
+    and the edge values' sum (twice the signed area). Coverage is decided on the snapped integers;
+    the weights come from the unsnapped float64 vertices, so interpolation carries no snapping error."""
     e = edge_values(s0, s1, s2, i, j)
     area = e[0] + e[1] + e[2]
     if area == wp.float64(0.0):  # a sliver only the snapped vertices give an area
-        return wp.vec3d(wp.float64(1.0), wp.float64(0.0), wp.float64(0.0))
-    return e / area
+        return wp.vec3d(wp.float64(1.0), wp.float64(0.0), wp.float64(0.0)), area
+    return e / area, area
 
 
 @wp.func

@@ -15,7 +15,7 @@ from ..._warp import wp
 from ...lighting.warp_model import MaterialW, checker_cell
 from ...vocabulary import FLAT, PHONG_SHADING
 from ..camera import CameraW, view_direction
-from .coverage import NO_HIT, edge_values, float_barycentrics
+from .coverage import NO_HIT, float_barycentrics
 
 wp.set_module_options({"enable_backward": False})
 
@@ -85,6 +85,8 @@ class SampleW:
     weights: wp.vec3  # over the face's vertices: perspective-correct or affine
     side: float  # +1 the face's front is seen, -1 its back
     point: PointW
+    screen: wp.vec3d  # the slot's screen-space (affine) barycentrics there, as `float_barycentrics` gives them
+    area: wp.float64  # and its edge values' sum
 
 
 @wp.func(inline=True)
@@ -138,20 +140,18 @@ def vertex_uv(weight: wp.array2d(dtype=wp.vec3), slot: int, k: int, uv0: wp.vec2
 
 
 @wp.func
-def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3), slot: int, i: int, j: int,
-                   perspective_correct: int, uv0: wp.vec2, uv1: wp.vec2, uv2: wp.vec2):
-    """Exact d(uv)/dx and d(uv)/dy at sample (i, j) of the interpolation the resolve stage uses.
+def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3), slot: int, b: wp.vec3d,
+                   area: wp.float64, perspective_correct: int, uv0: wp.vec2, uv1: wp.vec2, uv2: wp.vec2):
+    """Exact d(uv)/dx and d(uv)/dy of the interpolation the resolve stage uses, at the sample where
+    slot `slot` has screen barycentrics b and edge values summing to `area` (`float_barycentrics`).
 
     Screen barycentrics b_k are affine in (x, y); perspective-correct ones are B_k = c_k / S with
     c_k = b_k / w_k and S = sum c_k, so dB_k = (dc_k - B_k dS) / S (quotient rule); uv = sum B_k uv_k."""
     s0 = screen[slot, 0]
     s1 = screen[slot, 1]
     s2 = screen[slot, 2]
-    e = edge_values(s0, s1, s2, i, j)
-    area = e[0] + e[1] + e[2]
     if area == wp.float64(0.0):
         return wp.vec2(0.0), wp.vec2(0.0)
-    b = e / area
     db_dx = wp.vec3d(s1[1] - s2[1], s2[1] - s0[1], s0[1] - s1[1]) / area
     db_dy = wp.vec3d(s2[0] - s1[0], s0[0] - s2[0], s1[0] - s0[0]) / area
     if perspective_correct == 1:
@@ -179,12 +179,14 @@ def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: in
     slot = int(key % wp.int64(4294967296))
     screen = tris.screen
     weight = tris.weight
-    bd = float_barycentrics(screen[slot, 0], screen[slot, 1], screen[slot, 2], i, j)
+    bd, area = float_barycentrics(screen[slot, 0], screen[slot, 1], screen[slot, 2], i, j)
+    sample = SampleW()
+    sample.screen = bd
+    sample.area = area
     if perspective_correct == 1:  # b_k / w_k, renormalised
         bd = wp.vec3d(bd[0] * screen[slot, 0][3], bd[1] * screen[slot, 1][3], bd[2] * screen[slot, 2][3])
         bd = bd / (bd[0] + bd[1] + bd[2])
     b = wp.vec3(float(bd[0]), float(bd[1]), float(bd[2]))
-    sample = SampleW()
     sample.face = tris.face[slot]
     sample.slot = slot
     sample.weights = b[0] * weight[slot, 0] + b[1] * weight[slot, 1] + b[2] * weight[slot, 2]
@@ -222,14 +224,15 @@ def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: w
 
 
 @wp.func
-def sample_uv(sample: SampleW, tris: ScreenW, mesh: RasterMeshW, perspective_correct: int, i: int, j: int):
+def sample_uv(sample: SampleW, tris: ScreenW, mesh: RasterMeshW, perspective_correct: int):
     """uv at a covered sample and its exact screen derivatives d(uv)/dx, d(uv)/dy."""
     f = sample.face
     wb = sample.weights
     uv0 = mesh.uvs[mesh.faces[f, 0]]
     uv1 = mesh.uvs[mesh.faces[f, 1]]
     uv2 = mesh.uvs[mesh.faces[f, 2]]
-    duv_dx, duv_dy = uv_derivatives(tris.screen, tris.weight, sample.slot, i, j, perspective_correct, uv0, uv1, uv2)
+    duv_dx, duv_dy = uv_derivatives(tris.screen, tris.weight, sample.slot, sample.screen, sample.area,
+                                    perspective_correct, uv0, uv1, uv2)
     return wb[0] * uv0 + wb[1] * uv1 + wb[2] * uv2, duv_dx, duv_dy
 
 
@@ -279,7 +282,7 @@ def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW
     key[s] = NO_HIT  # the next frame's z-buffer starts cleared
     sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j)
     store_point(samples, s, sample.point)
-    uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, perspective_correct, i, j)
+    uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, perspective_correct)
     samples.uv[s] = uv
     samples.duv_dx[s] = duv_dx
     samples.duv_dy[s] = duv_dy
