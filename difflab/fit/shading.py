@@ -79,7 +79,8 @@ class Formation(NamedTuple):
 
 
 def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, ComposeJ | None, Formation, np.ndarray]:
-    """The G-buffer cut down to what `pixels` need, as JAX arrays.
+    """The G-buffer cut down to what `pixels` need, as numpy arrays (`GBufferModel.build` moves them to
+    the device in one call).
 
     Arguments:
         gbuffer: a `GBuffer`.
@@ -136,7 +137,6 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
         point_index=np.asarray(local, np.int32), point_weight=weight.astype(real),
         background=np.asarray(gbuffer.background, real), fog_color=np.asarray(color, real),
         fog_start=np.asarray(start, real), fog_end=np.asarray(end, real), fog_density=np.asarray(density, real))
-    points, comp = jax.device_put((points, comp))  # one transfer
     return points, comp, formation, point_ids
 
 
@@ -191,18 +191,30 @@ def shade_gbuffer(gbuffer, materials, lights, ambient=None, *, dtype=jnp.float32
     return _pixels_jit(GBufferModel.build(gbuffer, None, lights, dtype), table, lights, ambient).reshape(shape)
 
 
+def is_one_of(ids: np.ndarray, chosen) -> np.ndarray:
+    """ids == any of `chosen` (a few material ids), elementwise: comparisons, for a handful (`np.isin`
+    sorts: ~50x their cost on a 256 x 256 G-buffer)."""
+    chosen = [int(m) for m in chosen]
+    if len(chosen) > 8:
+        return np.isin(ids, chosen)
+    out = np.zeros(ids.shape, bool)
+    for m in chosen:
+        out |= ids == m
+    return out
+
+
 def influence(gbuffer, material_ids, any_surface: bool) -> np.ndarray:
     """(H, W) bool: pixels whose colour depends on the fitted materials (or on any surface when
     light intensities are fitted)."""
     if any_surface:
         touched = gbuffer.mask
     else:
-        touched = np.isin(gbuffer.material, np.asarray(list(material_ids), np.int32))
+        touched = is_one_of(gbuffer.material, material_ids)
         if gbuffer.shading != "phong":  # a sample's colour mixes its points': look at those
             point_material = gbuffer.points.material
             if point_material.size:
                 index = np.clip(gbuffer.point_index, 0, point_material.size - 1)
-                from_points = np.isin(point_material[index], list(material_ids)) & (gbuffer.point_weight != 0)
+                from_points = is_one_of(point_material[index], material_ids) & (gbuffer.point_weight != 0)
                 touched = touched | (gbuffer.mask & from_points.any(axis=-1))
     side = gbuffer.spp_side
     h, w = touched.shape[0] // side, touched.shape[1] // side
@@ -232,7 +244,7 @@ class GBufferModel(eqx.Module):
     def build(cls, gbuffer, pixels, lights: LightsJ, dtype, texels=None) -> GBufferModel:
         """`texels`: a `texels.TexelSource` for the fitted textures, or None."""
         points, comp, formation, point_ids = pixel_arrays(gbuffer, pixels, dtype)
-        geometry = _geometry_jit(points, lights, formation.specular)
+        material, cell, geometry, comp = _device_model(points, comp, lights, formation.specular)
         taps = tap_weight = None
         if texels is not None:
             rows, weight = texels.taps(gbuffer, point_ids)
@@ -241,7 +253,7 @@ class GBufferModel(eqx.Module):
             taps, tap_weight = jnp.asarray(rows), jnp.asarray(np.asarray(weight, np.float64), dtype)
         present = np.bincount(gbuffer.points.material[point_ids] + 1) if point_ids.size else np.ones(1)
         ids = tuple(int(m) - 1 for m in np.flatnonzero(present))  # the distinct ids (-1: none), sorted
-        return cls(material=points.material, cell=points.cell, geometry=geometry, comp=comp, formation=formation,
+        return cls(material=material, cell=cell, geometry=geometry, comp=comp, formation=formation,
                    taps=taps, tap_weight=tap_weight, targets=None if texels is None else texels.targets,
                    material_ids=ids)
 
@@ -258,13 +270,16 @@ class GBufferModel(eqx.Module):
         return colors if self.formation.direct else compose(colors, self.comp, self.formation)
 
 
-@partial(jax.jit, static_argnums=2)
-def _geometry_jit(points: PointsJ, lights: LightsJ, specular: int):
+@partial(jax.jit, static_argnums=3)
+def _device_model(points: PointsJ, comp: ComposeJ | None, lights: LightsJ, specular: int):
+    """(material ids, cells, `LightGeometry`, composition) on the device from `pixel_arrays`' numpy
+    arrays: one call moves them all."""
     real = lambda field: field.astype(lights.intensity.dtype)  # noqa: E731 (float32 G-buffer values, exactly)
     points = points._replace(**{k: real(getattr(points, k)) for k in ("normal", "view", "light_dir", "light_dist",
                                                                       "visibility")})
-    return light_geometry(specular, points.normal, points.view, lights, points.light_dir, points.light_dist,
-                          points.visibility)
+    geometry = light_geometry(specular, points.normal, points.view, lights, points.light_dir, points.light_dist,
+                              points.visibility)
+    return points.material, points.cell, geometry, comp
 
 
 @eqx.filter_jit
