@@ -19,6 +19,7 @@ z, mapped into the box smoothly: x = softplus(z) - softplus(Z_FLOOR) on [0, inf)
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from dataclasses import dataclass
@@ -108,8 +109,9 @@ class Layout:
         return sum(p.size for p in self.params)
 
     def entries(self, attribute: str) -> np.ndarray:
-        """Per entry of the flat vector: the parameter's `attribute` (a float array)."""
-        return np.concatenate([np.full(p.size, float(getattr(p, attribute))) for p in self.params])
+        """Per entry of the flat vector: the parameter's `attribute` (a read-only float array, formed
+        once per layout)."""
+        return _entries(self, attribute)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) of the solver coordinate x per entry."""
@@ -163,6 +165,13 @@ class Layout:
             out[p.key] = vector[offset:offset + p.size]
             offset += p.size
         return out
+
+
+@functools.lru_cache(maxsize=64)
+def _entries(layout: Layout, attribute: str) -> np.ndarray:
+    out = np.concatenate([np.full(p.size, float(getattr(p, attribute))) for p in layout.params])
+    out.setflags(write=False)
+    return out
 
 
 def name_list(value, argument: str) -> tuple[str, ...]:

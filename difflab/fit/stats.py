@@ -73,7 +73,7 @@ def estimate_sigma(images, used_maps, *, interior=True) -> float | None:
     values = np.concatenate(values) if values else np.zeros(0)
     if not np.isfinite(values).all():
         values = values[np.isfinite(values)]
-    return float(1.4826 * np.median(values) / 6.0) if values.size >= MIN_NOISE_PIXELS else None
+    return float(1.4826 * np.median(values, overwrite_input=True) / 6.0) if values.size >= MIN_NOISE_PIXELS else None
 
 
 @eqx.filter_jit
