@@ -8,6 +8,7 @@ often as the solver asks (DESIGN.md, invariant 3).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import equinox as eqx
@@ -21,6 +22,7 @@ from .problem import robust
 from .result import FitResult
 from .setup import Setup
 from .options import FitOptions
+from .clipping import clipped_band
 from .matfree import check_solver
 from .solvers import SUCCESSFUL, run
 from .stats import QUANTISATION_SIGMA, fit_statistics, normal_matrix, poorly_determined, psnr, standard_errors
@@ -173,11 +175,23 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
         `model_mismatch` when the image model does not explain the targets.
     """
     options = FitOptions.make(options, **option_fields)
+    common = dict(method=method, per_channel=per_channel, bounded=bounded, loss=loss, loss_scale=loss_scale,
+                  masks=masks, sigma=sigma, ceiling=ceiling, smoothness=smoothness, x64=options.x64,
+                  max_depth=max_depth, spp=spp, device=device, threads=threads)
     start = time.perf_counter()
-    setup = Setup(scene, targets, materials, params, method=method, per_channel=per_channel, bounded=bounded, loss=loss,
-                  loss_scale=loss_scale, masks=masks, weights=weights, init=init, sigma=sigma, ceiling=ceiling,
-                  smoothness=smoothness, x64=options.x64, max_depth=max_depth, spp=spp, device=device, threads=threads)
-    return run_fit(setup, options, {"setup": time.perf_counter() - start, "render": setup.render_seconds})
+    setup = Setup(scene, targets, materials, params, weights=weights, init=init, **common)
+    out = run_fit(setup, options, {"setup": time.perf_counter() - start, "render": setup.render_seconds})
+    band = clipped_band(setup, out)
+    if band is None:
+        return out
+    # noise clipped at a bound biases the pixels near it: fit again without them (`clipping.py`)
+    start = time.perf_counter()
+    kept = [view.weight * ~near[..., None] for view, near in zip(setup.views, band)]
+    again = Setup(scene, targets, materials, params, weights=kept, init=out.params, **common)
+    second = run_fit(again, options, {"setup": time.perf_counter() - start, "render": again.render_seconds})
+    left_out = 3 * int(sum(int(near.sum()) for near in band))
+    return dataclasses.replace(second, steps=out.steps + second.steps, censored=second.censored + left_out,
+                               seconds=out.seconds + second.seconds)
 
 
 def fit_material(scene, targets, material=None, params=DEFAULT_PARAMS, **kwargs) -> FitResult:

@@ -61,7 +61,9 @@ class FitResult:
         targets to their noise). model_mismatch: chi2 far above 1 (`fit.stats.MISMATCH_CHI2`).
     at_bound: names with a value (some channel) on a bound (ks = 0 for a matte target).
     censored: target pixel channels at the target's ceiling (clipped highlights), fitted as "at
-        least the ceiling". residuals: per view (H, W, 3) float32 model - target on the pixels
+        least the ceiling"; with noise, also the channels of the pixels left out because their
+        model lies within 2 sigma of a bound the target is clipped at (black or the ceiling,
+        `fit.clipping`). residuals: per view (H, W, 3) float32 model - target on the pixels
         used (0 elsewhere). seen: texture name -> (H_t, W_t) bool, the texels the pixels used
         constrain (`FitOptions.visible_threshold`).
     """

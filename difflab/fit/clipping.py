@@ -1,0 +1,61 @@
+"""Noisy targets clipped at a bound: the pixels whose mean the clip moves, left out.
+
+A target clipped at its floor (0: an image file's lowest code, or float data with ties at 0) or at
+its ceiling records clip(m + sigma Z) where the model m lies near the bound, and the mean of that is
+not m: at the floor
+
+    E[max(m + sigma Z, 0)] - m = sigma phi(m / sigma) - m (1 - Phi(m / sigma))
+
+which is 0.40 sigma at m = 0, 0.08 sigma at m = sigma and 0.008 sigma at m = 2 sigma (the ceiling
+likewise). Least squares over such pixels is biased: the dark, ambient-lit side of a sphere with
+1-3 % noise, saved as an 8-bit PNG (noise clipped at black), gave ka 15-85 % high at 6-12 standard
+errors, reported ok. `clipped_band` finds the used pixels whose fitted, unclipped model lies within
+BAND sigma of a bound the target is clipped at; `engine.fit` leaves them out (weight 0) and fits
+again from the first solution, counting their values as censored. Only when the noise is real
+(sigma above twice the targets' quantisation floor: a noise-free render keeps its pixels, whose
+residuals are 0 there anyway) and the fit has no texels.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .records import take_pixels
+
+BAND = 2.0  # sigmas: the bias left at the band's edge is under 1 % of sigma a pixel
+MIN_CLIPPED = 3  # target values at a bound (this many) mark it clipped there
+
+
+@eqx.filter_jit
+def _images(problem, values):
+    return problem.images(values)
+
+
+def clipped_band(setup, result) -> list[np.ndarray] | None:
+    """Per view (H, W) bool: the used pixels with a channel whose fitted model lies within BAND
+    sigma of the floor 0 or of the ceiling, where the target is clipped (MIN_CLIPPED values at
+    that bound, and none below the floor); None when there is none, or the fit failed, has texels, or its noise is no more
+    than twice the quantisation floor."""
+    sigma = result.sigma
+    if not result.converged or not np.isfinite(sigma) or sigma <= 2.0 * setup.sigma_floor or \
+            any(p.shape is not None for p in setup.layout):
+        return None
+    flat = setup.layout.flatten({p.key: np.asarray(result.params[p.key], np.float64).reshape(-1)
+                                 for p in setup.layout})
+    with jax.enable_x64(setup.x64):
+        images = _images(setup.problem, jnp.asarray(flat, setup.dtype))
+    bands = []
+    for view, image in zip(setup.views, images):
+        model, target = np.asarray(image, np.float64), take_pixels(view.target, view.pixels)
+        near = np.zeros(model.shape, bool)
+        if np.count_nonzero(target == 0.0) >= MIN_CLIPPED and not np.any(target < 0.0):
+            near |= model < BAND * sigma
+        if np.count_nonzero(target >= view.ceiling) >= MIN_CLIPPED:
+            near |= np.abs(model - view.ceiling) < BAND * sigma
+        band = np.zeros(view.used.shape, bool)
+        band.reshape(-1)[view.pixels] = near.any(axis=1)
+        bands.append(band)
+    return bands if any(band.any() for band in bands) else None
