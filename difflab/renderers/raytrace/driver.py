@@ -107,8 +107,17 @@ def scene_struct(compiled, light_buffer=None) -> SceneW:
     out = SceneW()
     out.geom, out.mesh, out.lights, out.materials = compiled.traceable(), mesh, compiled.lights, compiled.materials
     out.textures = compiled.textures.warp
-    out.light_buffer = light_buffer.warp if light_buffer is not None else no_light_buffer(compiled)
+    out.light_buffer = light_buffer.warp if light_buffer is not None else \
+        read_only(compiled, "no light buffer", lambda: no_light_buffer(compiled))
     return out
+
+
+def read_only(compiled, name: str, make):
+    """`make()` (device arrays no kernel writes) made once per compiled scene and kept in `built`:
+    a render does not pay for allocating them again."""
+    if name not in compiled.built:
+        compiled.built[name] = make()
+    return compiled.built[name]
 
 
 def trace_points(compiled, settings, points: np.ndarray | None, threads: int | None = None, *, side: int = 0,
@@ -150,7 +159,8 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         launch_row_loops(kernel, rows, [wp_points, cam, scene_w, params, item, tree, out], device, threads)
         return out
 
-    out = launch(trace_params(scene, settings, False, spread, side), empty_tree((1, 1), 0, 0, device))  # not read
+    unrecorded = read_only(compiled, "unrecorded tree", lambda: empty_tree((1, 1), 0, 0, device))  # not read
+    out = launch(trace_params(scene, settings, False, spread, side), unrecorded)
     shadow_tests = int(light_buffer.warp.tests.numpy()[0]) if light_buffer is not None else 0
     asked = asked_bvh(item)  # read before the recording pass adds its own
     counts = out.node_count.numpy()
