@@ -278,33 +278,49 @@ def _read_npy(path: Path) -> np.ndarray:
         raise DifflabError(f"{path}: cannot read .npy file ({_why(exc)})") from None
 
 
+#: 16-bit colour layouts Pillow unpacks to 8 bits (the sample's high byte), and their other byte order.
+_OTHER_ORDER = {"RGB;16B": "RGB;16L", "RGB;16L": "RGB;16B", "RGBA;16B": "RGBA;16L", "RGBA;16L": "RGBA;16B"}
+
+
+def _rawmode(tile) -> str | None:
+    """A decoder tile's raw mode: its args (PNG) or their first entry (TIFF, ...)."""
+    args = tile[3] if len(tile) == 4 else None
+    return args if isinstance(args, str) else (args[0] if isinstance(args, tuple) and args else None)
+
+
+def _swapped(tile):
+    """The tile unpacked in the other byte order: its samples' low bytes where Pillow takes the high."""
+    args = tile[3]
+    args = _OTHER_ORDER[args] if isinstance(args, str) else (_OTHER_ORDER[args[0]], *args[1:])
+    return tile._replace(args=args) if hasattr(tile, "_replace") else (*tile[:3], args)
+
+
 def _wide(im) -> str | None:
     """How a 16-bit image Pillow opened (header only) is laid out: "grey" (kept whole, "I;16"),
-    "RGB;16B" / "RGBA;16B" (colour, of which Pillow keeps only the high bytes), or None."""
-    if im.mode in ("I;16", "I;16B", "I;16L") or (im.mode == "I" and im.format == "PNG"):
+    "colour" (16-bit RGB(A) PNG / TIFF, of which Pillow keeps only the high bytes), or None."""
+    if im.mode in ("I;16", "I;16B", "I;16L") or (im.mode == "I" and im.format in ("PNG", "TIFF")):
         return "grey"
-    raw = im.tile[0][3] if len(im.tile) == 1 and len(im.tile[0]) == 4 else None
-    return raw if im.mode in ("RGB", "RGBA") and raw in ("RGB;16B", "RGBA;16B") else None
+    raw = {_rawmode(tile) for tile in im.tile}
+    return "colour" if im.mode in ("RGB", "RGBA") and im.tile and raw <= set(_OTHER_ORDER) else None
 
 
 def _samples16(im, path: Path) -> np.ndarray | None:
     """The (H, W, 3) uint16 samples of a 16-bit grey or RGB(A) image Pillow opened, or None for
-    other images. A colour file is decoded twice: with the big-endian unpacker (high bytes) and the
-    little-endian one (which, on the file's big-endian samples, takes the low bytes)."""
-    raw = _wide(im)
-    if raw is None:
+    other images. A colour file is decoded twice: as Pillow does (the high bytes) and with every
+    tile's byte order swapped (which takes the low bytes)."""
+    wide = _wide(im)
+    if wide is None:
         return None
-    if raw == "grey":
+    if wide == "grey":
         return np.repeat(np.asarray(im).astype(np.uint16)[..., None], 3, axis=-1)
     high = np.asarray(im)[..., :3].astype(np.uint16)
     with Image.open(path) as again:  # (a loaded image has closed its file)
-        tile = again.tile[0]
-        again.tile = [tile._replace(args=raw[:-1] + "L") if hasattr(tile, "_replace") else (*tile[:3], raw[:-1] + "L")]
+        again.tile = [_swapped(tile) for tile in again.tile]
         return high * 256 + np.asarray(again)[..., :3]
 
 
 def sample_bits(path: str | os.PathLike) -> int | None:
-    """Bits per sample of an image file as `load_image` reads it: 16 for a 16-bit PNG, 8 for other
+    """Bits per sample of an image file as `load_image` reads it: 16 for a 16-bit PNG / TIFF, 8 for other
     pictures, None for .npy (float data). Reads the header only; DifflabError naming the path."""
     path = file_path(path, "image")
     if path.suffix.lower() == ".npy":
@@ -344,7 +360,7 @@ def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
     """Read an image as linear float32 (H, W, 3).
 
     `.npy` files hold linear values (bool / int / uint / float dtypes; an alpha channel is dropped);
-    other files are whatever Pillow reads, 8-bit or 16-bit PNG (all 16 bits kept), their samples
+    other files are whatever Pillow reads, 8-bit, or 16-bit PNG / TIFF (all 16 bits kept), their samples
     s / (2^bits - 1) decoded when `srgb` is true by the file's transfer function: sRGB (IEC
     61966-2-1), unless a PNG declares a gamma g without an sRGB chunk (linear = s^(1/g); g = 1: the
     samples are linear, as POV-Ray writes with File_Gamma=1.0). With `srgb` false the samples are

@@ -1,6 +1,7 @@
-"""PNG files as other programs write them: 16-bit samples (read whole, not as their high bytes) and
+"""Image files as other programs write them: 16-bit samples (read whole, not as their high bytes) and
 the colour chunks that say how samples map to light (sRGB, or a gAMA chunk: 1.0 is linear). The
-files are written here byte by byte (PNG: signature, IHDR, optional sRGB / gAMA, IDAT, IEND)."""
+files are written here byte by byte (PNG: signature, IHDR, optional sRGB / gAMA, IDAT, IEND; TIFF:
+one uncompressed strip, either byte order)."""
 
 import struct
 import zlib
@@ -37,6 +38,22 @@ def write_png(path, samples: np.ndarray, *, srgb_chunk=False, gamma=None):
     return path
 
 
+def write_tiff(path, samples: np.ndarray, little_endian: bool):
+    """An uncompressed 16-bit RGB TIFF: header, one IFD of 9 entries, BitsPerSample, one strip."""
+    height, width, _ = samples.shape
+    order = "<" if little_endian else ">"
+    pixels = samples.astype(order + "u2").tobytes()
+    bits_at = 8 + 2 + 9 * 12 + 4
+    entry = lambda tag, kind, count, value: struct.pack(order + "HHI", tag, kind, count) + (  # noqa: E731
+        struct.pack(order + "HH", value, 0) if kind == 3 and count == 1 else struct.pack(order + "I", value))
+    entries = [entry(256, 4, 1, width), entry(257, 4, 1, height), entry(258, 3, 3, bits_at), entry(259, 3, 1, 1),
+               entry(262, 3, 1, 2), entry(273, 4, 1, bits_at + 6), entry(277, 3, 1, 3), entry(278, 4, 1, height),
+               entry(279, 4, 1, len(pixels))]
+    path.write_bytes((b"II*\x00" if little_endian else b"MM\x00*") + struct.pack(order + "IH", 8, 9) + b"".join(entries)
+                     + struct.pack(order + "I", 0) + struct.pack(order + "3H", 16, 16, 16) + pixels)
+    return path
+
+
 @pytest.fixture()
 def ramp16():
     rng = np.random.default_rng(3)
@@ -60,6 +77,13 @@ def test_16_bit_linear_rgba_and_grey(tmp_path, ramp16):
     np.testing.assert_allclose(grey, np.repeat(srgb_to_linear(ramp16[..., :1] / 65535.0), 3, axis=-1), rtol=1e-6)
     # srgb=False reads every file's samples as linear values (masks)
     np.testing.assert_allclose(load_image(tmp_path / "g.png", srgb=False)[..., 1], ramp16[..., 0] / 65535.0, rtol=1e-6)
+
+
+@pytest.mark.parametrize("little_endian", [True, False])
+def test_16_bit_tiff_is_read_whole(tmp_path, ramp16, little_endian):
+    path = write_tiff(tmp_path / "a.tif", ramp16, little_endian)
+    np.testing.assert_allclose(load_image(path, srgb=False), ramp16 / 65535.0, rtol=1e-6, atol=1e-9)
+    assert sample_bits(path) == 16
 
 
 def test_8_bit_gamma_chunks(tmp_path):
