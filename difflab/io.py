@@ -353,7 +353,12 @@ def _read_picture(path: Path) -> tuple[np.ndarray, float | None]:
     except DifflabError:
         raise
     except Exception as exc:  # Pillow raises OSError, ValueError, SyntaxError, DecompressionBombError, ...
-        raise DifflabError(f"{path}: cannot read image ({_why(exc)})") from None
+        hint = "; float images (EXR, HDR) are read from .npy: save the linear array with numpy.save" \
+            if path.suffix.lower() in FLOAT_FORMATS else ""
+        raise DifflabError(f"{path}: cannot read image ({_why(exc)}){hint}") from None
+
+
+FLOAT_FORMATS = (".exr", ".hdr", ".pfm")  # float image files that Pillow does not read
 
 
 def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:

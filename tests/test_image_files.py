@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from difflab import fit_material, load_image
+from difflab.errors import DifflabError
 from difflab.io import sample_bits, save_image, srgb_to_linear
 from difflab.renderers.api import render_frame
 from difflab.scene import Scene
@@ -113,3 +114,10 @@ def test_a_16_bit_target_fits_at_its_own_noise_floor(tmp_path):
     assert result.ok and result.sigma < 1e-4
     for key, truth in d["materials"]["red"].items():
         np.testing.assert_allclose(result.params[key], truth, rtol=1e-3, atol=1e-4)
+
+
+def test_a_float_exr_is_refused_with_what_to_do(tmp_path):
+    exr = tmp_path / "target.exr"
+    exr.write_bytes(b"\x76\x2f\x31\x01" + bytes(60))  # OpenEXR's magic number, then nothing Pillow reads
+    with pytest.raises(DifflabError, match=r"target\.exr: cannot read image .*EXR, HDR.* \.npy"):
+        load_image(exr)
