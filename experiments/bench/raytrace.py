@@ -2,7 +2,8 @@
 
 1. Primary rays: an 81,920-triangle icosphere filling a 1024x1024 view, depth 1, no shadows. difflab:
    the whole `difflab.render` of a compiled scene (its default: primary mesh hits from the item
-   buffer, the BVH's bit for bit; shading; the image; no ray tree), with the item buffer kept from
+   buffer, the BVH's bit for bit, its z-buffer without the closed sphere's back faces; shading; the
+   image; no ray tree), with the item buffer kept from
    the last render of the view (as the BVH is kept) and made anew (a new view's first frame), and
    with every primary ray through the BVH (item_buffer=False). Mitsuba: `scene.ray_intersect` alone on the same rays
    (closest hit only, no shading; llvm_ad_rgb when Mitsuba's LLVM backend loads, else scalar_rgb,
@@ -137,6 +138,7 @@ def primary_case(size: int, repeats: int, threads: int) -> dict:
            "difflab_bvh_rays_per_second": rays / medians(bvh)[0],
            "difflab_bvh_rays_per_cpu_second": rays / medians(bvh)[1],
            "item_buffer_asked_bvh": frame.stats["item_buffer_asked_bvh"],
+           "item_buffer_culled": frame.stats["item_buffer_culled"],
            "mitsuba_variant": variant, "mitsuba_rays_per_second": None, "mitsuba_rays_per_cpu_second": None}
     if theirs:
         row["mitsuba_rays_per_second"], row["mitsuba_rays_per_cpu_second"] = (rays / m for m in medians(theirs))
@@ -183,7 +185,8 @@ def main(argv=None) -> int:
           f"{primary['difflab_rays_per_cpu_second'] / 1e6:.2f} per CPU-s; new view (item buffer made anew) "
           f"{primary['difflab_new_view_rays_per_second'] / 1e6:.2f}, "
           f"{primary['difflab_new_view_rays_per_cpu_second'] / 1e6:.2f} per CPU-s; BVH only {primary['difflab_bvh_rays_per_second'] / 1e6:.2f}; "
-          f"{primary['item_buffer_asked_bvh']} samples asked the BVH), Mitsuba "
+          f"{primary['item_buffer_asked_bvh']} samples asked the BVH; back faces culled: "
+          f"{primary['item_buffer_culled']}), Mitsuba "
           + (f"{primary['mitsuba_rays_per_second'] / 1e6:.2f} Mrays/s ({primary['mitsuba_variant']}; "
              f"{primary['mitsuba_rays_per_cpu_second'] / 1e6:.2f} per CPU-s): difflab / Mitsuba "
              f"{primary['difflab_over_mitsuba']:.2f} (wall), {primary['difflab_over_mitsuba_cpu']:.2f} (CPU); "
