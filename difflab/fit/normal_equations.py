@@ -99,14 +99,14 @@ def by_parts(problem, x):
                                     (tangent["n"], tangent["m"], tangent["f0"]))
                 column[kind] = live * mat.ks * d_spec
         q = len(slots)
-        w = jnp.stack([column[k].T for k in slots] + [r.T], axis=-1)  # (3 channels, U, q + 1)
+        w = jnp.stack([column[k].T for k in slots] + [r.T], axis=1)  # (3 channels, q + 1, U): rows of U
         for material, cols in columns.items():
             if material not in model.material_ids:
                 continue
             # this material's rows, per channel every product of two columns summed over the pixels in
             # one batched product (3, q + 1, q + 1): the q x q block and J^T r
-            mine = w if model.material_ids == (material,) else jnp.where((model.material == material)[:, None], w, 0.0)
-            blocks = jnp.einsum("cui,cuj->cij", mine, w)
+            mine = w if model.material_ids == (material,) else jnp.where(model.material == material, w, 0.0)
+            blocks = jnp.einsum("ciu,cju->cij", mine, w)
             gram = gram.at[cols[:, :, None], cols[:, None, :]].add(blocks[:, :q, :q])
             grad = grad.at[cols].add(blocks[:, :q, q])
         residuals.append(r.reshape(-1))
