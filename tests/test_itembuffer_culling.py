@@ -5,6 +5,7 @@ solid, a solid cut by the near plane, an inside-out mesh) equal to the BVH's bit
 import numpy as np
 import pytest
 
+import difflab
 from conftest import scene_dict
 from difflab.geometry import TriMesh, box, closed_outward, concatenate, cylinder, quad, uv_sphere
 from test_itembuffer import assert_same_frames, both
@@ -100,3 +101,15 @@ def test_closed_meshes_in_front_of_the_camera_are_culled_and_the_frame_is_the_bv
 def test_back_faces_are_drawn_when_culling_would_be_wrong(objects, camera):
     item = frames(objects, camera)
     assert not item.stats["item_buffer_culled"]
+
+
+def test_a_kept_culled_item_buffer_says_so_and_gives_the_same_frame():
+    scene = scene_dict(SOLIDS, MATERIALS, lights=LIGHTS, ambient=(0.1, 0.1, 0.1),
+                       camera={"eye": [0.5, 1.2, 3.5], "target": [0, 0, 0], "fov_y": 45, "width": 40, "height": 30},
+                       render={"method": "raytrace", "max_depth": 2})
+    compiled = difflab.compile_scene(scene)
+    first, again = (difflab.render_frame(compiled, threads=2) for _ in range(2))
+    assert (first.stats["item_buffer_kept"], first.stats["item_buffer_culled"]) == (False, True)
+    assert (again.stats["item_buffer_kept"], again.stats["item_buffer_culled"]) == (True, True)
+    np.testing.assert_array_equal(again.image, first.image)
+    np.testing.assert_array_equal(difflab.render(compiled, threads=2, item_buffer=False), first.image)
