@@ -190,8 +190,10 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
     again = Setup(scene, targets, materials, params, weights=kept, init=out.params, **common)
     second = run_fit(again, options, {"setup": time.perf_counter() - start, "render": again.render_seconds})
     left_out = 3 * int(sum(int(near.sum()) for near in band))
+    timings = {key: out.timings.get(key, 0.0) + second.timings.get(key, 0.0)
+               for key in {**out.timings, **second.timings}}
     return dataclasses.replace(second, steps=out.steps + second.steps, censored=second.censored + left_out,
-                               seconds=out.seconds + second.seconds)
+                               seconds=out.seconds + second.seconds, timings=timings)
 
 
 def fit_material(scene, targets, material=None, params=DEFAULT_PARAMS, **kwargs) -> FitResult:

@@ -54,7 +54,8 @@ class FitResult:
         matrix-free fit: the textures with texels that no pixel sees).
     initial: the starting values (same shapes as params). solver: the solver's name.
     timings: seconds per phase ("setup": G-buffers / ray trees and arrays, of which "render": the
-        Warp renders, 0 where every view was kept with a compiled scene: `fit.records`; "solve"; "stats").
+        Warp renders, 0 where every view was kept with a compiled scene: `fit.records`; "solve"; "stats"),
+        summed over both solves when the fit was made again without clipped pixels (`fit.clipping`).
     model: the image model fitted through: "raster" (the G-buffer) or "raytrace" (the recorded ray
         tree). sigma: the pixel noise used (given, or estimated from the targets; see `fit.stats`).
     chi2: reduced chi-square of the residuals at noise sigma (about 1 when the model explains the
