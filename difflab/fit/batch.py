@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import FitError
 from . import lm
-from .engine import report
+from .engine import report, without_clipped
 from .matfree import check_solver
 from .params import DEFAULT_PARAMS
 from .setup import Setup
@@ -113,7 +113,11 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
             results.append(report(elements[b], None, elements[b].precheck(), 0, [], options, each))
         else:
             s = solved[b]
-            results.append(report(elements[b], s.x, s.result, s.steps, s.history, options, each, s.linearised))
+            out = report(elements[b], s.x, s.result, s.steps, s.history, options, each, s.linearised)
+            target = images[b] if overrides is None else (images[b], overrides)
+            results.append(without_clipped(elements[b], out, options, lambda kept, start_values: Setup(
+                scene, [target], material, params, weights=kept, init=start_values, x64=options.x64,
+                **{k: v for k, v in setup_kwargs.items() if k != "weights"})))
     return results
 
 

@@ -181,13 +181,20 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
     start = time.perf_counter()
     setup = Setup(scene, targets, materials, params, weights=weights, init=init, **common)
     out = run_fit(setup, options, {"setup": time.perf_counter() - start, "render": setup.render_seconds})
+    return without_clipped(setup, out, options, lambda kept, start_values: Setup(
+        scene, targets, materials, params, weights=kept, init=start_values, **common))
+
+
+def without_clipped(setup: Setup, out: FitResult, options: FitOptions, make_setup) -> FitResult:
+    """`out`, or -- when noise clipped at a bound biases it (`clipping.clipped_band`) -- the fit made
+    again without the pixels near the clip, from `out`'s values, their values counted as censored.
+    make_setup(weights, init): the same fit's `Setup` with other weights (per view (H, W, 3)) and start."""
     band = clipped_band(setup, out)
     if band is None:
         return out
-    # noise clipped at a bound biases the pixels near it: fit again without them (`clipping.py`)
     start = time.perf_counter()
     kept = [view.weight * ~near[..., None] for view, near in zip(setup.views, band)]
-    again = Setup(scene, targets, materials, params, weights=kept, init=out.params, **common)
+    again = make_setup(kept, out.params)
     second = run_fit(again, options, {"setup": time.perf_counter() - start, "render": again.render_seconds})
     left_out = 3 * int(sum(int(near.sum()) for near in band))
     timings = {key: out.timings.get(key, 0.0) + second.timings.get(key, 0.0)
