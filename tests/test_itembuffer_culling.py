@@ -8,6 +8,7 @@ import pytest
 import difflab
 from conftest import scene_dict
 from difflab.geometry import TriMesh, box, closed_outward, concatenate, cylinder, quad, uv_sphere
+from difflab.geometry.closed import pieces
 from test_itembuffer import assert_same_frames, both
 
 
@@ -47,6 +48,16 @@ def test_closed_outward_meshes(mesh):
         "degenerate-face"])
 def test_meshes_that_are_not_closed_outward(mesh):
     assert not solid(mesh)
+
+
+@pytest.mark.parametrize("n, edges, labels", [
+    (6, [(0, 1), (2, 3), (4, 3)], [0, 0, 2, 2, 2, 5]),  # two pieces and a lone vertex
+    (6, [(5, 4), (4, 3), (3, 2), (2, 1), (1, 0)], [0] * 6),  # a chain numbered backwards
+    (8, [(7, 0), (6, 1), (5, 2), (4, 3), (0, 3), (5, 6)], [0, 1, 1, 0, 0, 1, 1, 0]),  # interleaved pieces
+])
+def test_pieces_label_each_vertex_with_the_least_vertex_of_its_piece(n, edges, labels):
+    start, end = np.array(edges).T
+    assert pieces(n, start, end).tolist() == labels
 
 
 def test_closed_outward_of_no_faces():

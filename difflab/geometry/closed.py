@@ -37,8 +37,8 @@ def closed_outward(vertices, faces) -> bool:
     if np.any(edges[found] != reverse):  # an edge run one way only: a border
         return False
     v = vertices[faces]
-    volume = np.bincount(pieces(n, start, end)[corners[:, 0]],
-                         np.einsum("fi,fi->f", v[:, 0], np.cross(v[:, 1], v[:, 2])) / 6.0)
+    piece = pieces(n, start, end)[corners[:, 0]]  # each face's piece
+    volume = np.bincount(piece, np.einsum("fi,fi->f", v[:, 0], np.cross(v[:, 1], v[:, 2])) / 6.0)[np.unique(piece)]
     diagonal = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
     return bool(np.all(volume > MIN_VOLUME * diagonal ** 3))
 
@@ -54,9 +54,20 @@ def welded(vertices: np.ndarray) -> tuple[int, np.ndarray]:
 
 
 def pieces(n: int, start: np.ndarray, end: np.ndarray) -> np.ndarray:
-    """The connected piece of each of n vertices joined by edges start[k] - end[k], numbered 0, 1, ..."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    graph = coo_matrix((np.ones(len(start), np.int8), (start, end)), shape=(n, n))
-    return connected_components(graph, directed=False)[1]
+    """The connected piece of each of n vertices joined by edges start[k] - end[k]: a label (the least
+    vertex of its piece). Union-find in whole-array steps: every label is a vertex of its own piece
+    no larger than the vertex (label[v] <= v, so no cycles); each round hooks, for every edge whose
+    ends' roots differ, the larger root under the smaller (one root fewer at least), then points
+    every vertex at its root."""
+    label = np.arange(n)
+    while True:
+        a, b = label[start], label[end]
+        apart = a != b
+        if not apart.any():
+            return label
+        np.minimum.at(label, np.maximum(a[apart], b[apart]), np.minimum(a[apart], b[apart]))
+        while True:
+            root = label[label]
+            if np.array_equal(root, label):
+                break
+            label = root
