@@ -120,3 +120,25 @@ def test_a_kept_ray_tree_serves_new_coefficient_starts_but_not_a_new_tree_shape(
     new_kr = fit(compiled, [target], params=params, init={**START, "kr": 0.3})
     assert new_kr.timings["render"] > 0 and kept_views(compiled) == 2
     assert_same(new_kr, fit(scene, [target], params=params, init={**START, "kr": 0.3}))
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_setup_reweighted_is_the_setup_built_afresh(compiled):
+    """The refit without clipped pixels (`engine.fit`) reweights its setup instead of preparing the
+    targets again: the same problem, start, pixels and statistics as a `Setup` built afresh."""
+    import jax
+
+    from difflab.fit.setup import Setup
+
+    scene = compile_scene(SCENE) if compiled else SCENE
+    noisy = np.maximum(TARGET + np.random.default_rng(2).normal(0.0, 0.02, TARGET.shape), 0.0)
+    first = Setup(scene, [noisy], "red", init=START)
+    weights = [first.views[0].weight * (np.random.default_rng(0).random(TARGET.shape[:2]) > 0.3)[..., None]]
+    again, fresh = first.reweighted(weights, OTHER_START), Setup(scene, [noisy], "red", weights=weights,
+                                                                  init=OTHER_START)
+    for a, b in zip(jax.tree.leaves(again.problem), jax.tree.leaves(fresh.problem), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    np.testing.assert_array_equal(again.x0, fresh.x0)
+    np.testing.assert_array_equal(again.weighted_entries, fresh.weighted_entries)
+    assert (again.used_pixels, again.censored, again.weight_total, again.views[0].ceiling, again.render_seconds) == \
+        (fresh.used_pixels, fresh.censored, fresh.weight_total, fresh.views[0].ceiling, 0.0)

@@ -181,8 +181,7 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
     start = time.perf_counter()
     setup = Setup(scene, targets, materials, params, weights=weights, init=init, **common)
     out = run_fit(setup, options, {"setup": time.perf_counter() - start, "render": setup.render_seconds})
-    return without_clipped(setup, out, options, lambda kept, start_values: Setup(
-        scene, targets, materials, params, weights=kept, init=start_values, **common))
+    return without_clipped(setup, out, options, setup.reweighted)  # as Setup(..., weights=, init=) afresh
 
 
 def without_clipped(setup: Setup, out: FitResult, options: FitOptions, make_setup) -> FitResult:

@@ -19,6 +19,7 @@ z, mapped into the box smoothly: x = softplus(z) - softplus(Z_FLOOR) on [0, inf)
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import re
@@ -28,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..errors import FitError
+from ..errors import DifflabError, FitError
 
 INF = math.inf
 LOG_RANGE = (-12.0, 12.0)
@@ -289,3 +290,46 @@ def public_value(param: Param, value) -> float | list | np.ndarray:
     if param.rgb:
         return [float(x) for x in np.broadcast_to(value, (3,))]
     return float(value[0])
+
+
+def apply_init(scene, materials, init):
+    """The scene with the starting values `init` written in: keys "kind" (one fitted material),
+    "material.kind" or "lights[i].intensity"; values a number or an RGB triple."""
+    if init is None:
+        return scene
+    if not isinstance(init, dict):
+        raise FitError(f"init: expected a dict of name -> value, got {type(init).__name__}")
+    mats, lights = dict(scene.materials), list(scene.lights)
+    for key, value in init.items():
+        where = f"init[{key!r}]"
+        if not isinstance(key, str):
+            raise FitError(f"{where}: names are strings")
+        if KINDS.get(key.rpartition(".")[2], KINDS["ka"]).texels:
+            continue  # a texture's start: `texels.texture_starts`
+        try:
+            array = np.asarray(value, np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise FitError(f"{where}: expected a number or an RGB triple, got {value!r}") from None
+        if array.size not in (1, 3) or not np.all(np.isfinite(array)):
+            raise FitError(f"{where}: expected a finite number or RGB triple, got {array.tolist()}")
+        rgb = tuple(np.broadcast_to(array, (3,)).tolist())
+        try:
+            if (match := LIGHT_PARAM.match(key)) is not None:
+                i = int(match.group(1))
+                if i >= len(lights):
+                    raise FitError(f"{where}: the scene has {len(lights)} light(s)")
+                lights[i] = dataclasses.replace(lights[i], intensity=rgb)
+                continue
+            head, _, kind = key.rpartition(".")
+            name = head or (materials[0] if len(materials) == 1 else None)
+            if kind not in KINDS or kind == "intensity" or name not in materials:
+                raise FitError(f"{where}: expected 'kind' (one fitted material), 'material.kind' or "
+                               f"'lights[i].intensity'; fitted materials: {', '.join(materials)}")
+            if not KINDS[kind].rgb and array.size != 1:
+                raise FitError(f"{where}: {kind} is one number, got {array.tolist()}")
+            mats[name] = dataclasses.replace(mats[name], **{kind: rgb if KINDS[kind].rgb else float(array[0])})
+        except FitError:
+            raise
+        except DifflabError as exc:  # the scene's own validation names the field
+            raise FitError(f"{where}: {exc}") from None
+    return dataclasses.replace(scene, materials=mats, lights=tuple(lights))

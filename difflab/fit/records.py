@@ -83,7 +83,8 @@ class View:
     for float data: the noise floor is step / sqrt(12)); nonfinite: non-finite target values inside
     the mask; record: its G-buffer or ray tree; scene: the scene of this view; used (H, W) bool: the
     pixels the fit reads (`pixels`: their flat indices, in order); kept: the `KeptView` of
-    the record when it is kept with the compiled scene, else None."""
+    the record when it is kept with the compiled scene, else None; touched (H, W) bool: the pixels
+    the fitted parameters influence."""
 
     target: np.ndarray
     mask: np.ndarray
@@ -95,6 +96,7 @@ class View:
     scene: object
     used: np.ndarray
     kept: KeptView | None = None
+    touched: np.ndarray | None = None
 
     @cached_property
     def pixels(self) -> np.ndarray:

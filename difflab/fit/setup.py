@@ -29,7 +29,7 @@ from ..renderers.api import as_scene, render_frame
 from ..renderers.compile import CompiledScene
 from ..renderers.launch import resolve_device
 from .materials import MaterialTable
-from .params import DEFAULT_PARAMS, KINDS, LIGHT_PARAM, SCENE_PARAMS, Layout, build_layout, fitted_materials, scene_value
+from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
 from .problem import LOSSES, Problem, ViewJ, to_device, value_index
 from .raytree import TreeModel, tree_influence
 from .records import KeptView, View, take_pixels, view_key, view_store
@@ -59,49 +59,6 @@ def choose_method(scene, materials, method, texels=False) -> str:
     return "raster"
 
 
-def apply_init(scene, materials, init):
-    """The scene with the starting values `init` written in: keys "kind" (one fitted material),
-    "material.kind" or "lights[i].intensity"; values a number or an RGB triple."""
-    if init is None:
-        return scene
-    if not isinstance(init, dict):
-        raise FitError(f"init: expected a dict of name -> value, got {type(init).__name__}")
-    mats, lights = dict(scene.materials), list(scene.lights)
-    for key, value in init.items():
-        where = f"init[{key!r}]"
-        if not isinstance(key, str):
-            raise FitError(f"{where}: names are strings")
-        if KINDS.get(key.rpartition(".")[2], KINDS["ka"]).texels:
-            continue  # a texture's start: `texels.texture_starts`
-        try:
-            array = np.asarray(value, np.float64).reshape(-1)
-        except (TypeError, ValueError):
-            raise FitError(f"{where}: expected a number or an RGB triple, got {value!r}") from None
-        if array.size not in (1, 3) or not np.all(np.isfinite(array)):
-            raise FitError(f"{where}: expected a finite number or RGB triple, got {array.tolist()}")
-        rgb = tuple(np.broadcast_to(array, (3,)).tolist())
-        try:
-            if (match := LIGHT_PARAM.match(key)) is not None:
-                i = int(match.group(1))
-                if i >= len(lights):
-                    raise FitError(f"{where}: the scene has {len(lights)} light(s)")
-                lights[i] = dataclasses.replace(lights[i], intensity=rgb)
-                continue
-            head, _, kind = key.rpartition(".")
-            name = head or (materials[0] if len(materials) == 1 else None)
-            if kind not in KINDS or kind == "intensity" or name not in materials:
-                raise FitError(f"{where}: expected 'kind' (one fitted material), 'material.kind' or "
-                               f"'lights[i].intensity'; fitted materials: {', '.join(materials)}")
-            if not KINDS[kind].rgb and array.size != 1:
-                raise FitError(f"{where}: {kind} is one number, got {array.tolist()}")
-            mats[name] = dataclasses.replace(mats[name], **{kind: rgb if KINDS[kind].rgb else float(array[0])})
-        except FitError:
-            raise
-        except DifflabError as exc:  # the scene's own validation names the field
-            raise FitError(f"{where}: {exc}") from None
-    return dataclasses.replace(scene, materials=mats, lights=tuple(lights))
-
-
 def _check_number(value, name, *, allow_none=False):
     """A finite number > 0 as a float (None when allowed), or FitError naming the argument."""
     if value is None and allow_none:
@@ -124,7 +81,7 @@ class Setup:
     """A fit prepared (see the module docstring). Attributes: scene (start values written in),
     materials, method, layout, initial (key -> value), x0 (solver coordinates), views, used_pixels,
     nonfinite, censored, sigma_given, sigma_floor, x64, dtype, problem, render_seconds (the Warp
-    renders' wall time)."""
+    renders' wall time), base_scene (before `init`), ceiling_given, loss, loss_scale."""
 
     def __init__(self, scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None,
                  per_channel=True, bounded=False, loss="l2", loss_scale=0.05, masks=None, weights=None, init=None,
@@ -147,6 +104,7 @@ class Setup:
         self.materials = fitted_materials(scene, materials)
         texels = wants_texels(params)
         self.method = choose_method(scene, self.materials, method, texels)
+        self.base_scene, self.ceiling_given = scene, ceiling
         self.scene = scene = apply_init(scene, self.materials, init)  # a tree is recorded at the start values
         self.textures = texture_starts(scene, self.materials, init) if texels else {}
         self.layout: Layout = build_layout(scene, self.materials, params, tree=self.method == "raytrace",
@@ -164,13 +122,31 @@ class Setup:
                                "'texture' to params")
         self.initial = {p.key: scene_value(scene, p, self.textures) for p in self.layout}
         self.x0 = self.layout.x_of(self.layout.flatten(self.initial))
-        self.views = self._record(targets, masks, weights, ceiling, max_depth, spp, device, threads)
+        self.views = self._record(targets, masks, weights, max_depth, spp, device, threads)
         self.used_pixels = int(sum(int(v.used.sum()) for v in self.views))
         self._target_statistics()
         self.x64 = x64
         self.dtype = jnp.float64 if x64 else jnp.float32
+        self.loss, self.loss_scale = loss, loss_scale
         with jax.enable_x64(x64):
             self.problem = self._problem(loss, loss_scale)
+
+    def reweighted(self, weights, init) -> Setup:
+        """What `Setup` builds from the same arguments but `weights` -- per view (H, W, 3) >= 0, 0
+        outside its mask -- and `init`, without preparing the targets again (their records, checks
+        and ceilings' inputs are the same)."""
+        out = copy.copy(self)
+        out.scene = apply_init(self.base_scene, self.materials, init)
+        out.textures = texture_starts(out.scene, self.materials, init) if self.textures else {}
+        out.initial = {p.key: scene_value(out.scene, p, out.textures) for p in self.layout}
+        out.x0 = self.layout.x_of(self.layout.flatten(out.initial))
+        out.render_seconds = 0.0
+        out.views = [out._seen(view, weight) for view, weight in zip(self.views, weights)]
+        out.used_pixels = int(sum(int(v.used.sum()) for v in out.views))
+        out._target_statistics()
+        with jax.enable_x64(self.x64):
+            out.problem = out._problem(self.loss, self.loss_scale)
+        return out
 
     def _target_statistics(self):
         """nonfinite, censored (used values at the ceiling) and the noise floor of the targets."""
@@ -225,7 +201,7 @@ class Setup:
             if plain not in keys:
                 raise FitError(f"init[{key!r}]: not fitted (fitted: {sorted(keys)})")
 
-    def _record(self, targets, masks, weights, ceiling, max_depth, spp, device, threads) -> list[View]:
+    def _record(self, targets, masks, weights, max_depth, spp, device, threads) -> list[View]:
         """One Warp render per target: its G-buffer, or its ray tree (adaptive_threshold 0, so that
         no child is cut by weight)."""
         render = {"method": self.method}
@@ -258,18 +234,24 @@ class Setup:
                 touched = kept.touched((tree_ids, tuple(crossing)), lambda: tree_influence(record, tree_ids, crossing))
             else:
                 touched = kept.touched((tuple(ids), all_surfaces), lambda: influence(record, ids, all_surfaces))
-            positive = weight > 0
-            used = mask & (positive[..., 0] | positive[..., 1] | positive[..., 2]) & touched
-            top = ceiling if ceiling is not None else (1.0 if step else None)  # files saturate at 1
-            if top is None:  # float data: a clipped ceiling shows as ties at the maximum
-                values = take_pixels(image, np.flatnonzero(used))
-                peak = float(values.max()) if values.size else 0.0
-                ties = np.count_nonzero(values == peak)
-                top = peak if peak > 0 and CENSOR_MIN_TIES <= ties < values.size // 2 else np.inf
-            views.append(View(target=image, mask=mask, weight=weight, ceiling=np.inf if top is False else float(top),
-                              step=step or 0.0, nonfinite=nonfinite, record=record,
-                              scene=view_scene, used=used, kept=kept if store is not None else None))
+            views.append(self._seen(View(target=image, mask=mask, weight=weight, ceiling=np.inf, step=step or 0.0,
+                                         nonfinite=nonfinite, record=record, scene=view_scene, used=touched,
+                                         kept=kept if store is not None else None, touched=touched), weight))
         return views
+
+    def _seen(self, view: View, weight) -> View:
+        """The view with `weight`, the pixels it uses (in the mask, weight > 0, influenced by the
+        fitted parameters) and its target's ceiling (given; 1 for image files, which saturate there;
+        for float data, ties at the maximum of the used values)."""
+        positive = weight > 0
+        used = view.mask & (positive[..., 0] | positive[..., 1] | positive[..., 2]) & view.touched
+        top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
+        if top is None:  # float data: a clipped ceiling shows as ties at the maximum
+            values = take_pixels(view.target, np.flatnonzero(used))
+            peak = float(values.max()) if values.size else 0.0
+            ties = np.count_nonzero(values == peak)
+            top = peak if peak > 0 and CENSOR_MIN_TIES <= ties < values.size // 2 else np.inf
+        return dataclasses.replace(view, weight=weight, used=used, ceiling=np.inf if top is False else float(top))
 
     def _compiled_for(self, view_scene, device):
         """The compiled scene given, under the view's scene, when it holds the view's geometry (same
