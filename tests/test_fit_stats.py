@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from difflab.fit.stats import MISMATCH_CHI2, estimate_sigma, fit_statistics, standard_errors
+from difflab.fit.stats import MISMATCH_CHI2, estimate_sigma, fit_statistics, median, standard_errors
 from difflab.fit.solvers import result_name
 
 
@@ -73,3 +73,14 @@ def test_noise_estimate_is_the_robust_laplacian_over_the_used_pixels(interior):
     want = 1.4826 * np.median(np.abs(lap[centre])) / 6.0
     assert estimate_sigma([image], [used], interior=interior) == pytest.approx(want, rel=1e-12)
     assert estimate_sigma([image], [np.zeros_like(used)], interior=interior) is None  # too few pixels
+
+
+@pytest.mark.parametrize("size", [2, 3, 48, 49, 70000, 70001])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_median_is_numpys(size, dtype):
+    """The noise estimate's median (one partition) is np.median's number and type, ties included."""
+    values = np.abs(np.random.default_rng(size).normal(size=size)).astype(dtype)
+    values[: size // 3] = values[0]  # ties at the low end
+    expected = np.median(values)
+    got = median(values.copy())
+    assert got == expected and type(got) is type(expected)
