@@ -59,6 +59,13 @@ def choose_method(scene, materials, method, texels=False) -> str:
     return "raster"
 
 
+def at_ceiling(image, ceiling) -> np.ndarray:
+    """(H, W) bool: pixels with a channel at or above `ceiling` (three comparisons or'ed: numpy's
+    `any` over a last axis of 3 costs ~10x as much)."""
+    top = image >= ceiling
+    return top[..., 0] | top[..., 1] | top[..., 2]
+
+
 def _check_number(value, name, *, allow_none=False):
     """A finite number > 0 as a float (None when allowed), or FitError naming the argument."""
     if value is None and allow_none:
@@ -151,8 +158,9 @@ class Setup:
     def _target_statistics(self):
         """nonfinite, censored (used values at the ceiling) and the noise floor of the targets."""
         self.nonfinite = int(sum(v.nonfinite for v in self.views))
-        self.censored = int(sum(int(np.count_nonzero((v.target >= v.ceiling) & v.used[..., None] & (v.weight > 0)))
-                                for v in self.views if np.isfinite(v.ceiling)))
+        self.censored = int(sum(int(np.count_nonzero((take_pixels(v.target, v.pixels) >= v.ceiling)
+                                                     & (take_pixels(v.weight, v.pixels) > 0)))
+                                for v in self.views if np.isfinite(v.ceiling)))  # over the used pixels
         self.sigma_floor = max(FLOAT_SIGMA, max(v.step for v in self.views) / math.sqrt(12.0))
 
     def noise(self, residual_images) -> float:
@@ -160,8 +168,7 @@ class Setup:
         solution (from the targets where too few pixels allow), floored (see `stats`)."""
         if self.sigma_given is not None:
             return self.sigma_given
-        clean = [v.used & ~np.any(v.target >= v.ceiling, axis=-1) if np.isfinite(v.ceiling) else v.used
-                 for v in self.views]
+        clean = [v.used & ~at_ceiling(v.target, v.ceiling) if np.isfinite(v.ceiling) else v.used for v in self.views]
         estimate = estimate_sigma(residual_images, clean)
         if estimate is None:
             estimate = estimate_sigma([v.target for v in self.views], clean, interior=False)
