@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .records import take_pixels
@@ -46,7 +45,7 @@ def clipped_band(setup, result) -> list[np.ndarray] | None:
     flat = setup.layout.flatten({p.key: np.asarray(result.params[p.key], np.float64).reshape(-1)
                                  for p in setup.layout})
     with jax.enable_x64(setup.x64):
-        images = _images(setup.problem, jnp.asarray(flat, setup.dtype))
+        images = _images(setup.problem, np.asarray(flat, setup.dtype))  # numpy: moved with the call
     bands = []
     for view, image in zip(setup.views, images):
         model, target = np.asarray(image, np.float64), take_pixels(view.target, view.pixels)
@@ -56,6 +55,6 @@ def clipped_band(setup, result) -> list[np.ndarray] | None:
         if np.count_nonzero(target >= view.ceiling) >= MIN_CLIPPED:
             near |= np.abs(model - view.ceiling) < BAND * sigma
         band = np.zeros(view.used.shape, bool)
-        band.reshape(-1)[view.pixels] = near.any(axis=1)
+        band.reshape(-1)[view.pixels] = near[:, 0] | near[:, 1] | near[:, 2]  # (any over 3: ~5x slower)
         bands.append(band)
     return bands if any(band.any() for band in bands) else None
