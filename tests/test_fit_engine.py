@@ -146,3 +146,35 @@ def test_a_target_no_material_can_reach_puts_every_coefficient_on_its_bound():
     assert result.converged and result.censored == 0
     assert all(max(result.params[k]) == 0.0 for k in ("ka", "kd", "ks"))
     assert {"ka", "kd", "ks"} <= set(result.at_bound) and result.model_mismatch
+
+
+def test_an_unlit_side_at_zero_is_not_clipped_noise():
+    """A sphere lit by one point light, no ambient: its unlit side is exactly 0 in the target and in
+    the model (N.L <= 0), with 2 % noise (proportional: no value crosses 0) on the lit side. Those
+    zeros are the scene's darkness, not noise clipped at black: the fit is solved once (the steps,
+    the values and nothing censored, as one solve of its `Setup`), and the unlit pixels, which have
+    no residual and no derivative, change nothing: masked out, the fit takes the same steps to the
+    same values. (Read as clipped, the fit ran twice, leaving out the terminator's pixels.)"""
+    from difflab.fit.engine import solve
+    from difflab.fit.setup import Setup
+    from difflab.renderers.api import render_frame
+
+    d = scene_dict(size=32, red={"ka": [0.0] * 3})
+    d["ambient"], d["background"], d["objects"] = [0.0] * 3, [0.0] * 3, d["objects"][:1]
+    d["render"]["shadows"] = False
+    scene = Scene.from_dict(d)
+    clean = target_of(scene)
+    noisy = clean * (1.0 + np.random.default_rng(4).normal(0.0, 0.02, clean.shape))
+    unlit = np.all(clean == 0, axis=-1)  # the sphere's unlit side and the background
+    assert np.count_nonzero(unlit & (render_frame(scene).gbuffer.material == 0)) >= 50 and np.all(noisy >= 0)
+    params, start = ("kd", "ks", "n"), {"kd": [0.5, 0.3, 0.2], "ks": [0.3] * 3, "n": 30.0}
+    result = fit_material(scene, [noisy], "red", params, init=start)
+    once = solve(Setup(scene, [noisy], "red", params, init=start))
+    assert result.converged and result.censored == 0 and result.steps == once.steps
+    for key in params:
+        np.testing.assert_array_equal(result.params[key], once.params[key])
+    lit_only = fit_material(scene, [noisy], "red", params, init=start, masks=[~unlit])
+    assert lit_only.steps == result.steps
+    for key in params:
+        np.testing.assert_allclose(lit_only.params[key], result.params[key], rtol=1e-9)
+    np.testing.assert_allclose(result.params["kd"], TRUTH["kd"], rtol=0.02)

@@ -14,6 +14,13 @@ BAND sigma of a bound the target is clipped at; `engine.fit` leaves them out (we
 again from the first solution, counting their values as censored. Only when the noise is real
 (sigma above twice the targets' quantisation floor: a noise-free render keeps its pixels, whose
 residuals are 0 there anyway) and the fit has no texels.
+
+A zero is not always clipped noise: where no light reaches a surface and nothing is ambient (the
+unlit side of a sphere), the target is 0 because the scene is dark there, and the model is exactly
+0 too (N.L <= 0). Such a pixel has no residual and no derivative (every part of the colour is 0),
+so it moves nothing and needs no refit. So the floor counts as clipped only where MIN_CLIPPED
+target values at 0 sit at channels whose fitted model is > 0 (noise clipped away where the fit
+says there is signal), and the band holds only channels whose model is > 0 and < BAND sigma.
 """
 
 from __future__ import annotations
@@ -34,10 +41,11 @@ def _images(problem, values):
 
 
 def clipped_band(setup, result) -> list[np.ndarray] | None:
-    """Per view (H, W) bool: the used pixels with a channel whose fitted model lies within BAND
-    sigma of the floor 0 or of the ceiling, where the target is clipped (MIN_CLIPPED values at
-    that bound, and none below the floor); None when there is none, or the fit failed, has texels, or its noise is no more
-    than twice the quantisation floor."""
+    """Per view (H, W) bool: the used pixels with a channel whose fitted model lies above the floor
+    0 by less than BAND sigma, or within BAND sigma of the ceiling, where the target is clipped
+    (MIN_CLIPPED values at that bound -- at the floor, at channels whose model is > 0 -- and none
+    below the floor); None when there is none, or the fit failed, has texels, or its noise is no
+    more than twice the quantisation floor."""
     sigma = result.sigma
     if not result.converged or not np.isfinite(sigma) or sigma <= 2.0 * setup.sigma_floor or \
             any(p.shape is not None for p in setup.layout):
@@ -50,8 +58,9 @@ def clipped_band(setup, result) -> list[np.ndarray] | None:
     for view, image in zip(setup.views, images):
         model, target = np.asarray(image, np.float64), take_pixels(view.target, view.pixels)
         near = np.zeros(model.shape, bool)
-        if np.count_nonzero(target == 0.0) >= MIN_CLIPPED and not np.any(target < 0.0):
-            near |= model < BAND * sigma
+        lit = model > 0.0  # a channel the model puts at 0 is dark in the scene: no residual, no derivative
+        if np.count_nonzero((target == 0.0) & lit) >= MIN_CLIPPED and not np.any(target < 0.0):
+            near |= lit & (model < BAND * sigma)
         if np.count_nonzero(target >= view.ceiling) >= MIN_CLIPPED:
             near |= np.abs(model - view.ceiling) < BAND * sigma
         band = np.zeros(view.used.shape, bool)
