@@ -4,11 +4,15 @@ solid, a solid cut by the near plane, an inside-out mesh) equal to the BVH's bit
 
 import numpy as np
 import pytest
+import trimesh
 
 import difflab
 from conftest import scene_dict
 from difflab.geometry import TriMesh, box, closed_outward, concatenate, cylinder, quad, uv_sphere
-from difflab.geometry.closed import pieces
+from difflab.geometry.closed import pieces, solid_pieces
+from difflab.renderers.raytrace import itembuffer
+from difflab._warp import wp
+from difflab.renderers.raytrace.selfcross import crossing_faces, passes_through_itself, star_shaped
 from test_itembuffer import assert_same_frames, both
 
 
@@ -78,12 +82,16 @@ LIGHTS = [{"type": "point", "position": [2, 3, 4]}]
 INSIDE_OUT = flipped(uv_sphere(radius=0.6, center=(-0.6, 0.1, 0), n_lat=12, n_lon=20))
 
 
-def frames(objects, camera, **render):
-    scene = scene_dict(objects, MATERIALS, camera=camera, lights=LIGHTS, ambient=(0.1, 0.1, 0.1),
-                       render={"method": "raytrace", "max_depth": 2, "shadows": True, **render})
-    bvh, item = both(scene)
+def frames(objects, camera, lights=LIGHTS, **render):
+    """The item buffer's frame, checked equal to the BVH's bit for bit."""
+    bvh, item = both(solids_scene(objects, camera, lights, **render))
     assert_same_frames(bvh, item)
     return item
+
+
+def solids_scene(objects, camera, lights=LIGHTS, **render):
+    return scene_dict(objects, MATERIALS, camera=camera, lights=lights, ambient=(0.1, 0.1, 0.1),
+                      render={"method": "raytrace", "max_depth": 2, "shadows": True, **render})
 
 
 @pytest.mark.parametrize("camera", [
@@ -124,3 +132,135 @@ def test_a_kept_culled_item_buffer_says_so_and_gives_the_same_frame():
     assert (again.stats["item_buffer_kept"], again.stats["item_buffer_culled"]) == (True, True)
     np.testing.assert_array_equal(again.image, first.image)
     np.testing.assert_array_equal(difflab.render(compiled, threads=2, item_buffer=False), first.image)
+
+
+
+# --- pieces passing through themselves (`renderers/raytrace/selfcross.py`) ---
+
+FLAT = [(0, 0, 0), (2, 0, 0), (0, 2, 0)]  # welded corner numbers 0, 1, 2
+APART = (3, 4, 5)  # the second triangle's corner numbers when it shares none
+
+
+@pytest.mark.parametrize("second, numbers, meets", [
+    ([(0.5, 0.5, -1), (0.5, 0.5, 1), (3, 3, 0)], APART, True),  # crossing: the second pierces the first
+    ([(0.5, 0.5, 1e-3), (3, 0.5, 1e-3), (0.5, 3, 1e-3)], APART, False),  # parallel, 1e-3 above
+    ([(1, 1, 0), (3, 1, 1), (1, 3, 1)], APART, True),  # touching: a corner on the hypotenuse
+    ([(0.5, 0.5, 0), (3, 0.5, 0), (0.5, 3, 0)], APART, True),  # coplanar, overlapping
+    ([(0.5, 0.5, 0), (0.5, -3, 0), (-3, 0.5, 0)], APART, True),  # coplanar, overlapping, facing the other way
+    ([(0.2, 0.2, 0), (0.6, 0.2, 0), (0.2, 0.6, 0)], APART, True),  # coplanar, inside the first (no edges cross)
+    ([(1.2, 1.2, 0), (-0.5, 0.8, 0), (0.8, -0.5, 0)], APART, True),  # coplanar, edges crossing, no corner inside
+    ([(3, 3, 0), (5, 3, 0), (3, 5, 0)], APART, False),  # coplanar, apart
+    ([(1.5, 1.5, 0), (5, 1.5, 0), (1.5, 5, 0)], APART, False),  # coplanar, 0.35 beyond the hypotenuse
+    ([(0, 0, 0), (-1, -2, 0), (-2, -1, 0)], (0, 4, 5), False),  # sharing the corner (0, 0, 0): coplanar, apart
+    ([(0, 0, 0), (-1, 0, 1), (-1, 0, -1)], (0, 4, 5), False),  # sharing a corner, in another plane, apart
+    ([(0, 0, 0), (1, 1, -1), (1, 1, 1)], (0, 4, 5), True),  # sharing a corner and crossing beyond it
+    ([(0, 0, 0), (1, 0.1, 0), (0.1, 1, 0)], (0, 4, 5), True),  # sharing a corner, coplanar, inside the first
+    ([(0, 0, 0), (1, 1, 0), (3, 0, 0)], (0, 4, 5), True),  # sharing a corner, coplanar, overlapping
+    ([(0, 2, 0), (2, 0, 0), (2, 2, 0)], (2, 1, 5), False),  # sharing an edge (not tested: module doc)
+    ([(2, 0, 0), (0, 2, 0), (1, 1, 1)], (1, 2, 5), False),  # sharing an edge, folded up
+], ids=["crossing", "parallel-apart", "touching-corner-on-edge", "coplanar-overlap", "coplanar-overlap-facing-away",
+        "coplanar-nested", "coplanar-edges-crossing", "coplanar-apart", "coplanar-near", "shared-vertex-apart-coplanar", "shared-vertex-apart",
+        "shared-vertex-crossing", "shared-vertex-nested", "shared-vertex-overlap", "shared-edge", "shared-edge-folded"])
+def test_two_triangles_of_a_piece_meet_where_they_share_no_vertex(second, numbers, meets):
+    """The pair test on known cases, both ways round (which face comes later must not matter);
+    two triangles of different pieces are never paired."""
+    for faces, corners in [((FLAT, second), [0, 1, 2, *numbers]), ((second, FLAT), [*numbers, 0, 1, 2])]:
+        points = np.array([*faces[0], *faces[1]], np.float32)
+        bvh = wp.Mesh(points=wp.array(points, dtype=wp.vec3), indices=wp.array(np.arange(6, dtype=np.int32),
+                                                                                 dtype=wp.int32))
+        corners = np.array(corners).reshape(2, 3)
+        assert crossing_faces(bvh, corners, np.zeros(2, np.int64)).tolist() == [meets, False]
+        assert not crossing_faces(bvh, corners, np.array([0, 5])).any()
+
+
+def dented_box(depth: float) -> TriMesh:
+    """A unit box whose top side (y = 0.5) is a pyramid pushed `depth` down from its centre: a
+    fan of four triangles to an apex at y = 0.5 - depth, wound as the side was. Closed and facing
+    out for any depth below 3 (volume 1 - depth / 3); past 1 its tip pokes out through the bottom,
+    a region of winding number -1 that is seen first through back faces from below."""
+    base = box()
+    top = np.all(base.vertices[base.faces][:, :, 1] == 0.5, axis=1)
+    edges = {(a, b) for f in base.faces[top] for a, b in zip(f, np.roll(f, -1))}
+    rim = [(a, b) for a, b in edges if (b, a) not in edges]  # the side's border, counter-clockwise from above
+    apex = len(base.vertices)
+    fan = np.array([(a, b, apex) for a, b in rim])
+    return TriMesh(np.r_[base.vertices, [[0.0, 0.5 - depth, 0.0]]], np.r_[base.faces[~top], fan])
+
+
+def pentagram_prism() -> TriMesh:
+    """A prism on the pentagram {5/2} (0 <= y <= 1, capped by fans from the axis): closed, facing
+    out, every face turning counter-clockwise seen from its centre -- yet its sides cross each other,
+    winding twice around the axis (its faces' solid angles sum to 8 pi)."""
+    angle = 4 * np.pi * np.arange(5) / 5  # every second corner of a pentagon
+    ring = np.stack([np.cos(angle), np.zeros(5), -np.sin(angle)], axis=1)  # counter-clockwise seen from +y
+    vertices = np.r_[ring, ring + [0, 1, 0], [[0, 0, 0], [0, 1, 0]]]
+    k, n = np.arange(5), (np.arange(5) + 1) % 5
+    faces = np.r_[np.stack([k, n, n + 5], 1), np.stack([k, n + 5, k + 5], 1),  # sides
+                  np.stack([np.full(5, 11), k + 5, n + 5], 1), np.stack([np.full(5, 10), n, k], 1)]  # caps
+    return TriMesh(vertices, faces)
+
+
+def icosphere(subdivisions: int) -> TriMesh:
+    sphere = trimesh.creation.icosphere(subdivisions=subdivisions)
+    return TriMesh(sphere.vertices, sphere.faces)
+
+
+def crossing(mesh: TriMesh) -> tuple[bool, bool]:
+    """Whether the pieces of a closed mesh facing out are proven star-shaped, and whether one passes
+    through itself (the item buffer's test, and the pair test alone on every face)."""
+    corners, piece = solid_pieces(mesh.vertices, mesh.faces)
+    bvh = wp.Mesh(points=wp.array(mesh.vertices.astype(np.float32), dtype=wp.vec3),
+                  indices=wp.array(mesh.faces.ravel().astype(np.int32), dtype=wp.int32))
+    passes = passes_through_itself(bvh, corners, piece)
+    assert crossing_faces(bvh, corners, piece).any() == passes
+    return bool(star_shaped(bvh, piece).all()), passes
+
+
+@pytest.mark.parametrize("mesh, star, passes", [
+    (icosphere(3), True, False),
+    (box(size=(1, 2, 3)), True, False),
+    (cylinder(segments=9), True, False),
+    (dented_box(0.4), True, False),  # a shallow dent: still star-shaped from the centre
+    (dented_box(0.9), False, False),  # a deep one: not star-shaped from the centre, not crossing either
+    (dented_box(1.4), False, True),  # the dent poked through the bottom
+    (pentagram_prism(), False, True),
+    (concatenate([box(), uv_sphere(0.7, center=(0.5, 0.2, 0.1))]), True, False),  # two pieces crossing each other
+    (concatenate([box(center=(3, 0, 0)), dented_box(1.4)]), False, True),  # one piece fine, the other not
+], ids=["icosphere", "box", "cylinder", "dent", "deep-dent", "dent-through", "pentagram-prism", "box-through-sphere",
+        "box-beside-dent-through"])
+def test_pieces_passing_through_themselves(mesh, star, passes):
+    assert solid(mesh)
+    assert crossing(mesh) == (star, passes)
+
+
+
+def mesh_object(mesh: TriMesh, **extra) -> dict:
+    return {"type": "mesh", "vertices": mesh.vertices.tolist(), "faces": mesh.faces.tolist(), "material": "m", **extra}
+
+
+FROM_ABOVE = {"eye": [0.5, 1.2, 3.5], "target": [0, 0, 0], "fov_y": 45, "width": 48, "height": 36}
+FROM_BELOW = {"eye": [0.6, -2.5, 1.4], "target": [0, -0.4, 0], "fov_y": 40, "width": 48, "height": 40}
+LIT_FROM_BELOW = [{"type": "point", "position": [1.5, -4, 3]}]
+
+
+def test_a_piece_through_itself_is_drawn_whole_and_culling_it_would_be_wrong(monkeypatch):
+    """The dent poked through the bottom, seen from below: its tip's back faces are what the BVH
+    meets first. Culled only if `passes_through_itself` is bypassed -- then the z-buffer leaves the
+    tip out and the frame shows the bottom side behind it instead."""
+    objects = [mesh_object(dented_box(1.4))]
+    assert not frames(objects, FROM_BELOW, LIT_FROM_BELOW).stats["item_buffer_culled"]
+    monkeypatch.setattr(itembuffer, "passes_through_itself", lambda *args: False)
+    bvh, item = both(solids_scene(objects, FROM_BELOW, LIT_FROM_BELOW))
+    assert item.stats["item_buffer_culled"]
+    wrong = np.any(item.image != bvh.image, axis=2)
+    assert wrong.sum() > 20  # the tip's footprint: ~0.4 x 0.4 of the 1 x 1 bottom in view
+
+
+@pytest.mark.parametrize("objects", [
+    [mesh_object(icosphere(3).transformed(np.diag([0.6, 0.6, 0.6, 1.0]))), mesh_object(box(center=(0.9, -0.2, 0)))],
+    [mesh_object(concatenate([box(), uv_sphere(0.6, center=(0.5, 0.3, 0.2), n_lat=10, n_lon=16)]))],
+    [mesh_object(dented_box(0.9))],
+], ids=["icosphere-and-box", "box-through-sphere-one-mesh", "deep-dent"])
+def test_solids_not_through_themselves_are_culled_and_the_frame_is_the_bvhs(objects):
+    for camera, lights in [(FROM_ABOVE, LIGHTS), (FROM_BELOW, LIT_FROM_BELOW)]:
+        assert frames(objects, camera, lights).stats["item_buffer_culled"]

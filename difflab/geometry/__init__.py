@@ -1,6 +1,6 @@
 """difflab.geometry: numpy triangle meshes (no Warp, no JAX).
 
-- `TriMesh` (validated, immutable), `concatenate`, `weld`; `closed_outward` (closed surfaces of solids, facing out)
+- `TriMesh` (validated, immutable), `concatenate`, `weld`; `closed_outward` / `solid_pieces` (closed surfaces of solids, facing out)
 - primitives: `uv_sphere`, `quad`, `box`, `cylinder`; the Utah `teapot`
   (`teapot_control_points`, `teapot_patches`)
 - normals: `face_normals`, `face_areas`, `vertex_normals` (area-weighted by default; vertices
@@ -12,7 +12,7 @@
 - uv projection: `planar_uv`, `spherical_uv`, `cylindrical_uv`, `project_uvs`
 """
 
-from .closed import closed_outward
+from .closed import closed_outward, solid_pieces
 from .loading import load_mesh, save_mesh
 from .mesh import TriMesh, concatenate, weld
 from .normals import degenerate_faces, face_areas, face_normals, vertex_normals
@@ -23,7 +23,7 @@ from .transforms import (apply_to_normals, apply_to_points, look_at, ndc_to_rast
                          rotation_matrix, scale_matrix, transform_matrix, translation_matrix)
 
 __all__ = [
-    "TriMesh", "concatenate", "weld", "closed_outward",
+    "TriMesh", "concatenate", "weld", "closed_outward", "solid_pieces",
     "uv_sphere", "quad", "box", "cylinder",
     "teapot", "teapot_control_points", "teapot_patches",
     "face_normals", "face_areas", "vertex_normals", "degenerate_faces",

@@ -1,5 +1,5 @@
-"""Whether triangles bound solids from outside: `closed_outward` (the item buffer's back-face culling
-asks it, `renderers/raytrace/itembuffer.py`)."""
+"""Whether triangles bound solids from outside: `closed_outward` / `solid_pieces` (the item buffer's
+back-face culling asks it, `renderers/raytrace/itembuffer.py`)."""
 
 from __future__ import annotations
 
@@ -9,38 +9,46 @@ MIN_VOLUME = 1.0e-8  # a piece's volume must pass this times the bounding-box di
 
 
 def closed_outward(vertices, faces) -> bool:
-    """Whether the triangles are the closed, outward-facing surfaces of solids.
+    """Whether the triangles are the closed, outward-facing surfaces of solids (`solid_pieces`)."""
+    return solid_pieces(vertices, faces) is not None
+
+
+def solid_pieces(vertices, faces) -> tuple[np.ndarray, np.ndarray] | None:
+    """The solids the triangles bound, facing out: each face's corners as welded vertex numbers
+    (F, 3) and its connected piece (F,), both int64; None unless they are closed and face out.
 
     Vertices at bitwise-equal positions are one (a seam's duplicates, whose edges the BVH's watertight
     triangle test shares too). Then every edge a -> b of a face must be met by exactly one other face,
     which runs it b -> a (closed, consistently wound, no face repeated or folded flat onto a neighbour
     with the same winding), no face may repeat a vertex, and every connected piece must enclose a
     signed volume V = sum over its faces of v0 . (v1 x v2) / 6 above MIN_VOLUME d^3 (d: the bounding
-    box diagonal of all the vertices; a sheet shown on both sides has V ~ 0): its counter-clockwise (front) faces look
-    out. A ray from outside every piece then enters
-    a solid at its first hit, through a front face -- provided no piece passes through itself (a
-    self-intersection can wrap a region inside out, which this does not test). Empty: False."""
+    box diagonal of all the vertices; a sheet shown on both sides has V ~ 0): its counter-clockwise
+    (front) faces look out. A ray from outside every piece then enters a solid at its first hit,
+    through a front face -- provided no piece passes through itself: a self-intersection can wrap a
+    region inside out (winding number -1), seen first through a back face. That is not tested here
+    (pieces crossing each other are fine: windings add up); the item buffer asks it of the pieces
+    returned (`renderers/raytrace/selfcross.py`). Empty: None."""
     vertices = np.asarray(vertices, np.float64)
     faces = np.asarray(faces, np.int64)
     if not len(faces):
-        return False
+        return None
     n, weld = welded(vertices)
     corners = weld[faces]
     start, end = corners.reshape(-1), np.roll(corners, -1, axis=1).reshape(-1)  # edge k of face f: k -> k + 1
     if np.any(start == end):
-        return False
+        return None
     edges = np.sort(start * n + end)
     if np.any(edges[1:] == edges[:-1]):  # an edge run twice the same way
-        return False
+        return None
     reverse = end * n + start
     found = np.minimum(np.searchsorted(edges, reverse), len(edges) - 1)
     if np.any(edges[found] != reverse):  # an edge run one way only: a border
-        return False
+        return None
     v = vertices[faces]
     piece = pieces(n, start, end)[corners[:, 0]]  # each face's piece
     volume = np.bincount(piece, np.einsum("fi,fi->f", v[:, 0], np.cross(v[:, 1], v[:, 2])) / 6.0)[np.unique(piece)]
     diagonal = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
-    return bool(np.all(volume > MIN_VOLUME * diagonal ** 3))
+    return (corners, piece) if np.all(volume > MIN_VOLUME * diagonal ** 3) else None
 
 
 def welded(vertices: np.ndarray) -> tuple[int, np.ndarray]:
@@ -71,3 +79,4 @@ def pieces(n: int, start: np.ndarray, end: np.ndarray) -> np.ndarray:
             if np.array_equal(root, label):
                 break
             label = root
+

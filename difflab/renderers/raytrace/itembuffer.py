@@ -22,10 +22,10 @@ edges, cracks, silhouettes -- under 1 % of a smooth mesh's samples); the others 
 Like the BVH, the item buffer is kept with the compiled scene (per thread, camera and sample grid).
 
 The z-buffer leaves back faces out (`culls_back_faces`) when the mesh triangles are the closed,
-outward-facing surfaces of solids (`geometry.closed_outward`) lying beyond the near plane: a primary
-ray then starts outside every solid, so the first triangle it meets is one it enters, a front face,
-and the back faces change no hint -- except on a mesh that passes through itself (which is not
-tested: a self-intersection can turn a region inside out) or, as without culling, on triangles
+outward-facing surfaces of solids (`geometry.solid_pieces`), no piece of them passes through itself
+(`selfcross.py`: a self-intersection can turn a region inside out) and they lie beyond the near
+plane: a primary ray then starts outside every solid, so the first triangle it meets is one it
+enters, a front face, and the back faces change no hint -- except, as without culling, on triangles
 thinner than the fixed-point snapping (whose snapped winding may flip). Otherwise every triangle
 is drawn.
 
@@ -45,12 +45,13 @@ from dataclasses import replace
 import numpy as np
 
 from ..._warp import wp
-from ...geometry import closed_outward
+from ...geometry import solid_pieces
 from ..camera import camera_frame, camera_struct
 from ..launch import load_kernels
 from ..raster.coverage import NO_HIT
 from ..raster.driver import mark_key_cleared, zbuffer
 from ..trace import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triangle_hit
+from .selfcross import passes_through_itself
 
 wp.set_module_options({"enable_backward": False})
 
@@ -59,7 +60,7 @@ PLANE_GAP = 1.0e-3  # relative depth gap telling a neighbour's plane from the hi
 NO_TRIANGLE = wp.constant(-1)  # resolve_hint: no mesh triangle before the nearest sphere / plane (if any)
 ASK_BVH = wp.constant(-2)  # resolve_hint: an ambiguous hint, the BVH finds the mesh hit
 ITEM_BUFFER_VIEW = "item buffer of"  # scratch-pool note: ((camera, width, height), culled) of the kept item buffer
-SOLID_MESHES = "solid meshes"  # compiled.built: the mesh vertices' bounding box when `closed_outward`, else
+SOLID_MESHES = "solid meshes"  # compiled.built: the mesh vertices' bounding box when solids (`culls_back_faces`), else
 # None; with a camera, (SOLID_MESHES, camera): whether `culls_back_faces`
 NEAR_MARGIN = 1.0e-4  # back faces are culled when the meshes lie this far (relative) beyond the near plane
 SLOT_BITS = wp.constant(wp.int64(4294967295))  # the z-buffer key's low 32 bits: the screen slot
@@ -270,7 +271,7 @@ def item_buffer(compiled, width: int, height: int, threads: int | None = None) -
             wp.launch(edges_kernel, dim=end - begin - 2, inputs=[begin + 1, face, arrays["faces"], edge], device=device)
         seams.update((begin, end - 1))
 
-    cull = culls_back_faces(compiled)
+    cull = culls_back_faces(compiled, threads)
     unused, key = zbuffer(meshes, camera_struct(compiled.scene.camera, width, height), int(cull), threads, decode_band)
     mark_key_cleared(compiled, key)  # hints_kernel reset every key
     rows = wp.array(sorted(seams), dtype=wp.int32, device=device)
@@ -279,17 +280,19 @@ def item_buffer(compiled, width: int, height: int, threads: int | None = None) -
     return item_struct(compiled, face, edge), False, cull
 
 
-def culls_back_faces(compiled) -> bool:
+def culls_back_faces(compiled, threads: int | None = None) -> bool:
     """Whether the item buffer may leave the mesh triangles' back faces out of its z-buffer: they are
-    the closed surfaces of solids, facing out (`geometry.closed_outward`), and their bounding box lies
-    beyond the near plane by NEAR_MARGIN (relative to the coordinates' size), so every primary ray
-    starts outside every solid and its first mesh hit, entering one, is a front face (module doc).
-    Asked once per compiled scene and camera."""
+    the closed surfaces of solids, facing out (`geometry.solid_pieces`), no piece passes through
+    itself (`selfcross.passes_through_itself`), and their bounding box lies beyond the near plane by
+    NEAR_MARGIN (relative to the coordinates' size), so every primary ray starts outside every solid
+    and its first mesh hit, entering one, is a front face (module doc). The meshes are asked once
+    per compiled scene, the camera once per camera."""
     camera = compiled.scene.camera
     if (SOLID_MESHES, camera) not in compiled.built:
         if SOLID_MESHES not in compiled.built:
             vertices = compiled.arrays["vertices"].numpy()[:compiled.n_mesh_vertices]
-            solid = closed_outward(vertices, compiled.faces[:compiled.n_mesh_faces])
+            pieces = solid_pieces(vertices, compiled.faces[:compiled.n_mesh_faces])
+            solid = pieces is not None and not passes_through_itself(bvh(compiled), *pieces, threads)
             compiled.built[SOLID_MESHES] = (vertices.min(axis=0), vertices.max(axis=0)) if solid else None
         box = compiled.built[SOLID_MESHES]
         cull = False
@@ -300,6 +303,12 @@ def culls_back_faces(compiled) -> bool:
             cull = bool(((corners - eye) @ camera_frame(camera)[2]).min() > camera.near + NEAR_MARGIN * size)
         compiled.built[SOLID_MESHES, camera] = cull
     return compiled.built[SOLID_MESHES, camera]
+
+
+def bvh(compiled) -> wp.Mesh:
+    """The compiled scene's BVH over its mesh triangles (built now if no ray has needed it yet)."""
+    compiled.traceable()
+    return compiled.built["bvh"]
 
 
 def forget_item_buffer(compiled) -> None:
