@@ -50,20 +50,36 @@ def clipped_band(setup, result) -> list[np.ndarray] | None:
     if not result.converged or not np.isfinite(sigma) or sigma <= 2.0 * setup.sigma_floor or \
             any(p.shape is not None for p in setup.layout):
         return None
+    bounds = [_clipped_bounds(view, residual) for view, residual in zip(setup.views, result.residuals)]
+    if not any(floor or top for floor, top in bounds):
+        return None  # (the model images are formed only for a view clipped at a bound)
     flat = setup.layout.flatten({p.key: np.asarray(result.params[p.key], np.float64).reshape(-1)
                                  for p in setup.layout})
     with jax.enable_x64(setup.x64):
         images = _images(setup.problem, np.asarray(flat, setup.dtype))  # numpy: moved with the call
     bands = []
-    for view, image in zip(setup.views, images):
-        model, target = np.asarray(image, np.float64), take_pixels(view.target, view.pixels)
+    for view, image, (floor, top) in zip(setup.views, images, bounds):
+        model = np.asarray(image, np.float64)
         near = np.zeros(model.shape, bool)
-        lit = model > 0.0  # a channel the model puts at 0 is dark in the scene: no residual, no derivative
-        if np.count_nonzero((target == 0.0) & lit) >= MIN_CLIPPED and not np.any(target < 0.0):
-            near |= lit & (model < BAND * sigma)
-        if np.count_nonzero(target >= view.ceiling) >= MIN_CLIPPED:
+        if floor:
+            near |= (model > 0.0) & (model < BAND * sigma)
+        if top:
             near |= np.abs(model - view.ceiling) < BAND * sigma
         band = np.zeros(view.used.shape, bool)
         band.reshape(-1)[view.pixels] = near[:, 0] | near[:, 1] | near[:, 2]  # (any over 3: ~5x slower)
         bands.append(band)
     return bands if any(band.any() for band in bands) else None
+
+
+def _clipped_bounds(view, residual) -> tuple[bool, bool]:
+    """(clipped at the floor, clipped at the ceiling) for a view from its target values and its
+    residual image (H, W, 3) at the fit: at the floor, MIN_CLIPPED weighted target values at 0 whose
+    residual -- the model itself there -- is > 0, and none below 0; at the ceiling, MIN_CLIPPED
+    target values at or above it."""
+    target = view.values
+    top = np.count_nonzero(target >= view.ceiling) >= MIN_CLIPPED
+    zero = (target == 0.0) & (view.weights > 0)
+    if np.count_nonzero(zero) < MIN_CLIPPED or np.any(target < 0.0):
+        return False, top
+    lit = take_pixels(residual, view.pixels) > 0.0  # a channel the model puts at 0 is dark in the scene
+    return np.count_nonzero(zero & lit) >= MIN_CLIPPED, top

@@ -82,9 +82,11 @@ class View:
     nowhere); step: its samples' step (1 / 255 from an 8-bit file, 1 / 65535 from a 16-bit one, 0
     for float data: the noise floor is step / sqrt(12)); nonfinite: non-finite target values inside
     the mask; record: its G-buffer or ray tree; scene: the scene of this view; used (H, W) bool: the
-    pixels the fit reads (`pixels`: their flat indices, in order); kept: the `KeptView` of
-    the record when it is kept with the compiled scene, else None; touched (H, W) bool: the pixels
-    the fitted parameters influence."""
+    pixels the fit reads (`pixels`: their flat indices, in order; `values` and `weights`: the
+    target's and the weight's (U, 3) rows there -- each computed once, on first use, or handed over
+    by `Setup._seen`, which took them already); kept: the `KeptView` of the record when it is kept
+    with the compiled scene, else None; touched (H, W) bool: the pixels the fitted parameters
+    influence."""
 
     target: np.ndarray
     mask: np.ndarray
@@ -101,6 +103,14 @@ class View:
     @cached_property
     def pixels(self) -> np.ndarray:
         return np.flatnonzero(self.used)
+
+    @cached_property
+    def values(self) -> np.ndarray:
+        return take_pixels(self.target, self.pixels)
+
+    @cached_property
+    def weights(self) -> np.ndarray:
+        return take_pixels(self.weight, self.pixels)
 
 
 def take_pixels(image, pixels) -> np.ndarray:

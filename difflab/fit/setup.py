@@ -158,8 +158,7 @@ class Setup:
     def _target_statistics(self):
         """nonfinite, censored (used values at the ceiling) and the noise floor of the targets."""
         self.nonfinite = int(sum(v.nonfinite for v in self.views))
-        self.censored = int(sum(int(np.count_nonzero((take_pixels(v.target, v.pixels) >= v.ceiling)
-                                                     & (take_pixels(v.weight, v.pixels) > 0)))
+        self.censored = int(sum(int(np.count_nonzero((v.values >= v.ceiling) & (v.weights > 0)))
                                 for v in self.views if np.isfinite(v.ceiling)))  # over the used pixels
         self.sigma_floor = max(FLOAT_SIGMA, max(v.step for v in self.views) / math.sqrt(12.0))
 
@@ -197,7 +196,7 @@ class Setup:
             out.x0 = self.layout.x_of(self.layout.flatten(out.initial))
         with jax.enable_x64(self.x64):
             out.problem = self.problem.with_targets(
-                [jnp.asarray(take_pixels(v.target, v.pixels), self.dtype) for v in views])
+                [jnp.asarray(v.values, self.dtype) for v in views])
         return out
 
     def _check_init_keys(self, init):
@@ -252,13 +251,16 @@ class Setup:
         for float data, ties at the maximum of the used values)."""
         positive = weight > 0
         used = view.mask & (positive[..., 0] | positive[..., 1] | positive[..., 2]) & view.touched
+        pixels = np.flatnonzero(used)
+        values = take_pixels(view.target, pixels)
         top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
         if top is None:  # float data: a clipped ceiling shows as ties at the maximum
-            values = take_pixels(view.target, np.flatnonzero(used))
             peak = float(values.max()) if values.size else 0.0
             ties = np.count_nonzero(values == peak)
             top = peak if peak > 0 and CENSOR_MIN_TIES <= ties < values.size // 2 else np.inf
-        return dataclasses.replace(view, weight=weight, used=used, ceiling=np.inf if top is False else float(top))
+        out = dataclasses.replace(view, weight=weight, used=used, ceiling=np.inf if top is False else float(top))
+        out.__dict__.update(pixels=pixels, values=values)  # View's cached properties, taken already
+        return out
 
     def _compiled_for(self, view_scene, device):
         """The compiled scene given, under the view's scene, when it holds the view's geometry (same
@@ -277,17 +279,18 @@ class Setup:
             return TreeModel.build(view.record, pixels, view.scene.background, self.dtype, self.texel_source)
         return GBufferModel.build(view.record, pixels, lights, self.dtype, self.texel_source)
 
-    def _view_arrays(self, view: View, pixels, index, weight=None) -> tuple:
+    def _view_arrays(self, view: View, pixels, index) -> tuple:
         """A view's arrays for `pixels`, numpy: (lights, target, sqrt(weight), ceiling,
-        intensity_index) (see `ViewJ`); `weight`: its (U, 3) weights there, when taken already."""
+        intensity_index) (see `ViewJ`)."""
         lights = lights_to_jax(view.scene.lights, self.dtype, host=True)
         count = lights.intensity.shape[0]
         intensity_index = np.full((count, 3), -1, np.int32)
         shared = min(count, index.shape[0])
         intensity_index[:shared] = index[:shared]
         real = np.dtype(self.dtype)
-        weight = take_pixels(view.weight, pixels) if weight is None else weight
-        return (lights, take_pixels(view.target, pixels).astype(real, copy=False),
+        used = pixels is view.pixels  # its rows are taken once (`View.values`, `View.weights`)
+        weight = view.weights if used else take_pixels(view.weight, pixels)
+        return (lights, (view.values if used else take_pixels(view.target, pixels)).astype(real, copy=False),
                 np.sqrt(weight).astype(real, copy=False), np.asarray(view.ceiling, real), intensity_index)
 
     def _view(self, view: View, pixels, arrays) -> ViewJ:
@@ -303,14 +306,14 @@ class Setup:
                      intensity_index=intensity_index)
 
     def _problem(self, loss, loss_scale) -> Problem:
-        weights = [take_pixels(v.weight, v.pixels) for v in self.views]
+        weights = [v.weights for v in self.views]
         self.weighted_entries = np.concatenate([(w > 0).reshape(-1) for w in weights])  # residual entries that count
         self.unit_weights = all(np.all(w == 1.0) for w in weights)  # weighted residuals are the plain ones
         self.weight_total = float(sum(np.sum(w) for w in weights))
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
         arrays, table, ambient, index, loss_scale = to_device((  # one transfer
-            [self._view_arrays(v, v.pixels, index["intensity"], w) for v, w in zip(self.views, weights)],
+            [self._view_arrays(v, v.pixels, index["intensity"]) for v in self.views],
             MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
             np.asarray(self.scene.ambient, real), {k: v for k, v in index.items() if k != "intensity"},
             np.asarray(loss_scale, real)))
@@ -337,7 +340,7 @@ class Setup:
             part = np.asarray(r[offset:offset + 3 * pixels.size], np.float64).reshape(-1, 3)
             offset += 3 * pixels.size
             if not weighted and not self.unit_weights:
-                sqrt_w = np.sqrt(take_pixels(view.weight, pixels))
+                sqrt_w = np.sqrt(view.weights)
                 part = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w, 1.0), 0.0)
             full = np.zeros(view.target.shape, np.float32)
             full.reshape(-1, 3)[pixels] = part
