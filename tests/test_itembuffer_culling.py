@@ -187,11 +187,11 @@ def dented_box(depth: float) -> TriMesh:
     return TriMesh(np.r_[base.vertices, [[0.0, 0.5 - depth, 0.0]]], np.r_[base.faces[~top], fan])
 
 
-def pentagram_prism() -> TriMesh:
-    """A prism on the pentagram {5/2} (0 <= y <= 1, capped by fans from the axis): closed, facing
-    out, every face turning counter-clockwise seen from its centre -- yet its sides cross each other,
-    winding twice around the axis (its faces' solid angles sum to 8 pi)."""
-    angle = 4 * np.pi * np.arange(5) / 5  # every second corner of a pentagon
+def star_prism(step: int) -> TriMesh:
+    """A prism (0 <= y <= 1, capped by fans from the axis) on the pentagon (step 1) or the pentagram
+    {5/2} (step 2): closed, facing out, every face turning counter-clockwise seen from the axis --
+    the pentagram's sides cross each other, winding twice around it."""
+    angle = 2 * step * np.pi * np.arange(5) / 5
     ring = np.stack([np.cos(angle), np.zeros(5), -np.sin(angle)], axis=1)  # counter-clockwise seen from +y
     vertices = np.r_[ring, ring + [0, 1, 0], [[0, 0, 0], [0, 1, 0]]]
     k, n = np.arange(5), (np.arange(5) + 1) % 5
@@ -208,12 +208,12 @@ def icosphere(subdivisions: int) -> TriMesh:
 def crossing(mesh: TriMesh) -> tuple[bool, bool]:
     """Whether the pieces of a closed mesh facing out are proven star-shaped, and whether one passes
     through itself (the item buffer's test, and the pair test alone on every face)."""
-    corners, piece = solid_pieces(mesh.vertices, mesh.faces)
+    corners, piece, centre = solid_pieces(mesh.vertices, mesh.faces)
     bvh = wp.Mesh(points=wp.array(mesh.vertices.astype(np.float32), dtype=wp.vec3),
                   indices=wp.array(mesh.faces.ravel().astype(np.int32), dtype=wp.int32))
-    passes = passes_through_itself(bvh, corners, piece)
+    passes = passes_through_itself(bvh, corners, piece, centre)
     assert crossing_faces(bvh, corners, piece).any() == passes
-    return bool(star_shaped(bvh, piece).all()), passes
+    return bool(star_shaped(bvh, piece, centre).all()), passes
 
 
 @pytest.mark.parametrize("mesh, star, passes", [
@@ -223,16 +223,29 @@ def crossing(mesh: TriMesh) -> tuple[bool, bool]:
     (dented_box(0.4), True, False),  # a shallow dent: still star-shaped from the centre
     (dented_box(0.9), False, False),  # a deep one: not star-shaped from the centre, not crossing either
     (dented_box(1.4), False, True),  # the dent poked through the bottom
-    (pentagram_prism(), False, True),
+    (star_prism(1), True, False),
+    (star_prism(2), False, True),
     (concatenate([box(), uv_sphere(0.7, center=(0.5, 0.2, 0.1))]), True, False),  # two pieces crossing each other
     (concatenate([box(center=(3, 0, 0)), dented_box(1.4)]), False, True),  # one piece fine, the other not
-], ids=["icosphere", "box", "cylinder", "dent", "deep-dent", "dent-through", "pentagram-prism", "box-through-sphere",
+], ids=["icosphere", "box", "cylinder", "dent", "deep-dent", "dent-through", "pentagon-prism", "pentagram-prism", "box-through-sphere",
         "box-beside-dent-through"])
 def test_pieces_passing_through_themselves(mesh, star, passes):
     assert solid(mesh)
     assert crossing(mesh) == (star, passes)
 
 
+
+
+@pytest.mark.parametrize("step, star", [(1, True), (2, False)], ids=["pentagon", "pentagram"])
+def test_star_shaped_needs_every_face_turning_and_one_cover(step, star):
+    """Both prisms' faces all turn counter-clockwise seen from their centroid; the pentagram's
+    central projection covers the sphere twice (a ray from the centre crosses two sides), so it is
+    not proven star-shaped -- rightly: its sides cross."""
+    prism = star_prism(step)
+    corners, piece, centre = solid_pieces(prism.vertices, prism.faces)
+    np.testing.assert_allclose(centre[piece], np.tile([0, 0.5, 0], (len(piece), 1)), atol=1e-12)
+    assert np.all(np.linalg.det(prism.vertices[prism.faces] - centre[piece][:, None]) > 0.1)
+    assert crossing(prism) == (star, not star)
 
 def mesh_object(mesh: TriMesh, **extra) -> dict:
     return {"type": "mesh", "vertices": mesh.vertices.tolist(), "faces": mesh.faces.tolist(), "material": "m", **extra}
@@ -249,7 +262,7 @@ def test_a_piece_through_itself_is_drawn_whole_and_culling_it_would_be_wrong(mon
     tip out and the frame shows the bottom side behind it instead."""
     objects = [mesh_object(dented_box(1.4))]
     assert not frames(objects, FROM_BELOW, LIT_FROM_BELOW).stats["item_buffer_culled"]
-    monkeypatch.setattr(itembuffer, "passes_through_itself", lambda *args: False)
+    monkeypatch.setattr(itembuffer, "passes_through_itself", lambda *args, **options: False)
     bvh, item = both(solids_scene(objects, FROM_BELOW, LIT_FROM_BELOW))
     assert item.stats["item_buffer_culled"]
     wrong = np.any(item.image != bvh.image, axis=2)

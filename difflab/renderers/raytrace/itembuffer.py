@@ -292,7 +292,7 @@ def culls_back_faces(compiled, threads: int | None = None) -> bool:
         if SOLID_MESHES not in compiled.built:
             vertices = compiled.arrays["vertices"].numpy()[:compiled.n_mesh_vertices]
             pieces = solid_pieces(vertices, compiled.faces[:compiled.n_mesh_faces])
-            solid = pieces is not None and not passes_through_itself(bvh(compiled), *pieces, threads)
+            solid = pieces is not None and not passes_through_itself(bvh(compiled), *pieces, threads=threads)
             compiled.built[SOLID_MESHES] = (vertices.min(axis=0), vertices.max(axis=0)) if solid else None
         box = compiled.built[SOLID_MESHES]
         cull = False

@@ -4,10 +4,12 @@ welded vertices from `geometry.solid_pieces`). A fold that passes through its ow
 region inside out (winding number -1), where a primary ray's first hit is a back face; pieces
 crossing each other are fine (each is a solid: windings add up, never below 0).
 
-A piece strictly star-shaped from its centre is proven not to pass through itself at a few
-operations a face (`star_shaped`: convex solids, the benchmark's sphere). In the others, two
-triangles of one piece are tested when their bounding boxes overlap (the BVH's
-`mesh_query_aabb`, each pair once), by how many welded vertices they share:
+A piece strictly star-shaped from its centroid is proven not to pass through itself at once
+(`star_shaped`: convex solids, the benchmark's sphere; ~0.05 us a face, 2 cores -- the 81,920-face
+icosphere's ~4 ms against its BVH build's ~25 ms). In the others (~0.8 us a face: Warp's CPU
+`mesh_query_aabb` takes ~0.55 us and gained nothing from a second thread here), two triangles
+of one piece are tested when their bounding boxes overlap (the BVH's candidates, each pair once),
+by how many welded vertices they share:
 
 - none: they meet exactly when an edge of one meets the other triangle (`segment_meets`, six
   tests: two triangles in different planes meet in a segment whose ends lie on edges; in one plane,
@@ -36,7 +38,8 @@ wp.set_module_options({"enable_backward": False})
 TOUCH = wp.constant(wp.float64(1.0e-6))  # pairs closer than this x their longest edge meet (see module doc)
 ZERO = wp.constant(wp.float64(0.0))
 ONE = wp.constant(wp.float64(1.0))
-STAR_MARGIN = wp.constant(wp.float64(1.0e-12))  # `star_kernel`: the least relative turn of a face seen from the centre
+STAR_MARGIN = wp.constant(wp.float64(1.0e-12))  # `cover_kernel`: the least sine of a decided turn (rounding: ~1e-16)
+PROBE = wp.constant(wp.vec3d(wp.float64(0.5379), wp.float64(0.6934), wp.float64(0.4795)))  # `star_shaped`'s ray (unit)
 
 
 @wp.func
@@ -154,11 +157,13 @@ def meets_later_face(face: int, bvh: wp.uint64, points: wp.array(dtype=wp.vec3),
 
 
 @wp.kernel
-def star_kernel(begin: int, end: int, chunk: int, points: wp.array(dtype=wp.vec3), indices: wp.array(dtype=wp.int32),
-                piece: wp.array(dtype=wp.int32), centre: wp.array(dtype=wp.vec3d), solid_angle: wp.array(dtype=wp.float64)):
-    """Faces begin + tid * chunk ... (up to chunk, below end): the solid angle (Van Oosterom and
-    Strackee 1983) of face (a, b, x) seen from its piece's centre c when it turns counter-clockwise
-    from there, det(a - c, b - c, x - c) > STAR_MARGIN |a - c| |b - c| |x - c|; else -1."""
+def cover_kernel(begin: int, end: int, chunk: int, points: wp.array(dtype=wp.vec3), indices: wp.array(dtype=wp.int32),
+                 piece: wp.array(dtype=wp.int32), centre: wp.array(dtype=wp.vec3d), cover: wp.array(dtype=wp.int8)):
+    """Faces begin + tid * chunk ... (up to chunk, below end) seen from their piece's centre c:
+    `cover` -1 unless face (a, b, x) turns counter-clockwise, det(a - c, b - c, x - c) >
+    STAR_MARGIN |a - c| |b - c| |x - c|; else 1 where the ray from c along PROBE crosses it strictly
+    inside (it is on the left of all three planes through c and an edge), 0 where it clearly misses
+    (on the right of one by the margin), -1 where it may pass through an edge (undecided)."""
     first = begin + wp.tid() * chunk
     for face in range(first, wp.min(first + chunk, end)):
         c = centre[piece[face]]
@@ -169,10 +174,14 @@ def star_kernel(begin: int, end: int, chunk: int, points: wp.array(dtype=wp.vec3
         la = wp.length(a)
         lb = wp.length(b)
         lx = wp.length(x)
-        solid_angle[face] = -ONE
+        side = wp.vec3d(wp.dot(PROBE, wp.cross(a, b)) / (la * lb), wp.dot(PROBE, wp.cross(b, x)) / (lb * lx),
+                        wp.dot(PROBE, wp.cross(x, a)) / (lx * la))  # sines: PROBE against each edge's plane
+        cover[face] = wp.int8(-1)
         if det > STAR_MARGIN * la * lb * lx:
-            solid_angle[face] = wp.float64(2.0) * wp.atan2(det, la * lb * lx + wp.dot(a, b) * lx + wp.dot(a, x) * lb
-                                                           + wp.dot(b, x) * la)
+            if wp.min(side) > STAR_MARGIN:
+                cover[face] = wp.int8(1)
+            elif wp.min(side) < -STAR_MARGIN:
+                cover[face] = wp.int8(0)
 
 
 @wp.kernel
@@ -188,35 +197,33 @@ def meets_kernel(begin: int, end: int, chunk: int, tested: wp.array(dtype=wp.int
             meets[k] = wp.uint8(1)
 
 
-def passes_through_itself(bvh: wp.Mesh, corners, piece, threads: int | None = None) -> bool:
-    """Whether a piece of a closed, consistently wound surface (`geometry.solid_pieces` gives each
-    face's welded corners and piece, the BVH its points and faces) passes through itself: not the
-    pieces `star_shaped` proves embedded; of the others, whether a face meets another of its piece
-    (`crossing_faces`, the BVH's candidates)."""
-    tested = np.flatnonzero(~star_shaped(bvh, piece, threads))
+def passes_through_itself(bvh: wp.Mesh, corners, piece, centre, threads: int | None = None) -> bool:
+    """Whether a piece of a closed, consistently wound surface (the BVH's) passes through itself:
+    not those `star_shaped` proves embedded; of the others, whether a face meets another of its
+    piece (`crossing_faces`, the BVH's candidates). `corners`, `piece`, `centre`: each face's welded
+    corners and piece, and each piece's centre, as `geometry.solid_pieces` gives them."""
+    tested = np.flatnonzero(~star_shaped(bvh, piece, centre, threads))
     return bool(tested.size) and bool(crossing_faces(bvh, corners, piece, tested, threads).any())
 
 
-def star_shaped(bvh: wp.Mesh, piece, threads: int | None = None) -> np.ndarray:
+def star_shaped(bvh: wp.Mesh, piece, centre, threads: int | None = None) -> np.ndarray:
     """Per face of a closed, consistently wound surface (the BVH's), whether its piece is strictly
-    star-shaped from c, the mean of its faces' first corners: every face turns counter-clockwise
-    seen from c (`star_kernel`), so that the central projection onto a sphere around c is a branched
-    covering, and their solid angles sum to 4 pi, not 8 pi or more -- it covers the sphere once, so
-    no two points of the piece lie in one direction from c: the piece does not pass through itself
-    (convex solids, the benchmark's sphere: ~0.03 us a face). False says nothing. (F,) bool."""
+    star-shaped from its centre c (row piece of `centre`; `solid_pieces` gives the centroid): every
+    face turns counter-clockwise seen from c, so that the central projection onto a sphere around c
+    is a branched covering, covering each direction equally often -- and the ray from c along PROBE
+    crosses exactly one face, strictly inside (`cover_kernel`): it covers the sphere once, so no
+    two points of the piece lie in one direction from c, and the piece does not pass through itself.
+    False says nothing. (F,) bool."""
     device = str(bvh.device)
     piece = np.asarray(piece, np.int64)
-    first = bvh.points.numpy()[bvh.indices.numpy()[0::3]].astype(np.float64)
-    count = np.bincount(piece)
-    centre = np.stack([np.bincount(piece, first[:, k]) for k in range(3)], axis=1) / np.maximum(count, 1)[:, None]
-    solid_angle = wp.empty(len(piece), dtype=wp.float64, device=device)
-    load_kernels(device, star_kernel)
-    launch_chunks(star_kernel, len(piece), [bvh.points, bvh.indices, wp.array(piece.astype(np.int32), dtype=wp.int32,
-                                                                              device=device),
-                                            wp.array(centre, dtype=wp.vec3d, device=device), solid_angle], device, threads)
-    solid_angle = solid_angle.numpy()
-    star = (np.bincount(piece, solid_angle < 0.0, len(count)) == 0) & (np.bincount(piece, solid_angle, len(count))
-                                                                         < 6.0 * np.pi)
+    cover = wp.empty(len(piece), dtype=wp.int8, device=device)
+    load_kernels(device, cover_kernel)
+    launch_chunks(cover_kernel, len(piece), [bvh.points, bvh.indices, wp.array(piece.astype(np.int32), dtype=wp.int32,
+                                                                               device=device),
+                                             wp.array(np.ascontiguousarray(centre, np.float64), dtype=wp.vec3d,
+                                                      device=device), cover], device, threads)
+    cover = cover.numpy()
+    star = (np.bincount(piece, cover < 0, len(centre)) == 0) & (np.bincount(piece, cover == 1, len(centre)) == 1)
     return star[piece]
 
 
