@@ -6,10 +6,10 @@ crossing each other are fine (each is a solid: windings add up, never below 0).
 
 A piece strictly star-shaped from its centroid is proven not to pass through itself at once
 (`star_shaped`: convex solids, the benchmark's sphere; ~0.05 us a face, 2 cores -- the 81,920-face
-icosphere's ~4 ms against its BVH build's ~25 ms). In the others (~0.8 us a face: Warp's CPU
-`mesh_query_aabb` takes ~0.55 us and gained nothing from a second thread here), two triangles
-of one piece are tested when their bounding boxes overlap (the BVH's candidates, each pair once),
-by how many welded vertices they share:
+icosphere's ~4 ms against its BVH build's ~25 ms). In the others (~0.8 us a face on one core, of
+which Warp's CPU `mesh_query_aabb` takes ~0.55 us), two triangles of one piece are tested when
+their bounding boxes overlap (the BVH's candidates, each pair once), by how many welded vertices
+they share:
 
 - none: they meet exactly when an edge of one meets the other triangle (`segment_meets`, six
   tests: two triangles in different planes meet in a segment whose ends lie on edges; in one plane,
