@@ -5,7 +5,8 @@
    buffer, the BVH's bit for bit, its z-buffer without the closed sphere's back faces; shading; the
    image; no ray tree), with the item buffer kept from
    the last render of the view (as the BVH is kept) and made anew (a new view's first frame), and
-   with every primary ray through the BVH (item_buffer=False). Mitsuba: `scene.ray_intersect` alone on the same rays
+   with every primary ray through the BVH (item_buffer=False); beside them what the compiled scene
+   builds once: the BVH and the culling test. Mitsuba: `scene.ray_intersect` alone on the same rays
    (closest hit only, no shading; llvm_ad_rgb when Mitsuba's LLVM backend loads, else scalar_rgb,
    named in the output). Rays per second, medians, interleaved repeats.
 2. Whitted scenes: spheres (mirror, glass, diffuse) over a checkered plane, two point lights with
@@ -40,7 +41,9 @@ import difflab
 from difflab.io import write_json_atomic
 from difflab.renderers.camera import camera_frame
 from difflab.renderers.launch import cpu_threads
+from difflab.geometry import solid_pieces
 from difflab.renderers.raytrace.itembuffer import forget_item_buffer
+from difflab.renderers.raytrace.selfcross import passes_through_itself
 
 sys.path.insert(0, str(Path(__file__).parent))
 import peers  # noqa: E402
@@ -98,6 +101,21 @@ def timed_render(scene, threads: int, **options) -> tuple[float, float]:
     return time.perf_counter() - start, time.process_time() - start_cpu
 
 
+def one_time_costs(compiled) -> tuple[float, float, float]:
+    """Wall seconds of what a compiled scene builds once for its meshes: the BVH (`wp.Mesh`), and
+    the item buffer's culling test -- closed solids facing out (`solid_pieces`), then none passing
+    through itself (`passes_through_itself`)."""
+    vertices = compiled.arrays["vertices"]
+    faces = compiled.faces[:compiled.n_mesh_faces]
+    start = time.perf_counter()
+    bvh = warp.Mesh(points=vertices, indices=warp.array(np.ascontiguousarray(faces).ravel(), dtype=warp.int32))
+    built = time.perf_counter()
+    pieces = solid_pieces(vertices.numpy()[:compiled.n_mesh_vertices], faces)
+    solids = time.perf_counter()
+    passes_through_itself(bvh, *pieces)
+    return built - start, solids - built, time.perf_counter() - solids
+
+
 def medians(pairs) -> tuple[float, float]:
     return statistics.median(p[0] for p in pairs), statistics.median(p[1] for p in pairs)
 
@@ -117,7 +135,9 @@ def primary_case(size: int, repeats: int, threads: int) -> dict:
         origins, directions = primary_rays(scene.camera, size)
         mitsuba, variant = peers.mitsuba_tracer(obj_path, origins, directions)
         ours, new_view, bvh, single, theirs = [], [], [], [], []
+        once = [one_time_costs(compiled)]  # the first loads the kernels
         for _ in range(repeats):
+            once.append(one_time_costs(compiled))
             ours.append(timed_render(compiled, threads))
             forget_item_buffer(compiled)
             new_view.append(timed_render(compiled, threads))
@@ -139,6 +159,8 @@ def primary_case(size: int, repeats: int, threads: int) -> dict:
            "difflab_bvh_rays_per_cpu_second": rays / medians(bvh)[1],
            "item_buffer_asked_bvh": frame.stats["item_buffer_asked_bvh"],
            "item_buffer_culled": frame.stats["item_buffer_culled"],
+           **{f"{name}_ms": 1e3 * statistics.median(times) for name, times in
+              zip(("bvh_build", "solid_pieces", "passes_through_itself"), zip(*once[1:]))},
            "mitsuba_variant": variant, "mitsuba_rays_per_second": None, "mitsuba_rays_per_cpu_second": None}
     if theirs:
         row["mitsuba_rays_per_second"], row["mitsuba_rays_per_cpu_second"] = (rays / m for m in medians(theirs))
@@ -186,7 +208,8 @@ def main(argv=None) -> int:
           f"{primary['difflab_new_view_rays_per_second'] / 1e6:.2f}, "
           f"{primary['difflab_new_view_rays_per_cpu_second'] / 1e6:.2f} per CPU-s; BVH only {primary['difflab_bvh_rays_per_second'] / 1e6:.2f}; "
           f"{primary['item_buffer_asked_bvh']} samples asked the BVH; back faces culled: "
-          f"{primary['item_buffer_culled']}), Mitsuba "
+          f"{primary['item_buffer_culled']}; once per compiled scene: BVH {primary['bvh_build_ms']:.1f} ms, culling test "
+          f"{primary['solid_pieces_ms']:.1f} ms solids + {primary['passes_through_itself_ms']:.1f} ms self-crossing), Mitsuba "
           + (f"{primary['mitsuba_rays_per_second'] / 1e6:.2f} Mrays/s ({primary['mitsuba_variant']}; "
              f"{primary['mitsuba_rays_per_cpu_second'] / 1e6:.2f} per CPU-s): difflab / Mitsuba "
              f"{primary['difflab_over_mitsuba']:.2f} (wall), {primary['difflab_over_mitsuba_cpu']:.2f} (CPU); "
