@@ -54,7 +54,7 @@ def solid_pieces(vertices, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray] |
     diagonal = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
     if not np.all(volume[labels] > MIN_VOLUME * diagonal ** 3):
         return None
-    corner_sum = v[:, 0] + v[:, 1] + v[:, 2]  # a cone's centroid is corner_sum / 4 (numpy's sum over axis 1: ~10x slower)
+    corner_sum = v[:, 0] + v[:, 1] + v[:, 2]  # a cone's centroid is corner_sum / 4 (numpy's sum(axis=1): ~10x slower)
     centroid = np.stack([np.bincount(piece, six_volume * corner_sum[:, k]) for k in range(3)], axis=1)
     return corners, piece, centroid / np.where(labels, 24.0 * volume, 1.0)[:, None]
 
