@@ -3,10 +3,12 @@ calibrated standard errors, bounds, diagnostics, failures and bad input."""
 
 import numpy as np
 import pytest
-from test_fit_helpers import TRUTH, make_scene, perturbed, target_of
+from test_fit_helpers import TRUTH, make_scene, perturbed, scene_dict, target_of
 
 from difflab.errors import FitError
 from difflab.fit import FitResult, fit_batch, fit_material
+from difflab.renderers.api import render_frame
+from difflab.scene import Scene
 
 START = perturbed(TRUTH)
 
@@ -210,3 +212,34 @@ def test_a_textured_material_goes_through_the_ray_tree(tmp_path):
     np.testing.assert_allclose(result.params["kd"], TRUTH["kd"], rtol=1e-4)
     with pytest.raises(FitError, match="add .texture. to params"):
         fit_material(scene, [target], "red", method="raster")
+
+
+def test_unlit_pixels_leave_the_noise_estimate_and_the_chi_square():
+    """A sphere lit from the side without ambient light: 52 % of its pixels are exactly 0 in the
+    target and in the fitted model. A renderer's noise scales with its signal, so they carry none:
+    Gaussian noise of sigma 0.01 on the lit pixels only. The noise estimate reads the lit pixels (over
+    every used pixel the median Laplacian sits in the unlit half: ~9x too low, the correct fit
+    flagged model_mismatch) and the chi-square counts only the lit entries: its sum of squares over
+    dof estimates 0.01^2 within 5 standard deviations (counting the unlit entries too gives ~0.48).
+    With noise proportional to the signal (5 %), sigma is the median lit pixel's noise within 25 %."""
+    from difflab.fit.stats import estimate_sigma
+
+    side = {"type": "point", "position": [-4, 1.5, 1], "intensity": [1, 1, 1], "attenuation": [1, 0, 0]}
+    d = scene_dict(size=48, red={"ka": [0.0] * 3, "ks": [0.0] * 3}, lights=[side])
+    d["ambient"], d["background"], d["objects"] = [0, 0, 0], [0, 0, 0], d["objects"][:1]
+    scene = Scene.from_dict(d)
+    frame = render_frame(scene)
+    clean, mask = frame.image.astype(np.float64), frame.gbuffer.material == 0
+    lit = mask & (clean > 0).any(axis=-1)
+    assert (mask & ~lit).sum() > 0.5 * mask.sum()
+    rng = np.random.default_rng(0)
+    fit = lambda noisy: fit_material(scene, [noisy], "red", ("kd",), masks=[mask], init={"kd": [0.5] * 3})  # noqa: E731
+    result = fit(clean + 0.01 * (clean > 0) * rng.normal(size=clean.shape))
+    assert result.converged and not result.model_mismatch
+    assert abs(result.sigma - 0.01) < 0.0015
+    assert estimate_sigma(result.residuals, [mask]) < 0.2 * result.sigma  # the unlit pixels counted: too low
+    dof = 3 * int(lit.sum()) - 3
+    assert abs(result.chi2 * result.sigma ** 2 / 0.01 ** 2 - 1.0) < 5 * np.sqrt(2.0 / dof)
+    proportional = fit(clean * (1.0 + 0.05 * rng.normal(size=clean.shape)))
+    median_noise = float(np.median(0.05 * clean[lit]))
+    assert proportional.converged and abs(proportional.sigma / median_noise - 1.0) < 0.25

@@ -1,5 +1,5 @@
-"""The fit's statistics in closed form: degrees of freedom net of censored values, the reduced
-chi-square, the mismatch threshold, standard errors and optimistix result names."""
+"""The fit's statistics in closed form: degrees of freedom net of censored and noise-free values, the
+reduced chi-square, the mismatch threshold, standard errors and optimistix result names."""
 
 import math
 
@@ -20,6 +20,9 @@ def test_reduced_chi_square_counts_uncensored_values_less_parameters():
     np.testing.assert_allclose(st["diag"], np.diag(np.linalg.inv(jac.T @ jac)), rtol=1e-12)
     assert fit_statistics(jac.T @ jac, r, censored=0, sigma=0.5, size=2)["s2"] == pytest.approx(sse / 4, rel=1e-15)
     assert fit_statistics(jac.T @ jac, r, censored=0, sigma=0.0, size=2)["chi2"] == math.inf
+    silent = fit_statistics(jac.T @ jac, r, censored=1, sigma=0.5, size=2, silent=1)  # r[3] = 0: a noise-free zero
+    assert silent["s2"] == pytest.approx(sse / (6 - 1 - 1 - 2), rel=1e-15)
+    assert silent["chi2"] == pytest.approx(sse / 2 / 0.25, rel=1e-15)
     three = jac[:3].T @ jac[:3]
     assert fit_statistics(three, r[:3], censored=0, sigma=1.0, size=2)["s2"] == pytest.approx(0.14, rel=1e-14)  # dof 1
     assert fit_statistics(three, r[:3], censored=1, sigma=1.0, size=2)["s2"] == pytest.approx(0.14, rel=1e-14)  # floor 1

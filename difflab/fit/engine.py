@@ -67,10 +67,11 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         residuals = setup.residual_images(r)
         finite = bool(np.all(np.isfinite(flat)) and np.isfinite(loss) and (gram is None or np.all(np.isfinite(gram))))
         weighted = residuals if setup.unit_weights else setup.residual_images(r, weighted=True)
-        sigma = setup.noise(weighted) if finite else float("nan")
+        silent, silent_entries = setup.silent(r)
+        sigma = setup.noise(weighted, silent) if finite else float("nan")
         r = r[used]
         if finite:
-            st = fit_statistics(gram, r, setup.censored, sigma, layout.size)
+            st = fit_statistics(gram, r, setup.censored, sigma, layout.size, silent_entries)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if gram is not None else
                                       np.full(layout.size, np.nan))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], QUANTISATION_SIGMA ** 2)))

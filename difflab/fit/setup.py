@@ -162,12 +162,32 @@ class Setup:
                                 for v in self.views if np.isfinite(v.ceiling)))  # over the used pixels
         self.sigma_floor = max(FLOAT_SIGMA, max(v.step for v in self.views) / math.sqrt(12.0))
 
-    def noise(self, residual_images) -> float:
+    def silent(self, r) -> tuple[list[np.ndarray], int]:
+        """The used pixels that carry no noise: target and model both exactly 0 in every channel (an
+        unlit side; a renderer's noise scales with its signal), from the flat weighted residuals r
+        over every used entry. Returns per view (U,) bool over its used pixels, and how many of
+        their entries have weight > 0 (left out of the chi-square's dof, see `stats`)."""
+        out, count, offset = [], 0, 0
+        for view in self.views:
+            part = r[offset:offset + 3 * view.pixels.size].reshape(-1, 3)
+            offset += 3 * view.pixels.size
+            zero = (part == 0) & (view.values == 0)
+            rows = zero[:, 0] & zero[:, 1] & zero[:, 2]
+            out.append(rows)
+            count += int(np.count_nonzero(view.weights[rows] > 0))
+        return out, count
+
+    def noise(self, residual_images, silent=None) -> float:
         """The pixel noise sigma: given, or estimated from the residual images (H, W, 3) at the
-        solution (from the targets where too few pixels allow), floored (see `stats`)."""
+        solution (from the targets where too few pixels allow) without the `silent` pixels (per view
+        (U,) bool, from `silent`), floored (see `stats`)."""
         if self.sigma_given is not None:
             return self.sigma_given
         clean = [v.used & ~at_ceiling(v.target, v.ceiling) if np.isfinite(v.ceiling) else v.used for v in self.views]
+        for i, (view, rows) in enumerate(zip(self.views, silent or ())):
+            if rows.any():
+                clean[i] = clean[i].copy()
+                clean[i].reshape(-1)[view.pixels[rows]] = False
         estimate = estimate_sigma(residual_images, clean)
         if estimate is None:
             estimate = estimate_sigma([v.target for v in self.views], clean, interior=False)

@@ -12,10 +12,23 @@ upper estimate). It is floored at the targets' quantisation: one step / sqrt(12)
 
     chi2_red = sum_i r_i^2 / (sigma^2 (N - p))
 
-over the N uncensored residual entries and p fitted entries. `model_mismatch` is set when
-chi2_red > MISMATCH_CHI2 (and above 1 + 5 sqrt(2 / (N - p)), its statistical spread): the residuals
-sit far above the noise, so the image model does not explain the target (wrong image model, wrong
-specular model, missing light...) and the fitted values answer a different question.
+over the N uncensored residual entries and p fitted entries.
+
+Silent pixels: a used pixel whose target and fitted model are both exactly 0 in every channel (the
+unlit side of an object without ambient light) carries no noise -- a renderer's noise scales with
+its signal, so there is none where there is no light -- and says nothing about sigma: such pixels
+are left out of the noise estimate (so are their neighbours, whose Laplacian they would damp), else
+a large unlit region pulls the median, and sigma, down and flags a correct fit as a mismatch.
+Their entries add exactly 0 to the sum of squares and are left out of N too: the chi-square counts
+only the entries that can carry noise, so a correct fit still has chi2_red ~ 1 (and s^2 below
+estimates the lit pixels' noise). A pixel zero in only some channels stays in both. Where the noise
+level varies over the lit pixels (noise proportional to the signal), sigma is a median level and
+chi2_red, a mean square over it, exceeds 1 by the spread: (rms / median of the pixels' sigmas)^2.
+
+`model_mismatch` is set when chi2_red > MISMATCH_CHI2 (and above 1 + 5 sqrt(2 / (N - p)), its
+statistical spread): the residuals sit far above the noise, so the image model does not explain the
+target (wrong image model, wrong specular model, missing light...) and the fitted values answer a
+different question.
 
 Standard errors are those of linearised least squares, in scene units, and assume the model holds:
 
@@ -138,14 +151,15 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
     return np.where(finite, np.sqrt(np.where(finite, np.maximum(diag, 0.0), 0.0) * sigma2), np.inf)
 
 
-def fit_statistics(gram: np.ndarray | None, r: np.ndarray, censored: int, sigma: float, size: int) -> dict:
-    """s2 = sse / dof (dof = N - p, N uncensored entries of r, p = `size` fitted entries), chi2 =
-    s2 / sigma^2 (reduced), the mismatch flag (chi2 above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))),
-    and diag (J^T J)^-1 (p,) from gram = J^T J (p, p); gram None (a matrix-free fit): diag nan, no
-    covariance is formed."""
+def fit_statistics(gram: np.ndarray | None, r: np.ndarray, censored: int, sigma: float, size: int,
+                   silent: int = 0) -> dict:
+    """s2 = sse / dof (dof = N - p, N entries of r neither censored nor `silent` (noise-free zeros),
+    p = `size` fitted entries), chi2 = s2 / sigma^2 (reduced), the mismatch flag (chi2 above
+    max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and diag (J^T J)^-1 (p,) from gram = J^T J (p, p);
+    gram None (a matrix-free fit): diag nan, no covariance is formed."""
     p = size
     sse = float(np.sum(r * r))
-    dof = max(r.size - censored - p, 1)
+    dof = max(r.size - censored - silent - p, 1)
     s2 = sse / dof
     chi2 = s2 / (sigma * sigma) if sigma > 0 else math.inf
     mismatch = bool(chi2 > max(MISMATCH_CHI2, 1.0 + 5.0 * math.sqrt(2.0 / dof)))
