@@ -152,8 +152,10 @@ def make_whitted_kernel(stack_size: int):
             base = int(0)
             if params.record == 1:
                 base = tree.offset[i, j]
-            stack = wp.zeros(shape=stack_size, dtype=RayW)
-            stack[0] = new_ray(origin, origin, direction, wp.vec3(1.0), 0.0, 1, -1, PRIMARY, -1, -1)
+            first = new_ray(origin, origin, direction, wp.vec3(1.0), 0.0, 1, -1, PRIMARY, -1, -1)
+            if wp.static(stack_size > 1):  # (a one-ray stack is the primary ray alone: no array to clear)
+                stack = wp.zeros(shape=stack_size, dtype=RayW)
+                stack[0] = first
             sp = int(1)
             count = int(0)
             total = wp.vec3(0.0)
@@ -161,7 +163,9 @@ def make_whitted_kernel(stack_size: int):
 
             while sp > 0:
                 sp = sp - 1
-                ray = stack[sp]
+                ray = first
+                if wp.static(stack_size > 1):
+                    ray = stack[sp]
                 node = count
                 count = count + 1
                 hit = trace_ray(scene.geom, item, out, ray, i, j, t_far)
