@@ -137,26 +137,31 @@ def nearer(item: ItemBufferW, face: int, origin: wp.vec3, direction: wp.vec3, t_
 @wp.func(inline=True)
 def resolve_hint(item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: wp.vec3, found: HitW):
     """The mesh part of sample (i, j)'s primary hit before `found` (its nearest sphere or plane, or a
-    miss at the far plane): (triangle, NO_TRIANGLE or ASK_BVH; (t, u, v)) from its hint (module doc)."""
+    miss at the far plane): (triangle, NO_TRIANGLE or ASK_BVH; (t, u, v); the triangle's unit
+    winding normal, as `mesh_query_ray` reports it) from its hint (module doc)."""
     face = hint(item, i, j)
     corners = wp.vec3i(-1, -1, -1)  # the hint's vertices (none: -1)
     best = wp.vec4(0.0)
+    normal = wp.vec3(0.0)
     t_limit = found.t  # a neighbour's triangle met before this makes the sample ambiguous
     if face >= 0:
         corners = wp.vec3i(item.faces[face, 0], item.faces[face, 1], item.faces[face, 2])
-        best = woop_triangle(origin, direction, item.vertices[corners[0]], item.vertices[corners[1]],
-                             item.vertices[corners[2]])
+        a = item.vertices[corners[0]]
+        b = item.vertices[corners[1]]
+        c = item.vertices[corners[2]]
+        best = woop_triangle(origin, direction, a, b, c)
         u = best[1]
         v = best[2]
         if best[3] == 0.0 or u < BARY_MARGIN or v < BARY_MARGIN or 1.0 - u - v < BARY_MARGIN:
-            return ASK_BVH, wp.vec3(0.0)
+            return ASK_BVH, wp.vec3(0.0), normal
+        normal = wp.normalize(wp.cross(b - a, c - a))  # as mesh_query_ray's
         if best[0] < found.t:  # mesh_query_ray keeps 0 <= t < max_t; woop's t is >= 0
             t_limit = best[0]
         else:
             face = NO_TRIANGLE  # the sphere or plane is in front: every neighbour's triangle is checked
             corners = wp.vec3i(-2, -2, -2)  # (no vertex has a negative index)
     if item.edge[i, j] == wp.uint8(0) and corners[0] != -2:
-        return face, wp.vec3(best[0], best[1], best[2])  # no neighbour's hint to check (`edge_row`)
+        return face, wp.vec3(best[0], best[1], best[2]), normal  # no neighbour's hint to check (`edge_row`)
     ambiguous = bool(False)
     tested = int(-1)  # the last neighbour's triangle checked (neighbours mostly repeat one)
     for k in range(4):
@@ -166,8 +171,8 @@ def resolve_hint(item: ItemBufferW, i: int, j: int, origin: wp.vec3, direction: 
             if not shares_vertex(corners, item.faces, other):
                 ambiguous = ambiguous or nearer(item, other, origin, direction, t_limit)
     if ambiguous:
-        return ASK_BVH, wp.vec3(0.0)
-    return face, wp.vec3(best[0], best[1], best[2])
+        return ASK_BVH, wp.vec3(0.0), normal
+    return face, wp.vec3(best[0], best[1], best[2]), normal
 
 
 @wp.func(inline=True)
@@ -175,14 +180,12 @@ def item_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.vec
     """`closest_hit(geom, origin, direction, 0, t_max, -1)` of sample (i, j)'s primary ray, bit for
     bit, its mesh part from the item buffer (the BVH where the sample is ambiguous, counted)."""
     found = analytic_hit(geom, origin, direction, 0.0, t_max, -1)
-    face, tuv = resolve_hint(item, i, j, origin, direction, found)
+    face, tuv, normal = resolve_hint(item, i, j, origin, direction, found)
     if face == ASK_BVH:
         item.asked[i] = item.asked[i] + 1
         return mesh_hit(geom, origin, direction, 0.0, found, -1)
     if face == NO_TRIANGLE:
         return finish_hit(geom, found, origin, direction)
-    a = corner(item, face, 0)
-    normal = wp.normalize(wp.cross(corner(item, face, 1) - a, corner(item, face, 2) - a))  # as mesh_query_ray's
     return triangle_hit(geom, face, tuv[0], tuv[1], tuv[2], normal, origin, direction)
 
 
