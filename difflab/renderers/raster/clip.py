@@ -53,6 +53,12 @@ def snap(x: wp.float64):
 
 
 @wp.func
+def snapped(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d):
+    """The screen triangle's corners on the fixed-point grid: x0, y0, x1, y1, x2, y2 (int64)."""
+    return snap(s0[0]), snap(s0[1]), snap(s1[0]), snap(s1[1]), snap(s2[0]), snap(s2[1])
+
+
+@wp.func
 def edge(ax: wp.int64, ay: wp.int64, bx: wp.int64, by: wp.int64, px: wp.int64, py: wp.int64):
     """Twice the signed area of (a, b, p), exact in 64-bit integers."""
     return (bx - ax) * (py - ay) - (by - ay) * (px - ax)
@@ -92,12 +98,7 @@ def emit(slot: int, s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, w0: wp.vec3, w1: w
          rows: wp.array2d(dtype=wp.int32)):
     """Store one screen triangle, wound so its integer area is positive; facing +1 front, -1 back,
     0 not drawn (degenerate, or culled); and the rows of sample centres it may cover, for binning."""
-    x0 = snap(s0[0])
-    y0 = snap(s0[1])
-    x1 = snap(s1[0])
-    y1 = snap(s1[1])
-    x2 = snap(s2[0])
-    y2 = snap(s2[1])
+    x0, y0, x1, y1, x2, y2 = snapped(s0, s1, s2)
     area = edge(x0, y0, x1, y1, x2, y2)
     facing[slot] = 0
     if area == wp.int64(0):

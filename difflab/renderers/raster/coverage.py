@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from ..._warp import wp
 
-from .clip import SAMPLE_CENTRE, SUBPIXEL, drawn_rows, edge, owns_edge, sample_box, snap
+from .clip import SAMPLE_CENTRE, SUBPIXEL, drawn_rows, edge, owns_edge, sample_box, snapped
 
 wp.set_module_options({"enable_backward": False})
 
@@ -75,12 +75,7 @@ def raster_slot(slot: int, row_begin: int, row_end: int, screen: wp.array2d(dtyp
     s0 = screen[slot, 0]
     s1 = screen[slot, 1]
     s2 = screen[slot, 2]
-    x0 = snap(s0[0])
-    y0 = snap(s0[1])
-    x1 = snap(s1[0])
-    y1 = snap(s1[1])
-    x2 = snap(s2[0])
-    y2 = snap(s2[1])
+    x0, y0, x1, y1, x2, y2 = snapped(s0, s1, s2)
     box = sample_box(x0, y0, x1, y1, x2, y2)  # the candidates: samples in the snapped triangle's box
     j_lo = wp.max(box[2], 0)
     j_hi = wp.min(box[3], width - 1)
