@@ -5,7 +5,7 @@ import os
 
 import numpy as np
 import pytest
-from test_fit_helpers import TRUTH, make_scene, perturbed, scene_dict, target_of
+from test_fit_helpers import TRUTH, make_scene, mirror_scene, perturbed, target_of
 
 from difflab import Scene, render
 from difflab.cli import main
@@ -53,9 +53,7 @@ def test_fit_command_not_converged_exit_3(files):
 def test_fit_command_model_mismatch_exit_4(tmp_path, capsys):
     """A ray-traced mirror fitted with --method raster: converged, flagged, exit 4, files written;
     the scene's own model (the ray tree) exits 0. Two materials given as one comma-separated list."""
-    d = scene_dict(size=16, red={"kr": 0.1})
-    d["render"]["method"] = "raytrace"
-    scene = Scene.from_dict(d)
+    scene = mirror_scene(16)
     target = tmp_path / "target.npy"
     save_image(target, render(scene))
     path = tmp_path / "scene.json"

@@ -4,7 +4,7 @@ model mismatch), censored (clipped) targets, non-finite losses, and the paramete
 import jax
 import numpy as np
 import pytest
-from test_fit_helpers import TRUTH, make_scene, perturbed, scene_dict, target_of
+from test_fit_helpers import TRUTH, make_scene, mirror_scene, perturbed, scene_dict, target_of
 
 from difflab import Scene, render
 from difflab.fit import FitOptions, fit_material
@@ -15,10 +15,7 @@ START = perturbed(TRUTH)
 
 @pytest.fixture(scope="module")
 def mirror():
-    """The issue's trap: a ray-traced scene whose sphere reflects (kr = 0.1), with shadows."""
-    d = scene_dict(size=24, red={"kr": 0.1})
-    d["render"]["method"] = "raytrace"
-    scene = Scene.from_dict(d)
+    scene = mirror_scene(24)
     return scene, render(scene)
 
 

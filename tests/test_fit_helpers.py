@@ -34,6 +34,13 @@ def make_scene(**kw) -> Scene:
     return Scene.from_dict(scene_dict(**kw))
 
 
+def mirror_scene(size: int) -> Scene:
+    """The issue's trap: a ray-traced scene whose red sphere reflects (kr = 0.1), with shadows."""
+    d = scene_dict(size=size, red={"kr": 0.1})
+    d["render"]["method"] = "raytrace"
+    return Scene.from_dict(d)
+
+
 def target_of(scene) -> np.ndarray:
     return render_frame(scene).image
 

@@ -4,9 +4,9 @@ precision or fitted set; another camera, light placement or tree shape is render
 
 import numpy as np
 import pytest
-from test_fit_helpers import TRUTH, make_scene, perturbed, scene_dict, target_of
+from test_fit_helpers import TRUTH, make_scene, mirror_scene, perturbed, target_of
 
-from difflab import Scene, compile_scene
+from difflab import compile_scene
 from difflab.fit import fit_material
 from difflab.fit.records import KEPT_VIEWS, STORE
 
@@ -101,9 +101,7 @@ def test_another_camera_or_light_placement_is_rendered_and_at_most_kept_views_ar
 
 @pytest.fixture(scope="module")
 def mirror():
-    d = scene_dict(size=12, red={"kr": 0.1})
-    d["render"]["method"] = "raytrace"
-    scene = Scene.from_dict(d)
+    scene = mirror_scene(12)
     return scene, target_of(scene)
 
 
