@@ -298,8 +298,9 @@ def _swapped(tile):
 def _wide(im) -> str | None:
     """How a 16-bit image Pillow opened (header only) is laid out: "grey" (kept whole, "I;16"),
     "colour" (16-bit RGB(A) PNG / TIFF, of which Pillow keeps only the high bytes), or None."""
-    if im.mode in ("I;16", "I;16B", "I;16L") or (im.mode == "I" and im.format in ("PNG", "TIFF")):
-        return "grey"
+    if im.mode in ("I;16", "I;16B", "I;16L") or (im.mode == "I" and im.tile and
+                                                all((_rawmode(tile) or "").startswith("I;16") for tile in im.tile)):
+        return "grey"  # (mode "I" also holds 32-bit integer files: only 16-bit samples are read as such)
     raw = {_rawmode(tile) for tile in im.tile}
     return "colour" if im.mode in ("RGB", "RGBA") and im.tile and raw <= set(_OTHER_ORDER) else None
 
@@ -340,7 +341,7 @@ def _transfer(info: dict) -> float | None:
 
 
 def _read_picture(path: Path) -> tuple[np.ndarray, float | None]:
-    """(RGB samples (H, W, 3): uint8, or uint16 for a 16-bit PNG; the file's gamma, None for sRGB)
+    """(RGB samples (H, W, 3): uint8, or uint16 for a 16-bit PNG / TIFF; the file's gamma, None for sRGB)
     of an image file Pillow reads; its size (from the header, read lazily by Image.open) is checked
     against the memory budget before anything is decoded."""
     try:
@@ -349,6 +350,9 @@ def _read_picture(path: Path) -> tuple[np.ndarray, float | None]:
             with Image.open(path) as im:
                 limits.require_image(im.width, im.height, str(path), limits.IMAGE_LOAD_BYTES)
                 wide = _samples16(im, path)
+                if wide is None and im.mode in ("I", "F"):
+                    raise DifflabError(f"{path}: 32-bit integer or float samples (mode {im.mode!r}) are not read: "
+                                       "save 8- or 16-bit samples, or the linear array as .npy")
                 return (np.asarray(im.convert("RGB")) if wide is None else wide), _transfer(im.info)
     except DifflabError:
         raise

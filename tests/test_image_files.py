@@ -121,3 +121,16 @@ def test_a_float_exr_is_refused_with_what_to_do(tmp_path):
     exr.write_bytes(b"\x76\x2f\x31\x01" + bytes(60))  # OpenEXR's magic number, then nothing Pillow reads
     with pytest.raises(DifflabError, match=r"target\.exr: cannot read image .*EXR, HDR.* \.npy"):
         load_image(exr)
+
+
+@pytest.mark.parametrize("mode, values", [("I", np.full((4, 4), 100000, np.int32)),
+                                          ("F", np.full((4, 4), 0.5, np.float32))])
+def test_32_bit_integer_and_float_tiffs_are_refused(tmp_path, mode, values):
+    """Pillow opens them as mode "I" / "F": neither 8- nor 16-bit samples (a 32-bit integer TIFF was
+    read as 16-bit, its values wrapped: 100000 -> 0.526)."""
+    from PIL import Image
+
+    path = tmp_path / f"deep_{mode}.tif"
+    Image.fromarray(values, mode=mode).save(path)
+    with pytest.raises(DifflabError, match=rf"deep_{mode}\.tif: 32-bit integer or float samples .*\.npy"):
+        load_image(path)

@@ -328,10 +328,13 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     # then filter to pixels (Phong without stage 7: a sample's colour is its point's, fogged, so the
     # pixels are not finite exactly where these are not)
     samples_rgb = (canvas.numpy() if composed else gbuffer.points.color).reshape(height, width, 3)
-    pixels = box_downsample(samples_rgb, side)
-    stats = frame_stats(compiled, start, nonfinite_pixels(pixels), width * height, n_points)
+    pixels = box_downsample(samples_rgb, side) if image else None
+    nonfinite = nonfinite_pixels(samples_rgb if pixels is None else pixels)
+    if pixels is None and nonfinite and side > 1:  # count the pixels the non-finite samples reach
+        nonfinite = nonfinite_pixels(box_downsample(samples_rgb, side))
+    stats = frame_stats(compiled, start, nonfinite, width * height, n_points)
     stats["covered_samples"] = int(gbuffer.mask.sum())
-    return Frame(image=pixels if image else None, buffers=gbuffer, stats=stats)
+    return Frame(image=pixels, buffers=gbuffer, stats=stats)
 
 
 def frame_stats(compiled, start: float, nonfinite: int, n_samples: int, n_points: int) -> dict:
