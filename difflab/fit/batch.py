@@ -114,10 +114,7 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
         else:
             s = solved[b]
             out = report(elements[b], s.x, s.result, s.steps, s.history, options, each, s.linearised)
-            target = images[b] if overrides is None else (images[b], overrides)
-            results.append(without_clipped(elements[b], out, options, lambda kept, start_values: Setup(
-                scene, [target], material, params, weights=kept, init=start_values, x64=options.x64,
-                **{k: v for k, v in setup_kwargs.items() if k != "weights"})))
+            results.append(without_clipped(elements[b], out, options, elements[b].reweighted))
     return results
 
 

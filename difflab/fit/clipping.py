@@ -25,19 +25,14 @@ says there is signal), and the band holds only channels whose model is > 0 and <
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import numpy as np
 
 from .records import take_pixels
+from .setup import images_jit
 
 BAND = 2.0  # sigmas: the bias left at the band's edge is under 1 % of sigma a pixel
 MIN_CLIPPED = 3  # target values at a bound (this many) mark it clipped there
-
-
-@eqx.filter_jit
-def _images(problem, values):
-    return problem.images(values)
 
 
 def clipped_band(setup, result) -> list[np.ndarray] | None:
@@ -56,7 +51,7 @@ def clipped_band(setup, result) -> list[np.ndarray] | None:
     flat = setup.layout.flatten({p.key: np.asarray(result.params[p.key], np.float64).reshape(-1)
                                  for p in setup.layout})
     with jax.enable_x64(setup.x64):
-        images = _images(setup.problem, np.asarray(flat, setup.dtype))  # numpy: moved with the call
+        images = images_jit(setup.problem, np.asarray(flat, setup.dtype))  # numpy: moved with the call
     bands = []
     for view, image, (floor, top) in zip(setup.views, images, bounds):
         model = np.asarray(image, np.float64)

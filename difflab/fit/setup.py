@@ -389,13 +389,14 @@ class Setup:
                 every = np.arange(view.used.size)
                 arrays = to_device(self._view_arrays(view, every, index["intensity"]))
                 full = eqx.tree_at(lambda p: p.views, self.problem, (self._view(view, every, arrays),))
-                image = _images_jit(full, jnp.asarray(flat, self.dtype))[0]
+                image = images_jit(full, jnp.asarray(flat, self.dtype))[0]
                 out.append(np.asarray(image, np.float32).reshape(view.target.shape))
         return out
 
 
 @eqx.filter_jit
-def _images_jit(problem, values):
+def images_jit(problem, values):
+    """Every view's (U, 3) image at the flat `values` (scene units), compiled once per problem structure."""
     return problem.images(values)
 
 
