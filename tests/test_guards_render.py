@@ -156,9 +156,8 @@ def test_a_small_rasterized_frame_runs_on_one_thread_unless_told(monkeypatch):
     """The default for a frame under RASTER_POOL_MIN_SAMPLES samples is one thread; larger frames,
     an explicit `threads` and $DIFFLAB_THREADS keep their own count; the image is the same."""
     monkeypatch.delenv("DIFFLAB_THREADS", raising=False)
-    assert RASTER_POOL_MIN_SAMPLES == 256 * 256 + 1
-    assert raster_threads(None, 256 * 256) == 1
-    assert raster_threads(None, 256 * 256 + 1) is None
+    assert raster_threads(None, RASTER_POOL_MIN_SAMPLES - 1) == 1
+    assert raster_threads(None, RASTER_POOL_MIN_SAMPLES) is None
     assert raster_threads(2, 64) == 2
     monkeypatch.setenv("DIFFLAB_THREADS", "2")
     assert raster_threads(None, 64) is None  # cpu_threads() then reads the variable
