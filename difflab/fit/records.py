@@ -25,6 +25,8 @@ from functools import cached_property
 
 import numpy as np
 
+from .targets import in_channels
+
 KEPT_VIEWS = 4
 KEPT_MODELS = 2  # per view
 EVALUATED = frozenset(("ka", "kd", "ks", "n", "m", "f0"))  # what the image models evaluate afresh
@@ -77,20 +79,22 @@ class KeptView:
 
 @dataclass(frozen=True)
 class View:
-    """One target and what it was seen with. target (H, W, 3) float64 (0 where masked out); mask
-    (H, W) bool; weight (H, W, 3) >= 0 (0 outside the mask); ceiling: where its values clip (inf:
-    nowhere); step: its samples' step (1 / 255 from an 8-bit file, 1 / 65535 from a 16-bit one, 0
-    for float data: the noise floor is step / sqrt(12)); nonfinite: non-finite target values inside
-    the mask; record: its G-buffer or ray tree; scene: the scene of this view; used (H, W) bool: the
-    pixels the fit reads (`pixels`: their flat indices, in order; `values` and `weights`: the
-    target's and the weight's (U, 3) rows there -- each computed once, on first use, or handed over
-    by `Setup._seen`, which took them already); kept: the `KeptView` of the record when it is kept
-    with the compiled scene, else None; touched (H, W) bool: the pixels the fitted parameters
-    influence."""
+    """One target and what it was seen with. image (H, W, 3): the target as given (a private copy,
+    in its own float precision; `target`: float64, 0 outside the mask and where not finite); mask
+    (H, W) bool; weighting (H, W, 3) >= 0, 0 outside the mask, or None: 1 inside the mask (`weight`:
+    either as an image); ceiling: where its values clip (inf: nowhere); step: its samples' step (1 /
+    255 from an 8-bit file, 1 / 65535 from a 16-bit one, 0 for float data: the noise floor is step /
+    sqrt(12)); nonfinite: non-finite target values inside the mask; record: its G-buffer or ray tree;
+    scene: the scene of this view; used (H, W) bool: the pixels the fit reads (`pixels`: their flat
+    indices, in order; `values` and `weights`: the target's and the weight's (U, 3) float64 rows there
+    -- each computed once, on first use, or handed over by `Setup._seen`, which took them already);
+    kept: the `KeptView` of the record when it is kept with the compiled scene, else None; touched
+    (H, W) bool: the pixels the fitted parameters influence. The whole-image `target` and `weight`
+    are formed only when asked for: a fit reads the used pixels' rows."""
 
-    target: np.ndarray
+    image: np.ndarray
     mask: np.ndarray
-    weight: np.ndarray
+    weighting: np.ndarray | None
     ceiling: float
     step: float
     nonfinite: int
@@ -101,16 +105,32 @@ class View:
     touched: np.ndarray | None = None
 
     @cached_property
+    def target(self) -> np.ndarray:
+        inside = np.isfinite(self.image) & self.mask[..., None]
+        return np.where(inside, self.image, np.float64(0.0))
+
+    @cached_property
+    def weight(self) -> np.ndarray:
+        if self.weighting is not None:
+            return self.weighting
+        return in_channels(self.mask).astype(np.float64)
+
+    @cached_property
     def pixels(self) -> np.ndarray:
         return np.flatnonzero(self.used)
 
     @cached_property
     def values(self) -> np.ndarray:
-        return take_pixels(self.target, self.pixels)
+        values = take_pixels(self.image, self.pixels).astype(np.float64, copy=False)
+        if self.nonfinite:  # (only inside the mask: where the pixels used are)
+            values[~np.isfinite(values)] = 0.0
+        return values
 
     @cached_property
     def weights(self) -> np.ndarray:
-        return take_pixels(self.weight, self.pixels)
+        if self.weighting is None:
+            return np.ones((self.pixels.size, 3))
+        return take_pixels(self.weighting, self.pixels)
 
 
 def take_pixels(image, pixels) -> np.ndarray:

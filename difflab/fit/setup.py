@@ -35,7 +35,7 @@ from .raytree import TreeModel, tree_influence
 from .records import KeptView, View, take_pixels, view_key, view_store
 from .shading import GBufferModel, influence
 from .stats import FLOAT_SIGMA, estimate_sigma
-from .targets import prepared_targets
+from .targets import nonfinite_count, prepared_targets
 from .texels import TexelSource, texture_starts, wants_texels
 
 METHODS = ("raster", "raytrace")
@@ -60,7 +60,7 @@ def choose_method(scene, materials, method, texels=False) -> str:
 
 
 def at_ceiling(image, ceiling) -> np.ndarray:
-    """(H, W) bool: pixels with a channel at or above `ceiling` (three comparisons or'ed: numpy's
+    """(...) bool: the pixels of an image (..., 3) with a channel at or above `ceiling` (three comparisons or'ed: numpy's
     `any` over a last axis of 3 costs ~10x as much)."""
     top = image >= ceiling
     return top[..., 0] | top[..., 1] | top[..., 2]
@@ -190,11 +190,15 @@ class Setup:
         (U,) bool, from `silent`), floored (see `stats`)."""
         if self.sigma_given is not None:
             return self.sigma_given
-        clean = [v.used & ~at_ceiling(v.target, v.ceiling) if np.isfinite(v.ceiling) else v.used for v in self.views]
-        for i, (view, rows) in enumerate(zip(self.views, silent or ())):
-            if rows.any():
-                clean[i] = clean[i].copy()
-                clean[i].reshape(-1)[view.pixels[rows]] = False
+        clean = []  # the used pixels but the silent and the censored ones
+        for i, view in enumerate(self.views):
+            left_out = silent[i] if silent else np.zeros(view.pixels.size, bool)
+            if np.isfinite(view.ceiling):
+                left_out = left_out | at_ceiling(view.values, view.ceiling)
+            clean.append(view.used)
+            if left_out.any():
+                clean[i] = view.used.copy()
+                clean[i].reshape(-1)[view.pixels[left_out]] = False
         estimate = estimate_sigma(residual_images, clean)
         if estimate is None:
             estimate = estimate_sigma([v.target for v in self.views], clean, interior=False)
@@ -206,10 +210,8 @@ class Setup:
         out = copy.copy(self)
         views = []
         for view, image in zip(self.views, images):
-            image = np.asarray(image, np.float64)
-            inside = np.isfinite(image) & view.mask[..., None]
-            views.append(dataclasses.replace(view, target=np.where(inside, image, 0.0),
-                                             nonfinite=int(np.count_nonzero(~np.isfinite(image) & view.mask[..., None]))))
+            image = np.array(image, np.float64)  # (a copy: read later)
+            views.append(dataclasses.replace(view, image=image, nonfinite=nonfinite_count(image, view.mask)))
         out.views = views
         out._target_statistics()
         if init is not None:
@@ -267,27 +269,29 @@ class Setup:
                 touched = kept.touched((tree_ids, tuple(crossing)), lambda: tree_influence(record, tree_ids, crossing))
             else:
                 touched = kept.touched((tuple(ids), all_surfaces), lambda: influence(record, ids, all_surfaces))
-            views.append(self._seen(View(target=image, mask=mask, weight=weight, ceiling=np.inf, step=step or 0.0,
+            views.append(self._seen(View(image=image, mask=mask, weighting=weight, ceiling=np.inf, step=step or 0.0,
                                          nonfinite=nonfinite, record=record, scene=view_scene, used=touched,
                                          kept=kept if store is not None else None, touched=touched), weight))
         return views
 
     def _seen(self, view: View, weight) -> View:
-        """The view with `weight`, the pixels it uses (in the mask, weight > 0, influenced by the
-        fitted parameters) and its target's ceiling (given; 1 for image files, which saturate there;
-        for float data, ties at the maximum of the used values)."""
-        positive = weight > 0
-        used = view.mask & (positive[..., 0] | positive[..., 1] | positive[..., 2]) & view.touched
-        pixels = np.flatnonzero(used)
-        values = take_pixels(view.target, pixels)
+        """The view with `weight` (None: 1 inside the mask), the pixels it uses (in the mask, weight >
+        0, influenced by the fitted parameters) and its target's ceiling (given; 1 for image files,
+        which saturate there; for float data, ties at the maximum of the used values)."""
+        used = view.mask & view.touched
+        if weight is not None:
+            positive = weight > 0
+            used &= positive[..., 0] | positive[..., 1] | positive[..., 2]
+        out = dataclasses.replace(view, weighting=weight, used=used)
+        values = out.values
         top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
         if top is None:  # float data: a clipped ceiling shows as ties at the maximum
             peak = float(values.max()) if values.size else 0.0
             ties = np.count_nonzero(values == peak)
             top = peak if peak > 0 and CENSOR_MIN_TIES <= ties < values.size // 2 else np.inf
-        out = dataclasses.replace(view, weight=weight, used=used, ceiling=np.inf if top is False else float(top))
-        out.__dict__.update(pixels=pixels, values=values)  # View's cached properties, taken already
-        return out
+        seen = dataclasses.replace(out, ceiling=np.inf if top is False else float(top))
+        seen.__dict__.update(pixels=out.pixels, values=values)  # View's cached properties, taken already
+        return seen
 
     def _compiled_for(self, view_scene, device):
         """The compiled scene given, under the view's scene, when it holds the view's geometry (same
@@ -316,9 +320,12 @@ class Setup:
         intensity_index[:shared] = index[:shared]
         real = np.dtype(self.dtype)
         used = pixels is view.pixels  # its rows are taken once (`View.values`, `View.weights`)
-        weight = view.weights if used else take_pixels(view.weight, pixels)
+        if used and view.weighting is None:
+            sqrt_weight = np.ones((pixels.size, 3), real)
+        else:
+            sqrt_weight = np.sqrt(view.weights if used else take_pixels(view.weight, pixels)).astype(real, copy=False)
         return (lights, (view.values if used else take_pixels(view.target, pixels)).astype(real, copy=False),
-                np.sqrt(weight).astype(real, copy=False), np.asarray(view.ceiling, real), intensity_index)
+                sqrt_weight, np.asarray(view.ceiling, real), intensity_index)
 
     def _view(self, view: View, pixels, arrays) -> ViewJ:
         """The view for `pixels` from its `_view_arrays` on the device, with its image model (kept
@@ -333,10 +340,17 @@ class Setup:
                      intensity_index=intensity_index)
 
     def _problem(self, loss, loss_scale) -> Problem:
-        weights = [v.weights for v in self.views]
-        self.weighted_entries = np.concatenate([(w > 0).reshape(-1) for w in weights])  # residual entries that count
-        self.unit_weights = all(np.all(w == 1.0) for w in weights)  # weighted residuals are the plain ones
-        self.weight_total = float(sum(np.sum(w) for w in weights))
+        entries, total, self.unit_weights = [], 0.0, True  # unit weights: the weighted residuals are the plain ones
+        for v in self.views:
+            if v.weighting is None:  # 1 at every pixel used
+                entries.append(np.ones(3 * v.pixels.size, bool))
+                total += 3 * v.pixels.size
+            else:
+                entries.append((v.weights > 0).reshape(-1))
+                total += np.sum(v.weights)
+                self.unit_weights &= bool(np.all(v.weights == 1.0))
+        self.weighted_entries = np.concatenate(entries)  # the residual entries that count
+        self.weight_total = float(total)
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
         arrays, table, ambient, index, loss_scale = to_device((  # one transfer
@@ -369,7 +383,7 @@ class Setup:
             if not weighted and not self.unit_weights:
                 sqrt_w = np.sqrt(view.weights)
                 part = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w, 1.0), 0.0)
-            full = np.zeros(view.target.shape, np.float32)
+            full = np.zeros(view.image.shape, np.float32)
             full.reshape(-1, 3)[pixels] = part
             out.append(full)
         return out
@@ -390,7 +404,7 @@ class Setup:
                 arrays = to_device(self._view_arrays(view, every, index["intensity"]))
                 full = eqx.tree_at(lambda p: p.views, self.problem, (self._view(view, every, arrays),))
                 image = images_jit(full, jnp.asarray(flat, self.dtype))[0]
-                out.append(np.asarray(image, np.float32).reshape(view.target.shape))
+                out.append(np.asarray(image, np.float32).reshape(view.image.shape))
         return out
 
 

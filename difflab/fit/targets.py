@@ -52,7 +52,7 @@ def normalise_targets(targets) -> list[tuple[object, dict]]:
 
 
 def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
-    """(image (H, W, 3) linear floats -- an array in its own precision, float64 from a file --, its
+    """(image (H, W, 3) linear floats -- a copy of an array, in its own precision; float64 from a file --, its
     sample step: 1 / 255 for 8-bit image files, 1 / 65535 for 16-bit ones (their ceiling is 1.0),
     None for float data)."""
     if _is_path(item):
@@ -73,7 +73,7 @@ def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
                        "ceiling=1.0 for its clipped highlights")
     if image.dtype.kind != "f":
         raise FitError(f"{where}: an image of dtype {image.dtype} is refused; give linear RGB floats")
-    return image, None
+    return np.array(image), None  # (a copy: the fit reads it later)
 
 
 def per_view(values, count: int, name: str) -> list:
@@ -135,12 +135,23 @@ def view_weight(value, shape, where) -> np.ndarray:
     return weight
 
 
+def in_channels(mask) -> np.ndarray:
+    """(H, W, 3) bool: an (H, W) mask repeated over the channels (numpy broadcasts over 3 slowly)."""
+    return np.repeat(mask.reshape(-1), 3).reshape(mask.shape + (3,))
+
+
+def nonfinite_count(image, mask) -> int:
+    """How many values of an (H, W, 3) image inside the (H, W) mask are not finite."""
+    finite = np.isfinite(image)
+    return 0 if finite.all() else int(np.count_nonzero(~finite & in_channels(mask)))
+
+
 def prepared_targets(scene, targets, masks, weights, render: dict):
-    """For each target: (its view's scene, target image, sample step (`load_target`), mask, weight, count of non-finite
-    masked values). A view's scene is `scene` with the target's camera / lights override and the
-    `render` settings; the target must have that camera's size. The target is float64, 0 outside the
-    mask and where its values are not finite (those inside the mask are counted, so that the fit
-    reports them); the weight (H, W, 3) float64, 0 outside the mask."""
+    """For each target: (its view's scene, target image (`load_target`: a copy, in its own precision),
+    sample step (`load_target`), mask, weight, count of non-finite masked values). A view's scene is
+    `scene` with the target's camera / lights override and the `render` settings; the target must have
+    that camera's size. The weight is (H, W, 3) float64, 0 outside the mask, or None when not given
+    (1 inside the mask)."""
     items = normalise_targets(targets)
     masks = per_view(masks, len(items), "masks")
     weights = per_view(weights, len(items), "weights")
@@ -159,9 +170,6 @@ def prepared_targets(scene, targets, masks, weights, render: dict):
             raise FitError(f"{where}: the image is {width}x{height} (width x height) but its view's camera renders "
                            f"{camera.width}x{camera.height}; resize the target or set the camera's width / height")
         mask = view_mask(mask, (height, width), f"masks[{i}]")
-        mask3 = np.repeat(mask.reshape(-1), 3).reshape(height, width, 3)  # (numpy broadcasts over 3 slowly)
-        weight = mask3.astype(np.float64) if weight is None else view_weight(weight, (height, width),
-                                                                             f"weights[{i}]") * mask3
-        inside = np.isfinite(image) & mask3
-        nonfinite = 3 * int(np.count_nonzero(mask)) - int(np.count_nonzero(inside))
-        yield view_scene, np.where(inside, image, np.float64(0.0)), step, mask, weight, nonfinite
+        if weight is not None:
+            weight = view_weight(weight, (height, width), f"weights[{i}]") * in_channels(mask)
+        yield view_scene, image, step, mask, weight, nonfinite_count(image, mask)
