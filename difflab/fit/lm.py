@@ -11,9 +11,10 @@ projected onto the box, x' = clip(x + dx, lower, upper). A step that lowers the 
 taken and lambda shrinks by Nielsen's rule; otherwise lambda grows. So a coefficient whose best value
 is 0 lands on 0 in one projected step and stays there, instead of crawling along a softplus.
 
-Stops with "successful" when a step changes every entry by at most atol + rtol |x|, or when an
-accepted step lowered the loss -- and the linear model predicted it would lower it -- by at most
-rtol of itself (MINPACK's xtol / ftol tests); "nonlinear_max_steps_reached" after max_steps;
+Stops with "successful" when the next step would change every entry by at most atol + rtol |x|
+(tested before the step is taken: a solve that has landed on its minimum is not linearised once more
+at a point it would not move from), or when an accepted step lowered the loss -- and the linear model
+predicted it would lower it -- by at most rtol of itself (MINPACK's xtol / ftol tests); "nonlinear_max_steps_reached" after max_steps;
 "nonfinite" when the loss at the start is not finite. A trial step whose loss is not finite is
 rejected like any step that does not lower the loss, so the point returned always has a finite
 loss (a fit with an infinite loss is never successful). Each step costs one linearisation and one
@@ -48,6 +49,23 @@ class State(NamedTuple):
     step: jnp.ndarray
     code: jnp.ndarray
     history: jnp.ndarray
+    d: jnp.ndarray
+    predicted: jnp.ndarray
+
+
+def projected_step(x, a, g, lam, lower, upper):
+    """The damped Gauss-Newton step from x, projected onto the box: d = clip(x + dx) - x with
+    (A + lam D) dx = -g over the free entries (an entry on its bound with the gradient pushing
+    outward is held), and the decrease of 0.5 |r|^2 the linear model predicts for it,
+    -(g.d + 0.5 d.A d)."""
+    held = ((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0))
+    diag = jnp.diagonal(a)
+    floor = 1e-9 * jnp.max(diag) + 1e-20  # a parameter no pixel sees still gets a (huge) damping
+    free = ~held
+    m = jnp.where(free[:, None] & free[None, :], a, 0.0) + jnp.diag(jnp.where(free, lam * jnp.maximum(diag, floor), 1.0))
+    dx = jsl.cho_solve(jsl.cho_factor(m), jnp.where(free, -g, 0.0))
+    d = jnp.clip(x + jnp.where(jnp.isfinite(dx), dx, 0.0), lower, upper) - x
+    return d, -(g @ d + 0.5 * d @ (a @ d))
 
 
 def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=None):
@@ -65,40 +83,31 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
     """
     dtype = x0.dtype
     x0 = jnp.clip(x0, lower, upper)
+    small = lambda d, x: jnp.all(jnp.abs(d) <= atol + rtol * jnp.abs(x))  # noqa: E731 (MINPACK's xtol)
     p = x0.shape[0]
-    # Step -1 only evaluates the start (so the model is linearised in one place of the program). The
+    # Step -1 only evaluates the start (a step d = 0, so the model is linearised in one place of the
+    # program). Each step ends by solving for the next one, d, which the loop's test reads. The
     # residuals are not carried from step to step (only their loss): r at the solution is formed once
     # at the end.
     state = State(x0, jnp.zeros((p, p), dtype), jnp.zeros(p, dtype), jnp.asarray(jnp.inf, dtype),
                   jnp.asarray(LAMBDA0, dtype), jnp.asarray(2.0, dtype), jnp.asarray(-1), jnp.asarray(RUNNING),
-                  jnp.full(max_steps, jnp.nan, dtype))
+                  jnp.full(max_steps, jnp.nan, dtype), jnp.zeros(p, dtype), jnp.asarray(0.0, dtype))
 
     def body(s: State) -> State:
         first = s.step < 0
-        g, a = s.g, s.a
-        fixed = first | ((s.x <= lower) & (g > 0)) | ((s.x >= upper) & (g < 0))
-        diag = jnp.diagonal(a)
-        floor = 1e-9 * jnp.max(diag) + 1e-20  # a parameter no pixel sees still gets a (huge) damping
-        free = ~fixed
-        m = jnp.where(free[:, None] & free[None, :], a, 0.0) + jnp.diag(jnp.where(free, s.lam * jnp.maximum(diag, floor),
-                                                                                   1.0))
-        dx = jsl.cho_solve(jsl.cho_factor(m), jnp.where(free, -g, 0.0))
-        dx = jnp.where(jnp.isfinite(dx), dx, 0.0)
-        x_new = jnp.clip(s.x + dx, lower, upper)
-        d = x_new - s.x
+        d, predicted = s.d, s.predicted
+        x_new = s.x + d
         r_new, a_new, g_new = linearise(x_new, args)
         loss_new = 0.5 * jnp.sum(r_new * r_new)
         finite = jnp.isfinite(loss_new)
         accept = finite & ((loss_new < s.loss) | first)
-        predicted = -(g @ d + 0.5 * d @ (a @ d))
         rho = (s.loss - loss_new) / jnp.where(predicted > 0, predicted, 1.0)
         lam = jnp.where(first, s.lam, jnp.where(accept, s.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3),
                                                  s.lam * s.nu))
         nu = jnp.where(accept, 2.0, 2.0 * s.nu)
-        small_step = jnp.all(jnp.abs(d) <= atol + rtol * jnp.abs(s.x))
         tol_loss = rtol * s.loss + atol * atol
         small_change = ((s.loss - loss_new) <= tol_loss) & (predicted <= tol_loss)
-        done = ~first & (small_step | (accept & small_change))
+        done = ~first & accept & small_change
         step = s.step + 1
         # The start must have a finite loss; a trial step whose loss is not finite is only rejected.
         code = jnp.where(first & ~finite, NONFINITE, jnp.where(done, SUCCESSFUL,
@@ -108,10 +117,17 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
         if progress is not None:
             jax.debug.callback(progress, step, loss)
         history = jnp.where(first, s.history, s.history.at[jnp.maximum(s.step, 0)].set(loss))
-        return State(keep(x_new, s.x), keep(a_new, s.a), keep(g_new, s.g), loss, lam, nu, step, code, history)
+        x, a, g = keep(x_new, s.x), keep(a_new, s.a), keep(g_new, s.g)
+        return State(x, a, g, loss, lam, nu, step, code, history, *projected_step(x, a, g, lam, lower, upper))
 
-    out = jax.lax.while_loop(lambda s: s.code == RUNNING, body, state)
-    return out.x, out.code, out.step, out.history, linearise(out.x, args)[0], out.a
+    def running(s: State) -> bool:
+        # MINPACK's xtol test on the next step: when it would change no entry by more than the
+        # tolerance, the solve ends here instead of linearising at a point it would not move from.
+        return (s.code == RUNNING) & ((s.step < 0) | ~small(s.d, s.x))
+
+    out = jax.lax.while_loop(running, body, state)
+    code = jnp.where(out.code == RUNNING, SUCCESSFUL, out.code)
+    return out.x, code, out.step, out.history, linearise(out.x, args)[0], out.a
 
 
 @eqx.filter_jit
