@@ -29,9 +29,10 @@ TABLE_KINDS = ("ka", "kd", "ks", "n", "m", "f0", "kr", "kt", "absorption")
 
 class ViewJ(eqx.Module):
     """One view on the device, cut down to the U pixels that count: its image model (a
-    `shading.GBufferModel` or a `raytree.TreeModel`), lights, target and sqrt(weight) (U, 3), the
-    target's ceiling (inf: none), and intensity_index (P, 3): the entry of the flat value vector
-    each of its lights' intensity channels takes (-1: not fitted)."""
+    `shading.GBufferModel` or a `raytree.TreeModel`), lights, target (U, 3) and sqrt(weight) (U, 3,
+    or a scalar 1 when every weight is 1: nothing to move or multiply), the target's ceiling (inf:
+    none), and intensity_index (P, 3): the entry of the flat value vector each of its lights'
+    intensity channels takes (-1: not fitted)."""
 
     model: eqx.Module
     lights: LightsJ

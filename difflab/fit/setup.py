@@ -130,7 +130,7 @@ class Setup:
         self.initial = {p.key: scene_value(scene, p, self.textures) for p in self.layout}
         self.x0 = self.layout.x_of(self.layout.flatten(self.initial))
         self.views = self._record(targets, masks, weights, max_depth, spp, device, threads)
-        self.used_pixels = int(sum(int(v.used.sum()) for v in self.views))
+        self.used_pixels = sum(v.pixels.size for v in self.views)
         self._target_statistics()
         self.x64 = x64
         self.dtype = jnp.float64 if x64 else jnp.float32
@@ -149,7 +149,7 @@ class Setup:
         out.x0 = self.layout.x_of(self.layout.flatten(out.initial))
         out.render_seconds = 0.0
         out.views = [out._seen(view, weight) for view, weight in zip(self.views, weights)]
-        out.used_pixels = int(sum(int(v.used.sum()) for v in out.views))
+        out.used_pixels = sum(v.pixels.size for v in out.views)
         out._target_statistics()
         with jax.enable_x64(self.x64):
             out.problem = out._problem(self.loss, self.loss_scale)
@@ -321,7 +321,7 @@ class Setup:
         real = np.dtype(self.dtype)
         used = pixels is view.pixels  # its rows are taken once (`View.values`, `View.weights`)
         if used and view.weighting is None:
-            sqrt_weight = np.ones((pixels.size, 3), real)
+            sqrt_weight = np.ones((), real)  # (`ViewJ`: 1, broadcast)
         else:
             sqrt_weight = np.sqrt(view.weights if used else take_pixels(view.weight, pixels)).astype(real, copy=False)
         return (lights, (view.values if used else take_pixels(view.target, pixels)).astype(real, copy=False),
@@ -332,7 +332,7 @@ class Setup:
         with the record when they are the pixels used)."""
         lights, target, sqrt_weight, ceiling, intensity_index = arrays
         if view.kept is not None and pixels is view.pixels and self.texel_source is None:
-            key = (self.method, np.dtype(self.dtype).name)
+            key = (self.method, np.dtype(self.dtype))
             model = view.kept.model(key, view.used, lambda: self._model(view, pixels, lights))
         else:
             model = self._model(view, pixels, lights)
