@@ -87,8 +87,8 @@ def by_parts(problem, x):
 
         ambient_part, diffuse, specular = parts(mat.n, mat.m, mat.f0)
         image = jnp.where(has_material[:, None], combine_parts(mat, (ambient_part, diffuse, specular)), 0.0)
-        r = view.sqrt_weight * (jnp.minimum(image, view.ceiling) - view.target)
-        live = view.sqrt_weight * (has_material[:, None] & (image < view.ceiling))  # 0 where censored
+        r = view.sqrt_weight * (view.recorded(image) - view.target)
+        live = view.sqrt_weight * (has_material[:, None] & view.uncensored(image))  # 0 where censored
         first_cell = (model.cell != 1)[:, None]
         column = {"ka": live * ambient_part * first_cell, "kd": live * diffuse * first_cell, "ks": live * specular}
         for kind in slots:

@@ -30,16 +30,25 @@ TABLE_KINDS = ("ka", "kd", "ks", "n", "m", "f0", "kr", "kt", "absorption")
 class ViewJ(eqx.Module):
     """One view on the device, cut down to the U pixels that count: its image model (a
     `shading.GBufferModel` or a `raytree.TreeModel`), lights, target (U, 3) and sqrt(weight) (U, 3,
-    or a scalar 1 when every weight is 1: nothing to move or multiply), the target's ceiling (inf:
-    none), and intensity_index (P, 3): the entry of the flat value vector each of its lights'
+    or a scalar 1 when every weight is 1: nothing to move or multiply), the target's ceiling (None:
+    the target is not clipped -- a static difference, so unclipped residuals carry no min / compare
+    per pixel), and intensity_index (P, 3): the entry of the flat value vector each of its lights'
     intensity channels takes (-1: not fitted)."""
 
     model: eqx.Module
     lights: LightsJ
     target: jnp.ndarray
     sqrt_weight: jnp.ndarray
-    ceiling: jnp.ndarray
+    ceiling: jnp.ndarray | None
     intensity_index: jnp.ndarray
+
+    def recorded(self, image):
+        """The model's pixels as the target records them: min(image, ceiling)."""
+        return image if self.ceiling is None else jnp.minimum(image, self.ceiling)
+
+    def uncensored(self, image):
+        """Where the model is below the ceiling (its derivatives reach the residual); True without one."""
+        return True if self.ceiling is None else image < self.ceiling
 
 
 def value_index(layout, n_materials: int, n_lights: int) -> dict:
@@ -124,7 +133,7 @@ class Problem(eqx.Module):
     def weighted(self, values, texels=None):
         """sqrt(w) (min(model, ceiling) - target) of every view, flattened (N,): the plain residuals
         in image units (no robust loss)."""
-        return jnp.concatenate([(view.sqrt_weight * (jnp.minimum(image, view.ceiling) - view.target)).reshape(-1)
+        return jnp.concatenate([(view.sqrt_weight * (view.recorded(image) - view.target)).reshape(-1)
                                 for view, image in zip(self.views, self.images(values, texels))])
 
     def residuals(self, x, texels=None):

@@ -311,8 +311,8 @@ class Setup:
         return GBufferModel.build(view.record, pixels, lights, self.dtype, self.texel_source)
 
     def _view_arrays(self, view: View, pixels, index) -> tuple:
-        """A view's arrays for `pixels`, numpy: (lights, target, sqrt(weight), ceiling,
-        intensity_index) (see `ViewJ`)."""
+        """A view's arrays for `pixels`, numpy: (lights, target, sqrt(weight), ceiling (None: the
+        target is not clipped), intensity_index) (see `ViewJ`)."""
         lights = lights_to_jax(view.scene.lights, self.dtype, host=True)
         count = lights.intensity.shape[0]
         intensity_index = np.full((count, 3), -1, np.int32)
@@ -325,7 +325,7 @@ class Setup:
         else:
             sqrt_weight = np.sqrt(view.weights if used else take_pixels(view.weight, pixels)).astype(real, copy=False)
         return (lights, (view.values if used else take_pixels(view.target, pixels)).astype(real, copy=False),
-                sqrt_weight, np.asarray(view.ceiling, real), intensity_index)
+                sqrt_weight, np.asarray(view.ceiling, real) if np.isfinite(view.ceiling) else None, intensity_index)
 
     def _view(self, view: View, pixels, arrays) -> ViewJ:
         """The view for `pixels` from its `_view_arrays` on the device, with its image model (kept

@@ -35,7 +35,7 @@ def check_applicable(problem) -> None:
     if any(p.kind == "intensity" for p in problem.layout):
         raise FitError("solver: varpro cannot fit light intensities (intensity x k is not linear)")
     for view in problem.views:
-        if bool(np.isfinite(np.asarray(view.ceiling))) or getattr(getattr(view.model, "formation", None),
+        if view.ceiling is not None or getattr(getattr(view.model, "formation", None),
                                                                    "clamp_colors", False):
             raise FitError("solver: varpro needs an unclipped image (clipped targets and Gouraud vertex-colour "
                            "clamping are not linear); use 'lm'")
