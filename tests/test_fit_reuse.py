@@ -2,13 +2,14 @@
 nothing again, and gives exactly what a fresh fit gives -- for another start, target, mask, weights,
 precision or fitted set; another camera, light placement or tree shape is rendered anew."""
 
+import jax
 import numpy as np
 import pytest
 from test_fit_helpers import TRUTH, make_scene, mirror_scene, perturbed, target_of
 
 from difflab import compile_scene
 from difflab.fit import fit_material
-from difflab.fit.records import KEPT_VIEWS, STORE
+from difflab.fit.records import KEPT_VIEWS, SMALL, STORE, ViewStore
 
 SCENE = make_scene(size=16)
 TARGET = target_of(SCENE)
@@ -140,3 +141,28 @@ def test_a_setup_reweighted_is_the_setup_built_afresh(compiled):
     np.testing.assert_array_equal(again.weighted_entries, fresh.weighted_entries)
     assert (again.used_pixels, again.censored, again.weight_total, again.views[0].ceiling, again.render_seconds) == \
         (fresh.used_pixels, fresh.censored, fresh.weight_total, fresh.views[0].ceiling, 0.0)
+
+
+def test_small_device_arrays_are_reused_only_for_equal_contents():
+    """`ViewStore.on_device`: an equal small array (same bytes, dtype, shape, place in the tree) is
+    the device copy made before; any difference, or a large array, is moved afresh with its values."""
+    store = ViewStore()
+    with jax.enable_x64(True):
+        lights, index = np.array([0.5, 0.25, 1.0]), np.array([0, -1], np.int32)
+        large = np.arange(SMALL + 1, dtype=np.float64)
+        first = store.on_device({"lights": lights, "index": index, "target": large})
+        again = store.on_device({"lights": lights.copy(), "index": index.copy(), "target": large + 1.0})
+        assert again["lights"] is first["lights"] and again["index"] is first["index"]
+        assert again["target"] is not first["target"]
+        np.testing.assert_array_equal(again["target"], large + 1.0)
+        for other in ({"lights": np.array([0.5, 0.25, 1.5]), "index": index, "target": large},  # another value
+                      {"lights": lights.astype(np.float32), "index": index, "target": large},  # another dtype
+                      {"lights": lights, "index": index.reshape(2, 1), "target": large},  # another shape
+                      {"index": lights, "lights": index, "target": large}):  # other places in the tree
+            moved = store.on_device(other)
+            assert moved["lights"] is not first["lights"]
+            for key, value in other.items():
+                assert moved[key].dtype == value.dtype and moved[key].shape == value.shape
+                np.testing.assert_array_equal(moved[key], value)
+    with jax.enable_x64(False):  # the same bytes in the other precision: moved afresh (float32 there)
+        assert store.on_device({"lights": lights, "index": index, "target": large})["lights"].dtype == np.float32

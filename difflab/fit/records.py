@@ -14,7 +14,9 @@ on the target:
 
 So a fit of a `CompiledScene` keeps, in `CompiledScene.built` (shared by its `with_scene` copies),
 the records of its latest KEPT_VIEWS views, with the influence maps found on them and the image
-models of their latest KEPT_MODELS pixel sets. A fit of a plain scene keeps nothing.
+models of their latest KEPT_MODELS pixel sets, and the device copies of the problem's small arrays
+(lights, material table, indices: `ViewStore.on_device`) by their contents. A fit of a plain scene
+keeps nothing.
 """
 
 from __future__ import annotations
@@ -23,12 +25,16 @@ import threading
 from dataclasses import dataclass, fields
 from functools import cached_property
 
+import jax
 import numpy as np
 
+from .problem import to_device
 from .targets import in_channels
 
 KEPT_VIEWS = 4
 KEPT_MODELS = 2  # per view
+KEPT_ARRAYS = 4  # device copies of small arrays, by contents
+SMALL = 1024  # entries: an array this small is looked up by its contents, not moved again
 EVALUATED = frozenset(("ka", "kd", "ks", "n", "m", "f0"))  # what the image models evaluate afresh
 STORE = "fit views"  # the key in CompiledScene.built
 
@@ -145,6 +151,7 @@ class ViewStore:
     def __init__(self):
         self._lock = threading.Lock()
         self._views: list = []  # [(key, KeptView)], the latest first
+        self._arrays: list = []  # [(key, device arrays)], the latest first
 
     def get(self, key) -> KeptView | None:
         with self._lock:
@@ -158,6 +165,30 @@ class ViewStore:
         with self._lock:
             self._views = [(key, view)] + [(k, v) for k, v in self._views if k != key][:KEPT_VIEWS - 1]
         return view
+
+    def on_device(self, tree):
+        """`to_device(tree)` for a pytree of numpy arrays, its small leaves (<= SMALL entries) taken
+        from the latest KEPT_ARRAYS copies when they were moved before with the same structure,
+        precision, dtypes, shapes and bytes (device arrays are immutable; one jitted dispatch costs
+        some 8 us a leaf); the large ones (targets) are moved each time."""
+        leaves, structure = jax.tree_util.tree_flatten(tree)
+        small = [i for i, leaf in enumerate(leaves) if leaf.size <= SMALL]
+        key = (structure, jax.config.jax_enable_x64,
+               tuple((leaves[i].dtype.str, leaves[i].shape, leaves[i].tobytes()) for i in small))
+        with self._lock:
+            kept = next((copies for kept_key, copies in self._arrays if kept_key == key), None)
+        if kept is None:
+            moved = to_device(leaves)
+            with self._lock:
+                self._arrays = [(key, [moved[i] for i in small])] + self._arrays[:KEPT_ARRAYS - 1]
+        else:
+            large = [i for i, leaf in enumerate(leaves) if leaf.size > SMALL]
+            moved = [None] * len(leaves)
+            for i, leaf in zip(large, to_device([leaves[i] for i in large])):
+                moved[i] = leaf
+            for i, leaf in zip(small, kept):
+                moved[i] = leaf
+        return jax.tree_util.tree_unflatten(structure, moved)
 
     def __len__(self):
         return len(self._views)

@@ -353,7 +353,8 @@ class Setup:
         self.weight_total = float(total)
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
-        arrays, table, ambient, index, loss_scale = to_device((  # one transfer
+        store = view_store(self.compiled)
+        arrays, table, ambient, index, loss_scale = (to_device if store is None else store.on_device)((
             [self._view_arrays(v, v.pixels, index["intensity"]) for v in self.views],
             MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
             np.asarray(self.scene.ambient, real), {k: v for k, v in index.items() if k != "intensity"},
