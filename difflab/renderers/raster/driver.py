@@ -250,7 +250,7 @@ def light_mesh_points(compiled, lighting, points, n_points: int, n_samples: int,
     """Stage 6 for the G-buffer under flat or Gouraud shading: light every point, recording per
     light its direction, distance and visibility, and the texture factor."""
     lit = empty_lit(compiled, n_points, n_samples)
-    launch_chunks(shade.light_points_kernel, n_points, [points, lighting, 0, 1, lit], compiled.device, threads)
+    launch_chunks(shade.light_points_kernel, n_points, [points, lighting, lit], compiled.device, threads)
     return lit
 
 

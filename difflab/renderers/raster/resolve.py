@@ -85,8 +85,9 @@ class SampleW:
     weights: wp.vec3  # over the face's vertices: perspective-correct or affine
     side: float  # +1 the face's front is seen, -1 its back
     point: PointW
-    screen: wp.vec3d  # the slot's screen-space (affine) barycentrics there, as `float_barycentrics` gives them
-    area: wp.float64  # and its edge values' sum
+    area: wp.float64  # the slot's edge values' sum there (`float_barycentrics`)
+    perspective: wp.vec3d  # perspective-correct: c_k / total, c_k = b_k / w_k of its screen barycentrics b_k
+    total: wp.float64  # sum c_k
 
 
 @wp.func(inline=True)
@@ -140,10 +141,12 @@ def vertex_uv(weight: wp.array2d(dtype=wp.vec3), slot: int, k: int, uv0: wp.vec2
 
 
 @wp.func
-def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3), slot: int, b: wp.vec3d,
-                   area: wp.float64, perspective_correct: int, uv0: wp.vec2, uv1: wp.vec2, uv2: wp.vec2):
+def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=wp.vec3), slot: int, area: wp.float64,
+                   perspective_correct: int, big_b: wp.vec3d, total: wp.float64, uv0: wp.vec2, uv1: wp.vec2,
+                   uv2: wp.vec2):
     """Exact d(uv)/dx and d(uv)/dy of the interpolation the resolve stage uses, at the sample where
-    slot `slot` has screen barycentrics b and edge values summing to `area` (`float_barycentrics`).
+    slot `slot` has edge values summing to `area` (`float_barycentrics`) and, perspective-correct,
+    the weights big_b = c / total (`sample_weights`).
 
     Screen barycentrics b_k are affine in (x, y); perspective-correct ones are B_k = c_k / S with
     c_k = b_k / w_k and S = sum c_k, so dB_k = (dc_k - B_k dS) / S (quotient rule); uv = sum B_k uv_k."""
@@ -156,9 +159,6 @@ def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=
     db_dy = wp.vec3d(s2[0] - s1[0], s0[0] - s2[0], s1[0] - s0[0]) / area
     if perspective_correct == 1:
         q = wp.vec3d(s0[3], s1[3], s2[3])  # 1 / w per corner
-        c = wp.cw_mul(b, q)
-        total = c[0] + c[1] + c[2]
-        big_b = c / total
         dc_dx = wp.cw_mul(db_dx, q)
         dc_dy = wp.cw_mul(db_dy, q)
         db_dx = (dc_dx - big_b * (dc_dx[0] + dc_dx[1] + dc_dx[2])) / total
@@ -181,11 +181,12 @@ def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: in
     weight = tris.weight
     bd, area = float_barycentrics(screen[slot, 0], screen[slot, 1], screen[slot, 2], i, j)
     sample = SampleW()
-    sample.screen = bd
     sample.area = area
     if perspective_correct == 1:  # b_k / w_k, renormalised
-        bd = wp.vec3d(bd[0] * screen[slot, 0][3], bd[1] * screen[slot, 1][3], bd[2] * screen[slot, 2][3])
-        bd = bd / (bd[0] + bd[1] + bd[2])
+        c = wp.vec3d(bd[0] * screen[slot, 0][3], bd[1] * screen[slot, 1][3], bd[2] * screen[slot, 2][3])
+        sample.total = c[0] + c[1] + c[2]
+        bd = c / sample.total
+        sample.perspective = bd
     b = wp.vec3(float(bd[0]), float(bd[1]), float(bd[2]))
     sample.face = tris.face[slot]
     sample.slot = slot
@@ -231,8 +232,8 @@ def sample_uv(sample: SampleW, tris: ScreenW, mesh: RasterMeshW, perspective_cor
     uv0 = mesh.uvs[mesh.faces[f, 0]]
     uv1 = mesh.uvs[mesh.faces[f, 1]]
     uv2 = mesh.uvs[mesh.faces[f, 2]]
-    duv_dx, duv_dy = uv_derivatives(tris.screen, tris.weight, sample.slot, sample.screen, sample.area,
-                                    perspective_correct, uv0, uv1, uv2)
+    duv_dx, duv_dy = uv_derivatives(tris.screen, tris.weight, sample.slot, sample.area, perspective_correct,
+                                    sample.perspective, sample.total, uv0, uv1, uv2)
     return wb[0] * uv0 + wb[1] * uv1 + wb[2] * uv2, duv_dx, duv_dy
 
 
@@ -269,7 +270,9 @@ def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW
                  materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
                  n_vertices: int, out: GBufferW, samples: PointsW, i: int, j: int):
     """Stage 4 at sample (i, j): its G-buffer entries (empty ones where nothing covers it: the
-    non-zero ones only, as `samples` and `out` are zero when the kernel starts)."""
+    non-zero ones only, as `samples` and `out` are zero when the kernel starts). Returns whether it
+    is covered, and its point, uv and uv derivatives as stored (what a Phong pass lights next,
+    without reading them back)."""
     s = i * cam.width + j
     k = key[s]
     if k == NO_HIT:  # its other entries stay as cleared: zero
@@ -278,7 +281,7 @@ def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW
         out.object[s] = -1
         out.depth[s] = wp.inf
         out.point_index[s] = wp.vec3i(s, s, s)
-        return
+        return False, PointW(), wp.vec2(0.0), wp.vec2(0.0), wp.vec2(0.0)
     key[s] = NO_HIT  # the next frame's z-buffer starts cleared
     sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j)
     store_point(samples, s, sample.point)
@@ -294,6 +297,7 @@ def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW
     index, weight = sample_points(sample, mesh, shading, s, n_vertices)
     out.point_index[s] = index
     out.point_weight[s] = weight
+    return True, sample.point, uv, duv_dx, duv_dy
 
 
 @wp.kernel

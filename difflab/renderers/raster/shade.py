@@ -111,41 +111,40 @@ def texel_at(lighting: LightingW, mat_id: int, uv: wp.vec2, duv_dx: wp.vec2, duv
 
 
 @wp.func
-def light_into(points: PointsW, lighting: LightingW, points_are_samples: int, record: int, lit: LitW, k: int):
-    """Stage 6 at point k; under Phong the points are the samples, whose texels are sampled here.
-    `record` keeps each light's direction, distance and visibility (the G-buffer's). `lit` is zero
-    when the kernel starts: nothing is written for an empty point."""
-    if points.material[k] < 0:
-        return
-    point = load_point(points, k)
-    texel = wp.vec3(0.0)
-    if points_are_samples == 1:
-        texel = texel_at(lighting, point.material, points.uv[k], points.duv_dx[k], points.duv_dy[k])
-        lit.texel[k] = texel
-    color, factor = light_point(point, lighting, points_are_samples, texel, lit, k, record)
+def light_into(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3, lit: LitW, k: int):
+    """Stage 6 at point k: its colour and texture factor (`light_point`), and per light its
+    direction, distance and visibility (the G-buffer's). `lit` is zero when the kernel starts:
+    nothing is written for an empty point."""
+    color, factor = light_point(point, lighting, textured, texel, lit, k, 1)
     lit.color[k] = color
     lit.factor[k] = factor
 
 
 @wp.kernel
-def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, lighting: LightingW,
-                        points_are_samples: int, record: int, lit: LitW):
-    """Stage 6 over points [begin, end), `chunk` consecutive points per thread."""
+def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, lighting: LightingW, lit: LitW):
+    """Stage 6 over flat / Gouraud points [begin, end), `chunk` consecutive points per thread."""
     first = begin + wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, end)):
-        light_into(points, lighting, points_are_samples, record, lit, k)
+        if points.material[k] >= 0:
+            light_into(load_point(points, k), lighting, 0, wp.vec3(0.0), lit, k)
 
 
 @wp.kernel
 def phong_gbuffer_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW, cam: CameraW,
                          perspective_correct: int, out: GBufferW, samples: PointsW, lighting: LightingW, lit: LitW):
     """Stages 4 and 6 under Phong shading, one row of samples per thread: each sample resolved (its
-    G-buffer entries, `resolve_into`), then lit as its own shading point (`light_into`)."""
+    G-buffer entries, `resolve_into`), then lit as its own shading point, its texel sampled there
+    (`light_into`)."""
     i = row0 + wp.tid()
     for j in range(cam.width):
-        resolve_into(key, tris, mesh, lighting.materials, cam, perspective_correct, PHONG_SHADING,
-                     mesh.vertices.shape[0], out, samples, i, j)
-        light_into(samples, lighting, 1, 1, lit, i * cam.width + j)
+        covered, point, uv, duv_dx, duv_dy = resolve_into(key, tris, mesh, lighting.materials, cam,
+                                                          perspective_correct, PHONG_SHADING, mesh.vertices.shape[0],
+                                                          out, samples, i, j)
+        if covered:
+            s = i * cam.width + j
+            texel = texel_at(lighting, point.material, uv, duv_dx, duv_dy)
+            lit.texel[s] = texel
+            light_into(point, lighting, 1, texel, lit, s)
 
 
 @wp.struct
