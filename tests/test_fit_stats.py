@@ -14,19 +14,22 @@ def test_reduced_chi_square_counts_uncensored_values_less_parameters():
     jac = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0], [0.0, 0.0], [0.0, 0.0], [3.0, 0.0]])
     r = np.array([0.1, -0.2, 0.3, 0.0, 0.4, -0.1])
     sse = float(np.sum(r * r))
-    st = fit_statistics(jac.T @ jac, r, censored=1, sigma=0.5, size=2)
+    st = fit_statistics(jac.T @ jac, sse, r.size, censored=1, sigma=0.5, size=2)
     assert st["s2"] == pytest.approx(sse / (6 - 1 - 2), rel=1e-15)
     assert st["chi2"] == pytest.approx(sse / 3 / 0.25, rel=1e-15)
     np.testing.assert_allclose(st["diag"], np.diag(np.linalg.inv(jac.T @ jac)), rtol=1e-12)
-    assert fit_statistics(jac.T @ jac, r, censored=0, sigma=0.5, size=2)["s2"] == pytest.approx(sse / 4, rel=1e-15)
-    assert fit_statistics(jac.T @ jac, r, censored=0, sigma=0.0, size=2)["chi2"] == math.inf
-    silent = fit_statistics(jac.T @ jac, r, censored=1, sigma=0.5, size=2, silent=1)  # r[3] = 0: a noise-free zero
+    gram, n = jac.T @ jac, r.size
+    assert fit_statistics(gram, sse, n, censored=0, sigma=0.5, size=2)["s2"] == pytest.approx(sse / 4, rel=1e-15)
+    assert fit_statistics(gram, sse, n, censored=0, sigma=0.0, size=2)["chi2"] == math.inf
+    silent = fit_statistics(gram, sse, n, censored=1, sigma=0.5, size=2, silent=1)  # r[3] = 0: a noise-free zero
     assert silent["s2"] == pytest.approx(sse / (6 - 1 - 1 - 2), rel=1e-15)
     assert silent["chi2"] == pytest.approx(sse / 2 / 0.25, rel=1e-15)
     three = jac[:3].T @ jac[:3]
-    assert fit_statistics(three, r[:3], censored=0, sigma=1.0, size=2)["s2"] == pytest.approx(0.14, rel=1e-14)  # dof 1
-    assert fit_statistics(three, r[:3], censored=1, sigma=1.0, size=2)["s2"] == pytest.approx(0.14, rel=1e-14)  # floor 1
-    free = fit_statistics(None, r, censored=1, sigma=0.5, size=2)  # matrix-free: no J^T J, same dof
+    sse3 = float(np.sum(r[:3] ** 2))  # three entries, two parameters: dof 1, floored at 1 with one censored
+    for censored in (0, 1):
+        st3 = fit_statistics(three, sse3, 3, censored=censored, sigma=1.0, size=2)
+        assert st3["s2"] == pytest.approx(0.14, rel=1e-14)
+    free = fit_statistics(None, sse, r.size, censored=1, sigma=0.5, size=2)  # matrix-free: no J^T J, same dof
     assert free["s2"] == pytest.approx(sse / 3, rel=1e-15) and free["chi2"] == pytest.approx(st["chi2"], rel=1e-15)
     assert free["diag"].shape == (2,) and np.isnan(free["diag"]).all()
 
@@ -40,7 +43,7 @@ def test_mismatch_threshold_is_max_of_two_and_five_sigma_of_chi_square(dof):
     jac[0, 0] = 1.0
     for chi2, flagged in ((threshold * (1 - 1e-9), False), (threshold * (1 + 1e-9), True)):
         r = np.full(dof + 1, math.sqrt(chi2 * dof / (dof + 1)))
-        st = fit_statistics(jac.T @ jac, r, censored=0, sigma=1.0, size=1)
+        st = fit_statistics(jac.T @ jac, float(np.sum(r * r)), r.size, censored=0, sigma=1.0, size=1)
         assert st["chi2"] == pytest.approx(chi2, rel=1e-12)
         assert st["mismatch"] is flagged
 

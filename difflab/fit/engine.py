@@ -63,15 +63,17 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             rho = r if setup.problem.loss == "l2" else \
                 np.asarray(robust(setup.problem.loss, jnp.asarray(r), setup.problem.loss_scale), np.float64)
             seen = {k: c > options.visible_threshold for k, c in texel_coverage(setup.problem, at, used).items()}
-        loss = float(0.5 * np.sum(np.square(rho)))
+        counted = r if setup.unit_weights else r[used]  # the entries that count (unit weights: every one)
+        with np.errstate(over="ignore", invalid="ignore"):
+            sse = float(np.sum(np.square(counted)))
+        loss = 0.5 * sse if rho is counted else float(0.5 * np.sum(np.square(rho)))
         residuals = setup.residual_images(r)
         finite = bool(np.all(np.isfinite(flat)) and np.isfinite(loss) and (gram is None or np.all(np.isfinite(gram))))
         weighted = residuals if setup.unit_weights else setup.residual_images(r, weighted=True)
         silent, silent_entries = setup.silent(r)
         sigma = setup.noise(weighted, silent) if finite else float("nan")
-        r = r[used]
         if finite:
-            st = fit_statistics(gram, r, setup.censored, sigma, layout.size, silent_entries)
+            st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size, silent_entries)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if gram is not None else
                                       np.full(layout.size, np.nan))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], QUANTISATION_SIGMA ** 2)))
@@ -86,7 +88,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         lo, hi = layout.bounds()
         on_bound = layout.unflatten((x <= lo) | (x >= hi))
         weight_total = setup.weight_total
-        out = FitResult(params=public(values), stderr=public(stderr), loss=loss, psnr=psnr(r, weight_total),
+        out = FitResult(params=public(values), stderr=public(stderr), loss=loss, psnr=psnr(sse, weight_total),
                         seconds=timings.get("solve", 0.0), converged=bool(result == SUCCESSFUL and finite),
                         result=result, history=list(history), poorly_determined=flagged, sigma=float(sigma),
                         chi2=float(chi2), model_mismatch=bool(mismatch),

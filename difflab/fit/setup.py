@@ -60,8 +60,8 @@ def choose_method(scene, materials, method, texels=False) -> str:
 
 
 def at_ceiling(image, ceiling) -> np.ndarray:
-    """(...) bool: the pixels of an image (..., 3) with a channel at or above `ceiling` (three comparisons or'ed: numpy's
-    `any` over a last axis of 3 costs ~10x as much)."""
+    """(...) bool: the pixels of an image (..., 3) with a channel at or above `ceiling` (three
+    comparisons or'ed: numpy's `any` over a last axis of 3 costs ~10x as much)."""
     top = image >= ceiling
     return top[..., 0] | top[..., 1] | top[..., 2]
 
@@ -180,7 +180,8 @@ class Setup:
                 black = np.flatnonzero(rows)
                 zero = np.take(part, black, axis=0) == 0
                 rows[black] = zero[:, 0] & zero[:, 1] & zero[:, 2]
-                count += int(np.count_nonzero(np.take(view.weights, np.flatnonzero(rows), axis=0) > 0))
+                count += 3 * int(np.count_nonzero(rows)) if view.weighting is None else \
+                    int(np.count_nonzero(np.take(view.weights, np.flatnonzero(rows), axis=0) > 0))
             out.append(rows)
         return out, count
 
@@ -385,7 +386,9 @@ class Setup:
                 sqrt_w = np.sqrt(view.weights)
                 part = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w, 1.0), 0.0)
             full = np.zeros(view.image.shape, np.float32)
-            full.reshape(-1, 3)[pixels] = part
+            rows = full.reshape(-1, 3)
+            for c in range(3):  # a channel at a time: ~1.5x the speed of scattering rows of 3
+                rows[:, c][pixels] = part[:, c]
             out.append(full)
         return out
 

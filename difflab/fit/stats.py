@@ -156,15 +156,15 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
     return np.where(finite, np.sqrt(np.where(finite, np.maximum(diag, 0.0), 0.0) * sigma2), np.inf)
 
 
-def fit_statistics(gram: np.ndarray | None, r: np.ndarray, censored: int, sigma: float, size: int,
+def fit_statistics(gram: np.ndarray | None, sse: float, entries: int, censored: int, sigma: float, size: int,
                    silent: int = 0) -> dict:
-    """s2 = sse / dof (dof = N - p, N entries of r neither censored nor `silent` (noise-free zeros),
-    p = `size` fitted entries), chi2 = s2 / sigma^2 (reduced), the mismatch flag (chi2 above
-    max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and diag (J^T J)^-1 (p,) from gram = J^T J (p, p);
-    gram None (a matrix-free fit): diag nan, no covariance is formed."""
+    """s2 = sse / dof (sse: the sum of squares of the `entries` residuals r; dof = N - p, N entries
+    neither censored nor `silent` (noise-free zeros), p = `size` fitted entries), chi2 = s2 / sigma^2
+    (reduced), the mismatch flag (chi2 above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and
+    diag (J^T J)^-1 (p,) from gram = J^T J (p, p); gram None (a matrix-free fit): diag nan, no
+    covariance is formed."""
     p = size
-    sse = float(np.sum(r * r))
-    dof = max(r.size - censored - silent - p, 1)
+    dof = max(entries - censored - silent - p, 1)
     s2 = sse / dof
     chi2 = s2 / (sigma * sigma) if sigma > 0 else math.inf
     mismatch = bool(chi2 > max(MISMATCH_CHI2, 1.0 + 5.0 * math.sqrt(2.0 / dof)))
@@ -189,13 +189,12 @@ def poorly_determined(layout, values: dict, stderr_floor: dict, rel_tol=0.1, abs
     return [p.key for p in layout if p.key in flagged]
 
 
-def psnr(r: np.ndarray, weight_total: float) -> float:
-    """10 log10(1 / MSE) of weighted residuals r (peak 1): inf for a perfect fit, -inf when the
-    error overflows, nan without weight."""
+def psnr(sse: float, weight_total: float) -> float:
+    """10 log10(1 / MSE), MSE = sse / weight_total, sse the sum of squares of the weighted residuals
+    (peak 1): inf for a perfect fit, -inf when the error overflows, nan without weight."""
     if weight_total <= 0:
         return float("nan")
-    with np.errstate(over="ignore", invalid="ignore"):
-        mse = float(np.sum(np.square(r)) / weight_total)
+    mse = sse / weight_total
     if not math.isfinite(mse):
         return float("-inf")
     return float("inf") if mse == 0 else 10.0 * math.log10(1.0 / mse)
