@@ -134,19 +134,19 @@ def normal_matrix(problem, values, solved=None) -> tuple[np.ndarray, np.ndarray]
 def covariance_unscaled(gram: np.ndarray) -> np.ndarray:
     """(J^T J)^-1 from J^T J (p, p), with singular directions given infinite variance. Returns
     (p, p); the diagonal is inf for parameters that a singular direction involves."""
-    p = gram.shape[0]
     norms = np.sqrt(np.maximum(np.diagonal(gram), 0.0))
     zero = norms == 0
     scale = np.where(zero, 1.0, 1.0 / np.where(zero, 1.0, norms))
-    jtj = gram * np.outer(scale, scale)
-    eigval, eigvec = np.linalg.eigh(jtj)
+    outer = np.outer(scale, scale)
+    eigval, eigvec = np.linalg.eigh(gram * outer)
     top = max(float(eigval.max(initial=0.0)), 1e-300)
     singular = eigval <= SINGULAR_RCOND * top
     inv = np.where(singular, 0.0, 1.0 / np.where(singular, 1.0, eigval))
-    cov = (eigvec * inv) @ eigvec.T * np.outer(scale, scale)
-    infinite = zero | (np.abs(eigvec[:, singular]) > 1e-6).any(axis=1) if p else zero
-    cov[infinite, :] = np.inf
-    cov[:, infinite] = np.inf
+    cov = (eigvec * inv) @ eigvec.T * outer
+    infinite = zero | (np.abs(eigvec[:, singular]) > 1e-6).any(axis=1) if singular.any() else zero
+    if infinite.any():
+        cov[infinite, :] = np.inf
+        cov[:, infinite] = np.inf
     return cov
 
 
