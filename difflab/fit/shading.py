@@ -95,49 +95,61 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
     side = int(gbuffer.spp_side)
     height, width = gbuffer.mask.shape[0] // side, gbuffer.mask.shape[1] // side
     pixels = np.arange(height * width) if pixels is None else np.asarray(pixels, np.int64).reshape(-1)
-    if side == 1:
-        samples = pixels[:, None]  # (U, S) flat sample indices
-    else:
-        row, col = np.divmod(pixels, width)
-        di, dj = (x.reshape(-1) for x in np.meshgrid(np.arange(side), np.arange(side), indexing="ij"))
-        samples = (row[:, None] * side + di) * (width * side) + col[:, None] * side + dj
-    take = lambda array, *channels: np.take(array.reshape(-1, *channels), samples, axis=0)  # noqa: E731 (numpy's
-    mask = take(np.asarray(gbuffer.mask, bool))  # fast gather: several times an index expression's speed)
-    index = take(gbuffer.point_index, 3)
-    weight = take(gbuffer.point_weight, 3)
-    if not mask.all():  # an empty sample's points are not read
-        index, weight = np.where(mask[..., None], index, 0), np.where(mask[..., None], weight, 0.0)
     pts = gbuffer.points
     mode, color, start, end, density = gbuffer.fog
     formation = Formation(specular=SPECULAR_MODELS[gbuffer.specular], fog_mode=int(mode),
                           clamp_colors=bool(gbuffer.clamp_vertex_colors))
-    if (side == 1 and mask.all() and formation.fog_mode == FOG_NONE and not formation.clamp_colors
-            and np.all(weight[:, 0, 0] == 1.0) and not np.any(weight[:, 0, 1:])
-            and index[:, 0, 0].max(initial=0) < pts.material.shape[0]):
-        # each pixel is one point's colour: the points, in pixel order, are the pixels
-        point_ids = index[:, 0, 0]
-        local = None
+    point_ids = None
+    if side == 1 and formation.fog_mode == FOG_NONE and not formation.clamp_colors:
+        point_ids = own_points(gbuffer, pixels)
+    comp = None
+    if point_ids is not None:  # each pixel is one point's colour: the points, in pixel order, are the pixels
         formation = formation._replace(direct=True)
     else:
+        if side == 1:
+            samples = pixels[:, None]  # (U, S) flat sample indices
+        else:
+            row, col = np.divmod(pixels, width)
+            di, dj = (x.reshape(-1) for x in np.meshgrid(np.arange(side), np.arange(side), indexing="ij"))
+            samples = (row[:, None] * side + di) * (width * side) + col[:, None] * side + dj
+        take = lambda array, *channels: np.take(array.reshape(-1, *channels), samples, axis=0)  # noqa: E731 (numpy's
+        mask = take(np.asarray(gbuffer.mask, bool))  # fast gather: several times an index expression's speed)
+        index = take(gbuffer.point_index, 3)
+        weight = take(gbuffer.point_weight, 3)
+        if not mask.all():  # an empty sample's points are not read
+            index, weight = np.where(mask[..., None], index, 0), np.where(mask[..., None], weight, 0.0)
         point_ids = np.unique(index[mask]) if mask.any() else np.zeros(0, np.int64)
         point_ids = point_ids[point_ids < pts.material.shape[0]]
         local = np.searchsorted(point_ids, index).clip(0, max(point_ids.size - 1, 0))
-    real = np.dtype(dtype)
+        real = np.dtype(dtype)
+        comp = ComposeJ(
+            mask=mask, depth=np.where(mask, take(gbuffer.depth), 0.0).astype(real),
+            point_index=np.asarray(local, np.int32), point_weight=weight.astype(real),
+            background=np.asarray(gbuffer.background, real), fog_color=np.asarray(color, real),
+            fog_start=np.asarray(start, real), fog_end=np.asarray(end, real), fog_density=np.asarray(density, real))
     if point_ids.size:
-        points = PointsJ(*(np.take(getattr(pts, k), point_ids, axis=0) for k in PointsJ._fields))
-        points = points._replace(light_dist=np.where(np.isfinite(points.light_dist), points.light_dist, np.inf))
+        rows = point_ids.astype(np.intp)  # once, not per take
+        points = PointsJ(*(np.take(getattr(pts, k), rows, axis=0) for k in PointsJ._fields))
+        if not np.isfinite(points.light_dist).all():
+            points = points._replace(light_dist=np.where(np.isfinite(points.light_dist), points.light_dist, np.inf))
     else:  # nothing hit: one dummy point with no material (colour 0), never used
         n_lights = pts.light_dir.shape[1] if pts.light_dir.ndim == 3 else 0
         points = PointsJ(normal=np.zeros((1, 3)), view=np.zeros((1, 3)), material=np.full(1, -1),
                          cell=np.zeros(1), light_dir=np.zeros((1, n_lights, 3)), light_dist=np.ones((1, n_lights)),
                          visibility=np.zeros((1, n_lights)))
     points = points._replace(material=np.asarray(points.material, np.int32), cell=np.asarray(points.cell, np.int32))
-    comp = None if formation.direct else ComposeJ(
-        mask=mask, depth=np.where(mask, take(gbuffer.depth), 0.0).astype(real),
-        point_index=np.asarray(local, np.int32), point_weight=weight.astype(real),
-        background=np.asarray(gbuffer.background, real), fog_color=np.asarray(color, real),
-        fog_start=np.asarray(start, real), fog_end=np.asarray(end, real), fog_density=np.asarray(density, real))
     return points, comp, formation, point_ids
+
+
+def own_points(gbuffer, pixels) -> np.ndarray | None:
+    """At spp 1, the point of each pixel in `pixels` (U,) (point_ids, int32) when each is covered and
+    exactly its point's colour (point weights (1, 0, 0), a valid first point index), else None."""
+    if not np.take(gbuffer.mask.reshape(-1), pixels).all():
+        return None
+    if not (np.take(gbuffer.point_weight.reshape(-1, 3), pixels, axis=0) == (1.0, 0.0, 0.0)).all():
+        return None
+    point_ids = np.take(gbuffer.point_index.reshape(-1, 3), pixels, axis=0)[:, 0]
+    return point_ids if point_ids.max(initial=0) < gbuffer.points.material.shape[0] else None
 
 
 def point_colors(material, cell, geometry: LightGeometry, table: MaterialTable, intensity, ambient, specular: int,
