@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from ..._warp import wp
 
-from .clip import SAMPLE_CENTRE, SUBPIXEL, drawn_rows, edge, owns_edge, sample_box, snapped
+from .clip import SAMPLE_CENTRE, SUBPIXEL, drawn_rows, edge, owns_edge, snapped
 
 wp.set_module_options({"enable_backward": False})
 
@@ -69,18 +69,17 @@ def edge_threshold(owned: bool):
 
 
 @wp.func
-def raster_slot(slot: int, row_begin: int, row_end: int, screen: wp.array2d(dtype=wp.vec4d), width: int,
-                key: wp.array(dtype=wp.int64)):
+def raster_slot(slot: int, row_begin: int, row_end: int, rows: wp.array2d(dtype=wp.int32),
+                screen: wp.array2d(dtype=wp.vec4d), width: int, key: wp.array(dtype=wp.int64)):
     """Z-test the samples of rows [row_begin, row_end) that screen triangle `slot` covers."""
     s0 = screen[slot, 0]
     s1 = screen[slot, 1]
     s2 = screen[slot, 2]
     x0, y0, x1, y1, x2, y2 = snapped(s0, s1, s2)
-    box = sample_box(x0, y0, x1, y1, x2, y2)  # the candidates: samples in the snapped triangle's box
-    j_lo = wp.max(box[2], 0)
-    j_hi = wp.min(box[3], width - 1)
-    i_lo = wp.max(box[0], row_begin)
-    i_hi = wp.min(box[1], row_end - 1)
+    j_lo = wp.max(rows[slot, 2], 0)  # the candidates: samples in the snapped triangle's box (`clip.emit`)
+    j_hi = wp.min(rows[slot, 3], width - 1)
+    i_lo = wp.max(rows[slot, 0], row_begin)
+    i_hi = wp.min(rows[slot, 1], row_end - 1)
     if j_lo > j_hi or i_lo > i_hi:
         return
     t0 = edge_threshold(owns_edge(x1, y1, x2, y2))  # covered: every b_k >= t_k
@@ -120,11 +119,11 @@ def raster_kernel(chunk: int, row_begin: int, row_end: int, slots: wp.array(dtyp
         n = slots.shape[0]
     for k in range(first, wp.min(first + chunk, n)):
         if binned:
-            raster_slot(slots[k], row_begin, row_end, screen, width, key)
+            raster_slot(slots[k], row_begin, row_end, rows, screen, width, key)
         else:
             top, bottom, unused = drawn_rows(k, rows, width, height)
             if top <= bottom:
-                raster_slot(k, row_begin, row_end, screen, width, key)
+                raster_slot(k, row_begin, row_end, rows, screen, width, key)
 
 
 @wp.func
