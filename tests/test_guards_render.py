@@ -9,7 +9,8 @@ from conftest import scene_dict
 from difflab import MeshError, RenderError, Scene, TextureError, compile_scene, limits, render, render_frame
 from difflab.geometry import load_mesh
 from difflab.guards import check_image, check_render, likely_causes, nonfinite_pixels, tree_shape
-from difflab.renderers.launch import RASTER_POOL_MIN_SAMPLES, cpu_threads, raster_threads
+from difflab.renderers.launch import (BANDS_PER_THREAD, PASS_POOL_MIN_SAMPLES, RASTER_POOL_MIN_SAMPLES, cpu_threads,
+                                     pass_threads, raster_threads)
 from difflab.renderers.raytrace.record import sized_tree
 from difflab.renderers.texture.store import TextureStore
 
@@ -159,8 +160,13 @@ def test_a_small_rasterized_frame_runs_on_one_thread_unless_told(monkeypatch):
     assert raster_threads(None, RASTER_POOL_MIN_SAMPLES - 1) == 1
     assert raster_threads(None, RASTER_POOL_MIN_SAMPLES) is None
     assert raster_threads(2, 64) == 2
+    assert pass_threads(None, PASS_POOL_MIN_SAMPLES - 1) == (1, BANDS_PER_THREAD)
+    assert pass_threads(None, PASS_POOL_MIN_SAMPLES) == (None, 1)  # the per-sample passes: a band per core
+    assert pass_threads(None, RASTER_POOL_MIN_SAMPLES) == (None, BANDS_PER_THREAD)
+    assert pass_threads(1, RASTER_POOL_MIN_SAMPLES) == (1, BANDS_PER_THREAD)
     monkeypatch.setenv("DIFFLAB_THREADS", "2")
     assert raster_threads(None, 64) is None  # cpu_threads() then reads the variable
+    assert pass_threads(None, PASS_POOL_MIN_SAMPLES) == (None, BANDS_PER_THREAD)
     small = scene(camera={"eye": [0, 0, 5], "target": [0, 0, 0], "width": 48, "height": 32})
     image = render(small)
     assert (image > 0).any(axis=-1).sum() > 100  # the sphere is drawn

@@ -8,6 +8,7 @@ import pytest
 
 from conftest import scene_dict
 from difflab import RenderError, compile_scene, render_frame, save_image
+from difflab.renderers import launch
 from difflab.renderers.camera import camera_struct
 from difflab.scene import Scene
 
@@ -61,6 +62,35 @@ def test_the_image_less_frame_has_the_full_frames_gbuffer_field_by_field(tmp_pat
     assert {k: v for k, v in bare.stats.items() if k != "seconds"} == \
         {k: v for k, v in full.stats.items() if k != "seconds"}
     assert bare.gbuffer.mask.any() and (bare.gbuffer.material == 1).any()  # the ball and the textured floor seen
+
+
+@pytest.mark.parametrize("shading", ["phong", "flat", "gouraud"])
+def test_per_sample_passes_split_over_threads_give_the_one_thread_frame(tmp_path, monkeypatch, shading):
+    """From PASS_POOL_MIN_SAMPLES samples (lowered here to this small frame's) the G-buffer passes
+    run in a band per core while the z-buffer stays on one thread: the same buffers, bit for bit."""
+    monkeypatch.delenv("DIFFLAB_THREADS", raising=False)
+    monkeypatch.setattr(launch, "PASS_POOL_MIN_SAMPLES", 1)
+    monkeypatch.setattr(launch, "cpu_threads", lambda: 3)  # 3 bands of 20 rows, whatever the machine
+    launched = []
+    monkeypatch.setattr(launch, "row_bands", lambda n, k: launched.append(k) or [(0, 7), (7, 13), (13, n)])
+    compiled = compile_scene(textured_scene(tmp_path, shading, 1))
+    split = render_frame(compiled)
+    assert launched and set(launched) == {3}  # every banded launch was one band per thread
+    one = render_frame(compiled, threads=1)
+    assert_same_gbuffer(split.gbuffer, one.gbuffer)
+    assert np.array_equal(split.image, one.image)
+
+
+def test_run_bands_runs_each_band_once_and_hands_a_bands_error_to_the_caller():
+    seen = []
+    launch.run_bands(lambda a, b: seen.append((a, b)), [(0, 2), (2, 5), (5, 6), (6, 9)], threads=3)
+    assert sorted(seen) == [(0, 2), (2, 5), (5, 6), (6, 9)]
+
+    def fail_on_second(a, b):
+        if a == 2:
+            raise RenderError("band 2")
+    with pytest.raises(RenderError, match="^band 2$"):
+        launch.run_bands(fail_on_second, [(0, 2), (2, 5), (5, 6)], threads=2)
 
 
 @pytest.mark.parametrize("method", ["raster", "raytrace"])

@@ -9,7 +9,7 @@ from ..guards import check_image, check_render, check_threads
 from ..scene import Scene
 from .compile import CompiledScene, as_scene, compile_scene
 from .frame import Frame
-from .launch import raster_threads, resolve_device
+from .launch import resolve_device
 
 RENDER_OVERRIDES = ("method", "shading", "specular", "shadows", "max_depth", "spp", "fresnel",
                     "transparent_shadows", "clamp_vertex_colors", "interpolation", "cull_backfaces",
@@ -65,7 +65,8 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
         width, height: override the camera's image size (not with a CompiledScene, which is
             tessellated for its camera: compile the resized scene instead).
         threads: CPU worker threads (default: $DIFFLAB_THREADS, else all cores; a rasterized
-            frame of up to 256^2 samples on one: `launch.raster_threads`).
+            frame of up to 256^2 samples on one, but from 128^2 samples its G-buffer passes on all:
+            `launch.raster_threads`, `launch.pass_threads`).
         item_buffer, light_buffer: ray-tracer speed-ups that leave the image unchanged: the primary
             rays' mesh hits from the rasterizer's z-buffer (needs "grid" sampling; None, the
             default: on wherever it applies, False: every primary ray through the BVH), and shadow
@@ -124,9 +125,7 @@ def draw(scene, overrides: dict, device, width, height, threads, keep: bool, spe
             raise RenderError("item_buffer / light_buffer: speed-ups of the ray tracer; use method='raytrace'")
         from .raster.driver import rasterize
 
-        camera = compiled.scene.camera
-        samples = camera.width * camera.height * settings.spp_side ** 2
-        frame = rasterize(compiled, settings, raster_threads(threads, samples), gbuffer=keep, image=image)
+        frame = rasterize(compiled, settings, threads, gbuffer=keep, image=image)
     else:
         from .raytrace.driver import raytrace
 

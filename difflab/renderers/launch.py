@@ -99,6 +99,7 @@ def cpu_threads() -> int:
 # load 4: 64^2 2.5 vs 4.4 ms, 128^2 3.6 vs 10.9, 256^2 7.7 vs 14.3, 512^2 44.5 vs 45.2; load 1:
 # 256^2 ~8 vs 11.4, 512^2 24.3 vs 19.9 -- the pool's win starts between the two).
 RASTER_POOL_MIN_SAMPLES = 256 * 256 + 1
+BANDS_PER_THREAD = 4
 
 
 def raster_threads(threads: int | None, n_samples: int) -> int | None:
@@ -109,6 +110,25 @@ def raster_threads(threads: int | None, n_samples: int) -> int | None:
     return 1 if n_samples < RASTER_POOL_MIN_SAMPLES else None
 
 
+# The per-sample passes of a rasterized G-buffer (stages 4-7, `raster.driver.rasterize`) are one
+# launch per band of rows with nothing to bin: from this many samples on they use every core, one
+# band per thread, even where the z-buffer stays on one thread (below RASTER_POOL_MIN_SAMPLES). A
+# band costs a launch (~16 us); the 256^2 bench sphere's Phong pass is ~2.3 ms of work (2-core
+# machine at load 2-2.7, medians of 40, one thread vs two bands: 4.37 vs 4.52 ms a frame, minima
+# 4.25 vs 3.89 ms -- even with the second core taken, and the saving of a free one).
+PASS_POOL_MIN_SAMPLES = 128 * 128
+
+
+def pass_threads(threads: int | None, n_samples: int) -> tuple[int | None, int]:
+    """(threads, bands per thread) of a per-sample pass of a rasterized frame of `n_samples`
+    samples: those of `raster_threads` with 4 bands each, but all cores with one band each for a
+    frame left to the default that `raster_threads` puts on one thread, from PASS_POOL_MIN_SAMPLES on."""
+    chosen = raster_threads(threads, n_samples)
+    if threads is None and chosen == 1 and n_samples >= PASS_POOL_MIN_SAMPLES:
+        return None, 1
+    return chosen, BANDS_PER_THREAD
+
+
 def row_bands(n_rows: int, n_bands: int) -> list[tuple[int, int]]:
     """Split rows [0, n_rows) into at most `n_bands` contiguous (begin, end) bands of near-equal size."""
     n_bands = max(1, min(n_bands, n_rows))
@@ -116,38 +136,80 @@ def row_bands(n_rows: int, n_bands: int) -> list[tuple[int, int]]:
     return [(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
-def band_plan(n_rows: int, device: str, threads: int | None = None) -> list[tuple[int, int]]:
-    """The row bands a launch over n_rows is split into: one on CUDA or with one thread, else 4 per
-    thread (more bands than threads balances uneven rows)."""
+def band_plan(n_rows: int, device: str, threads: int | None = None,
+              per_thread: int = BANDS_PER_THREAD) -> list[tuple[int, int]]:
+    """The row bands a launch over n_rows is split into: one on CUDA or with one thread, else
+    `per_thread` per thread (more bands than threads balances uneven rows)."""
     threads = cpu_threads() if threads is None else max(1, threads)
     if not device.startswith("cpu") or threads == 1 or n_rows < 2:
         return [(0, n_rows)]
-    return row_bands(n_rows, 4 * threads)
+    return row_bands(n_rows, per_thread * threads)
 
 
 _pools: dict[int, ThreadPoolExecutor] = {}
 
 
+class _BandQueue:
+    """Bands handed out in order to whichever thread asks next; `wait` returns once every band is
+    done (or, after a band raised, once those started are), however many helpers never started."""
+
+    def __init__(self, run_band, bands: list[tuple[int, int]]):
+        self.run_band, self.todo = run_band, list(reversed(bands))  # popped from the end: first band first
+        self.lock, self.finished = threading.Lock(), threading.Event()
+        self.left, self.error = len(bands), None
+
+    def work(self) -> None:
+        while True:
+            with self.lock:
+                if not self.todo:
+                    return
+                band = self.todo.pop()
+            try:
+                self.run_band(*band)
+            except BaseException as exc:  # noqa: BLE001 -- handed to the caller by `wait`
+                with self.lock:
+                    self.error = self.error or exc
+                    self.left -= len(self.todo)  # not started: never will be
+                    self.todo.clear()
+            with self.lock:
+                self.left -= 1
+                if self.left == 0:
+                    self.finished.set()
+
+    def wait(self) -> None:
+        self.finished.wait()
+        if self.error is not None:
+            raise self.error
+
+
 def run_bands(run_band, bands: list[tuple[int, int]], threads: int | None = None) -> None:
-    """Call `run_band(begin, end)` for every band, on a pool of `threads` workers (kept between calls)."""
+    """Call `run_band(begin, end)` for every band, in order, on the calling thread and up to
+    `threads` - 1 pool workers (kept between calls), each taking the next band when free: the caller
+    never idles, and a worker the machine does not schedule in time leaves its share to the others
+    instead of holding the frame up."""
     threads = cpu_threads() if threads is None else max(1, threads)
     if len(bands) == 1 or threads == 1:
         for begin, end in bands:
             run_band(begin, end)
         return
-    if threads not in _pools:
-        _pools[threads] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="difflab")
-    for future in [_pools[threads].submit(run_band, a, b) for a, b in bands]:
-        future.result()
+    helpers = min(threads, len(bands)) - 1
+    if helpers not in _pools:
+        _pools[helpers] = ThreadPoolExecutor(max_workers=helpers, thread_name_prefix="difflab")
+    queue = _BandQueue(run_band, bands)
+    for _ in range(helpers):
+        _pools[helpers].submit(queue.work)
+    queue.work()
+    queue.wait()
 
 
-def parallel_bands(run_band, n_rows: int, device: str, threads: int | None = None) -> None:
+def parallel_bands(run_band, n_rows: int, device: str, threads: int | None = None,
+                   per_thread: int = BANDS_PER_THREAD) -> None:
     """Call `run_band(begin, end)` over row bands: all cores on the CPU, a single band on CUDA.
 
     `run_band` must launch Warp kernels that touch only rows [begin, end) of their outputs, so that
     bands never write the same element and the result is bitwise identical to one launch.
     """
-    run_bands(run_band, band_plan(n_rows, device, threads), threads)
+    run_bands(run_band, band_plan(n_rows, device, threads, per_thread), threads)
 
 
 def launch_rows(kernel, shape: tuple[int, int], inputs: list, device: str, threads: int | None = None) -> None:
@@ -164,14 +226,15 @@ def launch_rows(kernel, shape: tuple[int, int], inputs: list, device: str, threa
     parallel_bands(run_band, rows, device, threads)
 
 
-def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int | None = None) -> None:
-    """Launch `kernel` with one thread per row, in row bands: its first argument is `row0: int` and
-    its thread wp.tid() handles row row0 + tid, looping over the columns itself. On the CPU this reads
-    the kernel's (struct) arguments once per row rather than once per pixel."""
+def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int | None = None,
+                     per_thread: int = BANDS_PER_THREAD) -> None:
+    """Launch `kernel` with one thread per row, in row bands (`per_thread` per CPU thread): its first
+    argument is `row0: int` and its thread wp.tid() handles row row0 + tid, looping over the columns
+    itself. On the CPU this reads the kernel's (struct) arguments once per row rather than once per pixel."""
     def run_band(begin: int, end: int) -> None:
         wp.launch(kernel, dim=end - begin, inputs=[begin, *inputs], device=device)
 
-    parallel_bands(run_band, rows, device, threads)
+    parallel_bands(run_band, rows, device, threads, per_thread)
 
 
 def launch_chunks(kernel, n: int, inputs: list, device: str, threads: int | None = None) -> None:

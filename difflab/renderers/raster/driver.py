@@ -24,7 +24,7 @@ from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
 from ..launch import (band_plan, host_empty, launch_chunks, launch_parts, launch_row_loops, load_kernels,
-                      parallel_bands, part_count, run_bands)
+                      parallel_bands, part_count, pass_threads, raster_threads, run_bands)
 
 
 def empty_points(compiled, name: str, count: int, clear: bool) -> resolve.PointsW:
@@ -259,10 +259,14 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     the G-buffer in the Frame when `gbuffer` (see the module doc). With `image` False (G-buffer
     only) the frame's image is None and, under Phong shading, stage 7 is not run: a sample's colour
     is its point's, so the non-finite count comes from the points' colours. Flat / Gouraud frames
-    still compose (that pass also samples their textures into the G-buffer)."""
+    still compose (that pass also samples their textures into the G-buffer). `threads`: as given
+    to `render_frame` (None: the default of `launch.raster_threads`, and `launch.pass_threads` for
+    the G-buffer's per-sample passes)."""
     scene, device = compiled.scene, compiled.device
     side = settings.spp_side  # the scene validated spp and the sample budget
     width, height = scene.camera.width * side, scene.camera.height * side
+    row_pass = pass_threads(threads, width * height)  # (threads, bands per thread) of the per-sample passes
+    threads = raster_threads(threads, width * height)
     shading = SHADING_MODELS[settings.shading]
     clamp_colors = bool(settings.clamp_vertex_colors and shading == GOURAUD)
     perspective_correct = int(settings.interpolation == "perspective")
@@ -309,11 +313,11 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         points, n_points = samples, width * height
         lit = empty_lit(compiled, n_points, n_points)
         launch_row_loops(shade.phong_gbuffer_kernel, height, [
-            key, tris, mesh, cam, perspective_correct, out, samples, lighting, lit], device, threads)
+            key, tris, mesh, cam, perspective_correct, out, samples, lighting, lit], device, *row_pass)
     else:
         launch_row_loops(resolve.resolve_kernel, height, [
             key, tris, mesh, compiled.materials, cam, perspective_correct, shading, compiled.vertices.shape[0], out,
-            samples], device, threads)
+            samples], device, *row_pass)
         points, n_points = mesh_points(compiled, mesh, cam, shading, threads)  # stages 5-6
         lit = light_mesh_points(compiled, lighting, points, n_points, width * height, threads)
     mark_key_cleared(compiled, key)  # stage 4 reset every key it read
@@ -323,7 +327,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         canvas = compiled.reusable("canvas", width * height, wp.vec3)  # every sample written
         launch_row_loops(shade.compose_kernel, height, [
             width, samples, out.depth, out.point_index, out.point_weight, lit, lighting, int(clamp_colors),
-            1 - points_are_samples, background, fog, canvas], device, threads)
+            1 - points_are_samples, background, fog, canvas], device, *row_pass)
     gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors)
     # then filter to pixels (Phong without stage 7: a sample's colour is its point's, fogged, so the
     # pixels are not finite exactly where these are not)
