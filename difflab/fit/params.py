@@ -115,10 +115,8 @@ class Layout:
         return _entries(self, attribute)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lower, upper) of the solver coordinate x per entry."""
-        log = self.entries("log") > 0
-        lo, hi = self.entries("lower"), self.entries("upper")
-        return np.where(log, np.log(np.where(log, lo, 1.0)), lo), np.where(log, np.log(np.where(log, hi, 1.0)), hi)
+        """(lower, upper) of the solver coordinate x per entry (read-only arrays, formed once per layout)."""
+        return _bounds(self)
 
     def values(self, x):
         """Solver coordinates x -> values in scene units (numpy for a numpy x, else JAX)."""
@@ -155,8 +153,11 @@ class Layout:
 
     def flatten(self, values: dict) -> np.ndarray:
         """key -> value (scalar, grey or RGB) as one vector in layout order."""
-        return np.concatenate([np.broadcast_to(np.asarray(values[p.key], np.float64).reshape(-1), (p.size,))
-                               for p in self.params])
+        out = []
+        for p in self.params:
+            value = np.asarray(values[p.key], np.float64).reshape(-1)
+            out.append(value if value.size == p.size else np.broadcast_to(value, (p.size,)))  # (a grey value)
+        return np.concatenate(out)
 
     def unflatten(self, vector) -> dict:
         """One vector back to key -> (size,) float64 arrays."""
@@ -172,6 +173,16 @@ class Layout:
 def _entries(layout: Layout, attribute: str) -> np.ndarray:
     out = np.concatenate([np.full(p.size, float(getattr(p, attribute))) for p in layout.params])
     out.setflags(write=False)
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _bounds(layout: Layout) -> tuple[np.ndarray, np.ndarray]:
+    log = layout.entries("log") > 0
+    lo, hi = layout.entries("lower"), layout.entries("upper")
+    out = np.where(log, np.log(np.where(log, lo, 1.0)), lo), np.where(log, np.log(np.where(log, hi, 1.0)), hi)
+    for bound in out:
+        bound.setflags(write=False)
     return out
 
 

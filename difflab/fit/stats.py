@@ -175,12 +175,13 @@ def fit_statistics(gram: np.ndarray | None, sse: float, entries: int, censored: 
 def poorly_determined(layout, values: dict, stderr_floor: dict, rel_tol=0.1, abs_tol=1e-3) -> list[str]:
     """Keys of parameters whose noise-floor standard error exceeds rel_tol |value| + abs_tol, with
     ks and n (or m) of one material flagged together."""
-    flagged = set()
+    value, err = (layout.flatten(d) for d in (values, stderr_floor))  # every entry at once
+    over = ~np.isfinite(err) | (err > rel_tol * np.abs(value) + abs_tol)
+    flagged, offset = set(), 0
     for p in layout:
-        value = np.abs(np.asarray(values[p.key], np.float64).reshape(-1))
-        err = np.asarray(stderr_floor[p.key]).reshape(-1)
-        if not np.all(np.isfinite(err)) or np.any(err > rel_tol * value + abs_tol):
+        if over[offset:offset + p.size].any():
             flagged.add(p.key)
+        offset += p.size
     for p in layout:  # the specular pair of a material
         if p.kind in ("ks", "n", "m") and p.key in flagged:
             for q in layout:
