@@ -299,7 +299,7 @@ def public_value(param: Param, value) -> float | list | np.ndarray:
     if param.shape is not None:
         return np.flipud(value.reshape(param.shape + (3,))).astype(np.float32)
     if param.rgb:
-        return [float(x) for x in np.broadcast_to(value, (3,))]
+        return (value if value.size == 3 else np.repeat(value, 3)).tolist()  # (python floats)
     return float(value[0])
 
 

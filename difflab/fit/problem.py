@@ -14,6 +14,8 @@ Levenberg-Marquardt solver is small against it from the first step.
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -51,10 +53,12 @@ class ViewJ(eqx.Module):
         return True if self.ceiling is None else image < self.ceiling
 
 
+@functools.lru_cache(maxsize=64)
 def value_index(layout, n_materials: int, n_lights: int) -> dict:
     """kind -> int32 array of the flat-vector entry each material (or light) field takes (-1: the
     base value stays): (M, 3) for RGB kinds, (M,) for scalars, (P, 3) for "intensity" (a texture's
-    texels are contiguous slices: `texels.stacked_texels`)."""
+    texels are contiguous slices: `texels.stacked_texels`). Formed once per layout and counts:
+    read-only arrays in a shared dict, not to be changed."""
     index = {k: np.full((n_materials, 3) if k in ("ka", "kd", "ks", "absorption") else (n_materials,), -1, np.int32)
              for k in TABLE_KINDS}
     index["intensity"] = np.full((n_lights, 3), -1, np.int32)
@@ -65,6 +69,8 @@ def value_index(layout, n_materials: int, n_lights: int) -> dict:
             target = index[p.kind]
             target[p.index] = np.broadcast_to(entries, (3,)) if target.ndim == 2 else entries[0]
         offset += p.size
+    for array in index.values():
+        array.setflags(write=False)
     return index
 
 

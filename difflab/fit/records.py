@@ -198,4 +198,4 @@ def view_store(compiled) -> ViewStore | None:
     """The compiled scene's store of kept views (None without a compiled scene)."""
     if compiled is None:
         return None
-    return compiled.built.setdefault(STORE, ViewStore())
+    return compiled.built.get(STORE) or compiled.built.setdefault(STORE, ViewStore())  # (made once)

@@ -99,7 +99,7 @@ def estimate_sigma(images, used_maps, *, interior=True) -> float | None:
         lap += rows2[:, 2:]
         picked = np.compress(centre.reshape(-1), lap.reshape(centre.size, -1), axis=0).reshape(-1)
         values.append(np.abs(picked, out=picked))
-    values = np.concatenate(values) if values else np.zeros(0)
+    values = values[0] if len(values) == 1 else np.concatenate(values or [np.zeros(0)])
     if not np.isfinite(values).all():
         values = values[np.isfinite(values)]
     return float(1.4826 * median(values) / 6.0) if values.size >= MIN_NOISE_PIXELS else None
