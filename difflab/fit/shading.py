@@ -263,7 +263,7 @@ class GBufferModel(eqx.Module):
             if point_ids.size == 0:  # the dummy point of `pixel_arrays`
                 rows, weight = np.full((1, 4), -1, np.int32), np.zeros((1, 4))
             taps, tap_weight = jnp.asarray(rows), jnp.asarray(np.asarray(weight, np.float64), dtype)
-        present = np.bincount(gbuffer.points.material[point_ids] + 1) if point_ids.size else np.ones(1)
+        present = np.bincount(points.material + 1)  # the points' ids as cut (the dummy point's: -1)
         ids = tuple(int(m) - 1 for m in np.flatnonzero(present))  # the distinct ids (-1: none), sorted
         return cls(material=material, cell=cell, geometry=geometry, comp=comp, formation=formation,
                    taps=taps, tap_weight=tap_weight, targets=None if texels is None else texels.targets,
