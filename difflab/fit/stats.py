@@ -136,7 +136,7 @@ def covariance_unscaled(gram: np.ndarray) -> np.ndarray:
     (p, p); the diagonal is inf for parameters that a singular direction involves."""
     norms = np.sqrt(np.maximum(np.diagonal(gram), 0.0))
     zero = norms == 0
-    scale = np.where(zero, 1.0, 1.0 / np.where(zero, 1.0, norms))
+    scale = 1.0 / np.where(zero, 1.0, norms)  # (1 for a zero column)
     outer = np.outer(scale, scale)
     eigval, eigvec = np.linalg.eigh(gram * outer)
     top = max(float(eigval.max(initial=0.0)), 1e-300)
