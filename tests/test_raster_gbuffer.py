@@ -93,6 +93,20 @@ def test_run_bands_runs_each_band_once_and_hands_a_bands_error_to_the_caller():
         launch.run_bands(fail_on_second, [(0, 2), (2, 5), (5, 6)], threads=2)
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_a_task_started_beside_runs_once_and_join_hands_back_its_error(threads):
+    """`start_beside` (the G-buffer's clearing beside the z-buffer): done exactly once by `join`,
+    on a worker or on the caller, and a task's error raised there."""
+    done = []
+    launch.start_beside(lambda: done.append(1), "cpu", threads).join()
+    assert done == [1]
+
+    def fail():
+        raise RenderError("cleared nothing")
+    with pytest.raises(RenderError, match="^cleared nothing$"):
+        launch.start_beside(fail, "cpu", threads).join()
+
+
 @pytest.mark.parametrize("method", ["raster", "raytrace"])
 def test_image_false_drops_the_image_of_either_renderer(tmp_path, method):
     frame = render_frame(textured_scene(tmp_path, "phong", 1), method=method, image=False)

@@ -93,19 +93,22 @@ class CompiledScene:
                 array.fill_(fill)
         return array
 
-    def reusable(self, name: str, shape, dtype, zeroed: bool = False) -> wp.array:
+    def reusable(self, name: str, shape, dtype, zeroed: bool = False, to_zero: list | None = None) -> wp.array:
         """A device array `name` for a frame's output, which the returned numpy arrays view (on the
         CPU): this thread's array from an earlier frame when nothing but the pool refers to it any
         more -- that frame and every view of it are gone (the reference count test of numpy's
         `resize(refcheck=True)`) -- else a new one, kept for the next frames. Fresh memory costs
-        a page fault per 4 KiB (~1.5 ms of a 256^2 G-buffer). Zero when `zeroed`, else holding
-        whatever the last frame left."""
+        a page fault per 4 KiB (~1.5 ms of a 256^2 G-buffer). Zero when `zeroed` (a reused array is
+        appended to `to_zero` when given, for the caller to zero), else holding whatever the last
+        frame left."""
         shape = (shape,) if isinstance(shape, int) else tuple(shape)
         pool = self.scratch_pool()
         key = ("reusable", name)
         array = pool.get(key)
         if array is None or array.shape != shape or array.dtype != dtype or sys.getrefcount(array) > _UNHELD:
             pool[key] = host_empty(shape, dtype, self.device, zeroed=zeroed)  # an old one stays with its frame
+        elif zeroed and to_zero is not None:
+            to_zero.append(array)
         elif zeroed:
             array.zero_()
         return pool[key]

@@ -149,9 +149,16 @@ def band_plan(n_rows: int, device: str, threads: int | None = None,
 _pools: dict[int, ThreadPoolExecutor] = {}
 
 
+def _pool(workers: int) -> ThreadPoolExecutor:
+    if workers not in _pools:
+        _pools[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="difflab")
+    return _pools[workers]
+
+
 class _BandQueue:
-    """Bands handed out in order to whichever thread asks next; `wait` returns once every band is
-    done (or, after a band raised, once those started are), however many helpers never started."""
+    """Bands handed out in order to whichever thread asks next; `join` takes bands on the calling
+    thread until none is left, then returns once every band is done (or, after a band raised, once
+    those started are), however many helpers never started."""
 
     def __init__(self, run_band, bands: list[tuple[int, int]]):
         self.run_band, self.todo = run_band, list(reversed(bands))  # popped from the end: first band first
@@ -166,7 +173,7 @@ class _BandQueue:
                 band = self.todo.pop()
             try:
                 self.run_band(*band)
-            except BaseException as exc:  # noqa: BLE001 -- handed to the caller by `wait`
+            except BaseException as exc:  # noqa: BLE001 -- handed to the caller by `join`
                 with self.lock:
                     self.error = self.error or exc
                     self.left -= len(self.todo)  # not started: never will be
@@ -176,7 +183,8 @@ class _BandQueue:
                 if self.left == 0:
                     self.finished.set()
 
-    def wait(self) -> None:
+    def join(self) -> None:
+        self.work()
         self.finished.wait()
         if self.error is not None:
             raise self.error
@@ -193,13 +201,20 @@ def run_bands(run_band, bands: list[tuple[int, int]], threads: int | None = None
             run_band(begin, end)
         return
     helpers = min(threads, len(bands)) - 1
-    if helpers not in _pools:
-        _pools[helpers] = ThreadPoolExecutor(max_workers=helpers, thread_name_prefix="difflab")
     queue = _BandQueue(run_band, bands)
     for _ in range(helpers):
-        _pools[helpers].submit(queue.work)
-    queue.work()
-    queue.wait()
+        _pool(helpers).submit(queue.work)
+    queue.join()
+
+
+def start_beside(task, device: str, threads: int | None = None) -> _BandQueue:
+    """Start `task()` on a pool worker, beside what the caller does next, when the CPU has a thread
+    to spare (`threads`); `join()` the returned handle to have it done -- on the caller, if no worker
+    has taken it yet (and on CUDA, or with one thread, it runs there)."""
+    queue = _BandQueue(lambda begin, end: task(), [(0, 0)])
+    if device.startswith("cpu") and (cpu_threads() if threads is None else threads) > 1:
+        _pool(1).submit(queue.work)
+    return queue
 
 
 def parallel_bands(run_band, n_rows: int, device: str, threads: int | None = None,

@@ -29,7 +29,9 @@ With the G-buffer under Phong shading (whose points are its samples), stages 4 a
 pass (`shade.phong_gbuffer_kernel`: each sample resolved, then lit); `render_frame(...,
 image=False)` skips stage 7 there. The G-buffer's arrays come from `CompiledScene.reusable` (the
 last frame's memory when nothing holds it any more), cleared to zero where an empty sample's
-entries are zero; the kernels write the rest.
+entries are zero (beside stages 1-3, on a core the z-buffer leaves free); the kernels write the
+rest. From 128^2 samples the per-sample passes take a band of rows per core even where the
+z-buffer runs on one thread (`launch.pass_threads`).
 
 `render` (no G-buffer) runs stages 1-3, then `image_kernel` fuses 4-7 per sample: Phong's points are
 its samples; a flat / Gouraud point is lit when a sample first reads it, into a cache of the CPU
