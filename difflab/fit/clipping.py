@@ -73,7 +73,7 @@ def _clipped_bounds(view, residual) -> tuple[bool, bool]:
     target values at or above it."""
     target = view.values
     top = bool(np.isfinite(view.ceiling)) and np.count_nonzero(target >= view.ceiling) >= MIN_CLIPPED
-    zero = target == 0.0 if view.weighting is None else (target == 0.0) & (view.weights > 0)
+    zero = view.zeros if view.weighting is None else view.zeros & (view.weights > 0)
     if np.count_nonzero(zero) < MIN_CLIPPED or target.min() < 0.0:
         return False, top
     lit = take_pixels(residual, view.pixels) > 0.0  # a channel the model puts at 0 is dark in the scene

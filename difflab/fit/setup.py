@@ -171,7 +171,7 @@ class Setup:
         for view in self.views:
             part = r[offset:offset + 3 * view.pixels.size].reshape(-1, 3)
             offset += 3 * view.pixels.size
-            zero = (view.values == 0) & (part == 0)  # black in the target, and the model 0 there too
+            zero = view.zeros & (part == 0)  # black in the target, and the model 0 there too
             rows = zero[:, 0] & zero[:, 1] & zero[:, 2]
             count += 3 * int(np.count_nonzero(rows)) if view.weighting is None else \
                 int(np.count_nonzero(np.take(view.weights, np.flatnonzero(rows), axis=0) > 0))
