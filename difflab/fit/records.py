@@ -92,12 +92,12 @@ class View:
     255 from an 8-bit file, 1 / 65535 from a 16-bit one, 0 for float data: the noise floor is step /
     sqrt(12)); nonfinite: non-finite target values inside the mask; record: its G-buffer or ray tree;
     scene: the scene of this view; used (H, W) bool: the pixels the fit reads (`pixels`: their flat
-    indices, in order; `values` and `weights`: the target's and the weight's (U, 3) float64 rows there,
-    `zeros`: values == 0 -- each computed once, on first use, or handed over by `Setup._seen`, which
-    took them already);
-    kept: the `KeptView` of the record when it is kept with the compiled scene, else None; touched
-    (H, W) bool: the pixels the fitted parameters influence. The whole-image `target` and `weight`
-    are formed only when asked for: a fit reads the used pixels' rows."""
+    indices, in order; `values` and `weights`: the target's and the weight's (U, 3) float64 rows
+    there, `zeros`: values == 0 -- each computed once, on first use, or handed over by `Setup._seen`,
+    which took them already); kept: the `KeptView` of the record when it is kept with the compiled
+    scene, else None; touched (H, W) bool: the pixels the fitted parameters influence. The
+    whole-image `target` and `weight` are formed only when asked for: a fit reads the used pixels'
+    rows."""
 
     image: np.ndarray
     mask: np.ndarray
