@@ -9,6 +9,7 @@ often as the solver asks (DESIGN.md, invariant 3).
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 
 import equinox as eqx
@@ -68,7 +69,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             sse = float(np.sum(np.square(counted)))
         loss = 0.5 * sse if rho is counted else float(0.5 * np.sum(np.square(rho)))
         residuals = setup.residual_images(r)
-        finite = bool(np.all(np.isfinite(flat)) and np.isfinite(loss) and (gram is None or np.all(np.isfinite(gram))))
+        finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and (gram is None or np.all(np.isfinite(gram))))
         weighted = residuals if setup.unit_weights else setup.residual_images(r, weighted=True)
         silent, silent_entries = setup.silent(r)
         sigma = setup.noise(weighted, silent) if finite else float("nan")
