@@ -175,3 +175,17 @@ def test_an_unlit_side_at_zero_is_not_clipped_noise():
     for key in params:
         np.testing.assert_allclose(lit_only.params[key], result.params[key], rtol=1e-9)
     np.testing.assert_allclose(result.params["kd"], TRUTH["kd"], rtol=0.02)
+
+
+def test_a_float64_fit_after_a_float32_fit_of_the_same_layout():
+    """One process, one parameter layout, a float32 fit (optimistix's dogleg: the bounds enter its
+    compiled map into the box) and then a float64 one: each runs in its own precision (the layout's
+    cached read-only bounds once reached the float64 solve as float32 buffers: an XLA input
+    mismatch)."""
+    scene = make_scene(size=16, red=TRUTH)
+    target = target_of(scene)
+    low = fit_material(scene, [target], "red", ("kd",), x64=False, solver="dogleg")
+    high = fit_material(scene, [target], "red", ("kd",))
+    assert low.converged and high.converged
+    np.testing.assert_allclose(high.params["kd"], TRUTH["kd"], rtol=1e-6)
+    np.testing.assert_allclose(low.params["kd"], TRUTH["kd"], rtol=1e-4)

@@ -57,18 +57,21 @@ def projected_step(x, a, g, lam, lower, upper):
     """The damped Gauss-Newton step from x, projected onto the box: d = clip(x + dx) - x with
     (A + lam D) dx = -g over the free entries (an entry on its bound with the gradient pushing
     outward is held), and the decrease of 0.5 |r|^2 the linear model predicts for it,
-    -(g.d + 0.5 d.A d)."""
+    -(g.d + 0.5 d.A d). Where the damped matrix is not positive definite to its rounding (the
+    Cholesky factor is not finite), d = 0 and the decrease predicted is NaN: the step is made and
+    rejected, so lambda grows (it is no sign of convergence)."""
     held = ((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0))
     diag = jnp.diagonal(a)
     floor = 1e-9 * jnp.max(diag) + 1e-20  # a parameter no pixel sees still gets a (huge) damping
     free = ~held
     m = jnp.where(free[:, None] & free[None, :], a, 0.0) + jnp.diag(jnp.where(free, lam * jnp.maximum(diag, floor), 1.0))
     dx = jsl.cho_solve(jsl.cho_factor(m), jnp.where(free, -g, 0.0))
-    d = jnp.clip(x + jnp.where(jnp.isfinite(dx), dx, 0.0), lower, upper) - x
-    return d, -(g @ d + 0.5 * d @ (a @ d))
+    solved = jnp.all(jnp.isfinite(dx))
+    d = jnp.clip(x + jnp.where(solved, dx, 0.0), lower, upper) - x
+    return d, jnp.where(solved, -(g @ d + 0.5 * d @ (a @ d)), jnp.nan)
 
 
-def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=None):
+def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=None, exact=None):
     """Minimise 0.5 |r(x)|^2 over lower <= x <= upper.
 
     Arguments:
@@ -77,6 +80,8 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
         x0: (p,) start (clipped into the box); lower, upper: (p,) bounds (+-inf allowed).
         max_steps: the most steps (static); rtol, atol: the stopping tolerances above.
         progress: None, or a host callable (step, loss) called after each step.
+        exact: the linearisation r and J^T J at the solution are taken from (default: linearise;
+            one whose J^T J is exact where `linearise`'s only steers the steps).
     Returns:
         (x, code index into CODES, steps, history (max_steps,) the loss after each step (NaN beyond),
         r (N,) and J^T J (p, p) at x).
@@ -123,27 +128,31 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
     def running(s: State) -> bool:
         # MINPACK's xtol test on the next step: when it would change no entry by more than the
         # tolerance, the solve ends here instead of linearising at a point it would not move from.
-        return (s.code == RUNNING) & ((s.step < 0) | ~small(s.d, s.x))
+        return (s.code == RUNNING) & ((s.step < 0) | ~small(s.d, s.x) | jnp.isnan(s.predicted))
 
     out = jax.lax.while_loop(running, body, state)
     code = jnp.where(out.code == RUNNING, SUCCESSFUL, out.code)
-    return out.x, code, out.step, out.history, linearise(out.x, args)[0], out.a
+    if exact is None:  # the loop's J^T J at the solution; r formed once more
+        return out.x, code, out.step, out.history, linearise(out.x, args)[0], out.a
+    r, a, _ = exact(out.x, args)
+    return out.x, code, out.step, out.history, r, a
 
 
 @partial(jax.jit, static_argnames=("max_steps", "progress"))
 def solve_box(problem, x0, lower, upper, max_steps, rtol, atol, progress=None):
-    """`box_lm` on a `Problem`'s residuals, compiled once per problem structure and max_steps. (A
-    plain jit: a `Problem` is a pytree of arrays with its static fields in the tree's structure,
-    and jax.jit's dispatch costs less than eqx.filter_jit's partition of it: 0.21 vs 0.36 ms a call.)"""
-    return box_lm(linearise, x0, lower, upper, problem, max_steps=max_steps, rtol=rtol, atol=atol,
-                  progress=progress)
+    """`box_lm` on a `Problem`'s residuals (the steps on `linearise`'s fast form, the statistics at
+    the solution on its exact one), compiled once per problem structure and max_steps. (A plain
+    jit: a `Problem` is a pytree of arrays with its static fields in the tree's structure, and
+    jax.jit's dispatch costs 0.21 ms a call against eqx.filter_jit's 0.36.)"""
+    return box_lm(partial(linearise, fast=True), x0, lower, upper, problem, max_steps=max_steps, rtol=rtol,
+                  atol=atol, progress=progress, exact=linearise)
 
 
 @partial(jax.jit, static_argnames=("max_steps",))
 def solve_box_batch(problem, x0, targets, lower, upper, max_steps, rtol, atol):
     """Many `box_lm` solves at once, `jax.vmap` over starts x0 (B, p) and per-view targets (B, U, 3)."""
     def one(x0_b, targets_b):
-        return box_lm(linearise, x0_b, lower, upper, problem.with_targets(targets_b),
-                      max_steps=max_steps, rtol=rtol, atol=atol)
+        return box_lm(partial(linearise, fast=True), x0_b, lower, upper, problem.with_targets(targets_b),
+                      max_steps=max_steps, rtol=rtol, atol=atol, exact=linearise)
 
     return jax.vmap(one)(x0, targets)

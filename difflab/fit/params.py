@@ -115,8 +115,11 @@ class Layout:
         return _entries(self, attribute)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lower, upper) of the solver coordinate x per entry (read-only arrays, formed once per layout)."""
-        return _bounds(self)
+        """(lower, upper) of the solver coordinate x per entry (formed once per layout; returned as
+        copies: the same read-only arrays used by a float32 fit's compiled solve and then handed
+        to a float64 one reached it as float32 buffers -- an XLA input mismatch,
+        test_fit_engine.test_a_float64_fit_after_a_float32_fit_of_the_same_layout)."""
+        return tuple(bound.copy() for bound in _bounds(self))
 
     def values(self, x):
         """Solver coordinates x -> values in scene units (numpy for a numpy x, else JAX)."""
