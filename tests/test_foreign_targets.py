@@ -104,15 +104,22 @@ def clean_phong():
     return clean, ~np.any(clean >= 1.0, axis=-1)
 
 
+def noisy_phong_png(folder) -> Path:
+    """POV-Ray's Phong sphere (linear 16-bit file) with 3 % seeded Gaussian noise, saved as an 8-bit
+    sRGB PNG: the noise on the dark, ambient-lit side clips at black."""
+    clean, _ = clean_phong()
+    noisy = clean + np.random.default_rng(0).normal(0.0, 0.03, clean.shape).astype(np.float32)
+    return difflab.save_image(folder / "noisy.png", noisy)
+
+
 def test_noise_clipped_at_black_does_not_bias_the_fit(tmp_path):
     """POV-Ray's Phong sphere (its linear 16-bit file) with 3 % seeded Gaussian noise, saved as an
     8-bit sRGB PNG: the noise on the dark, ambient-lit side clips at black. Every parameter lies
     within 3 standard errors of the truth, ka (0.02-0.1 x ambient 0.2, under the noise) is reported
     poorly determined, and the pixels near the clip are counted as censored. (Fitted over them, ka
     came out 85 % high and kd 12 % at 8-12 standard errors, reported ok.)"""
-    clean, unclipped = clean_phong()
-    noisy = clean + np.random.default_rng(0).normal(0.0, 0.03, clean.shape).astype(np.float32)
-    target = difflab.save_image(tmp_path / "noisy.png", noisy)
+    _, unclipped = clean_phong()
+    target = noisy_phong_png(tmp_path)
     case = CASES["a_phong"]
     result = difflab.fit_material(difflab.load_scene(DATA / "a_phong.scene.json"), [target], "red", case["params"],
                                   masks=[unclipped], progress=False)
@@ -140,3 +147,26 @@ def test_a_batch_of_noisy_clipped_targets_is_fitted_without_bias():
         for key, truth in case["truth"].items():
             z = np.abs(np.asarray(result.params[key]) - np.asarray(truth)) / np.asarray(result.stderr[key])
             assert np.all(z < 3.5), (key, result.params[key], result.stderr[key])
+
+
+def test_a_mask_wholly_near_the_clip_keeps_the_first_fit_and_flags_it(tmp_path):
+    """The noisy 8-bit Phong sphere masked to its dark side (clean value < 0.03, ~1 sigma), ka fitted:
+    every used pixel lies in the band near black that the refit leaves out (`fit.clipping`), so
+    leaving it out would leave nothing to fit. The first fit is kept -- its values, steps and result
+    those of the same fit solved once (`solve`), nothing counted as censored -- and ka is listed as
+    poorly determined, because those values rest on noise the clip biases: ka comes out 5-8 of its
+    standard errors high in green and blue, which the first fit alone reported as well determined.
+    (Before, the refit over no pixel returned `empty_mask`, not converged: a fit thrown away.)"""
+    from difflab.fit import solve
+    from difflab.fit.setup import Setup
+
+    clean, _ = clean_phong()
+    target, mask, scene = noisy_phong_png(tmp_path), clean.max(axis=-1) < 0.03, difflab.load_scene(
+        DATA / "a_phong.scene.json")
+    result = difflab.fit_material(scene, [target], "red", ("ka",), masks=[mask], progress=False)
+    first = solve(Setup(scene, [target], "red", ("ka",), masks=[mask]), progress=False)
+    assert result.converged and result.result == first.result == "successful" and result.steps == first.steps
+    assert result.params == first.params and result.stderr == first.stderr and result.censored == 0
+    assert result.poorly_determined == ["ka"] and first.poorly_determined == []
+    z = (np.asarray(first.params["ka"]) - CASES["a_phong"]["truth"]["ka"]) / np.asarray(first.stderr["ka"])
+    assert z[1] > 3.0 and z[2] > 3.0, z  # biased by the clip: the flag is needed

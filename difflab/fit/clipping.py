@@ -11,7 +11,9 @@ likewise). Least squares over such pixels is biased: the dark, ambient-lit side 
 1-3 % noise, saved as an 8-bit PNG (noise clipped at black), gave ka 15-85 % high at 6-12 standard
 errors, reported ok. `clipped_band` finds the used pixels whose fitted, unclipped model lies within
 BAND sigma of a bound the target is clipped at; `engine.fit` leaves them out (weight 0) and fits
-again from the first solution, counting their values as censored. Only when the noise is real
+again from the first solution, counting their values as censored -- unless that would leave no more
+entries than unknowns: then the first fit is kept, every parameter flagged poorly determined (its
+values rest on clipped noise). Only when the noise is real
 (sigma above twice the targets' quantisation floor: a noise-free render keeps its pixels, whose
 residuals are 0 there anyway) and the fit has no texels.
 

@@ -191,10 +191,15 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
 def without_clipped(setup: Setup, out: FitResult, options: FitOptions, make_setup) -> FitResult:
     """`out`, or -- when noise clipped at a bound biases it (`clipping.clipped_band`) -- the fit made
     again without the pixels near the clip, from `out`'s values, their values counted as censored.
+    When leaving them out would leave no more uncensored entries than unknowns (a mask that lies
+    wholly near the clip), `out` is kept, every parameter listed in `poorly_determined`: its values
+    rest on pixels whose mean the clip moves, a bias its standard errors do not cover.
     make_setup(weights, init): the same fit's `Setup` with other weights (per view (H, W, 3)) and start."""
     band = clipped_band(setup, out)
     if band is None:
         return out
+    if _entries_left(setup, band) <= setup.layout.size:
+        return dataclasses.replace(out, poorly_determined=[p.key for p in setup.layout])
     start = time.perf_counter()
     kept = [view.weight * ~near[..., None] for view, near in zip(setup.views, band)]
     again = make_setup(kept, out.params)
@@ -204,6 +209,16 @@ def without_clipped(setup: Setup, out: FitResult, options: FitOptions, make_setu
                for key in {**out.timings, **second.timings}}
     return dataclasses.replace(second, steps=out.steps + second.steps, censored=second.censored + left_out,
                                seconds=out.seconds + second.seconds, timings=timings)
+
+
+def _entries_left(setup: Setup, band) -> int:
+    """The residual entries a fit without the `band` pixels (per view (H, W) bool) would count: weight
+    > 0, below the view's ceiling, outside the band."""
+    count = 0
+    for view, near in zip(setup.views, band):
+        rows = ~near.reshape(-1)[view.pixels]
+        count += int(np.count_nonzero((view.weights[rows] > 0) & (view.values[rows] < view.ceiling)))
+    return count
 
 
 def fit_material(scene, targets, material=None, params=DEFAULT_PARAMS, **kwargs) -> FitResult:

@@ -51,7 +51,10 @@ class FitResult:
         material lies in the masks; "nonfinite_target": NaN / inf target pixels inside the masks).
     history: the loss at the point each solver step evaluated (rejected trial points included).
     poorly_determined: names whose value the images do not pin down (see `fit.stats`; in a
-        matrix-free fit: the textures with texels that no pixel sees).
+        matrix-free fit: the textures with texels that no pixel sees); every name when the fit rests
+        only on noise clipped at a bound -- the pixels `fit.clipping` would leave out are all, or
+        all but no more entries than unknowns, of those used: the fit is kept as solved (nothing
+        censored), its values biased by the clip beyond what their standard errors cover.
     initial: the starting values (same shapes as params). solver: the solver's name.
     timings: seconds per phase ("setup": G-buffers / ray trees and arrays, of which "render": the
         Warp renders, 0 where every view was kept with a compiled scene: `fit.records`; "solve"; "stats"),
