@@ -14,12 +14,13 @@ is 0 lands on 0 in one projected step and stays there, instead of crawling along
 Stops with "successful" when the next step would change every entry by at most atol + rtol |x|
 (tested before the step is taken: a solve that has landed on its minimum is not linearised once more
 at a point it would not move from), or when an accepted step lowered the loss -- and the linear model
-predicted it would lower it -- by at most rtol of itself (MINPACK's xtol / ftol tests); "nonlinear_max_steps_reached" after max_steps;
-"nonfinite" when the loss at the start is not finite. A trial step whose loss is not finite is
-rejected like any step that does not lower the loss, so the point returned always has a finite
-loss (a fit with an infinite loss is never successful). Each step costs one linearisation and one
-p x p Cholesky solve, as a plain Gauss-Newton step does; the residual vector is not carried from step
-to step (only its loss), but formed once more at the solution.
+predicted it would lower it -- by at most rtol of itself (MINPACK's xtol / ftol tests);
+"nonlinear_max_steps_reached" after max_steps; "nonfinite" when the loss at the start is not finite.
+A trial step whose loss is not finite is rejected like any step that does not lower the loss, so
+the point returned always has a finite loss (a fit with an infinite loss is never successful). Each
+step costs one linearisation and one p x p Cholesky solve, as a plain Gauss-Newton step does; the
+residual vector is not carried from step to step (only its loss), but formed once more at the
+solution (with the exact J^T J there, where the steps used `normal_equations`' fast form).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 
-from .normal_equations import linearise
+from .normal_equations import has_fast_form, linearise
 
 CODES = ("successful", "nonlinear_max_steps_reached", "nonfinite")
 SUCCESSFUL, MAX_STEPS, NONFINITE = 0, 1, 2
@@ -64,7 +65,8 @@ def projected_step(x, a, g, lam, lower, upper):
     diag = jnp.diagonal(a)
     floor = 1e-9 * jnp.max(diag) + 1e-20  # a parameter no pixel sees still gets a (huge) damping
     free = ~held
-    m = jnp.where(free[:, None] & free[None, :], a, 0.0) + jnp.diag(jnp.where(free, lam * jnp.maximum(diag, floor), 1.0))
+    damping = jnp.where(free, lam * jnp.maximum(diag, floor), 1.0)
+    m = jnp.where(free[:, None] & free[None, :], a, 0.0) + jnp.diag(damping)
     dx = jsl.cho_solve(jsl.cho_factor(m), jnp.where(free, -g, 0.0))
     solved = jnp.all(jnp.isfinite(dx))
     d = jnp.clip(x + jnp.where(solved, dx, 0.0), lower, upper) - x
@@ -145,7 +147,7 @@ def solve_box(problem, x0, lower, upper, max_steps, rtol, atol, progress=None):
     jit: a `Problem` is a pytree of arrays with its static fields in the tree's structure, and
     jax.jit's dispatch costs 0.21 ms a call against eqx.filter_jit's 0.36.)"""
     return box_lm(partial(linearise, fast=True), x0, lower, upper, problem, max_steps=max_steps, rtol=rtol,
-                  atol=atol, progress=progress, exact=linearise)
+                  atol=atol, progress=progress, exact=linearise if has_fast_form(problem, x0) else None)
 
 
 @partial(jax.jit, static_argnames=("max_steps",))
@@ -153,6 +155,7 @@ def solve_box_batch(problem, x0, targets, lower, upper, max_steps, rtol, atol):
     """Many `box_lm` solves at once, `jax.vmap` over starts x0 (B, p) and per-view targets (B, U, 3)."""
     def one(x0_b, targets_b):
         return box_lm(partial(linearise, fast=True), x0_b, lower, upper, problem.with_targets(targets_b),
-                      max_steps=max_steps, rtol=rtol, atol=atol, exact=linearise)
+                      max_steps=max_steps, rtol=rtol, atol=atol,
+                      exact=linearise if has_fast_form(problem, x0) else None)
 
     return jax.vmap(one)(x0, targets)

@@ -120,6 +120,11 @@ def by_parts(problem, x, fast: bool = False):
     return (jnp.concatenate(residuals), scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p])
 
 
+def has_fast_form(problem, x) -> bool:
+    """Whether `linearise(x, problem, fast=True)` differs from the exact form: by parts, in float64."""
+    return x.dtype == jnp.float64 and by_parts_applies(problem)
+
+
 def linearise(x, problem, fast: bool = False):
     """(r, J^T J, J^T r) of `problem.residuals` at solver coordinates x, by parts where that
     applies (`fast`: its solver-step form), else dense."""
