@@ -50,6 +50,37 @@ def test_noise_estimate_and_chi_square_with_the_right_model(mirror):
     assert result.sigma == pytest.approx(0.02, rel=0.15) and 0.7 < result.chi2 < 1.4
 
 
+@pytest.fixture(scope="module")
+def noisy_sphere():
+    """The raster sphere (64 x 64) and its render with seeded noise of sigma 0.02."""
+    scene = make_scene(size=64)
+    target = target_of(scene)
+    return scene, target + np.random.default_rng(4).normal(0.0, 0.02, target.shape)
+
+
+@pytest.mark.parametrize("sigma", [None, 0.02])
+@pytest.mark.parametrize("zeros", ["blue", "random"])
+def test_chi_square_with_per_channel_weights_of_zero(noisy_sphere, zeros, sigma):
+    """Per-channel (H, W, 3) weights of 0 -- the blue channel everywhere, or 30 % of the entries at
+    random -- on a target with noise 0.02 and the right model: the noise is estimated within 10 %
+    (or given), the reduced chi-square is 1 within its statistical spread (given sigma: 4 sqrt(2 /
+    dof), dof > 2000 entries; estimated, as the noise estimate's test above), no mismatch flag.
+    (The zero-weight channels' residuals, 0, entered the noise estimate: sigma 0.009 and chi2 4.8
+    flagged as a mismatch with blue at 0, chi2 1.8 at random.)"""
+    scene, noisy = noisy_sphere
+    weights = np.ones(noisy.shape)
+    if zeros == "blue":
+        weights[..., 2] = 0.0
+    else:
+        weights = (np.random.default_rng(5).random(noisy.shape) > 0.3).astype(float)
+    result = fit_material(scene, [noisy], "red", init=START, weights=weights, sigma=sigma)
+    assert result.converged and not result.model_mismatch
+    if sigma is None:
+        assert result.sigma == pytest.approx(0.02, rel=0.1) and 0.7 < result.chi2 < 1.4
+    else:
+        assert result.sigma == 0.02 and abs(result.chi2 - 1.0) < 4.0 * np.sqrt(2.0 / 2000)
+
+
 def test_clipped_highlight_recovers_ks_and_n():
     """A highlight rendered above 1 and clipped to 1 (as an 8-bit photo or a 16-bit render clips it):
     the ceiling is detected, those pixels are censored, and ks and n come back within 1 %. Read as

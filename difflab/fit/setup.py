@@ -35,7 +35,7 @@ from .raytree import TreeModel, tree_influence
 from .records import KeptView, View, take_pixels, view_key, view_store
 from .shading import GBufferModel, influence
 from .stats import FLOAT_SIGMA, estimate_sigma
-from .targets import nonfinite_count, prepared_targets
+from .targets import in_channels, nonfinite_count, prepared_targets
 from .texels import TexelSource, texture_starts, wants_texels
 
 METHODS = ("raster", "raytrace")
@@ -184,7 +184,7 @@ class Setup:
         (U,) bool, from `silent`), floored (see `stats`)."""
         if self.sigma_given is not None:
             return self.sigma_given
-        clean = []  # the used pixels but the silent and the censored ones
+        clean = []  # the used pixels but the silent and the censored ones; per channel where a weight is 0
         for i, view in enumerate(self.views):
             left_out = silent[i] if silent else np.zeros(view.pixels.size, bool)
             if np.isfinite(view.ceiling):
@@ -193,6 +193,8 @@ class Setup:
             if left_out.any():
                 clean[i] = view.used.copy()
                 clean[i].reshape(-1)[view.pixels[left_out]] = False
+            if view.weighting is not None and not np.all(view.weights > 0):
+                clean[i] = in_channels(clean[i]) & (view.weighting > 0)
         estimate = estimate_sigma(residual_images, clean)
         if estimate is None:
             estimate = estimate_sigma([v.target for v in self.views], clean, interior=False)

@@ -3,7 +3,8 @@ standard errors, poorly determined parameters and PSNR.
 
 Noise: `sigma` when given, else estimated from the residual images at the solution by Immerkaer's
 Laplacian operator with a robust (median) scale, sigma = 1.4826 median |L| / 6, over the pixels
-whose 3 x 3 neighbourhood is all used and uncensored (L = R * [1 -2 1; -2 4 -2; 1 -2 1] has standard
+whose 3 x 3 neighbourhood is all used and uncensored -- per channel where weights of 0 leave some
+channels of used pixels out -- (L = R * [1 -2 1; -2 4 -2; 1 -2 1] has standard
 deviation 6 sigma for white noise). The Laplacian removes what a wrong model leaves smoothly (an
 offset, a gradual shading error), so the estimate sees the noise, not the mismatch. With fewer than
 MIN_NOISE_PIXELS such pixels the targets themselves are used (smooth shading adds a little: an
@@ -73,13 +74,16 @@ def median(values: np.ndarray):
 
 
 def estimate_sigma(images, used_maps, *, interior=True) -> float | None:
-    """The robust Laplacian noise estimate of (H, W, 3) images over their used pixels -- only those
+    """The robust Laplacian noise estimate of (H, W, 3) images over their used entries -- only those
     whose 3 x 3 neighbourhood is used, when `interior` -- or None with fewer than MIN_NOISE_PIXELS.
+    A used map is (H, W) bool (every channel of a used pixel) or (H, W, 3) (per channel: where some
+    channels have weight 0, their residuals are 0, not noise, and must not enter a neighbourhood).
     (The Laplacian kernel is [1 -2 1]^T [1 -2 1]: applied as two second differences, over the used
     pixels' bounding box.)"""
     values = []
     for image, used in zip(images, used_maps):
-        rows, cols = np.flatnonzero(used.any(axis=1)), np.flatnonzero(used.any(axis=0))
+        pixels = used if used.ndim == 2 else used[..., 0] | used[..., 1] | used[..., 2]
+        rows, cols = np.flatnonzero(pixels.any(axis=1)), np.flatnonzero(pixels.any(axis=0))
         if rows.size == 0 or used.shape[0] < 3 or used.shape[1] < 3:
             continue
         top, left = max(rows[0] - 1, 0), max(cols[0] - 1, 0)  # the box, one pixel wider (non-interior case)
@@ -97,7 +101,10 @@ def estimate_sigma(images, used_maps, *, interior=True) -> float | None:
         lap = rows2[:, 1:-1] * -2.0
         lap += rows2[:, :-2]
         lap += rows2[:, 2:]
-        picked = np.compress(centre.reshape(-1), lap.reshape(centre.size, -1), axis=0).reshape(-1)
+        if centre.ndim == 2:
+            picked = np.compress(centre.reshape(-1), lap.reshape(centre.size, -1), axis=0).reshape(-1)
+        else:
+            picked = lap[centre]
         values.append(np.abs(picked, out=picked))
     values = values[0] if len(values) == 1 else np.concatenate(values or [np.zeros(0)])
     if not np.isfinite(values).all():
