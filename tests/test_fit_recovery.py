@@ -195,6 +195,27 @@ def test_batch(vmap):
         np.testing.assert_allclose(r.params["kd"], kd, rtol=1e-4)
 
 
+def test_batch_targets_are_decoded_once_and_kept():
+    """A batch element's target is decoded by `load_target` (a private copy, in its own precision) and
+    kept by `Setup.retarget` as it is -- not copied again to float64 -- and checked against the view's
+    size without forming the first view's whole float64 `target`, which a fit does not read. The
+    loop's results are the single fits' exactly."""
+    from difflab.fit.batch import _decoded
+    from difflab.fit.setup import Setup
+
+    scene, start = make_scene(size=16), {"kd": [0.5, 0.5, 0.5]}
+    images = np.stack([target_of(make_scene(size=16, red={"kd": kd})) for kd in ([0.6, 0.3, 0.2], [0.3, 0.5, 0.7])])
+    images = images.astype(np.float32)
+    setup = Setup(scene, [images[0]], "red", ("kd",), init=start)
+    decoded = _decoded(images[1], setup, 1)
+    assert decoded.dtype == np.float32 and not np.shares_memory(decoded, images[1])
+    assert setup.retarget([decoded]).views[0].image is decoded and "target" not in setup.views[0].__dict__
+    batch = fit_batch(scene, images, "red", ("kd",), vmap=False, init=start)
+    for image, result in zip(images, batch):
+        single = fit_material(scene, [image], "red", ("kd",), init=start)
+        assert result.params == single.params and result.stderr == single.stderr and result.chi2 == single.chi2
+
+
 def test_a_textured_material_goes_through_the_ray_tree(tmp_path):
     """The G-buffer model carries no texture: the scene's choice is the ray tree (which does), and
     forcing the G-buffer is refused with a pointer to what can fit it."""

@@ -119,12 +119,14 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
 
 
 def _decoded(image, setup: Setup, b: int) -> np.ndarray:
-    """Target b as linear float data of the view's size (decoded like the first)."""
+    """Target b as linear float data of the view's size (decoded like the first; a private copy,
+    `load_target`'s, that `Setup.retarget` keeps)."""
     from .targets import load_target
 
     array, _ = load_target(image, f"images[{b}]")
-    if array.shape != setup.views[0].target.shape:
-        raise FitError(f"images[{b}]: shape {array.shape}, but the batch's view is {setup.views[0].target.shape}")
+    shape = setup.views[0].image.shape  # (not `target`'s: that would form the whole float64 image)
+    if array.shape != shape:
+        raise FitError(f"images[{b}]: shape {array.shape}, but the batch's view is {shape}")
     return array
 
 

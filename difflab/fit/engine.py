@@ -26,7 +26,8 @@ from .options import FitOptions
 from .clipping import clipped_band
 from .matfree import check_solver
 from .solvers import SUCCESSFUL, run
-from .stats import QUANTISATION_SIGMA, fit_statistics, normal_matrix, poorly_determined, psnr, standard_errors
+from .stats import (QUANTISATION_SIGMA, fit_statistics, normal_matrix, poorly_determined, psnr, silent_pixels,
+                    standard_errors, views_noise)
 from .texels import texel_coverage
 
 
@@ -71,8 +72,9 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         residuals = setup.residual_images(r)
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and (gram is None or np.all(np.isfinite(gram))))
         weighted = residuals if setup.unit_weights else setup.residual_images(r, weighted=True)
-        silent, silent_entries = setup.silent(r)
-        sigma = setup.noise(weighted, silent) if finite else float("nan")
+        silent, silent_entries = silent_pixels(setup.views, r)
+        sigma = views_noise(setup.views, weighted, silent, setup.sigma_given, setup.sigma_floor) if finite \
+            else float("nan")
         if finite:
             st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size, silent_entries)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if gram is not None else

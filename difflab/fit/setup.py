@@ -34,8 +34,8 @@ from .problem import LOSSES, Problem, ViewJ, to_device, value_index
 from .raytree import TreeModel, tree_influence
 from .records import KeptView, View, take_pixels, view_key, view_store
 from .shading import GBufferModel, influence
-from .stats import FLOAT_SIGMA, estimate_sigma
-from .targets import in_channels, nonfinite_count, prepared_targets
+from .stats import FLOAT_SIGMA
+from .targets import nonfinite_count, prepared_targets
 from .texels import TexelSource, texture_starts, wants_texels
 
 METHODS = ("raster", "raytrace")
@@ -57,13 +57,6 @@ def choose_method(scene, materials, method, texels=False) -> str:
     if any(scene.materials[m].texture is not None for m in materials):
         return "raytrace"
     return "raster"
-
-
-def at_ceiling(image, ceiling) -> np.ndarray:
-    """(...) bool: the pixels of an image (..., 3) with a channel at or above `ceiling` (three
-    comparisons or'ed: numpy's `any` over a last axis of 3 costs ~10x as much)."""
-    top = image >= ceiling
-    return top[..., 0] | top[..., 1] | top[..., 2]
 
 
 def _check_number(value, name, *, allow_none=False):
@@ -162,52 +155,15 @@ class Setup:
                                 for v in self.views if np.isfinite(v.ceiling)))  # over the used pixels
         self.sigma_floor = max(FLOAT_SIGMA, max(v.step for v in self.views) / math.sqrt(12.0))
 
-    def silent(self, r) -> tuple[list[np.ndarray], int]:
-        """The used pixels that carry no noise: target and model both exactly 0 in every channel (an
-        unlit side; a renderer's noise scales with its signal), from the flat weighted residuals r
-        over every used entry. Returns per view (U,) bool over its used pixels, and how many of
-        their entries have weight > 0 (left out of the chi-square's dof, see `stats`)."""
-        out, count, offset = [], 0, 0
-        for view in self.views:
-            part = r[offset:offset + 3 * view.pixels.size].reshape(-1, 3)
-            offset += 3 * view.pixels.size
-            zero = view.zeros & (part == 0)  # black in the target, and the model 0 there too
-            rows = zero[:, 0] & zero[:, 1] & zero[:, 2]
-            count += 3 * int(np.count_nonzero(rows)) if view.weighting is None else \
-                int(np.count_nonzero(np.take(view.weights, np.flatnonzero(rows), axis=0) > 0))
-            out.append(rows)
-        return out, count
-
-    def noise(self, residual_images, silent=None) -> float:
-        """The pixel noise sigma: given, or estimated from the residual images (H, W, 3) at the
-        solution (from the targets where too few pixels allow) without the `silent` pixels (per view
-        (U,) bool, from `silent`), floored (see `stats`)."""
-        if self.sigma_given is not None:
-            return self.sigma_given
-        clean = []  # the used pixels but the silent and the censored ones; per channel where a weight is 0
-        for i, view in enumerate(self.views):
-            left_out = silent[i] if silent else np.zeros(view.pixels.size, bool)
-            if np.isfinite(view.ceiling):
-                left_out = left_out | at_ceiling(view.values, view.ceiling)
-            clean.append(view.used)
-            if left_out.any():
-                clean[i] = view.used.copy()
-                clean[i].reshape(-1)[view.pixels[left_out]] = False
-            if view.weighting is not None and not np.all(view.weights > 0):
-                clean[i] = in_channels(clean[i]) & (view.weighting > 0)
-        estimate = estimate_sigma(residual_images, clean)
-        if estimate is None:
-            estimate = estimate_sigma([v.target for v in self.views], clean, interior=False)
-        return max(estimate or 0.0, self.sigma_floor)
-
     def retarget(self, images, init=None) -> Setup:
         """The same fit (views, image models, compiled solve) for other target images, one (H, W, 3)
-        linear float array per view, and optionally other start values `init`."""
+        linear float array per view, kept, not copied (as `targets.load_target` returns them: a private
+        copy), and optionally other start values `init`."""
         out = copy.copy(self)
         views = []
         for view, image in zip(self.views, images):
-            image = np.array(image, np.float64)  # (a copy: read later)
             views.append(dataclasses.replace(view, image=image, nonfinite=nonfinite_count(image, view.mask)))
+            views[-1].__dict__.update(pixels=view.pixels, weights=view.weights)  # cached properties: the same
         out.views = views
         out._target_statistics()
         if init is not None:

@@ -54,6 +54,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .normal_equations import dense, linearise
+from .targets import in_channels
 
 QUANTISATION_SIGMA = 1.0 / (255.0 * math.sqrt(12.0))
 FLOAT_SIGMA = 1e-5
@@ -110,6 +111,54 @@ def estimate_sigma(images, used_maps, *, interior=True) -> float | None:
     if not np.isfinite(values).all():
         values = values[np.isfinite(values)]
     return float(1.4826 * median(values) / 6.0) if values.size >= MIN_NOISE_PIXELS else None
+
+
+def at_ceiling(image, ceiling) -> np.ndarray:
+    """(...) bool: the pixels of an image (..., 3) with a channel at or above `ceiling` (three
+    comparisons or'ed: numpy's `any` over a last axis of 3 costs ~10x as much)."""
+    top = image >= ceiling
+    return top[..., 0] | top[..., 1] | top[..., 2]
+
+
+def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
+    """The used pixels of a fit's views (`records.View`) that carry no noise: target and model both
+    exactly 0 in every channel (an unlit side; a renderer's noise scales with its signal), from the
+    flat weighted residuals r over every used entry. Returns per view (U,) bool over its used
+    pixels, and how many of their entries have weight > 0 (left out of the chi-square's dof)."""
+    out, count, offset = [], 0, 0
+    for view in views:
+        part = r[offset:offset + 3 * view.pixels.size].reshape(-1, 3)
+        offset += 3 * view.pixels.size
+        zero = view.zeros & (part == 0)  # black in the target, and the model 0 there too
+        rows = zero[:, 0] & zero[:, 1] & zero[:, 2]
+        count += 3 * int(np.count_nonzero(rows)) if view.weighting is None else \
+            int(np.count_nonzero(np.take(view.weights, np.flatnonzero(rows), axis=0) > 0))
+        out.append(rows)
+    return out, count
+
+
+def views_noise(views, residual_images, silent, given: float | None, floor: float) -> float:
+    """The pixel noise sigma of a fit's views: `given`, or estimated from the residual images
+    (H, W, 3) at the solution (from the targets where too few pixels allow) over the used pixels but
+    the `silent` (per view (U,) bool, `silent_pixels`) and the censored ones -- per channel where a
+    weight of 0 leaves a used pixel's channel out -- and at least `floor` (the quantisation's)."""
+    if given is not None:
+        return given
+    clean = []
+    for i, view in enumerate(views):
+        left_out = silent[i] if silent else np.zeros(view.pixels.size, bool)
+        if np.isfinite(view.ceiling):
+            left_out = left_out | at_ceiling(view.values, view.ceiling)
+        clean.append(view.used)
+        if left_out.any():
+            clean[i] = view.used.copy()
+            clean[i].reshape(-1)[view.pixels[left_out]] = False
+        if view.weighting is not None and not np.all(view.weights > 0):
+            clean[i] = in_channels(clean[i]) & (view.weighting > 0)
+    estimate = estimate_sigma(residual_images, clean)
+    if estimate is None:
+        estimate = estimate_sigma([v.target for v in views], clean, interior=False)
+    return max(estimate or 0.0, floor)
 
 
 @eqx.filter_jit
