@@ -170,3 +170,16 @@ def test_a_mask_wholly_near_the_clip_keeps_the_first_fit_and_flags_it(tmp_path):
     assert result.poorly_determined == ["ka"] and first.poorly_determined == []
     z = (np.asarray(first.params["ka"]) - CASES["a_phong"]["truth"]["ka"]) / np.asarray(first.stderr["ka"])
     assert z[1] > 3.0 and z[2] > 3.0, z  # biased by the clip: the flag is needed
+
+
+def test_a_refit_with_too_few_pixels_for_a_noise_estimate_keeps_the_first_fits(tmp_path):
+    """The noisy 8-bit Phong sphere under an 8 x 8 mask around its terminator: the refit leaves out 56
+    of its 64 pixels (near black), more entries than unknowns remain, but too few for a noise
+    estimate: it takes the first fit's sigma (0.03 within a third, the noise added) and is not
+    flagged. (It fell to the 8-bit floor, 0.0011: chi2 860, model_mismatch on a correct model.)"""
+    mask = np.zeros((48, 48), bool)
+    mask[22:30, 22:30] = True
+    result = difflab.fit_material(difflab.load_scene(DATA / "a_phong.scene.json"), [noisy_phong_png(tmp_path)], "red",
+                                  CASES["a_phong"]["params"], masks=[mask], progress=False)
+    assert result.converged and result.censored > 0 and not result.model_mismatch
+    assert abs(result.sigma - 0.03) < 0.01

@@ -73,8 +73,8 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and (gram is None or np.all(np.isfinite(gram))))
         weighted = residuals if setup.unit_weights else setup.residual_images(r, weighted=True)
         silent, silent_entries = silent_pixels(setup.views, r)
-        sigma = views_noise(setup.views, weighted, silent, setup.sigma_given, setup.sigma_floor) if finite \
-            else float("nan")
+        sigma = views_noise(setup.views, weighted, silent, setup.sigma_given, setup.sigma_floor,
+                            setup.sigma_fallback) if finite else float("nan")
         if finite:
             st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size, silent_entries)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if gram is not None else
@@ -195,7 +195,8 @@ def without_clipped(setup: Setup, out: FitResult, options: FitOptions, make_setu
     again without the pixels near the clip, from `out`'s values, their values counted as censored.
     When leaving them out would leave no more uncensored entries than unknowns (a mask that lies
     wholly near the clip), `out` is kept, every parameter listed in `poorly_determined`: its values
-    rest on pixels whose mean the clip moves, a bias its standard errors do not cover.
+    rest on pixels whose mean the clip moves, a bias its standard errors do not cover. The refit
+    estimates the noise over the pixels it keeps, or takes `out`'s sigma where too few remain.
     make_setup(weights, init): the same fit's `Setup` with other weights (per view (H, W, 3)) and start."""
     band = clipped_band(setup, out)
     if band is None:
@@ -205,6 +206,7 @@ def without_clipped(setup: Setup, out: FitResult, options: FitOptions, make_setu
     start = time.perf_counter()
     kept = [view.weight * ~near[..., None] for view, near in zip(setup.views, band)]
     again = make_setup(kept, out.params)
+    again.sigma_fallback = out.sigma  # (the band left out, too few pixels may remain to estimate the noise)
     second = run_fit(again, options, {"setup": time.perf_counter() - start, "render": again.render_seconds})
     left_out = 3 * int(sum(int(near.sum()) for near in band))
     timings = {key: out.timings.get(key, 0.0) + second.timings.get(key, 0.0)

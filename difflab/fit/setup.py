@@ -80,7 +80,8 @@ def _check_smoothness(value, textures) -> float:
 class Setup:
     """A fit prepared (see the module docstring). Attributes: scene (start values written in),
     materials, method, layout, initial (key -> value), x0 (solver coordinates), views, used_pixels,
-    nonfinite, censored, sigma_given, sigma_floor, x64, dtype, problem, render_seconds (the Warp
+    nonfinite, censored, sigma_given, sigma_floor, sigma_fallback (the noise when too few pixels allow
+    an estimate, None: from the targets; `engine.without_clipped`), x64, dtype, problem, render_seconds (the Warp
     renders' wall time), base_scene (before `init`), ceiling_given, loss, loss_scale."""
 
     def __init__(self, scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None,
@@ -91,6 +92,7 @@ class Setup:
             raise FitError(f"loss: unknown loss {loss!r}; known: {', '.join(LOSSES)}")
         loss_scale = _check_number(loss_scale, "loss_scale")
         self.sigma_given = _check_number(sigma, "sigma", allow_none=True)
+        self.sigma_fallback = None
         if ceiling is not None and ceiling is not False:
             ceiling = _check_number(ceiling, "ceiling")
         for name, flag in (("per_channel", per_channel), ("bounded", bounded), ("x64", x64)):

@@ -137,11 +137,12 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
     return out, count
 
 
-def views_noise(views, residual_images, silent, given: float | None, floor: float) -> float:
+def views_noise(views, residual_images, silent, given: float | None, floor: float, fallback=None) -> float:
     """The pixel noise sigma of a fit's views: `given`, or estimated from the residual images
-    (H, W, 3) at the solution (from the targets where too few pixels allow) over the used pixels but
-    the `silent` (per view (U,) bool, `silent_pixels`) and the censored ones -- per channel where a
-    weight of 0 leaves a used pixel's channel out -- and at least `floor` (the quantisation's)."""
+    (H, W, 3) at the solution over the used pixels but the `silent` (per view (U,) bool,
+    `silent_pixels`) and the censored ones -- per channel where a weight of 0 leaves a used pixel's
+    channel out -- and at least `floor` (the quantisation's). Where too few pixels allow that:
+    `fallback` when given (a refit's, the first fit's sigma), else estimated from the targets."""
     if given is not None:
         return given
     clean = []
@@ -157,7 +158,8 @@ def views_noise(views, residual_images, silent, given: float | None, floor: floa
             clean[i] = in_channels(clean[i]) & (view.weighting > 0)
     estimate = estimate_sigma(residual_images, clean)
     if estimate is None:
-        estimate = estimate_sigma([v.target for v in views], clean, interior=False)
+        estimate = fallback if fallback is not None else estimate_sigma([v.target for v in views], clean,
+                                                                       interior=False)
     return max(estimate or 0.0, floor)
 
 
