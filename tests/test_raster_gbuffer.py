@@ -2,6 +2,7 @@
 and the frame buffers a compiled scene reuses once no frame holds them."""
 
 import dataclasses
+import threading
 
 import numpy as np
 import pytest
@@ -91,6 +92,14 @@ def test_run_bands_runs_each_band_once_and_hands_a_bands_error_to_the_caller():
             raise RenderError("band 2")
     with pytest.raises(RenderError, match="^band 2$"):
         launch.run_bands(fail_on_second, [(0, 2), (2, 5), (5, 6)], threads=2)
+
+
+def test_run_bands_over_no_band_returns():
+    """No band: nothing is run and nothing waited for (the band queue once waited for ever for a
+    band to finish; a daemon thread keeps a hang from stopping the test run)."""
+    returned = threading.Event()
+    threading.Thread(target=lambda: (launch.run_bands(pytest.fail, [], threads=3), returned.set()), daemon=True).start()
+    assert returned.wait(60), "run_bands([]) did not return"
 
 
 @pytest.mark.parametrize("threads", [1, 2])

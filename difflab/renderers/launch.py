@@ -196,7 +196,7 @@ def run_bands(run_band, bands: list[tuple[int, int]], threads: int | None = None
     never idles, and a worker the machine does not schedule in time leaves its share to the others
     instead of holding the frame up."""
     threads = cpu_threads() if threads is None else max(1, threads)
-    if len(bands) == 1 or threads == 1:
+    if len(bands) <= 1 or threads == 1:  # (none: nothing to wait for)
         for begin, end in bands:
             run_band(begin, end)
         return
