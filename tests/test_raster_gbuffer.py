@@ -2,7 +2,9 @@
 and the frame buffers a compiled scene reuses once no frame holds them."""
 
 import dataclasses
+import functools
 import threading
+import weakref
 
 import numpy as np
 import pytest
@@ -116,6 +118,19 @@ def test_a_task_started_beside_runs_once_and_join_hands_back_its_error(threads):
         launch.start_beside(fail, "cpu", threads).join()
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_a_joined_task_lets_go_of_what_it_captured(threads):
+    """After `join`, the handle (which a pool worker may still hold a moment) no longer refers to the
+    task: a frame's buffers that its clearing captured are reusable by the next frame at once. (The
+    handle kept them alive: a 128^2+ frame's G-buffer was reused only now and then.)"""
+    held = np.zeros(4)
+    ref = weakref.ref(held)
+    handle = launch.start_beside(functools.partial(held.fill, 1.0), "cpu", threads)
+    handle.join()
+    del held
+    assert ref() is None
+
+
 @pytest.mark.parametrize("method", ["raster", "raytrace"])
 def test_image_false_drops_the_image_of_either_renderer(tmp_path, method):
     frame = render_frame(textured_scene(tmp_path, "phong", 1), method=method, image=False)
@@ -169,7 +184,14 @@ def test_a_dropped_frames_buffers_are_reused_by_the_next_frame(tmp_path):
 
 
 @pytest.mark.parametrize("shading", ["phong", "gouraud"])
-def test_what_a_user_wrote_into_a_dropped_gbuffer_does_not_reach_the_next_frame(tmp_path, shading):
+@pytest.mark.parametrize("beside", [False, True])
+def test_what_a_user_wrote_into_a_dropped_gbuffer_does_not_reach_the_next_frame(tmp_path, monkeypatch, shading, beside):
+    """beside: the reused arrays cleared on a pool thread while the z-buffer is drawn (`start_beside`,
+    as from PASS_POOL_MIN_SAMPLES samples on a machine of several cores), not on the caller."""
+    if beside:
+        monkeypatch.delenv("DIFFLAB_THREADS", raising=False)
+        monkeypatch.setattr(launch, "PASS_POOL_MIN_SAMPLES", 1)
+        monkeypatch.setattr(launch, "cpu_threads", lambda: 3)
     scene = textured_scene(tmp_path, shading, 1)
     compiled = compile_scene(scene)
     frame = render_frame(compiled)

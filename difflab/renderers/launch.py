@@ -186,6 +186,8 @@ class _BandQueue:
     def join(self) -> None:
         self.work()
         self.finished.wait()
+        self.run_band = None  # a pool worker may hold this queue a moment longer: not what the bands
+        #                       captured (a frame's buffers, which the next frame reuses once unheld)
         if self.error is not None:
             raise self.error
 
