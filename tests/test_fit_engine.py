@@ -145,11 +145,19 @@ def test_options_object_and_keywords_agree():
     assert a.params == b.params and a.steps == b.steps
 
 
-def test_progress_bar_only_when_asked(capsys):
+def test_progress_bar_only_when_asked_and_compiled_once(capsys):
+    """A bar when asked (each fit its own), none by default off a terminal; fits with a bar share
+    one compiled solve, as fits without one do."""
+    from difflab.fit import lm
+
     scene = make_scene(size=12)
     target = target_of(scene)
     fit_material(scene, [target], "red", ("kd",), progress=True)
     assert "step" in capsys.readouterr().err  # tqdm's bar, on stderr
+    compiled = lm.solve_box._cache_size()
+    again = fit_material(scene, [target], "red", ("kd",), progress=True)
+    assert "step" in capsys.readouterr().err and again.converged
+    assert lm.solve_box._cache_size() == compiled
     fit_material(scene, [target], "red", ("kd",))  # default: only on a terminal (pytest's stderr is not)
     assert "step" not in capsys.readouterr().err
 

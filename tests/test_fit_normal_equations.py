@@ -123,3 +123,22 @@ def test_a_compiled_scene_fits_as_the_scene_does():
         assert compiled.converged and compiled.steps == plain.steps
         for key in plain.params:
             np.testing.assert_array_equal(compiled.params[key], plain.params[key])
+
+
+@pytest.mark.parametrize("where", ["start", "elsewhere"])
+def test_box_lm_with_a_nonfinite_normal_matrix(where):
+    """r = x - 1 with J^T J NaN at the start ("nonfinite" there, no step), or NaN away from the
+    start (those trial steps rejected: the solve still reaches x = 1 on the steps that are finite)."""
+    def linearise_nan(x, args):
+        r = x - 1.0
+        bad = jnp.all(x == 0.0) if where == "start" else jnp.any(x > 0.95)  # a cap the LM steps past
+        a = jnp.where(bad, jnp.nan, 1.0) * jnp.eye(2)
+        return r, a, jnp.where(bad, jnp.nan, 1.0) * r
+
+    with jax.enable_x64(True):
+        x, code, steps = jax.jit(partial(lm.box_lm, linearise_nan, max_steps=50, rtol=1e-8, atol=1e-10))(
+            jnp.zeros(2), jnp.full(2, -5.0), jnp.full(2, 0.96), None)[:3]
+    if where == "start":
+        assert lm.CODES[int(code)] == "nonfinite" and int(steps) == 0
+    else:
+        assert lm.CODES[int(code)] == "successful" and np.all(np.asarray(x) <= 0.95)

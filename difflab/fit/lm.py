@@ -15,9 +15,10 @@ Stops with "successful" when the next step would change every entry by at most a
 (tested before the step is taken: a solve that has landed on its minimum is not linearised once more
 at a point it would not move from), or when an accepted step lowered the loss -- and the linear model
 predicted it would lower it -- by at most rtol of itself (MINPACK's xtol / ftol tests);
-"nonlinear_max_steps_reached" after max_steps; "nonfinite" when the loss at the start is not finite.
-A trial step whose loss is not finite is rejected like any step that does not lower the loss, so
-the point returned always has a finite loss (a fit with an infinite loss is never successful). Each
+"nonlinear_max_steps_reached" after max_steps; "nonfinite" when the loss, J^T J or J^T r at the
+start is not finite. A trial step where one is not is rejected like any step that does not lower
+the loss, so the point returned always has finite ones (a fit with an infinite loss is never
+successful, and a NaN in J^T J never stalls the solve on steps it cannot solve for). Each
 step costs one linearisation and one p x p Cholesky solve, as a plain Gauss-Newton step does; the
 residual vector is not carried from step to step (only its loss), but formed once more at the
 solution (with the exact J^T J there, where the steps used `normal_equations`' fast form).
@@ -106,7 +107,7 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
         x_new = s.x + d
         r_new, a_new, g_new = linearise(x_new, args)
         loss_new = 0.5 * jnp.sum(r_new * r_new)
-        finite = jnp.isfinite(loss_new)
+        finite = jnp.isfinite(loss_new) & jnp.all(jnp.isfinite(g_new)) & jnp.all(jnp.isfinite(a_new))
         accept = finite & ((loss_new < s.loss) | first)
         rho = (s.loss - loss_new) / jnp.where(predicted > 0, predicted, 1.0)
         lam = jnp.where(first, s.lam, jnp.where(accept, s.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3),

@@ -174,11 +174,11 @@ class ViewStore:
     def on_device(self, tree):
         """`to_device(tree)` for a pytree of numpy arrays, its small leaves (<= SMALL entries) taken
         from the latest KEPT_ARRAYS copies when they were moved before with the same structure,
-        precision, dtypes, shapes and bytes (device arrays are immutable; one jitted dispatch costs
+        precision, default device, dtypes, shapes and bytes (device arrays are immutable; one jitted dispatch costs
         some 8 us a leaf); the large ones (targets) are moved each time."""
         leaves, structure = jax.tree_util.tree_flatten(tree)
         small = [i for i, leaf in enumerate(leaves) if leaf.size <= SMALL]
-        key = (structure, jax.config.jax_enable_x64,
+        key = (structure, jax.config.jax_enable_x64, jax.config.jax_default_device,
                tuple((leaves[i].dtype.str, leaves[i].shape, leaves[i].tobytes()) for i in small))
         with self._lock:
             kept = next((copies for kept_key, copies in self._arrays if kept_key == key), None)
@@ -203,4 +203,5 @@ def view_store(compiled) -> ViewStore | None:
     """The compiled scene's store of kept views (None without a compiled scene)."""
     if compiled is None:
         return None
-    return compiled.built.get(STORE) or compiled.built.setdefault(STORE, ViewStore())  # (made once)
+    store = compiled.built.get(STORE)  # (an empty store is falsy: it has a length)
+    return compiled.built.setdefault(STORE, ViewStore()) if store is None else store

@@ -41,7 +41,7 @@ class Solved(NamedTuple):
 
 
 class Progress:
-    """A tqdm bar fed from inside the compiled solve (`jax.debug.callback`), one update per step."""
+    """A tqdm bar fed from inside the compiled solve, one update per step (through `BAR_FEED`)."""
 
     def __init__(self, total: int, label: str):
         from tqdm import tqdm
@@ -54,6 +54,36 @@ class Progress:
 
     def close(self):
         self.bar.close()
+
+
+class BarFeed:
+    """The one host callable the compiled solves call after each step (`jax.debug.callback`) when a
+    bar is shown: it passes the step on to the bar of the solve now running. Being the same object
+    every time, it keeps the solve compiled once (a new bar each fit as the callable compiled the
+    solve anew, a second or more per fit). One bar at a time: a solve started while another shows
+    its bar takes the feed over."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._bar = None
+
+    def __call__(self, step, loss):
+        with self._lock:
+            bar = self._bar
+        if bar is not None:
+            bar(step, loss)
+
+    def take(self, bar: Progress):
+        with self._lock:
+            self._bar = bar
+
+    def release(self, bar: Progress):
+        with self._lock:
+            if self._bar is bar:
+                self._bar = None
+
+
+BAR_FEED = BarFeed()
 
 
 class LossRecorder:
@@ -149,7 +179,11 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
     rtol, atol = options.tolerances()
     dtype = problem.ambient.dtype
     lower, upper = (np.asarray(b, dtype) for b in problem.layout.bounds())  # numpy: moved with the call
-    progress = Progress(options.max_steps, label) if options.show_progress() else None
+    bar = Progress(options.max_steps, label) if options.show_progress() else None
+    progress = None
+    if bar is not None:
+        BAR_FEED.take(bar)
+        progress = BAR_FEED
     matrix_free = options.matrix_free(problem.layout.size)
     try:
         if options.solver == "lm" and matrix_free:
@@ -180,6 +214,7 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
             history = RECORDER.stop() if options.history else []
         return Solved(x, result_name(result), int(steps), history)
     finally:
-        if progress is not None:
+        if bar is not None:
             jax.effects_barrier()
-            progress.close()
+            BAR_FEED.release(bar)
+            bar.close()

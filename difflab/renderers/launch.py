@@ -147,12 +147,15 @@ def band_plan(n_rows: int, device: str, threads: int | None = None,
 
 
 _pools: dict[int, ThreadPoolExecutor] = {}
+_pools_lock = threading.Lock()
 
 
 def _pool(workers: int) -> ThreadPoolExecutor:
-    if workers not in _pools:
-        _pools[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="difflab")
-    return _pools[workers]
+    """The process's pool of `workers` threads (made once, also when two threads first ask at once)."""
+    with _pools_lock:
+        if workers not in _pools:
+            _pools[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="difflab")
+        return _pools[workers]
 
 
 class _BandQueue:
