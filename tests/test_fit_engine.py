@@ -228,3 +228,14 @@ def test_a_float64_fit_after_a_float32_fit_of_the_same_layout():
     assert low.converged and high.converged
     np.testing.assert_allclose(high.params["kd"], TRUTH["kd"], rtol=1e-6)
     np.testing.assert_allclose(low.params["kd"], TRUTH["kd"], rtol=1e-4)
+
+
+def test_large_linear_values_map_without_overflow():
+    """values(x) takes exp of the log entries only: a linear entry of 800 (a diverging ks) neither
+    overflows exp (a RuntimeWarning: an error under the tests' settings) nor gives a NaN gradient."""
+    layout = Layout((Param("ks", "ks", 0, 1, 0.0, np.inf), Param("n", "n", 0, 1, KINDS["n"].lower, KINDS["n"].upper)))
+    x = np.array([800.0, np.log(20.0)])
+    np.testing.assert_allclose(layout.values(x), [800.0, 20.0], rtol=1e-12)
+    with jax.enable_x64(True):
+        grad = jax.grad(lambda y: layout.values(y).sum())(jax.numpy.asarray(x))
+    np.testing.assert_allclose(np.asarray(grad), [1.0, 20.0], rtol=1e-12)

@@ -124,7 +124,8 @@ class Layout:
     def values(self, x):
         """Solver coordinates x -> values in scene units (numpy for a numpy x, else JAX)."""
         xp = np if isinstance(x, np.ndarray) else jnp
-        return xp.where(self.entries("log") > 0, xp.exp(x), x)
+        log = self.entries("log") > 0  # exp of the log entries only: a large linear one (ks = 800) overflows it
+        return xp.where(log, xp.exp(xp.where(log, x, 0.0)), x)
 
     def x_of(self, values) -> np.ndarray:
         """Values (flat, scene units) -> x inside the bounds (numpy)."""
