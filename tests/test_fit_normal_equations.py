@@ -81,8 +81,9 @@ def test_dense_where_by_parts_does_not_apply(kwargs, fit_kwargs):
 def test_solver_by_parts_takes_the_dense_solvers_steps(truth):
     """Recovery from a 30 % perturbed start, and a matte target (ks truly 0): the box LM on the
     closed-form normal equations takes the same steps to the same point as on forward-mode ones;
-    on their fast form (float32 columns' products for the steps, `solve_box`), the same values where
-    the target determines them (n of a matte target it does not) and the exact J^T J at its end."""
+    on their fast form (`solve_box`: float32 columns' products for the steps, a near Gauss-Newton
+    first step), no more steps, the same values to the tolerance where the target determines them
+    (n of a matte target it does not) and the exact J^T J at its end."""
     scene = make_scene(size=24, red=truth)
     start = perturbed({**truth, "ks": [0.5, 0.4, 0.3]})
     setup = Setup(scene, [target_of(scene)], "red", init=start)
@@ -100,12 +101,12 @@ def test_solver_by_parts_takes_the_dense_solvers_steps(truth):
     np.testing.assert_allclose(x, np.asarray(slow[0]), rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(np.asarray(exact[5]), np.asarray(slow[5]), rtol=1e-9, atol=1e-12)  # J^T J at x
     matte = max(truth["ks"]) == 0.0
-    assert lm.CODES[int(fast[1])] == "successful" and int(fast[2]) <= int(steps) + 1
+    assert lm.CODES[int(fast[1])] == "successful" and int(fast[2]) <= int(steps)
     for found in (setup.values(x), setup.values(np.asarray(fast[0]))):
         for key in ("ka", "kd") + (("ks",) if matte else ("ks", "n")):  # a matte target says nothing of n
             np.testing.assert_allclose(found[key], truth[key], rtol=1e-4, atol=0 if matte and key == "ks" else 1e-7)
     determined = np.concatenate([np.full(p.size, not (matte and p.kind == "n")) for p in setup.layout])
-    np.testing.assert_allclose(np.asarray(fast[0])[determined], x[determined], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(fast[0])[determined], x[determined], rtol=1e-7, atol=1e-10)
     np.testing.assert_allclose(np.asarray(fast[5]), np.asarray(dense_at_fast[1]), rtol=1e-9, atol=1e-12)
 
 
