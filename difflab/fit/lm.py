@@ -148,23 +148,28 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
     return out.x, code, out.step, out.history, r, a
 
 
-@partial(jax.jit, static_argnames=("max_steps", "progress"))
-def solve_box(problem, x0, lower, upper, max_steps, rtol, atol, progress=None):
-    """`box_lm` on a `Problem`'s residuals (the steps on `linearise`'s fast form, the statistics at
-    the solution on its exact one), compiled once per problem structure and max_steps. (A plain
-    jit: a `Problem` is a pytree of arrays with its static fields in the tree's structure, and
-    jax.jit's dispatch costs 0.21 ms a call against eqx.filter_jit's 0.36.)"""
+def solve_problem(problem, x0, lower, upper, *, max_steps: int, rtol, atol, progress=None):
+    """`box_lm` on a `Problem`'s residuals: the steps on `linearise`'s fast form, r and J^T J at the
+    solution on its exact one, the closed-form normal equations from LAMBDA0_BY_PARTS."""
     return box_lm(partial(linearise, fast=True), x0, lower, upper, problem, max_steps=max_steps, rtol=rtol,
                   atol=atol, progress=progress, exact=linearise if has_fast_form(problem, x0) else None,
                   lambda0=LAMBDA0_BY_PARTS if by_parts_applies(problem) else LAMBDA0)
 
 
+@partial(jax.jit, static_argnames=("max_steps", "progress"))
+def solve_box(problem, x0, lower, upper, max_steps, rtol, atol, progress=None):
+    """`solve_problem` compiled once per problem structure and max_steps. (A plain jit: a `Problem`
+    is a pytree of arrays with its static fields in the tree's structure, and jax.jit's dispatch
+    costs 0.21 ms a call against eqx.filter_jit's 0.36.)"""
+    return solve_problem(problem, x0, lower, upper, max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)
+
+
 @partial(jax.jit, static_argnames=("max_steps",))
 def solve_box_batch(problem, x0, targets, lower, upper, max_steps, rtol, atol):
-    """Many `box_lm` solves at once, `jax.vmap` over starts x0 (B, p) and per-view targets (B, U, 3)."""
+    """Many `solve_problem` solves at once, `jax.vmap` over starts x0 (B, p) and per-view targets
+    (B, U, 3): each takes the steps its single fit takes."""
     def one(x0_b, targets_b):
-        return box_lm(partial(linearise, fast=True), x0_b, lower, upper, problem.with_targets(targets_b),
-                      max_steps=max_steps, rtol=rtol, atol=atol,
-                      exact=linearise if has_fast_form(problem, x0) else None)
+        return solve_problem(problem.with_targets(targets_b), x0_b, lower, upper, max_steps=max_steps, rtol=rtol,
+                             atol=atol)
 
     return jax.vmap(one)(x0, targets)
