@@ -96,6 +96,54 @@ def test_run_bands_runs_each_band_once_and_hands_a_bands_error_to_the_caller():
         launch.run_bands(fail_on_second, [(0, 2), (2, 5), (5, 6)], threads=2)
 
 
+def test_run_bands_keeps_one_pool_per_thread_count():
+    """However many bands a call has, its workers come from the pool of its thread count (a pool per
+    band count once left a new set of threads behind for every short launch)."""
+    before = set(launch._pools)
+    for count in range(2, 10):
+        launch.run_bands(lambda a, b: None, [(i, i + 1) for i in range(count)], threads=7)
+    assert set(launch._pools) - before <= {6} and 6 in launch._pools
+
+
+class _FirstWaitInterrupted:
+    """An event whose first wait is interrupted (Ctrl-C), as the caller's wait in `join` may be."""
+
+    def __init__(self, event):
+        self.event, self.waits = event, 0
+
+    def wait(self, timeout=None):
+        self.waits += 1
+        if self.waits == 1:
+            raise KeyboardInterrupt
+        return self.event.wait(timeout)
+
+    def set(self):
+        self.event.set()
+
+
+def test_an_interrupt_while_waiting_stops_bands_from_starting_and_lets_running_ones_end():
+    """Ctrl-C in the caller's wait: the bands not started never start, and the one a worker runs
+    ends before the interrupt reaches the caller (it must not write a frame's buffers afterwards)."""
+    started, running, release = [], threading.Event(), threading.Event()
+
+    def band(a, b):
+        started.append(a)
+        if a == 0:  # the worker's band, held until released
+            running.set()
+            release.wait(60)
+            started.append("end")
+
+    queue = launch._BandQueue(band, [(0, 1), (1, 2), (2, 3)])
+    queue.finished = _FirstWaitInterrupted(queue.finished)
+    launch._pool(1).submit(queue.work)
+    assert running.wait(60)
+    queue.work = lambda: None  # the caller is interrupted before it took a band
+    threading.Timer(0.2, release.set).start()
+    with pytest.raises(KeyboardInterrupt):
+        queue.join()
+    assert started == [0, "end"] and queue.run_band is None
+
+
 def test_run_bands_over_no_band_returns():
     """No band: nothing is run and nothing waited for (the band queue once waited for ever for a
     band to finish; a daemon thread keeps a hang from stopping the test run)."""

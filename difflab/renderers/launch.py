@@ -121,7 +121,7 @@ PASS_POOL_MIN_SAMPLES = 128 * 128
 
 def pass_threads(threads: int | None, n_samples: int) -> tuple[int | None, int]:
     """(threads, bands per thread) of a per-sample pass of a rasterized frame of `n_samples`
-    samples: those of `raster_threads` with 4 bands each, but all cores with one band each for a
+    samples: those of `raster_threads` with BANDS_PER_THREAD bands each, but all cores with one band each for a
     frame left to the default that `raster_threads` puts on one thread, from PASS_POOL_MIN_SAMPLES on."""
     chosen = raster_threads(threads, n_samples)
     if threads is None and chosen == 1 and n_samples >= PASS_POOL_MIN_SAMPLES:
@@ -187,10 +187,20 @@ class _BandQueue:
                     self.finished.set()
 
     def join(self) -> None:
-        self.work()
-        self.finished.wait()
-        self.run_band = None  # a pool worker may hold this queue a moment longer: not what the bands
-        #                       captured (a frame's buffers, which the next frame reuses once unheld)
+        try:
+            self.work()
+            self.finished.wait()
+        except BaseException:  # interrupted waiting (Ctrl-C): no band starts now; those running end first
+            with self.lock:
+                self.left -= len(self.todo)
+                self.todo.clear()
+                if self.left == 0:
+                    self.finished.set()
+            self.finished.wait()
+            raise
+        finally:
+            self.run_band = None  # a pool worker may hold this queue a moment longer: not what the bands
+            #                       captured (a frame's buffers, which the next frame reuses once unheld)
         if self.error is not None:
             raise self.error
 
@@ -205,10 +215,9 @@ def run_bands(run_band, bands: list[tuple[int, int]], threads: int | None = None
         for begin, end in bands:
             run_band(begin, end)
         return
-    helpers = min(threads, len(bands)) - 1
-    queue = _BandQueue(run_band, bands)
-    for _ in range(helpers):
-        _pool(helpers).submit(queue.work)
+    queue, pool = _BandQueue(run_band, bands), _pool(threads - 1)  # (one pool per thread count, not per band count)
+    for _ in range(min(threads, len(bands)) - 1):
+        pool.submit(queue.work)
     queue.join()
 
 

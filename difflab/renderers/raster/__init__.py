@@ -1,6 +1,6 @@
 """The rasterizer: vertices -> clip space -> near-plane clipping -> z-buffer -> shading points -> image.
 
-`driver.rasterize(compiled, settings)` allocates once per frame and launches the stages, kernels in
+`driver.rasterize(compiled, settings)` takes the frame's arrays and launches the stages, kernels in
 `clip` (1-2), `coverage` (3), `resolve` (4-5) and `shade` (6-7).
 
 Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
@@ -29,7 +29,7 @@ With the G-buffer under Phong shading (whose points are its samples), stages 4 a
 pass (`shade.phong_gbuffer_kernel`: each sample resolved, then lit); `render_frame(...,
 image=False)` skips stage 7 there. The G-buffer's arrays come from `CompiledScene.reusable` (the
 last frame's memory when nothing holds it any more), cleared to zero where an empty sample's
-entries are zero (beside stages 1-3, on a core the z-buffer leaves free); the kernels write the
+entries are zero (beside stages 1-3, on a pool worker); the kernels write the
 rest. From 128^2 samples the per-sample passes take a band of rows per core even where the
 z-buffer runs on one thread (`launch.pass_threads`).
 

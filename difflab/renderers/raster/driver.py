@@ -1,4 +1,5 @@
-"""The rasterizer's driver: allocate once per frame, launch the stages (see the package doc), return a Frame.
+"""The rasterizer's driver: take the frame's arrays (the last frame's where nothing holds them),
+launch the stages (see the package doc), return a Frame.
 
 `rasterize(..., gbuffer=True)` keeps every stage's output (the G-buffer `render_frame` and the fits
 read; under Phong shading stages 4 and 6 in one pass, and stage 7 only when the image is asked for);
@@ -207,17 +208,16 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
     return tris, key
 
 
-def point_count(compiled, shading: int, n_samples: int) -> int:
-    """How many points stage 5 has: a sample each (phong), a face each (flat), two per vertex (gouraud)."""
-    if shading == PHONG_SHADING:
-        return n_samples
+def point_count(compiled, shading: int) -> int:
+    """How many points stage 5 has under flat or Gouraud shading: a face each (flat), two per vertex
+    (gouraud). (Phong's points are its samples.)"""
     return compiled.faces.shape[0] if shading == FLAT else 2 * compiled.vertices.shape[0]
 
 
 def mesh_points(compiled, mesh, cam, shading: int, threads: int | None = None):
     """Stage 5 under flat or Gouraud shading: the points where the model is evaluated (Phong's are
     its samples, see `rasterize`), and how many."""
-    n_points = point_count(compiled, shading, 0)
+    n_points = point_count(compiled, shading)
     points = empty_points(compiled, "points", n_points, clear=False)  # every point written but uv, never read
     launch_chunks(resolve.mesh_points_kernel, n_points, [mesh, compiled.materials, cam, shading, points],
                   compiled.device, threads)
@@ -285,7 +285,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     background, fog = wp.vec3(*scene.background), fog_struct(scene.fog)
 
     if not gbuffer:  # stages 1-3, then 4-7 fused (flat / Gouraud points lit on first use)
-        n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading, 0)
+        n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading)
         frame = next(compiled.built.setdefault("frames", itertools.count(1)))  # this frame's cache stamp
         if device != "cpu":  # one cache for the GPU's threads: lit before any is read
             launch_chunks(shade.light_mesh_points_kernel, n_points, [
