@@ -114,7 +114,7 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
         else:
             s = solved[b]
             out = report(elements[b], s.x, s.result, s.steps, s.history, options, each, s.linearised)
-            results.append(without_clipped(elements[b], out, options, elements[b].reweighted))
+            results.append(without_clipped(elements[b], out, options))
     return results
 
 

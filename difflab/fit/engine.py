@@ -187,17 +187,17 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
     start = time.perf_counter()
     setup = Setup(scene, targets, materials, params, weights=weights, init=init, **common)
     out = run_fit(setup, options, {"setup": time.perf_counter() - start, "render": setup.render_seconds})
-    return without_clipped(setup, out, options, setup.reweighted)  # as Setup(..., weights=, init=) afresh
+    return without_clipped(setup, out, options)
 
 
-def without_clipped(setup: Setup, out: FitResult, options: FitOptions, make_setup) -> FitResult:
+def without_clipped(setup: Setup, out: FitResult, options: FitOptions) -> FitResult:
     """`out`, or -- when noise clipped at a bound biases it (`clipping.clipped_band`) -- the fit made
     again without the pixels near the clip, from `out`'s values, their values counted as censored.
     When leaving them out would leave no more uncensored entries than unknowns (a mask that lies
     wholly near the clip), `out` is kept, every parameter listed in `poorly_determined`: its values
     rest on pixels whose mean the clip moves, a bias its standard errors do not cover. The refit
-    estimates the noise over the pixels it keeps, or takes `out`'s sigma where too few remain.
-    make_setup(weights, init): the same fit's `Setup` with other weights (per view (H, W, 3)) and start."""
+    estimates the noise over the pixels it keeps, or takes `out`'s sigma where too few remain. (The
+    refit's `Setup` is `setup.reweighted`: the one `Setup` would build with those weights and start.)"""
     band = clipped_band(setup, out)
     if band is None:
         return out
@@ -205,10 +205,11 @@ def without_clipped(setup: Setup, out: FitResult, options: FitOptions, make_setu
         return dataclasses.replace(out, poorly_determined=[p.key for p in setup.layout])
     start = time.perf_counter()
     kept = [view.weight * ~near[..., None] for view, near in zip(setup.views, band)]
-    again = make_setup(kept, out.params)
+    again = setup.reweighted(kept, out.params)
     again.sigma_fallback = out.sigma  # (the band left out, too few pixels may remain to estimate the noise)
     second = run_fit(again, options, {"setup": time.perf_counter() - start, "render": again.render_seconds})
-    left_out = 3 * int(sum(int(near.sum()) for near in band))
+    left_out = sum(int(np.count_nonzero(view.weights[near.reshape(-1)[view.pixels]] > 0))  # their counted entries
+                   for view, near in zip(setup.views, band))
     timings = {key: out.timings.get(key, 0.0) + second.timings.get(key, 0.0)
                for key in {**out.timings, **second.timings}}
     return dataclasses.replace(second, steps=out.steps + second.steps, censored=second.censored + left_out,

@@ -115,11 +115,12 @@ class Layout:
         return _entries(self, attribute)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lower, upper) of the solver coordinate x per entry (formed once per layout; returned as
-        copies: the same read-only arrays used by a float32 fit's compiled solve and then handed
-        to a float64 one reached it as float32 buffers -- an XLA input mismatch,
-        test_fit_engine.test_a_float64_fit_after_a_float32_fit_of_the_same_layout)."""
-        return tuple(bound.copy() for bound in _bounds(self))
+        """(lower, upper) of the solver coordinate x per entry, new arrays each call (cached read-only
+        ones, used by a float32 fit's compiled solve and then handed to a float64 one, reached it as
+        float32 buffers: test_fit_engine.test_a_float64_fit_after_a_float32_fit_of_the_same_layout)."""
+        log = self.entries("log") > 0
+        lo, hi = self.entries("lower"), self.entries("upper")
+        return np.where(log, np.log(np.where(log, lo, 1.0)), lo), np.where(log, np.log(np.where(log, hi, 1.0)), hi)
 
     def values(self, x):
         """Solver coordinates x -> values in scene units (numpy for a numpy x, else JAX)."""
@@ -177,16 +178,6 @@ class Layout:
 def _entries(layout: Layout, attribute: str) -> np.ndarray:
     out = np.concatenate([np.full(p.size, float(getattr(p, attribute))) for p in layout.params])
     out.setflags(write=False)
-    return out
-
-
-@functools.lru_cache(maxsize=64)
-def _bounds(layout: Layout) -> tuple[np.ndarray, np.ndarray]:
-    log = layout.entries("log") > 0
-    lo, hi = layout.entries("lower"), layout.entries("upper")
-    out = np.where(log, np.log(np.where(log, lo, 1.0)), lo), np.where(log, np.log(np.where(log, hi, 1.0)), hi)
-    for bound in out:
-        bound.setflags(write=False)
     return out
 
 
