@@ -49,6 +49,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from fit_common import RESULTS, SEED, perturb, rel_error, scene_dict, versions  # noqa: E402
+from foreign_targets import interior_mask  # noqa: E402
 
 REFLECTANCE = [0.2, 0.5, 0.8]
 LIGHT = {"position": [3.0, 4.0, 3.0], "intensity": 40.0}
@@ -243,13 +244,13 @@ def mitsuba_comparison(size: int, iterations: int, repeats: int) -> dict:
 
 def difflab_on_mitsuba_target(size: int, targets: list, repeats: int) -> dict:
     """kd, ks, n of a sphere fitted to Mitsuba's images: kd should be reflectance / pi, ks 0 (its
-    bound). Repeat i fits targets[i % 2] (two renders of the scene). Mitsuba's pixels integrate over
-    their area, difflab samples centres: the fit reads the sphere's interior pixels (2 pixels in from
-    its silhouette). Reported: the fit of targets[0]."""
+    bound). Each fit is of the other of `targets` (two renders of the scene) than the fit before it.
+    Mitsuba's pixels integrate over their area, difflab samples centres: the fit reads the sphere's
+    interior pixels (2 pixels in from its silhouette, `foreign_targets.interior_mask`). Reported: the
+    fit of targets[0]."""
     from difflab import compile_scene
     from difflab.fit import fit_material
     from difflab.fit.records import STORE
-    from difflab.renderers.api import render_frame
     from difflab.scene import Scene
 
     d = scene_dict(size, red={"ka": [0.0] * 3, "kd": [0.1] * 3, "ks": [0.2] * 3, "n": 10.0},
@@ -259,11 +260,7 @@ def difflab_on_mitsuba_target(size: int, targets: list, repeats: int) -> dict:
     d["objects"] = d["objects"][:1]  # the sphere alone, as in Mitsuba's scene
     d["render"]["shadows"] = False
     scene = Scene.from_dict(d)
-    mask = render_frame(scene).gbuffer.material == 0
-    for _ in range(2):  # erode by one pixel
-        padded = np.pad(mask, 1)
-        mask = np.logical_and.reduce([padded[1 + di:mask.shape[0] + 1 + di, 1 + dj:mask.shape[1] + 1 + dj]
-                                      for di in (-1, 0, 1) for dj in (-1, 0, 1)])
+    mask = interior_mask(d)
 
     compiled = compile_scene(scene)
 
@@ -276,11 +273,12 @@ def difflab_on_mitsuba_target(size: int, targets: list, repeats: int) -> dict:
         return result, time.perf_counter() - t0, which
 
     first_call = run(True, 0)[1]
-    timed = {True: [], False: []}
-    for i in range(repeats):  # interleaved: a first fit of the view, then the same view again (another target)
+    timed, fits = {True: [], False: []}, 1  # fits made so far: fit k is of targets[k % 2], the other one each time
+    for _ in range(repeats):  # interleaved: a first fit of the view, then the same view again
         for first_of_view in (True, False):
-            timed[first_of_view].append(run(first_of_view, (i + (not first_of_view)) % 2))
-    in_row = [run(False, i % 2) for i in range(repeats)]  # a series of targets of one view
+            timed[first_of_view].append(run(first_of_view, fits % 2))
+            fits += 1
+    in_row = [run(False, k % 2) for k in range(fits, fits + repeats)]  # a series of targets of one view
 
     def stages(runs) -> dict:
         return {"wall_s": statistics.median(t for _, t, _ in runs),
