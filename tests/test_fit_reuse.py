@@ -122,25 +122,39 @@ def test_a_kept_ray_tree_serves_new_coefficient_starts_but_not_a_new_tree_shape(
 
 
 @pytest.mark.parametrize("compiled", [False, True])
-def test_a_setup_reweighted_is_the_setup_built_afresh(compiled):
+def test_a_setup_reweighted_keeps_its_pixels_and_fits_as_a_setup_built_afresh(compiled):
     """The refit without clipped pixels (`engine.fit`) reweights its setup instead of preparing the
-    targets again: the same problem, start, pixels and statistics as a `Setup` built afresh."""
-    import jax
-
+    targets again: its pixels stay (weight 0 where left out), so the problem keeps its shapes and
+    every refit of the view runs one compiled solve; its fit is the one a `Setup` built afresh with
+    those weights makes (the left-out pixels dropped)."""
+    from difflab.fit.engine import solve
+    from difflab.fit.lm import solve_box
     from difflab.fit.setup import Setup
 
     scene = compile_scene(SCENE) if compiled else SCENE
     noisy = np.maximum(TARGET + np.random.default_rng(2).normal(0.0, 0.02, TARGET.shape), 0.0)
     first = Setup(scene, [noisy], "red", init=START)
-    weights = [first.views[0].weight * (np.random.default_rng(0).random(TARGET.shape[:2]) > 0.3)[..., None]]
-    again, fresh = first.reweighted(weights, OTHER_START), Setup(scene, [noisy], "red", weights=weights,
-                                                                  init=OTHER_START)
-    for a, b in zip(jax.tree.leaves(again.problem), jax.tree.leaves(fresh.problem), strict=True):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+    def some_left_out(seed):
+        return [first.views[0].weight * (np.random.default_rng(seed).random(TARGET.shape[:2]) > 0.3)[..., None]]
+
+    again = first.reweighted(some_left_out(0), OTHER_START)
+    fresh = Setup(scene, [noisy], "red", weights=some_left_out(0), init=OTHER_START)
+    np.testing.assert_array_equal(again.views[0].pixels, first.views[0].pixels)
+    assert again.views[0].pixels.size > fresh.views[0].pixels.size
     np.testing.assert_array_equal(again.x0, fresh.x0)
-    np.testing.assert_array_equal(again.weighted_entries, fresh.weighted_entries)
-    assert (again.used_pixels, again.censored, again.weight_total, again.views[0].ceiling, again.render_seconds) == \
-        (fresh.used_pixels, fresh.censored, fresh.weight_total, fresh.views[0].ceiling, 0.0)
+    assert (again.censored, again.weight_total, again.views[0].ceiling, again.render_seconds) == \
+        (fresh.censored, fresh.weight_total, fresh.views[0].ceiling, 0.0)
+    a, b = solve(again), solve(fresh)
+    assert (a.result, a.steps, a.at_bound, a.censored) == (b.result, b.steps, b.at_bound, b.censored)
+    for key in b.params:  # (to the solver's rtol 1e-8: the steps' J^T J is summed over other rows)
+        np.testing.assert_allclose(a.params[key], b.params[key], rtol=1e-7)
+        np.testing.assert_allclose(a.stderr[key], b.stderr[key], rtol=1e-6)
+    np.testing.assert_allclose([a.loss, a.sigma, a.chi2, a.psnr], [b.loss, b.sigma, b.chi2, b.psnr], rtol=1e-7)
+    np.testing.assert_allclose(a.residuals[0], b.residuals[0], atol=1e-6)
+    compiled_solves = solve_box._cache_size()
+    other = solve(first.reweighted(some_left_out(1), START))  # other pixels left out: the same compiled solve
+    assert other.converged and solve_box._cache_size() == compiled_solves
 
 
 def test_small_device_arrays_are_reused_only_for_equal_contents():

@@ -134,16 +134,18 @@ class Setup:
             self.problem = self._problem(loss, loss_scale)
 
     def reweighted(self, weights, init) -> Setup:
-        """What `Setup` builds from the same arguments but `weights` -- per view (H, W, 3) >= 0, 0
-        outside its mask -- and `init`, without preparing the targets again (their records, checks
-        and ceilings' inputs are the same)."""
+        """The fit with other `weights` -- per view (H, W, 3) >= 0, 0 outside its mask -- and `init`,
+        without preparing the targets again: the same pixels (a pixel whose weight became 0 stays,
+        its residual 0), so the problem keeps its shapes and its compiled solve serves every such
+        refit of the view, and the ceilings are those found for the fit it reweights. Its solution,
+        statistics and residual images are those of a `Setup` built afresh with these weights."""
         out = copy.copy(self)
         out.scene = apply_init(self.base_scene, self.materials, init)
         out.textures = texture_starts(out.scene, self.materials, init) if self.textures else {}
         out.initial = {p.key: scene_value(out.scene, p, out.textures) for p in self.layout}
         out.x0 = self.layout.x_of(self.layout.flatten(out.initial))
         out.render_seconds = 0.0
-        out.views = [out._seen(view, weight) for view, weight in zip(self.views, weights)]
+        out.views = [out._seen(view, weight, keep=True) for view, weight in zip(self.views, weights)]
         out.used_pixels = sum(v.pixels.size for v in out.views)
         out._target_statistics()
         with jax.enable_x64(self.x64):
@@ -228,10 +230,15 @@ class Setup:
                                          kept=kept if store is not None else None, touched=touched), weight))
         return views
 
-    def _seen(self, view: View, weight) -> View:
+    def _seen(self, view: View, weight, keep: bool = False) -> View:
         """The view with `weight` (None: 1 inside the mask), the pixels it uses (in the mask, weight >
         0, influenced by the fitted parameters) and its target's ceiling (given; 1 for image files,
-        which saturate there; for float data, ties at the maximum of the used values)."""
+        which saturate there; for float data, ties at the maximum of the used values); `keep`: the
+        view's own pixels and ceiling."""
+        if keep:  # the same pixels, rows and ceiling
+            out = dataclasses.replace(view, weighting=weight)
+            out.__dict__.update(pixels=view.pixels, values=view.values, zeros=view.zeros)
+            return out
         used = view.mask & view.touched
         if weight is not None:
             positive = weight > 0
