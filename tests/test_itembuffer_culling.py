@@ -16,6 +16,7 @@ from difflab.geometry import TriMesh, box, closed_outward, concatenate, cylinder
 from difflab.geometry.closed import pieces, solid_pieces
 from difflab.renderers.raytrace import itembuffer
 from difflab.renderers.raytrace.selfcross import crossing_faces, passes_through_itself, star_shaped
+from difflab.scene import Scene
 from test_itembuffer import assert_same_frames, both
 
 
@@ -280,3 +281,23 @@ def test_a_piece_through_itself_is_drawn_whole_and_culling_it_would_be_wrong(mon
 def test_solids_not_through_themselves_are_culled_and_the_frame_is_the_bvhs(objects):
     for camera, lights in [(FROM_ABOVE, LIGHTS), (FROM_BELOW, LIT_FROM_BELOW)]:
         assert frames(objects, camera, lights).stats["item_buffer_culled"]
+
+
+def test_the_culling_test_follows_the_camera_of_a_compiled_scene_and_keeps_nothing_per_camera():
+    """One compiled scene seen from cameras outside its solids (culled) and from inside the sphere
+    mesh (drawn whole), in turn: each frame the BVH's, and what the compiled scene keeps does not
+    grow with the cameras seen (the meshes' answer is kept; the camera's is asked each frame)."""
+    outside = {"eye": [0.5, 1.2, 3.5], "target": [0, 0, 0], "fov_y": 45, "width": 32, "height": 24}
+    inside = {**outside, "eye": [-0.6, 0.1, 0.05], "target": [1, 0, 0]}
+    compiled = difflab.compile_scene(solids_scene(SOLIDS, outside))
+    kept = None
+    for k, (camera, culled) in enumerate([(outside, True), (inside, False), ({**outside, "eye": [0.4, 1.3, 3.4]}, True),
+                                          (inside, False), ({**outside, "eye": [0.6, 1.1, 3.6]}, True)]):
+        view = compiled.with_scene(Scene.from_dict(solids_scene(SOLIDS, camera)))
+        frame = difflab.render_frame(view, threads=2)
+        assert frame.stats["item_buffer_culled"] == culled
+        np.testing.assert_array_equal(difflab.render(view, threads=2, item_buffer=False), frame.image)
+        if k == 1:
+            kept = set(compiled.built)
+        elif k > 1:
+            assert set(compiled.built) == kept

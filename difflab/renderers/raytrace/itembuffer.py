@@ -60,8 +60,7 @@ PLANE_GAP = 1.0e-3  # relative depth gap telling a neighbour's plane from the hi
 NO_TRIANGLE = wp.constant(-1)  # resolve_hint: no mesh triangle before the nearest sphere / plane (if any)
 ASK_BVH = wp.constant(-2)  # resolve_hint: an ambiguous hint, the BVH finds the mesh hit
 ITEM_BUFFER_VIEW = "item buffer of"  # scratch-pool note: ((camera, width, height), culled) of the kept item buffer
-SOLID_MESHES = "solid meshes"  # compiled.built: the mesh vertices' bounding box when solids (`culls_back_faces`), else
-# None; with a camera, (SOLID_MESHES, camera): whether `culls_back_faces`
+SOLID_MESHES = "solid meshes"  # compiled.built: the mesh vertices' bounding box when solids (`culls_back_faces`), else None
 NEAR_MARGIN = 1.0e-4  # back faces are culled when the meshes lie this far (relative) beyond the near plane
 SLOT_BITS = wp.constant(wp.int64(4294967295))  # the z-buffer key's low 32 bits: the screen slot
 NEIGHBOUR_DI = wp.constant(wp.vec4i(-1, 1, 0, 0))  # the four neighbouring samples: up, down, left, right
@@ -289,23 +288,20 @@ def culls_back_faces(compiled, threads: int | None = None) -> bool:
     itself (`selfcross.passes_through_itself`), and their bounding box lies beyond the near plane by
     NEAR_MARGIN (relative to the coordinates' size), so every primary ray starts outside every solid
     and its first mesh hit, entering one, is a front face (module doc). The meshes are asked once
-    per compiled scene, the camera once per camera."""
+    per compiled scene; the camera's 8 box corners are tested on each call (nothing kept per camera)."""
+    if SOLID_MESHES not in compiled.built:
+        vertices = compiled.arrays["vertices"].numpy()[:compiled.n_mesh_vertices]
+        pieces = solid_pieces(vertices, compiled.faces[:compiled.n_mesh_faces])
+        solid = pieces is not None and not passes_through_itself(bvh(compiled), *pieces, threads=threads)
+        compiled.built[SOLID_MESHES] = (vertices.min(axis=0), vertices.max(axis=0)) if solid else None
+    box = compiled.built[SOLID_MESHES]
+    if box is None:
+        return False
     camera = compiled.scene.camera
-    if (SOLID_MESHES, camera) not in compiled.built:
-        if SOLID_MESHES not in compiled.built:
-            vertices = compiled.arrays["vertices"].numpy()[:compiled.n_mesh_vertices]
-            pieces = solid_pieces(vertices, compiled.faces[:compiled.n_mesh_faces])
-            solid = pieces is not None and not passes_through_itself(bvh(compiled), *pieces, threads=threads)
-            compiled.built[SOLID_MESHES] = (vertices.min(axis=0), vertices.max(axis=0)) if solid else None
-        box = compiled.built[SOLID_MESHES]
-        cull = False
-        if box is not None:
-            corners = np.array(list(itertools.product(*zip(*box))), np.float64)
-            eye = np.asarray(camera.eye, np.float64)
-            size = camera.near + np.abs(corners).max() + np.abs(eye).max()
-            cull = bool(((corners - eye) @ camera_frame(camera)[2]).min() > camera.near + NEAR_MARGIN * size)
-        compiled.built[SOLID_MESHES, camera] = cull
-    return compiled.built[SOLID_MESHES, camera]
+    corners = np.array(list(itertools.product(*zip(*box))), np.float64)
+    eye = np.asarray(camera.eye, np.float64)
+    size = camera.near + np.abs(corners).max() + np.abs(eye).max()
+    return bool(((corners - eye) @ camera_frame(camera)[2]).min() > camera.near + NEAR_MARGIN * size)
 
 
 def bvh(compiled) -> wp.Mesh:
