@@ -42,7 +42,8 @@ def check_render(scene, record_tree: bool = True) -> None:
     branching, weight = tree_shape(scene)
     nodes = limits.ray_tree_nodes(settings.max_depth, branching, weight, settings.adaptive_threshold)
     limits.check_rays(samples, nodes, n_lights, f"{what} at max_depth {settings.max_depth}", RenderError)
-    limits.require_memory(limits.raytrace_bytes(samples, samples, n_lights, record_tree), what, RenderError,
+    textured = any(mat.texture is not None for mat in scene.materials.values())
+    limits.require_memory(limits.raytrace_bytes(samples, samples, n_lights, record_tree, textured), what, RenderError,
                           "lower the image size or spp")
 
 
@@ -53,11 +54,13 @@ def check_threads(threads):
     raise RenderError(f"threads: expected a positive integer or None, got {limits.shorten(threads)}")
 
 
-def check_tree(n_nodes: int, n_lights: int, n_crossing_counts: int) -> None:
+def check_tree(n_nodes: int, n_lights: int, n_crossing_counts: int, textured: bool = False) -> None:
     """Refuse recording a ray tree of `n_nodes` (counted by the first pass) over the memory budget;
-    `n_crossing_counts` = lights x materials per node when transparent shadow crossings are recorded."""
+    `n_crossing_counts` = lights x materials per node when transparent shadow crossings are recorded;
+    `textured`: the nodes record texels and uv."""
     limits.require_count(n_nodes, "record_tree: ray-tree nodes", RenderError)
-    nbytes = limits.raytrace_bytes(0, n_nodes, n_lights, True) + n_nodes * n_crossing_counts * limits.TREE_CROSSING_BYTES
+    nbytes = limits.raytrace_bytes(0, n_nodes, n_lights, True, textured) + \
+        n_nodes * n_crossing_counts * limits.TREE_CROSSING_BYTES
     limits.require_memory(nbytes, f"record_tree: a ray tree of {n_nodes} nodes", RenderError,
                           "render with record_tree=False, fewer samples or a lower max_depth")
 

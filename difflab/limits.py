@@ -55,6 +55,9 @@ RASTER_LIGHT_POINT_BYTES = 24
 RAYTRACE_SAMPLE_BYTES = 90
 TREE_NODE_BYTES = 110
 TREE_NODE_LIGHT_BYTES = 40
+#: Per recorded node when a material has an image texture: its texel (vec3) and uv (vec2) float32,
+#: on the device and copied (from the dtypes, not measured).
+TREE_NODE_TEXTURE_BYTES = 40
 #: Per node, light and material when shadow rays count their crossings of transparent surfaces
 #: (int32 on the device, its numpy copy, the uint8 result: from the dtypes, not measured).
 TREE_CROSSING_BYTES = 9
@@ -232,9 +235,11 @@ def ray_tree_nodes(max_depth: int, branching: int, weight: float = 1.0, threshol
     return min(2 ** 62, branching ** levels - 1)
 
 
-def raytrace_bytes(samples: int, nodes: int, n_lights: int, record: bool) -> int:
-    """Peak bytes of a ray-traced frame: samples x RAYTRACE_SAMPLE_BYTES, plus the recorded tree."""
-    tree = nodes * (TREE_NODE_BYTES + n_lights * TREE_NODE_LIGHT_BYTES) if record else 0
+def raytrace_bytes(samples: int, nodes: int, n_lights: int, record: bool, textured: bool = False) -> int:
+    """Peak bytes of a ray-traced frame: samples x RAYTRACE_SAMPLE_BYTES, plus the recorded tree
+    (`textured`: its nodes record texels and uv too)."""
+    per_node = TREE_NODE_BYTES + n_lights * TREE_NODE_LIGHT_BYTES + (TREE_NODE_TEXTURE_BYTES if textured else 0)
+    tree = nodes * per_node if record else 0
     return samples * RAYTRACE_SAMPLE_BYTES + tree
 
 

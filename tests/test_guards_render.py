@@ -77,6 +77,10 @@ def test_a_recorded_tree_over_the_budget_is_refused_after_counting(monkeypatch):
     monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "3M")
     tree, offsets = sized_tree(counts, 1, 0, "cpu")
     assert offsets[-1] == 16000 and tree.sample.shape == (16000,)
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "2.5M")
+    sized_tree(counts, 1, 0, "cpu")
+    with pytest.raises(RenderError, match=r"^record_tree: a ray tree of 16000 nodes: needs about 2\.9 MiB"):
+        sized_tree(counts, 1, 0, "cpu", textured=True)  # 190 bytes a node: texel and uv recorded too
 
 
 @pytest.mark.parametrize("materials, cause", [

@@ -150,7 +150,7 @@ def sized_tree(counts: np.ndarray, n_lights: int, n_materials: int, device: str,
     offsets = np.zeros(counts.size + 1, np.int64)
     np.cumsum(counts.ravel(), out=offsets[1:])
     n_nodes = int(offsets[-1])
-    check_tree(n_nodes, n_lights, n_lights * n_materials)
+    check_tree(n_nodes, n_lights, n_lights * n_materials, textured)
     tree = empty_tree(counts.shape, n_nodes, n_lights, device, n_materials, textured)
     tree.offset = wp.array(offsets[:-1].reshape(counts.shape).astype(np.int32), dtype=wp.int32, device=device)
     return tree, offsets
