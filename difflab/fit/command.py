@@ -33,8 +33,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("fit", help="fit material coefficients to target images",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", help="scene file (JSON); its values are the starting point")
-    p.add_argument("targets", nargs="+", help="target images (8- and 16-bit PNGs are sRGB-decoded unless their gAMA "
-                   "chunk says linear; .npy is linear)")
+    p.add_argument("targets", nargs="+", help="target images: 8-bit pictures and 16-bit PNG / TIFF, decoded as sRGB unless a "
+                   "PNG's gAMA chunk (without an sRGB chunk) gives another gamma (1.0: linear); .npy holds linear "
+                   "floats")
     p.add_argument("--material", action="append", required=True,
                    help="material(s) to fit: a name, or several comma-separated (or the option repeated)")
     p.add_argument("--method", choices=("raster", "raytrace"), default=None,

@@ -18,7 +18,6 @@ from ..errors import DifflabError, FitError
 from ..io import load_image, sample_bits
 
 OVERRIDE_KEYS = ("camera", "lights")
-EIGHT_BIT = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
 def _is_path(x) -> bool:
