@@ -1,5 +1,6 @@
 """JAX image formation against the Warp rasterizer, and gradients of the fit's residuals."""
 
+import dataclasses
 import itertools
 
 import jax
@@ -10,7 +11,7 @@ from jax.test_util import check_grads
 from test_fit_helpers import make_scene, target_of
 
 from difflab.fit import Setup, shade_gbuffer
-from difflab.fit.shading import pixel_arrays
+from difflab.fit.shading import own_points, pixel_arrays
 from difflab.renderers.api import render_frame
 
 LIGHTS = [
@@ -111,3 +112,35 @@ def test_single_point_pixels_skip_the_composition(shading):
     with jax.enable_x64(True):
         image = setup.problem.images(setup.layout.values(jnp.asarray(setup.x0)))[0]
     np.testing.assert_allclose(np.asarray(image), frame.image.reshape(-1, 3)[pixels], atol=1e-5, rtol=0)
+
+
+def test_phong_points_are_the_samples():
+    """`own_points` reads only the mask under Phong shading (the G-buffer's points are its samples, in
+    order): the points it gives are those the point indices and weights say, and it refuses a pixel
+    that nothing covers."""
+    scene = make_scene(size=20, shading="phong", lights=LIGHTS)
+    gbuffer = render_frame(scene).gbuffer
+    covered = np.flatnonzero(gbuffer.mask)
+    assert 0 < covered.size < gbuffer.mask.size and gbuffer.points.material.shape[0] == gbuffer.mask.size
+    np.testing.assert_array_equal(gbuffer.point_index.reshape(-1, 3)[covered, 0], covered)
+    np.testing.assert_array_equal(gbuffer.point_weight.reshape(-1, 3)[covered], np.tile([1.0, 0.0, 0.0], (covered.size, 1)))
+    read_all = dataclasses.replace(gbuffer, shading="flat")  # the same buffers, every field checked
+    np.testing.assert_array_equal(own_points(gbuffer, covered), own_points(read_all, covered))
+    np.testing.assert_array_equal(own_points(gbuffer, covered), covered)
+    empty = np.flatnonzero(~gbuffer.mask)[:1]
+    assert own_points(gbuffer, np.concatenate([covered, empty])) is None
+
+
+def test_own_points_refuses_mixed_weights():
+    """Flat shading: pixels whose points' weights are not (1, 0, 0) are composed, not taken as one point."""
+    scene = make_scene(size=20, shading="flat", lights=LIGHTS)
+    gbuffer = render_frame(scene).gbuffer
+    covered = np.flatnonzero(gbuffer.mask)
+    np.testing.assert_array_equal(own_points(gbuffer, covered), gbuffer.point_index.reshape(-1, 3)[covered, 0])
+    for weight in ([0.5, 0.5, 0.0], [1.0, 0.0, 1e-7], [1.0, -0.0, np.nan]):
+        changed = gbuffer.point_weight.copy()
+        changed.reshape(-1, 3)[covered[3]] = weight
+        assert own_points(dataclasses.replace(gbuffer, point_weight=changed), covered) is None, weight
+    changed = gbuffer.point_weight.copy()
+    changed.reshape(-1, 3)[covered[3]] = [1.0, -0.0, 0.0]  # -0 is 0
+    assert own_points(dataclasses.replace(gbuffer, point_weight=changed), covered) is not None

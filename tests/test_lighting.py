@@ -119,6 +119,28 @@ def test_warp_and_jax_models_agree_on_random_inputs(model):
         assert np.all(excess <= 0.0), f"{name}: worst excess {excess.max():.3g}"
 
 
+@pytest.mark.parametrize("kinds", [("point",), ("directional",), ("spot",), ("point", "directional"),
+                                   ("point", "spot"), ("directional", "spot"), ("point", "directional", "spot")])
+def test_falloff_for_known_kinds_is_the_general_one(kinds):
+    """`light_falloff` / `light_geometry` told which kinds the lights have leave the other kinds' terms
+    out: the values are bit for bit the general ones (eager and compiled), spot cones included."""
+    lights, _, p, normal, v = random_inputs(seed=len(kinds), count=600)
+    chosen = [light for light in lights if light.type in kinds][:8]
+    ids = tuple(sorted(jm.LIGHT_TYPES[k] for k in kinds))
+    assert {light.type for light in chosen} == set(kinds)
+    lj = jm.lights_to_jax(chosen)
+    l, d = jm.light_vector(lj, jnp.asarray(p, jnp.float32)[:, None, :])  # (N, P, 3), (N, P)
+    general = jm.light_falloff(lj, l, d)
+    if "spot" in kinds:  # outside and inside a cone
+        assert bool(jnp.any(general == 0.0)) and bool(jnp.any(general > 0.0))
+    assert np.array_equal(np.asarray(jm.light_falloff(lj, l, d, ids)), np.asarray(general))
+    geometry = jax.jit(lambda n, v, l, d, s, known: jm.light_geometry(PHONG, n, v, lj, l, d, s, known),
+                       static_argnums=5)
+    args = (jnp.asarray(normal, jnp.float32), jnp.asarray(v, jnp.float32), l, d, jnp.ones(d.shape))
+    for got, want in zip(jax.tree_util.tree_leaves(geometry(*args, ids)), jax.tree_util.tree_leaves(geometry(*args, None))):
+        assert np.array_equal(np.asarray(got), np.asarray(want))
+
+
 def lambert_phong_reference(theta_deg, view_deg, ka, kd, ks, n, ia, il):
     """The textbook value for a directional light at theta and a viewer at view_deg, in one plane."""
     t, a = math.radians(theta_deg), math.radians(view_deg)

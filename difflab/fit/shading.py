@@ -128,7 +128,7 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
             background=np.asarray(gbuffer.background, real), fog_color=np.asarray(color, real),
             fog_start=np.asarray(start, real), fog_end=np.asarray(end, real), fog_density=np.asarray(density, real))
     if point_ids.size:
-        rows = point_ids.astype(np.intp)  # once, not per take
+        rows = point_ids.astype(np.intp, copy=False)  # once, not per take
         points = PointsJ(*(np.take(getattr(pts, k), rows, axis=0) for k in PointsJ._fields))
         if not np.isfinite(points.light_dist).all():
             points = points._replace(light_dist=np.where(np.isfinite(points.light_dist), points.light_dist, np.inf))
@@ -142,11 +142,16 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
 
 
 def own_points(gbuffer, pixels) -> np.ndarray | None:
-    """At spp 1, the point of each pixel in `pixels` (U,) (point_ids, int32) when each is covered and
-    exactly its point's colour (point weights (1, 0, 0), a valid first point index), else None."""
+    """At spp 1, the point of each pixel in `pixels` (U,) (point_ids) when each is covered and
+    exactly its point's colour (point weights (1, 0, 0), a valid first point index), else None.
+    Under Phong shading the points are the samples, in sample order (`GBuffer.light_dir`): a covered
+    pixel's point is the pixel itself, and only the mask is read."""
     if not np.take(gbuffer.mask.reshape(-1), pixels).all():
         return None
-    if not (np.take(gbuffer.point_weight.reshape(-1, 3), pixels, axis=0) == (1.0, 0.0, 0.0)).all():
+    if gbuffer.shading == "phong":
+        return pixels
+    weight = np.take(gbuffer.point_weight.reshape(-1, 3), pixels, axis=0)
+    if not ((weight[:, 0] == 1.0).all() and not weight[:, 1:].any()):  # (1, 0, 0): ~2x a compare with it
         return None
     point_ids = np.take(gbuffer.point_index.reshape(-1, 3), pixels, axis=0)[:, 0]
     return point_ids if point_ids.max(initial=0) < gbuffer.points.material.shape[0] else None
@@ -256,7 +261,8 @@ class GBufferModel(eqx.Module):
     def build(cls, gbuffer, pixels, lights: LightsJ, dtype, texels=None) -> GBufferModel:
         """`texels`: a `texels.TexelSource` for the fitted textures, or None."""
         points, comp, formation, point_ids = pixel_arrays(gbuffer, pixels, dtype)
-        material, cell, geometry, comp = _device_model(points, comp, lights, formation.specular)
+        kinds = tuple(sorted(set(np.asarray(lights.kind).tolist())))  # the terms the geometry needs
+        material, cell, geometry, comp = _device_model(points, comp, lights, formation.specular, kinds)
         taps = tap_weight = None
         if texels is not None:
             rows, weight = texels.taps(gbuffer, point_ids)
@@ -282,15 +288,15 @@ class GBufferModel(eqx.Module):
         return colors if self.formation.direct else compose(colors, self.comp, self.formation)
 
 
-@partial(jax.jit, static_argnums=3)
-def _device_model(points: PointsJ, comp: ComposeJ | None, lights: LightsJ, specular: int):
+@partial(jax.jit, static_argnums=(3, 4))
+def _device_model(points: PointsJ, comp: ComposeJ | None, lights: LightsJ, specular: int, kinds: tuple):
     """(material ids, cells, `LightGeometry`, composition) on the device from `pixel_arrays`' numpy
-    arrays: one call moves them all."""
+    arrays: one call moves them all. `kinds`: the lights' LIGHT_TYPES ids (`light_falloff`)."""
     real = lambda field: field.astype(lights.intensity.dtype)  # noqa: E731 (float32 G-buffer values, exactly)
     points = points._replace(**{k: real(getattr(points, k)) for k in ("normal", "view", "light_dir", "light_dist",
                                                                       "visibility")})
     geometry = light_geometry(specular, points.normal, points.view, lights, points.light_dir, points.light_dist,
-                              points.visibility)
+                              points.visibility, kinds)
     return points.material, points.cell, geometry, comp
 
 

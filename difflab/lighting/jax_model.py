@@ -99,16 +99,22 @@ def light_vector(light: LightsJ, p):
     return l, d
 
 
-def light_falloff(light: LightsJ, l, d):
-    """att * spot: 1/(kc + kl d + kq d^2) times the spotlight cone factor (both 1 where absent)."""
+def light_falloff(light: LightsJ, l, d, kinds=None):
+    """att * spot: 1/(kc + kl d + kq d^2) times the spotlight cone factor (both 1 where absent).
+    `kinds`: the LIGHT_TYPES ids the lights have, when known (a collection of ints): the terms of
+    kinds not among them are left out -- the same values, without a spot cone's power per point when
+    no light is a spot."""
+    has = lambda kind: kinds is None or kind in kinds  # noqa: E731
     directional = light.kind == DIRECTIONAL
-    d = jnp.where(directional, 0.0, d)  # keep inf out of the untaken branch
+    if has(DIRECTIONAL):
+        d = jnp.where(directional, 0.0, d)  # keep inf out of the untaken branch
     kc, kl, kq = light.attenuation[..., 0], light.attenuation[..., 1], light.attenuation[..., 2]
     att = 1.0 / (kc + kl * d + kq * d * d)
-    cos_axis = -dot(l, light.direction)
-    spot = jnp.where(cos_axis < light.cos_cutoff, 0.0, safe_pow(jnp.maximum(cos_axis, 0.0), light.exponent))
-    att = jnp.where(light.kind == SPOT, att * spot, att)
-    return jnp.where(directional, 1.0, att)
+    if has(SPOT):
+        cos_axis = -dot(l, light.direction)
+        spot = jnp.where(cos_axis < light.cos_cutoff, 0.0, safe_pow(jnp.maximum(cos_axis, 0.0), light.exponent))
+        att = jnp.where(light.kind == SPOT, att * spot, att)
+    return jnp.where(directional, 1.0, att) if has(DIRECTIONAL) else att
 
 
 class LobeGeometry(NamedTuple):
@@ -257,10 +263,11 @@ class LightGeometry(NamedTuple):
     lobe: LobeGeometry
 
 
-def light_geometry(model: int, normal, v, lights: LightsJ, l, d, visibility) -> LightGeometry:
-    """The `LightGeometry` of points: normal, v (..., 3); l (..., P, 3), d, visibility (..., P)."""
+def light_geometry(model: int, normal, v, lights: LightsJ, l, d, visibility, kinds=None) -> LightGeometry:
+    """The `LightGeometry` of points: normal, v (..., 3); l (..., P, 3), d, visibility (..., P);
+    `kinds` as `light_falloff`'s."""
     n_dot_l = dot(normal[..., None, :], l)
-    s = visibility * light_falloff(lights, l, d)
+    s = visibility * light_falloff(lights, l, d, kinds)
     return LightGeometry(diffuse=s * jnp.maximum(n_dot_l, 0.0), weight=jnp.where(n_dot_l > 0.0, s, 0.0),
                          lobe=lobe_geometry(model, normal[..., None, :], v[..., None, :], l))
 
