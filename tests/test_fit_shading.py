@@ -11,7 +11,7 @@ from jax.test_util import check_grads
 from test_fit_helpers import make_scene, target_of
 
 from difflab.fit import Setup, shade_gbuffer
-from difflab.fit.shading import own_points, pixel_arrays
+from difflab.fit.shading import distinct_ids, own_points, pixel_arrays
 from difflab.renderers.api import render_frame
 
 LIGHTS = [
@@ -144,3 +144,9 @@ def test_own_points_refuses_mixed_weights():
     changed = gbuffer.point_weight.copy()
     changed.reshape(-1, 3)[covered[3]] = [1.0, -0.0, 0.0]  # -0 is 0
     assert own_points(dataclasses.replace(gbuffer, point_weight=changed), covered) is not None
+
+
+@pytest.mark.parametrize("ids,expected", [([3, 3, 3], (3,)), ([-1], (-1,)), ([2, -1, 0, 2, 5], (-1, 0, 2, 5)),
+                                          ([], ()), ([0, 1], (0, 1))])
+def test_distinct_ids(ids, expected):
+    assert distinct_ids(np.asarray(ids, np.int32)) == expected

