@@ -33,14 +33,25 @@ def edge_values(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, i: int, j: int):
 
 
 @wp.func
-def float_barycentrics(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, i: int, j: int):
-    """Screen-space barycentrics (float64) of sample centre (j + 0.5, i + 0.5) in triangle s0 s1 s2,
-    and the edge values' sum (twice the signed area). Coverage is decided on the snapped integers;
-    the weights come from the unsnapped float64 vertices, so interpolation carries no snapping error."""
+def edge_weights(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, i: int, j: int):
+    """`edge_values` at sample centre (j + 0.5, i + 0.5) and their sum (twice the signed area):
+    the screen-space barycentrics times that sum; (1, 0, 0) for a sliver (sum 0: a triangle only the
+    snapped vertices give an area). Coverage is decided on the snapped integers; the weights come
+    from the unsnapped float64 vertices, so interpolation carries no snapping error."""
     e = edge_values(s0, s1, s2, i, j)
     area = e[0] + e[1] + e[2]
-    if area == wp.float64(0.0):  # a sliver only the snapped vertices give an area
+    if area == wp.float64(0.0):
         return wp.vec3d(wp.float64(1.0), wp.float64(0.0), wp.float64(0.0)), area
+    return e, area
+
+
+@wp.func
+def float_barycentrics(s0: wp.vec4d, s1: wp.vec4d, s2: wp.vec4d, i: int, j: int):
+    """Screen-space barycentrics (float64) of sample centre (j + 0.5, i + 0.5) in triangle s0 s1 s2,
+    and the edge values' sum (`edge_weights`; (1, 0, 0) for a sliver)."""
+    e, area = edge_weights(s0, s1, s2, i, j)
+    if area == wp.float64(0.0):
+        return e, area
     return e / area, area
 
 

@@ -15,7 +15,8 @@ from ..._warp import wp
 from ...lighting.warp_model import MaterialW, checker_cell
 from ...vocabulary import FLAT, PHONG_SHADING
 from ..camera import CameraW, view_direction
-from .coverage import NO_HIT, float_barycentrics
+from ..launch import dealt_row
+from .coverage import NO_HIT, edge_weights, float_barycentrics
 
 wp.set_module_options({"enable_backward": False})
 
@@ -85,8 +86,8 @@ class SampleW:
     weights: wp.vec3  # over the face's vertices: perspective-correct or affine
     side: float  # +1 the face's front is seen, -1 its back
     point: PointW
-    area: wp.float64  # the slot's edge values' sum there (`float_barycentrics`)
-    perspective: wp.vec3d  # perspective-correct: c_k / total, c_k = b_k / w_k of its screen barycentrics b_k
+    area: wp.float64  # the slot's edge values' sum there (`edge_weights`)
+    perspective: wp.vec3d  # perspective-correct: c_k / total, c_k = e_k / w_k of its edge values e_k
     total: wp.float64  # sum c_k
 
 
@@ -145,24 +146,31 @@ def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=
                    perspective_correct: int, big_b: wp.vec3d, total: wp.float64, uv0: wp.vec2, uv1: wp.vec2,
                    uv2: wp.vec2):
     """Exact d(uv)/dx and d(uv)/dy of the interpolation the resolve stage uses, at the sample where
-    slot `slot` has edge values summing to `area` (`float_barycentrics`) and, perspective-correct,
-    the weights big_b = c / total (`sample_weights`).
+    slot `slot` has edge values summing to `area` (`edge_weights`) and, perspective-correct, the
+    weights big_b = c / total (`sample_weights`).
 
-    Screen barycentrics b_k are affine in (x, y); perspective-correct ones are B_k = c_k / S with
-    c_k = b_k / w_k and S = sum c_k, so dB_k = (dc_k - B_k dS) / S (quotient rule); uv = sum B_k uv_k."""
+    Screen barycentrics b_k = e_k / A are affine in (x, y), de_k/dx = y_{k+1} - y_{k+2} and
+    de_k/dy = x_{k+2} - x_{k+1}; perspective-correct ones are B_k = c_k / S with c_k = e_k / w_k
+    and S = sum c_k (A cancels), so dB_k = (dc_k - B_k dS) / S (quotient rule); uv = sum B_k uv_k."""
     s0 = screen[slot, 0]
     s1 = screen[slot, 1]
     s2 = screen[slot, 2]
     if area == wp.float64(0.0):
         return wp.vec2(0.0), wp.vec2(0.0)
-    db_dx = wp.vec3d(s1[1] - s2[1], s2[1] - s0[1], s0[1] - s1[1]) / area
-    db_dy = wp.vec3d(s2[0] - s1[0], s0[0] - s2[0], s1[0] - s0[0]) / area
+    de_dx = wp.vec3d(s1[1] - s2[1], s2[1] - s0[1], s0[1] - s1[1])
+    de_dy = wp.vec3d(s2[0] - s1[0], s0[0] - s2[0], s1[0] - s0[0])
+    db_dx = wp.vec3d()
+    db_dy = wp.vec3d()
     if perspective_correct == 1:
         q = wp.vec3d(s0[3], s1[3], s2[3])  # 1 / w per corner
-        dc_dx = wp.cw_mul(db_dx, q)
-        dc_dy = wp.cw_mul(db_dy, q)
-        db_dx = (dc_dx - big_b * (dc_dx[0] + dc_dx[1] + dc_dx[2])) / total
-        db_dy = (dc_dy - big_b * (dc_dy[0] + dc_dy[1] + dc_dy[2])) / total
+        dc_dx = wp.cw_mul(de_dx, q)
+        dc_dy = wp.cw_mul(de_dy, q)
+        inv_total = wp.float64(1.0) / total
+        db_dx = (dc_dx - big_b * (dc_dx[0] + dc_dx[1] + dc_dx[2])) * inv_total
+        db_dy = (dc_dy - big_b * (dc_dy[0] + dc_dy[1] + dc_dy[2])) * inv_total
+    else:
+        db_dx = de_dx / area
+        db_dy = de_dy / area
     ua = vertex_uv(weight, slot, 0, uv0, uv1, uv2)
     ub = vertex_uv(weight, slot, 1, uv0, uv1, uv2)
     uc = vertex_uv(weight, slot, 2, uv0, uv1, uv2)
@@ -179,14 +187,19 @@ def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: in
     slot = int(key % wp.int64(4294967296))
     screen = tris.screen
     weight = tris.weight
-    bd, area = float_barycentrics(screen[slot, 0], screen[slot, 1], screen[slot, 2], i, j)
     sample = SampleW()
-    sample.area = area
-    if perspective_correct == 1:  # b_k / w_k, renormalised
-        c = wp.vec3d(bd[0] * screen[slot, 0][3], bd[1] * screen[slot, 1][3], bd[2] * screen[slot, 2][3])
+    bd = wp.vec3d()
+    if perspective_correct == 1:  # b_k / w_k renormalised: c_k = e_k / w_k, as b_k = e_k / area and area cancels
+        e, area = edge_weights(screen[slot, 0], screen[slot, 1], screen[slot, 2], i, j)
+        c = wp.vec3d(e[0] * screen[slot, 0][3], e[1] * screen[slot, 1][3], e[2] * screen[slot, 2][3])
         sample.total = c[0] + c[1] + c[2]
-        bd = c / sample.total
+        bd = c * (wp.float64(1.0) / sample.total)  # one division
         sample.perspective = bd
+        sample.area = area
+    else:
+        b_screen, area = float_barycentrics(screen[slot, 0], screen[slot, 1], screen[slot, 2], i, j)
+        bd = b_screen
+        sample.area = area
     b = wp.vec3(float(bd[0]), float(bd[1]), float(bd[2]))
     sample.face = tris.face[slot]
     sample.slot = slot
@@ -301,11 +314,11 @@ def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW
 
 
 @wp.kernel
-def resolve_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
+def resolve_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
                    materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
                    n_vertices: int, out: GBufferW, samples: PointsW):
     """Stage 4, one row of samples per thread."""
-    i = row0 + wp.tid()
+    i = dealt_row(row0, row_step, wp.tid())
     for j in range(cam.width):
         resolve_into(key, tris, mesh, materials, cam, perspective_correct, shading, n_vertices, out, samples, i, j)
 

@@ -22,6 +22,7 @@ from ...lighting.warp_model import (FogW, LightW, MaterialW, ambient_term, fog_b
                                    surface_material, target_only, textured_material)
 from ...vocabulary import FOG_NONE, PHONG_SHADING
 from ..camera import CameraW
+from ..launch import dealt_row
 from ..texture.sampling import TexturesW, sample_texture
 from ..trace import SceneGeomW, light_visibility
 from .coverage import NO_HIT
@@ -130,12 +131,12 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
 
 
 @wp.kernel
-def phong_gbuffer_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW, cam: CameraW,
+def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW, cam: CameraW,
                          perspective_correct: int, out: GBufferW, samples: PointsW, lighting: LightingW, lit: LitW):
     """Stages 4 and 6 under Phong shading, one row of samples per thread: each sample resolved (its
     G-buffer entries, `resolve_into`), then lit as its own shading point, its texel sampled there
     (`light_into`)."""
-    i = row0 + wp.tid()
+    i = dealt_row(row0, row_step, wp.tid())
     for j in range(cam.width):
         covered, point, uv, duv_dx, duv_dy = resolve_into(key, tris, mesh, lighting.materials, cam,
                                                           perspective_correct, PHONG_SHADING, mesh.vertices.shape[0],
@@ -244,12 +245,12 @@ def compose_into(samples: PointsW, depth: wp.array(dtype=float), point_index: wp
 
 
 @wp.kernel
-def compose_kernel(row0: int, width: int, samples: PointsW, depth: wp.array(dtype=float),
+def compose_kernel(row0: int, row_step: int, width: int, samples: PointsW, depth: wp.array(dtype=float),
                    point_index: wp.array(dtype=wp.vec3i), point_weight: wp.array(dtype=wp.vec3), lit: LitW,
                    lighting: LightingW, clamp_colors: int, per_fragment: int, background: wp.vec3, fog: FogW,
                    image: wp.array(dtype=wp.vec3)):
     """Stage 7, one row of samples per thread."""
-    i = row0 + wp.tid()
+    i = dealt_row(row0, row_step, wp.tid())
     for j in range(width):
         compose_into(samples, depth, point_index, point_weight, lit, lighting, clamp_colors, per_fragment, background,
                      fog, image, i * width + j)

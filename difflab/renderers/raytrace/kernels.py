@@ -35,6 +35,7 @@ from ..._warp import wp
 from ...lighting.warp_model import FogW, LightW, MaterialW, ambient_term, fog_blend, light_term, light_vector
 from ...vocabulary import MAX_DEPTH_LIMIT
 from ..camera import CameraW
+from ..launch import dealt_row
 from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, light_visibility
 from .itembuffer import ItemBufferW, item_hit
 from .lightbuffer import LightBufferW, buffered_visibility
@@ -222,10 +223,10 @@ def make_whitted_kernel(stack_size: int):
         out.depth_hist[i, 0] = out.color.shape[1]
 
     @wp.kernel(module="unique", enable_backward=False)
-    def whitted_kernel(row0: int, points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW,
+    def whitted_kernel(row0: int, row_step: int, points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW,
                        params: TraceParamsW, item: ItemBufferW, tree: TreeW, out: TraceOutW):
         """One row of samples per thread."""
-        trace_row(points, cam, scene, params, item, tree, out, row0 + wp.tid())
+        trace_row(points, cam, scene, params, item, tree, out, dealt_row(row0, row_step, wp.tid()))
 
     return whitted_kernel
 
