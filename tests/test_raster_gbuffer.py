@@ -11,6 +11,7 @@ import pytest
 
 from conftest import scene_dict
 from difflab import RenderError, compile_scene, render_frame, save_image
+from difflab._warp import wp
 from difflab.renderers import launch
 from difflab.renderers.camera import camera_struct
 from difflab.scene import Scene
@@ -82,6 +83,31 @@ def test_per_sample_passes_split_over_threads_give_the_one_thread_frame(tmp_path
     one = render_frame(compiled, threads=1)
     assert_same_gbuffer(split.gbuffer, one.gbuffer)
     assert np.array_equal(split.image, one.image)
+
+
+@wp.kernel
+def mark_rows_kernel(row0: int, row_step: int, touched: wp.array(dtype=wp.int32), band: wp.array(dtype=wp.int32)):
+    i = launch.dealt_row(row0, row_step, wp.tid())
+    touched[i] = touched[i] + 1
+    band[i] = row0 // launch.ROW_BLOCK
+
+
+@pytest.mark.parametrize("rows", [1, 7, 8, 9, 61, 256])
+@pytest.mark.parametrize("threads, per_thread", [(1, 4), (2, 1), (3, 4)])
+def test_row_loops_deal_each_row_once_in_blocks_to_even_bands(rows, threads, per_thread):
+    """`launch_row_loops` deals blocks of ROW_BLOCK rows to its bands in turn (block b to band
+    b mod n): every row once, and no band more than a block longer than another (where the frame's
+    content sits in part of it, contiguous bands left a core idle)."""
+    touched = wp.zeros(rows, dtype=wp.int32, device="cpu")
+    band = wp.full(rows, -1, dtype=wp.int32, device="cpu")
+    launch.launch_row_loops(mark_rows_kernel, rows, [touched, band], "cpu", threads, per_thread)
+    n_bands = len(launch.band_plan(rows, "cpu", threads, per_thread))
+    assert n_bands == (1 if threads == 1 else min(threads * per_thread, rows))
+    assert touched.numpy().tolist() == [1] * rows
+    expected = (np.arange(rows) // launch.ROW_BLOCK) % n_bands
+    assert np.array_equal(band.numpy(), expected)
+    sizes = np.bincount(expected)
+    assert sizes.max() - sizes.min() <= launch.ROW_BLOCK
 
 
 def test_run_bands_runs_each_band_once_and_hands_a_bands_error_to_the_caller():

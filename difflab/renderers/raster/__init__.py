@@ -30,8 +30,9 @@ pass (`shade.phong_gbuffer_kernel`: each sample resolved, then lit); `render_fra
 image=False)` skips stage 7 there. The G-buffer's arrays come from `CompiledScene.reusable` (the
 last frame's memory when nothing holds it any more), cleared to zero where an empty sample's
 entries are zero (beside stages 1-3, on a pool worker); the kernels write the
-rest. From 128^2 samples the per-sample passes take a band of rows per core even where the
-z-buffer runs on one thread (`launch.pass_threads`).
+rest. From 128^2 samples the per-sample passes run a band per core even where the z-buffer runs
+on one thread (`launch.pass_threads`), each band dealt blocks of rows across the whole frame
+(`launch.launch_row_loops`).
 
 `render` (no G-buffer) runs stages 1-3, then `image_kernel` fuses 4-7 per sample: Phong's points are
 its samples; a flat / Gouraud point is lit when a sample first reads it, into a cache of the CPU
