@@ -351,3 +351,28 @@ def test_no_cracks_where_a_shared_edge_snaps_onto_sample_centres():
     differ = np.argwhere(ours != theirs)
     assert all(set(mesh.faces[ours[i, j]]) & set(mesh.faces[theirs[i, j]]) for i, j in differ)
     assert np.abs(raster.image - traced.image).max() < 1e-4  # 7.8e-6 measured
+
+
+def test_a_snapped_boxs_first_and_last_sample_centres_are_exact_at_every_step():
+    """`clip.first_centre` / `last_centre` (integer shifts) give the first sample index whose centre
+    k * SUBPIXEL + SAMPLE_CENTRE is >= lo and the last whose centre is <= hi, for fixed-point values
+    on both sides of 0 and on, next to, and between centres."""
+    from difflab._warp import wp
+    from difflab.renderers.raster import clip
+
+    @wp.kernel
+    def centres_kernel(values: wp.array(dtype=wp.int64), first: wp.array(dtype=wp.int32),
+                       last: wp.array(dtype=wp.int32)):
+        k = wp.tid()
+        first[k] = clip.first_centre(values[k])
+        last[k] = clip.last_centre(values[k])
+
+    values = np.arange(-5 * clip.SUBPIXEL - 3, 5 * clip.SUBPIXEL + 4, dtype=np.int64)
+    first = wp.empty(values.size, dtype=wp.int32, device="cpu")
+    last = wp.empty(values.size, dtype=wp.int32, device="cpu")
+    wp.launch(centres_kernel, dim=values.size, inputs=[wp.array(values, dtype=wp.int64, device="cpu"), first, last],
+              device="cpu")
+    centre = lambda k: k * clip.SUBPIXEL + clip.SAMPLE_CENTRE  # noqa: E731
+    want_first = [min(k for k in range(-8, 8) if centre(k) >= v) for v in values]
+    want_last = [max(k for k in range(-8, 8) if centre(k) <= v) for v in values]
+    assert first.numpy().tolist() == want_first and last.numpy().tolist() == want_last

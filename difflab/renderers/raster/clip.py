@@ -14,7 +14,8 @@ from ..._warp import wp
 
 wp.set_module_options({"enable_backward": False})
 
-SUBPIXEL = 256  # fixed-point steps per sample
+SUBPIXEL_BITS = 8
+SUBPIXEL = 1 << SUBPIXEL_BITS  # fixed-point steps per sample
 SAMPLE_CENTRE = SUBPIXEL // 2  # a sample centre, in fixed-point steps from its sample's corner
 GUARD = 4194304.0  # |raster coordinate| clamp (samples) keeping int64 edge products exact
 
@@ -66,14 +67,15 @@ def edge(ax: wp.int64, ay: wp.int64, bx: wp.int64, by: wp.int64, px: wp.int64, p
 
 @wp.func
 def first_centre(lo: wp.int64):
-    """The first sample index whose centre (index * SUBPIXEL + SAMPLE_CENTRE, fixed point) is >= lo."""
-    return int(wp.ceil(wp.float64(lo - wp.int64(SAMPLE_CENTRE)) / wp.float64(SUBPIXEL)))
+    """The first sample index whose centre (index * SUBPIXEL + SAMPLE_CENTRE, fixed point) is >= lo:
+    ceil((lo - SAMPLE_CENTRE) / SUBPIXEL), as -floor of the negation (an arithmetic shift floors)."""
+    return int(-((wp.int64(SAMPLE_CENTRE) - lo) >> wp.int64(SUBPIXEL_BITS)))
 
 
 @wp.func
 def last_centre(hi: wp.int64):
-    """The last sample index whose centre is <= hi (fixed point)."""
-    return int(wp.floor(wp.float64(hi - wp.int64(SAMPLE_CENTRE)) / wp.float64(SUBPIXEL)))
+    """The last sample index whose centre is <= hi (fixed point): floor((hi - SAMPLE_CENTRE) / SUBPIXEL)."""
+    return int((hi - wp.int64(SAMPLE_CENTRE)) >> wp.int64(SUBPIXEL_BITS))
 
 
 @wp.func

@@ -30,15 +30,17 @@ from ..launch import (band_plan, host_empty, launch_chunks, launch_parts, launch
 
 def empty_points(compiled, name: str, count: int, clear: bool, to_zero: list | None = None) -> resolve.PointsW:
     """Arrays for `count` shading points (`CompiledScene.reusable`: an earlier frame's memory when
-    free); with `clear`, those an empty sample of the G-buffer leaves zero are zeroed (its material
-    is written, and only covered samples read the kernels' own geo_normal, ignore and uv) -- or,
-    given `to_zero`, listed there for the caller to zero."""
+    free); with `clear` (the G-buffer's samples), those an empty sample leaves zero are zeroed (its
+    material is written) -- or, given `to_zero`, listed there for the caller to zero -- and the
+    samples keep no shadow-ray start (geometric normal, object skipped: `resolve.PointsW`)."""
     points = resolve.PointsW()
-    for field, dtype, zero in [("position", wp.vec3, True), ("normal", wp.vec3, True), ("geo_normal", wp.vec3, False),
-                               ("view", wp.vec3, True), ("material", wp.int32, False), ("cell", wp.int32, True),
-                               ("ignore", wp.int32, False), ("uv", wp.vec2, False), ("duv_dx", wp.vec2, True),
+    for field, dtype, zero in [("position", wp.vec3, True), ("normal", wp.vec3, True), ("view", wp.vec3, True),
+                               ("material", wp.int32, False), ("cell", wp.int32, True), ("duv_dx", wp.vec2, True),
                                ("duv_dy", wp.vec2, True)]:
         setattr(points, field, compiled.reusable(f"{name}.{field}", count, dtype, clear and zero, to_zero))
+    kept = 0 if clear else count
+    points.geo_normal = compiled.reusable(f"{name}.geo_normal", kept, wp.vec3)
+    points.ignore = compiled.reusable(f"{name}.ignore", kept, wp.int32)
     return points
 
 
@@ -218,7 +220,7 @@ def mesh_points(compiled, mesh, cam, shading: int, threads: int | None = None):
     """Stage 5 under flat or Gouraud shading: the points where the model is evaluated (Phong's are
     its samples, see `rasterize`), and how many."""
     n_points = point_count(compiled, shading)
-    points = empty_points(compiled, "points", n_points, clear=False)  # every point written but uv, never read
+    points = empty_points(compiled, "points", n_points, clear=False)  # every point written (`resolve.mesh_point`)
     launch_chunks(resolve.mesh_points_kernel, n_points, [mesh, compiled.materials, cam, shading, points],
                   compiled.device, threads)
     return points, n_points
@@ -341,7 +343,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     if composed:  # Stage 7: compose samples (on the CUDA device before the G-buffer is copied out)
         canvas = compiled.reusable("canvas", width * height, wp.vec3)  # every sample written
         launch_row_loops(shade.compose_kernel, height, [
-            width, samples, out.depth, out.point_index, out.point_weight, lit, lighting, int(clamp_colors),
+            width, samples, out.uv, out.depth, out.point_index, out.point_weight, lit, lighting, int(clamp_colors),
             1 - points_are_samples, background, fog, canvas], device, *row_pass)
     gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors)
     # then filter to pixels (Phong without stage 7: a sample's colour is its point's, fogged, so the

@@ -67,12 +67,11 @@ class PointsW:
 
     position: wp.array(dtype=wp.vec3)
     normal: wp.array(dtype=wp.vec3)
-    geo_normal: wp.array(dtype=wp.vec3)
+    geo_normal: wp.array(dtype=wp.vec3)  # what shadow rays start from: empty for the G-buffer's samples (lit
+    ignore: wp.array(dtype=wp.int32)  # where resolved, or not at them), kept for flat / Gouraud points
     view: wp.array(dtype=wp.vec3)
     material: wp.array(dtype=wp.int32)
     cell: wp.array(dtype=wp.int32)
-    ignore: wp.array(dtype=wp.int32)
-    uv: wp.array(dtype=wp.vec2)  # texture coordinates (samples only; not written at flat / Gouraud points)
     duv_dx: wp.array(dtype=wp.vec2)  # d(uv)/dx, d(uv)/dy per sample of the sample grid (samples only)
     duv_dy: wp.array(dtype=wp.vec2)
 
@@ -112,13 +111,16 @@ def make_point(p: wp.vec3, normal: wp.vec3, geo: wp.vec3, view: wp.vec3, mat: in
 
 @wp.func
 def store_point(points: PointsW, k: int, point: PointW):
+    """Point k into `points`; its shadow rays' start (geometric normal, object skipped) only where
+    `points` keeps them (flat / Gouraud points, lit in a pass of their own)."""
     points.position[k] = point.p
     points.normal[k] = point.normal
-    points.geo_normal[k] = point.geo
     points.view[k] = point.view
     points.material[k] = point.material
     points.cell[k] = point.cell
-    points.ignore[k] = point.ignore
+    if points.geo_normal.shape[0] > 0:
+        points.geo_normal[k] = point.geo
+        points.ignore[k] = point.ignore
 
 
 @wp.func
@@ -299,7 +301,6 @@ def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW
     sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j)
     store_point(samples, s, sample.point)
     uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, perspective_correct)
-    samples.uv[s] = uv
     samples.duv_dx[s] = duv_dx
     samples.duv_dy[s] = duv_dy
     out.face[s] = sample.face

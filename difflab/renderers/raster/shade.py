@@ -118,7 +118,8 @@ def light_into(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3
     nothing is written for an empty point."""
     color, factor = light_point(point, lighting, textured, texel, lit, k, 1)
     lit.color[k] = color
-    lit.factor[k] = factor
+    if textured == 0:  # (else zero, as cleared)
+        lit.factor[k] = factor
 
 
 @wp.kernel
@@ -144,7 +145,8 @@ def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64)
         if covered:
             s = i * cam.width + j
             texel = texel_at(lighting, point.material, uv, duv_dx, duv_dy)
-            lit.texel[s] = texel
+            if lighting.materials[point.material].texture >= 0:  # (else zero, as cleared)
+                lit.texel[s] = texel
             light_into(point, lighting, 1, texel, lit, s)
 
 
@@ -227,9 +229,10 @@ def fogged(fog: FogW, color: wp.vec3, z: float):
 
 
 @wp.func
-def compose_into(samples: PointsW, depth: wp.array(dtype=float), point_index: wp.array(dtype=wp.vec3i),
-                 point_weight: wp.array(dtype=wp.vec3), lit: LitW, lighting: LightingW, clamp_colors: int,
-                 per_fragment: int, background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3), s: int):
+def compose_into(samples: PointsW, uv: wp.array(dtype=wp.vec2), depth: wp.array(dtype=float),
+                 point_index: wp.array(dtype=wp.vec3i), point_weight: wp.array(dtype=wp.vec3), lit: LitW,
+                 lighting: LightingW, clamp_colors: int, per_fragment: int, background: wp.vec3, fog: FogW,
+                 image: wp.array(dtype=wp.vec3), s: int):
     """Stage 7 from the G-buffer at sample s: its colour, then fog."""
     mat_id = samples.material[s]
     if mat_id < 0:
@@ -238,22 +241,22 @@ def compose_into(samples: PointsW, depth: wp.array(dtype=float), point_index: wp
     textured = int(per_fragment == 1 and lighting.materials[mat_id].texture >= 0)
     texel = wp.vec3(0.0)
     if textured == 1:
-        texel = texel_at(lighting, mat_id, samples.uv[s], samples.duv_dx[s], samples.duv_dy[s])
+        texel = texel_at(lighting, mat_id, uv[s], samples.duv_dx[s], samples.duv_dy[s])
         lit.texel[s] = texel
     image[s] = fogged(fog, fragment_color(lit.color, lit.factor, point_index[s], point_weight[s], clamp_colors, texel,
                                           textured), depth[s])
 
 
 @wp.kernel
-def compose_kernel(row0: int, row_step: int, width: int, samples: PointsW, depth: wp.array(dtype=float),
-                   point_index: wp.array(dtype=wp.vec3i), point_weight: wp.array(dtype=wp.vec3), lit: LitW,
-                   lighting: LightingW, clamp_colors: int, per_fragment: int, background: wp.vec3, fog: FogW,
-                   image: wp.array(dtype=wp.vec3)):
+def compose_kernel(row0: int, row_step: int, width: int, samples: PointsW, uv: wp.array(dtype=wp.vec2),
+                   depth: wp.array(dtype=float), point_index: wp.array(dtype=wp.vec3i),
+                   point_weight: wp.array(dtype=wp.vec3), lit: LitW, lighting: LightingW, clamp_colors: int,
+                   per_fragment: int, background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3)):
     """Stage 7, one row of samples per thread."""
     i = dealt_row(row0, row_step, wp.tid())
     for j in range(width):
-        compose_into(samples, depth, point_index, point_weight, lit, lighting, clamp_colors, per_fragment, background,
-                     fog, image, i * width + j)
+        compose_into(samples, uv, depth, point_index, point_weight, lit, lighting, clamp_colors, per_fragment,
+                     background, fog, image, i * width + j)
 
 
 @wp.func(inline=True)
