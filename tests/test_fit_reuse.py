@@ -8,8 +8,8 @@ import pytest
 from test_fit_helpers import TRUTH, make_scene, mirror_scene, perturbed, target_of
 
 from difflab import compile_scene
-from difflab.fit import fit_material
-from difflab.fit.records import KEPT_VIEWS, SMALL, STORE, ViewStore
+from difflab.fit import Setup, fit_material
+from difflab.fit.records import KEPT_VIEWS, SMALL, STORE, DeviceCopies
 
 SCENE = make_scene(size=16)
 TARGET = target_of(SCENE)
@@ -158,9 +158,9 @@ def test_a_setup_reweighted_keeps_its_pixels_and_fits_as_a_setup_built_afresh(co
 
 
 def test_small_device_arrays_are_reused_only_for_equal_contents():
-    """`ViewStore.on_device`: an equal small array (same bytes, dtype, shape, place in the tree) is
+    """`DeviceCopies.on_device`: an equal small array (same bytes, dtype, shape, place in the tree) is
     the device copy made before; any difference, or a large array, is moved afresh with its values."""
-    store = ViewStore()
+    store = DeviceCopies()
     with jax.enable_x64(True):
         lights, index = np.array([0.5, 0.25, 1.0]), np.array([0, -1], np.int32)
         large = np.arange(SMALL + 1, dtype=np.float64)
@@ -180,3 +180,22 @@ def test_small_device_arrays_are_reused_only_for_equal_contents():
                 np.testing.assert_array_equal(moved[key], value)
     with jax.enable_x64(False):  # the same bytes in the other precision: moved afresh (float32 there)
         assert store.on_device({"lights": lights, "index": index, "target": large})["lights"].dtype == np.float32
+
+
+def test_small_device_arrays_are_kept_process_wide():
+    """The first fit of a view, of a compiled or a plain scene, takes the device copies of the small
+    arrays (material table, lights, ambient) that an earlier fit with the same values moved; other
+    values are moved afresh."""
+    compiled = compile_scene(SCENE)
+    first = Setup(compiled, [TARGET], "red", x64=True).problem
+    compiled.built.pop(STORE)  # no view kept
+    for scene in (compiled, SCENE):
+        again = Setup(scene, [TARGET], "red", x64=True).problem
+        assert again.table.kd is first.table.kd and again.ambient is first.ambient
+        assert again.views[0].lights.position is first.views[0].lights.position
+    other = Setup(SCENE, [TARGET], "red", init={"kd": [0.25, 0.5, 0.75]}, x64=True).problem
+    assert other.table.kd is not first.table.kd
+    red = SCENE.material_index("red")
+    expected = np.array(first.table.kd)
+    expected[red] = [0.25, 0.5, 0.75]
+    np.testing.assert_array_equal(other.table.kd, expected)

@@ -14,9 +14,10 @@ on the target:
 
 So a fit of a `CompiledScene` keeps, in `CompiledScene.built` (shared by its `with_scene` copies),
 the records of its latest KEPT_VIEWS views, with the influence maps found on them and the image
-models of their latest KEPT_MODELS pixel sets, and the device copies of the problem's small arrays
-(lights, material table, indices: `ViewStore.on_device`) by their contents. A fit of a plain scene
-keeps nothing.
+models of their latest KEPT_MODELS pixel sets; a fit of a plain scene keeps no view. The device
+copies of a problem's small arrays (lights, material table, indices) are kept process-wide by their
+contents (`DEVICE_COPIES`): they depend on no view, and any fit with the same values uses them --
+the first fit of another view or scene too.
 """
 
 from __future__ import annotations
@@ -156,7 +157,6 @@ class ViewStore:
     def __init__(self):
         self._lock = threading.Lock()
         self._views: list = []  # [(key, KeptView)], the latest first
-        self._arrays: list = []  # [(key, device arrays)], the latest first
 
     def get(self, key) -> KeptView | None:
         with self._lock:
@@ -170,6 +170,17 @@ class ViewStore:
         with self._lock:
             self._views = [(key, view)] + [(k, v) for k, v in self._views if k != key][:KEPT_VIEWS - 1]
         return view
+
+    def __len__(self):
+        return len(self._views)
+
+
+class DeviceCopies:
+    """The device copies of the latest KEPT_ARRAYS sets of small arrays, by their contents."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._arrays: list = []  # [(key, device arrays)], the latest first
 
     def on_device(self, tree):
         """`to_device(tree)` for a pytree of numpy arrays, its small leaves (<= SMALL entries) taken
@@ -195,8 +206,8 @@ class ViewStore:
                 moved[i] = leaf
         return jax.tree_util.tree_unflatten(structure, moved)
 
-    def __len__(self):
-        return len(self._views)
+
+DEVICE_COPIES = DeviceCopies()  # one for the process (device arrays are immutable)
 
 
 def view_store(compiled) -> ViewStore | None:

@@ -32,7 +32,7 @@ from .materials import MaterialTable
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
 from .problem import LOSSES, Problem, ViewJ, to_device, value_index
 from .raytree import TreeModel, tree_influence
-from .records import KeptView, View, take_pixels, view_key, view_store
+from .records import DEVICE_COPIES, KeptView, View, take_pixels, view_key, view_store
 from .shading import GBufferModel, influence
 from .stats import FLOAT_SIGMA
 from .targets import nonfinite_count, prepared_targets
@@ -314,8 +314,7 @@ class Setup:
         self.weight_total = float(total)
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
-        store = view_store(self.compiled)
-        arrays, table, ambient, index, loss_scale = (to_device if store is None else store.on_device)((
+        arrays, table, ambient, index, loss_scale = DEVICE_COPIES.on_device((
             [self._view_arrays(v, v.pixels, index["intensity"]) for v in self.views],
             MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
             np.asarray(self.scene.ambient, real), {k: v for k, v in index.items() if k != "intensity"},
