@@ -288,15 +288,18 @@ class Setup:
         return (lights, (view.values if used else take_pixels(view.target, pixels)).astype(real, copy=False),
                 sqrt_weight, np.asarray(view.ceiling, real) if np.isfinite(view.ceiling) else None, intensity_index)
 
-    def _view(self, view: View, pixels, arrays) -> ViewJ:
-        """The view for `pixels` from its `_view_arrays` on the device, with its image model (kept
-        with the record when they are the pixels used)."""
-        lights, target, sqrt_weight, ceiling, intensity_index = arrays
+    def _view_model(self, view: View, pixels, lights):
+        """The image model of a view's `pixels` (kept with the record when they are the pixels used),
+        for its lights (`_view_arrays`' numpy ones: nothing waits for a device copy)."""
         if view.kept is not None and pixels is view.pixels and self.texel_source is None:
             key = (self.method, np.dtype(self.dtype))
-            model = view.kept.model(key, view.used, lambda: self._model(view, pixels, lights))
-        else:
-            model = self._model(view, pixels, lights)
+            return view.kept.model(key, view.used, lambda: self._model(view, pixels, lights))
+        return self._model(view, pixels, lights)
+
+    @staticmethod
+    def _view(arrays, model) -> ViewJ:
+        """A view from its `_view_arrays` on the device and its image model."""
+        lights, target, sqrt_weight, ceiling, intensity_index = arrays
         return ViewJ(model=model, lights=lights, target=target, sqrt_weight=sqrt_weight, ceiling=ceiling,
                      intensity_index=intensity_index)
 
@@ -314,12 +317,14 @@ class Setup:
         self.weight_total = float(total)
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
+        host = [self._view_arrays(v, v.pixels, index["intensity"]) for v in self.views]
+        models = [self._view_model(v, v.pixels, arrays[0]) for v, arrays in zip(self.views, host)]  # first: a
+        # model cut afresh is computed (asynchronously) while the rest is moved
         arrays, table, ambient, index, loss_scale = DEVICE_COPIES.on_device((
-            [self._view_arrays(v, v.pixels, index["intensity"]) for v in self.views],
-            MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
+            host, MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
             np.asarray(self.scene.ambient, real), {k: v for k, v in index.items() if k != "intensity"},
             np.asarray(loss_scale, real)))
-        views = tuple(self._view(v, v.pixels, a) for v, a in zip(self.views, arrays))
+        views = tuple(self._view(a, model) for a, model in zip(arrays, models))
         return Problem(views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
                        layout=self.layout, loss=loss, smoothness=self.smoothness)
 
@@ -364,8 +369,9 @@ class Setup:
             index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
             for view in self.views:
                 every = np.arange(view.used.size)
-                arrays = to_device(self._view_arrays(view, every, index["intensity"]))
-                full = eqx.tree_at(lambda p: p.views, self.problem, (self._view(view, every, arrays),))
+                arrays = self._view_arrays(view, every, index["intensity"])
+                model = self._view_model(view, every, arrays[0])
+                full = eqx.tree_at(lambda p: p.views, self.problem, (self._view(to_device(arrays), model),))
                 image = images_jit(full, jnp.asarray(flat, self.dtype))[0]
                 out.append(np.asarray(image, np.float32).reshape(view.image.shape))
         return out
