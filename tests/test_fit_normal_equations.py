@@ -83,9 +83,9 @@ def test_dense_where_by_parts_does_not_apply(kwargs, fit_kwargs):
 def test_solver_by_parts_takes_the_dense_solvers_steps(truth):
     """Recovery from a 30 % perturbed start, and a matte target (ks truly 0): the box LM on the
     closed-form normal equations takes the same steps to the same point as on forward-mode ones;
-    on their fast form (`solve_box`: float32 columns' products for the steps, a near Gauss-Newton
-    first step), no more steps, the same values to the tolerance where the target determines them
-    (n of a matte target it does not) and the exact J^T J at its end."""
+    from the moments (`solve_box`, a near Gauss-Newton first step), no more steps, the same values to
+    the tolerance where the target determines them (n of a matte target it does not) and the exact
+    J^T J at its end."""
     scene = make_scene(size=24, red=truth)
     start = perturbed({**truth, "ks": [0.5, 0.4, 0.3]})
     setup = Setup(scene, [target_of(scene)], "red", init=start)
@@ -94,8 +94,8 @@ def test_solver_by_parts_takes_the_dense_solvers_steps(truth):
     with jax.enable_x64(True):
         lower, upper = (jnp.asarray(b) for b in setup.layout.bounds())
         x0 = jnp.asarray(setup.x0)
-        exact = jax.jit(partial(solve, linearise))(x0, lower, upper, setup.problem)
-        slow = jax.jit(partial(solve, partial(dense, residuals)))(x0, lower, upper, setup.problem)
+        exact = jax.jit(partial(solve, lm.squared(linearise)))(x0, lower, upper, setup.problem)
+        slow = jax.jit(partial(solve, lm.squared(partial(dense, residuals))))(x0, lower, upper, setup.problem)
         fast = lm.solve_box(setup.problem, x0, lower, upper, 64, 1e-8, 1e-10)
         dense_at_fast = jax.jit(partial(dense, residuals))(fast[0], setup.problem)
     x, code, steps = (np.asarray(v) for v in exact[:3])
@@ -139,7 +139,7 @@ def test_box_lm_with_a_nonfinite_normal_matrix(where):
         return r, a, jnp.where(bad, jnp.nan, 1.0) * r
 
     with jax.enable_x64(True):
-        x, code, steps = jax.jit(partial(lm.box_lm, linearise_nan, max_steps=50, rtol=1e-8, atol=1e-10))(
+        x, code, steps = jax.jit(partial(lm.box_lm, lm.squared(linearise_nan), max_steps=50, rtol=1e-8, atol=1e-10))(
             jnp.zeros(2), jnp.full(2, -5.0), jnp.full(2, 0.96), None)[:3]
     if where == "start":
         assert lm.CODES[int(code)] == "nonfinite" and int(steps) == 0

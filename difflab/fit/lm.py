@@ -1,8 +1,9 @@
 """Box-constrained (projected) Levenberg-Marquardt: the default solver.
 
-Each step forms r, J^T J and J^T r at the current point x (`normal_equations.linearise`: by forward
-mode, or in closed form where the image is a sum of known parts) and solves the damped normal
-equations over the free entries
+Each step forms 0.5 |r|^2, J^T J and J^T r at the current point x (`normal_equations.linearise`: by
+forward mode, or in closed form where the image is a sum of known parts; `moments.linearise`: from
+sums over the pixels, most of them formed once per solve, where no target is clipped) and solves the
+damped normal equations over the free entries
 
     (J^T J + lambda D) dx = -J^T r,     D = diag(J^T J) (floored),
 
@@ -20,8 +21,8 @@ start is not finite. A trial step where one is not is rejected like any step tha
 the loss, so the point returned always has finite ones (a fit with an infinite loss is never
 successful, and a NaN in J^T J never stalls the solve on steps it cannot solve for). Each
 step costs one linearisation and one p x p Cholesky solve, as a plain Gauss-Newton step does; the
-residual vector is not carried from step to step (only its loss), but formed once more at the
-solution (with the exact J^T J there, where the steps used `normal_equations`' fast form).
+residual vector is not carried from step to step (only its loss), but formed once at the solution
+(with the exact J^T J there, where the steps used `normal_equations`' fast form).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 
+from . import moments
 from .normal_equations import by_parts_applies, has_fast_form, linearise
 
 CODES = ("successful", "nonlinear_max_steps_reached", "nonfinite")
@@ -75,18 +77,29 @@ def projected_step(x, a, g, lam, lower, upper):
     return d, jnp.where(solved, -(g @ d + 0.5 * d @ (a @ d)), jnp.nan)
 
 
-def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=None, exact=None,
-           lambda0=LAMBDA0):
+def squared(linearise):
+    """A linearisation (x, args) -> (r, J^T J, J^T r) as `box_lm` takes it: (0.5 |r|^2, J^T J, J^T r)."""
+    def out(x, args):
+        r, a, g = linearise(x, args)
+        return 0.5 * jnp.sum(r * r), a, g
+
+    return out
+
+
+def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=None, residuals=None,
+           exact=None, lambda0=LAMBDA0):
     """Minimise 0.5 |r(x)|^2 over lower <= x <= upper.
 
     Arguments:
-        linearise: (x (p,), args) -> (r (N,), J^T J (p, p), J^T r (p,)) at x
-            (`normal_equations.linearise`, or `normal_equations.dense` of any residual function).
+        linearise: (x (p,), args) -> (0.5 |r|^2, J^T J (p, p), J^T r (p,)) at x (`moments.linearise`,
+            or `squared` of `normal_equations.linearise` or `normal_equations.dense` of any residual
+            function).
         x0: (p,) start (clipped into the box); lower, upper: (p,) bounds (+-inf allowed).
         max_steps: the most steps (static); rtol, atol: the stopping tolerances above.
         progress: None, or a host callable (step, loss) called after each step.
-        exact: the linearisation r and J^T J at the solution are taken from (default: linearise;
-            one whose J^T J is exact where `linearise`'s only steers the steps).
+        residuals: (x, args) -> r (N,), formed at the solution (None: r is not returned).
+        exact: None, or (x, args) -> (r, J^T J, ...) whose J^T J is exact where `linearise`'s only
+            steers the steps: r and J^T J at the solution are taken from it instead.
         lambda0: the starting damping (relative to diag(J^T J)): LAMBDA0, Marquardt's; the solves
             on the closed-form normal equations start at LAMBDA0_BY_PARTS (Madsen, Nielsen and
             Tingleff's choice for a start close to the solution in the model's terms: the image is
@@ -94,7 +107,7 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
             (`experiments/fit_recovery.py`, the Mitsuba diffuse sphere of `bench/fit.py`).
     Returns:
         (x, code index into CODES, steps, history (max_steps,) the loss after each step (NaN beyond),
-        r (N,) and J^T J (p, p) at x).
+        r (N,) (or None) and J^T J (p, p) at x).
     """
     dtype = x0.dtype
     x0 = jnp.clip(x0, lower, upper)
@@ -112,8 +125,7 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
         first = s.step < 0
         d, predicted = s.d, s.predicted
         x_new = s.x + d
-        r_new, a_new, g_new = linearise(x_new, args)
-        loss_new = 0.5 * jnp.sum(r_new * r_new)
+        loss_new, a_new, g_new = linearise(x_new, args)
         finite = jnp.isfinite(loss_new) & jnp.all(jnp.isfinite(g_new)) & jnp.all(jnp.isfinite(a_new))
         accept = finite & ((loss_new < s.loss) | first)
         rho = (s.loss - loss_new) / jnp.where(predicted > 0, predicted, 1.0)
@@ -142,18 +154,28 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
 
     out = jax.lax.while_loop(running, body, state)
     code = jnp.where(out.code == RUNNING, SUCCESSFUL, out.code)
-    if exact is None:  # the loop's J^T J at the solution; r formed once more
-        return out.x, code, out.step, out.history, linearise(out.x, args)[0], out.a
-    r, a, _ = exact(out.x, args)
+    if exact is None:  # the loop's J^T J at the solution
+        return out.x, code, out.step, out.history, None if residuals is None else residuals(out.x, args), out.a
+    r, a = exact(out.x, args)[:2]
     return out.x, code, out.step, out.history, r, a
 
 
+def _residuals(x, problem):
+    return problem.residuals(x)
+
+
 def solve_problem(problem, x0, lower, upper, *, max_steps: int, rtol, atol, progress=None):
-    """`box_lm` on a `Problem`'s residuals: the steps on `linearise`'s fast form, r and J^T J at the
-    solution on its exact one, the closed-form normal equations from LAMBDA0_BY_PARTS."""
-    return box_lm(partial(linearise, fast=True), x0, lower, upper, problem, max_steps=max_steps, rtol=rtol,
-                  atol=atol, progress=progress, exact=linearise if has_fast_form(problem, x0) else None,
-                  lambda0=LAMBDA0_BY_PARTS if by_parts_applies(problem) else LAMBDA0)
+    """`box_lm` on a `Problem`'s residuals: the steps from the moments where they apply, else on
+    `linearise`'s fast form (r and J^T J at the solution on its exact one); the closed-form normal
+    equations from LAMBDA0_BY_PARTS."""
+    options = dict(max_steps=max_steps, rtol=rtol, atol=atol, progress=progress,
+                   lambda0=LAMBDA0_BY_PARTS if by_parts_applies(problem) else LAMBDA0)
+    if moments.applies(problem):
+        prepared = moments.prepare(problem, x0)
+        return box_lm(partial(moments.linearise, prepared), x0, lower, upper, problem,
+                      residuals=partial(moments.residuals, prepared), **options)
+    return box_lm(squared(partial(linearise, fast=True)), x0, lower, upper, problem, residuals=_residuals,
+                  exact=linearise if has_fast_form(problem, x0) else None, **options)
 
 
 @partial(jax.jit, static_argnames=("max_steps", "progress"))

@@ -76,8 +76,9 @@ def _solve_reduced(problem, x0, lower, upper, max_steps, rtol, atol, progress):
     def reduced(theta, p):
         return solve_linear(p, x0.at[nonlinear].set(theta))[1]
 
-    theta, code, steps, history, _, _ = lm.box_lm(partial(dense, reduced), x0[nonlinear], lower[nonlinear], upper[nonlinear], problem,
-                                            max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)
+    theta, code, steps, history, _, _ = lm.box_lm(lm.squared(partial(dense, reduced)), x0[nonlinear],
+                                                  lower[nonlinear], upper[nonlinear], problem, max_steps=max_steps,
+                                                  rtol=rtol, atol=atol, progress=progress)
     x, _ = solve_linear(problem, x0.at[nonlinear].set(theta))
     return x, code, steps, history
 

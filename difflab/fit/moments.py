@@ -1,0 +1,238 @@
+"""The normal equations from column moments: the solver's steps on problems whose normal equations
+`normal_equations.by_parts` forms, with no clipped target (no row is censored: every row's residual
+is affine in ka, kd and ks at any n, m, f0).
+
+Per material and channel, the weighted residual of a pixel row is
+
+    r = sqrt(w) (ka A + kd D + O + ks S),    S = sum_p Ip W_p L_p(n, m, f0)
+
+with A = Ia and D = sum_p Ip diffuse_p on the material's first checker cell (0 on its second cell
+and off the material), O = ka2 Ia + kd2 D on the second cell - target, and per light p the weight
+W_p = s att spot [N.L > 0] and the lobe L_p (`jax_model.shade_parts`' three parts). With
+K = [A, D, O, S, dS/dt...] (t: the fitted ones of n, m, f0), M = K^T diag(w) K summed over the
+material's pixels and beta = (ka, kd, 1, ks, 0...):
+
+    J = diag(sqrt(w)) K E,   J^T J = E^T M E,   J^T r = E^T M beta
+
+where E takes the fitted kinds' columns of J from K (ka: A, kd: D, ks: S, t: ks dS/dt). The
+block of M over A, D and O depends on no fitted value: it is summed once per solve (`prepare`).
+The rest, per channel c,
+
+    sum_u w S_c B_c = sum_p Ip_c sum_u (w B_c) (W_p L_p)        (B = A, D, O)
+    sum_u w S_c S_c = sum_p,p' Ip_c Ip'_c sum_u w (W_p L_p) (W_p' L_p')
+
+(dS/dt the same with dL/dt), so a step computes the lobes and their derivatives once per pixel and
+light -- shared by the three channels -- and sums them against the constant columns in a few
+matrix-vector products. A, D and O of the three channels are combinations of 4 + P rows that
+`prepare` keeps (`ViewSums`), the residuals are formed from them: r^T r is summed from r (as
+beta^T M beta it would be a difference of sums as large as |target|^2, whose rounding, 1e-16 of
+them in float64, can exceed the last steps' decrease on a noise-free target). These are the
+numbers `by_parts` forms, to rounding, laid out channel-major (the pixels along the last axis,
+where XLA's CPU code runs several times faster than over an axis of 3 or 1).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from ..lighting.jax_model import LobeGeometry, MaterialJ, lobe, shade_parts, surface_material, table_row
+from .normal_equations import LINEAR, SLOTS, by_parts_applies, slot_columns
+
+NONLINEAR = tuple(k for k in SLOTS if k not in LINEAR)
+CONSTANT = 3  # K's rows A, D, O; then S and the derivatives dS/dt
+ROW = {"ka": 0, "kd": 1, "ks": CONSTANT}
+
+
+def applies(problem) -> bool:
+    """Whether `linearise` can take the steps: `by_parts` applies, no view's target is clipped and
+    every point of a view has a fitted material (as the pixels a fit uses have: those its fitted
+    materials show)."""
+    if not by_parts_applies(problem) or any(view.ceiling is not None for view in problem.views):
+        return False
+    fitted = {p.index for p in problem.layout}
+    return all(set(view.model.material_ids) <= fitted for view in problem.views)
+
+
+class ViewSums(NamedTuple):
+    """A view's part of `prepare`, channel-major. The columns B = A, D, O of the channels are
+    combinations of E = 4 + P rows e (E, U): e = [first cell, first cell * diffuse_p (P lights),
+    O_0, O_1, O_2], B_c = T_c e with t = T (3 channels, 3, E) of ambient and light intensities.
+    weight (P, U) and lobe (`LobeGeometry`, fields (P, U)): the lights' W_p and lobe geometry.
+    sqrt_weight: (3, U), or None when every weight is the same (the view's scalar sqrt_weight then
+    multiplies); weighted: w e (3, E, U), None with it; blocks: per material of the view
+    (`material_ids`) the constant block of M (3, 3, 3)."""
+
+    e: jnp.ndarray
+    t: jnp.ndarray
+    weight: jnp.ndarray
+    lobe: LobeGeometry
+    sqrt_weight: jnp.ndarray | None
+    weighted: jnp.ndarray | None
+    blocks: tuple
+
+
+def _mine(view, material, array):
+    """`array` (..., U) on the rows of `material`, 0 on the others (itself when the view shows no other)."""
+    model = view.model
+    return array if model.material_ids == (material,) else jnp.where(model.material == material, array, 0.0)
+
+
+def _products(sums: ViewSums, square, rows, vector):
+    """sum_u w rows vector per channel (3, R) for rows (R, U) -- sums.e or the view's weighted rows
+    are read as e -- and vector (U,); `square`: the weight when it is the same everywhere. (As
+    matrix-vector products: XLA's CPU reductions of products run at a fraction of their speed.)"""
+    if sums.sqrt_weight is None:
+        return jnp.broadcast_to(square * (rows @ vector), (3, rows.shape[0]))
+    if rows is sums.e:
+        return sums.weighted @ vector
+    return (jnp.square(sums.sqrt_weight)[:, None, :] * rows) @ vector
+
+
+def prepare(problem, x) -> tuple:
+    """The constant rows and moments of `problem`, a `ViewSums` per view (read at solver coordinates
+    x: only what no fitted value changes -- the checker's second cells -- is used)."""
+    table = problem.materials(problem.layout.values(x))
+    views = []
+    for view in problem.views:
+        model = view.model
+        ids = model.material_ids
+        mat = surface_material(table, ids[0] if len(ids) == 1 else model.material, model.cell)
+        ambient_part, diffuse, _ = shade_parts(mat, model.formation.specular, model.geometry, view.lights.intensity,
+                                               problem.ambient)
+        first, second = model.cell != 1, (model.cell == 1)[:, None]
+        offset = jnp.where(second, mat.ka * ambient_part + mat.kd * diffuse, 0.0) - view.target
+        e = jnp.concatenate([first[None].astype(offset.dtype), jnp.where(first, model.geometry.diffuse.T, 0.0),
+                             offset.T])  # (E, U)
+        count = e.shape[0] - 3  # 1 + P
+        t = jnp.zeros((3, CONSTANT, e.shape[0]), e.dtype).at[:, 0, 0].set(problem.ambient)
+        t = t.at[:, 1, 1:count].set(view.lights.intensity.T).at[:, 2, count:].set(jnp.eye(3, dtype=e.dtype))
+        sqrt_weight = weighted = None
+        if view.sqrt_weight.ndim:
+            sqrt_weight = view.sqrt_weight.T  # (3, U)
+            weighted = jnp.square(sqrt_weight)[:, None, :] * e
+        geometry = model.geometry.lobe
+        sums = ViewSums(e, t, model.geometry.weight.T, geometry._replace(**{
+            k: getattr(geometry, k).T for k in LobeGeometry._fields if getattr(geometry, k) is not None}),
+            sqrt_weight, weighted, ())
+        square = jnp.square(view.sqrt_weight)
+        blocks = []
+        for m in ids:
+            gram = jnp.stack([_products(sums, square, _mine(view, m, e), row) for row in e], axis=-1)  # (3, E, E)
+            blocks.append(jnp.einsum("cae,cef,cbf->cab", t, gram, t))
+        views.append(sums._replace(blocks=tuple(blocks)))
+    return tuple(views)
+
+
+def _coefficients(view, table) -> MaterialJ:
+    """Each point's coefficients of its first checker cell (the columns A and D are 0 on the second)
+    channel-major: ka, kd, ks (3, U), or (3, 1) for a view of one material; n, m, f0 (U,) or ()."""
+    ids = view.model.material_ids
+    if len(ids) == 1:
+        return MaterialJ(*(getattr(table, k)[ids[0]][..., None] if k in LINEAR else getattr(table, k)[ids[0]]
+                           for k in MaterialJ._fields))
+    index = view.model.material
+    return MaterialJ(*(table_row(getattr(table, k), index).T for k in MaterialJ._fields))
+
+
+def lobes(view, sums: ViewSums, mat: MaterialJ, kinds) -> list:
+    """[W L, W dL/dt for t in kinds]: each light's weight times its specular lobe at each point and
+    their derivatives, each (P, U) and computed once (kept apart from the products that read them,
+    each of which XLA would otherwise recompute them for)."""
+    def of(n, m, f0):
+        return sums.weight * lobe(view.model.formation.specular, sums.lobe, n, m, f0)
+
+    primal = (mat.n, mat.m, mat.f0)
+    out = [of(*primal)]
+    for kind in kinds:
+        tangent = tuple(jnp.ones_like(v) if k == kind else jnp.zeros_like(v) for k, v in zip(NONLINEAR, primal))
+        out.append(jax.jvp(of, primal, tangent)[1])
+    return list(jax.lax.optimization_barrier(out))
+
+
+def _residuals(view, sums: ViewSums, mat: MaterialJ, f):
+    """The view's weighted residuals (3, U) from its rows and `lobes`' first entry f (P, U) (sums
+    over the lights as products with their intensities: XLA's CPU product of a (3, P) and a (P, U)
+    matrix costs several times as much)."""
+    intensity = view.lights.intensity
+    lights = range(intensity.shape[0])
+    e = sums.e
+    diffuse = sum(intensity[p][:, None] * e[1 + p] for p in lights)
+    specular = sum(intensity[p][:, None] * f[p] for p in lights)
+    r = mat.ka * sums.t[:, 0, :1] * e[0] + mat.kd * diffuse + e[1 + len(lights):] + mat.ks * specular
+    return (view.sqrt_weight if sums.sqrt_weight is None else sums.sqrt_weight) * r
+
+
+def residuals(prepared: tuple, x, problem):
+    """`Problem.residuals` at solver coordinates x (N,), from the rows of `prepare`."""
+    table = problem.materials(problem.layout.values(x))
+    out = []
+    for view, sums in zip(problem.views, prepared):
+        mat = _coefficients(view, table)
+        out.append(_residuals(view, sums, mat, lobes(view, sums, mat, ())[0]).T.reshape(-1))
+    return jnp.concatenate(out)
+
+
+def _moments(view, sums: ViewSums, block, mine, f):
+    """M (3 channels, 4 + k, 4 + k) of one material from its constant block and the lobes f
+    ([W L, W dL/dt...], each (P, U)) on its rows (`mine`: (U,) bool, or None: every row)."""
+    intensity = view.lights.intensity
+    lights = range(intensity.shape[0])
+    square = jnp.square(view.sqrt_weight)
+    if mine is not None:
+        f = [jnp.where(mine, g, 0.0) for g in f]
+    k = len(f)
+    zb = jnp.stack([jnp.einsum("cae,ce->ca", sums.t, sum(intensity[p][:, None] * _products(sums, square, sums.e,
+                                                                                            f[i][p]) for p in lights))
+                    for i in range(k)], axis=1)  # (3, k, 3)
+    zz = [[None] * k for _ in range(k)]
+    for i in range(k):
+        for j in range(i, k):
+            zz[i][j] = zz[j][i] = sum(intensity[p] * intensity[q] * _products(sums, square, f[i][p][None],
+                                                                              f[j][q])[:, 0]
+                                      for p in lights for q in lights)  # (3,)
+    zz = jnp.stack([jnp.stack(row, axis=1) for row in zz], axis=1)  # (3, k, k)
+    top = jnp.concatenate([block, jnp.swapaxes(zb, 1, 2)], axis=2)
+    return jnp.concatenate([top, jnp.concatenate([zb, zz], axis=2)], axis=1)
+
+
+def linearise(prepared: tuple, x, problem):
+    """(0.5 r^T r, J^T J (p, p), J^T r (p,)) at solver coordinates x from the moments (module
+    docstring); `prepared` = `prepare(problem, ...)`."""
+    layout = problem.layout
+    values = layout.values(x)
+    table = problem.materials(values)
+    slots, columns = slot_columns(layout, table.ka.shape[0])
+    nonlinear = [k for k in slots if k in NONLINEAR]
+    p = layout.size
+    gram = jnp.zeros((p + 1, p + 1), x.dtype)  # row / column p collects what is not fitted
+    grad = jnp.zeros(p + 1, x.dtype)
+    loss = jnp.zeros((), x.dtype)
+    for view, sums in zip(problem.views, prepared):
+        mat = _coefficients(view, table)
+        f = lobes(view, sums, mat, nonlinear)
+        r = _residuals(view, sums, mat, f[0]).reshape(-1)
+        loss = loss + 0.5 * (r @ r)
+        for material, block in zip(view.model.material_ids, sums.blocks):
+            mine = None if view.model.material_ids == (material,) else view.model.material == material
+            full = _moments(view, sums, block, mine, f)
+            ka, kd, ks = (getattr(table, name)[material] for name in LINEAR)  # (3,) each
+            zero = jnp.zeros_like(ka)
+            beta = jnp.stack([ka, kd, jnp.ones_like(ka), ks] + [zero] * len(nonlinear), axis=1)
+            pick = jnp.stack([_pick(kind, nonlinear, ks) for kind in slots], axis=2)  # E (3, 4 + k, q)
+            cols = columns[material]
+            gram = gram.at[cols[:, :, None], cols[:, None, :]].add(jnp.einsum("cai,cab,cbj->cij", pick, full, pick))
+            grad = grad.at[cols].add(jnp.einsum("cai,cab,cb->ci", pick, full, beta))
+    scale = jnp.where(layout.entries("log") > 0, values, 1.0)  # d value / d x
+    return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p]
+
+
+def _pick(kind, nonlinear, ks):
+    """E's column (3, 4 + k) for a fitted kind: the row of K that is J's column (ks times it for
+    the derivatives dS/dt)."""
+    rows = jnp.zeros((ks.shape[0], CONSTANT + 1 + len(nonlinear)), ks.dtype)
+    if kind in NONLINEAR:
+        return rows.at[:, CONSTANT + 1 + nonlinear.index(kind)].set(ks)
+    return rows.at[:, ROW[kind]].set(1.0)
