@@ -13,6 +13,7 @@ from conftest import scene_dict
 from difflab import RenderError, compile_scene, render_frame, save_image
 from difflab._warp import wp
 from difflab.renderers import launch
+from difflab.renderers.raster import coverage, driver
 from difflab.renderers.camera import camera_struct
 from difflab.scene import Scene
 
@@ -83,6 +84,30 @@ def test_per_sample_passes_split_over_threads_give_the_one_thread_frame(tmp_path
     one = render_frame(compiled, threads=1)
     assert_same_gbuffer(split.gbuffer, one.gbuffer)
     assert np.array_equal(split.image, one.image)
+
+
+@pytest.mark.parametrize("shading", ["phong", "gouraud"])
+def test_a_zbuffer_drawn_in_two_halves_gives_the_one_thread_frame_and_leaves_both_cleared(tmp_path, monkeypatch,
+                                                                                          shading):
+    """Where the z-buffer stays on one thread but the passes get every core (`launch.halved_zbuffer`),
+    it is drawn as two halves of the slots on two threads, each sample taking the lesser key: the
+    same buffers bit for bit as one thread's, frame after frame (both key arrays left all NO_HIT)."""
+    monkeypatch.delenv("DIFFLAB_THREADS", raising=False)
+    monkeypatch.setattr(launch, "PASS_POOL_MIN_SAMPLES", 1)
+    monkeypatch.setattr(launch, "cpu_threads", lambda: 2)
+    halves = []
+    real = driver.zbuffer
+    monkeypatch.setattr(driver, "zbuffer", lambda *a, **k: halves.append(k.get("partial")) or real(*a, **k))
+    scene = textured_scene(tmp_path, shading, 1)
+    compiled = compile_scene(scene)
+    one = render_frame(scene, threads=1)
+    for image in (True, False, True):
+        halved = render_frame(compiled, image=image)
+        assert halves[-1] is not None and halves[-1].shape == (24 * 20,)
+        assert_same_gbuffer(halved.gbuffer, one.gbuffer)
+        for name in ("key", "partial key"):
+            assert (compiled.scratch(name, 24 * 20, wp.int64).numpy() == coverage.NO_HIT).all(), name
+    assert halves[0] is None and np.array_equal(halved.image, one.image)  # the threads=1 frame: one z-buffer
 
 
 @wp.kernel

@@ -89,9 +89,12 @@ def resolve_device(device: str = "cpu") -> str:
         raise RenderError(f"device: {device!r} is not available ({exc})") from None
 
 
+CORES = max(1, os.cpu_count() or 1)  # (asked once: ~4 us a call, several calls a frame)
+
+
 def cpu_threads() -> int:
     """Worker threads for banded CPU launches: $DIFFLAB_THREADS, else the number of cores."""
-    return env_count("DIFFLAB_THREADS", max(1, os.cpu_count() or 1))
+    return env_count("DIFFLAB_THREADS", CORES)
 
 
 # A rasterized frame of fewer samples than this runs on one thread: its bands' launches and the
@@ -127,6 +130,14 @@ def pass_threads(threads: int | None, n_samples: int) -> tuple[int | None, int]:
     if threads is None and chosen == 1 and n_samples >= PASS_POOL_MIN_SAMPLES:
         return None, 1
     return chosen, BANDS_PER_THREAD
+
+
+def halved_zbuffer(threads: int | None, n_samples: int, device: str) -> bool:
+    """Whether a rasterized frame's z-buffer is drawn as two halves on two threads (`raster.driver.
+    zbuffer`): where `raster_threads` leaves it on one thread (no binning into bands below
+    RASTER_POOL_MIN_SAMPLES) while `pass_threads` gives the per-sample passes every core."""
+    return device == "cpu" and raster_threads(threads, n_samples) == 1 and pass_threads(threads, n_samples)[0] is None \
+        and cpu_threads() > 1
 
 
 def row_bands(n_rows: int, n_bands: int) -> list[tuple[int, int]]:

@@ -118,17 +118,18 @@ def raster_slot(slot: int, row_begin: int, row_end: int, rows: wp.array2d(dtype=
 
 
 @wp.kernel
-def raster_kernel(chunk: int, row_begin: int, row_end: int, slots: wp.array(dtype=wp.int32), n_all: int,
+def raster_kernel(first: int, step: int, row_begin: int, row_end: int, slots: wp.array(dtype=wp.int32), n_all: int,
                   rows: wp.array2d(dtype=wp.int32), screen: wp.array2d(dtype=wp.vec4d), width: int, height: int,
                   key: wp.array(dtype=wp.int64)):
-    """The triangles binned to rows [row_begin, row_end), `chunk` consecutive ones per thread; with
-    `slots` empty (a single band: nothing binned), the slots of [0, n_all) whose box holds samples."""
-    first = wp.tid() * chunk
+    """The triangles binned to rows [row_begin, row_end), or with `slots` empty (a single band:
+    nothing binned) the slots of [0, n_all) whose box holds samples: thread tid takes the items
+    first + tid, first + tid + step, ... (on the CPU one thread takes a band's list, or every
+    step-th slot for one of `step` partial z-buffers; on CUDA, a thread an item)."""
     binned = slots.shape[0] > 0
     n = n_all
     if binned:
         n = slots.shape[0]
-    for k in range(first, wp.min(first + chunk, n)):
+    for k in range(first + wp.tid(), n, step):
         if binned:
             raster_slot(slots[k], row_begin, row_end, rows, screen, width, key)
         else:

@@ -24,8 +24,8 @@ from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR
 from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
-from ..launch import (band_plan, host_empty, launch_chunks, launch_parts, launch_row_loops, load_kernels,
-                      parallel_bands, part_count, pass_threads, raster_threads, run_bands, start_beside)
+from ..launch import (band_plan, halved_zbuffer, host_empty, launch_chunks, launch_parts, launch_row_loops,
+                      load_kernels, parallel_bands, part_count, pass_threads, raster_threads, run_bands, start_beside)
 
 
 def empty_points(compiled, name: str, count: int, clear: bool, to_zero: list | None = None) -> resolve.PointsW:
@@ -102,19 +102,20 @@ def bin_starts(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return starts, cursor.astype(np.int32)
 
 
-def cleared_key(compiled, n_samples: int) -> wp.array:
-    """The visibility key per sample, all NO_HIT. The array is kept between frames; the kernel that
-    reads a frame's keys last resets each to NO_HIT (and `mark_key_cleared` notes it), so the array
-    is filled here only when the last frame's reader did not (a first frame, a new size, a frame
-    stopped midway, the ray tracer's item buffer)."""
-    key = compiled.scratch("key", n_samples, wp.int64)
-    if compiled.scratch_pool().pop("cleared key", None) is not key:
+def cleared_key(compiled, n_samples: int, name: str = "key") -> wp.array:
+    """The visibility key per sample, all NO_HIT (`name`: "key", or the second of a z-buffer drawn
+    in two, `zbuffer`). The array is kept between frames; the kernel that reads a frame's keys last
+    resets each to NO_HIT (and `mark_key_cleared` notes it), so the array is filled here only when
+    the last frame's reader did not (a first frame, a new size, a frame stopped midway, the ray
+    tracer's item buffer)."""
+    key = compiled.scratch(name, n_samples, wp.int64)
+    if compiled.scratch_pool().pop(("cleared", name), None) is not key:
         key.fill_(coverage.NO_HIT)
     return key
 
 
-def mark_key_cleared(compiled, key: wp.array) -> None:
-    compiled.scratch_pool()["cleared key"] = key
+def mark_key_cleared(compiled, key: wp.array, name: str = "key") -> None:
+    compiled.scratch_pool()[("cleared", name)] = key
 
 
 def empty_screen(device: str) -> resolve.ScreenW:
@@ -138,7 +139,7 @@ def split_slots(compiled, p_clip: wp.array, threads: int | None) -> tuple[wp.arr
     return wp.array(extra_slot, dtype=wp.int32, device=device), split_faces.size
 
 
-def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
+def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, partial: wp.array | None = None):
     """Stages 1-3 on the sample grid of `cam`: clip space, near-plane clipping, and the z-buffer.
 
     Returns the clipped screen triangles (a `ScreenW`: a slot per face, and one more per face clipped
@@ -146,7 +147,12 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
     triangle). Vertices and faces are transformed in parts on all cores; assembling counts the slots
     meeting each band of rows, `bin_kernel` lists them (with a single band, every slot is its), and
     each band rasterizes only its list, then calls `then(tris, key, begin, end)` when given: the
-    band's keys are final there, and its rows need no other band's."""
+    band's keys are final there, and its rows need no other band's.
+
+    `partial` (a second key array, all NO_HIT; one band of rows, no `then`): the slots are dealt in
+    turn to the returned key and to `partial`, the two drawn side by side on two threads (no binning:
+    a 256^2 frame's z-buffer on one thread); a sample's key is then the lesser of its two, which its
+    reader takes (`resolve.resolve_into`), the same as one z-buffer's (min is order-free)."""
     device, arrays = compiled.device, compiled.arrays
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     width, height = cam.width, cam.height
@@ -162,7 +168,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
     behind.zero_()
     launch_chunks(clip.clip_vertices_kernel, n_vertices, [arrays["vertices"], cam.view_proj, width, height, p_clip,
                                                           p_screen, behind], device, threads)
-    extra = wp.empty(0, dtype=wp.int32, device=device)  # only a vertex behind the near plane can split a face
+    extra = none = scratch("no slots", 0, wp.int32)  # only a vertex behind the near plane can split a face
     n_split = 0
     if behind.numpy()[0]:
         extra, n_split = split_slots(compiled, p_clip, threads)
@@ -184,7 +190,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
         tris.face, band_of_row, counts, tests], device, threads)
     check_raster_work(int(tests.numpy().sum()), n_slots, "render", RenderError)
     band_index = {band: k for k, band in enumerate(bands)}
-    binned = wp.empty(0, dtype=wp.int32, device=device)  # one band: it draws every slot, nothing is binned
+    binned = none  # one band: it draws every slot, nothing is binned
     starts = np.array([0, n_slots])
     if len(bands) > 1:
         starts, cursor = bin_starts(counts.numpy())
@@ -196,12 +202,20 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None):
     def raster_band(begin, end):
         first, last = int(starts[band_index[(begin, end)]]), int(starts[band_index[(begin, end)] + 1])
         if last > first:
-            chunk = last - first if device == "cpu" else 1  # a band is one thread's work on the CPU
-            wp.launch(coverage.raster_kernel, dim=(last - first + chunk - 1) // chunk, inputs=[
-                chunk, begin, end, binned[first:last] if binned.shape[0] else binned, n_slots, rows, tris.screen, width,
-                height, key], device=device)
+            count, step = (1, 1) if device == "cpu" else (last - first,) * 2  # on the CPU one thread takes a band
+            wp.launch(coverage.raster_kernel, dim=count, inputs=[
+                0, step, begin, end, binned[first:last] if binned.shape[0] else binned, n_slots, rows, tris.screen,
+                width, height, key], device=device)
         if then is not None:
             then(tris, key, begin, end)
+
+    if partial is not None:  # every other slot into each of two z-buffers, side by side
+        assert len(bands) == 1 and then is None and device == "cpu"
+        halves = (key, partial)
+        run_bands(lambda part, parts: wp.launch(coverage.raster_kernel, dim=1, inputs=[
+            part, parts, 0, height, binned, n_slots, rows, tris.screen, width, height, halves[part]], device=device),
+            [(0, 2), (1, 2)], 2)
+        return tris, key
 
     # the bands with most triangles first: the threads finish on the small ones (bands write disjoint rows,
     # so the order changes no result)
@@ -275,6 +289,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     side = settings.spp_side  # the scene validated spp and the sample budget
     width, height = scene.camera.width * side, scene.camera.height * side
     row_pass = pass_threads(threads, width * height)  # (threads, bands per thread) of the per-sample passes
+    halved = halved_zbuffer(threads, width * height, device)  # the G-buffer's z-buffer in two halves (`zbuffer`)
     threads = raster_threads(threads, width * height)
     shading = SHADING_MODELS[settings.shading]
     clamp_colors = bool(settings.clamp_vertex_colors and shading == GOURAUD)
@@ -322,22 +337,26 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     points_are_samples = int(shading == PHONG_SHADING)
     if points_are_samples:
         lit = empty_lit(compiled, width * height, width * height, to_zero)
+    partial = cleared_key(compiled, width * height, "partial key") if halved else compiled.scratch("no key", 0, wp.int64)
     clearing = start_beside(lambda: zero_all(to_zero), device, row_pass[0])
     try:
-        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads)  # stages 1-3
+        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads,  # stages 1-3
+                            partial=partial if halved else None)
     finally:
         clearing.join()
     if points_are_samples:  # stages 4-6 in one pass: each sample resolved, then lit as its own point
         points, n_points = samples, width * height
         launch_row_loops(shade.phong_gbuffer_kernel, height, [
-            key, tris, mesh, cam, perspective_correct, out, samples, lighting, lit], device, *row_pass)
+            key, partial, tris, mesh, cam, perspective_correct, out, samples, lighting, lit], device, *row_pass)
     else:
         launch_row_loops(resolve.resolve_kernel, height, [
-            key, tris, mesh, compiled.materials, cam, perspective_correct, shading, compiled.vertices.shape[0], out,
-            samples], device, *row_pass)
+            key, partial, tris, mesh, compiled.materials, cam, perspective_correct, shading, compiled.vertices.shape[0],
+            out, samples], device, *row_pass)
         points, n_points = mesh_points(compiled, mesh, cam, shading, threads)  # stages 5-6
         lit = light_mesh_points(compiled, lighting, points, n_points, width * height, threads)
     mark_key_cleared(compiled, key)  # stage 4 reset every key it read
+    if halved:
+        mark_key_cleared(compiled, partial, "partial key")
 
     composed = image or not points_are_samples
     if composed:  # Stage 7: compose samples (on the CUDA device before the G-buffer is copied out)

@@ -281,15 +281,21 @@ class GBufferW:
 
 
 @wp.func
-def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
+def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
                  materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
                  n_vertices: int, out: GBufferW, samples: PointsW, i: int, j: int):
     """Stage 4 at sample (i, j): its G-buffer entries (empty ones where nothing covers it: the
-    non-zero ones only, as `samples` and `out` are zero when the kernel starts). Returns whether it
-    is covered, and its point, uv and uv derivatives as stored (what a Phong pass lights next,
-    without reading them back)."""
+    non-zero ones only, as `samples` and `out` are zero when the kernel starts). Its key is the
+    lesser of `key` and `partial` (a z-buffer drawn in two; `partial` empty otherwise), both reset.
+    Returns whether it is covered, and its point, uv and uv derivatives as stored (what a Phong
+    pass lights next, without reading them back)."""
     s = i * cam.width + j
     k = key[s]
+    if partial.shape[0] > 0:
+        other = partial[s]
+        if other != NO_HIT:
+            partial[s] = NO_HIT  # the next frame's z-buffer starts cleared
+            k = wp.min(k, other)
     if k == NO_HIT:  # its other entries stay as cleared: zero
         samples.material[s] = -1
         out.face[s] = -1
@@ -315,13 +321,14 @@ def resolve_into(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW
 
 
 @wp.kernel
-def resolve_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
-                   materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
-                   n_vertices: int, out: GBufferW, samples: PointsW):
+def resolve_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64),
+                   tris: ScreenW, mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), cam: CameraW,
+                   perspective_correct: int, shading: int, n_vertices: int, out: GBufferW, samples: PointsW):
     """Stage 4, one row of samples per thread."""
     i = dealt_row(row0, row_step, wp.tid())
     for j in range(cam.width):
-        resolve_into(key, tris, mesh, materials, cam, perspective_correct, shading, n_vertices, out, samples, i, j)
+        resolve_into(key, partial, tris, mesh, materials, cam, perspective_correct, shading, n_vertices, out, samples,
+                     i, j)
 
 
 @wp.func(inline=True)

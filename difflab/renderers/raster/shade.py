@@ -132,14 +132,15 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
 
 
 @wp.kernel
-def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW, cam: CameraW,
-                         perspective_correct: int, out: GBufferW, samples: PointsW, lighting: LightingW, lit: LitW):
+def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64),
+                         tris: ScreenW, mesh: RasterMeshW, cam: CameraW, perspective_correct: int, out: GBufferW,
+                         samples: PointsW, lighting: LightingW, lit: LitW):
     """Stages 4 and 6 under Phong shading, one row of samples per thread: each sample resolved (its
     G-buffer entries, `resolve_into`), then lit as its own shading point, its texel sampled there
     (`light_into`)."""
     i = dealt_row(row0, row_step, wp.tid())
     for j in range(cam.width):
-        covered, point, uv, duv_dx, duv_dy = resolve_into(key, tris, mesh, lighting.materials, cam,
+        covered, point, uv, duv_dx, duv_dy = resolve_into(key, partial, tris, mesh, lighting.materials, cam,
                                                           perspective_correct, PHONG_SHADING, mesh.vertices.shape[0],
                                                           out, samples, i, j)
         if covered:
