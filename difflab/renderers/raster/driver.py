@@ -346,8 +346,9 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         clearing.join()
     if points_are_samples:  # stages 4-6 in one pass: each sample resolved, then lit as its own point
         points, n_points = samples, width * height
+        bad = compiled.scratch("nonfinite rows", height, wp.int32)
         launch_row_loops(shade.phong_gbuffer_kernel, height, [
-            key, partial, tris, mesh, cam, perspective_correct, out, samples, lighting, lit], device, *row_pass)
+            key, partial, tris, mesh, cam, perspective_correct, out, samples, lighting, lit, bad], device, *row_pass)
     else:
         launch_row_loops(resolve.resolve_kernel, height, [
             key, partial, tris, mesh, compiled.materials, cam, perspective_correct, shading, compiled.vertices.shape[0],
@@ -366,10 +367,10 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
             1 - points_are_samples, background, fog, canvas], device, *row_pass)
     gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors)
     # then filter to pixels (Phong without stage 7: a sample's colour is its point's, fogged, so the
-    # pixels are not finite exactly where these are not)
+    # pixels are not finite exactly where these are not: the pass counted those samples)
     samples_rgb = (canvas.numpy() if composed else gbuffer.points.color).reshape(height, width, 3)
     pixels = box_downsample(samples_rgb, side) if image else None
-    nonfinite = nonfinite_pixels(samples_rgb if pixels is None else pixels)
+    nonfinite = nonfinite_pixels(samples_rgb if pixels is None else pixels) if composed else int(bad.numpy().sum())
     if pixels is None and nonfinite and side > 1:  # count the pixels the non-finite samples reach
         nonfinite = nonfinite_pixels(box_downsample(samples_rgb, side))
     stats = frame_stats(compiled, start, nonfinite, width * height, n_points)

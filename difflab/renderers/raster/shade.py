@@ -111,15 +111,23 @@ def texel_at(lighting: LightingW, mat_id: int, uv: wp.vec2, duv_dx: wp.vec2, duv
     return sample_texture(lighting.textures, mat.texture, uv, duv_dx, duv_dy, mat.texture_filter, mat.texture_wrap)
 
 
+@wp.func(inline=True)
+def finite3(c: wp.vec3):
+    """Whether all three channels are finite: c_k * 0 is 0 for finite c_k, NaN for inf or NaN
+    (cheaper than three isfinite calls, and no sum to overflow)."""
+    return c[0] * 0.0 + c[1] * 0.0 + c[2] * 0.0 == 0.0
+
+
 @wp.func
 def light_into(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3, lit: LitW, k: int):
     """Stage 6 at point k: its colour and texture factor (`light_point`), and per light its
     direction, distance and visibility (the G-buffer's). `lit` is zero when the kernel starts:
-    nothing is written for an empty point."""
+    nothing is written for an empty point. Returns the colour."""
     color, factor = light_point(point, lighting, textured, texel, lit, k, 1)
     lit.color[k] = color
     if textured == 0:  # (else zero, as cleared)
         lit.factor[k] = factor
+    return color
 
 
 @wp.kernel
@@ -128,17 +136,18 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
     first = begin + wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, end)):
         if points.material[k] >= 0:
-            light_into(load_point(points, k), lighting, 0, wp.vec3(0.0), lit, k)
+            unused = light_into(load_point(points, k), lighting, 0, wp.vec3(0.0), lit, k)
 
 
 @wp.kernel
 def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64),
                          tris: ScreenW, mesh: RasterMeshW, cam: CameraW, perspective_correct: int, out: GBufferW,
-                         samples: PointsW, lighting: LightingW, lit: LitW):
+                         samples: PointsW, lighting: LightingW, lit: LitW, nonfinite: wp.array(dtype=wp.int32)):
     """Stages 4 and 6 under Phong shading, one row of samples per thread: each sample resolved (its
     G-buffer entries, `resolve_into`), then lit as its own shading point, its texel sampled there
-    (`light_into`)."""
+    (`light_into`); nonfinite[i] counts row i's samples whose colour has a NaN or infinite channel."""
     i = dealt_row(row0, row_step, wp.tid())
+    bad = int(0)
     for j in range(cam.width):
         covered, point, uv, duv_dx, duv_dy = resolve_into(key, partial, tris, mesh, lighting.materials, cam,
                                                           perspective_correct, PHONG_SHADING, mesh.vertices.shape[0],
@@ -148,7 +157,9 @@ def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64)
             texel = texel_at(lighting, point.material, uv, duv_dx, duv_dy)
             if lighting.materials[point.material].texture >= 0:  # (else zero, as cleared)
                 lit.texel[s] = texel
-            light_into(point, lighting, 1, texel, lit, s)
+            if not finite3(light_into(point, lighting, 1, texel, lit, s)):
+                bad += 1
+    nonfinite[i] = bad
 
 
 @wp.struct
@@ -182,13 +193,6 @@ def light_mesh_points_kernel(begin: int, end: int, chunk: int, mesh: RasterMeshW
     first = begin + wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, end)):
         cache_point(cache, mesh, cam, shading, lighting, k)
-
-
-@wp.func(inline=True)
-def finite3(c: wp.vec3):
-    """Whether all three channels are finite: c_k * 0 is 0 for finite c_k, NaN for inf or NaN
-    (cheaper than three isfinite calls, and no sum to overflow)."""
-    return c[0] * 0.0 + c[1] * 0.0 + c[2] * 0.0 == 0.0
 
 
 @wp.func(inline=True)
