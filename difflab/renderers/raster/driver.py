@@ -209,8 +209,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, par
         if then is not None:
             then(tris, key, begin, end)
 
-    if partial is not None:  # every other slot into each of two z-buffers, side by side
-        assert len(bands) == 1 and then is None and device == "cpu"
+    if partial is not None:  # every other slot into each of two z-buffers, side by side (one band, on the CPU)
         halves = (key, partial)
         run_bands(lambda part, parts: wp.launch(coverage.raster_kernel, dim=1, inputs=[
             part, parts, 0, height, binned, n_slots, rows, tris.screen, width, height, halves[part]], device=device),
