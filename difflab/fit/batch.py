@@ -90,7 +90,8 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
             targets = tuple(jnp.stack([elements[b].problem.views[i].target for b in todo])
                             for i in range(len(setup.views)))
             out = lm.solve_box_batch(setup.problem, x0, targets, lower, upper, options.max_steps, rtol, atol)
-            x, codes, steps, history, r, gram = (np.asarray(a) for a in out)
+            x, codes, steps, history, gram = (np.asarray(a) for a in (*out[:4], out[5]))
+            r = lm.host_residuals(out[4])
             for i, b in enumerate(todo):
                 hist = history[i, :steps[i]].tolist() if options.history else []
                 name = lm.CODES[int(codes[i])]

@@ -165,16 +165,6 @@ def _residuals(view, sums: ViewSums, mat: MaterialJ, f):
     return (view.sqrt_weight if sums.sqrt_weight is None else sums.sqrt_weight) * r
 
 
-def residuals(prepared: tuple, x, problem):
-    """`Problem.residuals` at solver coordinates x (N,), from the rows of `prepare`."""
-    table = problem.materials(problem.layout.values(x))
-    out = []
-    for view, sums in zip(problem.views, prepared):
-        mat = _coefficients(view, table)
-        out.append(_residuals(view, sums, mat, lobes(view, sums, mat, ())[0]).T.reshape(-1))
-    return jnp.concatenate(out)
-
-
 def _moments(view, sums: ViewSums, block, mine, f):
     """M (3 channels, 4 + k, 4 + k) of one material from its constant block and the lobes f
     ([W L, W dL/dt...], each (P, U)) on its rows (`mine`: (U,) bool, or None: every row)."""
@@ -199,8 +189,10 @@ def _moments(view, sums: ViewSums, block, mine, f):
 
 
 def linearise(prepared: tuple, x, problem):
-    """(0.5 r^T r, J^T J (p, p), J^T r (p,)) at solver coordinates x from the moments (module
-    docstring); `prepared` = `prepare(problem, ...)`."""
+    """(0.5 r^T r, J^T J (p, p), J^T r (p,), r) at solver coordinates x from the moments (module
+    docstring); `prepared` = `prepare(problem, ...)`. r: per view (3, U), channel-major
+    (`lm.host_residuals` puts them in the problem's order, on the host: numpy transposes them at
+    several times the speed of XLA's CPU code)."""
     layout = problem.layout
     values = layout.values(x)
     table = problem.materials(values)
@@ -209,12 +201,13 @@ def linearise(prepared: tuple, x, problem):
     p = layout.size
     gram = jnp.zeros((p + 1, p + 1), x.dtype)  # row / column p collects what is not fitted
     grad = jnp.zeros(p + 1, x.dtype)
-    loss = jnp.zeros((), x.dtype)
+    loss, out = jnp.zeros((), x.dtype), []
     for view, sums in zip(problem.views, prepared):
         mat = _coefficients(view, table)
         f = lobes(view, sums, mat, nonlinear)
-        r = _residuals(view, sums, mat, f[0]).reshape(-1)
-        loss = loss + 0.5 * (r @ r)
+        r = jax.lax.optimization_barrier(_residuals(view, sums, mat, f[0]))  # (summed here and kept)
+        out.append(r)
+        loss = loss + 0.5 * jnp.sum(r * r)
         for material, block in zip(view.model.material_ids, sums.blocks):
             mine = None if view.model.material_ids == (material,) else view.model.material == material
             full = _moments(view, sums, block, mine, f)
@@ -226,7 +219,7 @@ def linearise(prepared: tuple, x, problem):
             gram = gram.at[cols[:, :, None], cols[:, None, :]].add(jnp.einsum("cai,cab,cbj->cij", pick, full, pick))
             grad = grad.at[cols].add(jnp.einsum("cai,cab,cb->ci", pick, full, beta))
     scale = jnp.where(layout.entries("log") > 0, values, 1.0)  # d value / d x
-    return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p]
+    return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p], tuple(out)
 
 
 def _pick(kind, nonlinear, ks):

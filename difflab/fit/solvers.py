@@ -197,7 +197,8 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
             steps = int(steps)
             history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
             name = lm.CODES[int(code)]  # a non-finite start leaves r, J unset
-            return Solved(np.asarray(x, np.float64), name, steps, history, None if name == "nonfinite" else (r, gram))
+            return Solved(np.asarray(x, np.float64), name, steps, history,
+                          None if name == "nonfinite" else (lm.host_residuals(r), gram))
         if options.solver == "varpro":
             from .varpro import run_varpro
 
