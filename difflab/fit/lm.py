@@ -178,7 +178,14 @@ def host_residuals(r) -> np.ndarray:
     of the views' channel-major (..., 3, U) residuals from the moments' solves, interleaved here)."""
     if not isinstance(r, tuple):
         return np.asarray(r)
-    return np.concatenate([np.swapaxes(np.asarray(v), -1, -2).reshape(*v.shape[:-2], -1) for v in r], axis=-1)
+    parts = []
+    for view in r:
+        view = np.asarray(view)
+        part = np.empty(view.shape[:-2] + view.shape[:-3:-1], view.dtype)  # (..., U, 3)
+        for c in range(view.shape[-2]):  # a channel at a time: ~2x the speed of a transposed copy
+            part[..., c] = view[..., c, :]
+        parts.append(part.reshape(*view.shape[:-2], -1))
+    return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=-1)
 
 
 def solve_problem(problem, x0, lower, upper, *, max_steps: int, rtol, atol, progress=None):

@@ -38,7 +38,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ..lighting.jax_model import LobeGeometry, MaterialJ, lobe, shade_parts, surface_material, table_row
+from ..lighting.jax_model import LobeGeometry, MaterialJ, lobe, table_row
 from .normal_equations import LINEAR, SLOTS, by_parts_applies, slot_columns
 
 NONLINEAR = tuple(k for k in SLOTS if k not in LINEAR)
@@ -99,16 +99,18 @@ def prepare(problem, x) -> tuple:
     for view in problem.views:
         model = view.model
         ids = model.material_ids
-        mat = surface_material(table, ids[0] if len(ids) == 1 else model.material, model.cell)
-        ambient_part, diffuse, _ = shade_parts(mat, model.formation.specular, model.geometry, view.lights.intensity,
-                                               problem.ambient)
-        first, second = model.cell != 1, (model.cell == 1)[:, None]
-        offset = jnp.where(second, mat.ka * ambient_part + mat.kd * diffuse, 0.0) - view.target
-        e = jnp.concatenate([first[None].astype(offset.dtype), jnp.where(first, model.geometry.diffuse.T, 0.0),
-                             offset.T])  # (E, U)
+        second = _coefficients(view, table._replace(ka=table.ka2, kd=table.kd2))  # the checker's second cell's
+        diffuse = model.geometry.diffuse.T  # (P, U)
+        intensity = view.lights.intensity
+        first = model.cell != 1
+        offset = jnp.where(model.cell == 1, second.ka * problem.ambient[:, None] + second.kd * sum(
+            intensity[p][:, None] * diffuse[p] for p in range(diffuse.shape[0])), 0.0) - view.target.T  # (3, U)
+        e = jax.lax.optimization_barrier(jnp.concatenate([
+            first[None].astype(offset.dtype), jnp.where(first, diffuse, 0.0), offset]))  # (E, U),
+        # formed once (XLA would otherwise form it again for each product that reads it)
         count = e.shape[0] - 3  # 1 + P
         t = jnp.zeros((3, CONSTANT, e.shape[0]), e.dtype).at[:, 0, 0].set(problem.ambient)
-        t = t.at[:, 1, 1:count].set(view.lights.intensity.T).at[:, 2, count:].set(jnp.eye(3, dtype=e.dtype))
+        t = t.at[:, 1, 1:count].set(intensity.T).at[:, 2, count:].set(jnp.eye(3, dtype=e.dtype))
         sqrt_weight = weighted = None
         if view.sqrt_weight.ndim:
             sqrt_weight = view.sqrt_weight.T  # (3, U)
@@ -137,9 +139,9 @@ def _coefficients(view, table) -> MaterialJ:
     return MaterialJ(*(table_row(getattr(table, k), index).T for k in MaterialJ._fields))
 
 
-def lobes(view, sums: ViewSums, mat: MaterialJ, kinds) -> list:
-    """[W L, W dL/dt for t in kinds]: each light's weight times its specular lobe at each point and
-    their derivatives, each (P, U) and computed once (kept apart from the products that read them,
+def lobes(view, sums: ViewSums, mat: MaterialJ, kinds):
+    """[W L, W dL/dt for t in kinds] (1 + k, P, U): each light's weight times its specular lobe at
+    each point and their derivatives, computed once (kept apart from the products that read them,
     each of which XLA would otherwise recompute them for)."""
     def of(n, m, f0):
         return sums.weight * lobe(view.model.formation.specular, sums.lobe, n, m, f0)
@@ -149,7 +151,7 @@ def lobes(view, sums: ViewSums, mat: MaterialJ, kinds) -> list:
     for kind in kinds:
         tangent = tuple(jnp.ones_like(v) if k == kind else jnp.zeros_like(v) for k, v in zip(NONLINEAR, primal))
         out.append(jax.jvp(of, primal, tangent)[1])
-    return list(jax.lax.optimization_barrier(out))
+    return jax.lax.optimization_barrier(jnp.stack(out))
 
 
 def _residuals(view, sums: ViewSums, mat: MaterialJ, f):
@@ -167,23 +169,18 @@ def _residuals(view, sums: ViewSums, mat: MaterialJ, f):
 
 def _moments(view, sums: ViewSums, block, mine, f):
     """M (3 channels, 4 + k, 4 + k) of one material from its constant block and the lobes f
-    ([W L, W dL/dt...], each (P, U)) on its rows (`mine`: (U,) bool, or None: every row)."""
+    (`lobes`, (1 + k, P, U)) on its rows (`mine`: (U,) bool, or None: every row)."""
     intensity = view.lights.intensity
     lights = range(intensity.shape[0])
     square = jnp.square(view.sqrt_weight)
     if mine is not None:
-        f = [jnp.where(mine, g, 0.0) for g in f]
-    k = len(f)
+        f = jnp.where(mine, f, 0.0)
+    k = f.shape[0]
     zb = jnp.stack([jnp.einsum("cae,ce->ca", sums.t, sum(intensity[p][:, None] * _products(sums, square, sums.e,
-                                                                                            f[i][p]) for p in lights))
+                                                                                            f[i, p]) for p in lights))
                     for i in range(k)], axis=1)  # (3, k, 3)
-    zz = [[None] * k for _ in range(k)]
-    for i in range(k):
-        for j in range(i, k):
-            zz[i][j] = zz[j][i] = sum(intensity[p] * intensity[q] * _products(sums, square, f[i][p][None],
-                                                                              f[j][q])[:, 0]
-                                      for p in lights for q in lights)  # (3,)
-    zz = jnp.stack([jnp.stack(row, axis=1) for row in zz], axis=1)  # (3, k, k)
+    zz = jnp.stack([sum(intensity[p][:, None] * intensity[q][:, None] * _products(sums, square, f[:, p], f[j, q])
+                        for p in lights for q in lights) for j in range(k)], axis=2)  # (3, k, k)
     top = jnp.concatenate([block, jnp.swapaxes(zb, 1, 2)], axis=2)
     return jnp.concatenate([top, jnp.concatenate([zb, zz], axis=2)], axis=1)
 
