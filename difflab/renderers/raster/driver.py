@@ -300,9 +300,12 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     mesh, lighting = raster_mesh(compiled), lighting_struct(compiled, settings)
     black = not any(scene.background)  # a zeroed image needs no background written (`render`)
     background, fog = wp.vec3(*scene.background), fog_struct(scene.fog)
-    auto_cull = not settings.cull_backfaces and culls_back_faces(compiled, compiled.faces.shape[0],
-                                                                 compiled.vertices.shape[0], threads)
-    cull = int(settings.cull_backfaces or auto_cull)  # back faces out of the z-buffer (`auto_cull`: `culling.py`)
+    # back faces out of the z-buffer where they cannot show (`culling.py`), from a compiled scene's second
+    # frame on: its one-off test (~2.6 us a triangle) pays for itself only over repeated frames
+    repeated = next(compiled.built.setdefault("raster frames", itertools.count())) > 0
+    auto_cull = not settings.cull_backfaces and repeated and culls_back_faces(
+        compiled, compiled.faces.shape[0], compiled.vertices.shape[0], threads)
+    cull = int(settings.cull_backfaces or auto_cull)
 
     if not gbuffer:  # stages 1-3, then 4-7 fused (flat / Gouraud points lit on first use)
         n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading)
