@@ -26,9 +26,12 @@ light -- shared by the three channels -- and sums them against the constant colu
 matrix-vector products. A, D and O of the three channels are combinations of 4 + P rows that
 `prepare` keeps (`ViewSums`), the residuals are formed from them: r^T r is summed from r (as
 beta^T M beta it would be a difference of sums as large as |target|^2, whose rounding, 1e-16 of
-them in float64, can exceed the last steps' decrease on a noise-free target). These are the
-numbers `by_parts` forms, to rounding, laid out channel-major (the pixels along the last axis,
-where XLA's CPU code runs several times faster than over an axis of 3 or 1).
+them in float64, can exceed the last steps' decrease on a noise-free target). J^T r = E^T M beta
+is such a difference too, but its rounding moves the solution by ~1e-16 |target| / |column| in
+float64 -- in float32 by up to 8e-5, relative, on a 64 x 64 sphere: a float32 step sums
+J^T r = E^T K^T diag(sqrt(w)) r from r instead (`_columns_r`, a few more matrix-vector products).
+These are the numbers `by_parts` forms, to rounding, laid out channel-major (the pixels along the
+last axis, where XLA's CPU code runs several times faster than over an axis of 3 or 1).
 """
 
 from __future__ import annotations
@@ -185,6 +188,17 @@ def _moments(view, sums: ViewSums, block, mine, f):
     return jnp.concatenate([top, jnp.concatenate([zb, zz], axis=2)], axis=1)
 
 
+def _columns_r(view, sums: ViewSums, mine, f, v):
+    """K^T v (3 channels, 4 + k) of one material for v (3, U) = sqrt(w) r, on its rows."""
+    intensity = view.lights.intensity
+    if mine is not None:
+        v = jnp.where(mine, v, 0.0)
+    rows = [jnp.concatenate([sums.t[c] @ (sums.e @ v[c]),
+                             sum(intensity[p, c] * (f[:, p] @ v[c]) for p in range(intensity.shape[0]))])
+            for c in range(3)]
+    return jnp.stack(rows)
+
+
 def linearise(prepared: tuple, x, problem):
     """(0.5 r^T r, J^T J (p, p), J^T r (p,), r) at solver coordinates x from the moments (module
     docstring); `prepared` = `prepare(problem, ...)`. r: per view (3, U), channel-major
@@ -214,7 +228,12 @@ def linearise(prepared: tuple, x, problem):
             pick = jnp.stack([_pick(kind, nonlinear, ks) for kind in slots], axis=2)  # E (3, 4 + k, q)
             cols = columns[material]
             gram = gram.at[cols[:, :, None], cols[:, None, :]].add(jnp.einsum("cai,cab,cbj->cij", pick, full, pick))
-            grad = grad.at[cols].add(jnp.einsum("cai,cab,cb->ci", pick, full, beta))
+            if x.dtype == jnp.float64:  # K^T diag(sqrt(w)) r = M beta (module docstring)
+                columns_r = jnp.einsum("cab,cb->ca", full, beta)
+            else:
+                sqrt_weight = view.sqrt_weight if sums.sqrt_weight is None else sums.sqrt_weight
+                columns_r = _columns_r(view, sums, mine, f, sqrt_weight * r)
+            grad = grad.at[cols].add(jnp.einsum("cai,ca->ci", pick, columns_r))
     scale = jnp.where(layout.entries("log") > 0, values, 1.0)  # d value / d x
     return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p], tuple(out)
 
