@@ -14,7 +14,7 @@ from conftest import scene_dict
 from difflab._warp import wp
 from difflab.geometry import TriMesh, box, closed_outward, concatenate, cylinder, quad, uv_sphere
 from difflab.geometry.closed import pieces, solid_pieces
-from difflab.renderers import culling
+from difflab.renderers.raytrace import itembuffer
 from difflab.renderers.raytrace.selfcross import crossing_faces, passes_through_itself, star_shaped
 from difflab.scene import Scene
 from test_itembuffer import assert_same_frames, both
@@ -266,7 +266,7 @@ def test_a_piece_through_itself_is_drawn_whole_and_culling_it_would_be_wrong(mon
     tip out and the frame shows the bottom side behind it instead."""
     objects = [mesh_object(dented_box(1.4))]
     assert not frames(objects, FROM_BELOW, LIT_FROM_BELOW).stats["item_buffer_culled"]
-    monkeypatch.setattr(culling, "passes_through_itself", lambda *args, **options: False)
+    monkeypatch.setattr(itembuffer, "passes_through_itself", lambda *args, **options: False)
     bvh, item = both(solids_scene(objects, FROM_BELOW, LIT_FROM_BELOW))
     assert item.stats["item_buffer_culled"]
     wrong = np.any(item.image != bvh.image, axis=2)

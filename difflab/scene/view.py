@@ -195,8 +195,7 @@ class RenderSettings(Record):
                                                 "surface (not blocked)"), True)
     clamp_vertex_colors: bool = spec_field(Spec("boolean", "clamp Gouraud vertex colours to [0, 1] (OpenGL)"), False)
     interpolation: str = spec_field(Spec("choice", "attribute interpolation", options=INTERPOLATIONS), "perspective")
-    cull_backfaces: bool = spec_field(Spec("boolean", "skip triangles facing away (rasterizer; done anyway where "
-                                           "they cannot show: closed solids facing out, beyond the near plane)"), False)
+    cull_backfaces: bool = spec_field(Spec("boolean", "skip triangles facing away (rasterizer)"), False)
     adaptive_threshold: float = spec_field(Spec("number", "Hall's adaptive depth control: stop a ray whose weight "
                                                 "falls below it (0: off)", "", bounds(ge=0)), 0.0)
     sampling: str = spec_field(Spec("choice", "sample pattern in a pixel", options=SAMPLINGS), "grid")

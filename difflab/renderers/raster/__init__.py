@@ -7,10 +7,7 @@ Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
 1. `clip_vertices_kernel`  world -> clip space.
 2. `assemble_kernel`       clip each triangle against the near plane (z_clip >= -w_clip) into at most
                            two triangles, divide by w, map to raster space, snap to 1/256 sample
-                           (fixed point), drop degenerate ones, cull back faces on request -- or by
-                           itself where they cannot show (`culling.py`: every triangle bounds a
-                           closed solid facing out, beyond the near plane; from a compiled scene's
-                           second frame on; `stats["auto_cull_backfaces"]`).
+                           (fixed point), drop degenerate ones, cull back faces on request.
 3. `raster_kernel`         per band of rows, the triangles `assemble_kernel` counted and `bin_kernel`
                            listed there: for every sample centre inside a triangle (exact integer
                            edge functions with a top-left-style fill rule: a shared edge's samples go

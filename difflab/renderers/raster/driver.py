@@ -23,7 +23,6 @@ from ...lighting.warp_model import fog_params, fog_struct
 from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR_MODELS
 from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
-from ..culling import culls_back_faces
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
 from ..launch import (band_plan, halved_zbuffer, host_empty, launch_chunks, launch_parts, launch_row_loops,
                       load_kernels, parallel_bands, part_count, pass_threads, raster_threads, run_bands, start_beside)
@@ -300,12 +299,6 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     mesh, lighting = raster_mesh(compiled), lighting_struct(compiled, settings)
     black = not any(scene.background)  # a zeroed image needs no background written (`render`)
     background, fog = wp.vec3(*scene.background), fog_struct(scene.fog)
-    # back faces out of the z-buffer where they cannot show (`culling.py`), from a compiled scene's second
-    # frame on: its one-off test (~2.6 us a triangle) pays for itself only over repeated frames
-    repeated = next(compiled.built.setdefault("raster frames", itertools.count())) > 0
-    auto_cull = not settings.cull_backfaces and repeated and culls_back_faces(
-        compiled, compiled.faces.shape[0], compiled.vertices.shape[0], threads)
-    cull = int(settings.cull_backfaces or auto_cull)
 
     if not gbuffer:  # stages 1-3, then 4-7 fused (flat / Gouraud points lit on first use)
         n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading)
@@ -321,14 +314,14 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
                 begin, key, tris, mesh, cam, lighting, point_cache(compiled, n_points, frame), perspective_correct,
                 shading, int(clamp_colors), int(not black), background, fog, canvas, bad], device=device)
 
-        tris, key = zbuffer(compiled, cam, cull, threads, image_band)
+        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads, image_band)
         mark_key_cleared(compiled, key)  # image_kernel reset every key it read
         pixels = box_downsample(canvas.numpy().reshape(height, width, 3), side)
         nonfinite = int(bad.numpy().sum())  # non-finite samples; with spp > 1 count the pixels they reach
         if nonfinite and side > 1:
             nonfinite = nonfinite_pixels(pixels)
         return Frame(image=pixels, buffers=None, stats=frame_stats(compiled, start, nonfinite, width * height,
-                                                                   n_points, auto_cull))
+                                                                   n_points))
 
     # The per-sample G-buffer's arrays (stage 4; Phong's stage 6 too): what must start zero is
     # cleared beside stages 1-3 when a core is free (memsets of memory other work has pushed out of
@@ -346,7 +339,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     partial = cleared_key(compiled, width * height, "partial key") if halved else compiled.scratch("no key", 0, wp.int64)
     clearing = start_beside(lambda: zero_all(to_zero), device, row_pass[0])
     try:
-        tris, key = zbuffer(compiled, cam, cull, threads,  # stages 1-3
+        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads,  # stages 1-3
                             partial=partial if halved else None)
     finally:
         clearing.join()
@@ -379,17 +372,14 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     nonfinite = nonfinite_pixels(samples_rgb if pixels is None else pixels) if composed else int(bad.numpy().sum())
     if pixels is None and nonfinite and side > 1:  # count the pixels the non-finite samples reach
         nonfinite = nonfinite_pixels(box_downsample(samples_rgb, side))
-    stats = frame_stats(compiled, start, nonfinite, width * height, n_points, auto_cull)
+    stats = frame_stats(compiled, start, nonfinite, width * height, n_points)
     stats["covered_samples"] = int(np.count_nonzero(gbuffer.mask))
     return Frame(image=pixels, buffers=gbuffer, stats=stats)
 
 
-def frame_stats(compiled, start: float, nonfinite: int, n_samples: int, n_points: int, auto_cull: bool) -> dict:
-    """The frame's counts; `auto_cull_backfaces`: whether back faces were left out of the z-buffer
-    without render.cull_backfaces, because they cannot show (`culling.culls_back_faces`)."""
+def frame_stats(compiled, start: float, nonfinite: int, n_samples: int, n_points: int) -> dict:
     return {"method": "raster", "seconds": time.perf_counter() - start, "triangles": compiled.faces.shape[0],
-            "samples": n_samples, "shading_points": n_points, "nonfinite_pixels": nonfinite,
-            "auto_cull_backfaces": auto_cull}
+            "samples": n_samples, "shading_points": n_points, "nonfinite_pixels": nonfinite}
 
 
 

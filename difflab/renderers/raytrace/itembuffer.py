@@ -39,17 +39,19 @@ and ends at the far one, where the rasterizer clips).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import replace
 
 import numpy as np
 
 from ..._warp import wp
-from ..camera import camera_struct
-from ..culling import culls_back_faces
+from ...geometry import solid_pieces
+from ..camera import camera_frame, camera_struct
 from ..launch import load_kernels
 from ..raster.coverage import NO_HIT
 from ..raster.driver import mark_key_cleared, zbuffer
 from ..trace import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triangle_hit
+from .selfcross import passes_through_itself
 
 wp.set_module_options({"enable_backward": False})
 
@@ -58,6 +60,8 @@ PLANE_GAP = 1.0e-3  # relative depth gap telling a neighbour's plane from the hi
 NO_TRIANGLE = wp.constant(-1)  # resolve_hint: no mesh triangle before the nearest sphere / plane (if any)
 ASK_BVH = wp.constant(-2)  # resolve_hint: an ambiguous hint, the BVH finds the mesh hit
 ITEM_BUFFER_VIEW = "item buffer of"  # scratch-pool note: ((camera, width, height), culled) of the kept item buffer
+SOLID_MESHES = "solid meshes"  # compiled.built: the mesh vertices' bounding box when solids (`culls_back_faces`), else None
+NEAR_MARGIN = 1.0e-4  # back faces are culled when the meshes lie this far (relative) beyond the near plane
 SLOT_BITS = wp.constant(wp.int64(4294967295))  # the z-buffer key's low 32 bits: the screen slot
 NEIGHBOUR_DI = wp.constant(wp.vec4i(-1, 1, 0, 0))  # the four neighbouring samples: up, down, left, right
 NEIGHBOUR_DJ = wp.constant(wp.vec4i(0, 0, -1, 1))
@@ -269,13 +273,41 @@ def item_buffer(compiled, width: int, height: int, threads: int | None = None) -
             wp.launch(edges_kernel, dim=end - begin - 2, inputs=[begin + 1, face, arrays["faces"], edge], device=device)
         seams.update((begin, end - 1))
 
-    cull = culls_back_faces(compiled, n_faces, n_vertices, threads)
+    cull = culls_back_faces(compiled, threads)
     unused, key = zbuffer(meshes, camera_struct(compiled.scene.camera, width, height), int(cull), threads, decode_band)
     mark_key_cleared(compiled, key)  # hints_kernel reset every key
     rows = wp.array(sorted(seams), dtype=wp.int32, device=device)
     wp.launch(seam_edges_kernel, dim=rows.shape[0], inputs=[rows, face, arrays["faces"], edge], device=device)
     pool[ITEM_BUFFER_VIEW] = (view, cull)
     return item_struct(compiled, face, edge), False, cull
+
+
+def culls_back_faces(compiled, threads: int | None = None) -> bool:
+    """Whether the item buffer may leave the mesh triangles' back faces out of its z-buffer: they are
+    the closed surfaces of solids, facing out (`geometry.solid_pieces`), no piece passes through
+    itself (`selfcross.passes_through_itself`), and their bounding box lies beyond the near plane by
+    NEAR_MARGIN (relative to the coordinates' size), so every primary ray starts outside every solid
+    and its first mesh hit, entering one, is a front face (module doc). The meshes are asked once
+    per compiled scene; the camera's 8 box corners are tested on each call (nothing kept per camera)."""
+    if SOLID_MESHES not in compiled.built:
+        vertices = compiled.arrays["vertices"].numpy()[:compiled.n_mesh_vertices]
+        pieces = solid_pieces(vertices, compiled.faces[:compiled.n_mesh_faces])
+        solid = pieces is not None and not passes_through_itself(bvh(compiled), *pieces, threads=threads)
+        compiled.built[SOLID_MESHES] = (vertices.min(axis=0), vertices.max(axis=0)) if solid else None
+    box = compiled.built[SOLID_MESHES]
+    if box is None:
+        return False
+    camera = compiled.scene.camera
+    corners = np.array(list(itertools.product(*zip(*box))), np.float64)
+    eye = np.asarray(camera.eye, np.float64)
+    size = camera.near + np.abs(corners).max() + np.abs(eye).max()
+    return bool(((corners - eye) @ camera_frame(camera)[2]).min() > camera.near + NEAR_MARGIN * size)
+
+
+def bvh(compiled) -> wp.Mesh:
+    """The compiled scene's BVH over its mesh triangles (built now if no ray has needed it yet)."""
+    compiled.traceable()
+    return compiled.built["bvh"]
 
 
 def forget_item_buffer(compiled) -> None:

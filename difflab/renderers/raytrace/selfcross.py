@@ -1,5 +1,5 @@
 """Whether a solid's surface passes through itself: the item buffer leaves back faces out of its
-z-buffer only when no piece of the mesh does (`culling.culls_back_faces`; the pieces and their
+z-buffer only when no piece of the mesh does (`itembuffer.culls_back_faces`; the pieces and their
 welded vertices from `geometry.solid_pieces`). A fold that passes through its own piece can wrap a
 region inside out (winding number -1), where a primary ray's first hit is a back face; pieces
 crossing each other are fine (each is a solid: windings add up, never below 0).
