@@ -119,15 +119,19 @@ def mark_rows_kernel(row0: int, row_step: int, touched: wp.array(dtype=wp.int32)
 
 @pytest.mark.parametrize("rows", [1, 7, 8, 9, 61, 256])
 @pytest.mark.parametrize("threads, per_thread", [(1, 4), (2, 1), (3, 4)])
-def test_row_loops_deal_each_row_once_in_blocks_to_even_bands(rows, threads, per_thread):
+def test_row_loops_deal_each_row_once_in_blocks_to_even_bands(rows, threads, per_thread, monkeypatch):
     """`launch_row_loops` deals blocks of ROW_BLOCK rows to its bands in turn (block b to band
-    b mod n): every row once, and no band more than a block longer than another (where the frame's
-    content sits in part of it, contiguous bands left a core idle)."""
+    b mod n): every row once, no band more than a block longer than another (where the frame's
+    content sits in part of it, contiguous bands left a core idle), and no band without a block."""
     touched = wp.zeros(rows, dtype=wp.int32, device="cpu")
     band = wp.full(rows, -1, dtype=wp.int32, device="cpu")
+    launched, real = [], launch.run_bands
+    monkeypatch.setattr(launch, "run_bands", lambda run, bands, threads=None: launched.append(len(bands)) or
+                        real(run, bands, threads))
     launch.launch_row_loops(mark_rows_kernel, rows, [touched, band], "cpu", threads, per_thread)
     n_bands = len(launch.band_plan(rows, "cpu", threads, per_thread))
     assert n_bands == (1 if threads == 1 else min(threads * per_thread, rows))
+    assert launched == [min(n_bands, -(-rows // launch.ROW_BLOCK))]
     assert touched.numpy().tolist() == [1] * rows
     expected = (np.arange(rows) // launch.ROW_BLOCK) % n_bands
     assert np.array_equal(band.numpy(), expected)

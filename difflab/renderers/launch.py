@@ -289,7 +289,7 @@ def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int 
     on the other; dealt, 1.25 and 1.19). The kernel's first arguments are (row0, row_step): its
     thread wp.tid() handles row `dealt_row(row0, row_step, tid)`, looping over the columns itself.
     On the CPU this reads the kernel's (struct) arguments once per row rather than once per pixel."""
-    n_bands = len(band_plan(rows, device, threads, per_thread))
+    n_bands = min(len(band_plan(rows, device, threads, per_thread)), -(-rows // ROW_BLOCK))  # (no band without a block)
 
     def run_band(k: int, n: int) -> None:
         band_rows = sum(min(ROW_BLOCK, rows - block) for block in range(k * ROW_BLOCK, rows, n * ROW_BLOCK))
