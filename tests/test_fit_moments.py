@@ -155,3 +155,44 @@ def test_float32_recovery_sums_its_gradient_from_r():
     found = setup.values(np.asarray(solved[0]))
     for key, value in TRUTH.items():
         np.testing.assert_allclose(found[key], value, rtol=1e-5)
+
+
+def test_a_ceiling_no_target_value_reaches_is_solved_unclipped_where_the_model_ends_below_it(monkeypatch):
+    """Targets with a ceiling that no value reaches (as an 8-bit file's 1.0 often is): the solve runs
+    on the problem without ceilings -- on the column moments -- and, the model ending below the
+    ceiling, is the clipped problem's solve (x to the solver's rtol, r and J^T J at it); where the
+    model would end above a ceiling, the clipped problem is solved after it; a target value at the
+    ceiling leaves the problem clipped."""
+    from difflab.fit import solvers
+    from difflab.fit.options import FitOptions
+
+    top = float(target_of(make_scene(size=20, lights=BRIGHT)).max())
+    setup = _setup(ceiling=1.25 * top)
+    problem = setup.problem
+    unclipped = problem.without_ceilings()
+    assert not moments.applies(problem) and moments.applies(unclipped)
+    assert unclipped.views[0].ceiling is None and problem.views[0].ceiling is not None
+    solved, real = [], solvers._box_lm
+    monkeypatch.setattr(solvers, "_box_lm", lambda p, *args: solved.append(p.views[0].ceiling is None) or
+                        real(p, *args))
+    options = FitOptions.make(None, progress=False)
+    lower, upper = (np.asarray(b) for b in setup.layout.bounds())
+    with jax.enable_x64(True):
+        fast = solvers.run(problem, setup.x0, options)
+        clipped = real(problem, setup.x0, lower, upper, options, None)
+    assert solved == [True] and fast.result == clipped.result == "successful"
+    np.testing.assert_allclose(fast.x, clipped.x, rtol=1e-7)
+    np.testing.assert_allclose(fast.linearised[0], clipped.linearised[0], atol=1e-9)
+    np.testing.assert_allclose(fast.linearised[1], clipped.linearised[1], rtol=1e-6)
+    # the model's values decide: below the ceiling at every entry that counts, or not
+    r = np.zeros_like(fast.linearised[0])
+    assert problem.below_ceilings(r)
+    r[np.argmax(np.asarray(problem.views[0].target))] = 0.25 * top + 1e-12  # the brightest entry at the ceiling
+    assert not problem.below_ceilings(r)
+    monkeypatch.setattr(type(problem), "below_ceilings", lambda self, r: False)
+    solved.clear()
+    with jax.enable_x64(True):
+        again = solvers.run(problem, setup.x0, options)
+    assert solved == [True, False]
+    np.testing.assert_array_equal(again.x, clipped.x)
+    assert _setup(ceiling=top).problem.without_ceilings() is None  # the brightest target value at the ceiling

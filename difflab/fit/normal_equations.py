@@ -20,7 +20,8 @@ Two ways to the same numbers:
 
 `linearise` picks the second when it applies (a static property of the problem). Its `fast`
 form -- what the solver's steps use where a target is clipped (the others step on the column
-moments of `moments.py`) -- takes the columns' products in float32 when the fit runs in
+moments of `moments.py`, and so do targets with a ceiling no value reaches while the model ends
+below it: `Problem.without_ceilings`) -- takes the columns' products in float32 when the fit runs in
 float64 (the (3, q, U) columns written and multiplied at half the width: ~0.25 ms of ~0.7 a step on
 26k pixels), while r and J^T r stay in float64 (J^T r from the float32 columns and the float64 r):
 a gradient whose rounding is proportional to r leaves the point the solver converges to where it

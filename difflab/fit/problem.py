@@ -152,6 +152,38 @@ class Problem(eqx.Module):
         data = robust(self.loss, self.weighted(values, texels), self.loss_scale)
         return jnp.concatenate([data, smoothness_residuals(self.layout, values, self.smoothness)])
 
+    def without_ceilings(self) -> Problem | None:
+        """The problem with no view clipped (every `ViewJ.ceiling` None), when some view has a ceiling
+        that no target value reaches; else None. Its solution is this problem's wherever the model
+        stays below the ceilings there (`below_ceilings`): the clip is then inactive around it, and
+        the residuals, J^T J and J^T r are the same -- and its solve may step on the column moments
+        (`moments.py`), which a clipped target cannot (an 8-bit file's targets have ceiling 1)."""
+        clipped = [view.ceiling is not None for view in self.views]
+        if not any(clipped) or any(bool(np.any(np.asarray(view.target) >= np.asarray(view.ceiling)))
+                                   for view, on in zip(self.views, clipped) if on):
+            return None
+        views = tuple(eqx.tree_at(lambda v: v.ceiling, view, None, is_leaf=lambda x: x is None)
+                      for view in self.views)
+        return eqx.tree_at(lambda p: p.views, self, views)
+
+    def below_ceilings(self, r) -> bool:
+        """Whether the model is below every view's ceiling at each entry that counts (weight > 0),
+        given the flat weighted residuals r (N,) of the problem without its ceilings: the model
+        there is target + r / sqrt(w)."""
+        offset = 0
+        for view in self.views:
+            target = np.asarray(view.target)
+            part = np.asarray(r[offset:offset + target.size]).reshape(target.shape)
+            offset += target.size
+            if view.ceiling is None:
+                continue
+            sqrt_weight = np.broadcast_to(np.asarray(view.sqrt_weight), target.shape)
+            counts = sqrt_weight > 0
+            model = target[counts] + part[counts] / sqrt_weight[counts]
+            if not np.all(model < np.asarray(view.ceiling)):
+                return False
+        return True
+
     def with_targets(self, targets) -> Problem:
         """The same problem with other targets, one (U, 3) array per view."""
         views = tuple(eqx.tree_at(lambda v: v.target, view, t) for view, t in zip(self.views, targets))

@@ -137,8 +137,11 @@ class Setup:
         """The fit with other `weights` -- per view (H, W, 3) >= 0, 0 outside its mask -- and `init`,
         without preparing the targets again: the same pixels (a pixel whose weight became 0 stays,
         its residual 0), so the problem keeps its shapes and its compiled solve serves every such
-        refit of the view, and the ceilings are those found for the fit it reweights. Its solution,
-        statistics and residual images are those of a `Setup` built afresh with these weights."""
+        refit of the view, and the ceilings are those found for the fit it reweights (a `Setup`
+        built afresh with these weights finds a float target's ceiling again, among the values left:
+        with that ceiling, its solution, statistics and residual images are the refit's). A pixel
+        at weight 0 still counts in `used_pixels`: `engine.without_clipped` refits only when
+        entries with weight > 0 remain."""
         out = copy.copy(self)
         out.scene = apply_init(self.base_scene, self.materials, init)
         out.textures = texture_starts(out.scene, self.materials, init) if self.textures else {}

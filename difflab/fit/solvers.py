@@ -174,6 +174,19 @@ def _optimistix(solver, z0, problem, max_steps):
     return problem.layout.x_from_free(sol.value), sol.result, sol.stats["num_steps"]
 
 
+def _box_lm(problem, x0, lower, upper, options: FitOptions, progress) -> Solved:
+    """`lm.solve_box` from x0, a `Solved` (its r and J^T J at the solution on the host)."""
+    rtol, atol = options.tolerances()
+    dtype = problem.ambient.dtype
+    x, code, steps, history, r, gram = lm.solve_box(problem, np.asarray(x0, dtype), lower, upper, options.max_steps,
+                                                   rtol, atol, progress)
+    steps = int(steps)
+    history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
+    name = lm.CODES[int(code)]  # a non-finite start leaves r, J unset
+    return Solved(np.asarray(x, np.float64), name, steps, history,
+                  None if name == "nonfinite" else (lm.host_residuals(r), gram))
+
+
 def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
     """One solve from solver coordinates x0, a `Solved`."""
     rtol, atol = options.tolerances()
@@ -192,13 +205,14 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
             history = np.asarray(history, np.float64)[:int(steps)].tolist() if options.history else []
             return Solved(np.asarray(x, np.float64), lm.CODES[int(code)], int(steps), history)
         if options.solver == "lm":
-            x, code, steps, history, r, gram = lm.solve_box(problem, np.asarray(x0, dtype), lower, upper,
-                                                           options.max_steps, rtol, atol, progress)
-            steps = int(steps)
-            history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
-            name = lm.CODES[int(code)]  # a non-finite start leaves r, J unset
-            return Solved(np.asarray(x, np.float64), name, steps, history,
-                          None if name == "nonfinite" else (lm.host_residuals(r), gram))
+            # targets with a ceiling no value reaches: solved unclipped, which holds where the model
+            # ends below the ceilings (`Problem.without_ceilings`), else solved again clipped
+            unclipped = problem.without_ceilings()
+            if unclipped is not None:
+                solved = _box_lm(unclipped, x0, lower, upper, options, progress)
+                if solved.linearised is not None and problem.below_ceilings(solved.linearised[0]):
+                    return solved
+            return _box_lm(problem, x0, lower, upper, options, progress)
         if options.solver == "varpro":
             from .varpro import run_varpro
 
