@@ -18,30 +18,41 @@ def residuals(x, problem):
     return problem.residuals(x)
 
 
+SPOT = [{"type": "spot", "position": [0, 4, 1], "direction": [0, -1, -0.2], "cutoff_deg": 30, "exponent": 8,
+         "intensity": [2.0, 1.5, 1.0]}, *BRIGHT]
+
+
 def _setup(shading="phong", specular="phong", materials=("red",), params=("ka", "kd", "ks", "n"), weighted=False,
-           x64=True, **kwargs):
-    scene = make_scene(size=20, shading=shading, specular=specular, lights=BRIGHT)
+           x64=True, lights=BRIGHT, **kwargs):
+    """`weighted`: per-channel weights in [0, 2) ("zeros": a third of them exactly 0)."""
+    scene = make_scene(size=20, shading=shading, specular=specular, lights=lights)
     target = target_of(scene)
-    weights = [np.random.default_rng(1).uniform(0.0, 2.0, target.shape)] if weighted else None
+    weights = None
+    if weighted:
+        rng = np.random.default_rng(1)
+        weights = [rng.uniform(0.0, 2.0, target.shape) * (rng.random(target.shape) > (0.33 if weighted == "zeros"
+                                                                                          else 0.0))]
     return Setup(scene, [target], list(materials), params, weights=weights, x64=x64, **kwargs)
 
 
-CASES = [
-    ("phong", "phong", ("red", "floor"), ("ka", "kd", "ks", "n"), False),  # two materials, checker cells
-    ("phong", "blinn", ("red",), ("kd", "ks", "n"), True),  # per-channel weights
-    ("flat", "torrance", ("red",), ("ks", "m", "f0"), False),  # two nonlinear kinds
-    ("phong", "phong", ("red", "floor"), ("kd", "n"), True),  # n without ks: S's coefficient is a constant
-    ("phong", "phong", ("red",), ("ka", "kd", "ks"), False),  # nothing nonlinear fitted
+CASES = [  # shading, specular, materials, params, weights, lights
+    ("phong", "phong", ("red", "floor"), ("ka", "kd", "ks", "n"), False, BRIGHT),  # two materials, checker cells
+    ("phong", "blinn", ("red",), ("kd", "ks", "n"), True, BRIGHT),  # per-channel weights
+    ("flat", "torrance", ("red",), ("ks", "m", "f0"), False, BRIGHT),  # two nonlinear kinds
+    ("phong", "phong", ("red", "floor"), ("kd", "n"), True, BRIGHT),  # n without ks: S's coefficient is a constant
+    ("phong", "phong", ("red",), ("ka", "kd", "ks"), False, BRIGHT),  # nothing nonlinear fitted
+    ("phong", "phong", ("red", "floor"), ("kd", "ks", "n"), "zeros", BRIGHT),  # weights exactly 0 at a third
+    ("phong", "blinn", ("red",), ("ka",), False, SPOT),  # ka alone; a spot light beside a point and a directional one
 ]
 
 
-@pytest.mark.parametrize("shading,specular,materials,params,weighted", CASES)
-def test_moments_equal_reverse_mode(shading, specular, materials, params, weighted):
+@pytest.mark.parametrize("shading,specular,materials,params,weighted,lights", CASES)
+def test_moments_equal_reverse_mode(shading, specular, materials, params, weighted, lights):
     """0.5 r^T r, J^T J and J^T r from the moments equal those of the residuals by reverse mode
     (J by jax.jacrev, the gradient by jax.grad), and the residuals formed from the kept rows equal
     `Problem.residuals`, at a point away from the solution (every value 0.8 of the truth's);
     r^T r to the rounding of the sums over |target|^2 it is the difference of."""
-    setup = _setup(shading, specular, materials, params, weighted)
+    setup = _setup(shading, specular, materials, params, weighted, lights=lights)
     assert moments.applies(setup.problem) and setup.problem.views[0].model.formation.direct
     with jax.enable_x64(True):
         x = jnp.asarray(setup.layout.x_of(setup.layout.flatten(setup.initial) * 0.8))

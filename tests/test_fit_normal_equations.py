@@ -11,7 +11,7 @@ from test_fit_helpers import TRUTH, make_scene, perturbed, target_of
 
 from difflab import compile_scene
 from difflab.fit import Setup, fit_material
-from difflab.fit import lm
+from difflab.fit import lm, moments
 from difflab.fit.normal_equations import by_parts, by_parts_applies, dense, linearise
 
 BRIGHT = [{"type": "point", "position": [2, 3, 3], "intensity": [2.5, 2.5, 2.5], "attenuation": [1, 0, 0]},
@@ -79,17 +79,21 @@ def test_dense_where_by_parts_does_not_apply(kwargs, fit_kwargs):
     assert np.abs(grad).max() > 1e-3 * np.abs(r).max() > 0  # a start away from the target: a real gradient
 
 
+@pytest.mark.parametrize("clipped", [False, True])
 @pytest.mark.parametrize("truth", [TRUTH, {**TRUTH, "ks": [0.0, 0.0, 0.0]}])
-def test_solver_by_parts_takes_the_dense_solvers_steps(truth):
+def test_solver_by_parts_takes_the_dense_solvers_steps(truth, clipped):
     """Recovery from a 30 % perturbed start, and a matte target (ks truly 0): the box LM on the
     closed-form normal equations takes the same steps to the same point as on forward-mode ones;
-    from the moments (`solve_box`, a near Gauss-Newton first step), no more steps, the same values to
-    the tolerance where the target determines them (n of a matte target it does not) and the exact
+    `solve_box` -- from the moments, or with a ceiling (`clipped`) on the closed form's fast steps
+    (float32 columns) -- a near Gauss-Newton first step: no more steps, the same values to the
+    tolerance where the target determines them (n of a matte target it does not) and the exact
     J^T J at its end."""
     scene = make_scene(size=24, red=truth)
     start = perturbed({**truth, "ks": [0.5, 0.4, 0.3]})
-    setup = Setup(scene, [target_of(scene)], "red", init=start)
+    target = target_of(scene)
+    setup = Setup(scene, [target], "red", init=start, ceiling=1.5 * float(target.max()) if clipped else None)
     assert by_parts_applies(setup.problem)  # (else both solves would be the dense one)
+    assert moments.applies(setup.problem) != clipped
     solve = partial(lm.box_lm, max_steps=64, rtol=1e-8, atol=1e-10)
     with jax.enable_x64(True):
         lower, upper = (jnp.asarray(b) for b in setup.layout.bounds())
