@@ -9,7 +9,7 @@ from test_fit_helpers import TRUTH, make_scene, mirror_scene, perturbed, target_
 
 from difflab import compile_scene
 from difflab.fit import Setup, fit_material
-from difflab.fit.records import KEPT_VIEWS, SMALL, STORE, DeviceCopies
+from difflab.fit.records import KEPT_ARRAYS, KEPT_VIEWS, SMALL, STORE, DeviceCopies
 
 SCENE = make_scene(size=16)
 TARGET = target_of(SCENE)
@@ -180,6 +180,17 @@ def test_small_device_arrays_are_reused_only_for_equal_contents():
                 np.testing.assert_array_equal(moved[key], value)
     with jax.enable_x64(False):  # the same bytes in the other precision: moved afresh (float32 there)
         assert store.on_device({"lights": lights, "index": index, "target": large})["lights"].dtype == np.float32
+
+
+def test_the_device_copies_used_last_are_kept():
+    """`DeviceCopies` lets go of the set used longest ago: one set used between every other keeps
+    its copies (it was let go as the oldest moved, KEPT_ARRAYS new sets after it was first moved)."""
+    store = DeviceCopies()
+    with jax.enable_x64(True):
+        often = store.on_device({"lights": np.array([0.5, 0.25, 1.0])})["lights"]
+        for k in range(2 * KEPT_ARRAYS):
+            store.on_device({"lights": np.array([float(k), 0.0, 0.0])})
+            assert store.on_device({"lights": np.array([0.5, 0.25, 1.0])})["lights"] is often
 
 
 def test_small_device_arrays_are_kept_process_wide():

@@ -176,15 +176,15 @@ class ViewStore:
 
 
 class DeviceCopies:
-    """The device copies of the latest KEPT_ARRAYS sets of small arrays, by their contents."""
+    """The device copies of the KEPT_ARRAYS sets of small arrays used last, by their contents."""
 
     def __init__(self):
         self._lock = threading.Lock()
-        self._arrays: list = []  # [(key, device arrays)], the latest first
+        self._arrays: list = []  # [(key, device arrays)], the latest used first
 
     def on_device(self, tree):
         """`to_device(tree)` for a pytree of numpy arrays, its small leaves (<= SMALL entries) taken
-        from the latest KEPT_ARRAYS copies when they were moved before with the same structure,
+        from the KEPT_ARRAYS copies used last when they were moved before with the same structure,
         precision, default device, dtypes, shapes and bytes (device arrays are immutable; one jitted dispatch costs
         some 8 us a leaf); the large ones (targets) are moved each time."""
         leaves, structure = jax.tree_util.tree_flatten(tree)
@@ -193,6 +193,8 @@ class DeviceCopies:
                tuple((leaves[i].dtype.str, leaves[i].shape, leaves[i].tobytes()) for i in small))
         with self._lock:
             kept = next((copies for kept_key, copies in self._arrays if kept_key == key), None)
+            if kept is not None:  # used now: the last to be let go
+                self._arrays = [(key, kept)] + [(k, c) for k, c in self._arrays if k != key]
         if kept is None:
             moved = to_device(leaves)
             with self._lock:
