@@ -207,3 +207,4 @@ def test_a_ceiling_no_target_value_reaches_is_solved_unclipped_where_the_model_e
     assert solved == [True, False]
     np.testing.assert_array_equal(again.x, clipped.x)
     assert _setup(ceiling=top).problem.without_ceilings() is None  # the brightest target value at the ceiling
+    assert _setup(ceiling=1.25 * top, loss="huber").problem.without_ceilings() is None  # r' = rho(r) hides the model

@@ -154,12 +154,13 @@ class Problem(eqx.Module):
 
     def without_ceilings(self) -> Problem | None:
         """The problem with no view clipped (every `ViewJ.ceiling` None), when some view has a ceiling
-        that no target value reaches; else None. Its solution is this problem's wherever the model
+        that no target value reaches and the loss is l2 (a robust loss's residuals do not give the
+        model back: `below_ceilings`); else None. Its solution is this problem's wherever the model
         stays below the ceilings there (`below_ceilings`): the clip is then inactive around it, and
         the residuals, J^T J and J^T r are the same -- and its solve may step on the column moments
         (`moments.py`), which a clipped target cannot (an 8-bit file's targets have ceiling 1)."""
         clipped = [view.ceiling is not None for view in self.views]
-        if not any(clipped) or any(bool(np.any(np.asarray(view.target) >= np.asarray(view.ceiling)))
+        if self.loss != "l2" or not any(clipped) or any(bool(np.any(np.asarray(view.target) >= np.asarray(view.ceiling)))
                                    for view, on in zip(self.views, clipped) if on):
             return None
         views = tuple(eqx.tree_at(lambda v: v.ceiling, view, None, is_leaf=lambda x: x is None)
