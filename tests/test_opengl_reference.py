@@ -4,9 +4,12 @@ With Blinn specular, per-vertex lighting, a local viewer, no light ambient and (
 attenuation, difflab's Gouraud shading is the GL 2.x lighting equation, so a 256x256 sphere must
 match Mesa's render to PSNR >= 40 dB (8-bit output). Flat shading given one normal per face must
 reach 30 dB: OpenGL lights a flat face at its last (provoking) vertex, difflab at its centroid.
-Runs when PyOpenGL and libOSMesa are installed (`apt-get install libosmesa6; pip install PyOpenGL`).
+Runs when PyOpenGL and libOSMesa are installed (`apt-get install libosmesa6; pip install PyOpenGL`);
+skipped, with that reason, on a machine without them -- unless DIFFLAB_REQUIRE_OSMESA=1 (CI sets it
+once it has installed libOSMesa), where their absence fails the run instead of skipping it.
 """
 
+import os
 import sys
 from pathlib import Path
 
@@ -16,8 +19,11 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parents[1] / "experiments" / "bench"))
 import mesa  # noqa: E402 - the benchmarks' OSMesa peer, one GL setup for both
 
-if mesa.available() is not None:  # pragma: no cover - depends on the machine
-    pytest.skip(mesa.available(), allow_module_level=True)
+MISSING = mesa.available()
+if MISSING is not None:  # pragma: no cover - depends on the machine
+    if os.environ.get("DIFFLAB_REQUIRE_OSMESA") == "1":
+        pytest.fail(f"DIFFLAB_REQUIRE_OSMESA=1, but {MISSING}", pytrace=False)
+    pytest.skip(MISSING, allow_module_level=True)
 
 from difflab import Scene, render
 from difflab.renderers.compile import object_mesh
