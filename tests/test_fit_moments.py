@@ -8,14 +8,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from test_fit_helpers import TRUTH, make_scene, perturbed, target_of
-from test_fit_normal_equations import BRIGHT
+from test_fit_normal_equations import BRIGHT, residuals
 
 from difflab.fit import Setup, lm, moments
 from difflab.fit.normal_equations import linearise
-
-
-def residuals(x, problem):
-    return problem.residuals(x)
 
 
 SPOT = [{"type": "spot", "position": [0, 4, 1], "direction": [0, -1, -0.2], "cutoff_deg": 30, "exponent": 8,

@@ -75,9 +75,9 @@ def test_per_sample_passes_split_over_threads_give_the_one_thread_frame(tmp_path
     run in a band per core while the z-buffer stays on one thread: the same buffers, bit for bit."""
     monkeypatch.delenv("DIFFLAB_THREADS", raising=False)
     monkeypatch.setattr(launch, "PASS_POOL_MIN_SAMPLES", 1)
-    monkeypatch.setattr(launch, "cpu_threads", lambda: 3)  # 3 bands of 20 rows, whatever the machine
-    launched = []
-    monkeypatch.setattr(launch, "row_bands", lambda n, k: launched.append(k) or [(0, 7), (7, 13), (13, n)])
+    monkeypatch.setattr(launch, "cpu_threads", lambda: 3)  # 3 bands (the 20 rows dealt in blocks), whatever the machine
+    launched, real_row_bands = [], launch.row_bands
+    monkeypatch.setattr(launch, "row_bands", lambda n, k: launched.append(k) or real_row_bands(n, k))
     compiled = compile_scene(textured_scene(tmp_path, shading, 1))
     split = render_frame(compiled)
     assert launched and set(launched) == {3}  # every banded launch was one band per thread

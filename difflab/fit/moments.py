@@ -42,7 +42,7 @@ import jax
 import jax.numpy as jnp
 
 from ..lighting.jax_model import LobeGeometry, MaterialJ, lobe, table_row
-from .normal_equations import LINEAR, SLOTS, by_parts_applies, slot_columns
+from .normal_equations import LINEAR, SLOTS, by_parts_applies, material_rows, slot_columns
 
 NONLINEAR = tuple(k for k in SLOTS if k not in LINEAR)
 CONSTANT = 3  # K's rows A, D, O; then S and the derivatives dS/dt
@@ -75,12 +75,6 @@ class ViewSums(NamedTuple):
     sqrt_weight: jnp.ndarray | None
     weighted: jnp.ndarray | None
     blocks: tuple
-
-
-def _mine(view, material, array):
-    """`array` (..., U) on the rows of `material`, 0 on the others (itself when the view shows no other)."""
-    model = view.model
-    return array if model.material_ids == (material,) else jnp.where(model.material == material, array, 0.0)
 
 
 def _products(sums: ViewSums, square, rows, vector):
@@ -125,7 +119,7 @@ def prepare(problem, x) -> tuple:
         square = jnp.square(view.sqrt_weight)
         blocks = []
         for m in ids:
-            gram = jnp.stack([_products(sums, square, _mine(view, m, e), row) for row in e], axis=-1)  # (3, E, E)
+            gram = jnp.stack([_products(sums, square, material_rows(view.model, m, e), row) for row in e], axis=-1)  # (3, E, E)
             blocks.append(jnp.einsum("cae,cef,cbf->cab", t, gram, t))
         views.append(sums._replace(blocks=tuple(blocks)))
     return tuple(views)

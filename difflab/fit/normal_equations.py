@@ -70,6 +70,12 @@ def slot_columns(layout, n_materials: int) -> tuple[tuple, dict]:
     return slots, columns
 
 
+def material_rows(model, material: int, array):
+    """`array` (..., U) on the rows (points) of `material`, 0 on the others (itself when the model
+    shows no other)."""
+    return array if model.material_ids == (material,) else jnp.where(model.material == material, array, 0.0)
+
+
 def by_parts(problem, x, fast: bool = False):
     """(r, J^T J, J^T r) in closed form (see the module docstring); `by_parts_applies(problem)`.
     `fast`: J^T J from float32 columns (float64 fits; see the module docstring)."""
@@ -114,7 +120,7 @@ def by_parts(problem, x, fast: bool = False):
                 continue
             # this material's rows, per channel every product of two columns summed over the pixels in
             # one batched product (3, q, q), and their products with r
-            mine = w if model.material_ids == (material,) else jnp.where(model.material == material, w, 0.0)
+            mine = material_rows(model, material, w)
             gram = gram.at[cols[:, :, None], cols[:, None, :]].add(jnp.einsum("ciu,cju->cij", mine, w).astype(x.dtype))
             grad = grad.at[cols].add(jnp.sum(mine * r.T[:, None, :], axis=-1, dtype=x.dtype))
         residuals.append(r.reshape(-1))
