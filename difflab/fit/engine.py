@@ -208,7 +208,7 @@ def without_clipped(setup: Setup, out: FitResult, options: FitOptions) -> FitRes
     again = setup.reweighted(kept, out.params)
     again.sigma_fallback = out.sigma  # (the band left out, too few pixels may remain to estimate the noise)
     second = run_fit(again, options, {"setup": time.perf_counter() - start, "render": again.render_seconds})
-    left_out = sum(int(np.count_nonzero(view.weights[near.reshape(-1)[view.pixels]] > 0))  # their counted entries
+    left_out = sum(int(np.count_nonzero(view.entries[near.reshape(-1)[view.pixels]]))  # their counted entries
                    for view, near in zip(setup.views, band))
     timings = {key: out.timings.get(key, 0.0) + second.timings.get(key, 0.0)
                for key in {**out.timings, **second.timings}}
@@ -217,13 +217,9 @@ def without_clipped(setup: Setup, out: FitResult, options: FitOptions) -> FitRes
 
 
 def _entries_left(setup: Setup, band) -> int:
-    """The residual entries a fit without the `band` pixels (per view (H, W) bool) would count: weight
-    > 0, below the view's ceiling, outside the band."""
-    count = 0
-    for view, near in zip(setup.views, band):
-        rows = ~near.reshape(-1)[view.pixels]
-        count += int(np.count_nonzero((view.weights[rows] > 0) & (view.values[rows] < view.ceiling)))
-    return count
+    """The residual entries a fit without the `band` pixels (per view (H, W) bool) would count
+    (`View.counted`, outside the band)."""
+    return sum(int(np.count_nonzero(view.counted[~near.reshape(-1)[view.pixels]])) for view, near in zip(setup.views, band))
 
 
 def fit_material(scene, targets, material=None, params=DEFAULT_PARAMS, **kwargs) -> FitResult:

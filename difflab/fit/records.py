@@ -144,6 +144,19 @@ class View:
             return np.ones((self.pixels.size, 3))
         return take_pixels(self.weighting, self.pixels)
 
+    @cached_property
+    def entries(self) -> np.ndarray:
+        """(U, 3) bool: the residual entries of the used pixels that weigh in (weight > 0)."""
+        if self.weighting is None:
+            return np.ones((self.pixels.size, 3), bool)
+        return self.weights > 0
+
+    @cached_property
+    def counted(self) -> np.ndarray:
+        """(U, 3) bool: the entries a fit counts -- weight > 0 and the target below its ceiling (an
+        entry at the ceiling is censored: the model need only reach it)."""
+        return self.entries & (self.values < self.ceiling) if np.isfinite(self.ceiling) else self.entries
+
 
 def take_pixels(image, pixels) -> np.ndarray:
     """(U, 3) rows of an (H, W, 3) image at flat pixel indices (numpy's `take`: several times the

@@ -158,7 +158,7 @@ class Setup:
     def _target_statistics(self):
         """nonfinite, censored (used values at the ceiling) and the noise floor of the targets."""
         self.nonfinite = int(sum(v.nonfinite for v in self.views))
-        self.censored = int(sum(int(np.count_nonzero((v.values >= v.ceiling) & (v.weights > 0)))
+        self.censored = int(sum(np.count_nonzero(v.entries) - np.count_nonzero(v.counted)
                                 for v in self.views if np.isfinite(v.ceiling)))  # over the used pixels
         self.sigma_floor = max(FLOAT_SIGMA, max(v.step for v in self.views) / math.sqrt(12.0))
 
@@ -309,11 +309,10 @@ class Setup:
     def _problem(self, loss, loss_scale) -> Problem:
         entries, total, self.unit_weights = [], 0.0, True  # unit weights: the weighted residuals are the plain ones
         for v in self.views:
+            entries.append(v.entries.reshape(-1))
             if v.weighting is None:  # 1 at every pixel used
-                entries.append(np.ones(3 * v.pixels.size, bool))
                 total += 3 * v.pixels.size
             else:
-                entries.append((v.weights > 0).reshape(-1))
                 total += np.sum(v.weights)
                 self.unit_weights &= bool(np.all(v.weights == 1.0))
         self.weighted_entries = np.concatenate(entries)  # the residual entries that count

@@ -132,7 +132,7 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
         zero = view.zeros & (part == 0)  # black in the target, and the model 0 there too
         rows = zero[:, 0] & zero[:, 1] & zero[:, 2]
         count += 3 * int(np.count_nonzero(rows)) if view.weighting is None else \
-            int(np.count_nonzero(np.take(view.weights, np.flatnonzero(rows), axis=0) > 0))
+            int(np.count_nonzero(np.take(view.entries, np.flatnonzero(rows), axis=0)))
         out.append(rows)
     return out, count
 
