@@ -1,5 +1,6 @@
 """The `difflab` command line. Exit codes: 0 success, 1 internal error, 2 invalid input, 3 a fit
-that did not converge, 4 a fit flagged model_mismatch (results still written for 3 and 4)."""
+that did not converge, 4 a fit flagged model_mismatch, 5 a converged fit whose noise could not be
+estimated, its model not judged (results still written for 3, 4 and 5)."""
 
 from __future__ import annotations
 

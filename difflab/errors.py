@@ -2,9 +2,10 @@
 and the command line's exit codes, one table for every command."""
 
 #: Exit codes of every `difflab` command: 0 success, 1 internal error, 2 invalid input (a DifflabError,
-#: one line), 3 a fit (or a batch line) that did not converge, 4 a fit flagged model_mismatch
-#: (results are still written for 3 and 4).
-EXIT_OK, EXIT_INTERNAL, EXIT_INVALID, EXIT_NOT_CONVERGED, EXIT_MODEL_MISMATCH = 0, 1, 2, 3, 4
+#: one line), 3 a fit (or a batch line) that did not converge, 4 a fit flagged model_mismatch, 5 a
+#: converged fit whose noise could not be estimated, so its model was not judged (results are still
+#: written for 3, 4 and 5).
+EXIT_OK, EXIT_INTERNAL, EXIT_INVALID, EXIT_NOT_CONVERGED, EXIT_MODEL_MISMATCH, EXIT_NOISE_UNKNOWN = 0, 1, 2, 3, 4, 5
 
 
 class DifflabError(Exception):

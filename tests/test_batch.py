@@ -154,6 +154,7 @@ def test_batch_recovers_each_fit_and_records_failures(reference):
     manifest, out, summary = reference
     assert summary.counts == {"converged": 11, "not_converged": 0, "failed": 1, "invalid": 1, "not_run": 0}
     assert (summary.ran, summary.skipped, summary.all_converged, summary.mismatched) == (12, 0, False, ["patched"])
+    assert summary.unjudged == []
     patched = json.loads((out / "reports" / "patched.json").read_text())
     assert patched["converged"] and patched["model_mismatch"] and patched["chi2"] > 100
     for name, kd in zip(GOOD, KDS):
@@ -168,7 +169,7 @@ def test_batch_recovers_each_fit_and_records_failures(reference):
     assert invalid == {"line": 3, "name": "typo", "error": "unknown key(s) ['materal']; known: name, scene, targets, "
                        "material, params, method, init, solver"}
     rows = (out / "summary.csv").read_text().splitlines()
-    assert rows[0] == "line,name,status,result,model,model_mismatch,loss,psnr,chi2,steps,params,error"
+    assert rows[0] == "line,name,status,result,model,model_mismatch,noise_unknown,loss,psnr,chi2,steps,params,error"
     assert [r.split(",")[:3] for r in rows[1:]] == (
         [["1", "fit0", "converged"], ["2", "fit1", "converged"], ["3", "typo", "invalid"]]
         + [[str(i + 2), f"fit{i}", "converged"] for i in range(2, len(KDS))]
@@ -355,3 +356,22 @@ def test_dask_cluster_with_a_worker_killed_gives_the_same_files(reference, tmp_p
             fit_many(manifest, tmp_path / "bytes", client=client, inline=True, quiet=True)
         assert snapshot(tmp_path / "bytes") == snapshot(out)
         assert len(tasks.data) == 10  # 12 jobs: 4 of one job (2 threads x 2), then 2, 2, 1, 1, 1, 1 (task_size)
+
+
+@pytest.mark.parametrize("rows, code", [
+    ([{"status": "converged", "model_mismatch": False, "noise_unknown": False}], 0),
+    ([{"status": "converged", "model_mismatch": False, "noise_unknown": True}], 5),
+    ([{"status": "converged", "model_mismatch": True, "noise_unknown": True}], 4),
+    ([{"status": "converged", "model_mismatch": False, "noise_unknown": True}, {"status": "failed"}], 3),
+])
+def test_batch_exit_code_orders_the_outcomes(monkeypatch, tmp_path, rows, code):
+    """fit-batch exits 3 for any line that gave no converged fit, else 4 for a mismatch, else 5 for a
+    fit whose noise could not be estimated, else 0 (docs/cli.md)."""
+    import difflab.batch.api as api
+    from difflab.batch.api import BatchSummary
+    from difflab.cli import main
+
+    rows = [{"name": f"f{i}", "model_mismatch": None, "noise_unknown": None, **row} for i, row in enumerate(rows)]
+    summary = BatchSummary(outdir=tmp_path, rows=rows, counts={}, ran=len(rows), skipped=0)
+    monkeypatch.setattr(api, "fit_many", lambda *args, **kwargs: summary)
+    assert main(["fit-batch", str(tmp_path / "m.jsonl"), "-o", str(tmp_path / "out")]) == code

@@ -67,6 +67,23 @@ def test_fit_command_model_mismatch_exit_4(tmp_path, capsys):
     assert "image model: raytrace" in capsys.readouterr().out
 
 
+def test_fit_command_noise_unknown_exit_5(files, capsys):
+    """A mask of 6 scattered pixels: converged, but the noise cannot be estimated -- exit 5, files
+    written, the report's noise_unknown true and sigma null; with --sigma, exit 0."""
+    scene, target, tmp = files
+    mask = np.zeros((24, 24), bool)
+    mask[[9, 9, 12, 12, 15, 15], [9, 14, 11, 16, 9, 14]] = True
+    mask_file = tmp / "mask.npy"
+    np.save(mask_file, mask)
+    out = tmp / "fitted.json"
+    args = ["fit", str(scene), str(target), "--material", "red", "--params", "kd", "--mask", str(mask_file), "-o", str(out)]
+    assert main(args) == 5
+    assert "NOISE UNKNOWN" in capsys.readouterr().out and out.exists()
+    report = json.loads((tmp / "fitted.fit.json").read_text())
+    assert report["converged"] and report["noise_unknown"] and report["sigma"] is None and report["chi2"] is None
+    assert main(args + ["--sigma", "0.01", "--force"]) == 0
+
+
 @pytest.mark.parametrize("extra", [["--material", "nope"], ["--material", "red", "--params", "kd,zz"],
                                    ["--material", "red", "--max-steps", "0"],
                                    ["--material", "red", "--sigma", "-1"]])

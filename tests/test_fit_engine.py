@@ -81,6 +81,38 @@ def test_chi_square_with_per_channel_weights_of_zero(noisy_sphere, zeros, sigma)
         assert result.sigma == 0.02 and abs(result.chi2 - 1.0) < 4.0 * np.sqrt(2.0 / 2000)
 
 
+def scattered_mask(scene, count: int, seed: int) -> np.ndarray:
+    """`count` pixels of the red sphere drawn at random: a mask with (almost) no used neighbourhoods."""
+    from difflab import render_frame
+
+    ys, xs = np.nonzero(render_frame(scene).gbuffer.material == 0)
+    pick = np.random.default_rng(seed).choice(ys.size, count, replace=False)
+    mask = np.zeros((scene.camera.height, scene.camera.width), bool)
+    mask[ys[pick], xs[pick]] = True
+    return mask
+
+
+@pytest.mark.parametrize("count", [8, 200])
+def test_a_scattered_mask_leaves_the_noise_unknown_until_sigma_is_given(noisy_sphere, count):
+    """Scattered pixels of the noisy sphere (noise 0.02), the right model: the residuals alone cannot
+    tell noise from a model's error, so the noise is unknown -- sigma, chi2 nan, no mismatch claimed,
+    not ok -- and kd is still fitted (within 5 standard errors); given sigma, chi2 is judged (1 within
+    5 sqrt(2 / dof)) and the fit is ok. (The targets' Laplacian, out-of-mask zeros around each pixel,
+    stood in: 8 pixels got sigma at the 1e-5 floor, chi2 ~1e6, a false mismatch; 200 pixels sigma
+    ~0.07, chi2 ~0.02 -- a wrong model would never have been flagged.)"""
+    scene, noisy = noisy_sphere
+    mask = scattered_mask(scene, count, seed=6)
+    result = fit_material(scene, [noisy], "red", ("kd",), masks=[mask])
+    assert result.converged and result.noise_unknown and not result.model_mismatch and not result.ok
+    assert np.isnan(result.sigma) and np.isnan(result.chi2)
+    assert "NOISE UNKNOWN" in result.table() and result.to_dict()["sigma"] is None
+    z = (np.asarray(result.params["kd"]) - TRUTH["kd"]) / np.asarray(result.stderr["kd"])
+    assert np.all(np.abs(z) < 5.0), z
+    given = fit_material(scene, [noisy], "red", ("kd",), masks=[mask], sigma=0.02)
+    dof = 3 * count - 3
+    assert given.ok and not given.noise_unknown and abs(given.chi2 - 1.0) < 5.0 * np.sqrt(2.0 / dof)
+
+
 def test_clipped_highlight_recovers_ks_and_n():
     """A highlight rendered above 1 and clipped to 1 (as an 8-bit photo or a 16-bit render clips it):
     the ceiling is detected, those pixels are censored, and ks and n come back within 1 %. Read as

@@ -35,6 +35,12 @@ class BatchSummary:
         """Names of the fits flagged model_mismatch: their image model does not explain the targets."""
         return [row["name"] for row in self.rows if row["model_mismatch"]]
 
+    @property
+    def unjudged(self) -> list:
+        """Names of the fits whose noise could not be estimated (`FitResult.noise_unknown`): whether
+        their image model explains the targets was not judged."""
+        return [row["name"] for row in self.rows if row.get("noise_unknown")]
+
 
 def _say(quiet: bool, text: str) -> None:
     if not quiet:

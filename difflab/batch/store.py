@@ -30,9 +30,9 @@ from ..io import TMP_MARK, refuse_overwrite, write_json_atomic, write_text_atomi
 from .manifest import Invalid, Job
 
 FOLDERS = ("scenes", "reports", "failures", "timing")
-COLUMNS = ("line", "name", "status", "result", "model", "model_mismatch", "loss", "psnr", "chi2", "steps", "params",
-           "error")
-REPORTED = ("result", "model", "model_mismatch", "loss", "psnr", "chi2", "steps", "params")  # columns from a report
+COLUMNS = ("line", "name", "status", "result", "model", "model_mismatch", "noise_unknown", "loss", "psnr", "chi2", "steps",
+           "params", "error")
+REPORTED = ("result", "model", "model_mismatch", "noise_unknown", "loss", "psnr", "chi2", "steps", "params")  # columns from a report
 
 
 def _read_json(path: Path):

@@ -21,7 +21,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOT_CONVERGED, EXIT_OK, FitError
+from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOISE_UNKNOWN, EXIT_NOT_CONVERGED, EXIT_OK, FitError
 
 
 
@@ -85,4 +85,6 @@ def run(args) -> int:
     print(f"wrote {output} and {report}")
     if not result.converged:
         return EXIT_NOT_CONVERGED
-    return EXIT_MODEL_MISMATCH if result.model_mismatch else EXIT_OK
+    if result.model_mismatch:
+        return EXIT_MODEL_MISMATCH
+    return EXIT_NOISE_UNKNOWN if result.noise_unknown else EXIT_OK

@@ -75,6 +75,8 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         silent, silent_entries = silent_pixels(setup.views, r)
         sigma = views_noise(setup.views, weighted, silent, setup.sigma_given, setup.sigma_floor,
                             setup.sigma_fallback) if finite else float("nan")
+        noise_unknown = finite and sigma is None
+        sigma = float("nan") if sigma is None else sigma
         if finite:
             st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size, silent_entries)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if gram is not None else
@@ -94,7 +96,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         out = FitResult(params=public(values), stderr=public(stderr), loss=loss, psnr=psnr(sse, weight_total),
                         seconds=timings.get("solve", 0.0), converged=bool(result == SUCCESSFUL and finite),
                         result=result, history=list(history), poorly_determined=flagged, sigma=float(sigma),
-                        chi2=float(chi2), model_mismatch=bool(mismatch),
+                        chi2=float(chi2), model_mismatch=bool(mismatch), noise_unknown=noise_unknown,
                         at_bound=[p.key for p in layout if np.any(on_bound[p.key])], residuals=residuals, seen=seen,
                         timings={**timings, "stats": time.perf_counter() - start}, **common)
     if options.throw and not out.converged:

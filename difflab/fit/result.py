@@ -63,6 +63,9 @@ class FitResult:
         tree). sigma: the pixel noise used (given, or estimated from the targets; see `fit.stats`).
     chi2: reduced chi-square of the residuals at noise sigma (about 1 when the model explains the
         targets to their noise). model_mismatch: chi2 far above 1 (`fit.stats.MISMATCH_CHI2`).
+        noise_unknown: too few used pixels have used neighbours to estimate the noise (a small,
+        thin or scattered mask) and no `sigma` was given: sigma and chi2 are nan, and whether the
+        image model explains the targets is not judged (`ok` is False; pass `sigma=` to judge it).
     at_bound: names with a value (some channel) on a bound (ks = 0 for a matte target).
     censored: target pixel channels at the target's ceiling (clipped highlights), fitted as "at
         least the ceiling"; with noise, also the channels of the pixels left out because their
@@ -89,6 +92,7 @@ class FitResult:
     sigma: float = float("nan")
     chi2: float = float("nan")
     model_mismatch: bool = False
+    noise_unknown: bool = False
     at_bound: list = field(default_factory=list)
     censored: int = 0
     residuals: list = field(default_factory=list, repr=False, compare=False)
@@ -98,8 +102,9 @@ class FitResult:
 
     @property
     def ok(self) -> bool:
-        """Converged, and the image model explains the targets (no mismatch flag)."""
-        return self.converged and not self.model_mismatch
+        """Converged, and the image model explains the targets (judged against a known noise
+        level, without a mismatch flag)."""
+        return self.converged and not self.model_mismatch and not self.noise_unknown
 
     @property
     def n_params(self) -> int:
@@ -164,7 +169,7 @@ class FitResult:
             "seconds": self.seconds, "converged": self.converged, "result": self.result, "solver": self.solver,
             "poorly_determined": list(self.poorly_determined), "history": [_json_number(x) for x in self.history],
             "timings": dict(self.timings), "model": self.model, "sigma": _json_number(self.sigma),
-            "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch, "at_bound": list(self.at_bound),
+            "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch, "noise_unknown": self.noise_unknown, "at_bound": list(self.at_bound),
             "censored": self.censored,
         }
 
@@ -187,6 +192,8 @@ class FitResult:
             rows.append(f"{key:<22} {cells}{flag}")
         flags = [name for name, on in (("MODEL MISMATCH: the image model does not explain the targets; the standard "
                                          "errors assume it does", self.model_mismatch),
+                                        ("NOISE UNKNOWN: too few used pixels with used neighbours to estimate it; "
+                                         "the image model is not judged (give sigma)", self.noise_unknown),
                                         (f"at bound: {', '.join(self.at_bound)}", bool(self.at_bound)),
                                         (f"censored (clipped) target values: {self.censored}", self.censored > 0)) if on]
         rows.append(f"result: {self.result}, converged: {self.converged}, steps: {self.steps}, "

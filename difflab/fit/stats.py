@@ -7,8 +7,10 @@ whose 3 x 3 neighbourhood is all used and uncensored -- per channel where weight
 channels of used pixels out -- (L = R * [1 -2 1; -2 4 -2; 1 -2 1] has standard
 deviation 6 sigma for white noise). The Laplacian removes what a wrong model leaves smoothly (an
 offset, a gradual shading error), so the estimate sees the noise, not the mismatch. With fewer than
-MIN_NOISE_PIXELS such pixels the targets themselves are used (smooth shading adds a little: an
-upper estimate). It is floored at the targets' quantisation: one step / sqrt(12) for targets from
+MIN_NOISE_PIXELS such pixels (a small, thin or scattered mask) the noise is unknown -- the residuals
+alone cannot tell noise from a model's error -- unless given: the fit then reports sigma and chi2 as
+nan and `noise_unknown`, and makes no claim about the model. (A refit without clipped pixels takes
+the first fit's estimate.) It is floored at the targets' quantisation: one step / sqrt(12) for targets from
 8- or 16-bit files (`Setup.sigma_floor`), FLOAT_SIGMA for float data (float32 rounding of a render is ~1e-7).
 
     chi2_red = sum_i r_i^2 / (sigma^2 (N - p))
@@ -137,12 +139,12 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
     return out, count
 
 
-def views_noise(views, residual_images, silent, given: float | None, floor: float, fallback=None) -> float:
+def views_noise(views, residual_images, silent, given: float | None, floor: float, fallback=None) -> float | None:
     """The pixel noise sigma of a fit's views: `given`, or estimated from the residual images
     (H, W, 3) at the solution over the used pixels but the `silent` (per view (U,) bool,
     `silent_pixels`) and the censored ones -- per channel where a weight of 0 leaves a used pixel's
     channel out -- and at least `floor` (the quantisation's). Where too few pixels allow that:
-    `fallback` when given (a refit's, the first fit's sigma), else estimated from the targets."""
+    `fallback` when given (a refit's, the first fit's sigma), else None (unknown)."""
     if given is not None:
         return given
     clean = []
@@ -158,9 +160,8 @@ def views_noise(views, residual_images, silent, given: float | None, floor: floa
             clean[i] = in_channels(clean[i]) & (view.weighting > 0)
     estimate = estimate_sigma(residual_images, clean)
     if estimate is None:
-        estimate = fallback if fallback is not None else estimate_sigma([v.target for v in views], clean,
-                                                                       interior=False)
-    return max(estimate or 0.0, floor)
+        estimate = fallback
+    return None if estimate is None else max(estimate, floor)
 
 
 @eqx.filter_jit
@@ -218,13 +219,14 @@ def fit_statistics(gram: np.ndarray | None, sse: float, entries: int, censored: 
                    silent: int = 0) -> dict:
     """s2 = sse / dof (sse: the sum of squares of the `entries` residuals r; dof = N - p, N entries
     neither censored nor `silent` (noise-free zeros), p = `size` fitted entries), chi2 = s2 / sigma^2
-    (reduced), the mismatch flag (chi2 above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and
+    (reduced; nan when sigma is: the noise unknown, the model is not judged), the mismatch flag (chi2
+    above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and
     diag (J^T J)^-1 (p,) from gram = J^T J (p, p); gram None (a matrix-free fit): diag nan, no
     covariance is formed."""
     p = size
     dof = max(entries - censored - silent - p, 1)
     s2 = sse / dof
-    chi2 = s2 / (sigma * sigma) if sigma > 0 else math.inf
+    chi2 = math.nan if math.isnan(sigma) else s2 / (sigma * sigma) if sigma > 0 else math.inf
     mismatch = bool(chi2 > max(MISMATCH_CHI2, 1.0 + 5.0 * math.sqrt(2.0 / dof)))
     diag = np.diag(covariance_unscaled(gram)) if gram is not None else np.full(p, np.nan)
     return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": diag}
