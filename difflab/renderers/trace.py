@@ -8,14 +8,23 @@ barycentrics in Warp's `mesh_query_ray` convention: p = u p0 + v p1 + (1 - u - v
 
 from __future__ import annotations
 
+import numpy as np
 from .._warp import wp
 
 from ..lighting.warp_model import MaterialW
+from ..scene import Plane, Sphere
 
 wp.set_module_options({"enable_backward": False})
 
 HIT_NONE, HIT_TRIANGLE, HIT_SPHERE, HIT_PLANE = 0, 1, 2, 3
 MAX_SHADOW_CROSSINGS = 16  # transparent surfaces a shadow ray may pass through before it counts as blocked
+
+
+def object_kinds(objects) -> np.ndarray:
+    """Per scene object the kind of surface a ray meets on it: HIT_SPHERE, HIT_PLANE or (meshes)
+    HIT_TRIANGLE, as int32."""
+    kinds = {Sphere: HIT_SPHERE, Plane: HIT_PLANE}
+    return np.array([kinds.get(type(obj), HIT_TRIANGLE) for obj in objects], np.int32)
 
 
 @wp.struct
@@ -46,6 +55,19 @@ class HitW:
     normal: wp.vec3  # geometric normal, unit, as stored (not flipped toward the ray)
     u: float
     v: float
+
+
+@wp.func
+def leaving_skip(kind: int, obj: int, outward: wp.vec3, direction: wp.vec3):
+    """The object a ray leaving a point of object `obj` (a surface of `kind`, with `outward` its
+    sphere's outward normal there) in unit `direction` cannot meet again, -1 for none: a plane
+    always; a sphere when the ray leaves it outwards (direction . outward > 0: a convex surface is
+    behind it), not when it goes in (it meets the far wall); a mesh never (it may be concave)."""
+    if kind == HIT_PLANE:
+        return obj
+    if kind == HIT_SPHERE and wp.dot(direction, outward) > 0.0:
+        return obj
+    return -1
 
 
 @wp.func

@@ -26,6 +26,7 @@ from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
 from ..launch import (band_plan, halved_zbuffer, host_empty, launch_chunks, launch_parts, launch_row_loops,
                       load_kernels, parallel_bands, part_count, pass_threads, raster_threads, run_bands, start_beside)
+from ..trace import object_kinds
 
 
 def empty_points(compiled, name: str, count: int, clear: bool, to_zero: list | None = None) -> resolve.PointsW:
@@ -59,7 +60,7 @@ def raster_mesh(compiled) -> resolve.RasterMeshW:
     for name in ("faces", "vertices", "normals", "uvs", "face_normal", "face_material", "face_object",
                  "vertex_material", "vertex_object"):
         setattr(mesh, name, compiled.arrays[name])
-    mesh.n_mesh_faces, mesh.n_mesh_vertices = compiled.n_mesh_faces, compiled.n_mesh_vertices
+    mesh.object_kind = wp.array(object_kinds(compiled.scene.objects), dtype=wp.int32, device=compiled.device)
     compiled.built["raster mesh"] = (compiled.arrays, mesh)
     return mesh
 

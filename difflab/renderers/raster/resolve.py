@@ -16,6 +16,7 @@ from ...lighting.warp_model import MaterialW, checker_cell
 from ...vocabulary import FLAT, PHONG_SHADING
 from ..camera import CameraW, view_direction
 from ..launch import dealt_row
+from ..trace import leaving_skip
 from .coverage import NO_HIT, edge_weights, float_barycentrics
 
 wp.set_module_options({"enable_backward": False})
@@ -34,8 +35,7 @@ class RasterMeshW:
     face_object: wp.array(dtype=wp.int32)
     vertex_material: wp.array(dtype=wp.int32)  # of a face using the vertex (Gouraud's vertex points)
     vertex_object: wp.array(dtype=wp.int32)
-    n_mesh_faces: int  # faces [0, n_mesh_faces) are mesh faces; the rest tessellate spheres and planes
-    n_mesh_vertices: int  # and so are vertices [0, n_mesh_vertices)
+    object_kind: wp.array(dtype=wp.int32)  # per scene object: trace.HIT_SPHERE / HIT_PLANE / HIT_TRIANGLE (mesh)
 
 
 @wp.struct
@@ -58,7 +58,7 @@ class PointW:
     view: wp.vec3  # unit direction to the viewer
     material: int  # -1: nothing here
     cell: int  # checker cell 0 / 1
-    ignore: int  # object shadow rays skip (convex analytic surfaces), else -1
+    ignore: int  # object its shadow rays skip (`trace.leaving_skip`), else -1
 
 
 @wp.struct
@@ -92,8 +92,13 @@ class SampleW:
 
 @wp.func(inline=True)
 def make_point(p: wp.vec3, normal: wp.vec3, geo: wp.vec3, view: wp.vec3, mat: int,
-               materials: wp.array(dtype=MaterialW), obj: int, analytic: bool):
-    """A shading point, with its checker cell and the object its shadow rays skip (convex analytic ones)."""
+               materials: wp.array(dtype=MaterialW), mesh: RasterMeshW, obj: int, outward: wp.vec3):
+    """A shading point of object `obj`, with its checker cell and the object its shadow rays skip.
+
+    That is the ray tracer's rule, `leaving_skip`, for a ray leaving along `geo`: shadow rays are
+    cast only where geo . L > 0, and geo is +-`outward` (the stored face or vertex normal, outward
+    on a sphere's tessellation), so every L gives the same answer as geo. A sphere seen from
+    inside is not skipped: its far wall shadows the inside from a light outside."""
     point = PointW()
     point.p = p
     point.normal = normal
@@ -103,9 +108,7 @@ def make_point(p: wp.vec3, normal: wp.vec3, geo: wp.vec3, view: wp.vec3, mat: in
     point.cell = 0
     if materials[mat].checker_size > 0.0:
         point.cell = checker_cell(p, geo, materials[mat].checker_size)
-    point.ignore = -1
-    if analytic:
-        point.ignore = obj
+    point.ignore = leaving_skip(mesh.object_kind[obj], obj, outward, geo)
     return point
 
 
@@ -234,8 +237,8 @@ def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: w
     if shading != FLAT:
         normal = side * wp.normalize(wb[0] * mesh.normals[mesh.faces[f, 0]] + wb[1] * mesh.normals[mesh.faces[f, 1]]
                                      + wb[2] * mesh.normals[mesh.faces[f, 2]])
-    sample.point = make_point(p, normal, geo, view_direction(cam, p), mesh.face_material[f], materials,
-                              mesh.face_object[f], f >= mesh.n_mesh_faces)
+    sample.point = make_point(p, normal, geo, view_direction(cam, p), mesh.face_material[f], materials, mesh,
+                              mesh.face_object[f], mesh.face_normal[f])
     return sample
 
 
@@ -344,16 +347,16 @@ def mesh_point(mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), cam: Cam
         normal = mesh.face_normal[f]
         if wp.dot(normal, view) < 0.0:
             normal = -normal
-        return make_point(p, normal, normal, view, mesh.face_material[f], materials, mesh.face_object[f],
-                          f >= mesh.n_mesh_faces)
+        return make_point(p, normal, normal, view, mesh.face_material[f], materials, mesh, mesh.face_object[f],
+                          mesh.face_normal[f])
     n_vertices = mesh.vertices.shape[0]
     v = k % n_vertices
     p = mesh.vertices[v]
     normal = mesh.normals[v]
     if k >= n_vertices:
         normal = -normal
-    return make_point(p, normal, normal, view_direction(cam, p), mesh.vertex_material[v], materials,
-                      mesh.vertex_object[v], v >= mesh.n_mesh_vertices)
+    return make_point(p, normal, normal, view_direction(cam, p), mesh.vertex_material[v], materials, mesh,
+                      mesh.vertex_object[v], mesh.normals[v])
 
 
 @wp.kernel

@@ -21,7 +21,7 @@ from ...vocabulary import FRESNEL_NONE
 from ..camera import CameraW, primary_ray
 from ..texture.sampling import TexturesW, cone_footprint, pixel_footprint, plane_uv, plane_uv_derivatives, \
     sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
-from ..trace import HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, HitW, SceneGeomW
+from ..trace import HIT_PLANE, HIT_TRIANGLE, HitW, SceneGeomW, leaving_skip
 from .lightbuffer import LightBufferW
 from .optics import fresnel, refract
 
@@ -236,13 +236,9 @@ def fresnel_split(d: wp.vec3, surf: SurfaceW, mode: int):
 
 @wp.func
 def skip_object(geom: SceneGeomW, hit: HitW, direction: wp.vec3):
-    """The object a ray leaving this hit in `direction` cannot meet again (-1: none): a plane always,
-    a sphere when the ray leaves outwards (hit.normal is the sphere's outward normal)."""
-    if hit.kind == HIT_PLANE:
-        return hit.object
-    if hit.kind == HIT_SPHERE and wp.dot(direction, hit.normal) > 0.0:
-        return hit.object
-    return -1
+    """The object a ray leaving this hit in `direction` cannot meet again (-1: none): `leaving_skip`
+    (hit.normal is a sphere's outward normal), the rule the rasterizer's shadow rays follow too."""
+    return leaving_skip(hit.kind, hit.object, hit.normal, direction)
 
 
 @wp.func
