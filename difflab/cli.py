@@ -1,6 +1,6 @@
 """The `difflab` command line. Exit codes: 0 success, 1 internal error, 2 invalid input, 3 a fit
 that did not converge, 4 a fit flagged model_mismatch, 5 a converged fit whose noise could not be
-estimated, its model not judged (results still written for 3, 4 and 5)."""
+estimated, its model not judged (results still written for 3, 4 and 5), 130 interrupted (Ctrl-C)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,8 @@ import os
 import sys
 import traceback
 
-from .errors import EXIT_INTERNAL, EXIT_INVALID, EXIT_OK, DifflabError
+from .errors import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK, DifflabError
 from .limits import short_path
-
 
 
 #: Arguments naming files a command writes; checked before any work (a folder, a missing folder, a
@@ -38,9 +37,9 @@ def check_outputs(args) -> None:
         if getattr(args, "output_is_folder", False):
             if os.path.exists(value) and not os.path.isdir(value):
                 raise DifflabError(f"{flag}: {short_path(value)} is a file, not a folder")
-            check_output_path(os.path.join(value, "x"), flag, create_parent=True)
+            check_output_path(os.path.join(value, "x"), flag, create_parent=True, probe=True)
         else:
-            check_output_path(value, flag)
+            check_output_path(value, flag, probe=True)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -69,9 +68,9 @@ def main(argv=None) -> int:
         print("difflab: error: out of memory: the request is too big for this machine; lower the image size, "
               "spp or mesh resolution, or DIFFLAB_MEMORY_BUDGET", file=sys.stderr)
         return EXIT_INVALID
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # outputs are written atomically: an interrupted write leaves nothing
         print("difflab: interrupted", file=sys.stderr)
-        return EXIT_INTERNAL
+        return EXIT_INTERRUPTED
     except Exception:  # an internal error: show where, so it can be reported
         traceback.print_exc()
         return EXIT_INTERNAL

@@ -2,31 +2,46 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
-from .errors import DifflabError
+from .errors import DifflabError, RenderError
 from .io import add_force
 from .vocabulary import FRACTAL_KINDS, MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS, SPECULAR_MODELS
 
 
 def run_render(args) -> int:
     from .io import refuse_overwrite, save_image
-    from .renderers.api import render_frame
+    from .renderers.api import prepare, render
 
     out = Path(args.output)
-    refuse_overwrite(out, *([out.with_suffix(".npy")] if args.linear else []), force=args.force)
-    frame = render_frame(args.scene, method=args.method, shading=args.shading, specular=args.specular,
-                         max_depth=args.max_depth, spp=args.spp, device=args.device, width=args.width,
-                         height=args.height)
-    if args.linear:
-        save_image(out.with_suffix(".npy"), frame.image)
-    save_image(out, frame.image)
-    stats = frame.stats
-    print(f"wrote {out} ({frame.image.shape[1]}x{frame.image.shape[0]}, {stats['method']}, "
-          f"{stats['seconds']:.3f} s)" + (f" and {out.with_suffix('.npy')}" if args.linear else ""))
-    if stats.get("nonfinite_pixels"):
-        raise DifflabError(f"{stats['nonfinite_pixels']} pixels are not finite")
+    linear = out.with_suffix(".npy") if args.linear and out.suffix.lower() != ".npy" else None  # (.npy is linear)
+    refuse_overwrite(out, *([linear] if linear else []), force=args.force)
+    scene = prepare(args.scene, args.width, args.height, method=args.method, shading=args.shading,
+                    specular=args.specular, max_depth=args.max_depth, spp=args.spp)
+    method = scene.render.method
+    refuse_unused(args, method)
+    start = time.perf_counter()
+    image = render(scene, device=args.device)  # the image alone: no G-buffer, no recorded ray tree
+    seconds = time.perf_counter() - start
+    if linear:
+        save_image(linear, image)
+    save_image(out, image)
+    print(f"wrote {out} ({image.shape[1]}x{image.shape[0]}, {method}, {seconds:.3f} s)" +
+          (f" and {linear}" if linear else ""))
     return 0
+
+
+def refuse_unused(args, method: str) -> None:
+    """DifflabError for a render flag the renderer of `method` does not use (`--shading` with the ray
+    tracer, `--max-depth` with the rasterizer: `renderers.api.NOT_USED`), whatever its value."""
+    from .renderers.api import NOT_USED
+
+    unused, why = NOT_USED[method]
+    for name in unused:
+        if getattr(args, name, None) is not None:
+            flag = "--" + name.replace("_", "-")
+            raise RenderError(f"{flag}: does not apply to this render's method {method!r} ({why.replace('method=', '--method ')})")
 
 
 def add_render(sub) -> None:

@@ -4,8 +4,9 @@ and the command line's exit codes, one table for every command."""
 #: Exit codes of every `difflab` command: 0 success, 1 internal error, 2 invalid input (a DifflabError,
 #: one line), 3 a fit (or a batch line) that did not converge, 4 a fit flagged model_mismatch, 5 a
 #: converged fit whose noise could not be estimated, so its model was not judged (results are still
-#: written for 3, 4 and 5).
+#: written for 3, 4 and 5); 130 interrupted (Ctrl-C: 128 + SIGINT, as shells report it).
 EXIT_OK, EXIT_INTERNAL, EXIT_INVALID, EXIT_NOT_CONVERGED, EXIT_MODEL_MISMATCH, EXIT_NOISE_UNKNOWN = 0, 1, 2, 3, 4, 5
+EXIT_INTERRUPTED = 130
 
 
 class DifflabError(Exception):
@@ -42,6 +43,11 @@ class RenderError(DifflabError, ValueError):
 
 class OutputError(DifflabError, ValueError):
     """An output would overwrite an existing file (or a non-empty folder) and --force was not given."""
+
+
+class WriteError(DifflabError, OSError):
+    """An output could not be written (no permission, a full disk, a read-only file system); the
+    message names the file and the reason. Also an OSError, as the failure it reports."""
 
 
 class FitError(DifflabError, RuntimeError):

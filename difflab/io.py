@@ -21,7 +21,7 @@ import numpy as np
 from PIL import Image
 
 from . import limits
-from .errors import DifflabError, OutputError
+from .errors import DifflabError, OutputError, WriteError
 from .limits import short_path, shorten
 
 _UMASK = os.umask(0o022)  # read the process umask once (setting it is not thread-safe), then restore it
@@ -100,10 +100,13 @@ def file_path(path, what: str = "path", error: type[DifflabError] = DifflabError
     return Path(path)
 
 
-def check_output_path(path: str | os.PathLike, what: str = "output", create_parent: bool = False) -> Path:
+def check_output_path(path: str | os.PathLike, what: str = "output", create_parent: bool = False,
+                      probe: bool = False) -> Path:
     """`path` as a file to write: not an existing folder; its parent a folder (made when
-    `create_parent`, else it must exist), no file used as a folder on the way. Raises DifflabError
-    naming `what` and the path, before any work is done."""
+    `create_parent`, else it must exist) that takes new files, no file used as a folder on the way.
+    Raises DifflabError naming `what` and the path, before any work is done. `probe`: test the
+    folder by creating (and removing) a file in it, as os.access cannot: it says yes to root on a
+    read-only or virtual file system (/sys)."""
     path = file_path(path, what)
     if not path.name or path.is_dir():
         raise DifflabError(f"{what}: {short_path(path)} is a folder; give a file name")
@@ -123,7 +126,14 @@ def check_output_path(path: str | os.PathLike, what: str = "output", create_pare
         except OSError as exc:
             raise DifflabError(f"{what}: cannot make folder {short_path(parent)} ({exc.strerror})") from None
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise DifflabError(f"{what}: folder {short_path(parent)} is not writable")
+        raise WriteError(f"{what}: folder {short_path(parent)} is not writable")
+    if probe:
+        try:
+            fd, name = tempfile.mkstemp(prefix=".difflab-probe.", dir=parent)
+        except OSError as exc:
+            raise WriteError(f"{what}: cannot write in folder {short_path(parent)} ({exc.strerror or exc})") from None
+        os.close(fd)
+        os.remove(name)
     return path
 
 
@@ -157,17 +167,31 @@ def atomic_path(path: str | os.PathLike, *, sweep: bool = True):
     if sweep:
         remove_stale_temps(path)
     _install_signal_cleanup()
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=TMP_MARK + path.suffix, dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=TMP_MARK + path.suffix, dir=path.parent)
+    except OSError as exc:
+        raise _write_error(path, exc) from exc
     _LIVE.add(tmp)
     try:
         os.close(fd)
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
         yield Path(tmp)
         os.replace(tmp, path)
+    except WriteError:
+        raise
+    except OSError as exc:  # a full disk, a quota, an I/O error: the file is not written
+        raise _write_error(path, exc) from exc
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
         _LIVE.discard(tmp)
+
+
+def _write_error(path: Path, exc: OSError) -> WriteError:
+    """WriteError naming `path` and why the OSError `exc` stopped writing it (its errno kept)."""
+    error = WriteError(f"{short_path(path)}: cannot write ({exc.strerror or ' '.join(str(exc).split())}); not written")
+    error.errno = exc.errno
+    return error
 
 
 def read_regular_file(path: str | os.PathLike, max_bytes: int, error: type[DifflabError] = DifflabError,

@@ -1,8 +1,10 @@
 """The command line (exit codes, outputs) and the file boundary (sRGB, atomic writes)."""
 
 import json
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -226,3 +228,144 @@ def test_linear_8_bit_files_skip_the_srgb_curve(tmp_path):
     save_image(tmp_path / "enc.png", image)  # the default encodes: mid-grey is stored brighter
     np.testing.assert_allclose(load_image(tmp_path / "enc.png", srgb=False)[0, 0, 2],
                                np.round(255 * linear_to_srgb(0.5)) / 255, atol=1e-7)
+
+
+# ---- the render command does only the image's work; outputs that cannot be written ---------------
+
+
+def glass_planes(tmp_path):
+    """Two glass planes (every hit spawns a reflected and a refracted ray), 24x16 at spp 16: its
+    recorded ray tree has 24576 nodes (about 3.9 MiB), the image alone needs under 2 MiB."""
+    d = scene_dict([{"type": "plane", "point": [0, 0, -1], "normal": [0, 0.3, 1], "material": "glass"},
+                    {"type": "plane", "point": [0, -0.8, 0], "normal": [0, 1, 0], "material": "floor"}],
+                   {"glass": {"kd": [0.0] * 3, "ks": [0.3] * 3, "n": 10, "kr": 0.5, "kt": 0.8, "ior": 1.5},
+                    "floor": {"kd": [0.5] * 3, "kr": 0.5}},
+                   lights=[{"type": "point", "position": [2, 3, 4]}],
+                   render={"method": "raytrace", "max_depth": 6, "spp": 16})
+    d["camera"].update(width=24, height=16)
+    path = tmp_path / "glass.json"
+    path.write_text(json.dumps(d))
+    return d, path
+
+
+def test_render_command_renders_the_image_alone_within_a_budget_the_ray_tree_is_over(tmp_path, monkeypatch, capsys):
+    """`difflab render` forms the image as `difflab.render` does (no recorded ray tree, no G-buffer):
+    under a 2 MB budget that refuses recording this scene's ray tree, it writes the same pixels."""
+    from difflab import RenderError, render, render_frame
+
+    d, scene = glass_planes(tmp_path)
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "2M")
+    with pytest.raises(RenderError, match="record_tree: a ray tree of 24576 nodes"):
+        render_frame(d)
+    out = tmp_path / "glass.npy"
+    assert main(["render", str(scene), "-o", str(out)]) == 0
+    np.testing.assert_array_equal(load_image(out), render(d))
+    assert capsys.readouterr().out.startswith(f"wrote {out} (24x16, raytrace, ")
+
+
+def output_cases(tmp_path, folder):
+    """(argv, output) of each command that writes a file, writing into `folder` (inputs in tmp_path)."""
+    scene = tiny_scene(tmp_path)
+    save_image(tmp_path / "target.npy", np.full((32, 32, 3), 0.2, np.float32))
+    return {
+        "render": (["render", str(scene), "-o", str(folder / "r.png"), "--width", "8", "--height", "8"], folder / "r.png"),
+        "fractal": (["fractal", "koch", "-o", str(folder / "k.png"), "--width", "64", "--height", "48", "--order", "2"],
+                    folder / "k.png"),
+        "fit": (["fit", str(scene), str(tmp_path / "target.npy"), "--material", "m", "--params", "kd",
+                 "-o", str(folder / "fitted.json")], folder / "fitted.json"),
+    }
+
+
+@pytest.mark.parametrize("where", ["read-only folder", "/sys"])
+@pytest.mark.parametrize("command", ["render", "fractal", "fit"])
+def test_an_output_folder_that_takes_no_files_is_refused_before_the_work(tmp_path, capsys, monkeypatch, command, where):
+    """Exit 2, one line naming the folder, and the command's work never starts: a folder without
+    write permission (root may write there: skipped), and /sys, where even root cannot create a file
+    (os.access says yes to root: the folder is probed by creating a file)."""
+    from difflab import commands
+    from difflab.fit import command as fit_command
+
+    if where == "/sys":
+        folder = Path("/sys")
+        if not folder.is_dir():
+            pytest.skip("no /sys on this system")
+    else:
+        folder = tmp_path / "locked"
+        folder.mkdir()
+        folder.chmod(0o500)
+        if os.geteuid() == 0:
+            pytest.skip("running as root: a folder without write permission is writable")
+    argv, _ = output_cases(tmp_path, folder)[command]
+
+    def work(args):
+        raise AssertionError("the work started")
+
+    monkeypatch.setattr(*{"render": (commands, "run_render"), "fractal": (commands, "run_fractal"),
+                          "fit": (fit_command, "run")}[command], work)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"difflab: error: -o/--output: ") and str(folder) in err[0]
+    assert "not writable" in err[0] or "cannot write in folder" in err[0]
+
+
+@pytest.mark.parametrize("command", ["render", "fractal", "fit"])
+def test_a_full_disk_while_writing_is_one_line_exit_2_and_leaves_nothing(tmp_path, capsys, monkeypatch, command):
+    """OSError(ENOSPC) from the writer, after the work: `difflab: error: OUTPUT: cannot write (...)`,
+    exit 2, no output and no temporary left in the folder."""
+    import errno
+    import pathlib
+
+    import matplotlib.figure
+
+    folder = tmp_path / "out"
+    folder.mkdir()
+    argv, output = output_cases(tmp_path, folder)[command]
+
+    def full_disk(self, fp, *args, **kwargs):  # (Path.write_text(self, data) writes to self)
+        with open(self if isinstance(self, pathlib.Path) else fp, "wb") as f:
+            f.write(b"the start of a file")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(*{"render": (Image.Image, "save"), "fractal": (matplotlib.figure.Figure, "savefig"),
+                          "fit": (pathlib.Path, "write_text")}[command], full_disk)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"difflab: error: {output}: cannot write ({os.strerror(errno.ENOSPC)}); not written"
+    assert list(folder.iterdir()) == []
+
+
+def test_an_interrupted_command_exits_130(tmp_path, capsys, monkeypatch):
+    """Ctrl-C (KeyboardInterrupt) is exit 130 (128 + SIGINT, as shells report it), not 1 (a bug),
+    with one line and no traceback; a write it interrupts leaves nothing."""
+    folder = tmp_path / "out"
+    folder.mkdir()
+
+    def interrupted(self, fp, *args, **kwargs):
+        with open(fp, "wb") as f:
+            f.write(b"half")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Image.Image, "save", interrupted)
+    argv, _ = output_cases(tmp_path, folder)["render"]
+    assert main(argv) == 130
+    assert capsys.readouterr().err == "difflab: interrupted\n"
+    assert list(folder.iterdir()) == []
+
+
+@pytest.mark.parametrize("render, flags, message", [
+    ({}, ["--method", "raytrace", "--shading", "phong"],
+     "--shading: does not apply to this render's method 'raytrace' (the ray tracer shades every hit with "
+     "interpolated normals; use --method 'raster')"),
+    ({"method": "raytrace"}, ["--shading", "gouraud"], "--shading: does not apply to this render's method 'raytrace'"),
+    ({}, ["--max-depth", "1"],
+     "--max-depth: does not apply to this render's method 'raster' (the rasterizer draws primary visibility on a "
+     "regular sample grid; use --method 'raytrace')"),
+])
+def test_a_flag_of_the_other_renderer_is_an_error(tmp_path, capsys, render, flags, message):
+    """docs/cli.md: --shading is the rasterizer's (an error with the ray tracer, even `phong`, the value
+    that says what it does), --max-depth the ray tracer's; the method is the flag's or the scene's."""
+    out = tmp_path / "o.png"
+    assert main(["render", str(tiny_scene(tmp_path, render=render)), "-o", str(out), *flags]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"difflab: error: {message}") and len(err.splitlines()) == 1
+    assert not out.exists()

@@ -103,9 +103,9 @@ def test_fit_command_wrong_size_and_missing_target_exit_2(files, capsys):
     assert main(["fit", str(scene), str(tmp / "missing.png"), "--material", "red", "-o", str(tmp / "x.json")]) == 2
 
 
-def test_output_is_atomic(files, monkeypatch):
-    """A writer failing midway leaves the old file as it was and no temporary file behind (exit 1:
-    an internal error, not bad input)."""
+def test_output_is_atomic(files, monkeypatch, capsys):
+    """A writer failing midway leaves the old file as it was and no temporary file behind; exit 2
+    with one line naming the file and the reason (docs/cli.md: an output that cannot be written)."""
     scene, target, tmp = files
     out = tmp / "fitted.json"
     out.write_text("old")
@@ -117,6 +117,7 @@ def test_output_is_atomic(files, monkeypatch):
             raise OSError("disk full")
 
     monkeypatch.setattr(io, "write_json_atomic", failing)
-    assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out), "--force"]) == 1
+    assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out), "--force"]) == 2
+    assert capsys.readouterr().err == f"difflab: error: {out}: cannot write (disk full); not written\n"
     assert out.read_text() == "old"
     assert sorted(os.listdir(tmp)) == sorted(["fitted.json", "scene.json", "target.npy"])
