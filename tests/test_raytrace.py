@@ -30,7 +30,8 @@ def trace(scene, **settings):
 
 
 def primary_rays(camera, width, height):
-    """Float64 origins and unit directions through pixel centres, as `camera.primary_ray` builds them."""
+    """Float64 near-plane origins and unit directions through pixel centres, unprojected through the
+    float64 matrices: an independent model of `camera.primary_ray`'s rays."""
     cam = Scene.from_dict(scene_dict([], {"m": {}}, camera=camera)).camera
     inv = np.linalg.inv(projection_matrix(cam, width, height) @ view_matrix(cam))
     x, y = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)

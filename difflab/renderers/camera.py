@@ -5,6 +5,12 @@ space, `projection_matrix` camera to clip space (OpenGL's glFrustum / glOrtho fo
 [-1, 1] after division), and the viewport maps NDC to raster coordinates with row 0 at the top:
 x_raster = (x_ndc + 1) W / 2, y_raster = (1 - y_ndc) H / 2. Pixel (i, j) has its centre at
 (j + 0.5, i + 0.5).
+
+Rays are built from the camera's basis, not by unprojecting through the (float32) inverse
+view-projection matrix, whose rounding grows with far / near and with the eye's distance from the
+origin: raster point (x, y) has NDC (a, b) = (2 x / W - 1, 1 - 2 y / H) and camera-plane offset
+a * half_w * right + b * half_h * up, where half_h = tan(fov_y / 2) (perspective) or ortho_height / 2
+(orthographic) and half_w = half_h * W / H -- the same NDC as the projection matrices give.
 """
 
 from __future__ import annotations
@@ -24,8 +30,12 @@ class CameraW:
 
     eye: wp.vec3
     forward: wp.vec3  # unit view direction (camera -z)
+    right: wp.vec3  # unit camera +x
+    up: wp.vec3  # unit camera +y
+    half_w: float  # half the view's width: at unit distance (perspective) or in scene units (orthographic)
+    half_h: float  # half the view's height, likewise: tan(fov_y / 2) or ortho_height / 2
+    near: float  # near plane's distance along `forward`
     view_proj: wp.mat44  # world -> clip
-    inv_view_proj: wp.mat44  # clip -> world
     perspective: int  # 1 perspective, 0 orthographic
     width: int
     height: int
@@ -53,11 +63,19 @@ def projection_matrix(camera, width: int | None = None, height: int | None = Non
     return orthographic(camera.ortho_height, width / height, camera.near, camera.far)
 
 
+def half_height(camera) -> float:
+    """Half the view's height: at unit distance, tan(fov_y / 2) (perspective), or in scene units,
+    ortho_height / 2 (orthographic)."""
+    if camera.projection == "perspective":
+        return math.tan(math.radians(camera.fov_y) / 2.0)
+    return camera.ortho_height / 2.0
+
+
 def pixel_size_at(camera, distance: float, height: int) -> float:
     """World-space height of one raster row at `distance` in front of the camera."""
     if camera.projection == "perspective":
-        return 2.0 * distance * math.tan(math.radians(camera.fov_y) / 2.0) / height
-    return camera.ortho_height / height
+        return 2.0 * distance * half_height(camera) / height
+    return 2.0 * half_height(camera) / height
 
 
 @functools.lru_cache(maxsize=64)
@@ -67,11 +85,14 @@ def camera_struct(camera, width: int, height: int) -> CameraW:
     small frame)."""
     view = view_matrix(camera)
     view_proj = projection_matrix(camera, width, height) @ view
+    right, up, forward = camera_frame(camera)
     out = CameraW()
     out.eye = wp.vec3(*camera.eye)
-    out.forward = wp.vec3(*(-view[2, :3]))  # as camera_frame's
+    out.forward, out.right, out.up = wp.vec3(*forward), wp.vec3(*right), wp.vec3(*up)
+    out.half_h = half_height(camera)
+    out.half_w = out.half_h * width / height
+    out.near = float(camera.near)
     out.view_proj = wp.mat44(*view_proj.astype(np.float32).ravel())
-    out.inv_view_proj = wp.mat44(*np.linalg.inv(view_proj).astype(np.float32).ravel())
     out.perspective = 1 if camera.projection == "perspective" else 0
     out.width, out.height = int(width), int(height)
     return out
@@ -87,11 +108,18 @@ def view_direction(cam: CameraW, p: wp.vec3):
 
 @wp.func
 def primary_ray(cam: CameraW, x: float, y: float):
-    """Origin and unit direction of the ray through raster point (x, y) of the sample grid."""
-    ndc_x = 2.0 * x / float(cam.width) - 1.0
-    ndc_y = 1.0 - 2.0 * y / float(cam.height)
-    near = cam.inv_view_proj * wp.vec4(ndc_x, ndc_y, -1.0, 1.0)
-    far = cam.inv_view_proj * wp.vec4(ndc_x, ndc_y, 1.0, 1.0)
-    p_near = wp.vec3(near[0], near[1], near[2]) / near[3]
-    p_far = wp.vec3(far[0], far[1], far[2]) / far[3]
-    return p_near, wp.normalize(p_far - p_near)
+    """Origin and unit direction of the ray through raster point (x, y) of the grid `cam` was built
+    for: from the eye along normalize(forward + offset) (perspective), or from the eye's plane at
+    eye + offset along forward (orthographic); offset = a half_w right + b half_h up (module doc).
+    Rays start there, not on the near plane: see `near_distance`."""
+    offset = (2.0 * x / float(cam.width) - 1.0) * cam.half_w * cam.right \
+        + (1.0 - 2.0 * y / float(cam.height)) * cam.half_h * cam.up
+    if cam.perspective == 1:
+        return cam.eye, wp.normalize(cam.forward + offset)
+    return cam.eye + offset, cam.forward
+
+
+@wp.func
+def near_distance(cam: CameraW, direction: wp.vec3):
+    """How far a `primary_ray` of unit `direction` travels from its origin to the near plane."""
+    return cam.near / wp.dot(direction, cam.forward)

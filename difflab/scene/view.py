@@ -15,8 +15,9 @@ from ._spec import Spec, bounds, colour, spec_field
 #: Largest image (width * height) a scene may ask for: 64 megapixels, the memory budget of a frame
 #: and its G-buffer. A supersampled render's sample grid (width * height * spp) is held to it too.
 MAX_PIXELS = 64 * 1024 * 1024
-#: Largest far / near ratio: beyond ~1e7 float32 unprojection of primary rays collapses (measured:
-#: far / near = 1e8 gives a black ray-traced image of a visible sphere).
+#: Largest far / near ratio: the rasterizer's float32 depth z_ndc ~ 1 - 2 near / z (far >> near) is
+#: within one float32 ulp (6e-8) of 1 for every z beyond ~1e7 near, so its z-buffer cannot order them.
+#: (The ray tracer builds its rays from the camera basis and has no such limit.)
 MAX_FAR_NEAR = 1e6
 #: Smallest field of view (degrees) and orthographic height (scene units) the camera matrices and
 #: the sphere tessellation stay finite for.
@@ -79,8 +80,8 @@ class Camera(Record):
         if not far > near:
             fail(p("far"), f"must be > near ({near}), got {show(v['far'])}")
         if far / near > MAX_FAR_NEAR:
-            fail(p("near"), f"far / near = {far / near:.3g} is over {MAX_FAR_NEAR:.0e} (float32 depth and primary "
-                 f"rays lose all precision); raise near or lower far")
+            fail(p("near"), f"far / near = {far / near:.3g} is over {MAX_FAR_NEAR:.0e} (the rasterizer's float32 "
+                 f"depth loses all precision); raise near or lower far")
         at_least(out["fov_y"], MIN_FOV_Y, p("fov_y"))
         at_least(out["ortho_height"], MIN_ORTHO_HEIGHT, p("ortho_height"))
         return out

@@ -149,11 +149,11 @@ def make_whitted_kernel(stack_size: int):
         rec = light_arrays(tree)
         nonfinite = int(0)
         for j in range(out.color.shape[1]):
-            xy, origin, direction, t_far = primary_sample(points, params.side, cam, params.far, i, j)
+            xy, start, direction, near, t_far = primary_sample(points, params.side, cam, params.far, i, j)
             base = int(0)
             if params.record == 1:
                 base = tree.offset[i, j]
-            first = new_ray(origin, origin, direction, wp.vec3(1.0), 0.0, 1, -1, PRIMARY, -1, -1)
+            first = new_ray(start, start + near * direction, direction, wp.vec3(1.0), near, 1, -1, PRIMARY, -1, -1)
             if wp.static(stack_size > 1):  # (a one-ray stack is the primary ray alone: no array to clear)
                 stack = wp.zeros(shape=stack_size, dtype=RayW)
                 stack[0] = first

@@ -18,7 +18,7 @@ from ..._warp import wp
 
 from ...lighting.warp_model import LightW, MaterialW, checker_cell, surface_material, textured_material
 from ...vocabulary import FRESNEL_NONE
-from ..camera import CameraW, primary_ray
+from ..camera import CameraW, near_distance, primary_ray
 from ..texture.sampling import TexturesW, cone_footprint, pixel_footprint, plane_uv, plane_uv_derivatives, \
     sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
 from ..trace import HIT_PLANE, HIT_TRIANGLE, HitW, SceneGeomW, leaving_skip
@@ -54,11 +54,11 @@ class SceneW:
 class RayW:
     """A ray waiting on the walk's stack."""
 
-    origin: wp.vec3  # where it starts: `start` moved epsilon off the surface
-    start: wp.vec3  # the surface point it leaves (the eye for the primary ray)
+    origin: wp.vec3  # where it is traced from: `start` moved epsilon off the surface (primary: onto the near plane)
+    start: wp.vec3  # the surface point it leaves (the primary ray: `camera.primary_ray`'s origin, the eye)
     direction: wp.vec3  # unit
     weight: wp.vec3  # path weight, before this ray's own absorption
-    path: float  # path length from the eye to `start` (texture footprints)
+    path: float  # path length from the eye to `origin` (texture footprints)
     depth: int  # 1 for the primary ray
     parent: int  # the parent's node index within the sample (-1: the primary ray)
     kind: int  # tree.PRIMARY / REFLECTED / REFRACTED
@@ -124,11 +124,14 @@ def sample_xy(points: wp.array2d(dtype=wp.vec2), side: int, i: int, j: int):
 
 @wp.func
 def primary_sample(points: wp.array2d(dtype=wp.vec2), side: int, cam: CameraW, far: float, i: int, j: int):
-    """Sample (i, j)'s raster position, its primary ray's origin (on the near plane) and unit
-    direction, and the ray's t at the far plane (where the rasterizer clips too)."""
+    """Sample (i, j)'s raster position and primary ray: it leaves `camera.primary_ray`'s origin
+    (the eye, perspective) and is traced from where it crosses the near plane, `near` further on
+    (where the rasterizer clips), to the far plane, t_far beyond that (where the rasterizer clips too).
+    Returns xy, the ray's start (the eye), its unit direction, near and t_far."""
     xy = sample_xy(points, side, i, j)
-    origin, direction = primary_ray(cam, xy[0], xy[1])
-    return xy, origin, direction, (far - wp.dot(origin - cam.eye, cam.forward)) / wp.dot(direction, cam.forward)
+    start, direction = primary_ray(cam, xy[0], xy[1])
+    near = near_distance(cam, direction)
+    return xy, start, direction, near, (far - cam.near) / wp.dot(direction, cam.forward)
 
 
 @wp.func(inline=True)
