@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from difflab import Scene, render, render_frame
+from difflab.renderers.compile import compile_scene
 
 EDGES = 0.05  # a reference pixel differing from a 4-neighbour by more than this sits on an edge
 
@@ -23,8 +24,9 @@ BASE = {
 
 
 def transformed(d, scale=1.0, shift=(0.0, 0.0, 0.0), **camera):
-    """Scene dict `d` under p -> scale p + shift (camera, lights, objects, near / far, checker cells,
-    attenuation and absorption per unit length): the same picture, in other coordinates."""
+    """Scene dict `d` under p -> scale p + shift (camera, lights, objects and mesh transforms, near /
+    far, checker cells, attenuation and absorption per unit length): the same picture, in other
+    coordinates."""
     shift = np.asarray(shift, float)
 
     def point(p):
@@ -53,6 +55,9 @@ def transformed(d, scale=1.0, shift=(0.0, 0.0, 0.0), **camera):
                 o[key] = point(o[key])
         if "radius" in o:
             o["radius"] = o["radius"] * scale
+        if "transform" in o:  # the mesh's own transform, then this one
+            t = o["transform"]
+            o["transform"] = {**t, "translate": point(t.get("translate", [0, 0, 0])), "scale": t.get("scale", 1) * scale}
         objects.append(o)
     out["objects"] = objects
     return out
@@ -116,14 +121,68 @@ def test_a_tiny_near_plane_leaves_the_image_as_it_was():
 def test_a_camera_far_from_the_origin_sees_what_it_sees_at_the_origin():
     """The whole scene moved by 1e5 along x: float32 positions there are 1/128 apart, so a hit point
     cannot be nearer than ~0.004 to the true one. Where that matters (a hit within an ulp of a checker
-    line, a shadow edge or the silhouette: pixels on an edge of the reference) a pixel may flip
-    (measured: 8 of 1628 edge pixels); every other pixel must keep its value within 0.02 (measured
-    0.006: the sphere's normal, from a point off by an ulp over a radius of 0.7, under an n = 30
-    highlight). The unprojected rays moved hits by 3.2 units: 823 pixels changed by > 0.1."""
-    ref = render(Scene.from_dict(BASE))
-    far = render(Scene.from_dict(transformed(BASE, shift=(1e5, 0, 0))))
+    line or the silhouette: pixels on an edge of the reference) a pixel may flip (measured: 8 of 1567
+    edge pixels); every other pixel must keep its value within 0.02 (measured 0.006: the sphere's
+    normal, from a point off by an ulp over a radius of 0.7, under an n = 30 highlight). Shadows are
+    off: their rays start a few ulps (`ray_epsilon`) off the surface, which moves shadow edges by
+    about as much. The unprojected rays moved hits by 3.2 units: 823 pixels changed by > 0.1."""
+    ref = render(Scene.from_dict(BASE), shadows=False)
+    far = render(Scene.from_dict(transformed(BASE, shift=(1e5, 0, 0))), shadows=False)
     err = np.abs(far - ref).max(-1)
     edge = edge_pixels(ref)
     assert err[~edge].max() <= 0.02
     assert (err > 0.02).sum() <= 0.02 * edge.sum()
 
+GLASS = {**BASE, "materials": {**BASE["materials"],
+                               "g": {"kd": [0, 0, 0], "ks": [0.5, 0.5, 0.5], "n": 100, "kt": 0.9, "ior": 1.5,
+                                     "absorption": [0.6, 0.2, 0.0]}},
+         "objects": BASE["objects"] + [{"type": "sphere", "center": [-1.1, 0.5, 0.9], "radius": 0.5, "material": "g"}],
+         "render": {**BASE["render"], "max_depth": 5, "fresnel": "schlick"}}
+
+GRAZING = {
+    "camera": {"eye": [0, 1, 4], "target": [0, 0.5, 0], "width": 96, "height": 72, "near": 0.01, "far": 1000},
+    "ambient": [0, 0, 0], "lights": [{"type": "directional", "direction": [-1, -0.3, -0.2]}],
+    "materials": {"m": {"kd": [0.8, 0.8, 0.8]}},
+    "objects": [{"type": "sphere", "center": [0, 0.7, 0], "radius": 0.7, "material": "m"},
+                {"type": "mesh", "builtin": "teapot", "resolution": 4, "material": "m",
+                 "transform": {"translate": [1.5, 0, 0], "scale": 0.4}},
+                {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "m"}],
+    "render": {"method": "raytrace", "shadows": True},
+}
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1e3])
+def test_a_uniformly_scaled_scene_renders_the_same_image(scale):
+    """A glass sphere (Schlick Fresnel, absorption, depth 5), a Phong sphere and a checker floor, under
+    an attenuated point light: scaled by 1e-3 or 1e3 about the origin, the ray offsets scale too and
+    the image stays within 1e-4 (measured 2.2e-5: float32 rounding). With offsets stuck at 1e-4 absolute,
+    scale 1e-3 changed 107 pixels by > 0.1."""
+    ref = render(Scene.from_dict(GLASS))
+    got = render(Scene.from_dict(transformed(GLASS, scale=scale)))
+    assert np.abs(got - ref).max() <= 1e-4
+
+
+def test_shadows_of_a_thin_scene_stay_dark():
+    """Grazing light over a sphere, a teapot and a floor: what is in shadow at scale 1 (darker than half
+    its unshadowed value) stays in shadow at scale 1e-3, and the images agree within 1e-4 (measured
+    4e-6). A 1e-4 offset at scale 1e-3 started shadow rays past the occluders: 37 of the 576 shadowed
+    pixels came out lit (up to 0.70)."""
+    ref = render(Scene.from_dict(GRAZING))
+    unshadowed = render(Scene.from_dict(GRAZING), shadows=False)
+    shadowed = (ref[..., 0] < 0.5 * unshadowed[..., 0]) & (unshadowed[..., 0] > 0.1)
+    assert shadowed.sum() > 500 and np.all(ref[shadowed] == 0.0)
+    got = render(Scene.from_dict(transformed(GRAZING, scale=1e-3)))
+    assert np.all(got[shadowed] == 0.0)
+    assert np.abs(got - ref).max() <= 1e-4
+
+
+def test_ray_offsets_follow_the_scene_down_to_float32_rounding():
+    """`ray_epsilon`: 1e-4 x the scene's diagonal at any scale, but never below 2 x 2^-23 (2 to 4
+    float32 ulps) of the largest coordinate a hit can have (the far plane's reach from the eye
+    included): 1e-4 x the diagonal, 4.5e-4 here, is under an ulp of 1e5 (0.0078), so a hit's
+    offset point would round back onto it."""
+    for scale in (1e-3, 1.0, 1e3):
+        compiled = compile_scene(transformed(GRAZING, scale=scale, far=10 * scale))
+        assert compiled.epsilon / scale == pytest.approx(compile_scene(transformed(GRAZING, far=10)).epsilon, rel=1e-6)
+    moved = compile_scene(transformed(GRAZING, shift=(1e5, 0, 0), far=10))
+    assert moved.epsilon == pytest.approx(2 * 2.0 ** -23 * (1e5 + 10), rel=1e-6)

@@ -29,7 +29,8 @@ from .launch import host_empty, resolve_device
 from .texture.store import TextureStore, scene_textures
 from .trace import SceneGeomW
 
-RAY_EPSILON_SCALE = 1e-4  # ray offset = this x the scene's extent (bounding-box diagonal, at least 1)
+RAY_EPSILON_SCALE = 1e-4  # ray offset = this x the scene's extent (bounding-box diagonal) ...
+RAY_EPSILON_ULPS = 2.0  # ... but at least this x 2^-23 (2 to 4 float32 ulps) of its largest coordinate
 MAX_SPHERE_SEGMENTS = 1024
 MIN_SPHERE_SEGMENTS = 128  # keeps interpolated normals within ~1e-3 of the sphere's inside the silhouette
 PLANE_RINGS = 12  # grid lines each side of the eye's foot on a rasterized plane, spaced geometrically
@@ -289,12 +290,19 @@ def triangle_soup(parts) -> dict:
 
 
 def ray_epsilon(camera, mesh_vertices: np.ndarray, spheres) -> float:
-    """RAY_EPSILON_SCALE x the diagonal (at least 1) of the box around the eye, the meshes and spheres."""
-    extent_points = [np.asarray(camera.eye, float)[None], mesh_vertices.reshape(-1, 3)]
+    """How far (scene units) a new ray starts off the surface it leaves: RAY_EPSILON_SCALE x the
+    diagonal of the box around the eye, the meshes and the spheres -- so a uniformly scaled scene
+    scales its offsets and renders the same image -- but at least RAY_EPSILON_ULPS float32 ulps of
+    the largest coordinate a hit can have (that box's, or a plane's within the far plane: |eye| +
+    far), where float32 rounding of hit points, not the scene's size, sets the offset a ray needs."""
+    eye = np.asarray(camera.eye, float)
+    extent_points = [eye[None], mesh_vertices.reshape(-1, 3)]
     for sphere, _, _ in spheres:
         extent_points.append(np.asarray(sphere.center)[None] + np.array([[sphere.radius] * 3, [-sphere.radius] * 3]))
     points = np.concatenate(extent_points)
-    return RAY_EPSILON_SCALE * max(1.0, float(np.linalg.norm(points.max(0) - points.min(0))))
+    largest = max(float(np.abs(points).max()), float(np.abs(eye).max()) + camera.far)
+    return max(RAY_EPSILON_SCALE * float(np.linalg.norm(points.max(0) - points.min(0))),
+               RAY_EPSILON_ULPS * 2.0 ** -23 * largest)
 
 
 def ray_geometry(arrays: dict, mesh_vertices: np.ndarray, spheres, planes, epsilon: float, device: str):
