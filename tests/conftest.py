@@ -21,6 +21,18 @@ def scene_dict(objects, materials, *, camera=None, lights=None, ambient=(0.0, 0.
     return d
 
 
+#: One polygon face each, in the z = 0 plane facing +z, spanning [-1, 1]^2.
+POLYGONS = {"quad": [(-1, -1), (1, -1), (1, 1), (-1, 1)], "pentagon": [(-1, -1), (1, -1), (1, 1), (0, 1), (-1, 1)]}
+
+
+def polygon_obj(points) -> str:
+    """OBJ text of one polygon face over `points` (x, y), each corner with its own `vt`, the uv
+    (x + 1, y + 1) / 2 (OBJ's v = 0 at the bottom), and one shared `vn` 0 0 1."""
+    lines = [f"v {x} {y} 0" for x, y in points] + [f"vt {(x + 1) / 2} {(y + 1) / 2}" for x, y in points]
+    lines += ["vn 0 0 1", "f " + " ".join(f"{k}/{k}/1" for k in range(1, len(points) + 1))]
+    return "\n".join(lines) + "\n"
+
+
 @pytest.fixture
 def compare_images(tmp_path):
     """Assert two images agree within `atol`; on failure write render, reference and difference PNGs."""

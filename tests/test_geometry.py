@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from conftest import POLYGONS, polygon_obj
 from difflab.errors import MeshError
 from difflab.geometry import (TriMesh, box, concatenate, cylinder, face_areas, face_normals,
                               load_mesh, quad, rotation_matrix, teapot, teapot_control_points,
@@ -574,17 +575,23 @@ def test_load_mesh_reads_leading_zeros_and_crlf_lines(tmp_path):
     assert loaded.faces.tolist() == [[0, 1, 2]] and loaded.vertices[1].tolist() == [1, 0, 0]
 
 
-def obj_file(layout: str, *, vt_columns=2, unused=None, extra_lines=(), quads=False, seed=3) -> str:
-    """OBJ text with `layout` corners (a, a/t, a//n, a/t/n): 8 random vertices, 6 uvs, 7 normals,
-    10 triangles (or quads) with random uv / normal indices (so a vertex meets several: trimesh
-    picks one), comment, o / g / s / mtllib / usemtl lines; vertex `unused` used by no face."""
+def obj_data(*, vt_columns=2, unused=None, quads=False, seed=3):
+    """8 random vertices, 6 uvs, 7 normals, 10 triangles (or quads) with random uv / normal indices
+    (so a vertex meets several: it must be split), vertex `unused` used by no face: (vertices, uvs,
+    normals, faces, uv indices, normal indices), 0-based."""
     rng = np.random.default_rng(seed)
     vertices, uvs, normals = rng.normal(size=(8, 3)), rng.random((6, vt_columns)), rng.normal(size=(7, 3))
     used = [k for k in range(8) if k != unused]
     faces = rng.choice(used, size=(10, 4 if quads else 3))
     faces[:2, :3] = np.reshape(used[:6], (2, 3))
     faces[2, :len(used) - 6] = used[6:]
-    tex, norm = rng.integers(0, 6, faces.shape), rng.integers(0, 7, faces.shape)
+    return vertices, uvs, normals, faces, rng.integers(0, 6, faces.shape), rng.integers(0, 7, faces.shape)
+
+
+def obj_file(layout: str, *, vt_columns=2, unused=None, extra_lines=(), quads=False, seed=3) -> str:
+    """`obj_data` as OBJ text with `layout` corners (a, a/t, a//n, a/t/n), comment, o / g / s /
+    mtllib / usemtl lines."""
+    vertices, uvs, normals, faces, tex, norm = obj_data(vt_columns=vt_columns, unused=unused, quads=quads, seed=seed)
     corner = {"a": "{0}", "a/t": "{0}/{1}", "a//n": "{0}//{2}", "a/t/n": "{0}/{1}/{2}"}[layout]
     lines = ["# a test", "mtllib none.mtl", "o thing", *[f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in vertices],
              *["vt " + " ".join(f"{u:.17g}" for u in uv) for uv in uvs],
@@ -594,6 +601,17 @@ def obj_file(layout: str, *, vt_columns=2, unused=None, extra_lines=(), quads=Fa
     return "\n".join(lines) + "\n"
 
 
+def corner_values(mesh) -> list:
+    """Per triangle corner its position, normal and uv (None where the mesh has none): what a mesh
+    renders as, however its vertices are ordered or split."""
+    return [None if values is None else values[mesh.faces] for values in (mesh.vertices, mesh.normals, mesh.uvs)]
+
+
+def same_corners(a, b) -> bool:
+    return all((x is None and y is None) or (x is not None and y is not None and np.array_equal(x, y))
+               for x, y in zip(corner_values(a), corner_values(b)))
+
+
 def same_mesh(a, b) -> bool:
     return all((x is None and y is None) or (x is not None and y is not None and x.shape == y.shape
                                               and np.array_equal(x, y))
@@ -601,33 +619,77 @@ def same_mesh(a, b) -> bool:
 
 
 @pytest.mark.parametrize("layout", ["a", "a/t", "a//n", "a/t/n"])
-@pytest.mark.parametrize("variant", ["plain", "uvw", "crlf", "unused last vertex"])
+@pytest.mark.parametrize("variant", ["plain", "uvw", "crlf", "unused last vertex", "unused vertex"])
 def test_common_obj_layouts_are_read_by_numpy_as_trimesh_reads_them(tmp_path, monkeypatch, layout, variant):
     """Triangles with a, a/t, a//n or a/t/n corners (with comment, o / g / s / mtllib / one usemtl
-    lines, 3-number `vt` lines, CRLF line ends, a last vertex no face uses): numpy's reading
-    (`obj_text`) is trimesh's exactly (vertices up to the last used one when corners carry uv or
-    normal indices; per vertex the uv / normal trimesh picks among its corners'), trimesh unasked."""
+    lines, 3-number `vt` lines, CRLF line ends, a vertex no face uses, the last or not): numpy's reading
+    (`obj_text`) gives trimesh's triangles corner by corner, trimesh unasked, and each corner has
+    the position, uv and normal the file gives it: a vertex met with several uvs / normals is split
+    into one vertex per (v, vt, vn) used (a vertex no face uses is dropped unless corners are bare)."""
     from difflab.geometry import loading
 
-    text = obj_file(layout, vt_columns=3 if variant == "uvw" else 2, unused=7 if variant == "unused last vertex" else None)
+    unused = {"unused last vertex": 7, "unused vertex": 2}.get(variant)
+    vt_columns = 3 if variant == "uvw" else 2
+    text = obj_file(layout, vt_columns=vt_columns, unused=unused)
     path = tmp_path / "m.obj"
     path.write_bytes(text.replace("\n", "\r\n").encode() if variant == "crlf" else text.encode())
     reference = loading._trimesh_load(str(path), None)
     monkeypatch.setattr(loading, "_trimesh_load", lambda *args: pytest.fail("trimesh was asked"))
     loaded = load_mesh(path)
-    assert same_mesh(loaded, reference)
-    assert (loaded.normals is not None) == ("n" in layout) and (loaded.uvs is not None) == ("t" in layout)
-    assert loaded.n_vertices == (7 if variant == "unused last vertex" and layout != "a" else 8)
+    assert same_corners(loaded, reference)
+    vertices, uvs, normals, faces, tex, norm = obj_data(vt_columns=vt_columns, unused=unused)
+    position, normal, uv = corner_values(loaded)
+    np.testing.assert_array_equal(position, vertices[faces])
+    assert (normal is None) == ("n" not in layout) and (uv is None) == ("t" not in layout)
+    if "n" in layout:
+        np.testing.assert_array_equal(normal, normals[norm])
+    if "t" in layout:
+        np.testing.assert_array_equal(uv, uvs[tex][..., :2])
+    columns = [faces] + [index for index, key in ((tex, "t"), (norm, "n")) if key in layout]
+    distinct = len(np.unique(np.stack(columns, -1).reshape(-1, len(columns)), axis=0))  # (v, vt, vn) used
+    assert loaded.n_vertices == (8 if layout == "a" else distinct) and (layout == "a" or distinct > 8)
 
 
-@pytest.mark.parametrize("case", ["quads", "two materials", "unused vertex with normals", "negative index"])
+def test_unmerged_gives_the_same_vertices_by_rows_as_by_one_key(monkeypatch):
+    """`unmerged` tells (v, vt, vn) tuples apart by one int64 key where their grid fits, else by
+    sorting rows: both give the same split vertices, in (v, vt, vn) order."""
+    from difflab.geometry import obj_text
+
+    vertices, uvs, normals, faces, tex, norm = obj_data()
+    attributes = [(tex, uvs), (norm, normals)]
+    by_key = obj_text.unmerged(vertices, faces, attributes)
+    monkeypatch.setattr(obj_text, "MAX_TUPLE_KEY", 0)
+    by_rows = obj_text.unmerged(vertices, faces, attributes)
+    assert all(np.array_equal(a, b) for a, b in zip(by_key, by_rows))
+    np.testing.assert_array_equal(by_key[0][by_key[1]], vertices[faces])
+    np.testing.assert_array_equal(by_key[2][by_key[1]], uvs[tex])
+    np.testing.assert_array_equal(by_key[3][by_key[1]], normals[norm])
+
+
+@pytest.mark.parametrize("name", sorted(POLYGONS))
+def test_polygon_faces_keep_their_corners_uvs_and_normals(tmp_path, name):
+    """A quad / pentagon face with `vt` and `vn` per corner: a fan of triangles covering the polygon
+    (areas sum to the shoelace area), each corner with the file's uv and normal (trimesh read
+    polygons' uvs as none at all: the face rendered one texel's colour)."""
+    path = tmp_path / f"{name}.obj"
+    path.write_text(polygon_obj(POLYGONS[name]))
+    loaded = load_mesh(path)
+    position, normal, uv = corner_values(loaded)
+    assert loaded.n_faces == len(POLYGONS[name]) - 2 and uv is not None and normal is not None
+    np.testing.assert_array_equal(uv, (position[..., :2] + 1) / 2)
+    np.testing.assert_array_equal(normal, np.broadcast_to([0.0, 0.0, 1.0], position.shape))
+    x, y = np.array(POLYGONS[name], float).T
+    shoelace = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+    edges = np.cross(position[:, 1] - position[:, 0], position[:, 2] - position[:, 0])
+    assert np.all(edges[:, 2] > 0) and np.isclose(0.5 * edges[:, 2].sum(), shoelace)
+
+
+@pytest.mark.parametrize("case", ["quads", "two materials", "negative index"])
 def test_other_obj_layouts_are_left_to_trimesh(tmp_path, monkeypatch, case):
-    """Quads, several materials, a vertex no face uses before the last (trimesh then drops the
-    normals) and negative indices: trimesh reads these, and load_mesh gives its mesh."""
+    """Quads, several materials and negative indices: trimesh reads these, and load_mesh gives its mesh."""
     from difflab.geometry import loading
 
     text = {"quads": obj_file("a//n", quads=True), "two materials": obj_file("a", extra_lines=["usemtl b", "f 1 2 3"]),
-            "unused vertex with normals": obj_file("a//n", unused=2),
             "negative index": obj_file("a", extra_lines=["f -1 -2 -3"])}[case]
     path = tmp_path / "m.obj"
     path.write_text(text)
@@ -636,8 +698,6 @@ def test_other_obj_layouts_are_left_to_trimesh(tmp_path, monkeypatch, case):
     monkeypatch.setattr(loading, "_trimesh_load", lambda *args: asked.append(1) or trimesh_load(*args))
     loaded = load_mesh(path)
     assert asked and same_mesh(loaded, trimesh_load(str(path), None))
-    if case == "unused vertex with normals":
-        assert loaded.normals is None and loaded.n_vertices == 8
 
 
 @pytest.mark.parametrize("name", sorted(BAD_FILES))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import difflab
-from conftest import scene_dict
+from conftest import POLYGONS, polygon_obj, scene_dict
 from difflab.errors import SceneError
 
 # A unit quad facing +z as two counter-clockwise triangles, with uvs.
@@ -95,3 +95,22 @@ def test_arrays_render_exactly_as_the_same_mesh_from_a_file(tmp_path, method):
     assert np.array_equal(a, b)
     covered = a.max(axis=-1) > 0
     assert 0.3 < covered.mean() < 0.9  # the quad covers part of the view, so the check compares something
+
+
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+@pytest.mark.parametrize("name", sorted(POLYGONS))
+def test_a_polygon_face_from_a_file_shows_its_texture_the_right_way_up(tmp_path, method, name):
+    """A quad / pentagon OBJ face with per-corner `vt` over [-1, 1]^2, textured (nearest) with a 2 x 2
+    image, red green / blue white: each quarter of the face shows its texel (its uvs once read as
+    none: the whole face showed uv (0, 0)'s blue)."""
+    texels = np.array([[[1, 0, 0], [0, 1, 0]], [[0, 0, 1], [1, 1, 1]]], np.float32)  # row 0 at the top
+    difflab.save_image(tmp_path / "tex.png", texels)
+    (tmp_path / "face.obj").write_text(polygon_obj(POLYGONS[name]))
+    scene = scene_dict([{"type": "mesh", "material": "m", "file": str(tmp_path / "face.obj")}],
+                       {"m": {"ka": [1, 1, 1], "kd": [0, 0, 0], "texture": str(tmp_path / "tex.png"),
+                              "texture_target": "ka", "filter": "nearest"}}, ambient=(1, 1, 1),
+                       camera={"eye": [0, 0, 3], "target": [0, 0, 0], "fov_y": 45, "width": 32, "height": 32})
+    image = difflab.render(scene, method=method)
+    # the face spans pixels ~3..28 (half-width 1 at distance 3: 16 / (3 tan 22.5 deg) = 12.9 pixels)
+    quarters = image[[9, 9, 22, 22], [9, 22, 9, 22]]  # top-left, top-right, bottom-left, bottom-right
+    np.testing.assert_allclose(quarters, texels.reshape(4, 3), atol=1e-6)

@@ -5,8 +5,8 @@ trimesh is lenient: it may drop faces that index past the vertex list or read a 
 empty scene. For OBJ files we therefore check the raw text (vertex values, every `f` index, at least
 one face) so each problem is reported, with the path and line, instead of silently repaired: a
 file in the plain layout (`v x y z`, triangle `f a b c`, see `obj_text`) is vouched for by
-vectorised byte checks and by its reading giving exactly as many vertices and triangles as it has
-lines; anything else is scanned line by line. The common plain layouts are read by numpy
+vectorised byte checks, by its `v` lines parsing as numbers and by its reading giving exactly as
+many triangles as it has `f` lines; anything else is scanned line by line. The common plain layouts are read by numpy
 (`obj_text.read_obj`) to what trimesh gives for them; trimesh reads the rest.
 """
 
@@ -131,11 +131,14 @@ def _convert(geometry, transform, path: str) -> TriMesh:
 def load_mesh(path) -> TriMesh:
     """Read a triangle mesh file (OBJ, PLY, or another format trimesh reads) into a `TriMesh`.
 
-    trimesh loads it with `process=False` (and `maintain_order=True`), so vertices keep their file
-    order (an OBJ vertex used with several uvs is split, as any renderer must). uvs are kept when
+    trimesh loads it with `process=False` (and `maintain_order=False`): each corner keeps the uv
+    and normal the file gives it -- an OBJ vertex used with several uvs (a uv seam) or normals (a
+    crease) is split into one vertex per (v, vt, vn) its corners use, as any renderer must, and
+    vertices no face uses are dropped; vertices otherwise keep their file order. uvs are kept when
     the file has them; normals when the file has them (OBJ `vn`, PLY nx/ny/nz), else None.
-    Polygons are triangulated by trimesh. A scene with several geometries is concatenated with its
-    node transforms applied. Every failure raises `MeshError` naming the path: missing file,
+    Polygons are triangulated by trimesh as fans, with their corners' uvs and normals. A scene
+    with several geometries is concatenated with its node transforms applied. Every failure raises
+    `MeshError` naming the path: missing file,
     unreadable or unparsable file, non-finite vertex, face index out of range, no faces.
     """
     path = os.fspath(path)
@@ -156,7 +159,7 @@ def load_mesh(path) -> TriMesh:
     else:
         mesh = _trimesh_load(path, data if text is not None and text.plain else None)
     if text is not None and text.plain and (
-            (mesh.n_vertices, mesh.n_faces) != (text.n_vertex_lines, text.n_face_lines)  # dropped, split
+            not text.vertices_parse or mesh.n_faces != text.n_face_lines  # a garbled vertex, a dropped face
             or not np.all(np.abs(mesh.vertices) <= MAX_COORD)):  # or a value is out of range
         _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)  # names the line
     if not np.all(np.isfinite(mesh.vertices)):
@@ -175,7 +178,7 @@ def _trimesh_load(path: str, plain_data: bytes | None) -> TriMesh:
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            loaded = trimesh.load(path, process=False, maintain_order=True)
+            loaded = trimesh.load(path, process=False, maintain_order=False)
     except MeshError:
         raise
     except Exception as exc:  # trimesh raises many kinds on bad input

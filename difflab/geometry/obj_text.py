@@ -4,21 +4,23 @@ numpy's C text reader, no Python loop per line.
 `read_obj(data)` gives an `ObjText`: whether the text is in the *plain* layout that `load_mesh`
 hands to trimesh without first checking it line by line (only `v x y z` lines of numbers, triangle
 `f` lines of positive indices, comments and `vn` / `vt` / `o` / `g` / `s` / `usemtl` / `mtllib`
-lines), its counts of `v` and `f` lines, and, for the common layouts, the mesh arrays themselves:
-what trimesh's OBJ loader gives (`process=False, maintain_order=True`), computed as it computes
-them. Those layouts are every `f` line a triangle with corners `a`, `a/t`, `a//n` or `a/t/n` as
-its first line has them, indices positive and in range, `vn` lines of 3 numbers, `vt` lines of 2
-or 3, at most one `usemtl` line (before the faces), no line continuations. There trimesh keeps the
-faces as written and the vertices up to the largest one used; a corner's `t` / `n` indices give
-each vertex one uv / normal: per corner column the last face using the vertex, and the median of
-the (up to three) columns, rounded down (`trimesh.visual.texture.unmerge_faces`). Anything else
-(quads, negative indices, several materials, a vertex that no face uses before the last used one,
-an index past its list) gives no arrays, and trimesh reads the file.
+lines), its counts of `v` and `f` lines, whether its `v` lines all parse, and, for the common
+layouts, the mesh arrays themselves: the mesh trimesh's OBJ loader gives (`process=False`,
+`maintain_order=False`). Those layouts are every `f` line a triangle with corners `a`, `a/t`,
+`a//n` or `a/t/n` as its first line has them, indices positive and in range, `vn` lines of 3
+numbers, `vt` lines of 2 or 3, at most one `usemtl` line (before the faces), no line
+continuations. With `a` corners the faces are kept as written over every vertex; with uv or
+normal indices, each distinct (v, t, n) a corner uses is one vertex (`unmerged`: a vertex met with
+two uvs, at a uv seam, or two normals, at a crease, is split), as trimesh's `unmerge_faces` does
+-- the same triangles, corner by corner, though the two may order the vertices differently.
+Anything else (polygons, negative indices, several materials, an index past its list) gives no
+arrays, and trimesh reads the file.
 """
 
 from __future__ import annotations
 
 import io
+import math
 import re
 import warnings
 from dataclasses import dataclass
@@ -32,16 +34,19 @@ V, VN, VT, F, USEMTL = 0, 1, 2, 3, 8  # their indices in KEYS
 BLANK, OTHER = len(KEYS), len(KEYS) + 1  # empty lines; lines with any other start
 MAX_RUNS = 100_000  # runs of consecutive lines of one key gathered one slice each; more: not plain
 SLASH_TO_SPACE = bytes.maketrans(b"/", b" ")
+MAX_TUPLE_KEY = 2 ** 62  # `unmerged` numbers (v, vt, vn) tuples by one int64 below this, else sorts rows
 
 
 @dataclass(frozen=True)
 class ObjText:
-    """What `read_obj` found: `plain` (see the module doc), the numbers of `v` and `f` lines, and
-    (vertices, faces, normals or None, uvs or None) as trimesh reads them, or None."""
+    """What `read_obj` found: `plain` (see the module doc), the numbers of `v` and `f` lines, whether
+    the `v` lines parse as 3 numbers each (plain text only), and (vertices, faces, normals or None,
+    uvs or None) as trimesh reads them, or None."""
 
     plain: bool
     n_vertex_lines: int
     n_face_lines: int
+    vertices_parse: bool = False
     arrays: tuple | None = None
 
 
@@ -123,6 +128,8 @@ def read_obj(data: bytes) -> ObjText:
     if not (n_faces and plain_lines(vertex_text, n_vertices, KEYS[V], VERTEX_CHARS)
             and plain_lines(face_text, n_faces, KEYS[F], FACE_CHARS)):
         return ObjText(False, n_vertices, n_faces)
+    vertices = table(vertex_text, KEYS[V], np.float64)
+    parse = vertices is not None and vertices.shape == (n_vertices, 3)
     usemtl = np.flatnonzero(code == USEMTL)
     corners = None  # continuations, tabs or several materials: trimesh reads the file
     if not (b"\\" in data or b"\t" in data or usemtl.size > 1 or data.count(b"usemtl") != usemtl.size
@@ -131,19 +138,18 @@ def read_obj(data: bytes) -> ObjText:
     first_corner = face_text.split(b" ", 2)[1]
     per_corner = len(first_corner.replace(b"/", b" ").split())
     if corners is None or corners.shape[1] != 3 * per_corner:
-        return ObjText(not has_zero_index(face_text), n_vertices, n_faces)
+        return ObjText(not has_zero_index(face_text), n_vertices, n_faces, parse)
     if (corners[:, ::per_corner] == 0).any():  # vertex index 0: not OBJ, the line scan names it
         return ObjText(False, n_vertices, n_faces)
     sample = face_text.split(b"\n", 1)[0][2:]  # trimesh reads the corners' layout off the first face line
-    return ObjText(True, n_vertices, n_faces, mesh_arrays(data, starts, ends, code, vertex_text, corners, sample))
+    arrays = mesh_arrays(data, starts, ends, code, vertices, corners, sample) if parse else None
+    return ObjText(True, n_vertices, n_faces, parse, arrays)
 
 
-def mesh_arrays(data: bytes, starts, ends, code, vertex_text: bytes, corners: np.ndarray, sample: bytes):
+def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, corners: np.ndarray, sample: bytes):
     """(vertices, faces, normals or None, uvs or None) of plain OBJ text as trimesh reads it, or
-    None outside the layouts of the module doc. `corners`: the `f` lines' numbers, a row each."""
-    vertices = table(vertex_text, KEYS[V], np.float64)
-    if vertices is None or vertices.shape[1] != 3:
-        return None
+    None outside the layouts of the module doc. `vertices`: the `v` lines' (N, 3) numbers;
+    `corners`: the `f` lines' numbers, a row each."""
     per_corner = corners.shape[1] // 3
     corners = np.where(corners > 0, corners - 1, corners)  # 1-based (a 0 tex / normal index stays 0, as in trimesh)
     faces = corners[:, ::per_corner]
@@ -167,33 +173,34 @@ def mesh_arrays(data: bytes, starts, ends, code, vertex_text: bytes, corners: np
     if (n_vn and (normal_table is None or normal_table.shape[1] != 3)) \
             or (n_vt and (uv_table is None or uv_table.shape[1] not in (2, 3))):
         return None
-    if tex is None and (norm is None or normal_table is None):
+    uv_table = None if uv_table is None else uv_table[:, :2]
+    used = {name: (index, values) for name, index, values in (("normals", norm, normal_table), ("uvs", tex, uv_table))
+            if index is not None and values is not None}
+    if not used:
         return vertices, faces, None, None  # every vertex, no normals or uvs
-    n_used = int(faces.max()) + 1
-    normals = uvs = None
-    if norm is not None and normal_table is not None:
-        normals = per_vertex(faces, norm, n_used, normal_table)
-        if normals is None:
-            return None
-    if tex is not None and uv_table is not None:
-        uvs = per_vertex(faces, tex, n_used, uv_table[:, :2])
-        if uvs is None:
-            return None
+    if any(index.max() >= len(values) for index, values in used.values()):
+        return None  # trimesh drops that attribute: let it read the file
+    vertices, faces, *values = unmerged(vertices, faces, list(used.values()))
+    found = dict(zip(used, values))
+    normals, uvs = (found.get(name) for name in ("normals", "uvs"))
     finite = [None if a is None or not np.all(np.isfinite(a)) else a for a in (normals, uvs)]  # else dropped
-    return (vertices[:n_used], faces, *finite)
+    return (vertices, faces, *finite)
 
 
-def per_vertex(faces: np.ndarray, index: np.ndarray, n_vertices: int, values: np.ndarray) -> np.ndarray | None:
-    """values[k] for each vertex, k from the corners that use it as trimesh's `unmerge_faces`
-    (maintain_faces=True) picks it: per corner column the last face's index, then the median of
-    the columns that have one (two: their mean, rounded down). None where a vertex has none or an
-    index is past `values` (trimesh then drops the attribute: let it read the file)."""
-    masks = np.full((3, n_vertices), -1, np.int64)
-    for column in range(3):
-        masks[column][faces[:, column]] = index[:, column]
-    count = (masks >= 0).sum(axis=0)
-    ordered = np.sort(np.where(masks >= 0, masks, np.iinfo(np.int64).max), axis=0)
-    pick = np.where(count == 3, ordered[1], np.where(count == 2, (ordered[0] + ordered[1]) // 2, ordered[0]))
-    if (count == 0).any() or pick.max() >= len(values):
-        return None
-    return values[pick]
+def unmerged(vertices: np.ndarray, faces: np.ndarray, attributes: list) -> list:
+    """[vertices, faces, *values]: one vertex per distinct (vertex, attribute indices...) tuple the
+    faces' corners use, rows in the order of those tuples (vertices in file order, a split vertex's
+    copies side by side), a vertex no face uses dropped. `attributes`: (index per corner (F, 3),
+    values) pairs, e.g. the corners' `vt` indices and the uv table. The tuples are told apart by
+    one int64 each, their index in the grid of all tuples (sorting one column is ~3x faster than
+    sorting rows), or by rows where that grid is too big for int64."""
+    columns = [faces.ravel()] + [index.ravel() for index, _ in attributes]
+    sizes = [len(vertices)] + [len(values) for _, values in attributes]
+    if math.prod(sizes) < MAX_TUPLE_KEY:
+        keys, inverse = np.unique(np.ravel_multi_index(columns, sizes), return_inverse=True)
+        rows = np.unravel_index(keys, sizes)
+    else:
+        keys, inverse = np.unique(np.column_stack(columns), axis=0, return_inverse=True)
+        rows = keys.T
+    return [vertices[rows[0]], inverse.reshape(faces.shape)] + [values[rows[k]]
+                                                                for k, (_, values) in enumerate(attributes, 1)]
