@@ -19,7 +19,15 @@ OUTPUT_ARGUMENTS = {"output": "-o/--output", "report": "--report"}
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: `difflab: error: ...` and exit code 2 (no usage block)."""
+    """argparse with one-line errors: `difflab: error: ...` and exit code 2 (no usage block), and
+    --help showing every option's default (`(default: X)`) unless its help states it."""
+
+    def add_argument(self, *args, **kwargs):
+        action = super().add_argument(*args, **kwargs)
+        if action.option_strings and action.default is not None and action.default is not False and \
+                action.default != argparse.SUPPRESS and "default" not in (action.help or ""):
+            action.help = f"{action.help} (default: %(default)s)" if action.help else "default: %(default)s"
+        return action
 
     def error(self, message):
         command = self.prog.removeprefix("difflab").strip()

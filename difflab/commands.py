@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import argparse
 import time
 from pathlib import Path
 
-from .errors import DifflabError, RenderError
+from .errors import RenderError
 from .io import add_force
 from .vocabulary import FRACTAL_KINDS, MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS, SPECULAR_MODELS
 
@@ -44,19 +45,32 @@ def refuse_unused(args, method: str) -> None:
             raise RenderError(f"{flag}: does not apply to this render's method {method!r} ({why.replace('method=', '--method ')})")
 
 
+def image_output(*suffixes):
+    """argparse type of an -o image: a path ending in one of `suffixes` (any case), else the one-line
+    exit-2 error naming them (Pillow would write a JPEG or TIFF of a linear image silently)."""
+    def check(text: str) -> str:
+        if Path(text).suffix.lower() not in suffixes:
+            raise argparse.ArgumentTypeError(f"{text!r}: give a file name ending in {' or '.join(suffixes)}")
+        return text
+    return check
+
+
 def add_render(sub) -> None:
     p = sub.add_parser("render", help="render a scene file to an image")
     p.add_argument("scene", help="scene JSON file")
-    p.add_argument("-o", "--output", required=True, help="output image (.png, 8-bit sRGB; or .npy linear floats)")
-    p.add_argument("--method", choices=METHODS)
-    p.add_argument("--shading", choices=tuple(SHADING_MODELS), help="shading model (rasterizer)")
-    p.add_argument("--specular", choices=tuple(SPECULAR_MODELS))
-    p.add_argument("--width", type=int)
-    p.add_argument("--height", type=int)
-    p.add_argument("--spp", type=int, help="samples per pixel, a perfect square (1, 4, 9, ...)")
-    p.add_argument("--max-depth", type=int, help=f"ray-tree depth, 1..{MAX_DEPTH_LIMIT} (ray tracer)")
-    p.add_argument("--linear", action="store_true", help="also write the linear float image as .npy")
-    p.add_argument("--device", default="cpu", help="cpu (default) or cuda")
+    p.add_argument("-o", "--output", required=True, type=image_output(".png", ".npy"),
+                   help="output image: .png (8-bit sRGB) or .npy (linear floats)")
+    p.add_argument("--method", choices=METHODS, help="renderer (default: the scene's)")
+    p.add_argument("--shading", choices=tuple(SHADING_MODELS),
+                   help="shading model, rasterizer only (default: the scene's)")
+    p.add_argument("--specular", choices=tuple(SPECULAR_MODELS), help="specular term (default: the scene's)")
+    p.add_argument("--width", type=int, help="image width in pixels (default: the scene camera's)")
+    p.add_argument("--height", type=int, help="image height in pixels (default: the scene camera's)")
+    p.add_argument("--spp", type=int, help="samples per pixel, a perfect square: 1, 4, 9, ... (default: the scene's)")
+    p.add_argument("--max-depth", type=int,
+                   help=f"ray-tree depth, 1..{MAX_DEPTH_LIMIT}, ray tracer only (default: the scene's)")
+    p.add_argument("--linear", action="store_true", help="also write the linear float image beside it as .npy")
+    p.add_argument("--device", default="cpu", help="cpu or cuda")
     add_force(p)
     p.set_defaults(func=run_render)
 
@@ -72,7 +86,7 @@ def run_demo(args) -> int:
 
 def add_demo(sub) -> None:
     p = sub.add_parser("demo", help="write the lecture's comparison figures to a folder")
-    p.add_argument("-o", "--output", default="difflab-demo", help="folder for the figures (default: ./difflab-demo)")
+    p.add_argument("-o", "--output", default="difflab-demo", help="folder for the figures")
     p.add_argument("--quick", action="store_true", help="smaller images")
     add_force(p)
     p.set_defaults(func=run_demo, output_is_folder=True)
@@ -99,14 +113,15 @@ def run_fractal(args) -> int:
 def add_fractal(sub) -> None:
     p = sub.add_parser("fractal", help="draw a fractal curve or render a fractal set")
     p.add_argument("kind", choices=FRACTAL_KINDS)
-    p.add_argument("-o", "--output", required=True, help="output PNG")
-    p.add_argument("--order", type=int, help="iterations / order / depth / terrain level")
-    p.add_argument("--width", type=int, default=640)
-    p.add_argument("--height", type=int, default=480)
+    p.add_argument("-o", "--output", required=True, type=image_output(".png"), help="output PNG")
+    p.add_argument("--order", type=int, help="iterations / order / depth / terrain level (default: 4 for a curve, 7 "
+                   "for the terrain)")
+    p.add_argument("--width", type=int, default=640, help="image width in pixels")
+    p.add_argument("--height", type=int, default=480, help="image height in pixels")
     p.add_argument("--seed", type=int, default=0, help="terrain seed")
-    p.add_argument("--hurst", type=float, default=0.8, help="terrain roughness (Hurst exponent in (0, 1))")
+    p.add_argument("--hurst", type=float, default=0.8, help="terrain roughness, the Hurst exponent in (0, 1)")
     p.add_argument("--max-iter", type=int, default=256, help="escape-time iterations")
-    p.add_argument("--device", default="cpu")
+    p.add_argument("--device", default="cpu", help="cpu or cuda")
     add_force(p)
     p.set_defaults(func=run_fractal)
 

@@ -254,8 +254,8 @@ def save_image(path: str | os.PathLike, image, srgb: bool = True) -> Path:
     path = file_path(path, "image")
     image = _as_image(image)
     if path.suffix.lower() == ".npy":
-        with atomic_path(path) as tmp:
-            np.save(tmp, image)
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:  # (np.save(name) appends .npy to "x.NPY")
+            np.save(f, image)
         return path
     bad = int(np.count_nonzero(~np.isfinite(image)))
     if bad:

@@ -45,6 +45,9 @@ def test_png_and_npy_round_trip(tmp_path):
     back = load_image(tmp_path / "a.png")
     assert back.shape == (5, 7, 3)
     np.testing.assert_allclose(back, image, atol=0.01)  # 8-bit sRGB quantisation
+    save_image(tmp_path / "b.NPY", image)  # (numpy.save appends .npy to a name ending otherwise)
+    assert np.array_equal(load_image(tmp_path / "b.NPY"), image)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.npy", "a.png", "b.NPY"]
 
 
 def test_non_finite_pixels_are_reported_not_hidden(tmp_path):
@@ -351,21 +354,3 @@ def test_an_interrupted_command_exits_130(tmp_path, capsys, monkeypatch):
     assert capsys.readouterr().err == "difflab: interrupted\n"
     assert list(folder.iterdir()) == []
 
-
-@pytest.mark.parametrize("render, flags, message", [
-    ({}, ["--method", "raytrace", "--shading", "phong"],
-     "--shading: does not apply to this render's method 'raytrace' (the ray tracer shades every hit with "
-     "interpolated normals; use --method 'raster')"),
-    ({"method": "raytrace"}, ["--shading", "gouraud"], "--shading: does not apply to this render's method 'raytrace'"),
-    ({}, ["--max-depth", "1"],
-     "--max-depth: does not apply to this render's method 'raster' (the rasterizer draws primary visibility on a "
-     "regular sample grid; use --method 'raytrace')"),
-])
-def test_a_flag_of_the_other_renderer_is_an_error(tmp_path, capsys, render, flags, message):
-    """docs/cli.md: --shading is the rasterizer's (an error with the ray tracer, even `phong`, the value
-    that says what it does), --max-depth the ray tracer's; the method is the flag's or the scene's."""
-    out = tmp_path / "o.png"
-    assert main(["render", str(tiny_scene(tmp_path, render=render)), "-o", str(out), *flags]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err.startswith(f"difflab: error: {message}") and len(err.splitlines()) == 1
-    assert not out.exists()

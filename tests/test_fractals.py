@@ -340,3 +340,20 @@ def test_terrain_scene_writes_loadable_band_meshes(tmp_path):
         assert part.normals is not None and np.all(part.normals[:, 1] > 0)
         total += len(part.faces)
     assert total == len(mesh.faces)
+
+
+def test_hurst_one_is_refused_because_its_displacements_vanish():
+    """At H = 1 (the linear fBm t Z) the variance of every symmetric configuration of parents is 0:
+    edge and diagonal midpoints, diamond and square centres -- subdivision would add no detail, so H
+    is in (0, 1) and 1.0 is a FractalError naming the open interval (just below, detail remains)."""
+    from difflab.fractals.heightfield import _std
+
+    d = 0.25
+    for parents in ([(-d, 0), (d, 0)], [(-d, -d), (d, d)], [(-d, -d), (-d, d), (d, -d), (d, d)],
+                    [(-d, 0), (d, 0), (0, -d), (0, d)]):
+        assert _std(1.0, 1.0, parents) == pytest.approx(0.0, abs=1e-7)
+        assert _std(1.0, 0.9, parents) > 0.05
+    for generate in (fr.diamond_square, fr.midpoint_displacement):
+        with pytest.raises(fr.FractalError, match=r"^hurst: must be a finite number in \(0\.0, 1\.0\), got 1\.0$"):
+            generate(4, hurst=1.0)
+        assert np.isfinite(generate(4, hurst=0.999)).all()

@@ -176,7 +176,7 @@ def test_fractal_images_are_priced_before_they_are_drawn(monkeypatch, tmp_path):
                                           r"memory budget of 1\.00 GiB"):
         mandelbrot(8000, 8000)
     with pytest.raises(RenderError, match=r"^koch: a figure of \(20000 x 20000 pixels\): needs about 2\.98 GiB"):
-        draw_curve("koch", 2, tmp_path / "k.png", size=20000)
+        draw_curve("koch", 2, tmp_path / "k.png", 20000, 20000)
     assert not (tmp_path / "k.png").exists()
 
 

@@ -9,13 +9,14 @@ from pathlib import Path
 from ..io import atomic_path, linear_to_srgb
 
 
-def save_figure(fig, path: Path) -> Path:
-    """Save a matplotlib figure atomically (format from the suffix, 100 dpi) and close it."""
+def save_figure(fig, path: Path, tight: bool = True) -> Path:
+    """Save a matplotlib figure atomically (format from the suffix, 100 dpi) and close it; `tight`:
+    cropped to what is drawn, else the figure's own size."""
     import matplotlib.pyplot as plt
 
     path = Path(path)
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, format=path.suffix.lstrip("."), dpi=100, bbox_inches="tight")
+        fig.savefig(tmp, format=path.suffix.lstrip("."), dpi=100, bbox_inches="tight" if tight else None)
     plt.close(fig)
     return path
 

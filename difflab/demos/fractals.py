@@ -10,6 +10,7 @@ import numpy as np
 from ..fractals import (box_counting_dimension, cantor_staircase, hilbert, julia, koch_snowflake, mandelbrot,
                         mandelbulb, peano, polyline_length, terrain, terrain_scene)
 from ..errors import RenderError
+from ..fractals._checks import check_int
 from ..io import save_image
 from ..limits import CURVE_PIXEL_BYTES, require_image
 from ..renderers.api import render
@@ -32,24 +33,34 @@ def curve_points(kind: str, order: int) -> tuple[np.ndarray, str]:
         f"Cantor staircase, depth {order}: 1/2 on [1/3, 2/3], steps summing to 1"
 
 
-def draw_curve(kind: str, order: int, path: Path, size: int = 512) -> str:
-    """Draw a curve fractal to `path` (atomically); returns its caption (with a box-counting dimension)."""
+def draw_curve(kind: str, order: int, path: Path, width: int = 512, height: int = 512, titled: bool = True) -> str:
+    """Draw a curve fractal to `path` (atomically); returns its caption (with a box-counting dimension).
+
+    titled: the caption as title, on a square figure of max(width, 256) pixels cropped to what is
+    drawn (the demo's figures); else an image of exactly width x height pixels, the curve fit into it
+    with equal axes and no title (`difflab fractal KIND --width W --height H`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    require_image(size, size, f"{kind}: a figure of", CURVE_PIXEL_BYTES, RenderError)
+    width, height = (max(width, 256),) * 2 if titled else (check_int("width", width, 1), check_int("height", height, 1))
+    require_image(width, height, f"{kind}: a figure of", CURVE_PIXEL_BYTES, RenderError)
     points, caption = curve_points(kind, order)
     if kind != "cantor" and len(points) > 16:
         caption += f", box-counting dimension {box_counting_dimension(points):.3f}"
-    fig, ax = plt.subplots(figsize=(size / 100, size / 100))
+    fig = plt.figure(figsize=(width / 100, height / 100), dpi=100)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0)) if not titled else fig.add_subplot()
     ax.plot(points[:, 0], points[:, 1], lw=0.8, color="#1f4e79")
     ax.set_aspect("equal")
-    ax.set_title(caption, fontsize=7)
     ax.set_xticks([])
     ax.set_yticks([])
-    save_figure(fig, Path(path))
+    if titled:
+        ax.set_title(caption, fontsize=7)
+    else:
+        ax.margins(0.02)
+        ax.set_axis_off()
+    save_figure(fig, Path(path), tight=titled)
     return caption
 
 
@@ -76,11 +87,11 @@ SET_TITLES = {
 
 
 def fractal_figure(kind: str, path: Path, width: int, height: int, *, titled: bool = True, **options) -> str:
-    """Write one fractal picture to `path`; returns what it shows. Curves are drawn with their
-    caption as title; the rendered sets get their title above the image when `titled` (the
-    demo's figures), or are written as the bare image (`difflab fractal KIND -o out.png`)."""
+    """Write one fractal picture to `path`; returns what it shows. When `titled` (the demo's
+    figures) a curve is drawn with its caption as title and a set with its title above the image;
+    else (`difflab fractal KIND -o out.png`) either is the bare width x height image."""
     if kind in CURVES:
-        return draw_curve(kind, options.get("order", 4), path, size=max(width, 256))
+        return draw_curve(kind, options.get("order", 4), path, width, height, titled=titled)
     image = render_set(kind, width, height, **options)
     values = {"hurst": options.get("hurst", 0.8), "order": options.get("order", 7), "max_iter": options.get("max_iter", 256)}
     caption = SET_TITLES[kind].format(**values) + f" ({width}x{height})"

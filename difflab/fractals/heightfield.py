@@ -8,7 +8,9 @@ the variance that fBm gives h(p) - mean(h(q_i)) for that configuration of parent
 
     Var = (2/m) sum_i g(|q_i - p|) - (1/m^2) sum_ij g(|q_i - q_j|),   g(r) = sigma^2 r^(2H) / 2
 
-(for the midpoint of a segment of length 2d this is FFC's sigma^2 d^(2H) (1 - 2^(2H-2))). The
+(for the midpoint of a segment of length 2d this is FFC's sigma^2 d^(2H) (1 - 2^(2H-2))). H is in
+(0, 1): at H = 1 (g = sigma^2 r^2 / 2, the linear fBm t Z) every symmetric configuration's variance
+is 0 -- midpoints, diamonds, squares -- so the surface is the corners' planes, not a fractal. The
 displacements are independent, so the surfaces are only approximately fBm: the measured variogram
 slope falls short of 2H by up to ~0.05 (diamond-square) and ~0.08 (midpoint, H = 0.8).
 
@@ -58,7 +60,7 @@ def _corners(seed: int, method: int, sigma: float) -> np.ndarray:
 
 def _check(level, hurst, seed, sigma):
     level = check_int("level", level, 0, MAX_LEVEL)
-    hurst = check_float("hurst", hurst, 0.0, 1.0, lo_open=True)
+    hurst = check_float("hurst", hurst, 0.0, 1.0, lo_open=True, hi_open=True)  # H = 1: no displacement (notes)
     seed = check_int("seed", seed, 0)
     sigma = check_float("sigma", sigma, 0.0)
     return level, hurst, seed, sigma
@@ -81,7 +83,7 @@ def diamond_square(level: int, hurst: float = 0.8, seed: int = 0, sigma: float =
 
     Arguments:
         level: refinement steps, 0..12.
-        hurst: Hurst exponent H in (0, 1]; high H is smooth, low H rough (dimension 3 - H).
+        hurst: Hurst exponent H in (0, 1); high H is smooth, low H rough (dimension 3 - H).
         seed: integer >= 0; the same (level, hurst, seed, sigma) gives bitwise the same grid.
         sigma: height scale: heights over a lag of one side differ with standard deviation ~sigma.
 

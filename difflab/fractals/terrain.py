@@ -43,7 +43,7 @@ def terrain(level: int = 6, hurst: float = 0.8, seed: int = 0, size: float = 10.
 
     Arguments:
         level: 1..12 refinement steps.
-        hurst: Hurst exponent in (0, 1] (roughness: lower is rougher).
+        hurst: Hurst exponent in (0, 1) (roughness: lower is rougher).
         seed: integer >= 0.
         size: side of the square in world units (> 0).
         height: vertical scale in world units (>= 0).

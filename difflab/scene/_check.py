@@ -202,5 +202,7 @@ def existing_file(value, path: str, base_dir: str | None = None) -> str:
         value = os.path.join(base_dir, value)
     value = os.path.abspath(value)
     if not os.path.isfile(value):
-        fail(path, f"file not found: {value}")
+        why = "a folder, not a file" if os.path.isdir(value) else "not a regular file" if os.path.exists(value) \
+            else "file not found"
+        fail(path, f"{why}: {value}")
     return value

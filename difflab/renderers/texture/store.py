@@ -31,7 +31,9 @@ def load_texture(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
     missing, unreadable, empty or not finite."""
     path = Path(path)
     if not path.is_file():
-        raise TextureError(f"{path}: texture file not found")
+        why = "a folder, not a texture file" if path.is_dir() else "not a regular file" if path.exists() \
+            else "texture file not found"
+        raise TextureError(f"{path}: {why}")
     try:
         image = load_image(path, srgb=srgb)
     except DifflabError as exc:

@@ -1,0 +1,112 @@
+"""The command line's options as docs/cli.md states them, each through `difflab.cli.main`: output
+kinds, flags of the other renderer, sizes and ranges, --help's defaults, messages naming the problem."""
+
+import json
+
+import numpy as np
+import pytest
+
+from difflab import load_image
+from difflab.cli import main
+from test_cli_io import tiny_scene
+
+
+@pytest.mark.parametrize("render, flags, message", [
+    ({}, ["--method", "raytrace", "--shading", "phong"],
+     "--shading: does not apply to this render's method 'raytrace' (the ray tracer shades every hit with "
+     "interpolated normals; use --method 'raster')"),
+    ({"method": "raytrace"}, ["--shading", "gouraud"], "--shading: does not apply to this render's method 'raytrace'"),
+    ({}, ["--max-depth", "1"],
+     "--max-depth: does not apply to this render's method 'raster' (the rasterizer draws primary visibility on a "
+     "regular sample grid; use --method 'raytrace')"),
+])
+def test_a_flag_of_the_other_renderer_is_an_error(tmp_path, capsys, render, flags, message):
+    """docs/cli.md: --shading is the rasterizer's (an error with the ray tracer, even `phong`, the value
+    that says what it does), --max-depth the ray tracer's; the method is the flag's or the scene's."""
+    out = tmp_path / "o.png"
+    assert main(["render", str(tiny_scene(tmp_path, render=render)), "-o", str(out), *flags]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"difflab: error: {message}") and len(err.splitlines()) == 1
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command, name, accepted", [
+    ("render", "a.jpg", ".png or .npy"), ("render", "a.tiff", ".png or .npy"), ("render", "noext", ".png or .npy"),
+    ("fractal", "k.npy", ".png"), ("fractal", "k.svg", ".png"),
+])
+def test_an_output_image_of_another_kind_is_refused_naming_the_accepted_ones(tmp_path, capsys, command, name, accepted):
+    """-o takes .png (8-bit sRGB) or .npy for render, .png for fractal: Pillow / matplotlib would write
+    a lossy JPEG, a TIFF or an SVG from the suffix silently; exit 2, one line, nothing written."""
+    out = tmp_path / name
+    first = ["render", str(tiny_scene(tmp_path))] if command == "render" else ["fractal", "koch"]
+    with pytest.raises(SystemExit) as exit_:  # (argparse's error: Parser.error exits)
+        main([*first, "-o", str(out), "--width", "8", "--height", "8"])
+    assert exit_.value.code == 2
+    assert capsys.readouterr().err == (f"difflab: error: {command}: argument -o/--output: {str(out)!r}: give a file "
+                                       f"name ending in {accepted}\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == (["scene.json"] if command == "render" else [])
+
+
+def test_render_to_npy_with_linear_writes_and_names_the_file_once(tmp_path, capsys):
+    """An .npy output is the linear image already: written once, named once (any case of the suffix:
+    numpy.save given a name not ending in lower-case .npy appends one, so the data went elsewhere)."""
+    scene = tiny_scene(tmp_path)
+    out = tmp_path / "b.NPY"
+    assert main(["render", str(scene), "-o", str(out), "--linear", "--width", "8", "--height", "6"]) == 0
+    printed = capsys.readouterr().out
+    assert printed.startswith(f"wrote {out} (8x6, raster, ") and " and " not in printed
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.NPY", "scene.json"]
+    assert load_image(out).shape == (6, 8, 3)
+
+
+@pytest.mark.parametrize("kind", ["koch", "peano", "hilbert", "cantor"])
+def test_fractal_curves_are_drawn_at_the_given_size(tmp_path, kind):
+    """--width / --height are the image's size for the curves too (the curve fit into it, equal axes)."""
+    for width, height in [(128, 96), (57, 133)]:
+        out = tmp_path / f"{kind}{width}.png"
+        assert main(["fractal", kind, "-o", str(out), "--width", str(width), "--height", str(height), "--order", "2"]) == 0
+        image = load_image(out)
+        assert image.shape == (height, width, 3)
+        ink = np.argwhere(image.min(axis=-1) < 0.5)  # the curve's pixels: inside, reaching across one axis
+        assert ink.size and max(np.ptp(ink[:, 0]) / height, np.ptp(ink[:, 1]) / width) > 0.9
+
+
+def test_fractal_refuses_hurst_one_and_sizes_below_one(tmp_path, capsys):
+    out = tmp_path / "t.png"
+    assert main(["fractal", "terrain", "-o", str(out), "--hurst", "1.0", "--width", "32", "--height", "24"]) == 2
+    assert capsys.readouterr().err == "difflab: error: hurst: must be a finite number in (0.0, 1.0), got 1.0\n"
+    assert main(["fractal", "koch", "-o", str(out), "--width", "0", "--height", "24"]) == 2
+    assert capsys.readouterr().err == "difflab: error: width: must be >= 1, got 0\n"
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command, shown", [
+    ("render", ["--device DEVICE       cpu or cuda (default: cpu)", "(default: the scene's)"]),
+    ("fractal", ["(default: 640)", "(default: 480)", "(default: 0.8)", "(default: 256)", "--seed SEED           terrain seed (default: 0)"]),
+    ("fit", ["default: lm", "default: l2", "default: 256"]),
+    ("demo", ["(default: difflab-demo)"]),
+])
+def test_help_shows_the_defaults(capsys, command, shown):
+    """docs/cli.md: `difflab COMMAND --help` lists the options with their defaults."""
+    with pytest.raises(SystemExit) as exit_:
+        main([command, "--help"])
+    assert exit_.value.code == 0
+    text = capsys.readouterr().out
+    for line in shown:
+        assert line in text, line
+
+
+def test_a_texture_path_that_is_a_folder_is_named_as_such(tmp_path, capsys):
+    from difflab import TextureError
+    from difflab.renderers.texture.store import load_texture
+
+    (tmp_path / "bricks").mkdir()
+    scene = tiny_scene(tmp_path)
+    d = json.loads(scene.read_text())
+    d["materials"]["m"]["texture"] = "bricks"
+    scene.write_text(json.dumps(d))
+    assert main(["render", str(scene), "-o", str(tmp_path / "o.png")]) == 2
+    assert capsys.readouterr().err == (f"difflab: error: materials.m.texture: a folder, not a file: {tmp_path / 'bricks'} "
+                                       f"(in {scene})\n")
+    with pytest.raises(TextureError, match=r"^.*bricks: a folder, not a texture file$"):
+        load_texture(tmp_path / "bricks")
