@@ -229,7 +229,7 @@ def test_uv_derivatives_are_those_of_the_interpolation(checker_file, interpolati
 def footprint_kernel(cam: CameraW, xs: wp.array(dtype=wp.vec2), ps: wp.array(dtype=wp.vec3), normal: wp.vec3,
                      out_dx: wp.array(dtype=wp.vec2), out_dy: wp.array(dtype=wp.vec2)):
     k = wp.tid()
-    dpdx, dpdy = pixel_footprint(cam, xs[k][0], xs[k][1], ps[k], normal)
+    dpdx, dpdy = pixel_footprint(cam, xs[k][0], xs[k][1], 1.0, ps[k], normal)
     du, dv = plane_uv_derivatives(dpdx, dpdy, normal)
     out_dx[k] = du
     out_dy[k] = dv

@@ -3,8 +3,9 @@
 Every pixel's four corners are traced once (a (H + 1) x (W + 1) grid of rays, shared between
 neighbours). A pixel whose corners differ by at most `threshold` (largest channel of max - min over
 the four) is their mean; any other pixel is traced again on a regular `refine` x `refine` grid of
-sample centres inside it and is the mean of those. Both patterns are fixed, so the render is
-deterministic. The ray tree is not recorded here (use `raytrace` for fitting).
+sample centres inside it and is the mean of those (each filtering its textures over its own
+footprint, 1/refine of a pixel: the same values as "grid" supersampling at spp refine^2). Both
+patterns are fixed, so the render is deterministic. The ray tree is not recorded here (use `raytrace` for fitting).
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ def raytrace_adaptive(compiled, settings, threshold: float = 0.05, refine: int =
         offsets = (np.arange(refine) + 0.5) / refine
         oy, ox = np.meshgrid(offsets, offsets, indexing="ij")
         pts = np.stack([cols[:, None] + ox.ravel()[None, :], rows[:, None] + oy.ravel()[None, :]], -1)
-        refined = trace_points(compiled, settings, pts.astype(np.float32), threads)
+        refined = trace_points(compiled, settings, pts.astype(np.float32), threads, footprint=1.0 / refine)
         image[rows, cols] = refined.color.mean(axis=1, dtype=np.float64).astype(np.float32)
         rays = {k: rays[k] + refined.rays[k] for k in rays}
     seconds = time.perf_counter() - start

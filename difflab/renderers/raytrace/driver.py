@@ -16,7 +16,6 @@ output element is written by one thread, so renders are bitwise deterministic.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -27,7 +26,7 @@ from ...errors import RenderError
 from ...guards import nonfinite_pixels
 from ...lighting.warp_model import fog_struct
 from ...vocabulary import FRESNEL_MODES, SPECULAR_MODELS
-from ..camera import camera_struct
+from ..camera import camera_struct, half_height
 from ..frame import Frame, box_downsample
 from ..launch import host_empty, launch_row_loops, load_kernels
 from .itembuffer import asked_bvh, item_buffer, item_struct
@@ -73,7 +72,7 @@ def sample_points(width: int, height: int, side: int, sampling: str = "grid") ->
     return np.stack([x, y], axis=-1).astype(np.float32)
 
 
-def trace_params(scene, settings, record: bool, spread: float, side: int) -> TraceParamsW:
+def trace_params(scene, settings, record: bool, sample: tuple[float, float], side: int) -> TraceParamsW:
     params = TraceParamsW()
     params.side = int(side)
     params.max_depth = int(settings.max_depth)
@@ -88,7 +87,7 @@ def trace_params(scene, settings, record: bool, spread: float, side: int) -> Tra
     params.fog = fog_struct(scene.fog)
     params.record = int(record)
     params.count_crossings = int(record and count_crossings(scene, settings))
-    params.spread = float(spread)
+    params.sample = wp.vec2(*sample)
     return params
 
 
@@ -121,11 +120,13 @@ def read_only(compiled, name: str, make):
 
 
 def trace_points(compiled, settings, points: np.ndarray | None, threads: int | None = None, *, side: int = 0,
-                 record: bool = False, item=None, pixel_size: tuple[int, int] | None = None,
-                 light_buffer=None) -> Traced:
+                 footprint: float = 1.0, record: bool = False, item=None,
+                 pixel_size: tuple[int, int] | None = None, light_buffer=None) -> Traced:
     """Trace one ray tree per raster point of `points` (rows, cols, 2), in pixels of the camera's
     image (or of `pixel_size` = (width, height)); with `points` None, per sample of the regular
     grid of `side` x `side` samples per pixel ("grid" `sample_points`, computed by the kernel).
+    `footprint`: a sample's width in pixels, what its texture filters cover (1 / side when side x
+    side samples share a pixel, as on the rasterizer's sample grid).
     `item`: an `ItemBufferW` on the same grid; `light_buffer`: a `lightbuffer.LightBuffer` for the
     shadow rays."""
     scene, device = compiled.scene, compiled.device
@@ -145,7 +146,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
     item = item if item is not None else item_struct(compiled)
     scene_w = scene_struct(compiled, light_buffer)
     # a sample's width per unit distance (texture footprints of secondary rays; 0 for orthographic views)
-    spread = 2.0 * math.tan(math.radians(scene.camera.fov_y) / 2.0) / rows if scene.camera.projection == "perspective" \
+    spread = 2.0 * half_height(scene.camera) / height * footprint if scene.camera.projection == "perspective" \
         else 0.0
 
     def launch(params, tree) -> TraceOutW:
@@ -160,7 +161,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         return out
 
     unrecorded = read_only(compiled, "unrecorded tree", lambda: empty_tree((1, 1), 0, 0, device))  # not read
-    out = launch(trace_params(scene, settings, False, spread, side), unrecorded)
+    out = launch(trace_params(scene, settings, False, (footprint, spread), side), unrecorded)
     shadow_tests = int(light_buffer.warp.tests.numpy()[0]) if light_buffer is not None else 0
     asked = asked_bvh(item)  # read before the recording pass adds its own
     counts = out.node_count.numpy()
@@ -174,7 +175,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         crossings = count_crossings(scene, settings)
         wp_tree, offsets = sized_tree(counts, n_lights, len(scene.materials) if crossings else 0, device,
                                       has_textures(scene))
-        launch(trace_params(scene, settings, True, spread, side), wp_tree)
+        launch(trace_params(scene, settings, True, (footprint, spread), side), wp_tree)
         tree = tree_to_numpy(wp_tree, offsets, n_lights, fog, scene, settings, shape, crossings)
     return Traced(color=out.color.numpy(), fog=fog, node_count=counts, rays=stats_rays,
                   depth_histogram=histogram, tree=tree, shadow_tests=shadow_tests,
@@ -222,8 +223,8 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
     built = time.perf_counter()
     lights = build_light_buffer(compiled, light_buffer_resolution) if use_light_buffer else None
     built = time.perf_counter() - built
-    traced = trace_points(compiled, settings, points, threads, side=side, record=record_tree, item=item,
-                          light_buffer=lights)
+    traced = trace_points(compiled, settings, points, threads, side=side, footprint=1.0 / side,
+                          record=record_tree, item=item, light_buffer=lights)
     image = box_downsample(traced.color, side)
     seconds = time.perf_counter() - start
     total_rays = sum(traced.rays.values())

@@ -66,7 +66,8 @@ class TraceParamsW:
     fog: FogW
     record: int
     count_crossings: int  # record the materials transparent shadow rays cross
-    spread: float  # texture footprint: a sample's width per unit path length, 2 tan(fov_y / 2) / rows
+    sample: wp.vec2  # texture footprints: a sample's width in pixels (1 / side), and per unit path length
+    # (its spread: 2 tan(fov_y / 2) / height x that; 0 for orthographic views)
     side: int  # > 0: the regular grid of `side` x `side` samples per pixel; 0: the samples are `points`
 
 
@@ -184,7 +185,7 @@ def make_whitted_kernel(stack_size: int):
                         tree.local[base + node] = params.background
                     continue
 
-                surf = surface_at(scene, cam, hit, ray, xy, int(ray.kind == PRIMARY), params.spread)
+                surf = surface_at(scene, cam, hit, ray, xy, int(ray.kind == PRIMARY), params.sample)
                 if ray.kind == PRIMARY:
                     fog_f = fog_blend(params.fog, wp.dot(surf.p - cam.eye, cam.forward))
                 local = shade_hit(scene.geom, scene.lights, scene.materials, scene.light_buffer, scene.mesh.vertices,

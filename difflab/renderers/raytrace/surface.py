@@ -150,17 +150,18 @@ def shading_normal(mesh: MeshDataW, hit: HitW):
 
 @wp.func
 def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3, geo: wp.vec3, d: wp.vec3,
-              xy: wp.vec2, primary: int, path: float, spread: float):
+              xy: wp.vec2, primary: int, path: float, sample: wp.vec2):
     """uv and the texture value at a hit. uv: interpolated vertex uvs (triangles), the plane's world
-    axes, or the sphere's (lon / 2 pi, lat / pi). Footprint: a primary ray's pixel footprint on the tangent
-    plane (as the rasterizer's derivatives), a secondary ray's cone of width spread x path length
-    from the eye (the pixel cone carried along the path, ignoring curvature)."""
+    axes, or the sphere's (lon / 2 pi, lat / pi). Footprint of one sample (`sample`: its width in
+    pixels, its spread): a primary ray's on the tangent plane (as the rasterizer's derivatives on
+    its sample grid), a secondary ray's cone of width spread x path length from the eye (the
+    sample's cone carried along the path, ignoring curvature)."""
     dpdx = wp.vec3(0.0)
     dpdy = wp.vec3(0.0)
     if primary == 1:
-        dpdx, dpdy = pixel_footprint(cam, xy[0], xy[1], p, geo)
+        dpdx, dpdy = pixel_footprint(cam, xy[0], xy[1], sample[0], p, geo)
     else:
-        dpdx, dpdy = cone_footprint(d, geo, spread * path)
+        dpdx, dpdy = cone_footprint(d, geo, sample[1] * path)
     uv = wp.vec2(0.0)
     duv_dx = wp.vec2(0.0)
     duv_dy = wp.vec2(0.0)
@@ -185,7 +186,7 @@ def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3
 
 
 @wp.func(inline=True)
-def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, xy: wp.vec2, primary: int, spread: float):
+def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, xy: wp.vec2, primary: int, sample: wp.vec2):
     """The surface `ray` meets at `hit` (not a miss): two-sided normals, checker cell, texture."""
     surf = SurfaceW()
     d = ray.direction
@@ -205,7 +206,7 @@ def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, xy: wp.vec2, p
     surf.uv = wp.vec2(0.0)
     surf.texel = wp.vec3(0.0)
     if surf.mat.texture >= 0:
-        uv, texel = hit_texel(scene, surf.mat, cam, hit, surf.p, surf.geo, d, xy, primary, ray.path + hit.t, spread)
+        uv, texel = hit_texel(scene, surf.mat, cam, hit, surf.p, surf.geo, d, xy, primary, ray.path + hit.t, sample)
         surf.uv = uv
         surf.texel = texel
         surf.mat = textured_material(surf.mat, surf.mat.texture_target, surf.texel)

@@ -33,10 +33,11 @@ Filters (`sample_texture`, `filter` in the scene's TEXTURE_FILTERS order):
   semi-axis of at most 2 EWA_MAX_ANISOTROPY + 1 texels at the finer level).
 
 Pixel footprint for ray hits (the ray tracer's rule; the rasterizer computes the same Jacobian
-analytically from its perspective-correct interpolation): `pixel_footprint` intersects the rays
-through the raster points (x +- 1/2, y) and (x, y +- 1/2) with the tangent plane at the hit and
-returns dp/dx, dp/dy (central differences over one sample); `cone_footprint` gives the same for a
-secondary ray from the spread of a pixel cone (width = spread angle x path length); and the
+analytically from its perspective-correct interpolation on its sample grid): `pixel_footprint`
+intersects the rays through the raster points (x +- w/2, y) and (x, y +- w/2) with the tangent
+plane at the hit and returns dp/dx, dp/dy (central differences over one sample, w pixels wide: 1 /
+side under side x side supersampling); `cone_footprint` gives the same for a secondary ray from the
+spread of a sample's cone (width = spread angle x path length); and the
 `*_uv_derivatives` functions turn dp/dx, dp/dy into d(uv)/dx, d(uv)/dy for triangles, planes and
 spheres with the uv conventions of `compile.py` and `geometry.uv_sphere`.
 """
@@ -276,13 +277,15 @@ def onto_plane(origin: wp.vec3, direction: wp.vec3, p: wp.vec3, normal: wp.vec3)
 
 
 @wp.func
-def pixel_footprint(cam: CameraW, x: float, y: float, p: wp.vec3, normal: wp.vec3):
-    """dp/dx, dp/dy of a primary hit p (raster point (x, y) of the sample grid, surface `normal`):
-    the rays through (x +- 1/2, y) and (x, y +- 1/2) met with the tangent plane at p, differenced."""
-    o_r, d_r = primary_ray(cam, x + 0.5, y)
-    o_l, d_l = primary_ray(cam, x - 0.5, y)
-    o_d, d_d = primary_ray(cam, x, y + 0.5)
-    o_u, d_u = primary_ray(cam, x, y - 0.5)
+def pixel_footprint(cam: CameraW, x: float, y: float, width: float, p: wp.vec3, normal: wp.vec3):
+    """dp/dx, dp/dy of a primary hit p (raster point (x, y) of `cam`'s grid, surface `normal`) over a
+    sample `width` raster units wide: the rays through (x +- width/2, y) and (x, y +- width/2) met
+    with the tangent plane at p, differenced."""
+    h = 0.5 * width
+    o_r, d_r = primary_ray(cam, x + h, y)
+    o_l, d_l = primary_ray(cam, x - h, y)
+    o_d, d_d = primary_ray(cam, x, y + h)
+    o_u, d_u = primary_ray(cam, x, y - h)
     dpdx = onto_plane(o_r, d_r, p, normal) - onto_plane(o_l, d_l, p, normal)
     dpdy = onto_plane(o_d, d_d, p, normal) - onto_plane(o_u, d_u, p, normal)
     return dpdx, dpdy
