@@ -5,6 +5,7 @@ name the object and file of a mesh that cannot be rendered, and refuse to return
     check_threads(threads)                the CPU worker count a caller asks for
     object_errors(index, obj)             around building an object's mesh: errors name the object
     check_world_mesh(mesh, index, obj)    after transforming it: coordinates within +-MAX_COORD
+    check_mesh_uvs(mesh, index, obj, material)  a textured material's mesh has uvs
     check_image(image, scene)             before returning: no NaN / inf, with the likely cause named
 """
 
@@ -15,7 +16,7 @@ import contextlib
 import numpy as np
 
 from . import limits
-from .errors import MeshError, RenderError
+from .errors import MeshError, RenderError, SceneError
 
 
 def tree_shape(scene) -> tuple[int, float]:
@@ -86,6 +87,16 @@ def check_world_mesh(mesh, index: int, obj) -> None:
     if not largest <= limits.MAX_COORD:
         raise MeshError(f"{_object_label(index, obj)}.transform: vertices reach {largest:.3g} after the transform, "
                         f"beyond +-{limits.MAX_COORD:g} (float32 rendering overflows)")
+
+
+def check_mesh_uvs(mesh, index: int, obj, material) -> None:
+    """SceneError naming the object, its file and its material if the material has an image texture
+    and the mesh no uvs. (OpenGL would sample every point at the default texture coordinate (0, 0),
+    Mitsuba at the triangle's barycentrics: a texture that means nothing, so it is refused.)"""
+    if material.texture is not None and mesh.uvs is None:
+        raise SceneError(f"{_object_label(index, obj)}: material {obj.material!r} has a texture "
+                         f"({limits.short_path(material.texture)}) but the mesh has no uvs (texture coordinates: "
+                         "OBJ vt lines, `uvs` with `vertices`, or a builtin other than the teapot)")
 
 
 def _numbers(value, path: str):

@@ -114,3 +114,24 @@ def test_a_polygon_face_from_a_file_shows_its_texture_the_right_way_up(tmp_path,
     # the face spans pixels ~3..28 (half-width 1 at distance 3: 16 / (3 tan 22.5 deg) = 12.9 pixels)
     quarters = image[[9, 9, 22, 22], [9, 22, 9, 22]]  # top-left, top-right, bottom-left, bottom-right
     np.testing.assert_allclose(quarters, texels.reshape(4, 3), atol=1e-6)
+
+
+@pytest.mark.parametrize("source", ["arrays", "file", "teapot"])
+def test_a_textured_material_on_a_mesh_without_uvs_is_a_scene_error(tmp_path, source):
+    """A mesh with no texture coordinates under an image texture once rendered uv (0, 0)
+    everywhere (one texel's colour, flat grey under bilinear filtering): now a SceneError naming
+    the object, its file and the material, from either renderer."""
+    texture = tmp_path / "tex.png"
+    difflab.save_image(texture, np.indices((2, 2)).sum(axis=0)[..., None].repeat(3, -1).astype(np.float32) % 2)
+    (tmp_path / "quad.obj").write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3 4\n")
+    obj = {"arrays": quad_object(), "file": {"type": "mesh", "material": "m", "file": str(tmp_path / "quad.obj")},
+           "teapot": {"type": "mesh", "material": "m", "builtin": "teapot", "resolution": 2}}[source]
+    label = "objects[0]" + (f" ({tmp_path / 'quad.obj'})" if source == "file" else "")
+    scene = scene_dict([obj], {"m": {"kd": [1, 1, 1], "texture": str(texture)}}, ambient=(1, 1, 1))
+    for method in ("raster", "raytrace"):
+        with pytest.raises(SceneError) as caught:
+            difflab.render(scene, method=method)
+        assert str(caught.value) == (f"{label}: material 'm' has a texture ({texture}) but the mesh has no uvs "
+                                     "(texture coordinates: OBJ vt lines, `uvs` with `vertices`, or a builtin "
+                                     "other than the teapot)")
+    assert difflab.render(scene_dict([obj], {"m": {"kd": [1, 1, 1]}}, ambient=(1, 1, 1))).shape == (32, 32, 3)

@@ -20,7 +20,7 @@ from .._warp import wp
 
 from .. import geometry
 from ..errors import MeshError, RenderError
-from ..guards import check_world_mesh, object_errors
+from ..guards import check_mesh_uvs, check_world_mesh, object_errors
 from ..limits import require_triangles
 from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Scene, Sphere, load_scene
@@ -235,6 +235,7 @@ def scene_parts(scene, sample_height: int):
             with object_errors(index, obj):
                 mesh = object_mesh(obj)
             check_world_mesh(mesh, index, obj)
+            check_mesh_uvs(mesh, index, obj, scene.materials[obj.material])
             mesh_parts.append((mesh, material, index))
         elif isinstance(obj, Sphere):
             spheres.append((obj, material, index))
