@@ -103,21 +103,34 @@ def test_fit_command_wrong_size_and_missing_target_exit_2(files, capsys):
     assert main(["fit", str(scene), str(tmp / "missing.png"), "--material", "red", "-o", str(tmp / "x.json")]) == 2
 
 
-def test_output_is_atomic(files, monkeypatch, capsys):
-    """A writer failing midway leaves the old file as it was and no temporary file behind; exit 2
-    with one line naming the file and the reason (docs/cli.md: an output that cannot be written)."""
+@pytest.mark.parametrize("failing", ["fitted.json", "fitted.fit.json"])
+def test_output_is_atomic(files, monkeypatch, capsys, failing):
+    """The fitted scene and the report are written as a pair: a write failing midway -- of either --
+    leaves both old files as they were and no temporary file behind; exit 2 with one line naming the
+    file and the reason (docs/cli.md: an output that cannot be written). (The scene was written
+    before the report: a full disk on the report left a new scene beside the old report.)"""
     scene, target, tmp = files
-    out = tmp / "fitted.json"
+    out, report = tmp / "fitted.json", tmp / "fitted.fit.json"
     out.write_text("old")
+    report.write_text("old report")
+    import contextlib
+
     import difflab.io as io
 
-    def failing(path, data):
-        with io.atomic_path(path) as tmp_path:
-            tmp_path.write_text("partial")
+    atomic_path = io.atomic_path
+
+    class Full(type(tmp)):  # a temporary whose writing runs out of space midway
+        def write_text(self, text, *args, **kwargs):
+            super().write_text(text[:10], *args, **kwargs)
             raise OSError("disk full")
 
-    monkeypatch.setattr(io, "write_json_atomic", failing)
+    @contextlib.contextmanager
+    def failing_path(path, **kwargs):
+        with atomic_path(path, **kwargs) as tmp_path:
+            yield Full(tmp_path) if path.name == failing else tmp_path
+
+    monkeypatch.setattr(io, "atomic_path", failing_path)
     assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out), "--force"]) == 2
-    assert capsys.readouterr().err == f"difflab: error: {out}: cannot write (disk full); not written\n"
-    assert out.read_text() == "old"
-    assert sorted(os.listdir(tmp)) == sorted(["fitted.json", "scene.json", "target.npy"])
+    assert capsys.readouterr().err == f"difflab: error: {tmp / failing}: cannot write (disk full); not written\n"
+    assert out.read_text() == "old" and report.read_text() == "old report"
+    assert sorted(os.listdir(tmp)) == sorted(["fitted.json", "fitted.fit.json", "scene.json", "target.npy"])

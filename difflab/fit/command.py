@@ -14,6 +14,11 @@ noise, reduced chi-square, flags -- writes the fitted scene and a report of the 
     4  converged, but MODEL MISMATCH: the residuals sit far above the noise (files written); the
        fitted values answer a different question than asked -- try --method raytrace, other params
        or another specular model
+    5  converged, but NOISE UNKNOWN: too few used pixels have used neighbours to estimate the
+       noise (a small, thin or scattered mask), so the model was not judged -- give --sigma
+
+The fitted scene and the report are written as a pair: both or neither (a full disk while writing
+either leaves the old files, if any).
 """
 
 from __future__ import annotations
@@ -60,8 +65,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
-    from ..io import refuse_overwrite, write_json_atomic
-    from ..scene import save_scene
+    import json
+    from contextlib import ExitStack
+
+    from ..io import atomic_path, refuse_overwrite
     from .engine import fit
 
     output = Path(args.output)
@@ -79,9 +86,11 @@ def run(args) -> int:
     print(result.table())
     if result.result in ("empty_mask", "nonfinite_target"):
         raise FitError(f"no fit made: {result.result}")
-    save_scene(result.to_scene(), output)
-    write_json_atomic(report, {"scene": str(args.scene), "targets": [str(t) for t in args.targets],
-                               "materials": materials, **result.to_dict()})
+    contents = {output: result.to_scene().to_dict(), report: {
+        "scene": str(args.scene), "targets": [str(t) for t in args.targets], "materials": materials, **result.to_dict()}}
+    with ExitStack() as files:  # both temporaries written before either is renamed onto its path
+        for path, data in contents.items():
+            files.enter_context(atomic_path(path)).write_text(json.dumps(data, indent=2) + "\n")
     print(f"wrote {output} and {report}")
     if not result.converged:
         return EXIT_NOT_CONVERGED
