@@ -69,6 +69,7 @@ class TraceParamsW:
     sample: wp.vec2  # texture footprints: a sample's width in pixels (1 / side), and per unit path length
     # (its spread: 2 tan(fov_y / 2) / height x that; 0 for orthographic views)
     side: int  # > 0: the regular grid of `side` x `side` samples per pixel; 0: the samples are `points`
+    medium: int  # material id of the medium the camera is in (`medium.camera_medium`), -1 outside
 
 
 @wp.struct
@@ -154,7 +155,8 @@ def make_whitted_kernel(stack_size: int):
             base = int(0)
             if params.record == 1:
                 base = tree.offset[i, j]
-            first = new_ray(start, start + near * direction, direction, wp.vec3(1.0), near, 1, -1, PRIMARY, -1, -1)
+            first = new_ray(start, start + near * direction, direction, wp.vec3(1.0), near, 1, -1, PRIMARY,
+                            params.medium, -1)
             if wp.static(stack_size > 1):  # (a one-ray stack is the primary ray alone: no array to clear)
                 stack = wp.zeros(shape=stack_size, dtype=RayW)
                 stack[0] = first
