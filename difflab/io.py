@@ -187,6 +187,27 @@ def atomic_path(path: str | os.PathLike, *, sweep: bool = True):
         _LIVE.discard(tmp)
 
 
+@contextlib.contextmanager
+def uninterrupted():
+    """Hold Ctrl-C (SIGINT) and SIGTERM back until the block is done, so that the files it writes are
+    all written (a pair of outputs: both renamed, not one) and no temporary is left half-made; the
+    first signal caught is delivered after it (KeyboardInterrupt for SIGINT). (Only the main thread
+    receives signals; elsewhere the block runs as it is.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught = []
+    previous = {number: signal.signal(number, lambda number, frame: caught.append(number))
+                for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    if caught:
+        signal.raise_signal(caught[0])
+
+
 def _write_error(path: Path, exc: OSError) -> WriteError:
     """WriteError naming `path` and why the OSError `exc` stopped writing it (its errno kept)."""
     error = WriteError(f"{short_path(path)}: cannot write ({exc.strerror or ' '.join(str(exc).split())}); not written")

@@ -169,7 +169,8 @@ def test_batch_recovers_each_fit_and_records_failures(reference):
     assert invalid == {"line": 3, "name": "typo", "error": "unknown key(s) ['materal']; known: name, scene, targets, "
                        "material, params, method, init, solver"}
     rows = (out / "summary.csv").read_text().splitlines()
-    assert rows[0] == "line,name,status,result,model,model_mismatch,noise_unknown,loss,psnr,chi2,steps,params,error"
+    assert rows[0] == ("line,name,status,result,model,model_mismatch,noise_unknown,underdetermined,loss,psnr,chi2,steps,"
+                       "params,error")
     assert [r.split(",")[:3] for r in rows[1:]] == (
         [["1", "fit0", "converged"], ["2", "fit1", "converged"], ["3", "typo", "invalid"]]
         + [[str(i + 2), f"fit{i}", "converged"] for i in range(2, len(KDS))]
@@ -229,7 +230,7 @@ def test_interrupted_and_killed_runs_completed_by_a_rerun_are_identical(referenc
     manifest, out, _ = reference
     reports, scenes, log = tmp_path / "out" / "reports", tmp_path / "out" / "scenes", tmp_path / "log.txt"
     names = lambda folder: {p.stem for p in folder.glob("*.json")}  # noqa: E731
-    assert _run_until(manifest, tmp_path / "out", log, 1, signal.SIGINT) == 1, log.read_text()
+    assert _run_until(manifest, tmp_path / "out", log, 1, signal.SIGINT) == 130, log.read_text()
     assert "difflab: interrupted" in log.read_text()
     assert not list((tmp_path / "out").rglob(".*.tmp*"))
     assert len(names(reports)) == 1 and names(scenes) == names(reports)  # the result being written: whole

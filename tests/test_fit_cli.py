@@ -84,6 +84,39 @@ def test_fit_command_noise_unknown_exit_5(files, capsys):
     assert main(args + ["--sigma", "0.01", "--force"]) == 0
 
 
+def test_fit_command_report_on_the_output_is_refused(files, capsys):
+    """-o X --report X: the report would replace the fitted scene -- exit 2 before any work, nothing
+    written (it printed "wrote X and X" and kept only the report)."""
+    scene, target, tmp = files
+    out = tmp / "fitted.json"
+    assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out), "--report", str(out)]) == 2
+    assert "--report: the same file as -o/--output" in capsys.readouterr().err and not out.exists()
+
+
+def test_fit_command_ctrl_c_while_writing_leaves_the_whole_pair(files, monkeypatch):
+    """Ctrl-C arriving while the fitted scene and report are written is held until both are renamed
+    into place, then ends the command (exit 130): never one new file beside an old one."""
+    import contextlib
+    import signal
+
+    import difflab.io as io
+
+    scene, target, tmp = files
+    out, report = tmp / "fitted.json", tmp / "fitted.fit.json"
+    atomic_path = io.atomic_path
+
+    @contextlib.contextmanager
+    def interrupted_path(path, **kwargs):
+        with atomic_path(path, **kwargs) as tmp_path:
+            if path.name == out.name:
+                signal.raise_signal(signal.SIGINT)  # the user's Ctrl-C, between the two files
+            yield tmp_path
+
+    monkeypatch.setattr(io, "atomic_path", interrupted_path)
+    assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out)]) == 130
+    assert json.loads(report.read_text())["converged"] and "materials" in json.loads(out.read_text())
+
+
 @pytest.mark.parametrize("extra", [["--material", "nope"], ["--material", "red", "--params", "kd,zz"],
                                    ["--material", "red", "--max-steps", "0"],
                                    ["--material", "red", "--sigma", "-1"]])

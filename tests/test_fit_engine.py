@@ -81,6 +81,28 @@ def test_chi_square_with_per_channel_weights_of_zero(noisy_sphere, zeros, sigma)
         assert result.sigma == 0.02 and abs(result.chi2 - 1.0) < 4.0 * np.sqrt(2.0 / 2000)
 
 
+def test_a_given_sigma_below_the_noise_is_flagged_within_the_spread(noisy_sphere):
+    """The noisy sphere (noise 0.02) fitted with sigma = 0.016 given: chi2 ~1.56, within the fixed
+    floor of 2 that an estimated sigma gets but far above 1 + 5 sqrt(2 / dof) (~1.06 over ~12000
+    entries): a given sigma is taken as the truth, so the fit is flagged. (It was not: POV-Ray's
+    brilliance 1.2, outside the model, fitted with its true sigma gave chi2 1.83, exit 0.)"""
+    scene, noisy = noisy_sphere
+    result = fit_material(scene, [noisy], "red", init=START, sigma=0.016)
+    assert result.converged and 1.3 < result.chi2 < 2.0 and result.model_mismatch and not result.ok
+
+
+def test_one_pixel_for_ten_unknowns_is_underdetermined(noisy_sphere):
+    """A single pixel (3 values) for ka, kd, ks, n (10 unknowns), sigma given: underdetermined -- chi2
+    nan, every parameter poorly determined, not ok. (It reported chi2 1.6e-16 and ok, exit 0.)"""
+    scene, noisy = noisy_sphere
+    mask = np.zeros(noisy.shape[:2], bool)
+    mask[32, 32] = True
+    result = fit_material(scene, [noisy], "red", init=START, masks=[mask], sigma=0.02)
+    assert result.underdetermined and np.isnan(result.chi2) and not result.model_mismatch and not result.ok
+    assert sorted(result.poorly_determined) == sorted(("ka", "kd", "ks", "n"))
+    assert "UNDERDETERMINED" in result.table() and result.to_dict()["underdetermined"]
+
+
 def scattered_mask(scene, count: int, seed: int) -> np.ndarray:
     """`count` pixels of the red sphere drawn at random: a mask with (almost) no used neighbourhoods."""
     from difflab import render_frame

@@ -25,27 +25,42 @@ def test_reduced_chi_square_counts_uncensored_values_less_parameters():
     assert silent["s2"] == pytest.approx(sse / (6 - 1 - 1 - 2), rel=1e-15)
     assert silent["chi2"] == pytest.approx(sse / 2 / 0.25, rel=1e-15)
     three = jac[:3].T @ jac[:3]
-    sse3 = float(np.sum(r[:3] ** 2))  # three entries, two parameters: dof 1, floored at 1 with one censored
-    for censored in (0, 1):
-        st3 = fit_statistics(three, sse3, 3, censored=censored, sigma=1.0, size=2)
-        assert st3["s2"] == pytest.approx(0.14, rel=1e-14)
+    sse3 = float(np.sum(r[:3] ** 2))  # three entries, two parameters: dof 1
+    st3 = fit_statistics(three, sse3, 3, censored=0, sigma=1.0, size=2)
+    assert st3["s2"] == pytest.approx(0.14, rel=1e-14) and not st3["underdetermined"]
     free = fit_statistics(None, sse, r.size, censored=1, sigma=0.5, size=2)  # matrix-free: no J^T J, same dof
     assert free["s2"] == pytest.approx(sse / 3, rel=1e-15) and free["chi2"] == pytest.approx(st["chi2"], rel=1e-15)
     assert free["diag"].shape == (2,) and np.isnan(free["diag"]).all()
 
 
+@pytest.mark.parametrize("sigma_given", [False, True])
 @pytest.mark.parametrize("dof", [2, 8, 50, 5000])
-def test_mismatch_threshold_is_max_of_two_and_five_sigma_of_chi_square(dof):
+def test_mismatch_threshold_is_five_sigma_of_chi_square_and_two_for_an_estimate(dof, sigma_given):
     """chi2 of dof degrees of freedom has standard deviation sqrt(2 / dof) (reduced): the flag is
-    raised above max(2, 1 + 5 sqrt(2 / dof)), just there and not just below."""
-    threshold = max(MISMATCH_CHI2, 1.0 + 5.0 * math.sqrt(2.0 / dof))
+    raised above 1 + 5 sqrt(2 / dof) for a given sigma, above max(2, that) for an estimated one, just
+    there and not just below."""
+    spread = 1.0 + 5.0 * math.sqrt(2.0 / dof)
+    threshold = spread if sigma_given else max(MISMATCH_CHI2, spread)
     jac = np.zeros((dof + 1, 1))
     jac[0, 0] = 1.0
     for chi2, flagged in ((threshold * (1 - 1e-9), False), (threshold * (1 + 1e-9), True)):
         r = np.full(dof + 1, math.sqrt(chi2 * dof / (dof + 1)))
-        st = fit_statistics(jac.T @ jac, float(np.sum(r * r)), r.size, censored=0, sigma=1.0, size=1)
+        st = fit_statistics(jac.T @ jac, float(np.sum(r * r)), r.size, censored=0, sigma=1.0, size=1,
+                            sigma_given=sigma_given)
         assert st["chi2"] == pytest.approx(chi2, rel=1e-12)
         assert st["mismatch"] is flagged
+
+
+@pytest.mark.parametrize("censored, silent", [(1, 0), (0, 1), (2, 0)])
+def test_no_more_counted_entries_than_unknowns_is_underdetermined(censored, silent):
+    """Three entries, two unknowns, one or two of them censored or noise-free: nothing is left to judge
+    the model by -- chi2 nan, no flag, s2 from a known sigma (else inf), the covariance as before."""
+    jac = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]])
+    st = fit_statistics(jac.T @ jac, 0.1, 3, censored=censored, sigma=0.5, size=2, silent=silent, sigma_given=True)
+    assert st["underdetermined"] and math.isnan(st["chi2"]) and not st["mismatch"] and st["s2"] == 0.25
+    np.testing.assert_allclose(st["diag"], np.diag(np.linalg.inv(jac.T @ jac)), rtol=1e-12)
+    unknown = fit_statistics(jac.T @ jac, 0.1, 3, censored=censored, sigma=math.nan, size=2, silent=silent)
+    assert unknown["underdetermined"] and unknown["s2"] == math.inf
 
 
 def test_standard_errors_scale_with_sigma_and_are_infinite_where_undetermined():

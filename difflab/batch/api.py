@@ -37,9 +37,9 @@ class BatchSummary:
 
     @property
     def unjudged(self) -> list:
-        """Names of the fits whose noise could not be estimated (`FitResult.noise_unknown`): whether
-        their image model explains the targets was not judged."""
-        return [row["name"] for row in self.rows if row.get("noise_unknown")]
+        """Names of the fits whose image model was not judged: their noise could not be estimated
+        or they are underdetermined (`FitResult.noise_unknown`, `.underdetermined`)."""
+        return [row["name"] for row in self.rows if row.get("noise_unknown") or row.get("underdetermined")]
 
 
 def _say(quiet: bool, text: str) -> None:

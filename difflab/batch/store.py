@@ -18,21 +18,19 @@ non-empty folder that is not a batch's is not written into without `force`.
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import json
-import signal
-import threading
 from pathlib import Path
 
-from ..io import TMP_MARK, refuse_overwrite, write_json_atomic, write_text_atomic
+from ..io import TMP_MARK, refuse_overwrite, uninterrupted, write_json_atomic, write_text_atomic
 from .manifest import Invalid, Job
 
 FOLDERS = ("scenes", "reports", "failures", "timing")
-COLUMNS = ("line", "name", "status", "result", "model", "model_mismatch", "noise_unknown", "loss", "psnr", "chi2", "steps",
-           "params", "error")
-REPORTED = ("result", "model", "model_mismatch", "noise_unknown", "loss", "psnr", "chi2", "steps", "params")  # columns from a report
+COLUMNS = ("line", "name", "status", "result", "model", "model_mismatch", "noise_unknown", "underdetermined", "loss", "psnr",
+           "chi2", "steps", "params", "error")
+REPORTED = ("result", "model", "model_mismatch", "noise_unknown", "underdetermined", "loss", "psnr", "chi2", "steps",
+            "params")  # columns from a report
 
 
 def _read_json(path: Path):
@@ -40,24 +38,6 @@ def _read_json(path: Path):
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-
-
-@contextlib.contextmanager
-def uninterrupted():
-    """Hold Ctrl-C (SIGINT) back until the block is done, so that the files it writes are all written
-    and no temporary is left half-made; the KeyboardInterrupt is raised after it. (Only the main thread
-    receives signals; elsewhere the block runs as it is.)"""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    caught = []
-    previous = signal.signal(signal.SIGINT, lambda number, frame: caught.append(number))
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    if caught:
-        raise KeyboardInterrupt
 
 
 class Store:

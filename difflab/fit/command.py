@@ -14,8 +14,9 @@ noise, reduced chi-square, flags -- writes the fitted scene and a report of the 
     4  converged, but MODEL MISMATCH: the residuals sit far above the noise (files written); the
        fitted values answer a different question than asked -- try --method raytrace, other params
        or another specular model
-    5  converged, but NOISE UNKNOWN: too few used pixels have used neighbours to estimate the
-       noise (a small, thin or scattered mask), so the model was not judged -- give --sigma
+    5  converged, but the model was not judged: NOISE UNKNOWN (too few used pixels have used
+       neighbours to estimate the noise: a small, thin or scattered mask -- give --sigma) or
+       UNDERDETERMINED (no more target values than unknowns)
 
 The fitted scene and the report are written as a pair: both or neither (a full disk while writing
 either leaves the old files, if any).
@@ -68,11 +69,13 @@ def run(args) -> int:
     import json
     from contextlib import ExitStack
 
-    from ..io import atomic_path, refuse_overwrite
+    from ..io import atomic_path, refuse_overwrite, uninterrupted
     from .engine import fit
 
     output = Path(args.output)
     report = Path(args.report) if args.report else output.with_name(output.stem + ".fit.json")
+    if output.resolve() == report.resolve():
+        raise FitError(f"--report: the same file as -o/--output ({output}): the report would replace the fitted scene")
     refuse_overwrite(output, report, force=args.force)
     if args.max_steps < 1:
         raise FitError(f"--max-steps: must be >= 1, got {args.max_steps}")
@@ -88,7 +91,7 @@ def run(args) -> int:
         raise FitError(f"no fit made: {result.result}")
     contents = {output: result.to_scene().to_dict(), report: {
         "scene": str(args.scene), "targets": [str(t) for t in args.targets], "materials": materials, **result.to_dict()}}
-    with ExitStack() as files:  # both temporaries written before either is renamed onto its path
+    with uninterrupted(), ExitStack() as files:  # both temporaries written before either is renamed onto its path
         for path, data in contents.items():
             files.enter_context(atomic_path(path)).write_text(json.dumps(data, indent=2) + "\n")
     print(f"wrote {output} and {report}")
@@ -96,4 +99,4 @@ def run(args) -> int:
         return EXIT_NOT_CONVERGED
     if result.model_mismatch:
         return EXIT_MODEL_MISMATCH
-    return EXIT_NOISE_UNKNOWN if result.noise_unknown else EXIT_OK
+    return EXIT_NOISE_UNKNOWN if result.noise_unknown or result.underdetermined else EXIT_OK

@@ -78,16 +78,17 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         noise_unknown = finite and sigma is None
         sigma = float("nan") if sigma is None else sigma
         if finite:
-            st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size, silent_entries)
+            st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size, silent_entries,
+                                sigma_given=setup.sigma_given is not None)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if gram is not None else
                                       np.full(layout.size, np.nan))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], QUANTISATION_SIGMA ** 2)))
             flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol) if gram is not None \
                 else [key for key, on in seen.items() if not on.all()]
-            chi2, mismatch = st["chi2"], st["mismatch"]
+            chi2, mismatch, underdetermined = st["chi2"], st["mismatch"], st["underdetermined"]
         else:
             stderr = {p.key: np.full(p.size, np.nan) for p in layout}
-            flagged, chi2, mismatch = [p.key for p in layout], float("inf"), True
+            flagged, chi2, mismatch, underdetermined = [p.key for p in layout], float("inf"), True, False
             if result == SUCCESSFUL:
                 result = "nonfinite"
         lo, hi = layout.bounds()
@@ -97,6 +98,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                         seconds=timings.get("solve", 0.0), converged=bool(result == SUCCESSFUL and finite),
                         result=result, history=list(history), poorly_determined=flagged, sigma=float(sigma),
                         chi2=float(chi2), model_mismatch=bool(mismatch), noise_unknown=noise_unknown,
+                        underdetermined=bool(underdetermined),
                         at_bound=[p.key for p in layout if np.any(on_bound[p.key])], residuals=residuals, seen=seen,
                         timings={**timings, "stats": time.perf_counter() - start}, **common)
     if options.throw and not out.converged:

@@ -66,6 +66,10 @@ class FitResult:
         noise_unknown: too few used pixels have used neighbours to estimate the noise (a small,
         thin or scattered mask) and no `sigma` was given: sigma and chi2 are nan, and whether the
         image model explains the targets is not judged (`ok` is False; pass `sigma=` to judge it).
+        underdetermined: no more counted residual entries (weight > 0, uncensored, not noise-free
+        zeros) than fitted unknowns: the data neither determine the values nor say anything of the
+        noise or the model -- chi2 nan, every parameter poorly determined, `ok` False; the standard
+        errors use a given sigma, else are inf.
     at_bound: names with a value (some channel) on a bound (ks = 0 for a matte target).
     censored: target pixel channels at the target's ceiling (clipped highlights), fitted as "at
         least the ceiling"; with noise, also the channels of the pixels left out because their
@@ -93,6 +97,7 @@ class FitResult:
     chi2: float = float("nan")
     model_mismatch: bool = False
     noise_unknown: bool = False
+    underdetermined: bool = False
     at_bound: list = field(default_factory=list)
     censored: int = 0
     residuals: list = field(default_factory=list, repr=False, compare=False)
@@ -104,7 +109,7 @@ class FitResult:
     def ok(self) -> bool:
         """Converged, and the image model explains the targets (judged against a known noise
         level, without a mismatch flag)."""
-        return self.converged and not self.model_mismatch and not self.noise_unknown
+        return self.converged and not (self.model_mismatch or self.noise_unknown or self.underdetermined)
 
     @property
     def n_params(self) -> int:
@@ -169,7 +174,7 @@ class FitResult:
             "seconds": self.seconds, "converged": self.converged, "result": self.result, "solver": self.solver,
             "poorly_determined": list(self.poorly_determined), "history": [_json_number(x) for x in self.history],
             "timings": dict(self.timings), "model": self.model, "sigma": _json_number(self.sigma),
-            "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch, "noise_unknown": self.noise_unknown, "at_bound": list(self.at_bound),
+            "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch, "noise_unknown": self.noise_unknown, "underdetermined": self.underdetermined, "at_bound": list(self.at_bound),
             "censored": self.censored,
         }
 
@@ -194,6 +199,8 @@ class FitResult:
                                          "errors assume it does", self.model_mismatch),
                                         ("NOISE UNKNOWN: too few used pixels with used neighbours to estimate it; "
                                          "the image model is not judged (give sigma)", self.noise_unknown),
+                                        (f"UNDERDETERMINED: no more counted target values than the {self.n_params} "
+                                         "unknowns; the model is not judged", self.underdetermined),
                                         (f"at bound: {', '.join(self.at_bound)}", bool(self.at_bound)),
                                         (f"censored (clipped) target values: {self.censored}", self.censored > 0)) if on]
         rows.append(f"result: {self.result}, converged: {self.converged}, steps: {self.steps}, "

@@ -28,10 +28,11 @@ estimates the lit pixels' noise). A pixel zero in only some channels stays in bo
 level varies over the lit pixels (noise proportional to the signal), sigma is a median level and
 chi2_red, a mean square over it, exceeds 1 by the spread: (rms / median of the pixels' sigmas)^2.
 
-`model_mismatch` is set when chi2_red > MISMATCH_CHI2 (and above 1 + 5 sqrt(2 / (N - p)), its
-statistical spread): the residuals sit far above the noise, so the image model does not explain the
-target (wrong image model, wrong specular model, missing light...) and the fitted values answer a
-different question.
+`model_mismatch` is set when chi2_red is above 1 + 5 sqrt(2 / (N - p)), its statistical spread
+(and, for an estimated sigma, above MISMATCH_CHI2 too: `fit_statistics`): the residuals sit far
+above the noise, so the image model does not explain the target (wrong image model, wrong specular
+model, missing light...) and the fitted values answer a different question. With N <= p the fit is
+`underdetermined`: nothing is left to judge the model or the noise by.
 
 Standard errors are those of linearised least squares, in scene units, and assume the model holds:
 
@@ -216,20 +217,34 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
 
 
 def fit_statistics(gram: np.ndarray | None, sse: float, entries: int, censored: int, sigma: float, size: int,
-                   silent: int = 0) -> dict:
+                   silent: int = 0, sigma_given: bool = False) -> dict:
     """s2 = sse / dof (sse: the sum of squares of the `entries` residuals r; dof = N - p, N entries
     neither censored nor `silent` (noise-free zeros), p = `size` fitted entries), chi2 = s2 / sigma^2
-    (reduced; nan when sigma is: the noise unknown, the model is not judged), the mismatch flag (chi2
-    above max(MISMATCH_CHI2, 1 + 5 sqrt(2 / dof))), and
+    (reduced; nan when sigma is: the noise unknown, the model is not judged), the mismatch flag, and
     diag (J^T J)^-1 (p,) from gram = J^T J (p, p); gram None (a matrix-free fit): diag nan, no
-    covariance is formed."""
+    covariance is formed.
+
+    The flag is raised when chi2 exceeds 1 + 5 sqrt(2 / dof) (five standard deviations of a reduced
+    chi-square) and, for an estimated sigma, MISMATCH_CHI2 too: an estimate is a median level, which
+    noise that varies over the image (a renderer's, proportional to the signal) lifts chi2 above 1
+    by the spread. A given sigma is taken as the truth: POV-Ray's brilliance 1.2 (outside the
+    model) fitted with its true sigma 0.01 gave chi2 1.83 over ~3600 entries and was not flagged.
+    With dof <= 0 (no more counted entries than unknowns: `underdetermined`) the residuals say
+    nothing about the noise or the model: chi2 nan, no flag, s2 = sigma^2 where sigma is known,
+    else inf."""
     p = size
-    dof = max(entries - censored - silent - p, 1)
+    dof = entries - censored - silent - p
+    if dof <= 0:
+        known = math.isfinite(sigma) and sigma > 0
+        diag = np.diag(covariance_unscaled(gram)) if gram is not None else np.full(p, np.nan)
+        return {"s2": sigma * sigma if known else math.inf, "chi2": math.nan, "mismatch": False, "diag": diag,
+                "underdetermined": True}
     s2 = sse / dof
     chi2 = math.nan if math.isnan(sigma) else s2 / (sigma * sigma) if sigma > 0 else math.inf
-    mismatch = bool(chi2 > max(MISMATCH_CHI2, 1.0 + 5.0 * math.sqrt(2.0 / dof)))
+    spread = 1.0 + 5.0 * math.sqrt(2.0 / dof)
+    mismatch = bool(chi2 > (spread if sigma_given else max(MISMATCH_CHI2, spread)))
     diag = np.diag(covariance_unscaled(gram)) if gram is not None else np.full(p, np.nan)
-    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": diag}
+    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": diag, "underdetermined": False}
 
 
 def poorly_determined(layout, values: dict, stderr_floor: dict, rel_tol=0.1, abs_tol=1e-3) -> list[str]:
