@@ -1,12 +1,14 @@
 """Solvers behind every fit, chosen by one value object, `FitOptions`.
 
 "lm" is difflab's box-constrained Levenberg-Marquardt (`lm.py`) on the bounded values themselves;
-"varpro" solves ka, kd, ks exactly inside an "lm" search over the rest (`varpro.py`); "gauss_newton",
+"varpro" solves ka, kd, ks exactly inside an "lm" search over the rest (`varpro.py`: with only ka,
+kd, ks fitted, the linear solve alone, 0 steps; a target with a ceiling that no value reaches solved
+unclipped, FitError where a target value or the fitted model reaches the ceiling); "gauss_newton",
 "dogleg", "bfgs" (optimistix) and "adam" (optax through optimistix) run on unconstrained coordinates
 mapped into the bounds (`params.Layout.x_from_free`). Fits with many entries (a texture's texels)
 solve each step's normal equations matrix-free by conjugate gradients (`matfree.py`,
 `FitOptions.linear_solver`). Failure is a value: each run returns a result code name and never
-raises here.
+raises here, but for "varpro" on a problem it cannot model (an input error, not a failed fit).
 """
 
 from __future__ import annotations

@@ -8,7 +8,16 @@ geometry are fixed, so solve those exactly and search only over the nonlinear re
 A and b come from the same residuals as every other solver (A = dr/dk, exact because r is affine in
 k; b = r at k = 0), so nothing here restates the image model. The linear solve is unconstrained;
 when a coefficient comes out negative, the box Levenberg-Marquardt solver polishes from the clipped
-solution, which brings it onto its bound 0.
+solution, which brings it onto its bound 0. With no nonlinear parameter (params ka, kd, ks only)
+there is no outer search: k* is the fit, reported as 0 steps (a fit's steps are the outer search's,
+as everywhere here: the linear solve is part of each of them), plus the polish's steps when a
+coefficient came out of its bounds.
+
+Clipping is not linear. A target with a ceiling that no counted value reaches (an 8- or 16-bit file
+below its white) is solved unclipped (`Problem.without_ceilings`), which is the clipped problem's
+solution wherever the fitted model stays below the ceilings (`Problem.below_ceilings`); where it
+ends at or above one at a counted entry, or a target value reaches its ceiling, varpro raises
+FitError: solver "lm" fits such targets, the pixels at the ceiling counted as censored.
 """
 
 from __future__ import annotations
@@ -35,12 +44,26 @@ def check_applicable(problem) -> None:
     if any(p.kind == "intensity" for p in problem.layout):
         raise FitError("solver: varpro cannot fit light intensities (intensity x k is not linear)")
     for view in problem.views:
-        if view.ceiling is not None or getattr(getattr(view.model, "formation", None),
-                                                                   "clamp_colors", False):
-            raise FitError("solver: varpro needs an unclipped image (clipped targets and Gouraud vertex-colour "
-                           "clamping are not linear); use 'lm'")
+        if getattr(getattr(view.model, "formation", None), "clamp_colors", False):
+            raise FitError("solver: varpro needs an unclamped image (Gouraud vertex-colour clamping is not "
+                           "linear); use solver='lm'")
     if not any(KINDS[p.kind].linear for p in problem.layout):
         raise FitError("solver: varpro needs at least one of ka, kd, ks among the params")
+
+
+def unclipped(problem):
+    """The problem varpro solves: `problem` when no target has a ceiling, else the same without its
+    ceilings (`Problem.without_ceilings`); FitError when a target value reaches its ceiling."""
+    if all(view.ceiling is None for view in problem.views):
+        return problem
+    out = problem.without_ceilings()
+    if out is None:
+        clipped = sum(int(np.count_nonzero(np.asarray(view.target) >= np.asarray(view.ceiling)))
+                      for view in problem.views if view.ceiling is not None)
+        raise FitError(f"solver: varpro needs an unclipped target, and {clipped} target values reach their ceiling "
+                       "(the value where it clips: 1.0 for an 8- or 16-bit file; clipped values are censored, not "
+                       "linear); use solver='lm', which fits them as censored")
+    return out
 
 
 def _linear_mask(layout) -> np.ndarray:
@@ -69,6 +92,14 @@ def solve_linear(problem, x):
     return base.at[lin_idx].set(k), b + a @ k
 
 
+_solve_direct = eqx.filter_jit(solve_linear)  # every parameter linear: k* from anywhere
+
+
+@eqx.filter_jit
+def _weighted(problem, x):
+    return problem.weighted(problem.layout.values(x))
+
+
 @eqx.filter_jit
 def _solve_reduced(problem, x0, lower, upper, max_steps, rtol, atol, progress):
     nonlinear = np.flatnonzero(~_linear_mask(problem.layout))
@@ -85,19 +116,30 @@ def _solve_reduced(problem, x0, lower, upper, max_steps, rtol, atol, progress):
 
 def run_varpro(problem, x0: np.ndarray, options, progress):
     """(x, result name, steps, loss history) by variable projection, polished by box LM when a
-    linear coefficient came out negative."""
+    linear coefficient came out negative; FitError when the problem is not linear in its ka, kd, ks
+    (`check_applicable`, a clipped target: see the module's docstring)."""
     check_applicable(problem)
+    solved = unclipped(problem)
     rtol, atol = options.tolerances()
     dtype = problem.ambient.dtype
     lower, upper = (jnp.asarray(b, dtype) for b in problem.layout.bounds())
-    x, code, steps, history = _solve_reduced(problem, jnp.asarray(x0, dtype), lower, upper, options.max_steps, rtol,
-                                             atol, progress)
+    if np.all(_linear_mask(problem.layout)):
+        x, r = _solve_direct(solved, jnp.asarray(x0, dtype))
+        code, steps, history = lm.SUCCESSFUL if np.all(np.isfinite(np.asarray(r))) else lm.NONFINITE, 0, []
+    else:
+        x, code, steps, history = _solve_reduced(solved, jnp.asarray(x0, dtype), lower, upper, options.max_steps,
+                                                 rtol, atol, progress)
+        history = np.asarray(history, np.float64)[:int(steps)].tolist()
     x, steps = np.asarray(x, np.float64), int(steps)
-    history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
+    history = history if options.history else []
     lo, hi = problem.layout.bounds()
     if lm.CODES[int(code)] == "successful" and (np.any(x < lo) or np.any(x > hi)):
-        x, code, more, extra, _, _ = lm.solve_box(problem, jnp.asarray(np.clip(x, lo, hi), dtype), lower, upper,
-                                            options.max_steps, rtol, atol, progress)
+        x, code, more, extra, _, _ = lm.solve_box(solved, jnp.asarray(np.clip(x, lo, hi), dtype), lower, upper,
+                                                  options.max_steps, rtol, atol, progress)
         x, steps = np.asarray(x, np.float64), steps + int(more)
         history += np.asarray(extra, np.float64)[:int(more)].tolist() if options.history else []
+    if solved is not problem and not problem.below_ceilings(_weighted(solved, jnp.asarray(x, dtype))):
+        raise FitError("solver: varpro's fit puts the model at or above a target's ceiling (the value where it "
+                       "clips: 1.0 for an 8- or 16-bit file) at a pixel that counts, where the target is below it: "
+                       "clipping is not linear; use solver='lm', which fits those pixels as censored")
     return x, lm.CODES[int(code)], steps, history
