@@ -46,6 +46,23 @@ def test_linear_params_only_is_the_linear_solve(scene_and_noisy, params):
     assert vp.sigma == pytest.approx(0.01, rel=0.1) and not vp.model_mismatch
 
 
+def test_a_coefficient_no_pixel_sees_keeps_its_start():
+    """Under no ambient light ka reaches no pixel: varpro leaves it at its start, as lm does, both
+    listing it poorly determined; kd is fitted."""
+    d = scene_dict(size=24)
+    d["ambient"] = [0, 0, 0]
+    scene = Scene.from_dict(d)
+    target = target_of(scene)
+    init = {"ka": 0.3, "kd": 0.4}
+    lm = fit_material(scene, [target], "red", ("ka", "kd"), init=init, x64=True)
+    vp = fit_material(scene, [target], "red", ("ka", "kd"), init=init, x64=True, solver="varpro")
+    np.testing.assert_allclose(vp.params["ka"], [0.3] * 3, rtol=1e-12)
+    np.testing.assert_allclose(lm.params["ka"], [0.3] * 3, rtol=1e-12)
+    np.testing.assert_allclose(vp.params["kd"], TRUTH["kd"], rtol=1e-6)
+    np.testing.assert_allclose(vp.params["kd"], lm.params["kd"], rtol=RTOL)
+    assert "ka" in vp.poorly_determined and "ka" in lm.poorly_determined
+
+
 def test_linear_params_only_lands_on_bound():
     """A target whose best green kd is -0.05 (the model's image there: affine in kd) -- the
     unconstrained solve's value -- is fitted with kd green on its bound 0, reported at_bound, as lm

@@ -72,7 +72,8 @@ def _linear_mask(layout) -> np.ndarray:
 
 def solve_linear(problem, x):
     """(x with its linear entries replaced by k*, the plain residual at k*) for the nonlinear
-    entries of x fixed."""
+    entries of x fixed; a coefficient no residual depends on (ka under no ambient light) keeps its
+    value in x, as in "lm"."""
     linear = _linear_mask(problem.layout)
     lin_idx = np.flatnonzero(linear)
     dtype = x.dtype
@@ -88,7 +89,7 @@ def solve_linear(problem, x):
     scale = jnp.where(norms > 0, 1.0 / jnp.where(norms > 0, norms, 1.0), 0.0)
     a_scaled = a * scale
     gram = a_scaled.T @ a_scaled + RIDGE[dtype == jnp.float64] * jnp.eye(lin_idx.size, dtype=dtype)
-    k = scale * jnp.linalg.solve(gram, -(a_scaled.T @ b))
+    k = jnp.where(norms > 0, scale * jnp.linalg.solve(gram, -(a_scaled.T @ b)), x[lin_idx])  # unseen: as it was
     return base.at[lin_idx].set(k), b + a @ k
 
 
