@@ -1,15 +1,13 @@
-"""Scene -> device arrays, once: the triangle soup the rasterizer draws, and the ray-traceable
-geometry (analytic spheres and planes, plus a BVH over the mesh triangles) for shadow and other rays.
+"""Scene -> device arrays, once: the mesh objects' triangle soup, and the ray-traceable geometry
+(analytic spheres and planes, plus a BVH over the mesh triangles) for shadow and other rays.
 
-The rasterizer tessellates analytic spheres finely enough that the silhouette is within half a
-sample of the true one (with the analytic normals at the vertices), and draws a plane as a grid of
-quads reaching the far plane in every direction, clipped to the view by the pipeline. Rays always
-see the exact spheres and planes.
+The rasterizer draws the analytic objects as triangles (`tessellate.py`) appended to the meshes'
+soup when it first draws the compiled scene (`CompiledScene.raster`); ray tracing never builds
+them: rays see the exact spheres and planes.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 import threading
@@ -24,16 +22,14 @@ from ..guards import check_mesh_uvs, check_world_mesh, object_errors
 from ..limits import require_triangles
 from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Scene, Sphere, load_scene
-from .camera import camera_frame, pixel_size_at
 from .launch import host_empty, resolve_device
+from .tessellate import AnalyticParts
 from .texture.store import TextureStore, scene_textures
 from .trace import SceneGeomW
 
 RAY_EPSILON_SCALE = 1e-4  # ray offset = this x the scene's extent (bounding-box diagonal) ...
 RAY_EPSILON_ULPS = 2.0  # ... but at least this x 2^-23 (2 to 4 float32 ulps) of its largest coordinate
-MAX_SPHERE_SEGMENTS = 1024
-MIN_SPHERE_SEGMENTS = 128  # keeps interpolated normals within ~1e-3 of the sphere's inside the silhouette
-PLANE_RINGS = 12  # grid lines each side of the eye's foot on a rasterized plane, spaced geometrically
+RASTER_SOUP = "raster soup"  # the key in CompiledScene.built of the mesh and analytic triangles (`raster`)
 
 
 def _unheld_refs() -> int:
@@ -50,10 +46,13 @@ _UNHELD = _unheld_refs()
 @dataclass(frozen=True)
 class CompiledScene:
     """A scene on a device, built once by `compile_scene` and rendered any number of times by
-    `render` / `render_frame` (with render-setting overrides: nothing is rebuilt). Raster triangles: world-space `vertices`, per-vertex `normals` (unit) and
-    `uvs`, `faces`, and per face its material id, object id and geometric (winding) normal. The first
-    `n_mesh_faces` faces are the mesh objects' and are also in the BVH; the rest tessellate spheres
-    and planes. Numpy copies are kept beside the device arrays for the G-buffer's users."""
+    `render` / `render_frame` (with render-setting overrides: nothing is rebuilt). The mesh objects'
+    triangles (those the BVH holds): world-space `vertices`, per-vertex `normals` (unit) and `uvs`,
+    `faces`, and per face its material id, object id and geometric (winding) normal; numpy copies are
+    kept beside the device arrays for the G-buffer's users. The rasterizer draws `raster()`: the same
+    fields with the analytic spheres' and planes' tessellation appended after the first
+    `n_mesh_faces` faces (and `n_mesh_vertices` vertices), built when something first rasterizes the
+    scene; ray tracing never builds it."""
 
     scene: object
     device: str
@@ -74,7 +73,31 @@ class CompiledScene:
     lights: wp.array
     materials: wp.array
     textures: TextureStore | None = None  # every material's image texture; `textures.warp` for kernels
-    built: dict = field(default_factory=dict, compare=False, repr=False)  # what `traceable` built, shared by copies
+    analytic: AnalyticParts = field(default_factory=AnalyticParts)  # what `raster` tessellates
+    built: dict = field(default_factory=dict, compare=False, repr=False)  # parts built on first use, shared by copies
+
+    def raster(self) -> CompiledScene:
+        """This compiled scene with the rasterizer's triangles in `vertices`, `faces`, ... and `arrays`:
+        the meshes' (the first `n_mesh_faces`), then the analytic spheres' and planes' tessellation
+        (`AnalyticParts`), built when first asked for (`build_once`; `with_scene` copies share it).
+        Itself when the scene has no analytic objects. RenderError, when building, if the triangles
+        pass the memory budget (a ray-traced scene of many spheres compiles and renders all the same)."""
+        if not self.analytic.objects:
+            return self
+        return replace(self, **self.build_once(RASTER_SOUP, lambda: appended_soup(
+            self, self.analytic.tessellate(self.n_mesh_faces))))
+
+    def build_once(self, name: str, build):
+        """`built[name]`, made by `build()` on first use -- by one thread: others asking for it at the
+        same time wait for that one (a part built twice would free the first one under its users:
+        a BVH is referred to by its id) -- and kept for every later render of this compiled scene."""
+        part = self.built.get(name)
+        if part is None:
+            with self.built.setdefault(("lock", name), threading.Lock()):  # setdefault: whoever comes first's lock
+                part = self.built.get(name)
+                if part is None:
+                    part = self.built[name] = build()
+        return part
 
     def with_scene(self, scene) -> CompiledScene:
         """The same device data under `scene`: the compiled scene with other render settings."""
@@ -120,19 +143,20 @@ class CompiledScene:
 
     def traceable(self) -> SceneGeomW:
         """`geom` with the BVH over the mesh faces, built on first use (rasterizing without shadows
-        never needs it) and kept for every later render of this compiled scene."""
-        if "geom" not in self.built:
-            geom = self.geom
-            if self.n_mesh_faces:
-                indices = wp.array(np.ascontiguousarray(self.faces[:self.n_mesh_faces]).ravel(), dtype=wp.int32,
-                                   device=self.device)
-                self.built["bvh"] = wp.Mesh(points=self.arrays["vertices"], indices=indices)
-                geom = SceneGeomW()
-                for name in SceneGeomW.vars:
-                    setattr(geom, name, getattr(self.geom, name))
-                geom.mesh = self.built["bvh"].id
-            self.built["geom"] = geom
-        return self.built["geom"]
+        never needs it; `build_once`) and kept for every later render of this compiled scene."""
+        return self.build_once("geom", self._with_bvh)
+
+    def _with_bvh(self) -> SceneGeomW:
+        if not self.n_mesh_faces:
+            return self.geom
+        indices = wp.array(np.ascontiguousarray(self.faces[:self.n_mesh_faces]).ravel(), dtype=wp.int32,
+                           device=self.device)
+        self.built["bvh"] = wp.Mesh(points=self.arrays["vertices"], indices=indices)
+        geom = SceneGeomW()
+        for name in SceneGeomW.vars:
+            setattr(geom, name, getattr(self.geom, name))
+        geom.mesh = self.built["bvh"].id
+        return geom
 
 
 def object_mesh(obj, base_dir=None) -> geometry.TriMesh:
@@ -171,63 +195,11 @@ def facet(mesh: geometry.TriMesh) -> geometry.TriMesh:
     return geometry.TriMesh(mesh.vertices[corners], np.arange(corners.size).reshape(-1, 3), normals, uvs)
 
 
-def sphere_segments(sphere: Sphere, camera, height: int) -> int:
-    """Longitude segments so that the polygon's sagitta r (1 - cos(pi / N)) is under half a sample
-    (and at least MIN_SPHERE_SEGMENTS, for smooth shading)."""
-    _, _, forward = camera_frame(camera)
-    distance = float(np.dot(np.asarray(sphere.center) - np.asarray(camera.eye), forward)) - sphere.radius
-    if camera.projection == "perspective" and distance <= camera.near:
-        return MAX_SPHERE_SEGMENTS
-    radius_px = sphere.radius / pixel_size_at(camera, max(distance, camera.near), height)
-    if radius_px <= 0.5:
-        return MIN_SPHERE_SEGMENTS
-    step = 2.0 * math.acos(1.0 - 0.5 / radius_px)
-    return int(min(MAX_SPHERE_SEGMENTS, max(MIN_SPHERE_SEGMENTS, math.ceil(2.0 * math.pi / step))))
-
-
-def plane_axes(normal) -> tuple[int, int]:
-    """The two world axes spanning a plane's checker and uv: those other than the normal's dominant one."""
-    dominant = int(np.argmax(np.abs(normal)))
-    return {0: (1, 2), 1: (0, 2), 2: (0, 1)}[dominant]
-
-
-def plane_grid(plane: Plane, camera) -> geometry.TriMesh:
-    """A grid of quads on the plane centred at the eye's foot, reaching 2 `far` each way, its lines
-    spaced geometrically from a quarter of the eye's height: cells stay small (well-conditioned
-    float32 interpolation) near the viewer and grow with distance. uv = the plane's two world axes
-    (as the checker uses)."""
-    normal = np.asarray(plane.normal, float)
-    point = np.asarray(plane.point, float)
-    eye = np.asarray(camera.eye, float)
-    centre = eye - np.dot(eye - point, normal) * normal
-    a_axis = np.cross(normal, [0.0, 0.0, 1.0] if abs(normal[2]) < 0.9 else [1.0, 0.0, 0.0])
-    a_axis /= np.linalg.norm(a_axis)
-    b_axis = np.cross(a_axis, normal)
-    height = abs(float(np.dot(eye - point, normal)))
-    steps = np.geomspace(max(0.25 * height, 0.5 * camera.near), 2.0 * camera.far, PLANE_RINGS)
-    s = np.concatenate([-steps[::-1], [0.0], steps])
-    cells = s.size - 1
-    aa, bb = np.meshgrid(s, s, indexing="ij")
-    vertices = centre + aa[..., None] * a_axis + bb[..., None] * b_axis
-    vertices = vertices.reshape(-1, 3)
-    k = np.arange(cells)
-    i, j = np.meshgrid(k, k, indexing="ij")
-    v00 = (i * (cells + 1) + j).ravel()
-    v10, v01, v11 = v00 + cells + 1, v00 + 1, v00 + cells + 2
-    faces = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)])
-    if np.dot(np.cross(vertices[faces[0, 1]] - vertices[faces[0, 0]], vertices[faces[0, 2]] - vertices[faces[0, 0]]),
-              normal) < 0:
-        faces = faces[:, ::-1]
-    axes = plane_axes(normal)
-    normals = np.repeat(normal[None], len(vertices), axis=0)
-    return geometry.TriMesh(vertices, faces, normals, vertices[:, axes])
-
-
-def scene_parts(scene, sample_height: int):
-    """Per object its raster triangles as (TriMesh, material id, object index): the mesh objects'
-    first, then the analytic ones' tessellations; and the analytic spheres and planes themselves."""
+def scene_parts(scene):
+    """The mesh objects' raster triangles as (TriMesh, material id, object index), and the analytic
+    spheres and planes as (object, material id, object index), each in scene order."""
     names = scene.material_names
-    mesh_parts, analytic_parts, spheres, planes = [], [], [], []
+    mesh_parts, analytic = [], []
     triangles = 0
     for index, obj in enumerate(scene.objects):
         material = names.index(obj.material)
@@ -237,20 +209,13 @@ def scene_parts(scene, sample_height: int):
             check_world_mesh(mesh, index, obj)
             check_mesh_uvs(mesh, index, obj, scene.materials[obj.material])
             mesh_parts.append((mesh, material, index))
-        elif isinstance(obj, Sphere):
-            spheres.append((obj, material, index))
-            n_lon = sphere_segments(obj, scene.camera, sample_height)
-            with object_errors(index, obj):
-                analytic_parts.append((geometry.uv_sphere(obj.radius, obj.center, max(2, n_lon // 2), n_lon), material,
-                                       index))
-        elif isinstance(obj, Plane):
-            planes.append((obj, material, index))
-            analytic_parts.append((plane_grid(obj, scene.camera), material, index))
+            triangles += mesh.n_faces
+            require_triangles(triangles, f"objects[0..{index}]: triangles of the scene's meshes", RenderError)
+        elif isinstance(obj, (Sphere, Plane)):
+            analytic.append((obj, material, index))
         else:  # pragma: no cover - the scene validates object types
             raise RenderError(f"objects[{index}]: cannot render {type(obj).__name__}")
-        triangles += (mesh_parts if isinstance(obj, Mesh) else analytic_parts)[-1][0].n_faces
-        require_triangles(triangles, f"objects[0..{index}]: triangles of the scene", RenderError)
-    return mesh_parts, analytic_parts, spheres, planes
+    return mesh_parts, analytic
 
 
 def chunked_face_normals(vertices: np.ndarray, faces: np.ndarray, chunk: int = 1 << 17) -> np.ndarray:
@@ -288,6 +253,26 @@ def triangle_soup(parts) -> dict:
         "vertex_material": np.concatenate([np.full(m.vertices.shape[0], mat, np.int32) for m, mat, _ in parts]),
         "vertex_object": np.concatenate([np.full(m.vertices.shape[0], obj, np.int32) for m, _, obj in parts]),
     }
+
+
+SOUP_DTYPES = {"vertices": wp.vec3, "normals": wp.vec3, "uvs": wp.vec2, "faces": wp.int32, "face_material": wp.int32,
+               "face_object": wp.int32, "face_normal": wp.vec3, "vertex_material": wp.int32, "vertex_object": wp.int32}
+
+
+def device_soup(soup: dict, device: str) -> dict:
+    """The soup's arrays on the device, by name (on the CPU they alias the soup's: copy=False, one
+    copy of the triangles in memory)."""
+    return {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device, copy=False)
+            for name, dtype in SOUP_DTYPES.items()}
+
+
+def appended_soup(compiled, parts) -> dict:
+    """The compiled scene's triangle fields and `arrays` with `parts`' triangles (`triangle_soup`)
+    after its own: the values `triangle_soup` gives all of them at once."""
+    added = triangle_soup(parts)
+    added["faces"] = added["faces"] + np.int32(compiled.vertices.shape[0])
+    soup = {name: np.concatenate([getattr(compiled, name), added[name]]) for name in SOUP_DTYPES}
+    return dict(soup, arrays=device_soup(soup, compiled.device))
 
 
 def ray_epsilon(camera, mesh_vertices: np.ndarray, spheres) -> float:
@@ -344,25 +329,23 @@ def as_scene(scene) -> Scene:
 def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     """Build the device arrays, BVH and textures of `scene` (a Scene, dict or path) once.
 
-    Analytic spheres are tessellated for the rasterizer finely enough for the scene's camera and
-    spp (silhouette within half a sample); planes as grids around the camera's eye.
+    The mesh objects' triangles are built here; the rasterizer's tessellation of the analytic
+    spheres (finely enough for the scene's camera and spp: silhouette within half a sample) and
+    planes (grids around the camera's eye) when something first rasterizes it (`CompiledScene.raster`).
     """
     scene = as_scene(scene)
     device = resolve_device(device)
-    mesh_parts, analytic_parts, spheres, planes = scene_parts(scene, scene.camera.height * scene.render.spp_side)
-    soup = triangle_soup(mesh_parts + analytic_parts)
-    n_mesh_faces = sum(m.faces.shape[0] for m, _, _ in mesh_parts)
-    n_mesh_vertices = sum(m.vertices.shape[0] for m, _, _ in mesh_parts)
-    faces = soup["faces"]
-    used = np.zeros(soup["vertices"].shape[0], bool)  # the vertices of the mesh faces, each once
-    used[faces[:n_mesh_faces].ravel()] = True
+    mesh_parts, analytic = scene_parts(scene)
+    soup = triangle_soup(mesh_parts)
+    n_mesh_faces = soup["faces"].shape[0]
+    n_mesh_vertices = soup["vertices"].shape[0]
+    used = np.zeros(n_mesh_vertices, bool)  # the vertices of the mesh faces, each once
+    used[soup["faces"].ravel()] = True
     mesh_vertices = soup["vertices"][used]
+    spheres = [part for part in analytic if isinstance(part[0], Sphere)]
+    planes = [part for part in analytic if isinstance(part[0], Plane)]
     epsilon = ray_epsilon(scene.camera, mesh_vertices, spheres)
-    dtypes = {"vertices": wp.vec3, "normals": wp.vec3, "uvs": wp.vec2, "faces": wp.int32, "face_material": wp.int32,
-              "face_object": wp.int32, "face_normal": wp.vec3, "vertex_material": wp.int32, "vertex_object": wp.int32}
-    # on the CPU the device arrays alias the soup's (copy=False): one copy of the mesh in memory
-    arrays = {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device, copy=False)
-              for name, dtype in dtypes.items()}
+    arrays = device_soup(soup, device)
     geom = ray_geometry(arrays, mesh_vertices, spheres, planes, epsilon, device)
     ordered = [scene.materials[name] for name in scene.material_names]
     textures, texture_ids = scene_textures(ordered, device)
@@ -371,4 +354,5 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
         epsilon=epsilon, arrays=arrays, geom=geom,
         lights=lights_to_warp(scene.lights, device), materials=materials_to_warp(ordered, device, texture_ids),
         textures=textures,
+        analytic=AnalyticParts(tuple(analytic), scene.camera, scene.camera.height * scene.render.spp_side),
     )

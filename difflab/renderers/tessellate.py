@@ -1,0 +1,104 @@
+"""The rasterizer's triangles of the analytic spheres and planes (rays see the exact ones).
+
+A sphere is tessellated finely enough that its silhouette is within half a sample of the true one
+(with the analytic normals at the vertices); a plane is a grid of quads reaching the far plane in
+every direction, clipped to the view by the pipeline.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import geometry
+from ..errors import RenderError
+from ..guards import object_errors
+from ..limits import require_triangles
+from ..scene import Plane, Sphere
+from .camera import camera_frame, pixel_size_at
+
+MAX_SPHERE_SEGMENTS = 1024
+MIN_SPHERE_SEGMENTS = 128  # keeps interpolated normals within ~1e-3 of the sphere's inside the silhouette
+PLANE_RINGS = 12  # grid lines each side of the eye's foot on a rasterized plane, spaced geometrically
+
+
+def sphere_segments(sphere: Sphere, camera, height: int) -> int:
+    """Longitude segments so that the polygon's sagitta r (1 - cos(pi / N)) is under half a sample
+    (and at least MIN_SPHERE_SEGMENTS, for smooth shading)."""
+    _, _, forward = camera_frame(camera)
+    distance = float(np.dot(np.asarray(sphere.center) - np.asarray(camera.eye), forward)) - sphere.radius
+    if camera.projection == "perspective" and distance <= camera.near:
+        return MAX_SPHERE_SEGMENTS
+    radius_px = sphere.radius / pixel_size_at(camera, max(distance, camera.near), height)
+    if radius_px <= 0.5:
+        return MIN_SPHERE_SEGMENTS
+    step = 2.0 * math.acos(1.0 - 0.5 / radius_px)
+    return int(min(MAX_SPHERE_SEGMENTS, max(MIN_SPHERE_SEGMENTS, math.ceil(2.0 * math.pi / step))))
+
+
+def plane_axes(normal) -> tuple[int, int]:
+    """The two world axes spanning a plane's checker and uv: those other than the normal's dominant one."""
+    dominant = int(np.argmax(np.abs(normal)))
+    return {0: (1, 2), 1: (0, 2), 2: (0, 1)}[dominant]
+
+
+def plane_grid(plane: Plane, camera) -> geometry.TriMesh:
+    """A grid of quads on the plane centred at the eye's foot, reaching 2 `far` each way, its lines
+    spaced geometrically from a quarter of the eye's height: cells stay small (well-conditioned
+    float32 interpolation) near the viewer and grow with distance. uv = the plane's two world axes
+    (as the checker uses)."""
+    normal = np.asarray(plane.normal, float)
+    point = np.asarray(plane.point, float)
+    eye = np.asarray(camera.eye, float)
+    centre = eye - np.dot(eye - point, normal) * normal
+    a_axis = np.cross(normal, [0.0, 0.0, 1.0] if abs(normal[2]) < 0.9 else [1.0, 0.0, 0.0])
+    a_axis /= np.linalg.norm(a_axis)
+    b_axis = np.cross(a_axis, normal)
+    height = abs(float(np.dot(eye - point, normal)))
+    steps = np.geomspace(max(0.25 * height, 0.5 * camera.near), 2.0 * camera.far, PLANE_RINGS)
+    s = np.concatenate([-steps[::-1], [0.0], steps])
+    cells = s.size - 1
+    aa, bb = np.meshgrid(s, s, indexing="ij")
+    vertices = centre + aa[..., None] * a_axis + bb[..., None] * b_axis
+    vertices = vertices.reshape(-1, 3)
+    k = np.arange(cells)
+    i, j = np.meshgrid(k, k, indexing="ij")
+    v00 = (i * (cells + 1) + j).ravel()
+    v10, v01, v11 = v00 + cells + 1, v00 + 1, v00 + cells + 2
+    faces = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)])
+    if np.dot(np.cross(vertices[faces[0, 1]] - vertices[faces[0, 0]], vertices[faces[0, 2]] - vertices[faces[0, 0]]),
+              normal) < 0:
+        faces = faces[:, ::-1]
+    axes = plane_axes(normal)
+    normals = np.repeat(normal[None], len(vertices), axis=0)
+    return geometry.TriMesh(vertices, faces, normals, vertices[:, axes])
+
+
+@dataclass(frozen=True)
+class AnalyticParts:
+    """The analytic spheres and planes of a compiled scene as the rasterizer tessellates them, fixed
+    when it is compiled (so its copies under other render settings tessellate alike): the objects as
+    (Sphere | Plane, material id, object index) in scene order, the camera, and the sample rows
+    (image height x spp side) a sphere's silhouette is made fine enough for (`sphere_segments`)."""
+
+    objects: tuple = ()
+    camera: object = None
+    sample_height: int = 0
+
+    def tessellate(self, n_before: int) -> list:
+        """Per object its raster triangles as (TriMesh, material id, object index). RenderError once
+        the scene's triangles -- `n_before` (the meshes') and these so far -- pass the memory budget."""
+        parts, triangles = [], n_before
+        for obj, material, index in self.objects:
+            if isinstance(obj, Sphere):
+                n_lon = sphere_segments(obj, self.camera, self.sample_height)
+                with object_errors(index, obj):
+                    mesh = geometry.uv_sphere(obj.radius, obj.center, max(2, n_lon // 2), n_lon)
+            else:
+                mesh = plane_grid(obj, self.camera)
+            parts.append((mesh, material, index))
+            triangles += mesh.n_faces
+            require_triangles(triangles, f"objects[0..{index}]: raster triangles of the scene", RenderError)
+        return parts

@@ -1,0 +1,118 @@
+"""The analytic spheres' and planes' raster triangles are built when something first rasterizes a
+compiled scene (`CompiledScene.raster`), once, and never for ray tracing."""
+
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from conftest import scene_dict
+from difflab import compile_scene, render, render_frame
+from difflab.renderers.compile import RASTER_SOUP, SOUP_DTYPES, scene_parts, triangle_soup
+from difflab.renderers.tessellate import AnalyticParts
+
+CAMERA = {"eye": [0.0, 2.0, 5.0], "target": [0, 0, -2], "fov_y": 45, "width": 32, "height": 24}
+SPHERES = [{"type": "sphere", "center": [x, 0.35, -z], "radius": 0.3, "material": m}
+           for x, m in zip((-1.2, -0.4, 0.4, 1.2), ("glass", "mirror", "glass", "mirror")) for z in (0.0, 1.5, 3.0)]
+BOX = {"type": "mesh", "builtin": "box", "material": "red", "transform": {"translate": [0, 0.4, 1.2], "scale": 0.5}}
+FLOOR = {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "floor"}
+MATERIALS = {"glass": {"kd": [0.05, 0.05, 0.05], "ks": [0.5, 0.5, 0.5], "n": 60, "kr": 0.1, "kt": 0.8, "ior": 1.5},
+             "mirror": {"kd": [0.1, 0.1, 0.1], "ks": [0.6, 0.6, 0.6], "n": 40, "kr": 0.8},
+             "red": {"ka": [0.2, 0, 0], "kd": [0.7, 0.1, 0.1]},
+             "floor": {"kd": [0.6, 0.6, 0.6], "checker": {"size": 0.5, "kd2": [0.1, 0.1, 0.1]}}}
+#: A Whitted scene: a grid of glass and mirror spheres over a checkered floor, and a box (a mesh).
+WHITTED = scene_dict(SPHERES + [BOX, FLOOR], MATERIALS, camera=CAMERA, ambient=(0.1, 0.1, 0.1),
+                     lights=[{"type": "point", "position": [2, 4, 3]}], render={"max_depth": 3})
+
+
+@pytest.fixture
+def tessellations(monkeypatch):
+    """Count the analytic tessellations built (each call slowed a little, so threads overlap in it)."""
+    calls = []
+    tessellate = AnalyticParts.tessellate
+
+    def counted(self, n_before):
+        calls.append(threading.get_ident())
+        time.sleep(0.05)
+        return tessellate(self, n_before)
+
+    monkeypatch.setattr(AnalyticParts, "tessellate", counted)
+    return calls
+
+
+def test_ray_tracing_builds_no_tessellation_and_its_image_does_not_depend_on_it(tessellations):
+    compiled = compile_scene(WHITTED)
+    mesh_faces = compiled.n_mesh_faces
+    assert mesh_faces > 0 and compiled.faces.shape[0] == mesh_faces  # the box's triangles alone
+    assert compiled.vertices.shape[0] == compiled.n_mesh_vertices and compiled.arrays["faces"].shape[0] == mesh_faces
+    traced = render_frame(compiled, method="raytrace")  # BVH, item buffer, ray tree
+    lit = render(compiled, method="raytrace", light_buffer=True, item_buffer=False)
+    assert traced.stats["item_buffer"] and traced.stats["total_rays"] > 32 * 24 * 2
+    assert tessellations == [] and RASTER_SOUP not in compiled.built
+    # a scene rasterized first (its BVH built beside the whole soup, for shadow rays) traces the same image
+    first = compile_scene(WHITTED)
+    render(first, method="raster")
+    assert len(tessellations) == 1 and first.raster().faces.shape[0] > 100 * mesh_faces
+    assert np.array_equal(render(first, method="raytrace"), traced.image)
+    assert np.array_equal(render(first, method="raytrace", light_buffer=True, item_buffer=False), lit)
+    assert np.array_equal(lit, traced.image)
+
+
+def test_the_raster_soup_is_the_eager_one_built_once(tessellations):
+    """The lazily appended soup is bitwise the one soup of all the scene's triangles that compiling
+    built before (`triangle_soup` of the meshes, then the spheres and planes in scene order), and the
+    raster image of a scene ray traced first is a freshly compiled scene's."""
+    compiled = compile_scene(WHITTED)
+    render(compiled, method="raytrace")
+    image = render(compiled, method="raster", shading="phong")
+    frame = render_frame(compiled, method="raster", shading="gouraud")  # the G-buffer (a fit's), from the same soup
+    assert len(tessellations) == 1
+    soup = compiled.raster()
+    assert soup.arrays is compiled.raster().arrays and len(tessellations) == 1  # kept, for copies too
+    mesh_parts, analytic = scene_parts(compiled.scene)
+    eager = triangle_soup(mesh_parts + compiled.analytic.tessellate(soup.n_mesh_faces))
+    for name in SOUP_DTYPES:
+        assert getattr(soup, name).dtype == eager[name].dtype and np.array_equal(getattr(soup, name), eager[name]), name
+        assert soup.arrays[name].shape[0] == eager[name].shape[0], name
+    assert [index for _, _, index in analytic] == list(range(len(SPHERES))) + [len(SPHERES) + 1]
+    assert frame.stats["triangles"] == eager["faces"].shape[0]
+    np.testing.assert_array_equal(soup.faces[:soup.n_mesh_faces], compiled.faces)
+    fresh = compile_scene(WHITTED)
+    assert np.array_equal(render(fresh, method="raster", shading="phong"), image)
+    assert np.array_equal(render(WHITTED, method="raster", shading="phong"), image)
+    assert np.array_equal(render_frame(fresh, method="raster", shading="gouraud").gbuffer.face, frame.gbuffer.face)
+    assert frame.gbuffer.mask.sum() > 0.5 * 32 * 24 and (frame.gbuffer.face[frame.gbuffer.mask] >= 0).all()
+
+
+def test_threads_rasterizing_one_compiled_scene_build_it_once(tessellations):
+    """Three threads start rasterizing a fresh compiled scene together: one builds the tessellation
+    (the others wait), then the BVH of their shadow rays, once too (two built at once freed the
+    first under the thread using it: a segmentation fault)."""
+    reference = render(compile_scene(WHITTED), method="raster", threads=1)
+    tessellations.clear()
+    compiled = compile_scene(WHITTED)
+    start = threading.Barrier(3)
+
+    def draw(gbuffer):
+        start.wait()
+        if gbuffer:
+            return render_frame(compiled, method="raster", threads=1).image
+        return render(compiled, method="raster", threads=1)
+
+    with ThreadPoolExecutor(max_workers=3) as pool:
+        images = list(pool.map(draw, [False, True, False]))
+    assert len(tessellations) == 1
+    for image in images:
+        assert np.array_equal(image, reference)
+
+
+def test_a_scene_without_analytic_objects_rasterizes_its_own_triangles(tessellations):
+    compiled = compile_scene(scene_dict([BOX], MATERIALS, camera=CAMERA, lights=[{"type": "directional",
+                                                                                  "direction": [0, -1, -1]}]))
+    assert compiled.raster() is compiled
+    frame = render_frame(compiled)
+    assert frame.stats["triangles"] == compiled.faces.shape[0] == compiled.n_mesh_faces
+    assert frame.gbuffer.mask.sum() == (frame.gbuffer.object == 0).sum() > 10
+    assert tessellations == [] and RASTER_SOUP not in compiled.built
