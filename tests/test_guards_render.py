@@ -137,8 +137,9 @@ def test_tessellation_errors_name_the_object(monkeypatch):
                                         r"33\.75 GiB, over the memory budget of 64\.0 MiB"):
         render(scene([SPHERE, teapot]))
     close = {"type": "sphere", "center": [0, 0, 4.95], "radius": 0.5, "material": "m"}  # around the eye: 1024 segments
+    compiled = compile_scene(scene([close], camera={"eye": [0, 0, 5], "target": [0, 0, 0], "width": 8, "height": 8}))
     with pytest.raises(MeshError, match=r"^objects\[0\]: uv_sphere of 512 x 1024 \(1046528 triangles\)"):
-        compile_scene(scene([close], camera={"eye": [0, 0, 5], "target": [0, 0, 0], "width": 8, "height": 8}))
+        render(compiled, method="raster")  # tessellated when first rasterized
 
 
 def test_textures_are_priced_before_their_pyramids(monkeypatch):
