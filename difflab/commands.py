@@ -45,9 +45,10 @@ def refuse_unused(args, method: str) -> None:
             raise RenderError(f"{flag}: does not apply to this render's method {method!r} ({why.replace('method=', '--method ')})")
 
 
-def image_output(*suffixes):
-    """argparse type of an -o image: a path ending in one of `suffixes` (any case), else the one-line
-    exit-2 error naming them (Pillow would write a JPEG or TIFF of a linear image silently)."""
+def output_ending(*suffixes):
+    """argparse type of an output file: a path ending in one of `suffixes` (any case), else the
+    one-line exit-2 error naming them (Pillow would write a JPEG or TIFF of a linear image silently;
+    `fit` would write JSON under a .png name)."""
     def check(text: str) -> str:
         if Path(text).suffix.lower() not in suffixes:
             raise argparse.ArgumentTypeError(f"{text!r}: give a file name ending in {' or '.join(suffixes)}")
@@ -58,7 +59,7 @@ def image_output(*suffixes):
 def add_render(sub) -> None:
     p = sub.add_parser("render", help="render a scene file to an image")
     p.add_argument("scene", help="scene JSON file")
-    p.add_argument("-o", "--output", required=True, type=image_output(".png", ".npy"),
+    p.add_argument("-o", "--output", required=True, type=output_ending(".png", ".npy"),
                    help="output image: .png (8-bit sRGB) or .npy (linear floats)")
     p.add_argument("--method", choices=METHODS, help="renderer (default: the scene's)")
     p.add_argument("--shading", choices=tuple(SHADING_MODELS),
@@ -113,7 +114,7 @@ def run_fractal(args) -> int:
 def add_fractal(sub) -> None:
     p = sub.add_parser("fractal", help="draw a fractal curve or render a fractal set")
     p.add_argument("kind", choices=FRACTAL_KINDS)
-    p.add_argument("-o", "--output", required=True, type=image_output(".png"), help="output PNG")
+    p.add_argument("-o", "--output", required=True, type=output_ending(".png"), help="output PNG")
     p.add_argument("--order", type=int, help="iterations / order / depth / terrain level (default: 4 for a curve, 7 "
                    "for the terrain)")
     p.add_argument("--width", type=int, default=640, help="image width in pixels")

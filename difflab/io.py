@@ -14,7 +14,6 @@ import signal
 import stat
 import tempfile
 import threading
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +22,7 @@ from PIL import Image
 from . import limits
 from .errors import DifflabError, OutputError, WriteError
 from .limits import short_path, shorten
+from .picture import read_picture, why, wide
 
 _UMASK = os.umask(0o022)  # read the process umask once (setting it is not thread-safe), then restore it
 os.umask(_UMASK)
@@ -288,17 +288,12 @@ def save_image(path: str | os.PathLike, image, srgb: bool = True) -> Path:
     return path
 
 
-def _why(exc: Exception) -> str:
-    """'Kind: message' of a library's exception, cut to one short line."""
-    return f"{type(exc).__name__}: {' '.join(str(exc).split())[:120]}"
-
-
 #: numpy dtype kinds an image file may hold: bool, signed and unsigned integers, real floats.
 IMAGE_DTYPE_KINDS = "biuf"
 
 
-def _read_npy(path: Path) -> np.ndarray:
-    """An image array from a .npy file: header checked (numeric real dtype, image shape, size within
+def read_npy(path: Path) -> np.ndarray:
+    """An image array from a .npy file, as stored: header checked (numeric real dtype, image shape, size within
     the memory budget, file long enough) before the data is read; pickles are never loaded."""
     try:
         with open(path, "rb") as f:
@@ -308,7 +303,7 @@ def _read_npy(path: Path) -> np.ndarray:
             shape, _, dtype = read_header(f)
             data_start = f.tell()
     except Exception as exc:  # numpy raises ValueError, OSError, EOFError, SyntaxError on bad headers
-        raise DifflabError(f"{path}: not a valid .npy file ({_why(exc)})") from None
+        raise DifflabError(f"{path}: not a valid .npy file ({why(exc)})") from None
     if dtype.hasobject or dtype.kind not in IMAGE_DTYPE_KINDS or dtype.fields is not None or dtype.subdtype:
         raise DifflabError(f"{path}: image array must hold real numbers (bool, int, uint or float), got dtype {dtype}")
     if len(shape) not in (2, 3) or (len(shape) == 3 and shape[-1] not in (3, 4)) or 0 in shape:
@@ -320,49 +315,25 @@ def _read_npy(path: Path) -> np.ndarray:
     try:
         return np.load(path, allow_pickle=False)
     except Exception as exc:
-        raise DifflabError(f"{path}: cannot read .npy file ({_why(exc)})") from None
+        raise DifflabError(f"{path}: cannot read .npy file ({why(exc)})") from None
 
 
-#: 16-bit colour layouts Pillow unpacks to 8 bits (the sample's high byte), and their other byte order.
-_OTHER_ORDER = {"RGB;16B": "RGB;16L", "RGB;16L": "RGB;16B", "RGBA;16B": "RGBA;16L", "RGBA;16L": "RGBA;16B"}
-
-
-def _rawmode(tile) -> str | None:
-    """A decoder tile's raw mode: its args (PNG) or their first entry (TIFF, ...)."""
-    args = tile[3] if len(tile) == 4 else None
-    return args if isinstance(args, str) else (args[0] if isinstance(args, tuple) and args else None)
-
-
-def _swapped(tile):
-    """The tile unpacked in the other byte order: its samples' low bytes where Pillow takes the high."""
-    args = tile[3]
-    args = _OTHER_ORDER[args] if isinstance(args, str) else (_OTHER_ORDER[args[0]], *args[1:])
-    return tile._replace(args=args) if hasattr(tile, "_replace") else (*tile[:3], args)
-
-
-def _wide(im) -> str | None:
-    """How a 16-bit image Pillow opened (header only) is laid out: "grey" (kept whole, "I;16"),
-    "colour" (16-bit RGB(A) PNG / TIFF, of which Pillow keeps only the high bytes), or None."""
-    if im.mode in ("I;16", "I;16B", "I;16L") or (im.mode == "I" and im.tile and
-                                                all((_rawmode(tile) or "").startswith("I;16") for tile in im.tile)):
-        return "grey"  # (mode "I" also holds 32-bit integer files: only 16-bit samples are read as such)
-    raw = {_rawmode(tile) for tile in im.tile}
-    return "colour" if im.mode in ("RGB", "RGBA") and im.tile and raw <= set(_OTHER_ORDER) else None
-
-
-def _samples16(im, path: Path) -> np.ndarray | None:
-    """The (H, W, 3) uint16 samples of a 16-bit grey or RGB(A) image Pillow opened, or None for
-    other images. A colour file is decoded twice: as Pillow does (the high bytes) and with every
-    tile's byte order swapped (which takes the low bytes)."""
-    wide = _wide(im)
-    if wide is None:
-        return None
-    if wide == "grey":
-        return np.repeat(np.asarray(im).astype(np.uint16)[..., None], 3, axis=-1)
-    high = np.asarray(im)[..., :3].astype(np.uint16)
-    with Image.open(path) as again:  # (a loaded image has closed its file)
-        again.tile = [_swapped(tile) for tile in again.tile]
-        return high * 256 + np.asarray(again)[..., :3]
+def refuse_code_values(dtype, name: str) -> None:
+    """The one rule for integer image data (an integer .npy file, an integer array given as a fit's
+    target): its values are a file's code values, not linear light, and are refused -- DifflabError
+    naming `name`, saying how to decode them for their dtype. Other dtypes pass."""
+    dtype = np.dtype(dtype)
+    if dtype.kind not in "iu":
+        return
+    if dtype.itemsize == 1:
+        how = "image / 255.0, then difflab.io.srgb_to_linear() of that if sRGB-encoded (ordinary 8-bit pictures are)"
+    elif dtype.itemsize == 2:
+        how = ("image / 65535.0: linear if the source wrote linear samples (POV-Ray File_Gamma=1.0, PNG gAMA 1.0), "
+               "else difflab.io.srgb_to_linear() of that")
+    else:
+        how = "image / (2^bits - 1) for the bits its source wrote, then that source's transfer function"
+    raise DifflabError(f"{name}: integer data ({dtype}) are code values, not linear light; give linear floats -- "
+                       f"{how} -- and ceiling=1.0 if it clips, or the PNG / TIFF, which difflab decodes")
 
 
 def sample_bits(path: str | os.PathLike) -> int | None:
@@ -373,48 +344,27 @@ def sample_bits(path: str | os.PathLike) -> int | None:
         return None
     try:
         with Image.open(path) as im:
-            return 16 if _wide(im) else 8
+            return 16 if wide(im) else 8
     except Exception as exc:
-        raise DifflabError(f"{short_path(path)}: cannot read image ({_why(exc)})") from None
+        raise DifflabError(f"{short_path(path)}: cannot read image ({why(exc)})") from None
 
 
-def _transfer(info: dict) -> float | None:
-    """The file's transfer function from its PNG colour chunks: None for sRGB (an sRGB chunk, or no
-    gAMA chunk), else the file gamma g of its gAMA chunk (samples are linear^g; 1.0: linear)."""
-    gamma = info.get("gamma")
-    return None if "srgb" in info or gamma is None or not gamma > 0 else float(gamma)
-
-
-def _read_picture(path: Path) -> tuple[np.ndarray, float | None]:
-    """(RGB samples (H, W, 3): uint8, or uint16 for a 16-bit PNG / TIFF; the file's gamma, None for sRGB)
-    of an image file Pillow reads; its size (from the header, read lazily by Image.open) is checked
-    against the memory budget before anything is decoded."""
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # our budget decides instead
-            with Image.open(path) as im:
-                limits.require_image(im.width, im.height, str(path), limits.IMAGE_LOAD_BYTES)
-                wide = _samples16(im, path)
-                if wide is None and im.mode in ("I", "F"):
-                    raise DifflabError(f"{path}: 32-bit integer or float samples (mode {im.mode!r}) are not read: "
-                                       "save 8- or 16-bit samples, or the linear array as .npy")
-                return (np.asarray(im.convert("RGB")) if wide is None else wide), _transfer(im.info)
-    except DifflabError:
-        raise
-    except Exception as exc:  # Pillow raises OSError, ValueError, SyntaxError, DecompressionBombError, ...
-        hint = "; float images (EXR, HDR) are read from .npy: save the linear array with numpy.save" \
-            if path.suffix.lower() in FLOAT_FORMATS else ""
-        raise DifflabError(f"{path}: cannot read image ({_why(exc)}){hint}") from None
-
-
-FLOAT_FORMATS = (".exr", ".hdr", ".pfm")  # float image files that Pillow does not read
+def image_file(path) -> Path:
+    """`path` (an image or mask file to read) as a Path to a regular file, else DifflabError naming it."""
+    path = file_path(path, "image")
+    if not path.exists():
+        raise DifflabError(f"{short_path(path)}: image file not found")
+    if not path.is_file():
+        raise DifflabError(f"{short_path(path)}: not a regular file")
+    return path
 
 
 def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
     """Read an image as linear float32 (H, W, 3).
 
-    `.npy` files hold linear values (bool / int / uint / float dtypes; an alpha channel is dropped);
-    other files are whatever Pillow reads, 8-bit, or 16-bit PNG / TIFF (all 16 bits kept), their samples
+    `.npy` files hold linear values (float or bool dtypes; an alpha channel is dropped); an integer
+    .npy holds code values, which are refused (`refuse_code_values`: how to decode them); other
+    files are whatever Pillow reads, 8-bit, or 16-bit PNG / TIFF (all 16 bits kept), their samples
     s / (2^bits - 1) decoded when `srgb` is true by the file's transfer function: sRGB (IEC
     61966-2-1), unless a PNG declares a gamma g without an sRGB chunk (linear = s^(1/g); g = 1: the
     samples are linear, as POV-Ray writes with File_Gamma=1.0). With `srgb` false the samples are
@@ -422,14 +372,12 @@ def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
     data, a pickled or string array, an image over the memory budget (checked from the header
     before decoding) -- raises DifflabError naming the path.
     """
-    path = file_path(path, "image")
-    if not path.exists():
-        raise DifflabError(f"{short_path(path)}: image file not found")
-    if not path.is_file():
-        raise DifflabError(f"{short_path(path)}: not a regular file")
+    path = image_file(path)
     if path.suffix.lower() == ".npy":
-        return _as_image(_read_npy(path))[..., :3].copy()
-    pixels, gamma = _read_picture(path)
+        array = read_npy(path)
+        refuse_code_values(array.dtype, short_path(path))
+        return _as_image(array)[..., :3].copy()
+    pixels, gamma = read_picture(path)
     if pixels.dtype == np.uint8 and (not srgb or gamma is None):
         return (_SRGB_DECODE if srgb else _LINEAR_DECODE)[pixels]  # a 256-entry table: 15 bytes per pixel
     samples = pixels / float(np.iinfo(pixels.dtype).max)

@@ -253,7 +253,8 @@ def test_failed_fits_are_values_not_exceptions(reference):
     mask = manifest.parent / "nothing.png"
     save_image(mask, np.zeros((16, 16, 3), np.float32))
     empty = outcome_of({**spec, "targets": [{**spec["targets"][0], "mask": str(mask)}]})
-    assert empty == {"ok": False, "error": "no fit made: empty_mask"}
+    assert empty == {"ok": False, "error": f"no fit made: empty_mask: targets[0] ({spec['targets'][0]['image']}): the "
+                     f"mask masks[0] ({mask}) selects no pixel (none is bright and opaque)"}
     unknown = outcome_of({**spec, "solver": {"solver": "newton"}})
     assert unknown == {"ok": False, "error": "solver: unknown solver 'newton'; known: lm, gauss_newton, dogleg, bfgs, "
                        "adam, varpro"}

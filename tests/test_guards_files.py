@@ -55,9 +55,12 @@ def test_npy_truncated_or_garbage_is_named(tmp_path):
         load_image(path)
 
 
-def test_npy_integer_and_bool_images_load_as_float(tmp_path):
+def test_npy_integer_images_are_code_values_and_bool_images_load_as_float(tmp_path):
+    """An integer .npy holds a file's code values, not linear light (it was read as 0..65535)."""
     np.save(tmp_path / "i.npy", np.array([[1, 2]], np.int16))
-    np.testing.assert_array_equal(load_image(tmp_path / "i.npy"), np.array([[[1, 1, 1], [2, 2, 2]]], np.float32))
+    with pytest.raises(DifflabError, match=r"i\.npy: integer data \(int16\) are code values, not linear light; "
+                                           r"give linear floats -- image / 65535\.0: "):
+        load_image(tmp_path / "i.npy")
     np.save(tmp_path / "b.npy", np.array([[True, False]]))
     assert load_image(tmp_path / "b.npy")[0, :, 0].tolist() == [1.0, 0.0]
 

@@ -15,7 +15,7 @@ from difflab.io import sample_bits, save_image, srgb_to_linear
 from difflab.renderers.api import render_frame
 from difflab.scene import Scene
 
-COLOUR_TYPE = {1: 0, 3: 2, 4: 6}  # channels -> PNG colour type (grey, RGB, RGBA)
+COLOUR_TYPE = {1: 0, 2: 4, 3: 2, 4: 6}  # channels -> PNG colour type (grey, grey + alpha, RGB, RGBA)
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:
@@ -78,6 +78,26 @@ def test_16_bit_linear_rgba_and_grey(tmp_path, ramp16):
     np.testing.assert_allclose(grey, np.repeat(srgb_to_linear(ramp16[..., :1] / 65535.0), 3, axis=-1), rtol=1e-6)
     # srgb=False reads every file's samples as linear values (masks)
     np.testing.assert_allclose(load_image(tmp_path / "g.png", srgb=False)[..., 1], ramp16[..., 0] / 65535.0, rtol=1e-6)
+
+
+@pytest.mark.parametrize("channels", [1, 2, 3, 4])
+def test_every_16_bit_png_colour_type_is_read_whole(tmp_path, ramp16, channels):
+    """Grey, grey + alpha, RGB and RGBA at 16 bits: all 16 bits of each sample, alpha dropped from
+    the image and kept for masks (`fit.targets.view_mask`: out where alpha <= 0.5). Grey + alpha
+    (PNG colour type 4) was read as its high bytes: sample_bits 8, errors up to 1 / 255."""
+    from difflab.fit.targets import view_mask
+
+    grey = channels < 3
+    samples = np.concatenate([ramp16[..., :1] if grey else ramp16, ramp16[..., 1:2]], axis=-1)[..., :channels]
+    path = write_png(tmp_path / "a.png", samples, gamma=1.0)
+    colour = np.repeat(samples[..., :1], 3, axis=-1) if grey else samples[..., :3]
+    assert sample_bits(path) == 16
+    np.testing.assert_allclose(load_image(path), colour / 65535.0, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(load_image(path, srgb=False), colour / 65535.0, rtol=1e-6, atol=1e-9)
+    inside = colour.max(axis=-1) > 32767.5
+    if channels in (2, 4):
+        inside &= samples[..., -1] > 32767.5
+    np.testing.assert_array_equal(view_mask(path, samples.shape[:2], "masks[0]"), inside)
 
 
 @pytest.mark.parametrize("little_endian", [True, False])

@@ -18,7 +18,6 @@ from pathlib import Path
 
 from ..errors import DifflabError, FitError
 
-NO_FIT = ("empty_mask", "nonfinite_target")  # result codes that mean no fit was made: a failed job
 VOLATILE = ("seconds", "timings")  # report fields that change from run to run (kept apart from the report)
 M_TRIM_THRESHOLD = -1  # glibc's mallopt parameter numbers
 M_MMAP_THRESHOLD = -3
@@ -79,8 +78,8 @@ def outcome_of(spec: dict, threads: int | None = None) -> dict:
     (DifflabError) gives its message, anything else "internal error: Type: message"."""
     try:
         result = fit_job(spec, threads)
-        if result.result in NO_FIT:
-            raise FitError(f"no fit made: {result.result}")
+        if result.no_fit() is not None:  # a failed job
+            raise FitError(f"no fit made: {result.no_fit()}")
         report = result.to_dict()
         for key in VOLATILE:
             report.pop(key, None)

@@ -25,14 +25,29 @@ either leaves the old files, if any).
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOISE_UNKNOWN, EXIT_NOT_CONVERGED, EXIT_OK, FitError
 
 
 
+def ceiling_value(text: str):
+    """argparse type of --ceiling: a finite number > 0, or "none" (also "inf"): no ceiling (False)."""
+    if text.strip().lower() in ("none", "inf"):
+        return False
+    try:
+        value = float(text)
+    except ValueError:
+        value = None
+    if value is None or not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a number > 0, or none (the targets do not clip)")
+    return value
+
+
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Add the `fit` subcommand to an argparse subparsers object."""
+    from ..commands import output_ending
     from ..io import add_force
     from .options import SOLVERS
 
@@ -47,12 +62,17 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("raster", "raytrace"), default=None,
                    help="image model: the G-buffer (raster) or the recorded ray tree (default: the scene's)")
     p.add_argument("--sigma", type=float, default=None, help="the targets' pixel noise (default: estimated)")
+    p.add_argument("--ceiling", type=ceiling_value, default=None, metavar="VALUE|none",
+                   help="where the targets clip (their values there are censored), or none: they do not (default: 1 "
+                        "for PNG / TIFF; for .npy the maximum when under half of each channel's values tie there)")
     p.add_argument("--params", default="ka,kd,ks,n",
                    help="comma-separated: ka, kd, ks, n, m, f0, kr, kt, absorption, intensity, lights[i].intensity "
                         "(default %(default)s)")
     p.add_argument("--solver", default="lm", choices=SOLVERS)
-    p.add_argument("-o", "--output", required=True, help="where to write the fitted scene (JSON)")
-    p.add_argument("--report", help="where to write the fit report (JSON; default: OUTPUT with .fit.json)")
+    p.add_argument("-o", "--output", required=True, type=output_ending(".json"),
+                   help="where to write the fitted scene (JSON: a name ending in .json)")
+    p.add_argument("--report", type=output_ending(".json"),
+                   help="where to write the fit report (JSON, .json; default: OUTPUT with .fit.json)")
     p.add_argument("--mask", action="append", help="mask image per target (white: counts)")
     p.add_argument("--grey", action="store_true", help="fit one grey value per coefficient, not RGB")
     p.add_argument("--bounded", action="store_true", help="keep ka, kd, ks in [0, 1]")
@@ -85,10 +105,10 @@ def run(args) -> int:
     materials = [name.strip() for item in args.material for name in item.split(",") if name.strip()]
     result = fit(args.scene, list(args.targets), materials, args.params, method=args.method, solver=args.solver,
                  per_channel=not args.grey, bounded=args.bounded, loss=args.loss, masks=masks, sigma=args.sigma,
-                 max_steps=args.max_steps, x64=not args.float32, device=args.device)
+                 ceiling=args.ceiling, max_steps=args.max_steps, x64=not args.float32, device=args.device)
     print(result.table())
-    if result.result in ("empty_mask", "nonfinite_target"):
-        raise FitError(f"no fit made: {result.result}")
+    if result.no_fit() is not None:
+        raise FitError(f"no fit made: {result.no_fit()}")
     contents = {output: result.to_scene().to_dict(), report: {
         "scene": str(args.scene), "targets": [str(t) for t in args.targets], "materials": materials, **result.to_dict()}}
     with uninterrupted(), ExitStack() as files:  # both temporaries written before either is renamed onto its path

@@ -6,8 +6,8 @@ layout of the fitted values in one flat vector.
     intensity   RGB      [0, inf)                   the value        (a light's Ip)
     kr, kt      1        [0, 1]                     the value        (ray tree only)
     absorption  RGB      [0, inf)                   the value        (ray tree only)
-    f0          1        [0, 1]                     the value
-    n, m        1        [e^-12, e^12]              log(value)
+    f0          1        [0, 1]                     the value        (torrance specular only)
+    n, m        1        [e^-12, e^12]              log(value)       (m: torrance specular only)
     texture     H_t W_t 3 [0, inf)                  the value        (texels of a material's image
                                                                       texture; G-buffer (Phong) or ray tree)
 
@@ -40,7 +40,8 @@ class Kind:
     """A parameter kind: rgb (an RGB triple, or one grey value); lower / upper bounds in scene units;
     log: the solver coordinate is log(value); tree: needs the ray-tree image model; linear: the
     image is affine in it (variable projection solves it exactly); texels: one entry per texel and
-    channel of the material's texture (`texels.py`)."""
+    channel of the material's texture (`texels.py`); specular: the specular model it belongs to
+    (None: any), outside which the image does not depend on it."""
 
     rgb: bool
     lower: float
@@ -49,12 +50,14 @@ class Kind:
     tree: bool = False
     linear: bool = False
     texels: bool = False
+    specular: str | None = None
 
 
 KINDS = {
     "ka": Kind(True, 0.0, INF, linear=True), "kd": Kind(True, 0.0, INF, linear=True),
     "ks": Kind(True, 0.0, INF, linear=True), "n": Kind(False, math.exp(LOG_RANGE[0]), math.exp(LOG_RANGE[1]), log=True),
-    "m": Kind(False, math.exp(LOG_RANGE[0]), math.exp(LOG_RANGE[1]), log=True), "f0": Kind(False, 0.0, 1.0),
+    "m": Kind(False, math.exp(LOG_RANGE[0]), math.exp(LOG_RANGE[1]), log=True, specular="torrance"),
+    "f0": Kind(False, 0.0, 1.0, specular="torrance"),
     "kr": Kind(False, 0.0, 1.0, tree=True), "kt": Kind(False, 0.0, 1.0, tree=True),
     "absorption": Kind(True, 0.0, INF, tree=True), "intensity": Kind(True, 0.0, INF),
     "texture": Kind(True, 0.0, INF, linear=True, texels=True),
@@ -244,6 +247,9 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
             raise FitError(f"params: unknown parameter {p!r}; {where}")
         if KINDS[kind].tree and not tree:
             raise FitError(f"params: {p!r} needs the ray-traced image model (method='raytrace')")
+        if KINDS[kind].specular not in (None, scene.render.specular):
+            raise FitError(f"params: {p!r} applies only to the {KINDS[kind].specular} specular model; the scene's is "
+                           f"{scene.render.specular!r} (its render.specular), where the image does not depend on it")
         if head and not _traced(scene.materials[head], kind):
             weight = "kr" if kind == "kr" else "kt"
             raise FitError(f"params: {p!r}: {head}.{weight} is 0 at the start, so the recorded ray tree has no "

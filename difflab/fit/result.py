@@ -26,6 +26,19 @@ def _json(value):
     return _json_number(value)
 
 
+NO_FIT = ("empty_mask", "nonfinite_target")  # difflab's result codes of a fit that was not made
+
+
+class ResultCode(str):
+    """A result code (compared, printed and written to JSON as the plain string) with `detail`: why,
+    in words (for difflab's "empty_mask" / "nonfinite_target": which targets, masks and counts)."""
+
+    def __new__(cls, code: str, detail: str = ""):
+        out = super().__new__(cls, code)
+        out.detail = detail
+        return out
+
+
 @dataclass(frozen=True)
 class FitResult:
     """The outcome of a fit (`fit_material`, `fit_scene`, `fit_batch`). Failure is a value: read
@@ -48,7 +61,8 @@ class FitResult:
     converged: the solver reported success and every value is finite.
     result: the result code as a string: optimistix's ("successful", "nonlinear_max_steps_reached",
         "nonlinear_divergence", "nonfinite", ...) or difflab's ("empty_mask": no pixel of the fitted
-        material lies in the masks; "nonfinite_target": NaN / inf target pixels inside the masks).
+        material lies in the masks; "nonfinite_target": NaN / inf target pixels inside the masks --
+        a `ResultCode`, its `.detail` naming the targets, masks and counts: `no_fit()`).
     history: the loss at the point each solver step evaluated (rejected trial points included).
     poorly_determined: names whose value the images do not pin down (see `fit.stats`; in a
         matrix-free fit: the textures with texels that no pixel sees); every name when the fit rests
@@ -110,6 +124,14 @@ class FitResult:
         """Converged, and the image model explains the targets (judged against a known noise
         level, without a mismatch flag)."""
         return self.converged and not (self.model_mismatch or self.noise_unknown or self.underdetermined)
+
+    def no_fit(self) -> str | None:
+        """Why no fit was made -- "empty_mask: ..." or "nonfinite_target: ..." with what the targets
+        and masks hold --, or None when one was."""
+        if self.result not in NO_FIT:
+            return None
+        detail = getattr(self.result, "detail", "")
+        return f"{self.result}: {detail}" if detail else str(self.result)
 
     @property
     def n_params(self) -> int:

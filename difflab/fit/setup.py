@@ -35,11 +35,12 @@ from .raytree import TreeModel, tree_influence
 from .records import DEVICE_COPIES, KeptView, View, take_pixels, view_key, view_store
 from .shading import GBufferModel, influence
 from .stats import FLOAT_SIGMA
-from .targets import nonfinite_count, prepared_targets
+from .result import ResultCode
+from .targets import empty_detail, nonfinite_count, nonfinite_detail, prepared_targets
 from .texels import TexelSource, texture_starts, wants_texels
 
 METHODS = ("raster", "raytrace")
-CENSOR_MIN_TIES = 3  # float targets: ties at the maximum (this many, under half the values) mark a ceiling
+CENSOR_MIN_TIES = 3  # float targets: ties at the maximum (this many, each channel's under half) mark a ceiling
 
 
 def choose_method(scene, materials, method, texels=False) -> str:
@@ -57,6 +58,30 @@ def choose_method(scene, materials, method, texels=False) -> str:
     if any(scene.materials[m].texture is not None for m in materials):
         return "raytrace"
     return "raster"
+
+
+def float_ceiling(values) -> float:
+    """Where float target values (U, 3) clip: their maximum, when at least CENSOR_MIN_TIES values
+    tie there and in each channel fewer than half of its U values do; else inf (not clipped). A
+    highlight clips a minority of a surface's pixels; a channel whose values mostly sit at its
+    maximum is a flat-lit surface (a floor under a directional light: one value at every lit pixel),
+    not a clip -- and it is told per channel, as the ties of a red floor are a minority of all the
+    values even when nearly every pixel holds them."""
+    if not values.size:
+        return np.inf
+    peak = float(values.max())
+    ties = np.count_nonzero(values == peak, axis=0)
+    clipped = peak > 0 and ties.sum() >= CENSOR_MIN_TIES and bool(np.all(2 * ties < values.shape[0]))
+    return peak if clipped else np.inf
+
+
+def _check_ceiling(value):
+    """None (detect), False (none: also inf), or a finite number > 0 as a float; FitError otherwise."""
+    if value is None or value is False:
+        return value
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and value == math.inf:
+        return False
+    return _check_number(value, "ceiling")
 
 
 def _check_number(value, name, *, allow_none=False):
@@ -93,8 +118,7 @@ class Setup:
         loss_scale = _check_number(loss_scale, "loss_scale")
         self.sigma_given = _check_number(sigma, "sigma", allow_none=True)
         self.sigma_fallback = None
-        if ceiling is not None and ceiling is not False:
-            ceiling = _check_number(ceiling, "ceiling")
+        ceiling = _check_ceiling(ceiling)
         for name, flag in (("per_channel", per_channel), ("bounded", bounded), ("x64", x64)):
             if not isinstance(flag, bool):
                 raise FitError(f"{name}: must be True or False, got {flag!r}")
@@ -172,6 +196,7 @@ class Setup:
             views.append(dataclasses.replace(view, image=image, nonfinite=nonfinite_count(image, view.mask)))
             views[-1].__dict__.update(pixels=view.pixels, weights=view.weights)  # cached properties: the same
         out.views = views
+        out.labels = [(f"targets[{i}]", mask) for i, (_, mask) in enumerate(self.labels)]  # another image
         out._target_statistics()
         if init is not None:
             scene = apply_init(self.scene, self.materials, init)
@@ -211,8 +236,10 @@ class Setup:
         views, self.render_seconds = [], 0.0
         store = view_store(self.compiled)  # the views kept with the compiled scene (`records.py`)
         tree_ids = tuple(range(len(self.scene.materials))) if all_surfaces else tuple(ids)
-        for view_scene, image, step, mask, weight, nonfinite in prepared_targets(self.scene, targets, masks,
-                                                                                 weights, render):
+        self.labels = []  # per view (target, mask or None), as messages name them
+        for view_scene, image, step, mask, weight, nonfinite, labels in prepared_targets(self.scene, targets, masks,
+                                                                                         weights, render):
+            self.labels.append(labels)
             key = view_key(view_scene, resolve_device(device)) if store is not None else None
             kept = store.get(key) if store is not None else None
             if kept is None:
@@ -249,10 +276,8 @@ class Setup:
         out = dataclasses.replace(view, weighting=weight, used=used)
         values = out.values
         top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
-        if top is None:  # float data: a clipped ceiling shows as ties at the maximum
-            peak = float(values.max()) if values.size else 0.0
-            ties = np.count_nonzero(values == peak)
-            top = peak if peak > 0 and CENSOR_MIN_TIES <= ties < values.size // 2 else np.inf
+        if top is None:
+            top = float_ceiling(values)
         seen = dataclasses.replace(out, ceiling=np.inf if top is False else float(top))
         seen.__dict__.update(pixels=out.pixels, values=values)  # View's cached properties, taken already
         return seen
@@ -330,13 +355,17 @@ class Setup:
         return Problem(views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
                        layout=self.layout, loss=loss, smoothness=self.smoothness)
 
-    def precheck(self) -> str | None:
+    def precheck(self) -> ResultCode | None:
         """A result code when the fit cannot be made (non-finite target values under the masks, or
-        no pixel that the fitted parameters affect), else None."""
+        no pixel that the fitted parameters affect), its `detail` naming the targets, masks and
+        counts; else None."""
         if self.nonfinite:
-            return "nonfinite_target"
+            return ResultCode("nonfinite_target", nonfinite_detail(self.labels, self.views))
         if self.used_pixels == 0:
-            return "empty_mask"
+            lit = any(p.kind == "intensity" for p in self.layout)
+            plural = "s" if len(self.materials) > 1 else ""
+            shown = "a surface" if lit else f"material{plural} {', '.join(self.materials)}"
+            return ResultCode("empty_mask", empty_detail(self.labels, self.views, shown))
         return None
 
     def residual_images(self, r, weighted=False) -> list[np.ndarray]:

@@ -1,9 +1,10 @@
 """Targets in: images (arrays or files), their per-view camera / lights, masks and weights, checked
 at the boundary.
 
-Image arrays are linear RGB floats. Integer arrays (what Pillow returns: 8-bit sRGB code values) are
-refused with a message saying how to decode them -- never read as linear -- and so are boolean,
-complex and object arrays. Image files are read by `io.load_image` (8- and 16-bit files decoded by
+Image arrays are linear RGB floats. Integer arrays and integer .npy files (code values: what
+Pillow returns, or a 16-bit file read by another reader) are refused with a message saying how to
+decode them for their dtype -- never read as linear (`io.refuse_code_values`, the one rule) --,
+and so are boolean, complex and object arrays. Image files are read by `io.load_image` (8- and 16-bit files decoded by
 their transfer function, sRGB unless a PNG says otherwise); a decoded file saturates at 1.0: its
 ceiling, where highlights clip, and its samples are quantised in steps of 1 / (2^bits - 1). A target
 must have its view's camera size.
@@ -15,7 +16,9 @@ import os
 import numpy as np
 
 from ..errors import DifflabError, FitError
-from ..io import load_image, sample_bits
+from ..io import image_file, load_image, read_npy, refuse_code_values, sample_bits
+from ..limits import short_path
+from ..picture import read_picture
 
 OVERRIDE_KEYS = ("camera", "lights")
 
@@ -66,10 +69,10 @@ def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
     if image.ndim != 3 or image.shape[-1] not in (3, 4):
         raise FitError(f"{where}: expected an (H, W, 3) image, got shape {image.shape} of {image.dtype}")
     image = image[..., :3]
-    if image.dtype.kind in "iu":
-        raise FitError(f"{where}: an integer image ({image.dtype}) holds sRGB code values, not linear light; pass "
-                       "the file's path, or decode it: difflab.io.srgb_to_linear(image / 255.0) for 8-bit, with "
-                       "ceiling=1.0 for its clipped highlights")
+    try:
+        refuse_code_values(image.dtype, where)
+    except DifflabError as exc:
+        raise FitError(str(exc)) from None
     if image.dtype.kind != "f":
         raise FitError(f"{where}: an image of dtype {image.dtype} is refused; give linear RGB floats")
     return np.array(image), None  # (a copy: the fit reads it later)
@@ -103,21 +106,54 @@ def _numeric(value, where: str) -> np.ndarray:
     return array.astype(np.float64) if array.dtype.kind != "b" else array
 
 
+def _mask_rule(values: np.ndarray) -> np.ndarray:
+    """(H, W) bool from mask values in [0, 1], (H, W), (H, W, 3) or (H, W, 4) (colour and alpha): a
+    pixel is in where its colour's brightest channel is > 0.5 and its alpha, if any, > 0.5."""
+    if values.ndim == 2:
+        return values > 0.5
+    inside = values[..., :3].max(axis=-1) > 0.5
+    return inside & (values[..., 3] > 0.5) if values.shape[-1] == 4 else inside
+
+
+def mask_array(value, where: str) -> np.ndarray:
+    """(H, W) bool from a mask array -- (H, W), (H, W, 3) or (H, W, 4) -- of bools or of 0 and 1
+    only (`_mask_rule`); any other value (NaN, -1, 255, 0.5) is a FitError naming the mask and them."""
+    values = _numeric(value, where)
+    if values.ndim not in (2, 3) or (values.ndim == 3 and values.shape[-1] not in (3, 4)):
+        raise FitError(f"{where}: expected a mask of shape (H, W), (H, W, 3) or (H, W, 4), got {values.shape}")
+    if values.dtype.kind != "b":
+        bad = np.unique(values[(values != 0) & (values != 1)])  # (NaN != 0: bad too)
+        if bad.size:
+            count = np.count_nonzero((values != 0) & (values != 1))
+            values = f"{count} value{'s are' if count > 1 else ' is'}"
+            raise FitError(f"{where}: a mask holds bools or only 0 and 1; {values} not: "
+                           f"{', '.join(f'{v:g}' for v in bad[:5])}{', ...' if bad.size > 5 else ''}")
+    return _mask_rule(values)
+
+
+def load_mask(path, where: str) -> np.ndarray:
+    """(H, W) bool from a mask file: a .npy array (`mask_array`), or a picture whose samples are
+    taken as they are, s / (2^bits - 1) without decoding, by `_mask_rule`: white or any bright
+    colour is in, black or transparent (alpha <= 0.5) out. FitError naming the mask and the file."""
+    try:
+        path = image_file(path)
+        array = read_npy(path) if path.suffix.lower() == ".npy" else None
+        samples = read_picture(path, alpha=True)[0] if array is None else None
+    except DifflabError as exc:
+        raise FitError(f"{where}: {exc}") from None
+    if array is not None:
+        return mask_array(array, f"{where} ({short_path(path)})")
+    return _mask_rule(samples / np.float32(np.iinfo(samples.dtype).max))
+
+
 def view_mask(value, shape, where) -> np.ndarray:
-    """A view's boolean mask (H, W) from None (all), an array or an image path."""
+    """A view's boolean mask (H, W) from None (all), an array (`mask_array`) or a file (`load_mask`)."""
     if value is None:
         return np.ones(shape, bool)
-    if _is_path(value):
-        try:
-            value = load_image(value, srgb=False)[..., 0] > 0.5
-        except DifflabError as exc:
-            raise FitError(f"{where}: {exc}") from None
-    mask = _numeric(value, where)
-    if mask.ndim == 3:
-        mask = mask[..., 0]
+    mask = load_mask(value, where) if _is_path(value) else mask_array(value, where)
     if mask.shape != shape:
         raise FitError(f"{where}: expected shape {shape}, got {mask.shape}")
-    return mask.astype(bool)
+    return mask
 
 
 def view_weight(value, shape, where) -> np.ndarray:
@@ -147,7 +183,9 @@ def nonfinite_count(image, mask) -> int:
 
 def prepared_targets(scene, targets, masks, weights, render: dict):
     """For each target: (its view's scene, target image (`load_target`: a copy, in its own precision),
-    sample step (`load_target`), mask, weight, count of non-finite masked values). A view's scene is
+    sample step (`load_target`), mask, weight, count of non-finite masked values, labels: (the
+    target's, e.g. "targets[0] (a.png)"; the mask's, e.g. "masks[0] (m.png)", or None without one)).
+    A view's scene is
     `scene` with the target's camera / lights override and the `render` settings; the target must have
     that camera's size. The weight is (H, W, 3) float64, 0 outside the mask, or None when not given
     (1 inside the mask)."""
@@ -171,4 +209,43 @@ def prepared_targets(scene, targets, masks, weights, render: dict):
         mask = view_mask(mask, (height, width), f"masks[{i}]")
         if weight is not None:
             weight = view_weight(weight, (height, width), f"weights[{i}]") * in_channels(mask)
-        yield view_scene, image, step, mask, weight, nonfinite_count(image, mask)
+        labels = (_label(where, item), None if masks[i] is None else _label(f"masks[{i}]", masks[i]))
+        yield view_scene, image, step, mask, weight, nonfinite_count(image, mask), labels
+
+
+def _label(where: str, item) -> str:
+    """`where`, and the file's name when `item` is a path: how messages name a target or mask."""
+    return f"{where} ({short_path(item)})" if _is_path(item) else where
+
+
+def nonfinite_detail(labels, views) -> str:
+    """Why a fit has "nonfinite_target": per view with non-finite target values inside its mask,
+    how many values (NaN, inf) and pixels, naming the target and its mask."""
+    parts = []
+    for (target, mask), view in zip(labels, views):
+        if view.nonfinite:
+            inside = view.mask[..., None]
+            nan = int(np.count_nonzero(np.isnan(view.image) & inside))
+            pixels = int(np.count_nonzero((~np.isfinite(view.image) & inside).any(axis=-1)))
+            values = f"{view.nonfinite} non-finite value{'s' if view.nonfinite > 1 else ''}"
+            parts.append(f"{target} holds {values} ({nan} NaN, {view.nonfinite - nan} inf) "
+                         f"in {pixels} pixel{'s' if pixels > 1 else ''}{f' inside {mask}' if mask else ''}")
+    return "; ".join(parts)
+
+
+def empty_detail(labels, views, shown: str) -> str:
+    """Why a fit has "empty_mask" (no view uses a pixel): per view, what its mask holds and whether
+    any of those pixels shows `shown` (e.g. "material(s) red") -- or that the weights are 0 there."""
+    parts = []
+    for (target, mask), view in zip(labels, views):
+        inside = int(np.count_nonzero(view.mask))
+        showing = int(np.count_nonzero(view.mask & view.touched))
+        if mask is None:
+            parts.append(f"{target}: no pixel shows {shown}")
+        elif inside == 0:
+            parts.append(f"{target}: the mask {mask} selects no pixel (none is bright and opaque)")
+        elif showing == 0:
+            parts.append(f"{target}: the mask {mask} holds {inside} pixels, none showing {shown}")
+        else:
+            parts.append(f"{target}: the weights are 0 at the {showing} pixels of the mask {mask} showing {shown}")
+    return "; ".join(parts)

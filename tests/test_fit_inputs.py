@@ -1,0 +1,203 @@
+"""A fit's inputs as other programs hand them over: integer .npy targets (code values), float
+targets with a flat-lit surface at their maximum (not a clip), mask files and arrays (colour,
+alpha, stray values), the messages of a fit that cannot be made, parameters of another specular
+model, and the fitted scene's file name."""
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+from test_fit_helpers import make_scene, target_of
+
+from difflab import FitError, Scene, fit_material, load_image, render
+from difflab.cli import main
+from difflab.errors import DifflabError
+from difflab.fit.targets import view_mask
+from difflab.io import save_image
+from difflab.renderers.api import render_frame
+from difflab.scene import save_scene
+
+FLOOR = [0.5, 0.4, 0.3]
+
+
+def cli(argv) -> int:
+    """`difflab` run as from a shell: its exit code (argparse's errors exit through SystemExit)."""
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        return exc.code
+
+
+def flat_scene(floor_kd=FLOOR, size=(24, 18)) -> Scene:
+    """A floor under a directional light straight down (every lit floor pixel holds the same value,
+    the image's maximum, in most of the floor's pixels) and a darker ball; ray traced, no ambient."""
+    return Scene.from_dict({
+        "camera": {"eye": [0, 3, 6], "target": [0, 0.3, 0], "fov_y": 40, "width": size[0], "height": size[1]},
+        "ambient": [0, 0, 0], "lights": [{"type": "directional", "direction": [0, -1, 0]}],
+        "materials": {"ball": {"kd": [0.3, 0.2, 0.1]}, "floor": {"kd": floor_kd}},
+        "objects": [{"type": "sphere", "center": [0, 0.6, 0], "radius": 0.6, "material": "ball"},
+                    {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "floor"}],
+        "render": {"method": "raytrace", "shadows": True}})
+
+
+# ---- integer .npy targets: code values, refused the same way as integer arrays, advice per dtype
+
+
+@pytest.mark.parametrize("dtype, advice", [(np.uint8, r"image / 255\.0, then difflab\.io\.srgb_to_linear\(\)"),
+                                           (np.uint16, r"image / 65535\.0: linear if the source wrote linear")])
+def test_an_integer_npy_target_is_refused_like_an_integer_array(tmp_path, dtype, advice):
+    """POV-Ray's 16-bit linear PNG read by another reader and saved with np.save was read as linear
+    light up to 65535: kd ~ 39320, reported successful (a uint8 one: kd ~ 185)."""
+    scene = make_scene(size=12)
+    codes = np.round(np.clip(target_of(scene), 0, 1) * np.iinfo(dtype).max).astype(dtype)
+    np.save(tmp_path / "codes.npy", codes)
+    with pytest.raises(FitError, match=r"^targets\[0\]: .*codes\.npy: integer data \(" + np.dtype(dtype).name
+                       + r"\) are code values, not linear light; .*" + advice):
+        fit_material(scene, [tmp_path / "codes.npy"], "red", ("kd",))
+    with pytest.raises(FitError, match=r"^targets\[0\]: integer data \(" + np.dtype(dtype).name + r"\) .*" + advice):
+        fit_material(scene, [codes], "red", ("kd",))
+    with pytest.raises(DifflabError, match=r"codes\.npy: integer data .*" + advice):
+        load_image(tmp_path / "codes.npy")
+    assert main(["fit", str(save_scene(scene, tmp_path / "s.json")), str(tmp_path / "codes.npy"), "--material",
+                 "red", "-o", str(tmp_path / "out.json")]) == 2
+    assert not (tmp_path / "out.json").exists()
+    decoded = codes / np.float32(np.iinfo(dtype).max)  # the advice, followed (the codes are linear here)
+    np.save(tmp_path / "linear.npy", decoded)
+    np.testing.assert_array_equal(load_image(tmp_path / "linear.npy"), decoded)
+
+
+# ---- float targets: a flat-lit surface at the maximum is not a clip; ceiling=inf / --ceiling none
+
+
+def test_a_flat_lit_floor_at_the_maximum_is_not_taken_for_a_clip():
+    """The floor's lit pixels all hold kd (0.5 in red, the image maximum): counted over all three
+    channels those ties were under half the values, so they were taken for a clipped ceiling --
+    every lit pixel censored, kd left at its start 0.9 +- inf. Counted per channel they are most of
+    the red channel's values: no ceiling, kd recovered exactly."""
+    target = render(flat_scene())
+    used = target[..., 0] > 0
+    assert np.count_nonzero(target[..., 0] == 0.5) > 0.5 * np.count_nonzero(used)  # most of the floor ties
+    start = flat_scene(floor_kd=0.9)
+    result = fit_material(start, [target], "floor", ("kd",))
+    assert result.ok and result.censored == 0
+    np.testing.assert_allclose(result.params["kd"], FLOOR, rtol=1e-5)
+    for none in (np.inf, float("inf"), False):  # inf is "no ceiling", as False (it was refused)
+        same = fit_material(start, [target], "floor", ("kd",), ceiling=none)
+        assert same.censored == 0 and same.params["kd"] == pytest.approx(result.params["kd"], rel=1e-9)
+    given = fit_material(start, [target], "floor", ("kd",), ceiling=0.5)  # told it clips there: censored
+    assert given.censored > 0 and given.params["kd"][0] >= 0.5
+    with pytest.raises(FitError, match=r"ceiling: must be a finite number > 0, got -inf"):
+        fit_material(start, [target], "floor", ("kd",), ceiling=-np.inf)
+
+
+def test_a_clipped_highlight_is_still_a_ceiling_and_the_cli_can_say_none(tmp_path, capsys):
+    scene = make_scene(size=20, red={"ks": [1.5, 1.5, 1.5], "n": 20.0})
+    image = target_of(scene)
+    clipped = np.minimum(image, 1.0)
+    save_image(tmp_path / "clipped.npy", clipped)
+    path = save_scene(scene, tmp_path / "scene.json")
+    reports = {}
+    for name, extra in (("default", []), ("none", ["--ceiling", "none"]), ("value", ["--ceiling", "1"])):
+        out = tmp_path / f"{name}.json"
+        code = main(["fit", str(path), str(tmp_path / "clipped.npy"), "--material", "red", "--params", "kd,ks",
+                     *extra, "-o", str(out)])
+        reports[name] = json.loads(out.with_name(f"{name}.fit.json").read_text())
+        assert code in (0, 4), capsys.readouterr()
+    censored = int(np.count_nonzero(image >= 1.0))
+    assert censored >= 3 and reports["default"]["censored"] == censored == reports["value"]["censored"]
+    assert reports["none"]["censored"] == 0
+    for bad in ("-1", "0", "nan", "x"):
+        assert cli(["fit", str(path), str(tmp_path / "clipped.npy"), "--material", "red", "--ceiling", bad,
+                     "-o", str(tmp_path / "bad.json")]) == 2
+        assert "--ceiling" in capsys.readouterr().err and not (tmp_path / "bad.json").exists()
+
+
+# ---- masks: colour (any channel) and alpha; arrays of 0 / 1 only
+
+
+def test_mask_files_read_colour_and_alpha(tmp_path):
+    """In: the brightest colour channel > 0.5 and alpha (if any) > 0.5. Only the red channel was read
+    (cyan counted out) and alpha was ignored (transparent white counted in)."""
+    rgba = np.zeros((4, 6, 4), np.uint8)
+    rgba[..., 3] = 255
+    rgba[0] = (0, 255, 255, 255)  # cyan, opaque: in (was out)
+    rgba[1] = (255, 255, 255, 0)  # white, transparent: out (was in)
+    rgba[2] = (255, 255, 255, 200)  # white, mostly opaque: in
+    rgba[3, :3] = (0, 0, 120, 255)  # dark blue: out
+    Image.fromarray(rgba).save(tmp_path / "m.png")
+    np.testing.assert_array_equal(view_mask(tmp_path / "m.png", (4, 6), "masks[0]"),
+                                  np.array([[1] * 6, [0] * 6, [1] * 6, [0] * 6], bool))
+    Image.fromarray(rgba[..., :3]).save(tmp_path / "rgb.png")  # without alpha: white is in
+    assert view_mask(tmp_path / "rgb.png", (4, 6), "m")[:, 0].tolist() == [True, True, True, False]
+    np.save(tmp_path / "m.npy", (rgba > 127).astype(np.uint8))  # a .npy of 0 / 1 (H, W, 4): the same rule
+    np.testing.assert_array_equal(view_mask(tmp_path / "m.npy", (4, 6), "m"),
+                                  view_mask(tmp_path / "m.png", (4, 6), "m"))
+
+
+@pytest.mark.parametrize("bad, shown", [(np.nan, "nan"), (-1.0, "-1"), (255.0, "255"), (0.5, "0.5")])
+def test_mask_arrays_hold_only_0_and_1(tmp_path, bad, shown):
+    """NaN and -1 went through astype(bool) and counted as in."""
+    mask = np.ones((4, 6))
+    mask[1, 2] = bad
+    with pytest.raises(FitError, match=rf"^masks\[0\]: a mask holds bools or only 0 and 1; 1 value is not: {shown}$"):
+        view_mask(mask, (4, 6), "masks[0]")
+    np.save(tmp_path / "m.npy", mask)
+    with pytest.raises(FitError, match=rf"^masks\[1\] \(.*m\.npy\): a mask .* 1 value is not: {shown}$"):
+        view_mask(tmp_path / "m.npy", (4, 6), "masks[1]")
+    assert view_mask(mask == 1, (4, 6), "m").sum() == 23  # bools as they are
+
+
+# ---- a fit that cannot be made names the target, the mask and the counts
+
+
+def test_no_fit_messages_name_the_target_mask_and_counts(tmp_path, capsys):
+    scene = make_scene(size=16)
+    path = save_scene(scene, tmp_path / "scene.json")
+    target = target_of(scene)
+    target[2, 3, 1], target[5, 5] = np.nan, np.inf
+    save_image(tmp_path / "bad.npy", target)
+    assert main(["fit", str(path), str(tmp_path / "bad.npy"), "--material", "red", "-o", str(tmp_path / "o.json")]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"difflab: error: no fit made: nonfinite_target: targets[0] ({tmp_path / 'bad.npy'}) holds 4 non-finite "
+        "values (1 NaN, 3 inf) in 2 pixels")
+    background = render_frame(scene).gbuffer.material != scene.material_names.index("red")
+    mask = np.zeros((16, 16, 3), np.float32)
+    mask[background] = 1.0  # every pixel but the sphere's
+    save_image(tmp_path / "mask.png", mask, srgb=False)
+    save_image(tmp_path / "good.npy", target_of(scene))
+    assert main(["fit", str(path), str(tmp_path / "good.npy"), "--material", "red", "--mask",
+                 str(tmp_path / "mask.png"), "-o", str(tmp_path / "o.json")]) == 2
+    count = int(np.count_nonzero(background))
+    assert capsys.readouterr().err.strip() == (
+        f"difflab: error: no fit made: empty_mask: targets[0] ({tmp_path / 'good.npy'}): the mask masks[0] "
+        f"({tmp_path / 'mask.png'}) holds {count} pixels, none showing material red")
+    result = fit_material(scene, [target_of(scene)], "red", masks=[background])  # the API: the code, and why
+    assert result.result == "empty_mask" and result.to_dict()["result"] == "empty_mask"
+    assert result.no_fit() == f"empty_mask: targets[0]: the mask masks[0] holds {count} pixels, none showing " \
+                              "material red"
+
+
+# ---- parameters of another specular model; the fitted scene's name
+
+
+def test_torrance_parameters_on_another_specular_model_are_refused():
+    """m on a Phong scene came back "0.3 +- inf" (the image does not depend on it)."""
+    for specular in ("phong", "blinn"):
+        scene = make_scene(size=8, specular=specular)
+        for param in ("m", "f0", "red.m"):
+            with pytest.raises(FitError, match=rf"params: '{param}' applies only to the torrance specular model; the "
+                                               rf"scene's is '{specular}'"):
+                fit_material(scene, [target_of(scene)], "red", ("kd", param))
+
+
+def test_fit_output_must_be_json(tmp_path, capsys):
+    scene = make_scene(size=8)
+    path = save_scene(scene, tmp_path / "scene.json")
+    save_image(tmp_path / "t.npy", target_of(scene))
+    for flags in (["-o", str(tmp_path / "out.png")],
+                  ["-o", str(tmp_path / "o.json"), "--report", str(tmp_path / "r.txt")]):
+        assert cli(["fit", str(path), str(tmp_path / "t.npy"), "--material", "red", *flags]) == 2
+        err = capsys.readouterr().err
+        assert "give a file name ending in .json" in err and ("out.png" in err or "r.txt" in err)
+    assert not any(p.name.startswith(("out", "o.", "r.")) for p in tmp_path.iterdir())
