@@ -74,7 +74,9 @@ def test_a_flat_lit_floor_at_the_maximum_is_not_taken_for_a_clip():
     """The floor's lit pixels all hold kd (0.5 in red, the image maximum): counted over all three
     channels those ties were under half the values, so they were taken for a clipped ceiling --
     every lit pixel censored, kd left at its start 0.9 +- inf. Counted per channel they are most of
-    the red channel's values: no ceiling, kd recovered exactly."""
+    the red channel's values: no ceiling, kd recovered exactly. Under a mask that keeps a few floor
+    pixels beside the ball, the ties are under half of each channel's values, yet all of the
+    floor's: no clip either (a highlight clips a minority of its surface's pixels)."""
     target = render(flat_scene())
     used = target[..., 0] > 0
     assert np.count_nonzero(target[..., 0] == 0.5) > 0.5 * np.count_nonzero(used)  # most of the floor ties
@@ -85,6 +87,13 @@ def test_a_flat_lit_floor_at_the_maximum_is_not_taken_for_a_clip():
     for none in (np.inf, float("inf"), False):  # inf is "no ceiling", as False (it was refused)
         same = fit_material(start, [target], "floor", ("kd",), ceiling=none)
         assert same.censored == 0 and same.params["kd"] == pytest.approx(result.params["kd"], rel=1e-9)
+    floor = np.flatnonzero(target[..., 0] == 0.5)[:5]  # a few floor pixels beside the ball's: the floor's ties
+    mask = (target[..., 0] > 0) & (target[..., 0] < 0.5)  # are under half of each channel's values, all of
+    assert np.count_nonzero(mask) > 2 * floor.size  # the floor's: still no clip
+    mask.reshape(-1)[floor] = True
+    both = fit_material(start, [target], ["floor", "ball"], ("kd",), masks=[mask], init={"ball.kd": 0.5})
+    assert both.converged and both.censored == 0  # (noise unknown: too few pixels to tell)
+    np.testing.assert_allclose(both.params["floor.kd"] + both.params["ball.kd"], FLOOR + [0.3, 0.2, 0.1], rtol=1e-5)
     given = fit_material(start, [target], "floor", ("kd",), ceiling=0.5)  # told it clips there: censored
     assert given.censored > 0 and given.params["kd"][0] >= 0.5
     with pytest.raises(FitError, match=r"ceiling: must be a finite number > 0, got -inf"):

@@ -28,6 +28,7 @@ from ..lighting.jax_model import lights_to_jax
 from ..renderers.api import as_scene, render_frame
 from ..renderers.compile import CompiledScene
 from ..renderers.launch import resolve_device
+from .ceiling import float_ceiling, primary_objects
 from .materials import MaterialTable
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
 from .problem import LOSSES, Problem, ViewJ, to_device, value_index
@@ -40,7 +41,6 @@ from .targets import empty_detail, nonfinite_count, nonfinite_detail, prepared_t
 from .texels import TexelSource, texture_starts, wants_texels
 
 METHODS = ("raster", "raytrace")
-CENSOR_MIN_TIES = 3  # float targets: ties at the maximum (this many, each channel's under half) mark a ceiling
 
 
 def choose_method(scene, materials, method, texels=False) -> str:
@@ -58,21 +58,6 @@ def choose_method(scene, materials, method, texels=False) -> str:
     if any(scene.materials[m].texture is not None for m in materials):
         return "raytrace"
     return "raster"
-
-
-def float_ceiling(values) -> float:
-    """Where float target values (U, 3) clip: their maximum, when at least CENSOR_MIN_TIES values
-    tie there and in each channel fewer than half of its U values do; else inf (not clipped). A
-    highlight clips a minority of a surface's pixels; a channel whose values mostly sit at its
-    maximum is a flat-lit surface (a floor under a directional light: one value at every lit pixel),
-    not a clip -- and it is told per channel, as the ties of a red floor are a minority of all the
-    values even when nearly every pixel holds them."""
-    if not values.size:
-        return np.inf
-    peak = float(values.max())
-    ties = np.count_nonzero(values == peak, axis=0)
-    clipped = peak > 0 and ties.sum() >= CENSOR_MIN_TIES and bool(np.all(2 * ties < values.shape[0]))
-    return peak if clipped else np.inf
 
 
 def _check_ceiling(value):
@@ -263,8 +248,8 @@ class Setup:
     def _seen(self, view: View, weight, keep: bool = False) -> View:
         """The view with `weight` (None: 1 inside the mask), the pixels it uses (in the mask, weight >
         0, influenced by the fitted parameters) and its target's ceiling (given; 1 for image files,
-        which saturate there; for float data, ties at the maximum of the used values); `keep`: the
-        view's own pixels and ceiling."""
+        which saturate there; for float data, ties at the maximum of the used values: `ceiling.py`);
+        `keep`: the view's own pixels and ceiling."""
         if keep:  # the same pixels, rows and ceiling
             out = dataclasses.replace(view, weighting=weight)
             out.__dict__.update(pixels=view.pixels, values=view.values, zeros=view.zeros)
@@ -276,8 +261,8 @@ class Setup:
         out = dataclasses.replace(view, weighting=weight, used=used)
         values = out.values
         top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
-        if top is None:
-            top = float_ceiling(values)
+        if top is None:  # float data (`ceiling.py`)
+            top = float_ceiling(values, primary_objects(view.record).reshape(-1)[out.pixels])
         seen = dataclasses.replace(out, ceiling=np.inf if top is False else float(top))
         seen.__dict__.update(pixels=out.pixels, values=values)  # View's cached properties, taken already
         return seen

@@ -1,0 +1,47 @@
+"""Where a float target clips: its ceiling, found from its values and the surfaces they show.
+
+An image file saturates at 1.0 (`targets.py`); float data (a renderer's .npy or EXR) may have been
+clipped anywhere or nowhere. A clip shows as ties at the maximum -- but so does a flat-lit surface:
+a floor under a directional light straight down holds kd I at every lit pixel, the image's
+maximum. What tells them apart: a highlight clips a minority of its surface's pixels, as it clips
+only where the light's reflection peaks, whereas a flat-lit surface holds its one value at most
+of them. So the maximum is a ceiling when at least CENSOR_MIN_TIES values tie there and, in each
+channel and on each surface (the object a pixel's primary ray hits), fewer than half of that
+surface's pixels do. (Counted over all values at once, a red floor's ties -- 95 % of the red
+channel, 6,578 of 6,912 pixels -- were a third of the values: taken for a clip, every lit pixel
+censored, the floor's kd left at its start +- inf.)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+CENSOR_MIN_TIES = 3  # ties at the maximum (this many, under half of each surface's pixels) mark a ceiling
+
+
+def primary_objects(record) -> np.ndarray:
+    """(H, W) int: the scene object each pixel's first sample hits (-1: none), from a G-buffer
+    (`object`, on its sample grid) or a ray tree (each sample's root node, the first of its nodes)."""
+    side = int(record.spp_side)
+    if hasattr(record, "sample_offset"):  # a RayTree
+        objects = np.asarray(record.object)[record.sample_offset[:-1]].reshape(record.grid_shape)
+    else:
+        objects = np.asarray(record.object)
+    return objects[::side, ::side]
+
+
+def float_ceiling(values: np.ndarray, surfaces: np.ndarray) -> float:
+    """The ceiling of float target values (U, 3) whose pixels show `surfaces` (U,) (object ids):
+    their maximum when it marks a clip (see the module docstring), else inf."""
+    if not values.size:
+        return np.inf
+    peak = float(values.max())
+    at_peak = values == peak
+    if not peak > 0 or np.count_nonzero(at_peak) < CENSOR_MIN_TIES:
+        return np.inf
+    ids, surface, size = np.unique(surfaces, return_inverse=True, return_counts=True)
+    for channel in range(values.shape[1]):
+        ties = np.bincount(surface.reshape(-1)[at_peak[:, channel]], minlength=ids.size)
+        if np.any(2 * ties >= size):
+            return np.inf  # a flat-lit surface, not a clip
+    return peak
