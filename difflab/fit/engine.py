@@ -78,7 +78,9 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         noise_unknown = finite and sigma is None
         sigma = float("nan") if sigma is None else sigma
         if finite:
-            st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size, silent_entries,
+            unseen = sum(int(np.count_nonzero(~seen[p.key])) * (p.size // seen[p.key].size) for p in layout
+                         if p.key in seen)  # texels no pixel reads: no unknowns of the data's
+            st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size - unseen, silent_entries,
                                 sigma_given=setup.sigma_given is not None)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if gram is not None else
                                       np.full(layout.size, np.nan))

@@ -211,7 +211,10 @@ def covariance_unscaled(gram: np.ndarray) -> np.ndarray:
 
 
 def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
-    """sqrt(diag (J^T J)^-1 * sigma2), inf where the diagonal is."""
+    """sqrt(diag (J^T J)^-1 * sigma2), inf where the diagonal is (and everywhere for sigma2 inf: an
+    underdetermined fit's unknown noise); nan where the diagonal is nan (not formed)."""
+    if math.isinf(sigma2):
+        return np.where(np.isnan(diag), np.nan, np.inf)
     finite = np.isfinite(diag)
     return np.where(finite, np.sqrt(np.where(finite, np.maximum(diag, 0.0), 0.0) * sigma2), np.inf)
 
@@ -219,7 +222,8 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
 def fit_statistics(gram: np.ndarray | None, sse: float, entries: int, censored: int, sigma: float, size: int,
                    silent: int = 0, sigma_given: bool = False) -> dict:
     """s2 = sse / dof (sse: the sum of squares of the `entries` residuals r; dof = N - p, N entries
-    neither censored nor `silent` (noise-free zeros), p = `size` fitted entries), chi2 = s2 / sigma^2
+    neither censored nor `silent` (noise-free zeros), p = `size` fitted entries the data reach -- a
+    texel no pixel reads is not one), chi2 = s2 / sigma^2
     (reduced; nan when sigma is: the noise unknown, the model is not judged), the mismatch flag, and
     diag (J^T J)^-1 (p,) from gram = J^T J (p, p); gram None (a matrix-free fit): diag nan, no
     covariance is formed.
