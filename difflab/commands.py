@@ -48,9 +48,10 @@ def refuse_unused(args, method: str) -> None:
 def output_ending(*suffixes):
     """argparse type of an output file: a path ending in one of `suffixes` (any case), else the
     one-line exit-2 error naming them (Pillow would write a JPEG or TIFF of a linear image silently;
-    `fit` would write JSON under a .png name)."""
+    `fit` would write JSON under a .png name). An existing folder passes here: the output check
+    (`cli.check_outputs`) names it as a folder."""
     def check(text: str) -> str:
-        if Path(text).suffix.lower() not in suffixes:
+        if Path(text).suffix.lower() not in suffixes and not Path(text).is_dir():
             raise argparse.ArgumentTypeError(f"{text!r}: give a file name ending in {' or '.join(suffixes)}")
         return text
     return check
