@@ -5,8 +5,11 @@ import math
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
-from difflab.fit.stats import MISMATCH_CHI2, estimate_sigma, fit_statistics, median, standard_errors
+from difflab.fit import stats
+from difflab.fit.stats import (MISMATCH_CHI2, covariance_diagonal, covariance_unscaled, estimate_sigma, fit_statistics,
+                               median, standard_errors)
 from difflab.fit.solvers import result_name
 
 
@@ -28,9 +31,9 @@ def test_reduced_chi_square_counts_uncensored_values_less_parameters():
     sse3 = float(np.sum(r[:3] ** 2))  # three entries, two parameters: dof 1
     st3 = fit_statistics(three, sse3, 3, censored=0, sigma=1.0, size=2)
     assert st3["s2"] == pytest.approx(0.14, rel=1e-14) and not st3["underdetermined"]
-    free = fit_statistics(None, sse, r.size, censored=1, sigma=0.5, size=2)  # matrix-free: no J^T J, same dof
+    free = fit_statistics(sp.csc_matrix(gram), sse, r.size, censored=1, sigma=0.5, size=2)  # a matrix-free fit's
     assert free["s2"] == pytest.approx(sse / 3, rel=1e-15) and free["chi2"] == pytest.approx(st["chi2"], rel=1e-15)
-    assert free["diag"].shape == (2,) and np.isnan(free["diag"]).all()
+    np.testing.assert_array_equal(free["diag"], st["diag"])  # made dense: the same numbers
 
 
 @pytest.mark.parametrize("sigma_given", [False, True])
@@ -64,7 +67,58 @@ def test_no_more_counted_entries_than_unknowns_is_underdetermined(censored, sile
 
 
 def test_standard_errors_scale_with_sigma_and_are_infinite_where_undetermined():
-    np.testing.assert_array_equal(standard_errors(np.array([4.0, np.inf, 0.25]), 9.0), [6.0, np.inf, 1.5])
+    np.testing.assert_array_equal(standard_errors(np.array([4.0, np.inf, 0.25, np.nan]), 9.0),
+                                  [6.0, np.inf, 1.5, np.nan])  # nan: not formed
+    np.testing.assert_array_equal(standard_errors(np.array([np.inf, 1.0]), 0.0), [np.inf, 0.0])
+
+
+def block_gram(rng, sizes, singular=()):
+    """A J^T J (dense) of independent blocks of `sizes` entries (random J, 3 rows per entry): a
+    block in `singular` has its last two columns equal (a direction no residual tells apart), a
+    size-1 block in it is a zero column (an unseen texel)."""
+    blocks = []
+    for i, size in enumerate(sizes):
+        jac = rng.normal(size=(3 * size, size)) * rng.uniform(0.5, 20.0, size)  # columns of unlike norms
+        if i in singular:
+            jac[:, -1] = jac[:, -2] if size > 1 else 0.0
+        blocks.append(jac.T @ jac)
+    gram = np.zeros((sum(sizes),) * 2)
+    offset = 0
+    for block in blocks:
+        gram[offset:offset + len(block), offset:offset + len(block)] = block
+        offset += len(block)
+    return gram
+
+
+def test_a_sparse_gram_gives_the_dense_diagonal_through_blocks_and_lu(monkeypatch):
+    """Above PACKED_MAX, a sparse J^T J is inverted per connected block -- small ones dense
+    (packed), larger ones by sparse LU, or dense where LU finds them singular -- with the same
+    diagonal as `covariance_unscaled` of the whole (rtol 1e-10; measured ~1e-13): inf for a zero
+    column and the entries of singular blocks, nan for a singular block beyond DENSE_STATS_MAX and
+    for a block beyond SPARSE_STATS_MAX."""
+    rng = np.random.default_rng(4)
+    sizes = [1, 6, 1, 30, 4, 40, 2, 12]  # PACKED_MAX 8: blocks of 12, 30 and 40 by LU (12, singular: dense)
+    gram = block_gram(rng, sizes, singular=(2, 4, 7))
+    perm = rng.permutation(gram.shape[0])  # the blocks' entries interleaved
+    gram = gram[perm][:, perm]
+    want = np.diag(covariance_unscaled(gram))
+    monkeypatch.setattr(stats, "DENSE_STATS_MAX", 20)
+    monkeypatch.setattr(stats, "PACKED_MAX", 8)
+    got = covariance_diagonal(sp.csr_matrix(gram))
+    assert np.isinf(want).sum() == 1 + 2 + 2 and (np.isinf(got) == np.isinf(want)).all()
+    np.testing.assert_allclose(got[np.isfinite(want)], want[np.isfinite(want)], rtol=1e-10)
+
+    lu_block = np.flatnonzero(np.isin(perm, np.arange(8, 38)))  # the entries of the block of 30
+    monkeypatch.setattr(stats, "SPARSE_STATS_MAX", 35)  # the block of 40: too large
+    got = covariance_diagonal(sp.csr_matrix(gram))
+    too_large = np.isin(perm, np.arange(42, 82))
+    assert np.isnan(got[too_large]).all() and not np.isnan(got[~too_large]).any()
+    np.testing.assert_allclose(got[lu_block], want[lu_block], rtol=1e-10)
+
+    singular = block_gram(rng, [30, 5], singular=(0,))  # a singular block above DENSE_STATS_MAX: nan
+    got = covariance_diagonal(sp.csr_matrix(singular))
+    assert np.isnan(got[:30]).all() and np.allclose(got[30:], np.diag(covariance_unscaled(singular))[30:],
+                                                    rtol=1e-10)
 
 
 def test_optimistix_results_are_named():

@@ -12,7 +12,6 @@ import dataclasses
 import math
 import time
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -26,14 +25,10 @@ from .options import FitOptions
 from .clipping import clipped_band
 from .matfree import check_solver
 from .solvers import SUCCESSFUL, run
-from .stats import (QUANTISATION_SIGMA, fit_statistics, normal_matrix, poorly_determined, psnr, silent_pixels,
-                    standard_errors, views_noise)
+from .sparse_jacobian import sparse_normal_matrix
+from .stats import (QUANTISATION_SIGMA, finite_gram, fit_statistics, normal_matrix, poorly_determined, psnr,
+                    silent_pixels, standard_errors, views_noise)
 from .texels import texel_coverage
-
-
-@eqx.filter_jit
-def _weighted(problem, values):
-    return problem.weighted(values)
 
 
 def report(setup: Setup, x, result: str, steps: int, history: list, options: FitOptions, timings: dict,
@@ -58,8 +53,8 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         matrix_free = options.matrix_free(layout.size)
         with jax.enable_x64(setup.x64):
             at = np.asarray(flat, setup.dtype)  # numpy: moved by the compiled calls that need it
-            if matrix_free:  # no Jacobian is formed: no covariance (stderr nan)
-                gram, r = None, np.asarray(_weighted(setup.problem, at), np.float64)
+            if matrix_free:  # the Jacobian by column compression: J^T J sparse
+                gram, r = sparse_normal_matrix(setup.problem, at)
             else:
                 gram, r = normal_matrix(setup.problem, at, solved)
             rho = r if setup.problem.loss == "l2" else \
@@ -70,7 +65,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             sse = float(np.sum(np.square(counted)))
         loss = 0.5 * sse if rho is counted else float(0.5 * np.sum(np.square(rho)))
         residuals = setup.residual_images(r)
-        finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and (gram is None or np.all(np.isfinite(gram))))
+        finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and finite_gram(gram))
         weighted = residuals if setup.unit_weights else setup.residual_images(r, weighted=True)
         silent, silent_entries = silent_pixels(setup.views, r)
         sigma = views_noise(setup.views, weighted, silent, setup.sigma_given, setup.sigma_floor,
@@ -82,11 +77,10 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                          if p.key in seen)  # texels no pixel reads: no unknowns of the data's
             st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size - unseen, silent_entries,
                                 sigma_given=setup.sigma_given is not None)
-            stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]) if gram is not None else
-                                      np.full(layout.size, np.nan))
+            stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], QUANTISATION_SIGMA ** 2)))
-            flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol) if gram is not None \
-                else [key for key, on in seen.items() if not on.all()]
+            partly_seen = [key for key, on in seen.items() if not on.all()]
+            flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol, also=partly_seen)
             chi2, mismatch, underdetermined = st["chi2"], st["mismatch"], st["underdetermined"]
         else:
             stderr = {p.key: np.full(p.size, np.nan) for p in layout}

@@ -38,7 +38,7 @@ from ..lighting.warp_model import SPECULAR_MODELS
 from ..renderers.raytrace.tree import REFLECTED
 from .materials import MaterialTable
 from .shading import PointsJ
-from .texels import point_texels
+from .texels import pixel_texels, point_texels
 
 __all__ = ["TreeModel", "TreeJ", "tree_to_jax", "tree_pixels", "tree_image", "evaluate_tree",
            "tree_influence"]
@@ -274,6 +274,12 @@ class TreeModel(eqx.Module):
     def point_texels(self, texels):
         """(N, 3) each node's texture value from the stacked `texels` (`node_texels`)."""
         return node_texels(self.tree, texels)
+
+    def texel_reads(self) -> tuple[np.ndarray, np.ndarray]:
+        """(pixel, texel) int64 pairs (M,): the stacked fitted texels each of the U pixels reads --
+        the taps of every node of its samples' trees."""
+        pixel = np.asarray(self.tree.sample, np.int64) // self.tree.samples_per_pixel
+        return pixel_texels(pixel, np.arange(pixel.size), self.tree.taps)
 
     def pixels(self, table: MaterialTable, lights: LightsJ, ambient, texel=None):
         """`texel` (N, 3): the nodes' texture values (default: `point_texels(table.texels)`)."""

@@ -49,8 +49,12 @@ class FitResult:
         floats for n, m, f0, an (H_t, W_t, 3) float32 image for a texture, row 0 at the top); names
         are "kd", ..., or "<material>.kd" when several materials were fitted, and
         "lights[i].intensity".
-    stderr: name -> standard error (same shapes; inf where the data do not determine it; nan when
-        no fit was made, and for every parameter of a matrix-free fit, which forms no covariance).
+    stderr: name -> standard error (same shapes; inf where the data do not determine it -- a texel
+        no pixel sees, or seen only in a fixed combination with others; nan when no fit was made,
+        and, in a matrix-free fit, for the entries of a block of J^T J too large to invert:
+        `fit.stats.covariance_diagonal`). A matrix-free (texel) fit's are the dense fit's, its
+        Jacobian formed sparse (`fit.sparse_jacobian`). With a texture `smoothness` prior they are
+        the pixels' alone (the prior's rows left out of J^T J).
         They assume the image model holds (see `fit.stats`): with `model_mismatch` set they
         understate the real error.
     loss: the solvers' objective 0.5 sum r^2 at the solution, summed over the channels of the pixels
@@ -64,9 +68,9 @@ class FitResult:
         material lies in the masks; "nonfinite_target": NaN / inf target pixels inside the masks --
         a `ResultCode`, its `.detail` naming the targets, masks and counts: `no_fit()`).
     history: the loss at the point each solver step evaluated (rejected trial points included).
-    poorly_determined: names whose value the images do not pin down (see `fit.stats`; in a
-        matrix-free fit: the textures with texels that no pixel sees); every name when the fit rests
-        only on noise clipped at a bound -- the pixels `fit.clipping` would leave out are all, or
+    poorly_determined: names whose value the images do not pin down (see `fit.stats`; a texture
+        also when some texel is not `seen`; an entry whose stderr is nan flags nothing); every name
+        when the fit rests only on noise clipped at a bound -- the pixels `fit.clipping` would leave out are all, or
         all but no more entries than unknowns, of those used: the fit is kept as solved (nothing
         censored), its values biased by the clip beyond what their standard errors cover.
     initial: the starting values (same shapes as params). solver: the solver's name.

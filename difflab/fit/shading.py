@@ -30,7 +30,7 @@ from ..lighting.jax_model import (LightGeometry, LightsJ, fog_factor, light_geom
                                   sum_axis, textured_surface)
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS
 from .materials import MaterialTable
-from .texels import point_texels
+from .texels import pixel_texels, point_texels
 
 
 class PointsJ(NamedTuple):
@@ -285,6 +285,16 @@ class GBufferModel(eqx.Module):
     def point_texels(self, texels):
         """(R, 3) each point's texture value from the stacked `texels` (its filter taps)."""
         return point_texels(texels, self.taps, self.tap_weight)
+
+    def texel_reads(self) -> tuple[np.ndarray, np.ndarray]:
+        """(pixel, texel) int64 pairs (M,): the stacked fitted texels each of the U pixels reads --
+        its points' taps (direct: pixel i is point i; composed: the points of its samples)."""
+        if self.formation.direct:
+            point = np.arange(self.material.shape[0])
+            return pixel_texels(point, point, self.taps)
+        index = np.asarray(self.comp.point_index).reshape(self.comp.point_index.shape[0], -1)  # (U, 3 S)
+        pixel = np.repeat(np.arange(index.shape[0]), index.shape[1])
+        return pixel_texels(pixel, index.reshape(-1), self.taps)
 
     def pixels(self, table: MaterialTable, lights: LightsJ, ambient, texel=None):
         """`texel` (R, 3): the points' texture values (default: `point_texels(table.texels)`)."""

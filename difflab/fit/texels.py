@@ -185,6 +185,16 @@ def point_texels(texels, rows, weights, other=1.0):
     return jnp.where(jnp.any(rows >= 0, axis=1)[:, None], value, other)
 
 
+def pixel_texels(pixel, point, taps) -> tuple[np.ndarray, np.ndarray]:
+    """(pixel, texel) int64 pairs: for each (pixel, point) pair -- a point the pixel's colour sums --
+    the stacked fitted texels the point's taps (R, K) read (rows -1: none); a model's `texel_reads`."""
+    if taps is None:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    rows = np.asarray(taps, np.int64)[np.asarray(point, np.int64)]  # (M, K)
+    keep = rows >= 0
+    return np.repeat(np.asarray(pixel, np.int64), rows.shape[1])[keep.reshape(-1)], rows[keep]
+
+
 def smoothness_residuals(layout, values, smoothness: float):
     """sqrt(smoothness) times the horizontal and vertical neighbour differences of every fitted
     texture (flat; empty when smoothness is 0): 0.5 |.|^2 is the first-difference prior."""
