@@ -1,6 +1,7 @@
 """The `difflab` command line. Exit codes: 0 success, 1 internal error, 2 invalid input, 3 a fit
-that did not converge, 4 a fit flagged model_mismatch, 5 a converged fit whose noise could not be
-estimated, its model not judged (results still written for 3, 4 and 5), 130 interrupted (Ctrl-C)."""
+that did not converge, 4 a fit flagged model_mismatch, 5 a converged fit whose model was not judged
+(its noise unknown, or underdetermined; results still written for 3, 4 and 5), 130 interrupted
+(Ctrl-C)."""
 
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ from .vocabulary import FRACTAL_KINDS, MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS,
 
 
 def run_render(args) -> int:
-    from .io import refuse_overwrite, save_image
+    from .io import refuse_overwrite, write_image, write_together
     from .renderers.api import prepare, render
 
     out = Path(args.output)
@@ -25,9 +25,8 @@ def run_render(args) -> int:
     start = time.perf_counter()
     image = render(scene, device=args.device)  # the image alone: no G-buffer, no recorded ray tree
     seconds = time.perf_counter() - start
-    if linear:
-        save_image(linear, image)
-    save_image(out, image)
+    write_together({path: lambda temporary, path=path: write_image(temporary, image, name=path)
+                    for path in ([out, linear] if linear else [out])})  # the image and its linear copy: both or neither
     print(f"wrote {out} ({image.shape[1]}x{image.shape[0]}, {method}, {seconds:.3f} s)" +
           (f" and {linear}" if linear else ""))
     return 0

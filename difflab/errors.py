@@ -3,9 +3,10 @@ and the command line's exit codes, one table for every command."""
 
 #: Exit codes of every `difflab` command: 0 success, 1 internal error, 2 invalid input (a DifflabError,
 #: one line), 3 a fit (or a batch line) that did not converge, 4 a fit flagged model_mismatch, 5 a
-#: converged fit whose noise could not be estimated, so its model was not judged (results are still
-#: written for 3, 4 and 5); 130 interrupted (Ctrl-C: 128 + SIGINT, as shells report it).
-EXIT_OK, EXIT_INTERNAL, EXIT_INVALID, EXIT_NOT_CONVERGED, EXIT_MODEL_MISMATCH, EXIT_NOISE_UNKNOWN = 0, 1, 2, 3, 4, 5
+#: converged fit whose model was not judged -- its noise could not be estimated, or it is
+#: underdetermined (results are still written for 3, 4 and 5); 130 interrupted (Ctrl-C: 128 + SIGINT,
+#: as shells report it).
+EXIT_OK, EXIT_INTERNAL, EXIT_INVALID, EXIT_NOT_CONVERGED, EXIT_MODEL_MISMATCH, EXIT_NOT_JUDGED = 0, 1, 2, 3, 4, 5
 EXIT_INTERRUPTED = 130
 
 

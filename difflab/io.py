@@ -191,11 +191,12 @@ def atomic_path(path: str | os.PathLike, *, sweep: bool = True):
 def uninterrupted():
     """Hold Ctrl-C (SIGINT) and SIGTERM back until the block is done, so that the files it writes are
     all written (a pair of outputs: both renamed, not one) and no temporary is left half-made; the
-    first signal caught is delivered after it (KeyboardInterrupt for SIGINT). (Only the main thread
-    receives signals; elsewhere the block runs as it is.)"""
+    first signal caught is delivered after it (KeyboardInterrupt for SIGINT), also when the block
+    raised. (Only the main thread receives signals; elsewhere the block runs as it is.)"""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    _install_signal_cleanup()  # before the handlers are replaced: the cleanup must see the real ones
     caught = []
     previous = {number: signal.signal(number, lambda number, frame: caught.append(number))
                 for number in (signal.SIGINT, signal.SIGTERM)}
@@ -204,8 +205,19 @@ def uninterrupted():
     finally:
         for number, handler in previous.items():
             signal.signal(number, handler)
-    if caught:
-        signal.raise_signal(caught[0])
+        if caught:
+            signal.raise_signal(caught[0])
+
+
+def write_together(writers: dict) -> None:
+    """Write outputs that belong together (a fitted scene and its report, an image and its linear
+    copy), all or none: `writers` maps each path to a callable writing a temporary path
+    (`atomic_path`); the temporaries are renamed onto their paths once every one is written. Ctrl-C
+    and SIGTERM are held meanwhile (`uninterrupted`); a writer failing midway leaves every old file
+    as it was, its error naming its path."""
+    with uninterrupted(), contextlib.ExitStack() as stack:
+        for path, write in writers.items():
+            write(stack.enter_context(atomic_path(path)))
 
 
 def _write_error(path: Path, exc: OSError) -> WriteError:
@@ -273,19 +285,26 @@ def save_image(path: str | os.PathLike, image, srgb: bool = True) -> Path:
     Non-finite pixels are not hidden: they raise, with their count.
     """
     path = file_path(path, "image")
+    with atomic_path(path) as tmp:
+        write_image(tmp, image, srgb, name=path)
+    return path
+
+
+def write_image(path: Path, image, srgb: bool = True, name=None) -> None:
+    """`save_image`'s writing, into `path` as it stands (a temporary: `atomic_path`,
+    `write_together`), in the format its suffix names; errors name `name` (default: `path`)."""
+    name = path if name is None else name
     image = _as_image(image)
     if path.suffix.lower() == ".npy":
-        with atomic_path(path) as tmp, open(tmp, "wb") as f:  # (np.save(name) appends .npy to "x.NPY")
+        with open(path, "wb") as f:  # (np.save(name) appends .npy to "x.NPY")
             np.save(f, image)
-        return path
+        return
     bad = int(np.count_nonzero(~np.isfinite(image)))
     if bad:
-        raise DifflabError(f"{path}: image has {bad} non-finite values; not written")
+        raise DifflabError(f"{name}: image has {bad} non-finite values; not written")
     encoded = linear_to_srgb(image) if srgb else np.clip(image, 0.0, 1.0)
     pixels = np.round(encoded * 255.0).astype(np.uint8)
-    with atomic_path(path) as tmp:
-        Image.fromarray(pixels).save(tmp, format=Image.registered_extensions().get(path.suffix.lower(), "PNG"))
-    return path
+    Image.fromarray(pixels).save(path, format=Image.registered_extensions().get(path.suffix.lower(), "PNG"))
 
 
 #: numpy dtype kinds an image file may hold: bool, signed and unsigned integers, real floats.
@@ -333,7 +352,7 @@ def refuse_code_values(dtype, name: str) -> None:
     else:
         how = "image / (2^bits - 1) for the bits its source wrote, then that source's transfer function"
     raise DifflabError(f"{name}: integer data ({dtype}) are code values, not linear light; give linear floats -- "
-                       f"{how} -- and ceiling=1.0 if it clips, or the PNG / TIFF, which difflab decodes")
+                       f"{how} -- or the PNG / TIFF, which difflab decodes")
 
 
 def sample_bits(path: str | os.PathLike) -> int | None:

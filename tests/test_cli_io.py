@@ -101,6 +101,48 @@ def test_render_command_writes_png_and_linear_npy(tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
 
 
+def test_render_writes_the_png_and_its_linear_copy_together(tmp_path, capsys, monkeypatch):
+    """--linear: a full disk while writing the PNG leaves no .npy either (the .npy was renamed into
+    place first, then the PNG failed: one output without the other), exit 2."""
+    import errno
+
+    import difflab.io as io
+
+    scene = tiny_scene(tmp_path)
+    out = tmp_path / "out.png"
+    write = io.write_image
+
+    def full_on_png(path, image, *args, **kwargs):
+        if str(path).endswith(".png"):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return write(path, image, *args, **kwargs)
+
+    monkeypatch.setattr(io, "write_image", full_on_png)
+    assert main(["render", str(scene), "-o", str(out), "--width", "8", "--height", "8", "--linear"]) == 2
+    assert "No space left on device" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.json"]
+
+
+def test_held_signals_are_delivered_even_when_the_block_fails():
+    """`uninterrupted`: a SIGTERM arriving inside the block is held, and delivered to the handler
+    in place before it when the block ends -- also when the block raised (it was dropped: a caller
+    catching the error ran on after a SIGTERM)."""
+    import signal
+
+    import difflab.io as io
+
+    seen = []
+    old_term = signal.signal(signal.SIGTERM, lambda number, frame: seen.append(number))
+    try:
+        with pytest.raises(OSError), io.uninterrupted():
+            signal.raise_signal(signal.SIGTERM)
+            assert seen == []  # held
+            raise OSError("disk full")
+        assert seen == [signal.SIGTERM]  # delivered
+    finally:
+        signal.signal(signal.SIGTERM, old_term)
+
+
 @pytest.mark.parametrize("change, message", [
     ({"objects": [{"type": "sphere", "center": [0, 0, 0], "radius": -1, "material": "m"}]}, "objects[0].radius"),
     ({"objects": [{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "nope"}]}, "undefined material"),

@@ -6,15 +6,15 @@ Bad manifest lines are listed (with their line numbers) before any fit starts an
 failures; the other fits run. Rerun the same command to finish an interrupted batch: finished fits
 are skipped. Exit code: 0 when every line gave a converged fit that its image model explains; 3 when
 any line is invalid, failed or did not converge; else 4 when any fit is flagged model_mismatch, else
-5 when any fit's noise could not be estimated (as `difflab fit`; everything is still written: see
-OUTDIR/summary.csv); 2 when the manifest cannot be read. docs/batch.md describes the manifest and the output folder.
+5 when any fit's model was not judged (noise unknown or underdetermined, as `difflab fit`; everything
+is still written: see OUTDIR/summary.csv); 2 when the manifest cannot be read. docs/batch.md describes the manifest and the output folder.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOISE_UNKNOWN, EXIT_NOT_CONVERGED, EXIT_OK
+from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOT_CONVERGED, EXIT_NOT_JUDGED, EXIT_OK
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -45,4 +45,4 @@ def run(args) -> int:
         return EXIT_NOT_CONVERGED  # a line invalid, failed or not converged
     if summary.mismatched:
         return EXIT_MODEL_MISMATCH
-    return EXIT_NOISE_UNKNOWN if summary.unjudged else EXIT_OK
+    return EXIT_NOT_JUDGED if summary.unjudged else EXIT_OK

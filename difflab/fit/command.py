@@ -28,7 +28,7 @@ import argparse
 import math
 from pathlib import Path
 
-from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOISE_UNKNOWN, EXIT_NOT_CONVERGED, EXIT_OK, FitError
+from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOT_CONVERGED, EXIT_NOT_JUDGED, EXIT_OK, FitError
 
 
 
@@ -87,9 +87,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     import json
-    from contextlib import ExitStack
 
-    from ..io import atomic_path, refuse_overwrite, uninterrupted
+    from ..io import refuse_overwrite, write_together
     from .engine import fit
 
     output = Path(args.output)
@@ -111,12 +110,11 @@ def run(args) -> int:
         raise FitError(f"no fit made: {result.no_fit()}")
     contents = {output: result.to_scene().to_dict(), report: {
         "scene": str(args.scene), "targets": [str(t) for t in args.targets], "materials": materials, **result.to_dict()}}
-    with uninterrupted(), ExitStack() as files:  # both temporaries written before either is renamed onto its path
-        for path, data in contents.items():
-            files.enter_context(atomic_path(path)).write_text(json.dumps(data, indent=2) + "\n")
+    write_together({path: lambda temporary, data=data: temporary.write_text(json.dumps(data, indent=2) + "\n")
+                    for path, data in contents.items()})  # both written before either is renamed onto its path
     print(f"wrote {output} and {report}")
     if not result.converged:
         return EXIT_NOT_CONVERGED
     if result.model_mismatch:
         return EXIT_MODEL_MISMATCH
-    return EXIT_NOISE_UNKNOWN if result.noise_unknown or result.underdetermined else EXIT_OK
+    return EXIT_NOT_JUDGED if result.noise_unknown or result.underdetermined else EXIT_OK

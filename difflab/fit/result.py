@@ -225,8 +225,8 @@ class FitResult:
                                          "errors assume it does", self.model_mismatch),
                                         ("NOISE UNKNOWN: too few used pixels with used neighbours to estimate it; "
                                          "the image model is not judged (give sigma)", self.noise_unknown),
-                                        (f"UNDERDETERMINED: no more counted target values than the {self.n_params} "
-                                         "unknowns; the model is not judged", self.underdetermined),
+                                        ("UNDERDETERMINED: no more counted target values than unknowns the data "
+                                         "reach; the model is not judged", self.underdetermined),
                                         (f"at bound: {', '.join(self.at_bound)}", bool(self.at_bound)),
                                         (f"censored (clipped) target values: {self.censored}", self.censored > 0)) if on]
         rows.append(f"result: {self.result}, converged: {self.converged}, steps: {self.steps}, "
