@@ -652,7 +652,7 @@ def test_common_obj_layouts_are_read_by_numpy_as_trimesh_reads_them(tmp_path, mo
 
 def test_unmerged_gives_the_same_vertices_by_rows_as_by_one_key(monkeypatch):
     """`unmerged` tells (v, vt, vn) tuples apart by one int64 key where their grid fits, else by
-    sorting rows: both give the same split vertices, in (v, vt, vn) order."""
+    sorting rows: both give the same split vertices (by their `v` index), in (v, vt, vn) order."""
     from difflab.geometry import obj_text
 
     vertices, uvs, normals, faces, tex, norm = obj_data()
@@ -661,7 +661,7 @@ def test_unmerged_gives_the_same_vertices_by_rows_as_by_one_key(monkeypatch):
     monkeypatch.setattr(obj_text, "MAX_TUPLE_KEY", 0)
     by_rows = obj_text.unmerged(vertices, faces, attributes)
     assert all(np.array_equal(a, b) for a, b in zip(by_key, by_rows))
-    np.testing.assert_array_equal(by_key[0][by_key[1]], vertices[faces])
+    np.testing.assert_array_equal(by_key[0][by_key[1]], faces)  # each split vertex's `v` index
     np.testing.assert_array_equal(by_key[2][by_key[1]], uvs[tex])
     np.testing.assert_array_equal(by_key[3][by_key[1]], normals[norm])
 

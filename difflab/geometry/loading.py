@@ -122,7 +122,10 @@ def _convert(geometry, transform, path: str) -> TriMesh:
         uv = np.asarray(uv, dtype=np.float64)
         if uv.shape == (len(vertices), 2) and np.all(np.isfinite(uv)):
             uvs = uv
-    mesh = TriMesh(vertices, faces, normals, uvs, name=path)
+    welds = None
+    if uvs is not None and normals is None:  # trimesh split each `v` per uv: copies of a position, bit for bit
+        welds = np.unique(vertices, axis=0, return_inverse=True)[1].reshape(-1)
+    mesh = TriMesh(vertices, faces, normals, uvs, name=path, welds=welds)
     if transform is not None and not np.allclose(transform, np.eye(4)):
         mesh = mesh.transformed(transform)
     return mesh
@@ -135,7 +138,10 @@ def load_mesh(path) -> TriMesh:
     and normal the file gives it -- an OBJ vertex used with several uvs (a uv seam) or normals (a
     crease) is split into one vertex per (v, vt, vn) its corners use, as any renderer must, and
     vertices no face uses are dropped; vertices otherwise keep their file order. uvs are kept when
-    the file has them; normals when the file has them (OBJ `vn`, PLY nx/ny/nz), else None.
+    the file has them; normals when the file has them (OBJ `vn`, PLY nx/ny/nz), else None -- then
+    `welds` numbers each vertex by the position it copies (the OBJ `v` index; where trimesh reads the
+    file, equal positions of a mesh with uvs), so smooth normals (`TriMesh.smooth_normals`) average
+    over all a position's faces and a uv seam shades as the unsplit surface.
     Polygons are triangulated by trimesh as fans, with their corners' uvs and normals. A scene
     with several geometries is concatenated with its node transforms applied. Every failure raises
     `MeshError` naming the path: missing file,
@@ -155,7 +161,8 @@ def load_mesh(path) -> TriMesh:
         if not text.plain:
             _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)
     if text is not None and text.arrays is not None:
-        mesh = TriMesh(*text.arrays, name=path)
+        vertices, faces, normals, uvs, welds = text.arrays
+        mesh = TriMesh(vertices, faces, normals, uvs, name=path, welds=welds)
     else:
         mesh = _trimesh_load(path, data if text is not None and text.plain else None)
     if text is not None and text.plain and (

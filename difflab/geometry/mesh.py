@@ -9,6 +9,8 @@ import numpy as np
 
 from difflab.errors import MeshError
 
+from .normals import vertex_normals
+
 
 def _frozen(array: np.ndarray) -> np.ndarray:
     array = np.array(array, copy=True)
@@ -26,6 +28,9 @@ class TriMesh:
     - `normals` (V, 3) float64 per-vertex shading normals, or None (then renderers use
       `vertex_normals` or flat face normals).
     - `uvs` (V, 2) float64 texture coordinates, or None.
+    - `welds` (V,) int64 position numbers, or None (every vertex its own): vertices with one number
+      are copies of one position -- an OBJ `v` split at a uv seam, its `v` index -- and share one
+      smooth normal (`smooth_normals`), as the unsplit surface gives them.
 
     The arrays are converted to those dtypes, copied and made read-only, so a TriMesh never changes
     after construction. Invalid input raises `MeshError` naming the problem. `name` is a free label
@@ -37,6 +42,7 @@ class TriMesh:
     normals: np.ndarray | None = None
     uvs: np.ndarray | None = None
     name: str = "mesh"
+    welds: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         where = self.name
@@ -86,11 +92,18 @@ class TriMesh:
             if not np.all(np.isfinite(uvs)):
                 raise MeshError(f"{where}: uvs are not all finite")
             uvs = _frozen(uvs)
+        welds = self.welds
+        if welds is not None:
+            welds = np.asarray(welds)
+            if welds.shape != (n_vertices,) or not np.issubdtype(welds.dtype, np.integer) or np.any(welds < 0):
+                raise MeshError(f"{where}: welds must be ({n_vertices},) integers >= 0, got {welds.dtype} {welds.shape}")
+            welds = _frozen(welds.astype(np.int64))
 
         object.__setattr__(self, "vertices", _frozen(vertices))
         object.__setattr__(self, "faces", _frozen(faces))
         object.__setattr__(self, "normals", normals)
         object.__setattr__(self, "uvs", uvs)
+        object.__setattr__(self, "welds", welds)
 
     @property
     def n_vertices(self) -> int:
@@ -103,6 +116,11 @@ class TriMesh:
     def bounds(self) -> np.ndarray:
         """(2, 3): the axis-aligned bounding box, [min corner, max corner]."""
         return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+    def smooth_normals(self) -> np.ndarray:
+        """(V, 3) the mesh's normals, or where it has none its smooth vertex normals
+        (`vertex_normals`, area-weighted) summed over each position's copies (`welds`)."""
+        return self.normals if self.normals is not None else vertex_normals(self.vertices, self.faces, welds=self.welds)
 
     def transformed(self, matrix) -> "TriMesh":
         """A new mesh with every vertex mapped by the 4x4 `matrix` (column vectors: p' = M p).
@@ -137,12 +155,12 @@ class TriMesh:
             length = np.linalg.norm(normals, axis=1, keepdims=True)
             normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
         faces = self.faces if det > 0 else self.faces[:, ::-1]
-        return TriMesh(points, faces, normals, self.uvs, name=self.name)
+        return TriMesh(points, faces, normals, self.uvs, name=self.name, welds=self.welds)
 
 
 def concatenate(meshes: Iterable[TriMesh], name: str = "mesh") -> TriMesh:
     """One mesh holding all of `meshes` (faces re-indexed). Normals and uvs are kept only if every
-    mesh has them. An empty list raises `MeshError`."""
+    mesh has them; `welds` if any has them (numbered apart per mesh). An empty list raises `MeshError`."""
     meshes = list(meshes)
     if not meshes:
         raise MeshError(f"{name}: cannot concatenate an empty list of meshes")
@@ -156,7 +174,12 @@ def concatenate(meshes: Iterable[TriMesh], name: str = "mesh") -> TriMesh:
                if all(m.normals is not None for m in meshes) else None)
     uvs = (np.concatenate([m.uvs for m in meshes])
            if all(m.uvs is not None for m in meshes) else None)
-    return TriMesh(vertices, faces, normals, uvs, name=name)
+    welds = None
+    if any(m.welds is not None for m in meshes):
+        own = [m.welds if m.welds is not None else np.arange(m.n_vertices) for m in meshes]
+        starts = np.cumsum([0] + [int(w.max()) + 1 for w in own[:-1]])
+        welds = np.concatenate([w + start for w, start in zip(own, starts)])
+    return TriMesh(vertices, faces, normals, uvs, name=name, welds=welds)
 
 
 def weld(vertices: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:

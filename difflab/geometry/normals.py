@@ -79,7 +79,7 @@ def _corner_angles(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     return angles
 
 
-def vertex_normals(vertices, faces, weighting: str = "area") -> np.ndarray:
+def vertex_normals(vertices, faces, weighting: str = "area", welds=None) -> np.ndarray:
     """(V, 3) unit vertex normals: the normalised sum of the normals of the adjacent faces.
 
     `weighting`:
@@ -92,6 +92,10 @@ def vertex_normals(vertices, faces, weighting: str = "area") -> np.ndarray:
     Degenerate faces are skipped. A vertex with no non-degenerate adjacent face (unused, or only
     on degenerate faces) gets the zero vector (0, 0, 0); so does a vertex whose weighted normals
     cancel exactly. Callers that need a unit normal everywhere must handle zero rows.
+
+    `welds` ((V,) integers >= 0, optional): vertices with one number are copies of one position
+    (a vertex split at a uv seam): each gets the sum over all the copies' faces, so a seam shades
+    as the unsplit surface.
     """
     if weighting not in WEIGHTINGS:
         raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
@@ -112,6 +116,11 @@ def vertex_normals(vertices, faces, weighting: str = "area") -> np.ndarray:
         angles = _corner_angles(v, f_ok)
         for k in range(3):
             np.add.at(acc, f_ok[:, k], unit * angles[:, k:k + 1])
+    if welds is not None:
+        welds = np.asarray(welds)
+        merged = np.zeros((int(welds.max()) + 1, 3))
+        np.add.at(merged, welds, acc)
+        acc = merged[welds]
     length = np.linalg.norm(acc, axis=1, keepdims=True)
     scale = np.abs(acc).max() if acc.size else 0.0
     ok = length > 1e-300 + 1e-15 * scale

@@ -41,7 +41,8 @@ MAX_TUPLE_KEY = 2 ** 62  # `unmerged` numbers (v, vt, vn) tuples by one int64 be
 class ObjText:
     """What `read_obj` found: `plain` (see the module doc), the numbers of `v` and `f` lines, whether
     the `v` lines parse as 3 numbers each (plain text only), and (vertices, faces, normals or None,
-    uvs or None) as trimesh reads them, or None."""
+    uvs or None, welds or None) as trimesh reads them (welds: each vertex's `v` index, 0-based, where
+    vertices were split), or None."""
 
     plain: bool
     n_vertex_lines: int
@@ -147,7 +148,8 @@ def read_obj(data: bytes) -> ObjText:
 
 
 def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, corners: np.ndarray, sample: bytes):
-    """(vertices, faces, normals or None, uvs or None) of plain OBJ text as trimesh reads it, or
+    """(vertices, faces, normals or None, uvs or None, welds or None) of plain OBJ text as trimesh
+    reads it (welds: `unmerged`'s, each vertex's `v` index, None where no vertex is split), or
     None outside the layouts of the module doc. `vertices`: the `v` lines' (N, 3) numbers;
     `corners`: the `f` lines' numbers, a row each."""
     per_corner = corners.shape[1] // 3
@@ -177,20 +179,21 @@ def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, corners: 
     used = {name: (index, values) for name, index, values in (("normals", norm, normal_table), ("uvs", tex, uv_table))
             if index is not None and values is not None}
     if not used:
-        return vertices, faces, None, None  # every vertex, no normals or uvs
+        return vertices, faces, None, None, None  # every vertex, no normals or uvs
     if any(index.max() >= len(values) for index, values in used.values()):
         return None  # trimesh drops that attribute: let it read the file
-    vertices, faces, *values = unmerged(vertices, faces, list(used.values()))
+    welds, faces, *values = unmerged(vertices, faces, list(used.values()))
     found = dict(zip(used, values))
     normals, uvs = (found.get(name) for name in ("normals", "uvs"))
     finite = [None if a is None or not np.all(np.isfinite(a)) else a for a in (normals, uvs)]  # else dropped
-    return (vertices, faces, *finite)
+    return (vertices[welds], faces, *finite, welds)
 
 
 def unmerged(vertices: np.ndarray, faces: np.ndarray, attributes: list) -> list:
-    """[vertices, faces, *values]: one vertex per distinct (vertex, attribute indices...) tuple the
+    """[welds, faces, *values]: one vertex per distinct (vertex, attribute indices...) tuple the
     faces' corners use, rows in the order of those tuples (vertices in file order, a split vertex's
-    copies side by side), a vertex no face uses dropped. `attributes`: (index per corner (F, 3),
+    copies side by side), a vertex no face uses dropped; `welds` is each one's index in `vertices`
+    (its positions: `vertices[welds]`). `attributes`: (index per corner (F, 3),
     values) pairs, e.g. the corners' `vt` indices and the uv table. The tuples are told apart by
     one int64 each, their index in the grid of all tuples (sorting one column is ~3x faster than
     sorting rows), or by rows where that grid is too big for int64."""
@@ -202,5 +205,5 @@ def unmerged(vertices: np.ndarray, faces: np.ndarray, attributes: list) -> list:
     else:
         keys, inverse = np.unique(np.column_stack(columns), axis=0, return_inverse=True)
         rows = keys.T
-    return [vertices[rows[0]], inverse.reshape(faces.shape)] + [values[rows[k]]
+    return [rows[0], inverse.reshape(faces.shape)] + [values[rows[k]]
                                                                 for k, (_, values) in enumerate(attributes, 1)]

@@ -77,4 +77,4 @@ def project_uvs(mesh: TriMesh, kind: str, axis=(0.0, 1.0, 0.0), center=None, sca
         uv = spherical_uv(v, axis, center)
     else:
         uv = cylindrical_uv(v, axis, center, scale)
-    return TriMesh(mesh.vertices, mesh.faces, mesh.normals, uv)
+    return TriMesh(mesh.vertices, mesh.faces, mesh.normals, uv, welds=mesh.welds)

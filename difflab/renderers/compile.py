@@ -179,8 +179,7 @@ def object_mesh(obj, base_dir=None) -> geometry.TriMesh:
     matrix = None if t.matrix is None else np.asarray(t.matrix, float).reshape(4, 4)
     mesh = mesh.transformed(geometry.transform_matrix(t.translate, t.rotate_deg, t.scale, matrix))
     if mesh.normals is None and obj.smooth:
-        mesh = geometry.TriMesh(mesh.vertices, mesh.faces, geometry.vertex_normals(mesh.vertices, mesh.faces),
-                                mesh.uvs)
+        mesh = geometry.TriMesh(mesh.vertices, mesh.faces, mesh.smooth_normals(), mesh.uvs)
     if not obj.smooth:
         mesh = facet(mesh)
     return mesh
@@ -243,8 +242,7 @@ def triangle_soup(parts) -> dict:
     faces = np.concatenate([m.faces + o for (m, _, _), o in zip(parts, offsets)]).astype(np.int32)
     return {
         "vertices": vertices, "faces": faces,
-        "normals": np.concatenate([m.normals if m.normals is not None else geometry.vertex_normals(m.vertices, m.faces)
-                                   for m, _, _ in parts]).astype(np.float32),
+        "normals": np.concatenate([m.smooth_normals() for m, _, _ in parts]).astype(np.float32),
         "uvs": np.concatenate([m.uvs if m.uvs is not None else np.zeros((m.vertices.shape[0], 2))
                                for m, _, _ in parts]).astype(np.float32),
         "face_material": np.concatenate([np.full(m.faces.shape[0], mat, np.int32) for m, mat, _ in parts]),
