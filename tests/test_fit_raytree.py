@@ -188,6 +188,33 @@ def test_recovers_kt_and_absorption_through_glass():
         assert np.max(np.abs(np.asarray(result.params[key]) - truth) / truth) < 1e-4, (key, result.params[key])
 
 
+def test_recovers_the_absorption_of_the_medium_around_the_eye():
+    """Eye inside a glass sphere (absorption [1, .2, .2]) looking at an opaque ball inside it, fitted
+    under a mask on the ball alone: its pixels never hit the glass, they only travel in its medium
+    (the centre pixel 0.2226 red at absorption 1, 0.9990 at 0), so the fit counts them (it stopped
+    with empty_mask, 'none showing material glass') and recovers the absorption from 0 red."""
+    d = {"camera": {"eye": [0, 0, 0], "target": [0, 0, -1], "fov_y": 40, "width": 12, "height": 12, "near": 0.01},
+         "ambient": [1, 1, 1], "background": [1, 1, 1], "lights": [{"type": "directional", "direction": [0, 0, -1]}],
+         "materials": {"glass": {"kd": [0, 0, 0], "ka": [0, 0, 0], "ks": [0, 0, 0], "kt": 1.0, "ior": 1.0,
+                                 "absorption": [1.0, 0.2, 0.2]},
+                       "ball": {"ka": [0.5, 0.5, 0.5], "kd": [0.5, 0.5, 0.5]}},
+         "objects": [{"type": "sphere", "center": [0, 0, 0], "radius": 3, "material": "glass"},
+                     {"type": "sphere", "center": [0, 0, -2], "radius": 0.5, "material": "ball"}],
+         "render": {"method": "raytrace", "max_depth": 3}}
+    target = render_frame(Scene.from_dict(d), threads=2).image
+    a = np.tan(np.radians(20)) / 12  # pixel (6, 6)'s ray: the centre's plus half a pixel right and down
+    ray = np.array([a, -a, -1.0]) / np.linalg.norm([a, -a, -1.0])
+    t = -2 * ray[2] - np.sqrt((2 * ray[2]) ** 2 - 3.75)  # to the ball (centre (0, 0, -2), radius 0.5)
+    n_z = (t * ray[2] + 2) / 0.5  # N.L, the light shining down -z
+    assert target[6, 6, 0] == pytest.approx((0.5 + 0.5 * n_z) * np.exp(-t), rel=1e-4)  # ka + kd N.L, t inside
+    start = {**d, "materials": {**d["materials"], "glass": {**d["materials"]["glass"], "absorption": [0.0, 0.2, 0.2]}}}
+    mask = np.zeros((12, 12), bool)
+    mask[5:7, 5:7] = True  # the ball's pixels only
+    result = fit_scene(Scene.from_dict(start), [target], ("glass",), ["glass.absorption"], masks=[mask], threads=2)
+    assert result.converged, result.result
+    np.testing.assert_allclose(result.params["absorption"], [1.0, 0.2, 0.2], rtol=1e-4)
+
+
 # -- 4. identifiability --------------------------------------------------------------------------------
 
 

@@ -100,9 +100,11 @@ def tree_pixels(tree) -> np.ndarray:
 
 def tree_influence(tree, material_ids, crossing_ids=()) -> np.ndarray:
     """(H, W) bool: pixels whose colour depends on the materials `material_ids` (some node of one of
-    their samples hit one of them) or on the kt of `crossing_ids` (a shadow ray crossed one)."""
+    their samples hit one of them, or travelled inside one -- its medium, whose absorption it takes:
+    a camera inside a transparent object starts its primary rays there without hitting it) or on
+    the kt of `crossing_ids` (a shadow ray crossed one)."""
     ids = np.asarray(list(material_ids), np.int64)
-    touched = np.isin(tree.material, ids)
+    touched = np.isin(tree.material, ids) | np.isin(tree.medium, ids)
     crossing_ids = list(crossing_ids)
     if crossing_ids and tree.crossings.size:
         touched |= (tree.crossings[..., crossing_ids] > 0).any(axis=(1, 2))
