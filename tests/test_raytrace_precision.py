@@ -185,8 +185,37 @@ def test_ray_offsets_follow_the_scene_down_to_float32_rounding():
     for scale in (1e-3, 1.0, 1e3):
         compiled = compile_scene(transformed(GRAZING, scale=scale, far=10 * scale))
         assert compiled.epsilon / scale == pytest.approx(compile_scene(transformed(GRAZING, far=10)).epsilon, rel=1e-6)
-    moved = compile_scene(transformed(GRAZING, shift=(1e5, 0, 0), far=10))
-    assert moved.epsilon == pytest.approx(2 * 2.0 ** -23 * (1e5 + 10), rel=1e-6)
+    moved = transformed(GRAZING, shift=(1e5, 0, 0), far=10)
+    corners = far_corners(moved["camera"]) - np.asarray(moved["camera"]["eye"])  # the floor plane: hits out to them
+    reach = 1e5 + np.abs(corners).max()
+    assert compile_scene(moved).epsilon == pytest.approx(2 * 2.0 ** -23 * reach, rel=1e-6)
+
+
+def far_corners(camera):
+    """(4, 3) float64 corners of a perspective camera's far plane (default fov_y 45)."""
+    eye, target = np.asarray(camera["eye"], float), np.asarray(camera["target"], float)
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, [0, 1, 0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    half = np.tan(np.radians(camera.get("fov_y", 45)) / 2)
+    return np.array([eye + camera["far"] * (forward + a * half * camera["width"] / camera["height"] * right
+                                              + b * half * up) for a in (-1, 1) for b in (-1, 1)])
+
+
+def test_without_planes_the_far_plane_beyond_everything_changes_nothing():
+    """A glass sphere, a Phong sphere and a quad mesh (a 6 x 6 wall at z = 0), no planes: every hit lies in the box around
+    the eye and the objects, so far = 10 or 1e5 gives the same offsets and the same image (bit for
+    bit). The offsets' floor took |eye| + far for every scene: 0.00097 became 0.0238 at far 1e5 and
+    18 of these 1728 pixels changed by > 0.02, up to 0.127."""
+    d = {**GLASS, "camera": {**GLASS["camera"], "width": 48, "height": 36}, "objects": [
+        {"type": "sphere", "center": [0, 0.7, 0], "radius": 0.7, "material": "g"},
+        {"type": "sphere", "center": [0.9, 0.3, 0.6], "radius": 0.3, "material": "r"},
+        {"type": "mesh", "builtin": "quad", "material": "f", "transform": {"rotate_deg": [-90, 0, 0], "scale": 6}}]}
+    near = compile_scene(d)
+    distant = compile_scene(transformed(d, far=1e5))
+    assert distant.epsilon == near.epsilon == pytest.approx(1e-4 * np.linalg.norm([6, 6, 4.7]), rel=1e-6)  # the box: quad, sphere, eye
+    np.testing.assert_array_equal(render(distant), render(near))
 
 
 ABSORBING = {"kd": [0, 0, 0], "kt": 1.0, "ior": 1.0, "absorption": [1.0, 0.0, 0.0]}

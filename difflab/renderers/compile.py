@@ -22,6 +22,7 @@ from ..guards import check_mesh_uvs, check_world_mesh, object_errors
 from ..limits import require_triangles
 from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Scene, Sphere, load_scene
+from .camera import far_reach
 from .launch import host_empty, resolve_device
 from .tessellate import AnalyticParts
 from .texture.store import TextureStore, scene_textures
@@ -273,18 +274,23 @@ def appended_soup(compiled, parts) -> dict:
     return dict(soup, arrays=device_soup(soup, compiled.device))
 
 
-def ray_epsilon(camera, mesh_vertices: np.ndarray, spheres) -> float:
+def ray_epsilon(camera, mesh_vertices: np.ndarray, spheres, planes=()) -> float:
     """How far (scene units) a new ray starts off the surface it leaves: RAY_EPSILON_SCALE x the
     diagonal of the box around the eye, the meshes and the spheres -- so a uniformly scaled scene
     scales its offsets and renders the same image -- but at least RAY_EPSILON_ULPS float32 ulps of
-    the largest coordinate a hit can have (that box's, or a plane's within the far plane: |eye| +
-    far), where float32 rounding of hit points, not the scene's size, sets the offset a ray needs."""
+    the largest coordinate a hit can have, where float32 rounding of hit points, not the scene's
+    size, sets the offset a ray needs: that box's, and with planes (unbounded) the farthest a
+    primary ray reaches before the far plane (`camera.far_reach`: |eye| + the far corners'); a
+    scene without planes does not depend on `far` (its hits lie in that box). Secondary rays can
+    meet a plane farther out (a reflection grazing a floor); their offsets there may round."""
     eye = np.asarray(camera.eye, float)
     extent_points = [eye[None], mesh_vertices.reshape(-1, 3)]
     for sphere, _, _ in spheres:
         extent_points.append(np.asarray(sphere.center)[None] + np.array([[sphere.radius] * 3, [-sphere.radius] * 3]))
     points = np.concatenate(extent_points)
-    largest = max(float(np.abs(points).max()), float(np.abs(eye).max()) + camera.far)
+    largest = float(np.abs(points).max())
+    if planes:
+        largest = max(largest, far_reach(camera))
     return max(RAY_EPSILON_SCALE * float(np.linalg.norm(points.max(0) - points.min(0))),
                RAY_EPSILON_ULPS * 2.0 ** -23 * largest)
 
@@ -342,7 +348,7 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     mesh_vertices = soup["vertices"][used]
     spheres = [part for part in analytic if isinstance(part[0], Sphere)]
     planes = [part for part in analytic if isinstance(part[0], Plane)]
-    epsilon = ray_epsilon(scene.camera, mesh_vertices, spheres)
+    epsilon = ray_epsilon(scene.camera, mesh_vertices, spheres, planes)
     arrays = device_soup(soup, device)
     geom = ray_geometry(arrays, mesh_vertices, spheres, planes, epsilon, device)
     ordered = [scene.materials[name] for name in scene.material_names]
