@@ -11,7 +11,9 @@ import pytest
 from conftest import scene_dict
 from difflab import compile_scene, render, render_frame
 from difflab.renderers.compile import RASTER_SOUP, SOUP_DTYPES, scene_parts, triangle_soup
-from difflab.renderers.tessellate import AnalyticParts
+from difflab.geometry import uv_sphere
+from difflab.renderers.tessellate import AnalyticParts, plane_grid, sphere_segments
+from difflab.scene import Sphere
 
 CAMERA = {"eye": [0.0, 2.0, 5.0], "target": [0, 0, -2], "fov_y": 45, "width": 32, "height": 24}
 SPHERES = [{"type": "sphere", "center": [x, 0.35, -z], "radius": 0.3, "material": m}
@@ -60,10 +62,27 @@ def test_ray_tracing_builds_no_tessellation_and_its_image_does_not_depend_on_it(
     assert np.array_equal(lit, traced.image)
 
 
+def eager_soup(scene) -> dict:
+    """The one soup of all the scene's triangles as `compile_scene` built it before the tessellation
+    was made lazy (commit 82029e4^): `triangle_soup` of the mesh objects', then each sphere's uv
+    sphere (`sphere_segments` longitudes for the sample rows) and each plane's grid, in scene order
+    -- built here from the primitives, not by `AnalyticParts.tessellate`."""
+    mesh_parts, analytic = scene_parts(scene)
+    rows = scene.camera.height * scene.render.spp_side
+    parts = []
+    for obj, material, index in analytic:
+        if isinstance(obj, Sphere):
+            n_lon = sphere_segments(obj, scene.camera, rows)
+            parts.append((uv_sphere(obj.radius, obj.center, max(2, n_lon // 2), n_lon), material, index))
+        else:
+            parts.append((plane_grid(obj, scene.camera), material, index))
+    return triangle_soup(mesh_parts + parts)
+
+
 def test_the_raster_soup_is_the_eager_one_built_once(tessellations):
-    """The lazily appended soup is bitwise the one soup of all the scene's triangles that compiling
-    built before (`triangle_soup` of the meshes, then the spheres and planes in scene order), and the
-    raster image of a scene ray traced first is a freshly compiled scene's."""
+    """The lazily built raster soup is bitwise the one soup of all the scene's triangles that
+    compiling built before (`eager_soup`), and the raster image of a scene ray traced first is a
+    freshly compiled scene's."""
     compiled = compile_scene(WHITTED)
     render(compiled, method="raytrace")
     image = render(compiled, method="raster", shading="phong")
@@ -71,8 +90,8 @@ def test_the_raster_soup_is_the_eager_one_built_once(tessellations):
     assert len(tessellations) == 1
     soup = compiled.raster()
     assert soup.arrays is compiled.raster().arrays and len(tessellations) == 1  # kept, for copies too
-    mesh_parts, analytic = scene_parts(compiled.scene)
-    eager = triangle_soup(mesh_parts + compiled.analytic.tessellate(soup.n_mesh_faces))
+    _, analytic = scene_parts(compiled.scene)
+    eager = eager_soup(compiled.scene)
     for name in SOUP_DTYPES:
         assert getattr(soup, name).dtype == eager[name].dtype and np.array_equal(getattr(soup, name), eager[name]), name
         assert soup.arrays[name].shape[0] == eager[name].shape[0], name

@@ -40,7 +40,6 @@ and ends at the far one, where the rasterizer clips).
 from __future__ import annotations
 
 import itertools
-from dataclasses import replace
 
 import numpy as np
 
@@ -243,8 +242,8 @@ def seam_edges_kernel(rows: wp.array(dtype=wp.int32), face: wp.array2d(dtype=wp.
 
 
 def item_buffer(compiled, width: int, height: int, threads: int | None = None) -> tuple[ItemBufferW, bool, bool]:
-    """The item buffer of a width x height sample grid: the z-buffer of the mesh triangles (the first
-    `n_mesh_faces` of the compiled scene, and their vertices), their back faces left out where
+    """The item buffer of a width x height sample grid: the z-buffer of the mesh triangles (the
+    compiled scene's `faces`, which hold only those), their back faces left out where
     `culls_back_faces` allows. Like the BVH it is kept with the compiled scene (whose geometry and
     camera are fixed), in this thread's per-frame arrays: a later render of the same sample grid
     reuses it. Returns it, whether it was kept, and whether back faces were left out.
@@ -260,10 +259,7 @@ def item_buffer(compiled, width: int, height: int, threads: int | None = None) -
     if kept is not None and kept[0] == view:
         return item_struct(compiled, face, edge), True, kept[1]
     pool.pop(ITEM_BUFFER_VIEW, None)  # until the new one is complete
-    n_faces, n_vertices = compiled.n_mesh_faces, compiled.n_mesh_vertices
-    arrays = dict(compiled.arrays, faces=compiled.arrays["faces"][:n_faces],
-                  vertices=compiled.arrays["vertices"][:n_vertices])
-    meshes = replace(compiled, faces=compiled.faces[:n_faces], vertices=compiled.vertices[:n_vertices], arrays=arrays)
+    n_faces, arrays = compiled.n_mesh_faces, compiled.arrays  # the mesh triangles only (`CompiledScene`)
     load_kernels(device, hints_kernel, edges_kernel, seam_edges_kernel)
     seams = set()
 
@@ -274,7 +270,7 @@ def item_buffer(compiled, width: int, height: int, threads: int | None = None) -
         seams.update((begin, end - 1))
 
     cull = culls_back_faces(compiled, threads)
-    unused, key = zbuffer(meshes, camera_struct(compiled.scene.camera, width, height), int(cull), threads, decode_band)
+    unused, key = zbuffer(compiled, camera_struct(compiled.scene.camera, width, height), int(cull), threads, decode_band)
     mark_key_cleared(compiled, key)  # hints_kernel reset every key
     rows = wp.array(sorted(seams), dtype=wp.int32, device=device)
     wp.launch(seam_edges_kernel, dim=rows.shape[0], inputs=[rows, face, arrays["faces"], edge], device=device)
@@ -290,8 +286,8 @@ def culls_back_faces(compiled, threads: int | None = None) -> bool:
     and its first mesh hit, entering one, is a front face (module doc). The meshes are asked once
     per compiled scene; the camera's 8 box corners are tested on each call (nothing kept per camera)."""
     if SOLID_MESHES not in compiled.built:
-        vertices = compiled.arrays["vertices"].numpy()[:compiled.n_mesh_vertices]
-        pieces = solid_pieces(vertices, compiled.faces[:compiled.n_mesh_faces])
+        vertices = compiled.vertices
+        pieces = solid_pieces(vertices, compiled.faces)
         solid = pieces is not None and not passes_through_itself(bvh(compiled), *pieces, threads=threads)
         compiled.built[SOLID_MESHES] = (vertices.min(axis=0), vertices.max(axis=0)) if solid else None
     box = compiled.built[SOLID_MESHES]

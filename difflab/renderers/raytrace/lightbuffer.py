@@ -227,8 +227,7 @@ def light_entries(light: np.ndarray, prims: list, resolution: int):
 def scene_primitives(compiled) -> list:
     """Every ray-traced surface as (kind, convex point set, lower bound of distance function, everywhere)."""
     geom = compiled.geom
-    n = compiled.n_mesh_faces
-    triangles = compiled.vertices[compiled.faces[:n]]
+    triangles = compiled.vertices[compiled.faces]
     centres = geom.sphere_center.numpy().astype(np.float64)
     radii = geom.sphere_radius.numpy().astype(np.float64)
     corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
