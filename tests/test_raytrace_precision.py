@@ -7,6 +7,7 @@ import pytest
 from difflab import Scene, render, render_frame
 from difflab.fit import evaluate_tree
 from difflab.renderers.compile import compile_scene
+from difflab.renderers.raytrace.medium import camera_media
 
 EDGES = 0.05  # a reference pixel differing from a 4-neighbour by more than this sits on an edge
 
@@ -284,3 +285,56 @@ def test_outside_every_object_primary_rays_start_in_no_medium():
                [0, 0, 0])
     tree = render_frame(Scene.from_dict(d)).ray_tree
     assert np.all(tree.medium[tree.parent == -1] == -1)
+
+
+def test_the_near_plane_clips_a_bubble_around_the_eye_and_its_medium():
+    """Eye at the centre of a bubble of radius 0.05 absorbing red: with the near plane inside it, every
+    ray absorbs exp(-0.05) from the eye on, whatever `near` is; with the near plane beyond it, the
+    bubble is clipped as the rasterizer clips it and the white background comes through (it came
+    out [0, 1, 1]: the ray took the eye's medium but started outside the bubble and never left it).
+    Only the second needs each ray's own look back from the near plane (`per_ray_check`)."""
+    d = inside([{"type": "sphere", "center": [0, 0, 0], "radius": 0.05, "material": "g"}], [0, 0, 0], fov_y=40)
+    g = Scene.from_dict(d).material_index("g")
+    for near in (0.001, 0.01):
+        scene = Scene.from_dict(transformed(d, near=near))
+        assert camera_media(compile_scene(scene)) == (g, False)
+        image = render(scene)
+        np.testing.assert_allclose(image[..., 0], np.exp(-0.05), rtol=1e-5)
+        np.testing.assert_array_equal(image[..., 1:], 1.0)
+    clipped = Scene.from_dict(transformed(d, near=0.1))
+    assert camera_media(compile_scene(clipped)) == (g, True)
+    np.testing.assert_array_equal(render(clipped), 1.0)
+    np.testing.assert_array_equal(render(clipped, method="raster"), 1.0)
+
+
+def test_past_a_clipped_bubble_the_ray_absorbs_from_its_wall():
+    """A bubble of radius 0.05 absorbing green around the eye, inside a unit sphere absorbing red, near
+    plane 0.1: rays start in the sphere's medium and absorb over the 0.95 from the bubble's (clipped)
+    wall to the sphere's -- exp(-0.95) red, green 1 (it was green exp(-1), red 1: the bubble's medium
+    from the eye) -- and the recorded tree (medium, distance from that wall) gives the same image."""
+    d = inside([{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "g"},
+                {"type": "sphere", "center": [0, 0, 0], "radius": 0.05, "material": "green"}], [0, 0, 0], fov_y=40)
+    d["camera"]["near"] = 0.1
+    d["materials"]["green"] = {**ABSORBING, "absorption": [0.0, 1.0, 0.0]}
+    scene = Scene.from_dict(d)
+    frame = render_frame(scene)
+    np.testing.assert_allclose(frame.image[..., 0], np.exp(-0.95), rtol=1e-5)
+    np.testing.assert_array_equal(frame.image[..., 1:], 1.0)
+    again = evaluate_tree(frame.ray_tree, scene.materials, scene.lights, scene.ambient, scene.background)
+    np.testing.assert_allclose(np.asarray(again), frame.image, rtol=1e-5)
+
+
+def test_orthographic_rays_start_in_the_medium_at_their_own_start():
+    """An orthographic camera (view 3 tall) at the centre of a unit sphere absorbing red: the ray at
+    offset (x, y) starts inside when x^2 + y^2 < 1 and absorbs over sqrt(1 - x^2 - y^2) to the wall,
+    else starts outside, misses, and stays white (it was [0, 1, 1]: every ray took the eye's medium)."""
+    d = inside([{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "g"}], [0, 0, 0])
+    d["camera"].update(projection="orthographic", ortho_height=3.0, width=15, height=15)
+    image = render(Scene.from_dict(d))
+    x = (np.arange(15) + 0.5) / 15 * 3 - 1.5
+    r2 = x[None, :] ** 2 + x[:, None] ** 2
+    expected = np.where(r2 < 1, np.exp(-np.sqrt(np.maximum(1 - r2, 0))), 1.0)
+    clear = np.abs(r2 - 1) > 0.05  # off the silhouette
+    np.testing.assert_allclose(image[..., 0][clear], expected[clear], rtol=1e-4)
+    assert np.all(image[..., 0][r2 > 1.05] == 1.0)
+    np.testing.assert_array_equal(image[..., 1:], 1.0)

@@ -31,7 +31,7 @@ from ..frame import Frame, box_downsample
 from ..launch import host_empty, launch_row_loops, load_kernels
 from .itembuffer import asked_bvh, item_buffer, item_struct
 from .lightbuffer import build_light_buffer, no_light_buffer
-from .medium import camera_medium
+from .medium import camera_media
 from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, TraceOutW, TraceParamsW, \
     whitted_kernel
 from .record import empty_tree, has_textures, sized_tree, tree_to_numpy
@@ -73,9 +73,10 @@ def sample_points(width: int, height: int, side: int, sampling: str = "grid") ->
     return np.stack([x, y], axis=-1).astype(np.float32)
 
 
-def trace_params(scene, settings, record: bool, sample: tuple[float, float], side: int, medium: int) -> TraceParamsW:
+def trace_params(scene, settings, record: bool, sample: tuple[float, float], side: int,
+                 media: tuple[int, bool]) -> TraceParamsW:
     params = TraceParamsW()
-    params.medium = int(medium)
+    params.medium, params.start_check = int(media[0]), int(media[1])
     params.side = int(side)
     params.max_depth = int(settings.max_depth)
     params.shadows = int(settings.shadows)
@@ -147,7 +148,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
     wp_points = wp.array(np.ascontiguousarray(points, np.float32), dtype=wp.vec2, device=device)
     item = item if item is not None else item_struct(compiled)
     scene_w = scene_struct(compiled, light_buffer)
-    medium = camera_medium(compiled)
+    media = camera_media(compiled)
     # a sample's width per unit distance (texture footprints of secondary rays; 0 for orthographic views)
     spread = 2.0 * half_height(scene.camera) / height * footprint if scene.camera.projection == "perspective" \
         else 0.0
@@ -164,7 +165,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         return out
 
     unrecorded = read_only(compiled, "unrecorded tree", lambda: empty_tree((1, 1), 0, 0, device))  # not read
-    out = launch(trace_params(scene, settings, False, (footprint, spread), side, medium), unrecorded)
+    out = launch(trace_params(scene, settings, False, (footprint, spread), side, media), unrecorded)
     shadow_tests = int(light_buffer.warp.tests.numpy()[0]) if light_buffer is not None else 0
     asked = asked_bvh(item)  # read before the recording pass adds its own
     counts = out.node_count.numpy()
@@ -178,7 +179,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         crossings = count_crossings(scene, settings)
         wp_tree, offsets = sized_tree(counts, n_lights, len(scene.materials) if crossings else 0, device,
                                       has_textures(scene))
-        launch(trace_params(scene, settings, True, (footprint, spread), side, medium), wp_tree)
+        launch(trace_params(scene, settings, True, (footprint, spread), side, media), wp_tree)
         tree = tree_to_numpy(wp_tree, offsets, n_lights, fog, scene, settings, shape, crossings)
     return Traced(color=out.color.numpy(), fog=fog, node_count=counts, rays=stats_rays,
                   depth_histogram=histogram, tree=tree, shadow_tests=shadow_tests,

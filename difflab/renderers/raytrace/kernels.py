@@ -39,6 +39,7 @@ from ..launch import dealt_row
 from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, light_visibility
 from .itembuffer import ItemBufferW, item_hit
 from .lightbuffer import LightBufferW, buffered_visibility
+from .medium import primary_medium
 from .optics import beer, reflect
 from .record import LightRecW, TreeW, light_arrays, record_light, record_ray, record_surface
 from .surface import RayW, SceneW, SurfaceW, child_ray, fresnel_split, new_ray, primary_sample, skip_object, \
@@ -69,7 +70,8 @@ class TraceParamsW:
     sample: wp.vec2  # texture footprints: a sample's width in pixels (1 / side), and per unit path length
     # (its spread: 2 tan(fov_y / 2) / height x that; 0 for orthographic views)
     side: int  # > 0: the regular grid of `side` x `side` samples per pixel; 0: the samples are `points`
-    medium: int  # material id of the medium the camera is in (`medium.camera_medium`), -1 outside
+    medium: int  # material id of the medium a perspective camera's eye is in (`medium.camera_media`), -1 outside
+    start_check: int  # 1: each primary ray finds its own medium (`medium.primary_medium`), 0: `medium` is every ray's
 
 
 @wp.struct
@@ -155,8 +157,12 @@ def make_whitted_kernel(stack_size: int):
             base = int(0)
             if params.record == 1:
                 base = tree.offset[i, j]
-            first = new_ray(start, start + near * direction, direction, wp.vec3(1.0), near, 1, -1, PRIMARY,
-                            params.medium, -1)
+            origin = start + near * direction
+            medium = params.medium
+            if params.start_check == 1:  # its absorption counts from `start` in `medium`
+                medium, start = primary_medium(scene.geom, scene.materials, start, direction, near, params.medium,
+                                               cam.perspective)
+            first = new_ray(start, origin, direction, wp.vec3(1.0), near, 1, -1, PRIMARY, medium, -1)
             if wp.static(stack_size > 1):  # (a one-ray stack is the primary ray alone: no array to clear)
                 stack = wp.zeros(shape=stack_size, dtype=RayW)
                 stack[0] = first

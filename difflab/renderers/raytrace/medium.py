@@ -1,40 +1,59 @@
-"""The medium the camera is in: where primary rays start their Beer absorption.
+"""The medium a primary ray starts in: where its Beer absorption begins.
 
 A ray refracted into an object travels in its medium (`RayW.medium`, its material) until it leaves
-through a surface's back side (`surface.py`). A camera inside a transparent object starts its
-primary rays in that object's medium: found once per frame by walking a ray from the eye along the
-view direction through every surface it crosses (each crossing counted from `epsilon` past the last)
-and keeping a depth count, +1 entering a surface (hitting the side its stored normal points to:
-outward for spheres, the plane's normal, the winding normal for triangles), -1 leaving one. The
-first crossing that takes the count below 0 leaves an object the eye was inside -- the innermost one
-where objects nest -- and its material is the medium (if that object is transparent, kt > 0; an
+through a surface's back side (`surface.py`). Which medium holds a point is found by walking a ray
+from it (`medium_at`) through every surface it crosses (each crossing counted from `epsilon` past
+the last), keeping a depth count: +1 entering a surface (hitting the side its stored normal points
+to: outward for spheres, the plane's normal, the winding normal for triangles), -1 leaving one. The
+first crossing that takes the count below 0 leaves an object the point was inside -- the innermost
+one where objects nest -- and its material is the medium (if that object is transparent, kt > 0; an
 opaque one has none). Closed objects give the same answer along any walk. A plane, or a mesh that
 is not closed, has no inside of its own: its back side counts as inside, as for the rays refracted
-through it, so the eye starts in its medium when the walk meets its back first (a slab of two
-planes facing out: entered, then left -- no medium). An orthographic camera's rays all start in the
-medium found at the eye.
+through it, so a point is in its medium when the walk meets its back first (a slab of two planes
+facing out: entered, then left -- no medium).
+
+The near plane clips as the rasterizer's does: a primary ray is traced from where it crosses the
+near plane, and what lies before that -- surfaces, and the media they bound -- is not seen. So the
+ray travels in the medium holding that near-plane point, and absorbs in it from where it entered
+it: from its start (the eye; an orthographic ray's point on the eye's plane) when no surface lies
+between the start and the near plane -- the image does not depend on `near` while the near plane is
+inside the eye's medium -- else from the last such (clipped) surface. An eye inside a bubble that
+lies wholly before the near plane sees what is behind the bubble unabsorbed, as the rasterizer
+shows it without the bubble.
+
+Cost: a perspective camera's medium is walked once per frame, from the eye along the view
+direction; each ray then looks back from its near-plane point for a clipped surface (one short
+ray), and walks only if it finds one -- and only when some surface comes within the ball around
+the eye that holds the near plane's corners (`per_ray_check`). An orthographic camera's rays start
+at different points: each walks from its own near-plane point, when some transparent object may
+contain one of them (its bounds, a plane's back half-space, any transparent mesh, meet the ball
+around the view volume's part before the near plane).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from ..._warp import wp
 
 from ...lighting.warp_model import MaterialW
-from ..camera import camera_frame
+from ...scene import Plane, Sphere
+from ..camera import camera_frame, half_height
 from ..launch import load_kernels
 from ..trace import HIT_NONE, SceneGeomW, closest_hit
 
 wp.set_module_options({"enable_backward": False})
 
-MAX_CROSSINGS = 256  # surfaces the walk crosses before it gives up (the eye then starts in no medium)
+MAX_CROSSINGS = 256  # surfaces a walk crosses before it gives up (the point then is in no medium)
 
 
 @wp.func
-def eye_medium(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), eye: wp.vec3, direction: wp.vec3):
-    """The material id of the medium containing `eye` (module doc), -1 for none."""
+def medium_at(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), point: wp.vec3, direction: wp.vec3):
+    """The material id of the medium containing `point` (module doc: the walk along unit
+    `direction`), -1 for none."""
     depth = int(0)
-    origin = eye
+    origin = point
     for crossing in range(MAX_CROSSINGS):
         hit = closest_hit(geom, origin, direction, 0.0, wp.inf, -1)
         if hit.kind == HIT_NONE:
@@ -51,22 +70,83 @@ def eye_medium(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), eye: wp.v
     return -1
 
 
+@wp.func
+def primary_medium(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), start: wp.vec3, direction: wp.vec3,
+                   near: float, eye_medium: int, perspective: int):
+    """A primary ray's medium and the point its absorption counts from (module doc): the ray leaves
+    `start` along unit `direction` and is traced from `near` further on; `eye_medium` is the eye's
+    (`camera_media`), which a perspective ray keeps when no surface lies before its near plane."""
+    origin = start + near * direction
+    clipped = closest_hit(geom, origin, -direction, 0.0, near, -1)  # the last surface before the near plane
+    if clipped.kind == HIT_NONE:
+        if perspective == 1:
+            return eye_medium, start
+        return medium_at(geom, materials, origin, direction), start
+    return medium_at(geom, materials, origin, direction), origin - clipped.t * direction
+
+
 @wp.kernel
 def eye_medium_kernel(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), eye: wp.vec3, direction: wp.vec3,
                       out: wp.array(dtype=wp.int32)):
-    out[0] = eye_medium(geom, materials, eye, direction)
+    out[0] = medium_at(geom, materials, eye, direction)
 
 
-def camera_medium(compiled) -> int:
-    """The material id of the medium the compiled scene's camera is in (-1: none); asked only when
-    the scene has a transparent material."""
+def near_ball(camera) -> tuple[np.ndarray, float]:
+    """Centre and radius of a ball holding every primary ray from its start to the near plane: around
+    the eye out to the near plane's corners (perspective), or around the middle of the view volume's
+    box before the near plane (orthographic)."""
+    right, up, forward = camera_frame(camera)
+    half_h = half_height(camera)
+    half_w = half_h * camera.width / camera.height
+    eye = np.asarray(camera.eye, float)
+    if camera.projection == "perspective":
+        return eye, camera.near * math.sqrt(1.0 + half_w ** 2 + half_h ** 2)
+    return eye + 0.5 * camera.near * forward, math.sqrt(half_w ** 2 + half_h ** 2 + (0.5 * camera.near) ** 2)
+
+
+def per_ray_check(compiled, transparent: set) -> bool:
+    """Whether primary rays must find their medium each (`primary_medium`), `transparent` being the
+    ids of the materials with kt > 0 (module doc): for a perspective camera, whether some surface
+    comes within `near_ball` (a sphere's shell, a plane, the meshes' bounding box); for an
+    orthographic one, whether some transparent object may hold a point of it (a sphere's ball, a
+    plane's back half-space, any transparent mesh: an open one holds what lies behind it)."""
     scene = compiled.scene
-    if not any(m.kt > 0 for m in scene.materials.values()):
-        return -1
+    centre, radius = near_ball(scene.camera)
+    perspective = scene.camera.projection == "perspective"
+    for obj in scene.objects:
+        if not perspective and scene.material_index(obj.material) not in transparent:
+            continue
+        if isinstance(obj, Sphere):
+            gap = float(np.linalg.norm(centre - np.asarray(obj.center))) - obj.radius
+            if (abs(gap) if perspective else gap) <= radius:
+                return True
+        elif isinstance(obj, Plane):
+            side = float(np.dot(centre - np.asarray(obj.point), obj.normal))
+            if (abs(side) if perspective else side) <= radius:
+                return True
+    if not perspective:
+        return bool(np.isin(compiled.face_material, list(transparent)).any())
+    if compiled.vertices.shape[0] == 0:
+        return False
+    nearest = np.clip(centre, compiled.vertices.min(axis=0), compiled.vertices.max(axis=0))  # the box's nearest point
+    return bool(np.linalg.norm(centre - nearest) <= radius)
+
+
+def camera_media(compiled) -> tuple[int, bool]:
+    """(the material id of the medium the perspective camera's eye is in, -1: none or an
+    orthographic camera; whether primary rays check their own medium, `per_ray_check`), for the
+    compiled scene; (-1, False) without a transparent material."""
+    scene = compiled.scene
+    transparent = {i for i, name in enumerate(scene.material_names) if scene.materials[name].kt > 0}
+    if not transparent:
+        return -1, False
+    check = per_ray_check(compiled, transparent)
+    if scene.camera.projection != "perspective":
+        return -1, check
     load_kernels(compiled.device, eye_medium_kernel)
     out = wp.empty(1, dtype=wp.int32, device=compiled.device)
     forward = np.asarray(camera_frame(scene.camera)[2], np.float32)
     wp.launch(eye_medium_kernel, dim=1, inputs=[compiled.traceable(), compiled.materials,
                                                 wp.vec3(*scene.camera.eye), wp.vec3(*forward), out],
               device=compiled.device)
-    return int(out.numpy()[0])
+    return int(out.numpy()[0]), check

@@ -55,7 +55,8 @@ class RayW:
     """A ray waiting on the walk's stack."""
 
     origin: wp.vec3  # where it is traced from: `start` moved epsilon off the surface (primary: onto the near plane)
-    start: wp.vec3  # the surface point it leaves (the primary ray: `camera.primary_ray`'s origin, the eye)
+    start: wp.vec3  # the surface point it leaves, where its absorption counts from (the primary ray:
+    # `camera.primary_ray`'s origin, or the last surface before the near plane: `medium.primary_medium`)
     direction: wp.vec3  # unit
     weight: wp.vec3  # path weight, before this ray's own absorption
     path: float  # path length from the eye to `origin` (texture footprints)

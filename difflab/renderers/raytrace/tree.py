@@ -43,8 +43,10 @@ class RayTree:
       object      scene object index hit (-1: none); face: mesh triangle index hit (-1: none).
       cell        checker cell 0 / 1 at the hit (cell 1 swaps in ka2 / kd2).
       medium      material id of the object the ray travelled inside to get here (-1: outside);
-      distance    (float32) how far it travelled (inf where it hit nothing). The path weight takes
-                  exp(-alpha d) over it, alpha = absorption of `medium` (exactly 1 where alpha = 0).
+      distance    (float32) how far it travelled in it (inf where it hit nothing; a primary ray: from
+                  the eye, or from the last surface before the near plane, `medium.primary_medium`).
+                  The path weight takes exp(-alpha d) over it, alpha = absorption of `medium`
+                  (exactly 1 where alpha = 0).
       position, normal, view  (N, 3) float32: hit point, unit shading normal facing the incoming ray
                   (pointing inwards inside an object), unit direction back along the incoming ray.
       light_dir (N, P, 3), light_dist (N, P), visibility (N, P) float32: per light, the unit
