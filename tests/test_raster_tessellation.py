@@ -10,6 +10,7 @@ import pytest
 
 from conftest import scene_dict
 from difflab import compile_scene, render, render_frame
+from difflab.errors import RenderError
 from difflab.renderers.compile import RASTER_SOUP, SOUP_DTYPES, scene_parts, triangle_soup
 from difflab.geometry import uv_sphere
 from difflab.renderers.tessellate import AnalyticParts, plane_grid, sphere_segments
@@ -135,3 +136,62 @@ def test_a_scene_without_analytic_objects_rasterizes_its_own_triangles(tessellat
     assert frame.stats["triangles"] == compiled.faces.shape[0] == compiled.n_mesh_faces
     assert frame.gbuffer.mask.sum() == (frame.gbuffer.object == 0).sum() > 10
     assert tessellations == [] and RASTER_SOUP not in compiled.built
+
+
+def distinct_bytes(*soups) -> int:
+    """Bytes of the distinct memory blocks behind the soups' triangle arrays (a view counts its base)."""
+    blocks = {}
+    for soup in soups:
+        for name in SOUP_DTYPES:
+            array = getattr(soup, name)
+            base = array if array.base is None else array.base
+            blocks[id(base)] = base.nbytes
+    return sum(blocks.values())
+
+
+#: A mesh of 6,240 triangles beside a plane (1,152 raster triangles) and a small sphere (16,128), shadows on.
+BIG_MESH = scene_dict([{"type": "mesh", "builtin": "sphere", "resolution": 40, "material": "red"}, FLOOR,
+                       {"type": "sphere", "center": [1.6, 0.3, 0], "radius": 0.3, "material": "mirror"}],
+                      MATERIALS, camera=CAMERA, lights=[{"type": "point", "position": [2, 4, 3]}],
+                      render={"shadows": True})
+
+
+def test_the_mesh_triangles_are_held_once(tessellations):
+    """The compiled scene's mesh fields are the first rows of the raster soup (compiling leaves room
+    after them; rasterizing writes the tessellation there): after a raster render (shadows: the BVH
+    built too) the two share memory, the device arrays and the BVH's points are the same memory, and
+    what is held is the raster soup's bytes alone: 1.188 MiB here. Before, the raster soup was a
+    concatenated copy: 1.505 MiB held (/tmp/rev/soup_twice.py: 63.5 MiB for a 31.8 MiB soup)."""
+    compiled = compile_scene(BIG_MESH)
+    image = render(compiled, method="raster", shading="phong")
+    soup = compiled.raster()
+    assert len(tessellations) == 1 and soup.faces.shape[0] > compiled.n_mesh_faces == 6240
+    for name in SOUP_DTYPES:
+        mesh, raster = getattr(compiled, name), getattr(soup, name)
+        rows = mesh.shape[0]
+        assert np.shares_memory(mesh, raster) and np.array_equal(raster[:rows], mesh), name
+        assert compiled.arrays[name].ptr == soup.arrays[name].ptr == raster.ctypes.data, name
+    assert compiled.built["bvh"].points.ptr == soup.arrays["vertices"].ptr
+    assert distinct_bytes(compiled, soup) == sum(getattr(soup, name).nbytes for name in SOUP_DTYPES)
+    eager = eager_soup(compiled.scene)
+    assert all(np.array_equal(getattr(soup, name), eager[name]) for name in SOUP_DTYPES)
+    assert np.array_equal(render(compile_scene(BIG_MESH), method="raster", shading="phong"), image)
+
+
+def test_a_scene_compiled_over_the_budget_copies_its_meshes_when_rasterized_under_it(monkeypatch, tessellations):
+    """Compiled when its tessellation passes the memory budget, a scene leaves no room after its
+    meshes (ray tracing it needs none); rasterized once the budget allows, its mesh rows are copied
+    into new arrays with room: the same soup and image as a scene compiled under the budget."""
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "20M")  # the box and one sphere pass, all 195,397 raster triangles not
+    compiled = compile_scene(WHITTED)
+    assert all(getattr(compiled, name).base is None or getattr(compiled, name).base.shape[0] ==
+               getattr(compiled, name).shape[0] for name in SOUP_DTYPES)  # no room
+    with pytest.raises(RenderError, match=r"raster triangles of the scene"):
+        render(compiled, method="raster")
+    monkeypatch.delenv("DIFFLAB_MEMORY_BUDGET")
+    image = render(compiled, method="raster", shading="phong")
+    soup = compiled.raster()
+    eager = eager_soup(compiled.scene)
+    assert all(np.array_equal(getattr(soup, name), eager[name]) for name in SOUP_DTYPES)
+    assert not np.shares_memory(compiled.vertices, soup.vertices)  # the copy
+    assert np.array_equal(render(compile_scene(WHITTED), method="raster", shading="phong"), image)

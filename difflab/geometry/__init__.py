@@ -1,7 +1,7 @@
 """difflab.geometry: numpy triangle meshes (no Warp, no JAX).
 
 - `TriMesh` (validated, immutable), `concatenate`, `weld`; `closed_outward` / `solid_pieces` (closed surfaces of solids, facing out)
-- primitives: `uv_sphere`, `quad`, `box`, `cylinder`; the Utah `teapot`
+- primitives: `uv_sphere` (`uv_sphere_size`: its counts), `quad`, `box`, `cylinder`; the Utah `teapot`
   (`teapot_control_points`, `teapot_patches`)
 - normals: `face_normals`, `face_areas`, `vertex_normals` (area-weighted by default; vertices
   without a non-degenerate face get a zero normal), `degenerate_faces`
@@ -16,7 +16,7 @@ from .closed import closed_outward, solid_pieces
 from .loading import load_mesh, save_mesh
 from .mesh import TriMesh, concatenate, weld
 from .normals import degenerate_faces, face_areas, face_normals, vertex_normals
-from .primitives import box, cylinder, quad, uv_sphere
+from .primitives import box, cylinder, quad, uv_sphere, uv_sphere_size
 from .teapot import teapot, teapot_control_points, teapot_patches
 from .uv_projection import cylindrical_uv, planar_uv, project_uvs, spherical_uv
 from .transforms import (apply_to_normals, apply_to_points, look_at, ndc_to_raster, orthographic, perspective,
@@ -24,7 +24,7 @@ from .transforms import (apply_to_normals, apply_to_points, look_at, ndc_to_rast
 
 __all__ = [
     "TriMesh", "concatenate", "weld", "closed_outward", "solid_pieces",
-    "uv_sphere", "quad", "box", "cylinder",
+    "uv_sphere", "uv_sphere_size", "quad", "box", "cylinder",
     "teapot", "teapot_control_points", "teapot_patches",
     "face_normals", "face_areas", "vertex_normals", "degenerate_faces",
     "transform_matrix", "rotation_matrix", "translation_matrix", "scale_matrix",

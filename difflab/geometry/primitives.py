@@ -36,6 +36,12 @@ def _count(value, minimum: int, what: str) -> int:
     return int(value)
 
 
+def uv_sphere_size(n_lat: int, n_lon: int) -> tuple[int, int]:
+    """(vertices, faces) of `uv_sphere(n_lat=n_lat, n_lon=n_lon)`: n_lon per pole and n_lon + 1 per
+    inner ring; two triangles per cell, one per polar cell."""
+    return 2 * n_lon + (n_lat - 1) * (n_lon + 1), 2 * n_lon * (n_lat - 1)
+
+
 def uv_sphere(radius=1.0, center=(0.0, 0.0, 0.0), n_lat=16, n_lon=32) -> TriMesh:
     """A latitude/longitude sphere with `n_lat` bands (>= 2) and `n_lon` segments (>= 3).
 
@@ -50,7 +56,7 @@ def uv_sphere(radius=1.0, center=(0.0, 0.0, 0.0), n_lat=16, n_lon=32) -> TriMesh
     c = _vec(center, 3, "center")
     n_lat = _count(n_lat, 2, "n_lat")
     n_lon = _count(n_lon, 3, "n_lon")
-    require_triangles(2 * n_lon * (n_lat - 1), f"uv_sphere of {n_lat} x {n_lon}", MeshError)
+    require_triangles(uv_sphere_size(n_lat, n_lon)[1], f"uv_sphere of {n_lat} x {n_lon}", MeshError)
 
     def direction(lat, lon):
         s = np.sin(lat)

@@ -31,6 +31,8 @@ from .trace import SceneGeomW
 RAY_EPSILON_SCALE = 1e-4  # ray offset = this x the scene's extent (bounding-box diagonal) ...
 RAY_EPSILON_ULPS = 2.0  # ... but at least this x 2^-23 (2 to 4 float32 ulps) of its largest coordinate
 RASTER_SOUP = "raster soup"  # the key in CompiledScene.built of the mesh and analytic triangles (`raster`)
+RASTER_ROOM = "raster room"  # ... and of the arrays the mesh fields are the first rows of (`soup_with_room`)
+PER_FACE = ("faces", "face_material", "face_object", "face_normal")  # the soup's arrays with a row per face
 
 
 def _unheld_refs() -> int:
@@ -53,7 +55,8 @@ class CompiledScene:
     kept beside the device arrays for the G-buffer's users. The rasterizer draws `raster()`: the same
     fields with the analytic spheres' and planes' tessellation appended after the first
     `n_mesh_faces` faces (and `n_mesh_vertices` vertices), built when something first rasterizes the
-    scene; ray tracing never builds it."""
+    scene; ray tracing never builds it. The mesh fields are the first rows of `raster()`'s arrays
+    (one copy of the mesh triangles: the rows after them are left unwritten until then)."""
 
     scene: object
     device: str
@@ -85,8 +88,27 @@ class CompiledScene:
         pass the memory budget (a ray-traced scene of many spheres compiles and renders all the same)."""
         if not self.analytic.objects:
             return self
-        return replace(self, **self.build_once(RASTER_SOUP, lambda: appended_soup(
-            self, self.analytic.tessellate(self.n_mesh_faces))))
+        return replace(self, **self.build_once(RASTER_SOUP, self._raster_soup))
+
+    def _raster_soup(self) -> dict:
+        """The triangle fields and `arrays` of `raster()`: the analytic objects' triangles
+        (`triangle_soup` of `AnalyticParts.tessellate`) written into the rows after the meshes' in
+        the arrays compiling left room in (`RASTER_ROOM`) -- the values `triangle_soup` gives all of
+        them at once. Where no room was left (the tessellation passed the memory budget when
+        compiled, not now) the mesh rows are copied into new arrays with room."""
+        added = triangle_soup(self.analytic.tessellate(self.n_mesh_faces))
+        added["faces"] += np.int32(self.n_mesh_vertices)
+        n_vertices, n_faces = self.n_mesh_vertices + len(added["vertices"]), self.n_mesh_faces + len(added["faces"])
+        host, device = self.built[RASTER_ROOM]
+        if len(host["faces"]) != n_faces or len(host["vertices"]) != n_vertices:
+            host = soup_with_room({name: getattr(self, name) for name in SOUP_DTYPES}, n_vertices, n_faces)
+            device = None
+        for name, dtype in SOUP_DTYPES.items():
+            first = self.n_mesh_faces if name in PER_FACE else self.n_mesh_vertices
+            host[name][first:] = added[name]
+            if device is not None and self.device != "cpu":  # on the CPU the device arrays are the host's
+                wp.copy(device[name], wp.array(added[name], dtype=dtype, device=self.device), dest_offset=first)
+        return dict(host, arrays=device if device is not None else device_soup(host, self.device))
 
     def build_once(self, name: str, build):
         """`built[name]`, made by `build()` on first use -- by one thread: others asking for it at the
@@ -150,8 +172,8 @@ class CompiledScene:
     def _with_bvh(self) -> SceneGeomW:
         if not self.n_mesh_faces:
             return self.geom
-        indices = wp.array(np.ascontiguousarray(self.faces[:self.n_mesh_faces]).ravel(), dtype=wp.int32,
-                           device=self.device)
+        indices = wp.array(self.faces[:self.n_mesh_faces].ravel(), dtype=wp.int32,  # a `raster()` copy's
+                           device=self.device)  # analytic triangles follow the meshes': rays see the exact ones
         self.built["bvh"] = wp.Mesh(points=self.arrays["vertices"], indices=indices)
         geom = SceneGeomW()
         for name in SceneGeomW.vars:
@@ -265,13 +287,26 @@ def device_soup(soup: dict, device: str) -> dict:
             for name, dtype in SOUP_DTYPES.items()}
 
 
-def appended_soup(compiled, parts) -> dict:
-    """The compiled scene's triangle fields and `arrays` with `parts`' triangles (`triangle_soup`)
-    after its own: the values `triangle_soup` gives all of them at once."""
-    added = triangle_soup(parts)
-    added["faces"] = added["faces"] + np.int32(compiled.vertices.shape[0])
-    soup = {name: np.concatenate([getattr(compiled, name), added[name]]) for name in SOUP_DTYPES}
-    return dict(soup, arrays=device_soup(soup, compiled.device))
+def soup_with_room(soup: dict, n_vertices: int, n_faces: int) -> dict:
+    """The soup's arrays copied into the first rows of new ones of `n_vertices` / `n_faces` rows, the
+    rest left unwritten (np.empty: memory pages nothing has written are not held)."""
+    out = {}
+    for name, values in soup.items():
+        out[name] = np.empty((n_faces if name in PER_FACE else n_vertices,) + values.shape[1:], values.dtype)
+        out[name][:len(values)] = values
+    return out
+
+
+def raster_room(analytic: AnalyticParts, n_faces: int) -> tuple[int, int]:
+    """(vertices, faces) of the analytic objects' tessellation (`AnalyticParts.size`), to leave room
+    for after the `n_faces` mesh triangles; (0, 0) where they pass the memory budget together (then
+    rasterizing the scene is refused, as `tessellate` prices them again)."""
+    n_vertices, n_added = analytic.size()
+    try:
+        require_triangles(n_faces + n_added, "raster triangles of the scene", RenderError)
+    except RenderError:
+        return 0, 0
+    return n_vertices, n_added
 
 
 def ray_epsilon(camera, mesh_vertices: np.ndarray, spheres, planes=()) -> float:
@@ -343,13 +378,19 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     soup = triangle_soup(mesh_parts)
     n_mesh_faces = soup["faces"].shape[0]
     n_mesh_vertices = soup["vertices"].shape[0]
+    parts = AnalyticParts(tuple(analytic), scene.camera, scene.camera.height * scene.render.spp_side)
+    room_vertices, room_faces = raster_room(parts, n_mesh_faces) if analytic else (0, 0)
+    room = soup_with_room(soup, n_mesh_vertices + room_vertices, n_mesh_faces + room_faces) if analytic else soup
+    room_arrays = device_soup(room, device)
+    soup = {name: values[:n_mesh_faces if name in PER_FACE else n_mesh_vertices] for name, values in room.items()}
+    arrays = {name: values if values.shape[0] == len(soup[name]) else values[:len(soup[name])]  # warp: no [:0] of
+              for name, values in room_arrays.items()}  # an empty array
     used = np.zeros(n_mesh_vertices, bool)  # the vertices of the mesh faces, each once
     used[soup["faces"].ravel()] = True
     mesh_vertices = soup["vertices"][used]
     spheres = [part for part in analytic if isinstance(part[0], Sphere)]
     planes = [part for part in analytic if isinstance(part[0], Plane)]
     epsilon = ray_epsilon(scene.camera, mesh_vertices, spheres, planes)
-    arrays = device_soup(soup, device)
     geom = ray_geometry(arrays, mesh_vertices, spheres, planes, epsilon, device)
     ordered = [scene.materials[name] for name in scene.material_names]
     textures, texture_ids = scene_textures(ordered, device)
@@ -357,6 +398,5 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
         scene=scene, device=device, **soup, n_mesh_faces=n_mesh_faces, n_mesh_vertices=n_mesh_vertices,
         epsilon=epsilon, arrays=arrays, geom=geom,
         lights=lights_to_warp(scene.lights, device), materials=materials_to_warp(ordered, device, texture_ids),
-        textures=textures,
-        analytic=AnalyticParts(tuple(analytic), scene.camera, scene.camera.height * scene.render.spp_side),
+        textures=textures, analytic=parts, built={RASTER_ROOM: (room, room_arrays)},
     )

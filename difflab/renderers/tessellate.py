@@ -44,6 +44,11 @@ def plane_axes(normal) -> tuple[int, int]:
     return {0: (1, 2), 1: (0, 2), 2: (0, 1)}[dominant]
 
 
+def plane_grid_size() -> tuple[int, int]:
+    """(vertices, faces) of every `plane_grid`: (2 PLANE_RINGS + 1)^2 grid points, two triangles per cell."""
+    return (2 * PLANE_RINGS + 1) ** 2, 2 * (2 * PLANE_RINGS) ** 2
+
+
 def plane_grid(plane: Plane, camera) -> geometry.TriMesh:
     """A grid of quads on the plane centred at the eye's foot, reaching 2 `far` each way, its lines
     spaced geometrically from a quarter of the eye's height: cells stay small (well-conditioned
@@ -87,15 +92,25 @@ class AnalyticParts:
     camera: object = None
     sample_height: int = 0
 
+    def sphere_grid(self, sphere: Sphere) -> tuple[int, int]:
+        """(n_lat, n_lon) of a sphere's uv sphere: `sphere_segments` longitudes, half as many bands."""
+        n_lon = sphere_segments(sphere, self.camera, self.sample_height)
+        return max(2, n_lon // 2), n_lon
+
+    def size(self) -> tuple[int, int]:
+        """(vertices, faces) that `tessellate` builds, counted without building them."""
+        sizes = [geometry.uv_sphere_size(*self.sphere_grid(obj)) if isinstance(obj, Sphere) else plane_grid_size()
+                 for obj, _, _ in self.objects]
+        return sum(v for v, _ in sizes), sum(f for _, f in sizes)
+
     def tessellate(self, n_before: int) -> list:
         """Per object its raster triangles as (TriMesh, material id, object index). RenderError once
         the scene's triangles -- `n_before` (the meshes') and these so far -- pass the memory budget."""
         parts, triangles = [], n_before
         for obj, material, index in self.objects:
             if isinstance(obj, Sphere):
-                n_lon = sphere_segments(obj, self.camera, self.sample_height)
                 with object_errors(index, obj):
-                    mesh = geometry.uv_sphere(obj.radius, obj.center, max(2, n_lon // 2), n_lon)
+                    mesh = geometry.uv_sphere(obj.radius, obj.center, *self.sphere_grid(obj))
             else:
                 mesh = plane_grid(obj, self.camera)
             parts.append((mesh, material, index))
