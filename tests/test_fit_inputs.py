@@ -100,6 +100,29 @@ def test_a_flat_lit_floor_at_the_maximum_is_not_taken_for_a_clip():
         fit_material(start, [target], "floor", ("kd",), ceiling=-np.inf)
 
 
+def test_a_surface_wholly_at_the_clip_does_not_hide_a_clipped_highlight():
+    """A small white bulb (ka 3: every pixel of it clipped) beside the red ball, whose highlight is
+    clipped at the same value: the ball's ties are a minority of its pixels -- a clip, censored, ks
+    and n recovered. (Any surface with ties at most of its pixels called the whole view unclipped:
+    ks 0.045 for 0.5, n 23.6 for 24, chi2 1.7e6.)"""
+    from test_fit_helpers import TRUTH, perturbed, scene_dict
+
+    from difflab import Scene
+
+    d = scene_dict(size=32)
+    d["materials"]["bulb"] = {"ka": [3.0, 3.0, 3.0], "kd": [0.5, 0.5, 0.5]}
+    d["objects"].append({"type": "sphere", "center": [-1.3, 1.6, 0.5], "radius": 0.12, "material": "bulb"})
+    scene = Scene.from_dict(d)
+    target = render(scene)
+    top = float(np.quantile(target[..., 0][target[..., 0] < 0.6], 0.99))  # under the ball's highlight
+    clipped = np.minimum(target, top)
+    start = {f"red.{k}": v for k, v in perturbed(TRUTH).items() if k != "ka"}
+    result = fit_material(scene, [clipped], ["red", "bulb"], ("kd", "ks", "n"), init=start)
+    assert result.censored > 0  # the bulb's values and the ball's highlight
+    np.testing.assert_allclose(result.params["red.ks"], TRUTH["ks"], rtol=1e-4)
+    assert result.params["red.n"] == pytest.approx(TRUTH["n"], rel=1e-4)
+
+
 def test_a_clipped_highlight_is_still_a_ceiling_and_the_cli_can_say_none(tmp_path, capsys):
     scene = make_scene(size=20, red={"ks": [1.5, 1.5, 1.5], "n": 20.0})
     image = target_of(scene)
