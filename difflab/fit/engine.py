@@ -69,7 +69,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         weighted = residuals if setup.unit_weights else setup.residual_images(r, weighted=True)
         silent, silent_entries = silent_pixels(setup.views, r)
         sigma = views_noise(setup.views, weighted, silent, setup.sigma_given, setup.sigma_floor,
-                            setup.sigma_fallback) if finite else float("nan")
+                            setup.sigma_fallback, setup.quantisation) if finite else float("nan")
         noise_unknown = finite and sigma is None
         sigma = float("nan") if sigma is None else sigma
         if finite:
@@ -168,7 +168,8 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
         masks: per target (H, W) bool (True: the pixel counts); weights: per target (H, W[, 3]) >= 0.
         init: name -> starting value, overriding the scene's (a texture: an (H_t, W_t, 3) image,
             row 0 at the top, which also sets the texel grid, or a value for every texel).
-        sigma: the targets' pixel noise (linear units); default: estimated (see `fit.stats`).
+        sigma: the targets' pixel noise (linear units) before quantisation: a file's (one code
+            step / sqrt(12)) is added in quadrature; default: estimated (see `fit.stats`).
         ceiling: the value where the targets clip (censored pixels: the model need only reach it);
             default: 1.0 for 8/16-bit targets, detected from ties at the maximum for float data;
             False: none.

@@ -90,8 +90,9 @@ def _check_smoothness(value, textures) -> float:
 class Setup:
     """A fit prepared (see the module docstring). Attributes: scene (start values written in),
     materials, method, layout, initial (key -> value), x0 (solver coordinates), views, used_pixels,
-    nonfinite, censored, sigma_given, sigma_floor, sigma_fallback (the noise when too few pixels allow
-    an estimate, None: from the targets; `engine.without_clipped`), x64, dtype, problem, render_seconds (the Warp
+    nonfinite, censored, sigma_given, quantisation (the targets' code step / sqrt(12), 0 for float
+    data), sigma_floor, sigma_fallback (the noise when too few pixels allow an estimate, None:
+    unknown; `engine.without_clipped`), x64, dtype, problem, render_seconds (the Warp
     renders' wall time), base_scene (before `init`), ceiling_given, loss, loss_scale."""
 
     def __init__(self, scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None,
@@ -169,7 +170,8 @@ class Setup:
         self.nonfinite = int(sum(v.nonfinite for v in self.views))
         self.censored = int(sum(np.count_nonzero(v.entries) - np.count_nonzero(v.counted)
                                 for v in self.views if np.isfinite(v.ceiling)))  # over the used pixels
-        self.sigma_floor = max(FLOAT_SIGMA, max(v.step for v in self.views) / math.sqrt(12.0))
+        self.quantisation = max(v.step for v in self.views) / math.sqrt(12.0)  # 0 for float data
+        self.sigma_floor = max(FLOAT_SIGMA, self.quantisation)
 
     def retarget(self, images, init=None) -> Setup:
         """The same fit (views, image models, compiled solve) for other target images, one (H, W, 3)
