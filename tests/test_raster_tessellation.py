@@ -11,6 +11,8 @@ import pytest
 from conftest import scene_dict
 from difflab import compile_scene, render, render_frame
 from difflab.errors import RenderError
+from difflab._warp import wp
+from difflab.renderers import compile as compile_module
 from difflab.renderers.compile import RASTER_SOUP, SOUP_DTYPES, scene_parts, triangle_soup
 from difflab.geometry import uv_sphere
 from difflab.renderers.tessellate import AnalyticParts, plane_grid, sphere_segments
@@ -195,3 +197,22 @@ def test_a_scene_compiled_over_the_budget_copies_its_meshes_when_rasterized_unde
     assert all(np.array_equal(getattr(soup, name), eager[name]) for name in SOUP_DTYPES)
     assert not np.shares_memory(compiled.vertices, soup.vertices)  # the copy
     assert np.array_equal(render(compile_scene(WHITTED), method="raster", shading="phong"), image)
+
+
+def test_device_arrays_apart_from_the_host_get_the_tessellation_too(monkeypatch):
+    """Where the device arrays are not the host's memory (a GPU's; here CPU copies stand in for them)
+    rasterizing writes the tessellation into both: the device arrays equal the raster soup's, and
+    the image is the one of device arrays that alias it."""
+    image = render(compile_scene(BIG_MESH), method="raster", shading="phong")
+
+    def copied(soup, device):
+        return {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device, copy=True)
+                for name, dtype in SOUP_DTYPES.items()}
+
+    monkeypatch.setattr(compile_module, "device_soup", copied)
+    compiled = compile_scene(BIG_MESH)
+    assert compiled.arrays["vertices"].ptr != compiled.vertices.ctypes.data
+    assert np.array_equal(render(compiled, method="raster", shading="phong"), image)
+    soup = compiled.raster()
+    for name in SOUP_DTYPES:
+        assert np.array_equal(soup.arrays[name].numpy().reshape(getattr(soup, name).shape), getattr(soup, name)), name

@@ -103,11 +103,11 @@ class CompiledScene:
         if len(host["faces"]) != n_faces or len(host["vertices"]) != n_vertices:
             host = soup_with_room({name: getattr(self, name) for name in SOUP_DTYPES}, n_vertices, n_faces)
             device = None
-        for name, dtype in SOUP_DTYPES.items():
+        for name in SOUP_DTYPES:
             first = self.n_mesh_faces if name in PER_FACE else self.n_mesh_vertices
             host[name][first:] = added[name]
-            if device is not None and self.device != "cpu":  # on the CPU the device arrays are the host's
-                wp.copy(device[name], wp.array(added[name], dtype=dtype, device=self.device), dest_offset=first)
+            if device is not None and device[name].ptr != host[name].ctypes.data:  # not the host's memory (a GPU's)
+                device[name][first:].assign(added[name])
         return dict(host, arrays=device if device is not None else device_soup(host, self.device))
 
     def build_once(self, name: str, build):
