@@ -25,7 +25,6 @@ either leaves the old files, if any).
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOT_CONVERGED, EXIT_NOT_JUDGED, EXIT_OK, FitError
@@ -33,16 +32,15 @@ from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOT_CONVERGED, EXIT_NOT_JUDGED, E
 
 
 def ceiling_value(text: str):
-    """argparse type of --ceiling: a finite number > 0, or "none" (also "inf"): no ceiling (False)."""
-    if text.strip().lower() in ("none", "inf"):
-        return False
+    """argparse type of --ceiling: a number > 0, or "none" (also "inf"): no ceiling -- the API's
+    rule (`setup.check_ceiling`), read from text."""
+    from .setup import check_ceiling
+
+    word = text.strip().lower()
     try:
-        value = float(text)
-    except ValueError:
-        value = None
-    if value is None or not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: give a number > 0, or none (the targets do not clip)")
-    return value
+        return check_ceiling(False if word == "none" else float(word))
+    except (ValueError, FitError):
+        raise argparse.ArgumentTypeError(f"{text!r}: give a number > 0, or none (the targets do not clip)") from None
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:

@@ -160,8 +160,7 @@ class Problem(eqx.Module):
         the residuals, J^T J and J^T r are the same -- and its solve may step on the column moments
         (`moments.py`), which a clipped target cannot (an 8-bit file's targets have ceiling 1)."""
         clipped = [view.ceiling is not None for view in self.views]
-        if self.loss != "l2" or not any(clipped) or any(bool(np.any(np.asarray(view.target) >= np.asarray(view.ceiling)))
-                                   for view, on in zip(self.views, clipped) if on):
+        if self.loss != "l2" or not any(clipped) or any(_reaches(view) for view, on in zip(self.views, clipped) if on):
             return None
         views = tuple(eqx.tree_at(lambda v: v.ceiling, view, None, is_leaf=lambda x: x is None)
                       for view in self.views)
@@ -189,3 +188,12 @@ class Problem(eqx.Module):
         """The same problem with other targets, one (U, 3) array per view."""
         views = tuple(eqx.tree_at(lambda v: v.target, view, t) for view, t in zip(self.views, targets))
         return eqx.tree_at(lambda p: p.views, self, views)
+
+
+def _reaches(view) -> bool:
+    """Whether a target value that counts (weight > 0) reaches the view's ceiling (a value at the
+    ceiling with weight 0 is no clip the fit sees)."""
+    target = np.asarray(view.target)
+    counts = np.broadcast_to(np.asarray(view.sqrt_weight), target.shape) > 0
+    return bool(np.any((target >= np.asarray(view.ceiling)) & counts))
+

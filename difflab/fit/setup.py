@@ -60,7 +60,7 @@ def choose_method(scene, materials, method, texels=False) -> str:
     return "raster"
 
 
-def _check_ceiling(value):
+def check_ceiling(value):
     """None (detect), False (none: also inf), or a finite number > 0 as a float; FitError otherwise."""
     if value is None or value is False:
         return value
@@ -104,7 +104,7 @@ class Setup:
         loss_scale = _check_number(loss_scale, "loss_scale")
         self.sigma_given = _check_number(sigma, "sigma", allow_none=True)
         self.sigma_fallback = None
-        ceiling = _check_ceiling(ceiling)
+        ceiling = check_ceiling(ceiling)
         for name, flag in (("per_channel", per_channel), ("bounded", bounded), ("x64", x64)):
             if not isinstance(flag, bool):
                 raise FitError(f"{name}: must be True or False, got {flag!r}")
