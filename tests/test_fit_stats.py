@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from difflab.fit import inverse_diagonal as inverse
 from difflab.fit import stats
 from difflab.fit.stats import (MISMATCH_CHI2, covariance_diagonal, covariance_unscaled, estimate_sigma, fit_statistics,
                                median, standard_errors)
@@ -179,3 +180,38 @@ def test_median_is_numpys(size, dtype):
     expected = np.median(values)
     got = median(values.copy())
     assert got == expected and type(got) is type(expected)
+
+
+def texture_jacobian(rng, side=12, scalars=2):
+    """J of a side x side texel grid read bilinearly by (side - 1)^2 pixels, 3 rows each, with
+    `scalars` dense columns beside (ks-like: every pixel)."""
+    rows, cols, vals = [], [], []
+    for i in range(side - 1):
+        for j in range(side - 1):
+            for r in range(3):
+                row = 3 * (i * (side - 1) + j) + r
+                for t in (i * side + j, i * side + j + 1, (i + 1) * side + j, (i + 1) * side + j + 1):
+                    rows.append(row), cols.append(t), vals.append(rng.uniform(0.1, 1.0))
+    jac = sp.csr_matrix((vals, (rows, cols)), shape=(3 * (side - 1) ** 2, side * side)).toarray()
+    return np.hstack([jac, rng.uniform(0.1, 1.0, (jac.shape[0], scalars))])
+
+
+@pytest.mark.parametrize("band_max", [256, 4])  # 4: the texels' band is too wide, SuperLU solves
+def test_the_inverse_diagonal_of_a_texel_block_with_wide_scalars(monkeypatch, band_max):
+    """`inverse_diagonal` of a unit-diagonal J^T J of 144 texels (shuffled) and 2 scalars coupled to
+    all of them: the band (reverse Cuthill-McKee) with the scalars by Schur complement, or SuperLU,
+    equal the dense inverse's diagonal (rtol 1e-10); two equal columns (a direction no residual
+    tells apart) make it singular: nan."""
+    monkeypatch.setattr(inverse, "BAND_MAX", band_max)
+    monkeypatch.setattr(inverse, "WIDE", 40)  # texel rows: <= 3 * 9 entries, the scalars' all 146
+    rng = np.random.default_rng(6)
+    jac = texture_jacobian(rng)[:, rng.permutation(146)]
+    gram = jac.T @ jac
+    unit = gram / np.sqrt(np.outer(np.diag(gram), np.diag(gram)))
+    top = float(np.linalg.eigvalsh(unit).max())
+    want = np.diag(np.linalg.inv(unit))
+    np.testing.assert_allclose(inverse.inverse_diagonal(sp.csr_matrix(unit), top, 1e-12), want, rtol=1e-10)
+    jac[:, 1] = jac[:, 0]  # one direction no residual tells apart
+    gram = jac.T @ jac
+    unit = gram / np.sqrt(np.outer(np.diag(gram), np.diag(gram)))
+    assert np.isnan(inverse.inverse_diagonal(sp.csr_matrix(unit), top, 1e-12)).all()

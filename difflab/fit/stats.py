@@ -46,13 +46,14 @@ what the pixels alone determine, linearised at the regularised solution -- a tex
 fills is inf.
 
 A matrix-free fit (more than `FitOptions` DENSE_MAX entries: texels) forms J sparse by column
-compression (`sparse_jacobian`) and `covariance_diagonal` inverts J^T J per connected block: sparse
-LU, dense eigh where a block is singular; the same numbers as the dense path's, to rounding. Nan
-where too costly: a block of more than SPARSE_STATS_MAX entries, a singular one of more than
-DENSE_STATS_MAX. Measured (`experiments/bench/fit_stderr.py`, 2 shared cores, load 2-4): the LU
-diagonal of a bilinear texture channel's block takes 0.07-0.12 s at 1024 entries, 0.26 s at 2025,
-1.2-1.6 s at 4096 (the limit), 4.7-6.4 s at 8100; eigh 0.07-0.5 s at 768, 0.5-3.6 s at 1536 (the
-limit), 1.5-2.2 s at 2048, 14 s at 3072. A whole 32 x 32 texture fit's statistics: 0.26 s.
+compression (`sparse_jacobian`) and `covariance_diagonal` inverts J^T J per connected block
+(`inverse_diagonal`: banded with the scalars by Schur complement, else sparse LU), dense eigh where
+a block is singular; the same numbers as the dense path's, to rounding. Nan where too costly: a
+block of more than SPARSE_STATS_MAX entries (or more than `inverse_diagonal.LU_MAX` whose band is
+too wide), a singular one of more than DENSE_STATS_MAX. Measured (`experiments/bench/fit_stderr.py`,
+2 shared cores, load 2-4): a bilinear texture channel's block takes 0.1 s at 1024 entries, 0.4 s
+at 4096, 1.3 s at 8100 (the limit: a 90 x 90 texture's channel), 3.5 s at 16384; eigh 0.07-0.5 s at
+768, 0.5-3.6 s at 1536 (the limit), 1.5-2.2 s at 2048, 14 s at 3072.
 
 A parameter is *poorly determined* when, even at a noise floor of one 8-bit quantisation step, its
 standard error exceeds `rel_tol` |value| + `abs_tol` in some channel. A specular exponent (n, or
@@ -69,8 +70,9 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
-from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh, splu
+from scipy.sparse.linalg import eigsh
 
+from .inverse_diagonal import inverse_diagonal
 from .normal_equations import dense, linearise
 from .targets import in_channels
 
@@ -80,7 +82,7 @@ MISMATCH_CHI2 = 2.0
 MIN_NOISE_PIXELS = 48  # pixel channels
 SINGULAR_RCOND = 1e-12
 PACKED_MAX = 256  # blocks of J^T J inverted dense (eigh) together, up to this many entries
-SPARSE_STATS_MAX = 4096  # the most entries of one block of J^T J factorised sparse (measured below)
+SPARSE_STATS_MAX = 8192  # the most entries of one block of J^T J inverted sparse (measured below)
 DENSE_STATS_MAX = 1536  # the most entries of a singular block inverted dense (eigh; measured below)
 
 
@@ -242,8 +244,8 @@ def covariance_diagonal(gram) -> np.ndarray:
     blocks (entries no residual couples: a texture's channels, texels far apart without a scalar
     beside them, a texel no pixel sees), each judged singular against the largest eigenvalue of the
     whole unit-diagonal J^T J: blocks of up to PACKED_MAX entries by `covariance_unscaled`, packed
-    together; larger ones, up to SPARSE_STATS_MAX entries, by a sparse LU factorisation
-    (`lu_inverse_diagonal`) -- or, where that finds a singular direction, by `covariance_unscaled`
+    together; larger ones, up to SPARSE_STATS_MAX entries, by `inverse_diagonal` (banded or sparse
+    LU) -- or, where that finds a singular direction, by `covariance_unscaled`
     when the block has at most DENSE_STATS_MAX entries. Nan (no standard errors: too costly) on a
     block above SPARSE_STATS_MAX entries, and on a singular one above DENSE_STATS_MAX (which entries
     its singular directions involve takes the block's eigenvectors)."""
@@ -267,32 +269,9 @@ def covariance_diagonal(gram) -> np.ndarray:
         if 0 < block.size <= PACKED_MAX:
             packed.append(block)
         elif PACKED_MAX < block.size <= SPARSE_STATS_MAX:
-            diag[block] = lu_inverse_diagonal(unit[block][:, block], top) * scale[block] ** 2
+            diag[block] = inverse_diagonal(unit[block][:, block], top, SINGULAR_RCOND) * scale[block] ** 2
             if np.isnan(diag[block[0]]) and block.size <= DENSE_STATS_MAX:  # singular
                 diag[block] = np.diag(covariance_unscaled(gram[block][:, block].toarray(), top))
-    return diag
-
-
-def lu_inverse_diagonal(unit, top: float) -> np.ndarray:
-    """diag A^-1 (n,) of a sparse symmetric positive definite `unit` (unit diagonal) from its LU
-    factorisation (a symmetric fill-reducing order, no pivoting: A's Cholesky factors), solved for
-    each unit vector (one at a time: SuperLU's solves with many right-hand sides cost more per
-    vector); nan when A is singular (its smallest eigenvalue, by inverse iteration on the factors,
-    at most SINGULAR_RCOND `top`)."""
-    n = unit.shape[0]
-    try:
-        lu = splu(unit.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-        inverse = LinearOperator(unit.shape, matvec=lu.solve, dtype=np.float64)
-        low = float(eigsh(unit, k=1, sigma=0.0, OPinv=inverse, which="LM", return_eigenvectors=False)[0])
-    except (RuntimeError, ArpackNoConvergence):  # an exactly singular factor; no convergence
-        return np.full(n, np.nan)
-    if not low > SINGULAR_RCOND * top:
-        return np.full(n, np.nan)
-    diag, unit_vector = np.empty(n), np.zeros(n)
-    for i in range(n):
-        unit_vector[i] = 1.0
-        diag[i] = lu.solve(unit_vector)[i]
-        unit_vector[i] = 0.0
     return diag
 
 

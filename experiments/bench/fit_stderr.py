@@ -8,9 +8,10 @@
    (another checkout, e.g. the code before this feature, whose stderr were nan) in processes
    interleaved with this tree's.
 2. The size limits of `fit.stats`: `covariance_unscaled` (eigh) of a dense p x p J^T J, and
-   `lu_inverse_diagonal` (sparse LU, one solve per unit vector) of a unit-diagonal block with a
-   bilinear texture channel's pattern (texels coupled to their 8 neighbours: the fill of a real
-   64^2 texture channel's, 222,506 entries), medians of the repeats.
+   `inverse_diagonal` of a unit-diagonal block with a bilinear texture channel's pattern (texels
+   coupled to their 8 neighbours; its SuperLU factors have the fill of a real 64^2 texture
+   channel's, 222,506 entries): banded (Takahashi) and by SuperLU (one solve per unit vector),
+   medians of the repeats.
 
 Writes experiments/results/bench_fit_stderr.json and prints a table.
 
@@ -85,7 +86,8 @@ def stencil(side: int) -> "scipy.sparse.csc_matrix":  # noqa: F821
 
 def limits(repeats: int, small: bool) -> dict:
     """Median seconds of the dense and the sparse inverse diagonal by size."""
-    from difflab.fit.stats import covariance_unscaled, lu_inverse_diagonal
+    from difflab.fit.inverse_diagonal import banded, factored
+    from difflab.fit.stats import covariance_unscaled
 
     def median_time(fn):
         times = []
@@ -95,13 +97,15 @@ def limits(repeats: int, small: bool) -> dict:
             times.append(time.perf_counter() - start)
         return statistics.median(times)
 
-    out = {"dense": {}, "lu": {}}
+    out = {"dense": {}, "banded": {}, "lu": {}}
     for p in (768, 1536, 2048) if small else (768, 1536, 2048, 3072):
         jac = np.random.default_rng(1).normal(size=(p + 16, p))
         out["dense"][p] = median_time(lambda: covariance_unscaled(jac.T @ jac))
-    for side in (32, 45) if small else (32, 45, 64, 90):
-        block = stencil(side)
-        out["lu"][side * side] = median_time(lambda: lu_inverse_diagonal(block, 9.0))
+    for side in (32, 45) if small else (32, 45, 64, 90, 128):
+        block = stencil(side).tocsr()
+        out["banded"][side * side] = median_time(lambda: banded(block)[1]())
+        if side <= 90:
+            out["lu"][side * side] = median_time(lambda: factored(block)[1]())
     return out
 
 
@@ -146,8 +150,9 @@ def main() -> None:
             print(line, flush=True)
     report["limits"] = limits(repeats, args.small)
     print("dense eigh (covariance_unscaled): " + ", ".join(f"p {p}: {s:.2f} s" for p, s in report["limits"]["dense"].items()))
-    print("sparse LU block (lu_inverse_diagonal): " + ", ".join(f"n {n}: {s:.2f} s"
-                                                               for n, s in report["limits"]["lu"].items()))
+    for name in ("banded", "lu"):
+        print(f"{name} block (inverse_diagonal): " + ", ".join(f"n {n}: {s:.2f} s"
+                                                            for n, s in report["limits"][name].items()))
     from difflab.io import write_json_atomic
 
     write_json_atomic(args.out, report)
