@@ -243,13 +243,12 @@ def test_with_a_smoothness_prior_the_standard_errors_are_the_pixels_alone(tmp_pa
     assert np.abs(free.texture[unseen] - 0.5).max() > 0.05  # filled by the prior from the seen neighbours
 
 
-def test_standard_errors_by_blocks_and_sparse_lu_equal_the_dense_ones(tmp_path, monkeypatch):
+def test_standard_errors_by_blocks_equal_the_dense_ones(tmp_path, monkeypatch):
     """With PACKED_MAX lowered below a channel's texels, the matrix-free fit inverts J^T J per
     connected block -- each channel's seen texels with its ks (`inverse_diagonal`: banded, ks by
-    Schur complement), each unseen texel alone
-    -- to the dense fit's standard errors (rtol 1e-8); a block above SPARSE_STATS_MAX gets nan (no
-    standard error formed; the unseen texels, single blocks, stay inf), and flags only what is
-    unseen."""
+    Schur complement), each unseen texel alone -- to the dense fit's standard errors (rtol 1e-8); a
+    block above SPARSE_STATS_MAX gets nan (no standard error formed; the unseen texels, single
+    blocks, stay inf), and flags only what is unseen."""
     setup, _ = noisy_texel_setup(tmp_path, (12, 12), "bilinear", ("texture", "ks"))
     dense = solve(setup, linear_solver="dense")
     monkeypatch.setattr(stats, "PACKED_MAX", 16)
