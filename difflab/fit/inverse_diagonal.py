@@ -19,9 +19,8 @@ vector, up to LU_MAX entries (beyond: nan). A is singular -- nan -- when its sma
 (inverse iteration with these solves, to 1e-3 relative) is at most `rcond` times `top`, or when a
 factorisation fails.
 
-Measured (2 shared cores): a bilinear texture channel's block of 4096 texels takes 0.3 s banded
-(factor 0.09, smallest eigenvalue 0.16, recurrence 0.05), 16384 about 3.5 s; by SuperLU 1.2-1.6 s
-at 4096 and 4.7-6.4 s at 8100.
+Measured (2 shared cores, load 2-3): a bilinear texture channel's block of 4096 texels takes 0.45 s
+banded, 8100 0.84 s, 16384 1.5 s; by SuperLU 1.75 s at 4096 and 7 s at 8100.
 """
 
 from __future__ import annotations

@@ -51,9 +51,11 @@ compression (`sparse_jacobian`) and `covariance_diagonal` inverts J^T J per conn
 a block is singular; the same numbers as the dense path's, to rounding. Nan where too costly: a
 block of more than SPARSE_STATS_MAX entries (or more than `inverse_diagonal.LU_MAX` whose band is
 too wide), a singular one of more than DENSE_STATS_MAX. Measured (`experiments/bench/fit_stderr.py`,
-2 shared cores, load 2-4): a bilinear texture channel's block takes 0.1 s at 1024 entries, 0.4 s
-at 4096, 1.3 s at 8100 (the limit: a 90 x 90 texture's channel), 3.5 s at 16384; eigh 0.07-0.5 s at
-768, 0.5-3.6 s at 1536 (the limit), 1.5-2.2 s at 2048, 14 s at 3072.
+2 shared cores, load 2-4): a bilinear texture channel's block takes 0.45 s at 4096 entries, 0.84 s
+at 8100 (the limit: a 90 x 90 texture's channel), 1.5 s at 16384 (by SuperLU: 0.1 s at 1024, 1.75
+s at 4096, 7 s at 8100); eigh 0.07-0.7 s at 768, 0.5-7 s at 1536 (the limit), 1.5-9.6 s at 2048,
+14-25 s at 3072. A fit's statistics phase: 0.03-0.16 s for a 16 x 16 texture, 0.12-0.18 s for a
+32 x 32 one (texture alone or with ks), against 0.002-0.009 s without standard errors.
 
 A parameter is *poorly determined* when, even at a noise floor of one 8-bit quantisation step, its
 standard error exceeds `rel_tol` |value| + `abs_tol` in some channel. A specular exponent (n, or
