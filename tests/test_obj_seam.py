@@ -88,3 +88,42 @@ def test_phong_render_with_vt_equals_the_render_without(tmp_path, quads):
             "render": {"method": "raster", "shading": "phong"}}))
     assert images[0].max() > 0.5  # the sphere is lit, its seam (x > 0, z = 0) faces the camera
     np.testing.assert_allclose(images[0], images[1], rtol=0, atol=1e-5)
+
+
+def cube_obj(*, quads: bool, mixed_order: bool = False) -> str:
+    """A 2-unit cube with its own 4 `v` lines per face (hard edges: the only way an OBJ without `vn`
+    keeps them; each corner position is in three `v` lines), `vt`, no `vn`. `quads`: a quad per face
+    (trimesh reads the file), else two triangles (numpy reads it). `mixed_order`: the faces as a
+    triangle pair and a quad alternately (trimesh puts the quads' triangles after the others)."""
+    lines, faces = [], []
+    for axis in range(3):
+        a, b = [k for k in range(3) if k != axis]
+        for sign in (-1, 1):
+            for u, v in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                p = [0, 0, 0]
+                p[axis], p[a], p[b] = sign, u, v * sign
+                lines.append("v %d %d %d" % tuple(p))
+            i = [len(lines) - 3 + j for j in range(4)]
+            quad = quads and (not mixed_order or len(faces) % 2 == 0)
+            faces += [[(i[0], 1), (i[1], 2), (i[2], 3), (i[3], 4)]] if quad else \
+                [[(i[0], 1), (i[1], 2), (i[2], 3)], [(i[0], 1), (i[2], 3), (i[3], 4)]]
+    lines += ["vt 0 0", "vt 1 0", "vt 1 1", "vt 0 1"]
+    lines += ["f " + " ".join(f"{p}/{t}" for p, t in face) for face in faces]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("layout", ["triangles", "quads", "mixed"])
+def test_a_hard_edged_cube_without_normals_keeps_its_face_normals(tmp_path, layout):
+    """The welds come from the file's `v` lines on every path, never from equal positions: each
+    vertex's smooth normal is its face's normal (0 deg apart, to rounding) however the faces are
+    written. Before, trimesh's reading (quads) welded the three `v` lines at each corner by position:
+    54.74 deg, the cube shaded as a blob."""
+    path = tmp_path / "cube.obj"
+    path.write_text(cube_obj(quads=layout != "triangles", mixed_order=layout == "mixed"))
+    mesh = load_mesh(path)
+    assert mesh.normals is None and mesh.uvs is not None and mesh.n_vertices == 24 and mesh.n_faces == 12
+    assert mesh.welds is None or len(np.unique(mesh.welds)) == 24
+    edges = mesh.vertices[mesh.faces[:, 1:]] - mesh.vertices[mesh.faces[:, :1]]
+    face_normal = np.cross(edges[:, 0], edges[:, 1])
+    face_normal /= np.linalg.norm(face_normal, axis=1, keepdims=True)
+    np.testing.assert_allclose(mesh.smooth_normals()[mesh.faces], np.repeat(face_normal[:, None], 3, 1), atol=1e-12)

@@ -25,7 +25,7 @@ from difflab.io import write_text_atomic
 from difflab.limits import MAX_COORD, MESH_FILE_BYTES, require_memory
 
 from .mesh import TriMesh, concatenate
-from .obj_text import read_obj
+from .obj_text import KEYS, V, fan_corners, key_lines, line_keys, read_obj, table
 
 
 def _read_obj(path: str) -> bytes:
@@ -122,10 +122,7 @@ def _convert(geometry, transform, path: str) -> TriMesh:
         uv = np.asarray(uv, dtype=np.float64)
         if uv.shape == (len(vertices), 2) and np.all(np.isfinite(uv)):
             uvs = uv
-    welds = None
-    if uvs is not None and normals is None:  # trimesh split each `v` per uv: copies of a position, bit for bit
-        welds = np.unique(vertices, axis=0, return_inverse=True)[1].reshape(-1)
-    mesh = TriMesh(vertices, faces, normals, uvs, name=path, welds=welds)
+    mesh = TriMesh(vertices, faces, normals, uvs, name=path)  # no welds: equal positions may be a hard edge
     if transform is not None and not np.allclose(transform, np.eye(4)):
         mesh = mesh.transformed(transform)
     return mesh
@@ -139,8 +136,9 @@ def load_mesh(path) -> TriMesh:
     crease) is split into one vertex per (v, vt, vn) its corners use, as any renderer must, and
     vertices no face uses are dropped; vertices otherwise keep their file order. uvs are kept when
     the file has them; normals when the file has them (OBJ `vn`, PLY nx/ny/nz), else None -- then
-    `welds` numbers each vertex by the position it copies (the OBJ `v` index; where trimesh reads the
-    file, equal positions of a mesh with uvs), so smooth normals (`TriMesh.smooth_normals`) average
+    `welds` numbers each vertex of an OBJ by the `v` line it copies (where trimesh reads
+    the file, from its `f` lines: `with_file_welds`; never by equal positions, which may be a hard
+    edge; a PLY's vertices are not welded), so smooth normals (`TriMesh.smooth_normals`) average
     over all a position's faces and a uv seam shades as the unsplit surface.
     Polygons are triangulated by trimesh as fans, with their corners' uvs and normals. A scene
     with several geometries is concatenated with its node transforms applied. Every failure raises
@@ -165,6 +163,8 @@ def load_mesh(path) -> TriMesh:
         mesh = TriMesh(vertices, faces, normals, uvs, name=path, welds=welds)
     else:
         mesh = _trimesh_load(path, data if text is not None and text.plain else None)
+        if text is not None and mesh.uvs is not None and mesh.normals is None:  # trimesh split `v`s per uv
+            mesh = with_file_welds(mesh, data)
     if text is not None and text.plain and (
             not text.vertices_parse or mesh.n_faces != text.n_face_lines  # a garbled vertex, a dropped face
             or not np.all(np.abs(mesh.vertices) <= MAX_COORD)):  # or a value is out of range
@@ -175,6 +175,48 @@ def load_mesh(path) -> TriMesh:
         raise MeshError(f"{path}: vertex coordinates reach {np.abs(mesh.vertices).max():.3g}, beyond +-{MAX_COORD:g} "
                         "(float32 rendering overflows)")
     return mesh
+
+
+def with_file_welds(mesh: TriMesh, data: bytes) -> TriMesh:
+    """`mesh` (trimesh's reading of the OBJ text `data`) with `welds`: each vertex numbered by the
+    `v` line its corners name in the `f` lines (`fan_corners`) -- only the file says which copies of
+    a position are one vertex (an OBJ without normals marks a hard edge by repeating a position in
+    another `v` line). trimesh reorders the triangles (a polygon's fans after the triangles, a fan
+    started at another corner), so each of its triangles is matched to the file's with the same
+    corner positions (`by_positions`). Unchanged (no welds) where they do not match one to one."""
+    data = data.replace(b"\r\n", b"\n")
+    corners = fan_corners(data)
+    starts, ends, code = line_keys(data)
+    positions = table(key_lines(data, starts, ends, code, V)[0], KEYS[V], np.float64)
+    if corners is None or positions is None or corners.shape != mesh.faces.shape or positions.shape[1] < 3 \
+            or corners.min() < 0 or corners.max() >= len(positions):
+        return mesh
+    ours, file_keys = by_positions(mesh.vertices[mesh.faces], mesh.faces)
+    theirs, their_keys = by_positions(positions[corners, :3], corners)
+    if not np.array_equal(file_keys, their_keys) or (their_keys[1:] == their_keys[:-1]).all(axis=1).any():
+        return mesh  # other triangles, or two at the same positions: which is which is unknown
+    welds = len(positions) + np.arange(mesh.n_vertices)  # a vertex no face uses: its own
+    welds[ours.ravel()] = theirs.ravel()
+    if not np.array_equal(welds[ours], theirs):  # a vertex at two `v` lines' corners
+        return mesh
+    return TriMesh(mesh.vertices, mesh.faces, None, mesh.uvs, name=mesh.name, welds=welds)
+
+
+def by_positions(points: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles' `corners` (T, 3) and their (T, 9) corner `points` (T, 3, 3), each triangle's
+    corners turned to start at its lexicographically least point and the triangles sorted by
+    those points: the same triangles in any order and turn give the same keys."""
+    rows = np.arange(len(points))
+    first = np.zeros(len(points), np.int64)
+    for k in (1, 2):
+        a, b = points[:, k], points[rows, first]
+        less = (a[:, 0] < b[:, 0]) | ((a[:, 0] == b[:, 0])
+                                      & ((a[:, 1] < b[:, 1]) | ((a[:, 1] == b[:, 1]) & (a[:, 2] < b[:, 2]))))
+        first = np.where(less, k, first)
+    turn = (first[:, None] + np.arange(3)) % 3
+    keys = points[rows[:, None], turn].reshape(-1, 9)
+    order = np.lexsort(keys.T[::-1])
+    return corners[rows[:, None], turn][order], keys[order]
 
 
 def _trimesh_load(path: str, plain_data: bytes | None) -> TriMesh:

@@ -189,6 +189,35 @@ def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, corners: 
     return (vertices[welds], faces, *finite, welds)
 
 
+def fan_corners(data: bytes) -> np.ndarray | None:
+    """(T, 3) int64: each corner's `v` index (0-based) of the triangles OBJ text's `f` lines make, in
+    file order, a polygon a b c d ... as the fan (a, b, c), (a, c, d), ... (trimesh's triangulation); a
+    negative (relative) index counts back from the `v` lines before its face. None where a corner
+    does not parse or a face has fewer than 3 corners."""
+    data = data.replace(b"\r\n", b"\n")
+    starts, ends, code = line_keys(data)
+    face_text, n_faces = key_lines(data, starts, ends, code, F)
+    if not n_faces:
+        return None
+    n_before = np.cumsum(code == V)[code == F]  # the `v` lines above each face line
+    tokens = np.array(re.sub(rb"/\S*|#[^\n]*", b"", face_text).split())  # keys and vertex indices
+    is_key = tokens == b"f"
+    try:
+        index = tokens[~is_key].astype(np.int64)
+    except ValueError:
+        return None
+    face = np.cumsum(is_key)[~is_key] - 1  # each corner's face line
+    counts = np.bincount(face, minlength=n_faces)
+    if counts.min() < 3:
+        return None
+    index = np.where(index > 0, index - 1, n_before[face] + index)
+    first = np.cumsum(counts) - counts  # each face's first corner
+    fans = counts - 2
+    owner = np.repeat(np.arange(n_faces), fans)
+    step = np.arange(owner.size) - np.repeat(np.cumsum(fans) - fans, fans) + 1  # 1 .. k-2 within a face
+    return np.stack([index[first[owner]], index[first[owner] + step], index[first[owner] + step + 1]], axis=1)
+
+
 def unmerged(vertices: np.ndarray, faces: np.ndarray, attributes: list) -> list:
     """[welds, faces, *values]: one vertex per distinct (vertex, attribute indices...) tuple the
     faces' corners use, rows in the order of those tuples (vertices in file order, a split vertex's
