@@ -7,7 +7,7 @@ import difflab
 from conftest import scene_dict
 from difflab import CompiledScene, RenderError, compile_scene, render, render_frame
 from difflab.renderers import api
-from difflab.renderers.compile import chunked_face_normals
+from difflab.renderers.soup import chunked_face_normals
 
 CAMERA = {"eye": [0.5, 1.0, 4.0], "target": [0, 0.2, 0], "fov_y": 40, "width": 24, "height": 18}
 SCENE = scene_dict(

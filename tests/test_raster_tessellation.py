@@ -13,7 +13,8 @@ from difflab import compile_scene, render, render_frame
 from difflab.errors import RenderError
 from difflab._warp import wp
 from difflab.renderers import compile as compile_module
-from difflab.renderers.compile import RASTER_SOUP, SOUP_DTYPES, scene_parts, triangle_soup
+from difflab.renderers.compile import RASTER_ROOM, RASTER_SOUP, scene_parts
+from difflab.renderers.soup import SOUP_DTYPES, triangle_soup
 from difflab.geometry import uv_sphere
 from difflab.renderers.tessellate import AnalyticParts, plane_grid, sphere_segments
 from difflab.scene import Sphere
@@ -199,20 +200,50 @@ def test_a_scene_compiled_over_the_budget_copies_its_meshes_when_rasterized_unde
     assert np.array_equal(render(compile_scene(WHITTED), method="raster", shading="phong"), image)
 
 
-def test_device_arrays_apart_from_the_host_get_the_tessellation_too(monkeypatch):
-    """Where the device arrays are not the host's memory (a GPU's; here CPU copies stand in for them)
-    rasterizing writes the tessellation into both: the device arrays equal the raster soup's, and
-    the image is the one of device arrays that alias it."""
+def test_a_device_apart_from_the_host_gets_the_mesh_rows_when_compiled_and_the_soup_when_rasterized(monkeypatch):
+    """Where the device arrays are not the host's memory (a GPU's; here CPU copies stand in for
+    them) compiling uploads the mesh rows alone -- not the room left for the tessellation, which a
+    ray-traced scene never builds (box + 400 spheres at spp 4: a 324.8 MiB room uploaded before) --
+    while the host keeps its room; the first rasterizing uploads the whole soup: the device arrays
+    equal the raster soup's, and the image is the one of device arrays that alias it."""
     image = render(compile_scene(BIG_MESH), method="raster", shading="phong")
+    uploads = []
 
     def copied(soup, device):
+        uploads.append({name: soup[name].shape[0] for name in SOUP_DTYPES})
         return {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device, copy=True)
                 for name, dtype in SOUP_DTYPES.items()}
 
+    monkeypatch.setattr(compile_module, "host_aliased", lambda device: False)
     monkeypatch.setattr(compile_module, "device_soup", copied)
     compiled = compile_scene(BIG_MESH)
+    mesh_rows = {name: getattr(compiled, name).shape[0] for name in SOUP_DTYPES}
+    assert uploads == [mesh_rows] and mesh_rows["faces"] == compiled.n_mesh_faces == 6240
+    assert compiled.built[RASTER_ROOM][0]["faces"].shape[0] > 6240 and compiled.built[RASTER_ROOM][1] is None
     assert compiled.arrays["vertices"].ptr != compiled.vertices.ctypes.data
     assert np.array_equal(render(compiled, method="raster", shading="phong"), image)
     soup = compiled.raster()
+    assert uploads == [mesh_rows, {name: getattr(soup, name).shape[0] for name in SOUP_DTYPES}]
+    assert soup.faces.shape[0] == compiled.built[RASTER_ROOM][0]["faces"].shape[0]
     for name in SOUP_DTYPES:
         assert np.array_equal(soup.arrays[name].numpy().reshape(getattr(soup, name).shape), getattr(soup, name)), name
+        assert np.array_equal(compiled.arrays[name].numpy().reshape(getattr(compiled, name).shape),
+                              getattr(compiled, name)), name
+
+
+@pytest.mark.parametrize("light_buffer", [False, True], ids=["bvh-shadows", "light-buffer"])
+def test_ray_tracing_a_raster_copy_traces_the_meshes_alone(light_buffer):
+    """`compiled.raster()` (public) holds the tessellated spheres and plane after the meshes'
+    triangles; the ray tracer traces its `meshes()`: the image equals the compiled scene's, bit for
+    bit (before, with the light buffer 37 pixels differed by up to 0.087, and the item buffer drew
+    195,456 faces instead of 768)."""
+    compiled = compile_scene(WHITTED)
+    copy = compiled.raster()
+    assert copy.faces.shape[0] == 195_456 and copy.meshes().faces.shape[0] == compiled.n_mesh_faces == 768
+    for name in SOUP_DTYPES:
+        assert copy.meshes().arrays[name].ptr == compiled.arrays[name].ptr, name
+        assert np.array_equal(getattr(copy.meshes(), name), getattr(compiled, name)), name
+    traced = render(copy, method="raytrace", light_buffer=light_buffer)  # the copy first: it builds the caches
+    assert np.array_equal(traced, render(compile_scene(WHITTED), method="raytrace", light_buffer=light_buffer))
+    assert np.array_equal(render(compiled, method="raytrace", light_buffer=light_buffer), traced)
+

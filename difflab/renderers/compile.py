@@ -24,6 +24,7 @@ from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Scene, Sphere, load_scene
 from .camera import far_reach
 from .launch import host_empty, resolve_device
+from .soup import PER_FACE, SOUP_DTYPES, device_soup, host_aliased, raster_room, soup_with_room, triangle_soup
 from .tessellate import AnalyticParts
 from .texture.store import TextureStore, scene_textures
 from .trace import SceneGeomW
@@ -31,8 +32,9 @@ from .trace import SceneGeomW
 RAY_EPSILON_SCALE = 1e-4  # ray offset = this x the scene's extent (bounding-box diagonal) ...
 RAY_EPSILON_ULPS = 2.0  # ... but at least this x 2^-23 (2 to 4 float32 ulps) of its largest coordinate
 RASTER_SOUP = "raster soup"  # the key in CompiledScene.built of the mesh and analytic triangles (`raster`)
-RASTER_ROOM = "raster room"  # ... and of the arrays the mesh fields are the first rows of (`soup_with_room`)
-PER_FACE = ("faces", "face_material", "face_object", "face_normal")  # the soup's arrays with a row per face
+RASTER_ROOM = "raster room"  # ... and of the host arrays the mesh fields are the first rows of (`soup_with_room`),
+# with their device arrays where these alias them (`host_aliased`), else None
+MESH_ROWS = "mesh rows"  # ... and of the compiled mesh fields and `arrays` (`meshes`)
 
 
 def _unheld_refs() -> int:
@@ -55,8 +57,11 @@ class CompiledScene:
     kept beside the device arrays for the G-buffer's users. The rasterizer draws `raster()`: the same
     fields with the analytic spheres' and planes' tessellation appended after the first
     `n_mesh_faces` faces (and `n_mesh_vertices` vertices), built when something first rasterizes the
-    scene; ray tracing never builds it. The mesh fields are the first rows of `raster()`'s arrays
-    (one copy of the mesh triangles: the rows after them are left unwritten until then)."""
+    scene; ray tracing never builds it (and reads `meshes()`, even of a `raster()` copy). On the
+    host the mesh fields are the first rows of `raster()`'s arrays (one copy of the mesh triangles:
+    the rows after them are left unwritten until then, untouched pages hold no memory); so are
+    the device arrays on the CPU, which alias them; on a GPU compiling uploads the mesh rows
+    alone, and `raster()` the whole soup."""
 
     scene: object
     device: str
@@ -95,7 +100,9 @@ class CompiledScene:
         (`triangle_soup` of `AnalyticParts.tessellate`) written into the rows after the meshes' in
         the arrays compiling left room in (`RASTER_ROOM`) -- the values `triangle_soup` gives all of
         them at once. Where no room was left (the tessellation passed the memory budget when
-        compiled, not now) the mesh rows are copied into new arrays with room."""
+        compiled, not now) the mesh rows are copied into new arrays with room. On the CPU the device
+        arrays are the host's (written with them); elsewhere (a GPU) the whole soup is uploaded
+        here, the first time: compiling uploaded the mesh rows alone."""
         added = triangle_soup(self.analytic.tessellate(self.n_mesh_faces))
         added["faces"] += np.int32(self.n_mesh_vertices)
         n_vertices, n_faces = self.n_mesh_vertices + len(added["vertices"]), self.n_mesh_faces + len(added["faces"])
@@ -106,9 +113,15 @@ class CompiledScene:
         for name in SOUP_DTYPES:
             first = self.n_mesh_faces if name in PER_FACE else self.n_mesh_vertices
             host[name][first:] = added[name]
-            if device is not None and device[name].ptr != host[name].ctypes.data:  # not the host's memory (a GPU's)
-                device[name][first:].assign(added[name])
         return dict(host, arrays=device if device is not None else device_soup(host, self.device))
+
+    def meshes(self) -> CompiledScene:
+        """This compiled scene with the mesh objects' triangles alone in `vertices`, `faces`, ... and
+        `arrays` (what the ray tracer reads: rays see the exact spheres and planes): itself, or, for
+        a `raster()` copy, the fields and arrays as compiled (`MESH_ROWS`)."""
+        if self.faces.shape[0] == self.n_mesh_faces and self.vertices.shape[0] == self.n_mesh_vertices:
+            return self
+        return replace(self, **self.built[MESH_ROWS])
 
     def build_once(self, name: str, build):
         """`built[name]`, made by `build()` on first use -- by one thread: others asking for it at the
@@ -172,9 +185,9 @@ class CompiledScene:
     def _with_bvh(self) -> SceneGeomW:
         if not self.n_mesh_faces:
             return self.geom
-        indices = wp.array(self.faces[:self.n_mesh_faces].ravel(), dtype=wp.int32,  # a `raster()` copy's
-                           device=self.device)  # analytic triangles follow the meshes': rays see the exact ones
-        self.built["bvh"] = wp.Mesh(points=self.arrays["vertices"], indices=indices)
+        meshes = self.meshes()  # rays see the exact spheres and planes
+        indices = wp.array(meshes.faces.ravel(), dtype=wp.int32, device=self.device)
+        self.built["bvh"] = wp.Mesh(points=meshes.arrays["vertices"], indices=indices)
         geom = SceneGeomW()
         for name in SceneGeomW.vars:
             setattr(geom, name, getattr(self.geom, name))
@@ -238,75 +251,6 @@ def scene_parts(scene):
         else:  # pragma: no cover - the scene validates object types
             raise RenderError(f"objects[{index}]: cannot render {type(obj).__name__}")
     return mesh_parts, analytic
-
-
-def chunked_face_normals(vertices: np.ndarray, faces: np.ndarray, chunk: int = 1 << 17) -> np.ndarray:
-    """(F, 3) float32 unit face normals, computed in float64 `chunk` faces at a time (the same
-    values as one call: each row depends only on its face; the float64 temporaries stay ~30 MB
-    instead of ~200 bytes per face)."""
-    vertices = vertices.astype(np.float64)
-    out = np.empty(faces.shape, np.float32)
-    for begin in range(0, faces.shape[0], chunk):
-        out[begin:begin + chunk] = geometry.face_normals(vertices, faces[begin:begin + chunk])
-    return out
-
-
-def triangle_soup(parts) -> dict:
-    """The parts' triangles in one set of float32 / int32 arrays (vertices, normals, uvs, faces,
-    and per face its material, object and geometric normal)."""
-    if not parts:
-        return {"vertices": np.zeros((0, 3), np.float32), "normals": np.zeros((0, 3), np.float32),
-                "uvs": np.zeros((0, 2), np.float32), "faces": np.zeros((0, 3), np.int32),
-                "face_material": np.zeros(0, np.int32), "face_object": np.zeros(0, np.int32),
-                "face_normal": np.zeros((0, 3), np.float32), "vertex_material": np.zeros(0, np.int32),
-                "vertex_object": np.zeros(0, np.int32)}
-    offsets = np.cumsum([0] + [m.vertices.shape[0] for m, _, _ in parts])
-    vertices = np.concatenate([m.vertices for m, _, _ in parts]).astype(np.float32)
-    faces = np.concatenate([m.faces + o for (m, _, _), o in zip(parts, offsets)]).astype(np.int32)
-    return {
-        "vertices": vertices, "faces": faces,
-        "normals": np.concatenate([m.smooth_normals() for m, _, _ in parts]).astype(np.float32),
-        "uvs": np.concatenate([m.uvs if m.uvs is not None else np.zeros((m.vertices.shape[0], 2))
-                               for m, _, _ in parts]).astype(np.float32),
-        "face_material": np.concatenate([np.full(m.faces.shape[0], mat, np.int32) for m, mat, _ in parts]),
-        "face_object": np.concatenate([np.full(m.faces.shape[0], obj, np.int32) for m, _, obj in parts]),
-        "face_normal": chunked_face_normals(vertices, faces),
-        "vertex_material": np.concatenate([np.full(m.vertices.shape[0], mat, np.int32) for m, mat, _ in parts]),
-        "vertex_object": np.concatenate([np.full(m.vertices.shape[0], obj, np.int32) for m, _, obj in parts]),
-    }
-
-
-SOUP_DTYPES = {"vertices": wp.vec3, "normals": wp.vec3, "uvs": wp.vec2, "faces": wp.int32, "face_material": wp.int32,
-               "face_object": wp.int32, "face_normal": wp.vec3, "vertex_material": wp.int32, "vertex_object": wp.int32}
-
-
-def device_soup(soup: dict, device: str) -> dict:
-    """The soup's arrays on the device, by name (on the CPU they alias the soup's: copy=False, one
-    copy of the triangles in memory)."""
-    return {name: wp.array(np.ascontiguousarray(soup[name]), dtype=dtype, device=device, copy=False)
-            for name, dtype in SOUP_DTYPES.items()}
-
-
-def soup_with_room(soup: dict, n_vertices: int, n_faces: int) -> dict:
-    """The soup's arrays copied into the first rows of new ones of `n_vertices` / `n_faces` rows, the
-    rest left unwritten (np.empty: memory pages nothing has written are not held)."""
-    out = {}
-    for name, values in soup.items():
-        out[name] = np.empty((n_faces if name in PER_FACE else n_vertices,) + values.shape[1:], values.dtype)
-        out[name][:len(values)] = values
-    return out
-
-
-def raster_room(analytic: AnalyticParts, n_faces: int) -> tuple[int, int]:
-    """(vertices, faces) of the analytic objects' tessellation (`AnalyticParts.size`), to leave room
-    for after the `n_faces` mesh triangles; (0, 0) where they pass the memory budget together (then
-    rasterizing the scene is refused, as `tessellate` prices them again)."""
-    n_vertices, n_added = analytic.size()
-    try:
-        require_triangles(n_faces + n_added, "raster triangles of the scene", RenderError)
-    except RenderError:
-        return 0, 0
-    return n_vertices, n_added
 
 
 def ray_epsilon(camera, mesh_vertices: np.ndarray, spheres, planes=()) -> float:
@@ -381,10 +325,11 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     parts = AnalyticParts(tuple(analytic), scene.camera, scene.camera.height * scene.render.spp_side)
     room_vertices, room_faces = raster_room(parts, n_mesh_faces) if analytic else (0, 0)
     room = soup_with_room(soup, n_mesh_vertices + room_vertices, n_mesh_faces + room_faces) if analytic else soup
-    room_arrays = device_soup(room, device)
     soup = {name: values[:n_mesh_faces if name in PER_FACE else n_mesh_vertices] for name, values in room.items()}
-    arrays = {name: values if values.shape[0] == len(soup[name]) else values[:len(soup[name])]  # warp: no [:0] of
-              for name, values in room_arrays.items()}  # an empty array
+    room_arrays = device_soup(room, device) if host_aliased(device) else None  # a GPU's: uploaded when rasterized
+    arrays = device_soup(soup, device) if room_arrays is None else {  # the mesh rows
+        name: values if values.shape[0] == len(soup[name]) else values[:len(soup[name])]  # warp: no [:0] of an
+        for name, values in room_arrays.items()}  # empty array
     used = np.zeros(n_mesh_vertices, bool)  # the vertices of the mesh faces, each once
     used[soup["faces"].ravel()] = True
     mesh_vertices = soup["vertices"][used]
@@ -398,5 +343,6 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
         scene=scene, device=device, **soup, n_mesh_faces=n_mesh_faces, n_mesh_vertices=n_mesh_vertices,
         epsilon=epsilon, arrays=arrays, geom=geom,
         lights=lights_to_warp(scene.lights, device), materials=materials_to_warp(ordered, device, texture_ids),
-        textures=textures, analytic=parts, built={RASTER_ROOM: (room, room_arrays)},
+        textures=textures, analytic=parts,
+        built={RASTER_ROOM: (room, room_arrays), MESH_ROWS: dict(soup, arrays=arrays)},
     )

@@ -131,7 +131,8 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
     `footprint`: a sample's width in pixels, what its texture filters cover (1 / side when side x
     side samples share a pixel, as on the rasterizer's sample grid).
     `item`: an `ItemBufferW` on the same grid; `light_buffer`: a `lightbuffer.LightBuffer` for the
-    shadow rays."""
+    shadow rays. A `raster()` copy is traced as its `meshes()`: rays see the exact spheres and planes."""
+    compiled = compiled.meshes()
     scene, device = compiled.scene, compiled.device
     kernel = whitted_kernel(settings.max_depth)
     load_kernels(device, kernel)
@@ -192,7 +193,7 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
     """Ray-trace a compiled scene under `settings` (a scene `RenderSettings`).
 
     Arguments:
-        compiled: `compile_scene(scene, device)`.
+        compiled: `compile_scene(scene, device)` (or its `raster()` copy: traced as the meshes alone).
         settings: max_depth, spp (a perfect square), sampling, fresnel, shadows, transparent_shadows,
             specular, adaptive_threshold are used.
         threads: CPU worker threads (default: all cores, or $DIFFLAB_THREADS).
@@ -212,6 +213,7 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
     `light_buffer_seconds` (building it, included in `seconds`), `light_buffer_entries` and
     `shadow_tests` (candidates tested by all shadow rays).
     """
+    compiled = compiled.meshes()  # a `raster()` copy's tessellation is not traced: rays see the exact spheres
     scene = compiled.scene
     side = settings.spp_side  # the scene validated spp and the sample budget
     width, height = scene.camera.width, scene.camera.height

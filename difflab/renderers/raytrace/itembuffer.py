@@ -243,7 +243,7 @@ def seam_edges_kernel(rows: wp.array(dtype=wp.int32), face: wp.array2d(dtype=wp.
 
 def item_buffer(compiled, width: int, height: int, threads: int | None = None) -> tuple[ItemBufferW, bool, bool]:
     """The item buffer of a width x height sample grid: the z-buffer of the mesh triangles (the
-    compiled scene's `faces`, which hold only those), their back faces left out where
+    compiled scene's `meshes()`: a `raster()` copy's tessellation is not drawn), their back faces left out where
     `culls_back_faces` allows. Like the BVH it is kept with the compiled scene (whose geometry and
     camera are fixed), in this thread's per-frame arrays: a later render of the same sample grid
     reuses it. Returns it, whether it was kept, and whether back faces were left out.
@@ -252,6 +252,7 @@ def item_buffer(compiled, width: int, height: int, threads: int | None = None) -
     they are in its cache): its hints, then the edge flags of the rows whose four neighbours are in
     the band; the first and last row of each band (a *seam*: a neighbour in the next band) are
     flagged once every band is done."""
+    compiled = compiled.meshes()
     pool, view, device = compiled.scratch_pool(), (compiled.scene.camera, width, height), compiled.device
     face = compiled.scratch("item buffer", (height + 2, width + 2), wp.int32, fill=-1)  # border rows stay -1
     edge = compiled.scratch("item buffer edges", (height, width), wp.uint8)
@@ -259,7 +260,7 @@ def item_buffer(compiled, width: int, height: int, threads: int | None = None) -
     if kept is not None and kept[0] == view:
         return item_struct(compiled, face, edge), True, kept[1]
     pool.pop(ITEM_BUFFER_VIEW, None)  # until the new one is complete
-    n_faces, arrays = compiled.n_mesh_faces, compiled.arrays  # the mesh triangles only (`CompiledScene`)
+    n_faces, arrays = compiled.n_mesh_faces, compiled.arrays  # the mesh triangles only (`CompiledScene.meshes`)
     load_kernels(device, hints_kernel, edges_kernel, seam_edges_kernel)
     seams = set()
 

@@ -259,7 +259,9 @@ def auto_resolution(triangles: int) -> int:
 
 def build_light_buffer(compiled, resolution: int | None = None) -> LightBuffer:
     """The light buffer of a compiled scene: candidates of every point and spot light, z-ordered,
-    on cubes of `resolution` cells per face edge (None: `auto_resolution` of the mesh size)."""
+    on cubes of `resolution` cells per face edge (None: `auto_resolution` of the mesh size); of
+    the mesh triangles alone (`meshes()`) and the exact spheres and planes."""
+    compiled = compiled.meshes()
     scene, device = compiled.scene, compiled.device
     resolution = auto_resolution(compiled.n_mesh_faces) if resolution is None else int(resolution)
     cells_per_light = 6 * resolution * resolution
