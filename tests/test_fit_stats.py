@@ -6,12 +6,14 @@ import math
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from scipy.sparse.linalg import ArpackNoConvergence
 
 from difflab.fit import inverse_diagonal as inverse
 from difflab.fit import stats
 from difflab.fit.stats import (MISMATCH_CHI2, covariance_diagonal, covariance_unscaled, estimate_sigma, fit_statistics,
                                median, standard_errors)
 from difflab.fit.solvers import result_name
+from difflab.fit.sparse_jacobian import read_graph, stats_blocks
 
 
 def test_reduced_chi_square_counts_uncensored_values_less_parameters():
@@ -120,6 +122,48 @@ def test_a_sparse_gram_gives_the_dense_diagonal_through_blocks_and_lu(monkeypatc
     got = covariance_diagonal(sp.csr_matrix(singular))
     assert np.isnan(got[:30]).all() and np.allclose(got[30:], np.diag(covariance_unscaled(singular))[30:],
                                                     rtol=1e-10)
+
+
+def test_the_diagonal_without_arpack_and_with_blocks_skipped(monkeypatch):
+    """Where ARPACK does not converge on the largest eigenvalue, Gershgorin's bound stands in for
+    it: the same diagonal (rtol 1e-10), the same singular blocks inf. Entries `skip` (whole blocks)
+    are nan, the others' the full matrix's."""
+    rng = np.random.default_rng(5)
+    sizes = [1, 6, 1, 30, 4, 12]
+    gram = block_gram(rng, sizes, singular=(2, 4))
+    want = np.diag(covariance_unscaled(gram))
+    monkeypatch.setattr(stats, "PACKED_MAX", 8)
+    calls = []
+
+    def no_convergence(*args, **kwargs):
+        calls.append(1)
+        raise ArpackNoConvergence("ARPACK error -1: No convergence", np.zeros(0), np.zeros((0, 0)))
+
+    monkeypatch.setattr(stats, "eigsh", no_convergence)
+    got = covariance_diagonal(sp.csr_matrix(gram))
+    assert calls and np.isinf(want).sum() == 1 + 2 and (np.isinf(got) == np.isinf(want)).all()
+    np.testing.assert_allclose(got[np.isfinite(want)], want[np.isfinite(want)], rtol=1e-10)
+    skip = np.zeros(gram.shape[0], bool)
+    skip[8:38] = True  # the block of 30
+    got = covariance_diagonal(sp.csr_matrix(gram), skip)
+    assert np.isnan(got[skip]).all() and (np.isinf(got[~skip]) == np.isinf(want[~skip])).all()
+    finite = ~skip & np.isfinite(want)
+    np.testing.assert_allclose(got[finite], want[finite], rtol=1e-10)
+
+
+def test_predicted_blocks_of_texels_and_scalars():
+    """Texels {0, 1} read by one pixel, {2, 3, 4} chained by two, texel 5 by none: without scalars
+    blocks of 2 and 3 (and 1); RGB scalars (one per channel) join a channel's 5 read texels, 6
+    entries a block; a scalar of every channel joins all, 3 * 5 + 1."""
+    together = read_graph(np.array([0, 0, 1, 1, 2, 2]), np.array([0, 1, 2, 3, 3, 4]), 6)
+    keep, scalars = stats_blocks(together, np.zeros(0, np.int64), 2)
+    assert keep.tolist() == [True, True, False, False, False, True] and not scalars
+    assert stats_blocks(together, np.zeros(0, np.int64), 3)[0].all()
+    for channels, size in (([0, 1, 2], 6), ([-1], 16), ([0, 1, 2, -1], 19)):
+        keep, scalars = stats_blocks(together, np.array(channels), size)
+        assert keep.all() and scalars
+        keep, scalars = stats_blocks(together, np.array(channels), size - 1)
+        assert keep.tolist() == [False] * 5 + [True] and not scalars
 
 
 def test_optimistix_results_are_named():

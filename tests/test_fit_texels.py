@@ -10,6 +10,7 @@ from test_texture_fit import quad_scene
 
 from difflab import FitError, Scene, render, render_frame
 from difflab.fit import FitOptions, Setup, fit_batch, fit_material, identify, solve
+from difflab.fit import sparse_jacobian as jacobian
 from difflab.fit import stats
 from difflab.fit.matfree import linearisation
 from difflab.fit.sparse_jacobian import sparse_jacobian
@@ -246,18 +247,47 @@ def test_with_a_smoothness_prior_the_standard_errors_are_the_pixels_alone(tmp_pa
 def test_standard_errors_by_blocks_equal_the_dense_ones(tmp_path, monkeypatch):
     """With PACKED_MAX lowered below a channel's texels, the matrix-free fit inverts J^T J per
     connected block -- each channel's seen texels with its ks (`inverse_diagonal`: banded, ks by
-    Schur complement), each unseen texel alone -- to the dense fit's standard errors (rtol 1e-8); a
-    block above SPARSE_STATS_MAX gets nan (no standard error formed; the unseen texels, single
-    blocks, stay inf), and flags only what is unseen."""
+    Schur complement), each unseen texel alone -- to the dense fit's standard errors (rtol 1e-8), up
+    to a SPARSE_STATS_MAX of a channel's predicted block (`sparse_jacobian.stats_blocks`: the 120
+    texels its pixels read and ks; at the solution 108 of them have nonzero columns). Below it the
+    seen entries get nan without a Jacobian product (the unseen texels, single blocks, stay inf),
+    the fit's loss, noise and chi-square unchanged, and only what is unseen is flagged."""
     setup, _ = noisy_texel_setup(tmp_path, (12, 12), "bilinear", ("texture", "ks"))
     dense = solve(setup, linear_solver="dense")
     monkeypatch.setattr(stats, "PACKED_MAX", 16)
     assert_same_stderr(dense, solve(setup, linear_solver="cg"), rtol=1e-8)
-    monkeypatch.setattr(stats, "SPARSE_STATS_MAX", 100)  # a channel's block: 109 entries
+    monkeypatch.setattr(stats, "SPARSE_STATS_MAX", 121)  # a channel's block predicted: 120 texels read, its ks
+    assert_same_stderr(dense, solve(setup, linear_solver="cg"), rtol=1e-8)
+    monkeypatch.setattr(stats, "SPARSE_STATS_MAX", 120)
+    full = solve(setup, linear_solver="cg")
+    monkeypatch.setattr(jacobian, "_products", refuse)  # predicted too large: no Jacobian formed
     capped = solve(setup, linear_solver="cg")
     assert np.isnan(capped.stderr["ks"]).all() and capped.poorly_determined == ["texture"]
     err = capped.stderr["texture"]
     assert np.isinf(err[~capped.visible]).all() and np.isnan(err[capped.visible]).all()
+    assert (capped.loss, capped.sigma, capped.chi2) == (full.loss, full.sigma, full.chi2)
+
+
+def refuse(*args):
+    raise AssertionError("the sparse Jacobian was formed")
+
+
+def test_texel_blocks_over_the_limit_skip_the_jacobian(tmp_path, monkeypatch):
+    """Without scalars a bilinear texture's predicted blocks are a channel's connected texels its
+    pixels read (120 here) and each unseen texel alone: with SPARSE_STATS_MAX 119 the seen texels
+    get nan without a Jacobian product, the unseen ones inf, and the loss and noise stay those of a
+    fit with the numbers; with 120 the standard errors are the dense fit's."""
+    setup, _ = noisy_texel_setup(tmp_path, (12, 12), "bilinear", ("texture",))
+    monkeypatch.setattr(stats, "PACKED_MAX", 16)
+    monkeypatch.setattr(stats, "SPARSE_STATS_MAX", 120)
+    full = solve(setup, linear_solver="cg")
+    assert_same_stderr(solve(setup, linear_solver="dense"), full, rtol=1e-8)
+    monkeypatch.setattr(stats, "SPARSE_STATS_MAX", 119)
+    monkeypatch.setattr(jacobian, "_products", refuse)
+    capped = solve(setup, linear_solver="cg")
+    err = capped.stderr["texture"]
+    assert np.isinf(err[~capped.visible]).all() and np.isnan(err[capped.visible]).all()
+    assert (capped.loss, capped.sigma, capped.chi2) == (full.loss, full.sigma, full.chi2)
 
 
 def test_texel_standard_errors_are_calibrated(tmp_path):
@@ -282,9 +312,9 @@ def test_the_sparse_jacobian_equals_jacfwd(tmp_path, filter, spp):
     setup, _ = noisy_texel_setup(tmp_path, (6, 6), filter, ("texture", "ks", "n"), size=24, spp=spp)
     with jax.enable_x64(True):
         values = np.asarray(setup.layout.flatten(setup.initial)) * np.random.default_rng(3).uniform(0.9, 1.1, 112)
-        jac, r = sparse_jacobian(setup.problem, values)
+        jac, r, skipped = sparse_jacobian(setup.problem, values)
         want = np.asarray(jax.jacfwd(setup.problem.weighted)(jax.numpy.asarray(values)))
-    assert jac.shape == want.shape == (r.size, 112) and r.dtype == np.float64
+    assert jac.shape == want.shape == (r.size, 112) and r.dtype == np.float64 and not skipped.any()
     assert np.abs(jac.toarray() - want).max() <= 1e-12 * np.abs(want).max()
     assert jac.nnz < want.size / 10  # (measured: 2.7-5.2 % of the entries)
     unseen = np.abs(want).max(axis=0) == 0  # nearest: the masked quarter's texels (bilinear taps reach them)

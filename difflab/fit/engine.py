@@ -53,10 +53,10 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         matrix_free = options.matrix_free(layout.size)
         with jax.enable_x64(setup.x64):
             at = np.asarray(flat, setup.dtype)  # numpy: moved by the compiled calls that need it
-            if matrix_free:  # the Jacobian by column compression: J^T J sparse
-                gram, r = sparse_normal_matrix(setup.problem, at)
+            if matrix_free:  # the Jacobian by column compression: J^T J sparse, blocks too large skipped
+                gram, r, skip = sparse_normal_matrix(setup.problem, at)
             else:
-                gram, r = normal_matrix(setup.problem, at, solved)
+                (gram, r), skip = normal_matrix(setup.problem, at, solved), None
             rho = r if setup.problem.loss == "l2" else \
                 np.asarray(robust(setup.problem.loss, jnp.asarray(r), setup.problem.loss_scale), np.float64)
             seen = {k: c > options.visible_threshold for k, c in texel_coverage(setup.problem, at, used).items()}
@@ -76,7 +76,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             unseen = sum(int(np.count_nonzero(~seen[p.key])) * (p.size // seen[p.key].size) for p in layout
                          if p.key in seen)  # texels no pixel reads: no unknowns of the data's
             st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size - unseen, silent_entries,
-                                sigma_given=setup.sigma_given is not None)
+                                sigma_given=setup.sigma_given is not None, skip=skip)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], QUANTISATION_SIGMA ** 2)))
             partly_seen = [key for key, on in seen.items() if not on.all()]

@@ -72,7 +72,7 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
-from scipy.sparse.linalg import eigsh
+from scipy.sparse.linalg import ArpackError, eigsh
 
 from .inverse_diagonal import inverse_diagonal
 from .normal_equations import dense, linearise
@@ -238,9 +238,10 @@ def covariance_unscaled(gram: np.ndarray, top: float | None = None) -> np.ndarra
     return cov
 
 
-def covariance_diagonal(gram) -> np.ndarray:
+def covariance_diagonal(gram, skip=None) -> np.ndarray:
     """diag (J^T J)^-1 (p,) as `covariance_unscaled` gives it, from J^T J (p, p): a numpy array, or a
-    scipy.sparse matrix (a matrix-free fit's, `sparse_jacobian`).
+    scipy.sparse matrix (a matrix-free fit's, `sparse_jacobian`); nan at the entries `skip` (p,)
+    bool -- whole blocks left out (`sparse_jacobian.stats_blocks`) -- the rest from the others alone.
 
     A sparse one of up to PACKED_MAX entries is made dense. A larger one is split into its connected
     blocks (entries no residual couples: a texture's channels, texels far apart without a scalar
@@ -250,7 +251,17 @@ def covariance_diagonal(gram) -> np.ndarray:
     LU) -- or, where that finds a singular direction, by `covariance_unscaled`
     when the block has at most DENSE_STATS_MAX entries. Nan (no standard errors: too costly) on a
     block above SPARSE_STATS_MAX entries, and on a singular one above DENSE_STATS_MAX (which entries
-    its singular directions involve takes the block's eigenvectors)."""
+    its singular directions involve takes the block's eigenvectors).
+
+    The largest eigenvalue comes from ARPACK; where that fails (no convergence), from Gershgorin's bound
+    (the largest absolute row sum), which is at least the eigenvalue: a block judged regular
+    against it is regular against the eigenvalue too."""
+    if skip is not None and skip.any():  # (an empty column: inf, as `covariance_unscaled` has it)
+        diag = np.where(skip, np.nan, np.inf)
+        kept = np.flatnonzero(~skip & (gram.diagonal() > 0))
+        if kept.size:
+            diag[kept] = covariance_diagonal(gram[kept][:, kept])
+        return diag
     if not sp.issparse(gram):
         return np.diag(covariance_unscaled(gram))
     if gram.shape[0] <= PACKED_MAX:
@@ -259,7 +270,10 @@ def covariance_diagonal(gram) -> np.ndarray:
     norms = np.sqrt(np.maximum(gram.diagonal(), 0.0))
     scale = 1.0 / np.where(norms == 0, 1.0, norms)
     unit = sp.diags(scale) @ gram @ sp.diags(scale)
-    top = float(eigsh(unit, k=1, which="LA", return_eigenvectors=False)[0])
+    try:
+        top = float(eigsh(unit, k=1, which="LA", return_eigenvectors=False)[0])
+    except ArpackError:  # no convergence; a J^T J of empty columns (every texel unseen)
+        top = float(abs(unit).sum(axis=1).max())
     _, label = connected_components(unit, directed=False)
     blocks = np.split(np.argsort(label, kind="stable"), np.cumsum(np.bincount(label))[:-1])
     diag, packed = np.full(gram.shape[0], np.nan), []
@@ -292,12 +306,13 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
 
 
 def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, size: int, silent: int = 0,
-                   sigma_given: bool = False) -> dict:
+                   sigma_given: bool = False, skip=None) -> dict:
     """s2 = sse / dof (sse: the sum of squares of the `entries` residuals r; dof = N - p, N entries
     neither censored nor `silent` (noise-free zeros), p = `size` fitted entries the data reach -- a
     texel no pixel reads is not one), chi2 = s2 / sigma^2
     (reduced; nan when sigma is: the noise unknown, the model is not judged), the mismatch flag, and
-    diag (J^T J)^-1 (p,) from gram = J^T J (p, p), dense or sparse (`covariance_diagonal`).
+    diag (J^T J)^-1 (p,) from gram = J^T J (p, p), dense or sparse (`covariance_diagonal`; nan at
+    `skip`).
 
     The flag is raised when chi2 exceeds 1 + 5 sqrt(2 / dof) (five standard deviations of a reduced
     chi-square) and, for an estimated sigma, MISMATCH_CHI2 too: an estimate is a median level, which
@@ -312,12 +327,12 @@ def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, 
     if dof <= 0:
         known = math.isfinite(sigma) and sigma > 0
         return {"s2": sigma * sigma if known else math.inf, "chi2": math.nan, "mismatch": False,
-                "diag": covariance_diagonal(gram), "underdetermined": True}
+                "diag": covariance_diagonal(gram, skip), "underdetermined": True}
     s2 = sse / dof
     chi2 = math.nan if math.isnan(sigma) else s2 / (sigma * sigma) if sigma > 0 else math.inf
     spread = 1.0 + 5.0 * math.sqrt(2.0 / dof)
     mismatch = bool(chi2 > (spread if sigma_given else max(MISMATCH_CHI2, spread)))
-    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": covariance_diagonal(gram), "underdetermined": False}
+    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": covariance_diagonal(gram, skip), "underdetermined": False}
 
 
 def poorly_determined(layout, values: dict, stderr_floor: dict, rel_tol=0.1, abs_tol=1e-3, also=()) -> list[str]:
