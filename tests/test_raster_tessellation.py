@@ -1,6 +1,7 @@
 """The analytic spheres' and planes' raster triangles are built when something first rasterizes a
 compiled scene (`CompiledScene.raster`), once, and never for ray tracing."""
 
+import math
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -16,8 +17,10 @@ from difflab.renderers import compile as compile_module
 from difflab.renderers.compile import RASTER_ROOM, RASTER_SOUP, scene_parts
 from difflab.renderers.soup import SOUP_DTYPES, triangle_soup
 from difflab.geometry import uv_sphere
-from difflab.renderers.tessellate import AnalyticParts, plane_grid, sphere_segments
-from difflab.scene import Sphere
+from difflab.renderers.camera import camera_frame, pixel_size_at
+from difflab.renderers.tessellate import (MAX_SPHERE_SEGMENTS, MIN_SPHERE_SEGMENTS, AnalyticParts, plane_grid,
+                                          sphere_segments)
+from difflab.scene import Scene, Sphere
 
 CAMERA = {"eye": [0.0, 2.0, 5.0], "target": [0, 0, -2], "fov_y": 45, "width": 32, "height": 24}
 SPHERES = [{"type": "sphere", "center": [x, 0.35, -z], "radius": 0.3, "material": m}
@@ -76,7 +79,7 @@ def eager_soup(scene) -> dict:
     parts = []
     for obj, material, index in analytic:
         if isinstance(obj, Sphere):
-            n_lon = sphere_segments(obj, scene.camera, rows)
+            n_lon = int(sphere_segments([obj.center], [obj.radius], scene.camera, rows)[0])
             parts.append((uv_sphere(obj.radius, obj.center, max(2, n_lon // 2), n_lon), material, index))
         else:
             parts.append((plane_grid(obj, scene.camera), material, index))
@@ -247,3 +250,59 @@ def test_ray_tracing_a_raster_copy_traces_the_meshes_alone(light_buffer):
     assert np.array_equal(traced, render(compile_scene(WHITTED), method="raytrace", light_buffer=light_buffer))
     assert np.array_equal(render(compiled, method="raytrace", light_buffer=light_buffer), traced)
 
+
+
+def scalar_segments(center, radius, camera, height) -> int:
+    """`sphere_segments` of one sphere as it was written per sphere (commit d18105d), with the step's
+    underflow guarded: the reference the vectorised count must equal."""
+    _, _, forward = camera_frame(camera)
+    distance = float(np.dot(np.asarray(center) - np.asarray(camera.eye), forward)) - radius
+    if camera.projection == "perspective" and distance <= camera.near:
+        return MAX_SPHERE_SEGMENTS
+    radius_px = radius / pixel_size_at(camera, max(distance, camera.near), height)
+    if radius_px <= 0.5:
+        return MIN_SPHERE_SEGMENTS
+    step = 2.0 * math.acos(1.0 - 0.5 / radius_px)
+    if step == 0.0:
+        return MAX_SPHERE_SEGMENTS
+    return int(min(MAX_SPHERE_SEGMENTS, max(MIN_SPHERE_SEGMENTS, math.ceil(2.0 * math.pi / step))))
+
+
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_the_segment_counts_of_all_spheres_at_once_are_each_spheres(projection):
+    """400 random spheres -- in view, crossing the near plane, behind the camera, tiny (under half a
+    sample), huge (the step 2 acos(1 - 0.5 / r_px) underflows to 0 past r_px ~ 4.5e15) -- get the
+    counts the per-sphere formula gives, and every clamp is reached."""
+    camera = Scene.from_dict(scene_dict([], MATERIALS, camera={**CAMERA, "projection": projection,
+                                                               "ortho_height": 4.0, "near": 0.5})).camera
+    rng = np.random.default_rng(7)
+    eye = np.asarray(camera.eye)
+    centers = np.concatenate([rng.uniform(-6, 6, (100, 3)) + [0, 0, -4],  # mostly in view
+                              eye + rng.normal(0, 0.4, (100, 3)),  # at the eye: crossing the near plane
+                              eye + [0, 0, 5] + rng.normal(0, 1, (100, 3)),  # behind the camera
+                              rng.uniform(-1e12, 1e12, (100, 3))])
+    radii = np.concatenate([10.0 ** rng.uniform(-4, 1, 100), rng.uniform(0.1, 1, 100),
+                            10.0 ** rng.uniform(-3, 2, 100), 10.0 ** rng.uniform(-6, 17, 100)])
+    huge = 10.0 ** rng.uniform(12, 15, 20)  # their near side 1 ahead of the eye: r_px to 6e18 (step 0 past 4.5e15)
+    centers = np.concatenate([centers, eye + (huge + 1.0)[:, None] * camera_frame(camera)[2]])
+    radii = np.concatenate([radii, huge])
+    counts = sphere_segments(centers, radii, camera, 4800)
+    expected = [scalar_segments(c, r, camera, 4800) for c, r in zip(centers, radii)]
+    assert counts.dtype == np.int64 and counts.tolist() == expected
+    assert {MIN_SPHERE_SEGMENTS, MAX_SPHERE_SEGMENTS} < set(expected)
+    assert sphere_segments(centers[:0], radii[:0], camera, 4800).shape == (0,)
+
+
+def test_a_sphere_too_large_for_a_segment_step_compiles_and_ray_traces():
+    """An orthographic view 1e-5 tall of a sphere of radius 1e10: r_px = 1.6e16 rows, 1 - 0.5 / r_px
+    rounds to 1 and the step to 0 -- compiling divided by it (ZeroDivisionError). Now MAX_SPHERE_SEGMENTS
+    longitudes, and the ray-traced image is the sphere's lit face: kd 0.7 x cos 0 = 0.7 in red."""
+    camera = {"eye": [0, 0, 2e10], "target": [0, 0, 0], "projection": "orthographic", "ortho_height": 1e-5,
+              "width": 16, "height": 16, "near": 1e5, "far": 1e11}
+    scene = scene_dict([{"type": "sphere", "center": [0, 0, 0], "radius": 1e10, "material": "red"}], MATERIALS,
+                       camera=camera, lights=[{"type": "directional", "direction": [0, 0, -1]}])
+    compiled = compile_scene(scene)
+    sphere = compiled.scene.objects[0]
+    assert sphere_segments([sphere.center], [sphere.radius], compiled.scene.camera, 16).tolist() == [MAX_SPHERE_SEGMENTS]
+    image = render(compiled, method="raytrace")
+    np.testing.assert_allclose(image, np.broadcast_to([0.7, 0.1, 0.1], image.shape), rtol=1e-5)

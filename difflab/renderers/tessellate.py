@@ -7,6 +7,7 @@ every direction, clipped to the view by the pipeline.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -24,18 +25,24 @@ MIN_SPHERE_SEGMENTS = 128  # keeps interpolated normals within ~1e-3 of the sphe
 PLANE_RINGS = 12  # grid lines each side of the eye's foot on a rasterized plane, spaced geometrically
 
 
-def sphere_segments(sphere: Sphere, camera, height: int) -> int:
-    """Longitude segments so that the polygon's sagitta r (1 - cos(pi / N)) is under half a sample
-    (and at least MIN_SPHERE_SEGMENTS, for smooth shading)."""
+def sphere_segments(centers, radii, camera, height: int) -> np.ndarray:
+    """Longitude segments of each sphere (`centers` (n, 3), `radii` (n,), world units) so that the
+    polygon's sagitta r (1 - cos(pi / N)) is under half a sample: N = ceil(2 pi / (2 acos(1 - 0.5 / r_px)))
+    with r_px the radius in sample rows at the sphere's nearest depth, clamped to
+    [MIN_SPHERE_SEGMENTS (smooth shading), MAX_SPHERE_SEGMENTS]. MAX where a perspective sphere reaches
+    the near plane, or where the step underflows (r_px > ~4.5e15: 1 - 0.5 / r_px rounds to 1)."""
     _, _, forward = camera_frame(camera)
-    distance = float(np.dot(np.asarray(sphere.center) - np.asarray(camera.eye), forward)) - sphere.radius
-    if camera.projection == "perspective" and distance <= camera.near:
-        return MAX_SPHERE_SEGMENTS
-    radius_px = sphere.radius / pixel_size_at(camera, max(distance, camera.near), height)
-    if radius_px <= 0.5:
-        return MIN_SPHERE_SEGMENTS
-    step = 2.0 * math.acos(1.0 - 0.5 / radius_px)
-    return int(min(MAX_SPHERE_SEGMENTS, max(MIN_SPHERE_SEGMENTS, math.ceil(2.0 * math.pi / step))))
+    offset = np.asarray(centers, np.float64).reshape(-1, 3) - np.asarray(camera.eye, np.float64)
+    radii = np.asarray(radii, np.float64).reshape(-1)
+    distance = offset[:, 0] * forward[0] + offset[:, 1] * forward[1] + offset[:, 2] * forward[2] - radii
+    radius_px = radii / pixel_size_at(camera, np.maximum(distance, camera.near), height)
+    step = 2.0 * np.arccos(1.0 - 0.5 / np.maximum(radius_px, 0.5))
+    turns = np.divide(2.0 * math.pi, step, out=np.full_like(step, np.inf), where=step > 0)  # inf: underflow, NaN
+    segments = np.clip(np.ceil(turns), MIN_SPHERE_SEGMENTS, MAX_SPHERE_SEGMENTS)
+    segments = np.where(radius_px <= 0.5, MIN_SPHERE_SEGMENTS, segments)
+    if camera.projection == "perspective":
+        segments = np.where(distance <= camera.near, MAX_SPHERE_SEGMENTS, segments)
+    return segments.astype(np.int64)
 
 
 def plane_axes(normal) -> tuple[int, int]:
@@ -92,25 +99,34 @@ class AnalyticParts:
     camera: object = None
     sample_height: int = 0
 
-    def sphere_grid(self, sphere: Sphere) -> tuple[int, int]:
-        """(n_lat, n_lon) of a sphere's uv sphere: `sphere_segments` longitudes, half as many bands."""
-        n_lon = sphere_segments(sphere, self.camera, self.sample_height)
-        return max(2, n_lon // 2), n_lon
+    @functools.cached_property
+    def sphere_grids(self) -> np.ndarray:
+        """(n_lat, n_lon) per object of its uv sphere, (0, 0) for a plane: `sphere_segments`
+        longitudes (all the spheres' at once), half as many bands."""
+        is_sphere = np.array([isinstance(obj, Sphere) for obj, _, _ in self.objects], bool)
+        spheres = [obj for obj, _, _ in self.objects if isinstance(obj, Sphere)]
+        n_lon = sphere_segments(np.reshape([s.center for s in spheres], (-1, 3)), [s.radius for s in spheres],
+                                self.camera, self.sample_height)
+        grids = np.zeros((len(self.objects), 2), np.int64)
+        grids[is_sphere] = np.stack([np.maximum(2, n_lon // 2), n_lon], 1)
+        return grids
 
     def size(self) -> tuple[int, int]:
         """(vertices, faces) that `tessellate` builds, counted without building them."""
-        sizes = [geometry.uv_sphere_size(*self.sphere_grid(obj)) if isinstance(obj, Sphere) else plane_grid_size()
-                 for obj, _, _ in self.objects]
-        return sum(v for v, _ in sizes), sum(f for _, f in sizes)
+        n_lat, n_lon = self.sphere_grids[self.sphere_grids[:, 1] > 0].T
+        vertices, faces = geometry.uv_sphere_size(n_lat, n_lon)
+        planes = int((self.sphere_grids[:, 1] == 0).sum())
+        plane_vertices, plane_faces = plane_grid_size()
+        return int(vertices.sum()) + planes * plane_vertices, int(faces.sum()) + planes * plane_faces
 
     def tessellate(self, n_before: int) -> list:
         """Per object its raster triangles as (TriMesh, material id, object index). RenderError once
         the scene's triangles -- `n_before` (the meshes') and these so far -- pass the memory budget."""
         parts, triangles = [], n_before
-        for obj, material, index in self.objects:
+        for (obj, material, index), (n_lat, n_lon) in zip(self.objects, self.sphere_grids):
             if isinstance(obj, Sphere):
                 with object_errors(index, obj):
-                    mesh = geometry.uv_sphere(obj.radius, obj.center, *self.sphere_grid(obj))
+                    mesh = geometry.uv_sphere(obj.radius, obj.center, int(n_lat), int(n_lon))
             else:
                 mesh = plane_grid(obj, self.camera)
             parts.append((mesh, material, index))
