@@ -127,3 +127,37 @@ def test_a_hard_edged_cube_without_normals_keeps_its_face_normals(tmp_path, layo
     face_normal = np.cross(edges[:, 0], edges[:, 1])
     face_normal /= np.linalg.norm(face_normal, axis=1, keepdims=True)
     np.testing.assert_allclose(mesh.smooth_normals()[mesh.faces], np.repeat(face_normal[:, None], 3, 1), atol=1e-12)
+
+
+def normals_by_position(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct vertex positions (sorted) and the smooth normal of each (of its first copy)."""
+    positions, first = np.unique(mesh.vertices, axis=0, return_index=True)
+    return positions, mesh.smooth_normals()[first]
+
+
+def test_a_repeated_face_keeps_the_welds_of_a_trimesh_read(tmp_path):
+    """A quad sphere with its last quad written twice (trimesh reads it): the two copies' triangles
+    are at the same positions and name the same `v` lines, so pairing them either way is right and
+    the mesh is welded (before: no welds at all, seam normals 11.78 deg off radial). Its normals are
+    those of the triangle file with the quad's two triangles repeated (numpy reads it) at every
+    position. The quad repeated through new `v` lines at the same positions is ambiguous: no welds."""
+    quads, triangles = sphere_obj(uvs=True, quads=True), sphere_obj(uvs=True, quads=False)
+    last_quad = [line for line in quads.splitlines() if line.startswith("f ")][-1]
+    last_two = [line for line in triangles.splitlines() if line.startswith("f ")][-2:]
+    (tmp_path / "quads.obj").write_text(quads + last_quad + "\n")
+    (tmp_path / "triangles.obj").write_text(triangles + "\n".join(last_two) + "\n")
+    read_by_trimesh, read_by_numpy = load_mesh(tmp_path / "quads.obj"), load_mesh(tmp_path / "triangles.obj")
+    assert read_by_trimesh.welds is not None and read_by_numpy.welds is not None
+    assert read_by_trimesh.n_faces == read_by_numpy.n_faces == 2 * N_LON * (N_LAT - 1) + 2
+    positions, normals = normals_by_position(read_by_trimesh)
+    numpy_positions, numpy_normals = normals_by_position(read_by_numpy)
+    np.testing.assert_array_equal(positions, numpy_positions)
+    np.testing.assert_allclose(normals, numpy_normals, rtol=0, atol=1e-12)
+    assert angles_to_radial(read_by_trimesh, read_by_trimesh.smooth_normals()).max() < 7.1  # 7.04 (11.78 unwelded)
+    corners = [int(c.split("/")[0]) for c in last_quad.split()[1:]]
+    vertex_lines = [line for line in quads.splitlines() if line.startswith("v ")]
+    copies = "".join(vertex_lines[c - 1] + "\n" for c in corners)
+    copied_quad = "f " + " ".join(f"{len(vertex_lines) + k + 1}/{c.split('/')[1]}"
+                                  for k, c in enumerate(last_quad.split()[1:]))
+    (tmp_path / "copies.obj").write_text(quads + copies + copied_quad + "\n")
+    assert load_mesh(tmp_path / "copies.obj").welds is None

@@ -183,7 +183,9 @@ def with_file_welds(mesh: TriMesh, data: bytes) -> TriMesh:
     a position are one vertex (an OBJ without normals marks a hard edge by repeating a position in
     another `v` line). trimesh reorders the triangles (a polygon's fans after the triangles, a fan
     started at another corner), so each of its triangles is matched to the file's with the same
-    corner positions (`by_positions`). Unchanged (no welds) where they do not match one to one."""
+    corner positions (`by_positions`); triangles at the same positions pair in any order where they
+    name the same `v` lines (a repeated face). Unchanged (no welds) where they do not match one to
+    one, or two triangles at the same positions name different `v` lines (which is which is unknown)."""
     data = data.replace(b"\r\n", b"\n")
     corners = fan_corners(data)
     starts, ends, code = line_keys(data)
@@ -193,8 +195,10 @@ def with_file_welds(mesh: TriMesh, data: bytes) -> TriMesh:
         return mesh
     ours, file_keys = by_positions(mesh.vertices[mesh.faces], mesh.faces)
     theirs, their_keys = by_positions(positions[corners, :3], corners)
-    if not np.array_equal(file_keys, their_keys) or (their_keys[1:] == their_keys[:-1]).all(axis=1).any():
-        return mesh  # other triangles, or two at the same positions: which is which is unknown
+    if not np.array_equal(file_keys, their_keys):
+        return mesh  # other triangles
+    if ((their_keys[1:] == their_keys[:-1]).all(axis=1) & (theirs[1:] != theirs[:-1]).any(axis=1)).any():
+        return mesh  # two at the same positions from other `v` lines: which is which is unknown
     welds = len(positions) + np.arange(mesh.n_vertices)  # a vertex no face uses: its own
     welds[ours.ravel()] = theirs.ravel()
     if not np.array_equal(welds[ours], theirs):  # a vertex at two `v` lines' corners
