@@ -253,8 +253,8 @@ def covariance_diagonal(gram, skip=None) -> np.ndarray:
     block above SPARSE_STATS_MAX entries, and on a singular one above DENSE_STATS_MAX (which entries
     its singular directions involve takes the block's eigenvectors).
 
-    The largest eigenvalue comes from ARPACK; where that fails (no convergence), from Gershgorin's bound
-    (the largest absolute row sum), which is at least the eigenvalue: a block judged regular
+    The largest eigenvalue comes from ARPACK; where that fails (no convergence), from Gershgorin's
+    bound (the largest absolute row sum), which is at least the eigenvalue: a block judged regular
     against it is regular against the eigenvalue too."""
     if skip is not None and skip.any():  # (an empty column: inf, as `covariance_unscaled` has it)
         diag = np.where(skip, np.nan, np.inf)
@@ -332,7 +332,8 @@ def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, 
     chi2 = math.nan if math.isnan(sigma) else s2 / (sigma * sigma) if sigma > 0 else math.inf
     spread = 1.0 + 5.0 * math.sqrt(2.0 / dof)
     mismatch = bool(chi2 > (spread if sigma_given else max(MISMATCH_CHI2, spread)))
-    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": covariance_diagonal(gram, skip), "underdetermined": False}
+    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": covariance_diagonal(gram, skip),
+            "underdetermined": False}
 
 
 def poorly_determined(layout, values: dict, stderr_floor: dict, rel_tol=0.1, abs_tol=1e-3, also=()) -> list[str]:
