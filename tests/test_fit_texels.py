@@ -290,6 +290,23 @@ def test_texel_blocks_over_the_limit_skip_the_jacobian(tmp_path, monkeypatch):
     assert (capped.loss, capped.sigma, capped.chi2) == (full.loss, full.sigma, full.chi2)
 
 
+def test_the_sparse_jacobian_leaves_out_the_texels_of_blocks_over_the_limit(tmp_path):
+    """A 16 x 16 bilinear texture seen in 8 x 8 pixels: each pixel's 2 x 2 taps apart from the
+    others', blocks of 1, 2 and 4 texels a channel (2, 16 and 30 of them). With the limit 3 the
+    texels of the blocks of 4 are skipped -- empty columns -- and every other column equals
+    jax.jacfwd's (1e-12 relative), as do the residuals."""
+    setup, _ = noisy_texel_setup(tmp_path, (16, 16), "bilinear", ("texture",), size=8)
+    with jax.enable_x64(True):
+        values = np.asarray(setup.layout.flatten(setup.initial)) * np.random.default_rng(3).uniform(0.9, 1.1, 768)
+        jac, r, skipped = jacobian.sparse_jacobian(setup.problem, values, limit=3)
+        want = np.asarray(jax.jacfwd(setup.problem.weighted)(jax.numpy.asarray(values)))
+        plain = np.asarray(setup.problem.weighted(jax.numpy.asarray(values)))
+    assert skipped.sum() == 3 * 4 * 30 and skipped.reshape(-1, 3).all(axis=1).sum() == 4 * 30
+    assert jac[:, skipped].nnz == 0 and np.abs(want[:, skipped]).max() > 0
+    assert np.abs(jac.toarray()[:, ~skipped] - want[:, ~skipped]).max() <= 1e-12 * np.abs(want).max()
+    assert np.abs(want[:, ~skipped]).max() > 0 and np.abs(r - plain).max() <= 1e-12
+
+
 def test_texel_standard_errors_are_calibrated(tmp_path):
     """A 16 x 16 texture (768 entries: matrix-free) under noise sigma 0.02: the z-scores
     (fitted - true) / stderr of the seen texels have an RMS near 1 (measured 0.93 over 624; 0.91-1.00
