@@ -9,11 +9,12 @@ scene's dict (parsing included). What docs/api.md's "compiles in milliseconds" r
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 
 import difflab
 from difflab.scene import Scene
+from timing import median_seconds
+
+MS = 1e3  # milliseconds a second
 
 
 def spheres_scene(n: int) -> dict:
@@ -26,15 +27,6 @@ def spheres_scene(n: int) -> dict:
             "objects": spheres + [{"type": "mesh", "builtin": "box", "material": "red"}]}
 
 
-def median_ms(make, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        make()
-        times.append(time.perf_counter() - start)
-    return 1e3 * statistics.median(times)
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--small", action="store_true", help="1000 spheres, 3 repeats")
@@ -45,8 +37,8 @@ def main(argv=None) -> int:
     for n in sizes:
         data = spheres_scene(n)
         scene = Scene.from_dict(data)
-        print(f"{n:8d} {median_ms(lambda: difflab.compile_scene(scene), repeats):17.1f} "
-              f"{median_ms(lambda: difflab.compile_scene(data), repeats):16.1f}")
+        print(f"{n:8d} {MS * median_seconds(lambda: difflab.compile_scene(scene), repeats):17.1f} "
+              f"{MS * median_seconds(lambda: difflab.compile_scene(data), repeats):16.1f}")
     return 0
 
 

@@ -50,6 +50,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from fit_common import RESULTS, SEED, perturb, rel_error, scene_dict, versions  # noqa: E402
 from foreign_targets import interior_mask  # noqa: E402
+from timing import median_seconds  # noqa: E402
 
 REFLECTANCE = [0.2, 0.5, 0.8]
 LIGHT = {"position": [3.0, 4.0, 3.0], "intensity": 40.0}
@@ -73,15 +74,6 @@ def newest_libllvm() -> str | None:
         if match and int(match.group(1)) >= 17:
             found.append((int(match.group(1)), path))
     return max(found)[1] if found else None
-
-
-def median_time(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def per_step(scene, target, start, repeats: int) -> list[dict]:
@@ -119,7 +111,7 @@ def per_step(scene, target, start, repeats: int) -> list[dict]:
     def plain_time(setup):
         with jax.enable_x64(setup.x64):
             x0 = jnp.asarray(setup.x0, setup.dtype)
-            return median_time(lambda: jax.block_until_ready(plain(setup.problem, x0)), 3)
+            return median_seconds(lambda: jax.block_until_ready(plain(setup.problem, x0)), 3)
 
     for run in runs.values():  # compile every length
         timed(run["setup"], 1), timed(run["setup"], 12), plain_time(run["setup"])
@@ -181,7 +173,7 @@ def batches(rng, sizes, px: int) -> list[dict]:
                                  history=False, progress=False)
 
             results = run()  # compile for this batch size
-            seconds = median_time(run, 3)
+            seconds = median_seconds(run, 3)
             rows.append({"vmap": vmap, "batch": b, "seconds": seconds, "per_fit_s": seconds / b,
                          "converged": sum(r.converged for r in results)})
     for row in rows:
@@ -331,7 +323,7 @@ def main(argv=None) -> int:
     if "steps" in sections:
         report["per_step"] = per_step(scene, target, start, repeats)
         fit_material(scene, [target], "red", init=start, history=False, progress=False)
-        report["warm_fit_material_s"] = median_time(
+        report["warm_fit_material_s"] = median_seconds(
             lambda: fit_material(scene, [target], "red", init=start, history=False, progress=False), repeats)
     if "fresh" in sections:
         start_scene = Scene.from_dict(scene_dict(size, red=start))

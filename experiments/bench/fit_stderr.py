@@ -29,10 +29,10 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+from timing import median_seconds
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 HERE = Path(__file__).resolve().parents[2]
@@ -89,23 +89,15 @@ def limits(repeats: int, small: bool) -> dict:
     from difflab.fit.inverse_diagonal import banded, factored
     from difflab.fit.stats import covariance_unscaled
 
-    def median_time(fn):
-        times = []
-        for _ in range(repeats):
-            start = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - start)
-        return statistics.median(times)
-
     out = {"dense": {}, "banded": {}, "lu": {}}
     for p in (768, 1536, 2048) if small else (768, 1536, 2048, 3072):
         jac = np.random.default_rng(1).normal(size=(p + 16, p))
-        out["dense"][p] = median_time(lambda: covariance_unscaled(jac.T @ jac))
+        out["dense"][p] = median_seconds(lambda: covariance_unscaled(jac.T @ jac), repeats)
     for side in (32, 45) if small else (32, 45, 64, 90, 128):
         block = stencil(side).tocsr()
-        out["banded"][side * side] = median_time(lambda: banded(block)[1]())
+        out["banded"][side * side] = median_seconds(lambda: banded(block)[1](), repeats)
         if side <= 90:
-            out["lu"][side * side] = median_time(lambda: factored(block)[1]())
+            out["lu"][side * side] = median_seconds(lambda: factored(block)[1](), repeats)
     return out
 
 

@@ -14,8 +14,6 @@ from __future__ import annotations
 import argparse
 import copy
 import json
-import statistics
-import time
 from importlib import metadata
 from pathlib import Path
 
@@ -25,6 +23,9 @@ from difflab.demos import scene_path
 from difflab.errors import SceneError
 from difflab.io import write_json_atomic
 from difflab.scene import Scene, scene_schema
+from timing import median_seconds
+
+MS = 1e3  # milliseconds a second
 
 RESULTS = Path(__file__).resolve().parents[1] / "results" / "bench_scene_validation.json"
 # (what is wrong, a change to the lecture scene)
@@ -34,15 +35,6 @@ MISTAKES = [
     ("misspelt shading", lambda d: d["render"].update(shading="Phong")),
     ("colour of 2 numbers", lambda d: d["materials"]["chrome"].update(kd=[0.1, 0.2])),
 ]
-
-
-def median_ms(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return 1000 * statistics.median(times)
 
 
 def hand_message(data) -> str:
@@ -66,8 +58,8 @@ def main() -> None:
     data = json.loads(scene_path("lecture_teapot").read_text(encoding="utf-8"))
     data.pop("$schema")
     validator = jsonschema.Draft202012Validator(scene_schema())
-    hand = median_ms(lambda: Scene.from_dict(data), repeats)
-    schema = median_ms(lambda: list(validator.iter_errors(data)), repeats)
+    hand = MS * median_seconds(lambda: Scene.from_dict(data), repeats)
+    schema = MS * median_seconds(lambda: list(validator.iter_errors(data)), repeats)
     rows = []
     for name, change in MISTAKES:
         bad = copy.deepcopy(data)
