@@ -214,7 +214,9 @@ def write_together(writers: dict) -> None:
     copy), all or none: `writers` maps each path to a callable writing a temporary path
     (`atomic_path`); the temporaries are renamed onto their paths once every one is written. Ctrl-C
     and SIGTERM are held meanwhile (`uninterrupted`); a writer failing midway leaves every old file
-    as it was, its error naming its path."""
+    as it was, its error naming its path. (A rename failing after another one succeeded -- two
+    renames within their folders, which fail only where the folder turned read-only between the
+    writes and the renames -- leaves the earlier file new.)"""
     with uninterrupted(), contextlib.ExitStack() as stack:
         for path, write in writers.items():
             write(stack.enter_context(atomic_path(path)))

@@ -233,3 +233,18 @@ def test_fit_output_must_be_json(tmp_path, capsys):
         err = capsys.readouterr().err
         assert "give a file name ending in .json" in err and ("out.png" in err or "r.txt" in err)
     assert not any(p.name.startswith(("out", "o.", "r.")) for p in tmp_path.iterdir())
+
+
+def test_one_tied_value_on_a_second_surface_is_no_clip():
+    """float_ceiling on a flat-lit floor (100 pixels at 0.8 in red) beside a ball (50 pixels) that
+    reaches 0.8 at one pixel: no clip (a single value at the maximum is a peak, not a plateau); with
+    CENSOR_MIN_TIES of the ball's pixels there (a minority of it), a clip at 0.8."""
+    from difflab.fit.ceiling import CENSOR_MIN_TIES, float_ceiling
+
+    floor = np.tile([0.8, 0.6, 0.4], (100, 1))
+    ball = np.tile([0.5, 0.2, 0.1], (50, 1))
+    surfaces = np.r_[np.zeros(100, int), np.ones(50, int)]
+    ball[0, 0] = 0.8
+    assert float_ceiling(np.r_[floor, ball], surfaces) == np.inf  # (it censored 96 values, 95 the floor's)
+    ball[:CENSOR_MIN_TIES, 0] = 0.8
+    assert float_ceiling(np.r_[floor, ball], surfaces) == pytest.approx(0.8)

@@ -102,3 +102,22 @@ def test_taps_match_the_warp_bilinear_filter():
             index, weight = texture_taps(uv, (5, 9), filter, wrap)
             want = sample(store, 0, uv, filter=filter, wrap=wrap)
             np.testing.assert_allclose((weight[..., None] * flat[index]).sum(axis=1), want, atol=2e-6)
+
+
+@pytest.mark.parametrize("linear_solver", ["cg", "dense"])
+def test_a_texel_fit_with_a_view_at_weight_0_is_the_fit_of_the_other_view(tmp_path, linear_solver):
+    """Two views of the textured quad, the second at weight 0 everywhere (no used pixel: its model
+    keeps one dummy point): the texels come out as the first view's alone fits them. (The direct
+    formation's gain per residual -- 2700 -- was multiplied by the points' values -- 2703 with the
+    dummy: TypeError in the solve.)"""
+    from difflab.fit import Setup, solve
+
+    truth = np.random.default_rng(11).uniform(0.2, 0.8, (8, 8, 3)).astype(np.float32)
+    np.save(tmp_path / "t.npy", truth)
+    scene = quad_scene(tmp_path / "t.npy", size=32)
+    target = render_frame(scene).image + np.random.default_rng(1).normal(0, 0.02, (32, 32, 3)).astype(np.float32)
+    ones, zeros = np.ones((32, 32, 3), np.float32), np.zeros((32, 32, 3), np.float32)
+    both = solve(Setup(scene, [target, target], "m", ("texture",), weights=[ones, zeros]), linear_solver=linear_solver)
+    alone = solve(Setup(scene, [target], "m", ("texture",), weights=[ones]), linear_solver=linear_solver)
+    assert both.converged and alone.converged
+    np.testing.assert_allclose(both.texture, alone.texture, rtol=1e-5, atol=1e-6)

@@ -5,9 +5,8 @@ clipped anywhere or nowhere. A clip shows as ties at the maximum -- but so does 
 a floor under a directional light straight down holds kd I at every lit pixel, the image's
 maximum. What tells them apart: a highlight clips a minority of its surface's pixels, as it clips
 only where the light's reflection peaks, whereas a flat-lit surface holds its one value at most
-of them. So the maximum is a ceiling when at least CENSOR_MIN_TIES values tie there and, in some
-channel, some surface (the object a pixel's primary ray hits) has ties at fewer than half of its
-pixels; where every surface with ties holds them at most of its pixels, they are flat-lit surfaces,
+of them. So the maximum is a ceiling when, in some channel, some surface (the object a pixel's
+primary ray hits) has at least CENSOR_MIN_TIES ties there, at fewer than half of its pixels; where every surface with ties holds them at most of its pixels, they are flat-lit surfaces,
 no clip. (Counted over all values at once, a red floor's ties -- 95 % of the red channel, 6,578 of
 6,912 pixels -- were a third of the values: taken for a clip, every lit pixel censored, the floor's
 kd left at its start +- inf. And a surface wholly at the clip -- a small white bulb -- must not
@@ -18,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-CENSOR_MIN_TIES = 3  # ties at the maximum (this many, under half of each surface's pixels) mark a ceiling
+CENSOR_MIN_TIES = 3  # ties at the maximum on one surface (this many, under half its pixels) mark a ceiling
 
 
 def primary_objects(record) -> np.ndarray:
@@ -44,6 +43,6 @@ def float_ceiling(values: np.ndarray, surfaces: np.ndarray) -> float:
     ids, surface, size = np.unique(surfaces, return_inverse=True, return_counts=True)
     for channel in range(values.shape[1]):
         ties = np.bincount(surface.reshape(-1)[at_peak[:, channel]], minlength=ids.size)
-        if np.any((ties > 0) & (2 * ties < size)):
+        if np.any((ties >= CENSOR_MIN_TIES) & (2 * ties < size)):
             return peak  # a surface clipped at a minority of its pixels: a highlight
     return np.inf  # every surface with ties holds them at most of its pixels: flat-lit, no clip

@@ -62,7 +62,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--sigma", type=float, default=None, help="the targets' pixel noise (default: estimated)")
     p.add_argument("--ceiling", type=ceiling_value, default=None, metavar="VALUE|none",
                    help="where the targets clip (their values there are censored), or none: they do not (default: 1 "
-                        "for PNG / TIFF; for .npy the maximum, when under half of each surface's pixels tie there)")
+                        "for PNG / TIFF; for .npy the maximum, when some surface has 3 or more values there, at "
+                        "under half of its pixels: a clipped highlight)")
     p.add_argument("--params", default="ka,kd,ks,n",
                    help="comma-separated: ka, kd, ks, n, m, f0, kr, kt, absorption, intensity, lights[i].intensity "
                         "(default %(default)s)")

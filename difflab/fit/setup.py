@@ -16,6 +16,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import numbers
 import time
 
 import equinox as eqx
@@ -64,7 +65,7 @@ def check_ceiling(value):
     """None (detect), False (none: also inf), or a finite number > 0 as a float; FitError otherwise."""
     if value is None or value is False:
         return value
-    if isinstance(value, (int, float)) and not isinstance(value, bool) and value == math.inf:
+    if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) and value == math.inf:
         return False
     return _check_number(value, "ceiling")
 
@@ -73,8 +74,8 @@ def _check_number(value, name, *, allow_none=False):
     """A finite number > 0 as a float (None when allowed), or FitError naming the argument."""
     if value is None and allow_none:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-        raise FitError(f"{name}: must be a finite number > 0, got {value!r}")
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or not np.isfinite(value) or value <= 0:
+        raise FitError(f"{name}: must be a finite number > 0, got {value!r}")  # (numpy scalars are numbers.Real)
     return float(value)
 
 
@@ -170,7 +171,7 @@ class Setup:
         self.nonfinite = int(sum(v.nonfinite for v in self.views))
         self.censored = int(sum(np.count_nonzero(v.entries) - np.count_nonzero(v.counted)
                                 for v in self.views if np.isfinite(v.ceiling)))  # over the used pixels
-        self.quantisation = max(v.step for v in self.views) / math.sqrt(12.0)  # 0 for float data
+        self.quantisation = max(v.step for v in self.views) / math.sqrt(12.0)  # the coarsest view's; 0 for float data
         self.sigma_floor = max(FLOAT_SIGMA, self.quantisation)
 
     def retarget(self, images, init=None) -> Setup:

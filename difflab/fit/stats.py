@@ -165,7 +165,8 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
 def views_noise(views, residual_images, silent, given: float | None, floor: float, fallback=None,
                 quantisation: float = 0.0) -> float | None:
     """The pixel noise sigma of a fit's views: `given` -- the noise before quantisation, to which
-    the targets' `quantisation` (a file's code step / sqrt(12), 0 for float data) is added in
+    the targets' `quantisation` (the coarsest file target's code step / sqrt(12), 0 for float data:
+    one sigma serves every view) is added in
     quadrature: a correct fit of an 8-bit file with its true noise 0.002 given came out at chi2
     1.2, flagged -- or estimated from the residual images
     (H, W, 3) at the solution over the used pixels but the `silent` (per view (U,) bool,

@@ -234,7 +234,8 @@ def texel_linearisation(x, problem):
 
     (_, smooth), taps = jax.linearize(texel_terms, x[tex])
     taps_t = jax.linear_transpose(taps, x[tex])
-    if all(getattr(getattr(view.model, "formation", None), "direct", False) for view in problem.views):
+    if all(getattr(getattr(view.model, "formation", None), "direct", False) and view.target.size == t.size
+           for view, t in zip(problem.views, points)):  # (a view with no used pixel keeps one dummy point)
         r, gain = jax.jvp(lambda t: problem.residuals(x, t), (points,), (tuple(jnp.ones_like(t) for t in points),))
         gain = gain[:gain.shape[0] - smooth.shape[0]]  # the prior's entries: 0
         ends = np.cumsum([t.size for t in points])[:-1]
