@@ -24,9 +24,12 @@ per channel one block of every texel a pixel reads and the channel's scalars, wi
 channel (n) one block of all; without scalars, per channel the connected components of the texel
 graph (texels read by a common pixel) -- and the texels of a block over
 `stats.SPARSE_STATS_MAX` entries (and the scalars with them) get no colour and no column: their
-standard errors are nan (`stats.covariance_diagonal`'s `skip`). The prediction is never smaller
-than a real block (a texel whose reads all have zero derivative is counted too); where a model
-mixed channels the real blocks would be larger, and `stats.covariance_diagonal` still sizes them.
+standard errors are nan (`stats.covariance_diagonal`'s `skip`). The prediction is an upper bound,
+never smaller than a real block, and can be larger: a texel whose reads all have zero derivative,
+reads of pixels at weight 0 (a refit without clipped pixels keeps them) and a scalar of another
+material (its real block is its own) are counted in -- so near the limit, or beside a large texture,
+some entries report nan where the dense path would give numbers; where a model mixed channels the
+real blocks would be larger, and `stats.covariance_diagonal` still sizes them.
 When nothing is left no Jacobian is formed at all (a 128^2 texture with ks at 512^2 pixels: the
 stats phase 3.0 -> 0.52 s, peak RSS 996 -> 714 MiB, medians of 3 interleaved, load 2.8).
 """
