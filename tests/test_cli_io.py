@@ -325,8 +325,9 @@ def output_cases(tmp_path, folder):
 @pytest.mark.parametrize("command", ["render", "fractal", "fit"])
 def test_an_output_folder_that_takes_no_files_is_refused_before_the_work(tmp_path, capsys, monkeypatch, command, where):
     """Exit 2, one line naming the folder, and the command's work never starts: a folder without
-    write permission (root may write there: skipped), and /sys, where even root cannot create a file
-    (os.access says yes to root: the folder is probed by creating a file)."""
+    write permission, and /sys, where even root cannot create a file (os.access says yes to root:
+    the folder is probed by creating a file). Root may write in a folder without write permission,
+    so there the probe's file creation is refused as the kernel refuses it to anyone else (EACCES)."""
     from difflab import commands
     from difflab.fit import command as fit_command
 
@@ -339,7 +340,17 @@ def test_an_output_folder_that_takes_no_files_is_refused_before_the_work(tmp_pat
         folder.mkdir()
         folder.chmod(0o500)
         if os.geteuid() == 0:
-            pytest.skip("running as root: a folder without write permission is writable")
+            import errno
+            import tempfile
+
+            mkstemp = tempfile.mkstemp
+
+            def refused(*args, dir=None, **kwargs):
+                if dir is not None and Path(dir) == folder:
+                    raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(folder))
+                return mkstemp(*args, dir=dir, **kwargs)
+
+            monkeypatch.setattr(tempfile, "mkstemp", refused)
     argv, _ = output_cases(tmp_path, folder)[command]
 
     def work(args):

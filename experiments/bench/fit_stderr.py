@@ -26,13 +26,12 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
-from timing import median_seconds
+from timing import median_seconds, worker_in
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 HERE = Path(__file__).resolve().parents[2]
@@ -101,14 +100,6 @@ def limits(repeats: int, small: bool) -> dict:
     return out
 
 
-def child(tree: Path, size: int, pixels: int, params: tuple, repeats: int) -> dict:
-    """`worker` in a fresh process with `tree` first on the path and no compilation cache."""
-    env = {**os.environ, "PYTHONPATH": str(tree), "DIFFLAB_CACHE_DIR": "off", "MPLBACKEND": "Agg"}
-    out = subprocess.run([sys.executable, __file__, "--worker", str(size), str(pixels), ",".join(params),
-                          str(repeats)], env=env, capture_output=True, text=True, check=True, cwd=tree).stdout
-    return json.loads(out.strip().splitlines()[-1])
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--small", action="store_true", help="the 16^2 texture only, 2 repeats")
@@ -129,7 +120,7 @@ def main() -> None:
         for params in PARAMS:
             row = {"texels": size, "pixels": pixels, "params": list(params)}
             for name, tree in trees.items():  # fresh processes, interleaved: a busy machine slows both alike
-                row[name] = child(tree, size, pixels, params, repeats)
+                row[name] = worker_in(tree, __file__, size, pixels, ",".join(params), repeats)
             report["fits"].append(row)
             new = row["new"]
             line = (f"{size:>3}^2 texels ({3 * size * size + 3 * (len(params) - 1)} entries) {'+'.join(params):<11} "

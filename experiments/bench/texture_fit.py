@@ -28,13 +28,13 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from timing import worker_in
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 HERE = Path(__file__).resolve().parents[2]
@@ -124,14 +124,6 @@ def products(size: int, pixels: int, repeats: int) -> dict:
     return out
 
 
-def child(tree: Path, size: int, pixels: int, repeats: int, solver: str) -> dict:
-    """`worker` in a fresh process with `tree` first on the path and no compilation cache."""
-    env = {**os.environ, "PYTHONPATH": str(tree), "DIFFLAB_CACHE_DIR": "off", "MPLBACKEND": "Agg"}
-    out = subprocess.run([sys.executable, __file__, "--worker", str(size), str(pixels), str(repeats), solver], env=env,
-                         capture_output=True, text=True, check=True, cwd=tree).stdout
-    return json.loads(out.strip().splitlines()[-1])
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--small", action="store_true", help="the 24^2 texture only, 2 repeats")
@@ -154,7 +146,7 @@ def main() -> None:
     for size, pixels in sizes:
         row = {"texels": size, "pixels": pixels, "unknowns": 3 * size * size, **products(size, pixels, repeats)}
         for name, tree in trees.items():  # fresh processes, interleaved: a busy machine slows both alike
-            row[name] = child(tree, size, pixels, repeats, args.solver)
+            row[name] = worker_in(tree, __file__, size, pixels, repeats, args.solver)
         report["sizes"].append(row)
         line = (f"{size:>4}^2 texels, 2 x {pixels}^2 px: J v + J^T u {row['affine_ms']:.2f} ms affine vs "
                 f"{row['linearised_ms']:.2f} ms linearised ({row['linearised_ms'] / row['affine_ms']:.1f}x); "
