@@ -1,5 +1,5 @@
 """Picture files as Pillow opens them: their samples at full depth (8 or 16 bits, alpha kept where
-the file has it) and their transfer function. Internal: `io.load_image` and `io.load_mask` read
+the file has it) and their transfer function. Internal: `io.load_image` and `fit.targets.load_mask` read
 pictures through it.
 
 Pillow unpacks 16-bit colour PNG / TIFF samples to 8 bits (each sample's high byte). Those files

@@ -81,7 +81,8 @@ def colour_texels(together: sp.csr_matrix) -> np.ndarray:
     """(T,) a colour per texel, greedily (the smallest one none of its neighbours in the `read_graph`
     has), such that no pixel reads two texels of one colour; texels no pixel reads get colour 0."""
     colour = np.full(together.shape[0], -1, np.int64)
-    for t in range(colour.size):
+    colour[np.diff(together.indptr) == 0] = 0  # unread (or skipped): no neighbour, no loop
+    for t in np.flatnonzero(colour < 0):
         taken = colour[together.indices[together.indptr[t]:together.indptr[t + 1]]]
         free = np.ones(taken.size + 1, bool)
         free[taken[(taken >= 0) & (taken <= taken.size)]] = False

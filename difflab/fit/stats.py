@@ -277,14 +277,15 @@ def covariance_diagonal(gram, skip=None) -> np.ndarray:
         top = float(abs(unit).sum(axis=1).max())
     _, label = connected_components(unit, directed=False)
     blocks = np.split(np.argsort(label, kind="stable"), np.cumsum(np.bincount(label))[:-1])
-    diag, packed = np.full(gram.shape[0], np.nan), []
+    diag, packed, packed_size = np.full(gram.shape[0], np.nan), [], 0
     for block in blocks + [np.zeros(0, np.int64)]:  # (an empty block ends the last pack)
-        if packed and (not block.size or sum(b.size for b in packed) + block.size > PACKED_MAX):
+        if packed and (not block.size or packed_size + block.size > PACKED_MAX):
             index = np.concatenate(packed)
             diag[index] = np.diag(covariance_unscaled(gram[index][:, index].toarray(), top))
-            packed = []
+            packed, packed_size = [], 0
         if 0 < block.size <= PACKED_MAX:
             packed.append(block)
+            packed_size += block.size
         elif PACKED_MAX < block.size <= SPARSE_STATS_MAX:
             diag[block] = inverse_diagonal(unit[block][:, block], top, SINGULAR_RCOND) * scale[block] ** 2
             if np.isnan(diag[block[0]]) and block.size <= DENSE_STATS_MAX:  # singular
