@@ -15,6 +15,7 @@ import stat
 import tempfile
 import threading
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from PIL import Image
@@ -22,7 +23,7 @@ from PIL import Image
 from . import limits
 from .errors import DifflabError, OutputError, WriteError
 from .limits import short_path, shorten
-from .picture import read_picture, why, wide
+from .picture import read_picture, sample_depth, why
 
 _UMASK = os.umask(0o022)  # read the process umask once (setting it is not thread-safe), then restore it
 os.umask(_UMASK)
@@ -365,27 +366,57 @@ def sample_bits(path: str | os.PathLike) -> int | None:
         return None
     try:
         with Image.open(path) as im:
-            return 16 if wide(im) else 8
+            return sample_depth(im)
     except Exception as exc:
         raise DifflabError(f"{short_path(path)}: cannot read image ({why(exc)})") from None
 
 
-def image_file(path) -> Path:
-    """`path` (an image or mask file to read) as a Path to a regular file, else DifflabError naming it."""
-    path = file_path(path, "image")
+def image_file(path, what: str = "image") -> Path:
+    """`path` (an image, mask or texture file to read) as a Path to a regular file, else DifflabError
+    naming it and `what` it is."""
+    path = file_path(path, what)
     if not path.exists():
-        raise DifflabError(f"{short_path(path)}: image file not found")
+        raise DifflabError(f"{short_path(path)}: {what} file not found")
+    if path.is_dir():
+        raise DifflabError(f"{short_path(path)}: a folder, not {'an' if what[0] in 'aeiou' else 'a'} {what} file")
     if not path.is_file():
         raise DifflabError(f"{short_path(path)}: not a regular file")
     return path
 
 
+class LoadedImage(NamedTuple):
+    """An image file as `read_image` reads it."""
+    image: np.ndarray  # linear float32 (H, W, 3): `load_image`
+    bits: int | None  # bits per sample: 8 or 16 (its samples' step is 1 / (2^bits - 1)); None for .npy floats
+    channels: int  # colour channels the file holds: 1 (a grey PNG / TIFF or 2-D .npy, repeated into 3) or 3
+
+
+def read_image(path: str | os.PathLike, srgb: bool = True, what: str = "image") -> LoadedImage:
+    """`load_image`'s image, with the bits per sample and colour channels of the file, from one read
+    of it (its header once). Errors name the path and `what` the file is (an "image", a "texture")."""
+    path = image_file(path, what)
+    if path.suffix.lower() == ".npy":
+        array = read_npy(path)
+        refuse_code_values(array.dtype, short_path(path))
+        return LoadedImage(_as_image(array)[..., :3].copy(), None, 1 if array.ndim == 2 else 3)
+    pixels, gamma, bits, channels = read_picture(path)
+    if pixels.dtype == np.uint8 and (not srgb or gamma is None):
+        image = (_SRGB_DECODE if srgb else _LINEAR_DECODE)[pixels]  # a 256-entry table: 15 bytes per pixel
+    else:
+        samples = pixels / float(np.iinfo(pixels.dtype).max)
+        if srgb:
+            samples = srgb_to_linear(samples) if gamma is None else samples ** (1.0 / gamma)
+        image = samples.astype(np.float32)
+    return LoadedImage(image, bits, channels)
+
+
 def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
     """Read an image as linear float32 (H, W, 3).
 
-    `.npy` files hold linear values (float or bool dtypes; an alpha channel is dropped); an integer
-    .npy holds code values, which are refused (`refuse_code_values`: how to decode them); other
-    files are whatever Pillow reads, 8-bit, or 16-bit PNG / TIFF (all 16 bits kept), their samples
+    `.npy` files hold linear values (float or bool dtypes; an alpha channel is dropped; a 2-D array
+    is grey, repeated into the 3 channels); an integer .npy holds code values, which are refused
+    (`refuse_code_values`: how to decode them); other files are whatever Pillow reads, 8-bit, or
+    16-bit PNG / TIFF (all 16 bits kept; a grey file fills the 3 channels), their samples
     s / (2^bits - 1) decoded when `srgb` is true by the file's transfer function: sRGB (IEC
     61966-2-1), unless a PNG declares a gamma g without an sRGB chunk (linear = s^(1/g); g = 1: the
     samples are linear, as POV-Ray writes with File_Gamma=1.0). With `srgb` false the samples are
@@ -393,18 +424,7 @@ def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
     data, a pickled or string array, an image over the memory budget (checked from the header
     before decoding) -- raises DifflabError naming the path.
     """
-    path = image_file(path)
-    if path.suffix.lower() == ".npy":
-        array = read_npy(path)
-        refuse_code_values(array.dtype, short_path(path))
-        return _as_image(array)[..., :3].copy()
-    pixels, gamma = read_picture(path)
-    if pixels.dtype == np.uint8 and (not srgb or gamma is None):
-        return (_SRGB_DECODE if srgb else _LINEAR_DECODE)[pixels]  # a 256-entry table: 15 bytes per pixel
-    samples = pixels / float(np.iinfo(pixels.dtype).max)
-    if srgb:
-        samples = srgb_to_linear(samples) if gamma is None else samples ** (1.0 / gamma)
-    return samples.astype(np.float32)
+    return read_image(path, srgb).image
 
 
 _LINEAR_DECODE = (np.arange(256) / 255.0).astype(np.float32)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from PIL import Image
@@ -86,23 +87,49 @@ def _has_alpha(im) -> bool:
     return im.mode in ("RGBA", "LA", "PA", "La", "RGBa") or "transparency" in im.info
 
 
-def read_picture(path: Path, alpha: bool = False) -> tuple[np.ndarray, float | None]:
-    """(samples (H, W, 3) -- (H, W, 4) when `alpha` and the file has an alpha channel or a
-    transparent colour --: uint8, or uint16 for a 16-bit PNG / TIFF; the file's gamma, None for
-    sRGB) of an image file Pillow reads; its size (from the header, read lazily by Image.open) is
-    checked against the memory budget before anything is decoded. DifflabError naming the path."""
+def sample_depth(im) -> int:
+    """Bits per sample of an image Pillow opened (header only), as `read_picture` reads it: 16 for a
+    16-bit PNG / TIFF, else 8."""
+    return 16 if wide(im) else 8
+
+
+#: Pillow modes of grey files: bilevel, 8-bit grey (with alpha), 16-bit grey.
+_GREY_MODES = ("1", "L", "LA", "La", "I;16", "I;16B", "I;16L")
+
+
+def colour_channels(im) -> int:
+    """Colour channels an image Pillow opened stores (alpha not counted): 1 for a grey file (PNG
+    colour types 0 and 4 at any depth, bilevel), else 3 (RGB, palette, CMYK, ...)."""
+    return 1 if im.mode in _GREY_MODES or wide(im) in ("grey", "grey+alpha") else 3
+
+
+class Picture(NamedTuple):
+    """A picture file as `read_picture` reads it."""
+    samples: np.ndarray  # (H, W, 3) or (H, W, 4) uint8, or uint16 for a 16-bit PNG / TIFF
+    gamma: float | None  # the file's transfer function (`transfer`): None for sRGB
+    bits: int  # bits per sample: 8 or 16 (`sample_depth`)
+    channels: int  # colour channels the file stores: 1 (grey, repeated into the 3 of `samples`) or 3
+
+
+def read_picture(path: Path, alpha: bool = False) -> Picture:
+    """A `Picture` of an image file Pillow reads, its file opened once (a 16-bit colour file twice,
+    see the module doc): samples (H, W, 3) -- (H, W, 4) when `alpha` and the file has an alpha
+    channel or a transparent colour --, gamma, bits and colour channels. Its size (from the header,
+    read lazily by Image.open) is checked against the memory budget before anything is decoded.
+    DifflabError naming the path."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # our budget decides instead
             with Image.open(path) as im:
                 limits.require_image(im.width, im.height, str(path), limits.IMAGE_LOAD_BYTES)
+                bits, channels = sample_depth(im), colour_channels(im)  # (from the header: decoding drops the tiles)
                 samples = _samples16(im, path)
                 if samples is None and im.mode in ("I", "F"):
                     raise DifflabError(f"{path}: 32-bit integer or float samples (mode {im.mode!r}) are not read: "
                                        "save 8- or 16-bit samples, or the linear array as .npy")
                 if samples is None:
                     samples = np.asarray(im.convert("RGBA" if alpha and _has_alpha(im) else "RGB"))
-                return (samples if alpha else samples[..., :3]), transfer(im.info)
+                return Picture(samples if alpha else samples[..., :3], transfer(im.info), bits, channels)
     except DifflabError:
         raise
     except Exception as exc:  # Pillow raises OSError, ValueError, SyntaxError, DecompressionBombError, ...

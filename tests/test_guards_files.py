@@ -97,7 +97,7 @@ def test_broken_or_missing_picture_files_are_named(tmp_path):
     with pytest.raises(DifflabError, match=r"nothing\.png: image file not found"):
         load_image(tmp_path / "nothing.png")
     (tmp_path / "dir.png").mkdir()
-    with pytest.raises(DifflabError, match=r"dir\.png: not a regular file"):
+    with pytest.raises(DifflabError, match=r"dir\.png: a folder, not an image file$"):
         load_image(tmp_path / "dir.png")
 
 

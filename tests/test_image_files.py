@@ -154,3 +154,22 @@ def test_32_bit_integer_and_float_tiffs_are_refused(tmp_path, mode, values):
     Image.fromarray(values, mode=mode).save(path)
     with pytest.raises(DifflabError, match=rf"deep_{mode}\.tif: 32-bit integer or float samples .*\.npy"):
         load_image(path)
+
+
+@pytest.mark.parametrize("dtype, bits, opens", [(np.uint8, 8, 1), (np.uint16, 16, 2)])
+def test_a_target_file_is_opened_once(tmp_path, monkeypatch, dtype, bits, opens):
+    """`fit.targets.load_target` read a file's header twice (`load_image`, then `sample_bits`): an
+    8-bit PNG was opened 2 times, a 16-bit colour one 3 (its second decode, of the low bytes, is the
+    one more open: `picture._samples16`). Now `io.read_image` reads image, bits and channels at once."""
+    from PIL import Image
+
+    from difflab.fit.targets import load_target
+
+    samples = np.arange(5 * 7 * 3).reshape(5, 7, 3).astype(dtype)
+    path = write_png(tmp_path / "t.png", samples, gamma=1.0)
+    real_open, opened = Image.open, []
+    monkeypatch.setattr(Image, "open", lambda *a, **k: opened.append(a[0]) or real_open(*a, **k))
+    image, step = load_target(path, "targets[0]")
+    assert len(opened) == opens
+    assert step == 1.0 / (2 ** bits - 1)
+    np.testing.assert_allclose(image, samples / float(np.iinfo(dtype).max), rtol=1e-6)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import scene_dict
-from difflab import TextureError, render, render_frame
+from difflab import DifflabError, TextureError, load_image, render, render_frame
 from difflab._warp import wp
 from difflab.io import save_image
 from difflab.renderers.camera import camera_struct, projection_matrix, view_matrix
@@ -315,6 +315,22 @@ def test_a_missing_texture_raises_texture_error_naming_the_path(tmp_path):
         load_texture(missing)
     with pytest.raises(TextureError, match="brick.png"):
         TextureStore.from_paths([missing])
+
+
+def test_a_texture_file_is_checked_as_any_image_file(tmp_path):
+    """One place checks a file to read (`io.image_file`): a texture's messages are an image's, naming
+    it a texture. `load_texture` had its own checks before: a broken PNG was "cannot read texture
+    (broken.png: cannot read image (...))" (the path twice), a folder "a folder, not a texture file"
+    where `load_image` said "not a regular file"."""
+    (tmp_path / "folder.png").mkdir()
+    (tmp_path / "broken.png").write_bytes(b"not a png")
+    for name in ("missing.png", "folder.png", "broken.png"):
+        with pytest.raises(DifflabError) as image:
+            load_image(tmp_path / name)
+        with pytest.raises(TextureError) as texture:
+            load_texture(tmp_path / name)
+        assert str(texture.value) == str(image.value).replace(": image file", ": texture file").replace(
+            "not an image file", "not a texture file"), name
 
 
 def test_a_texture_deleted_after_loading_the_scene_raises_at_render(tmp_path):

@@ -4,7 +4,7 @@ at the boundary.
 Image arrays are linear RGB floats. Integer arrays and integer .npy files (code values: what
 Pillow returns, or a 16-bit file read by another reader) are refused with a message saying how to
 decode them for their dtype -- never read as linear (`io.refuse_code_values`, the one rule) --,
-and so are boolean, complex and object arrays. Image files are read by `io.load_image` (8- and 16-bit files decoded by
+and so are boolean, complex and object arrays. Image files are read by `io.read_image` (as `load_image`) (8- and 16-bit files decoded by
 their transfer function, sRGB unless a PNG says otherwise); a decoded file saturates at 1.0: its
 ceiling, where highlights clip, and its samples are quantised in steps of 1 / (2^bits - 1). A target
 must have its view's camera size.
@@ -16,7 +16,7 @@ import os
 import numpy as np
 
 from ..errors import DifflabError, FitError
-from ..io import image_file, load_image, read_npy, refuse_code_values, sample_bits
+from ..io import image_file, read_image, read_npy, refuse_code_values
 from ..limits import short_path
 from ..picture import read_picture
 
@@ -59,7 +59,7 @@ def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
     None for float data)."""
     if _is_path(item):
         try:
-            image, bits = load_image(item), sample_bits(item)
+            image, bits, channels = read_image(item)
         except DifflabError as exc:
             raise FitError(f"{where}: {exc}") from None
         return np.asarray(image, np.float64), (None if bits is None else 1.0 / (2 ** bits - 1))

@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from ..._warp import wp
 
 from ...errors import DifflabError, TextureError
-from ...io import load_image
+from ...io import read_image
 from ...limits import TEXEL_BYTES, require_count, require_memory
 from .sampling import TexturesW
 
@@ -28,16 +27,11 @@ from .sampling import TexturesW
 def load_texture(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
     """A texture image as linear float32 (H, W, 3), row 0 at the top (8-bit files are sRGB-decoded
     when `srgb`; .npy files are taken as linear). Raises TextureError naming the path if the file is
-    missing, unreadable, empty or not finite."""
-    path = Path(path)
-    if not path.is_file():
-        why = "a folder, not a texture file" if path.is_dir() else "not a regular file" if path.exists() \
-            else "texture file not found"
-        raise TextureError(f"{path}: {why}")
+    missing, a folder, unreadable, empty or not finite (`io.read_image`'s checks)."""
     try:
-        image = load_image(path, srgb=srgb)
+        image = read_image(path, srgb, what="texture").image
     except DifflabError as exc:
-        raise TextureError(f"{path}: cannot read texture ({exc})") from None
+        raise TextureError(str(exc)) from None
     if image.shape[0] < 1 or image.shape[1] < 1:
         raise TextureError(f"{path}: texture is empty ({image.shape})")
     if not np.all(np.isfinite(image)):
