@@ -4,11 +4,12 @@ alpha, stray values), the messages of a fit that cannot be made, parameters of a
 model, and the fitted scene's file name."""
 
 import json
+import re
 
 import numpy as np
 import pytest
 from PIL import Image
-from test_fit_helpers import make_scene, target_of
+from test_fit_helpers import make_scene, scene_dict, target_of
 
 from difflab import FitError, Scene, fit_material, load_image, render
 from difflab.cli import main
@@ -248,3 +249,46 @@ def test_one_tied_value_on_a_second_surface_is_no_clip():
     assert float_ceiling(np.r_[floor, ball], surfaces) == np.inf  # (it censored 96 values, 95 the floor's)
     ball[:CENSOR_MIN_TIES, 0] = 0.8
     assert float_ceiling(np.r_[floor, ball], surfaces) == pytest.approx(0.8)
+
+
+# ---- grey targets: refused, not fitted as equal R, G, B
+
+
+def grey_scene() -> Scene:
+    """make_scene with a grey ball and background: its image has R = G = B."""
+    d = scene_dict(size=12, red={"ka": [0.1] * 3, "kd": [0.5] * 3, "ks": [0.3] * 3})
+    d["background"] = [0.05] * 3
+    return Scene.from_dict(d)
+
+
+def test_a_grey_target_is_refused_naming_it_and_the_channel_counts(tmp_path, capsys):
+    """A luminance camera's image (Y of the RGB target, a 16-bit grey PNG) was read as equal R, G, B
+    and fitted: kd [0.016, 0.038, 0.054] for the truth [0.7, 0.2, 0.1], reported successful. Grey files
+    (8-bit L and LA, 16-bit grey, a 2-D .npy) and grey arrays are refused alike, by the API and
+    `difflab fit`; the advice, followed where equal RGB is meant, fits."""
+    scene = make_scene(size=12)
+    luminance = np.clip(target_of(scene) @ np.array([0.2126, 0.7152, 0.0722], np.float32), 0, 1)
+    codes = np.round(luminance * 255).astype(np.uint8)
+    Image.fromarray(codes, "L").save(tmp_path / "l.png")
+    Image.fromarray(np.stack([codes, np.full_like(codes, 255)], axis=-1), "LA").save(tmp_path / "la.png")
+    Image.fromarray(np.round(luminance * 65535).astype(np.uint16)).save(tmp_path / "i16.png")
+    np.save(tmp_path / "y.npy", luminance)
+    advice = (r" has 1 colour channel \(grey\) but the scene renders 3 \(linear RGB\); a grey target is not fitted as "
+              r"equal R, G, B: give an RGB image -- if equal RGB is meant, np\.repeat\(grey\[\.\.\., None\], 3, "
+              r"axis=-1\) of the \(H, W\) grey values, or the file saved as RGB$")
+    for name, kind in [("l.png", "a grey picture"), ("la.png", "a grey picture"), ("i16.png", "a grey picture"),
+                       ("y.npy", "a 2-D .npy array")]:
+        with pytest.raises(FitError, match=rf"^targets\[0\] \(.*{name}\): {kind}.*" + advice):
+            fit_material(scene, [tmp_path / name], "red", ("kd",))
+    for array in (luminance, luminance[..., None], np.stack([luminance, np.ones_like(luminance)], axis=-1)):
+        with pytest.raises(FitError, match=rf"^targets\[1\]: an array of shape {re.escape(str(array.shape))}" + advice):
+            fit_material(scene, [target_of(scene), array], "red", ("kd",))
+    path = save_scene(scene, tmp_path / "s.json")
+    assert cli(["fit", str(path), str(tmp_path / "l.png"), "--material", "red", "-o", str(tmp_path / "o.json")]) == 2
+    assert re.search(r"targets\[0\] \(.*l\.png\): a grey picture.*" + advice[:-1], capsys.readouterr().err)
+    assert not (tmp_path / "o.json").exists()
+    grey = grey_scene()
+    equal = np.repeat(target_of(grey)[..., 0][..., None], 3, axis=-1)  # the advice, where R = G = B is meant
+    result = fit_material(grey, [equal], "red", ("kd",), init={"kd": 0.3})
+    assert result.converged
+    np.testing.assert_allclose(result.params["kd"], [0.5] * 3, rtol=1e-4)

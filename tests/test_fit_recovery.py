@@ -158,7 +158,8 @@ def test_failures_are_values(scene_and_target):
 @pytest.mark.parametrize("kwargs,message", [
     ({"material": "nope"}, "undefined material"), ({"params": ("kd", "q")}, "unknown parameter"),
     ({"solver": "newton"}, "unknown solver"), ({"loss": "l1"}, "unknown loss"),
-    ({"init": {"n": -1.0}}, r"init\['n'\]"), ({"targets": [np.zeros((4, 4))]}, r"expected an \(H, W, 3\) image"),
+    ({"init": {"n": -1.0}}, r"init\['n'\]"), ({"targets": [np.zeros((4, 4, 5))]}, r"expected an \(H, W, 3\) image"),
+    ({"targets": [np.zeros((4, 4))]}, r"targets\[0\]: an array of shape \(4, 4\) has 1 colour channel \(grey\)"),
     ({"targets": [(np.zeros((4, 4, 3)), {"fog": {}})]}, "unknown override"),
     ({"params": 5}, "params: expected a name"), ({"params": ["kd", 3]}, "params: expected a name"),
     ({"material": 5}, "material: expected a name"), ({"init": {"kd": "abc"}}, r"init\['kd'\]"),

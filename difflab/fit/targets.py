@@ -4,10 +4,11 @@ at the boundary.
 Image arrays are linear RGB floats. Integer arrays and integer .npy files (code values: what
 Pillow returns, or a 16-bit file read by another reader) are refused with a message saying how to
 decode them for their dtype -- never read as linear (`io.refuse_code_values`, the one rule) --,
-and so are boolean, complex and object arrays. Image files are read by `io.read_image` (as `load_image`) (8- and 16-bit files decoded by
-their transfer function, sRGB unless a PNG says otherwise); a decoded file saturates at 1.0: its
-ceiling, where highlights clip, and its samples are quantised in steps of 1 / (2^bits - 1). A target
-must have its view's camera size.
+and so are boolean, complex and object arrays, and grey images (files and arrays with one colour
+channel: `_refuse_grey`), which are not equal R, G, B. Image files are read by `io.read_image`
+(as `load_image`: 8- and 16-bit files decoded by their transfer function, sRGB unless a PNG says
+otherwise); a decoded file saturates at 1.0: its ceiling, where highlights clip, and its samples
+are quantised in steps of 1 / (2^bits - 1). A target must have its view's camera size.
 """
 
 from __future__ import annotations
@@ -62,10 +63,15 @@ def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
             image, bits, channels = read_image(item)
         except DifflabError as exc:
             raise FitError(f"{where}: {exc}") from None
+        if channels == 1:
+            kind = "a 2-D .npy array" if os.fspath(item).lower().endswith(".npy") else "a grey picture (PNG L / LA)"
+            _refuse_grey(f"{where} ({short_path(item)})", kind)
         return np.asarray(image, np.float64), (None if bits is None else 1.0 / (2 ** bits - 1))
     if not isinstance(item, np.ndarray) and not hasattr(item, "__array__"):
         raise FitError(f"{where}: expected an image array or a file path, got {type(item).__name__}")
     image = np.asarray(item)
+    if image.ndim == 2 or (image.ndim == 3 and image.shape[-1] in (1, 2)):
+        _refuse_grey(where, f"an array of shape {image.shape}")
     if image.ndim != 3 or image.shape[-1] not in (3, 4):
         raise FitError(f"{where}: expected an (H, W, 3) image, got shape {image.shape} of {image.dtype}")
     image = image[..., :3]
@@ -76,6 +82,15 @@ def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
     if image.dtype.kind != "f":
         raise FitError(f"{where}: an image of dtype {image.dtype} is refused; give linear RGB floats")
     return np.array(image), None  # (a copy: the fit reads it later)
+
+
+def _refuse_grey(where: str, what: str) -> None:
+    """The one rule for a grey target: difflab renders 3 channels (linear RGB), and a grey image is not
+    taken for equal R, G and B -- a luminance camera does not see them equal --; FitError naming the
+    target, its channel count and the scene's, and how to make equal RGB if that is what is meant."""
+    raise FitError(f"{where}: {what} has 1 colour channel (grey) but the scene renders 3 (linear RGB); "
+                   "a grey target is not fitted as equal R, G, B: give an RGB image -- if equal RGB is meant, "
+                   "np.repeat(grey[..., None], 3, axis=-1) of the (H, W) grey values, or the file saved as RGB")
 
 
 def per_view(values, count: int, name: str) -> list:
