@@ -214,14 +214,35 @@ def test_no_fit_messages_name_the_target_mask_and_counts(tmp_path, capsys):
 # ---- parameters of another specular model; the fitted scene's name
 
 
-def test_torrance_parameters_on_another_specular_model_are_refused():
-    """m on a Phong scene came back "0.3 +- inf" (the image does not depend on it)."""
+def test_a_parameter_the_specular_model_does_not_read_is_refused(tmp_path, capsys):
+    """One rule, both ways: m / f0 on a Phong or Blinn scene came back "0.3 +- inf"; n on a torrance
+    scene was fitted though the model never reads it (the image does not depend on it: n moved
+    nowhere from its start, +- inf). The defaults (ka, kd, ks, n) read n as the model's lobe width:
+    m under torrance, recovered from a perturbed start."""
     for specular in ("phong", "blinn"):
         scene = make_scene(size=8, specular=specular)
         for param in ("m", "f0", "red.m"):
-            with pytest.raises(FitError, match=rf"params: '{param}' applies only to the torrance specular model; the "
-                                               rf"scene's is '{specular}'"):
+            with pytest.raises(FitError, match=rf"^params: '{param}' applies only to the torrance specular model; the "
+                                               rf"scene's is '{specular}' \(its render.specular\), which does not "
+                                               "read it"):
                 fit_material(scene, [target_of(scene)], "red", ("kd", param))
+    scene = make_scene(size=16, specular="torrance", red={"m": 0.3, "f0": 0.2})
+    target = target_of(scene)
+    for param in ("n", "red.n"):
+        with pytest.raises(FitError, match=rf"^params: '{param}' applies only to the phong and blinn specular models; "
+                                           r"the scene's is 'torrance' \(its render.specular\), which does not read it"):
+            fit_material(scene, [target], "red", ("kd", param))
+    path = save_scene(scene, tmp_path / "s.json")
+    np.save(tmp_path / "t.npy", target)
+    assert cli(["fit", str(path), str(tmp_path / "t.npy"), "--material", "red", "--params", "ks,n",
+                "-o", str(tmp_path / "o.json")]) == 2
+    assert "params: 'n' applies only to the phong and blinn specular models" in capsys.readouterr().err
+    result = fit_material(scene, [target], "red", init={"m": 0.4, "kd": 0.5})
+    assert result.converged and set(result.params) == {"ka", "kd", "ks", "m"}
+    np.testing.assert_allclose(result.params["m"], 0.3, rtol=1e-4)
+    np.testing.assert_allclose(result.params["kd"], [0.7, 0.2, 0.1], rtol=1e-4)
+    assert cli(["fit", str(path), str(tmp_path / "t.npy"), "--material", "red", "-o", str(tmp_path / "o.json")]) == 0
+    assert json.loads((tmp_path / "o.json").read_text())["materials"]["red"]["m"] == pytest.approx(0.3, rel=1e-4)
 
 
 def test_fit_output_must_be_json(tmp_path, capsys):

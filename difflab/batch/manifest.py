@@ -9,7 +9,8 @@ Keys of a line (docs/batch.md is the reference):
     targets   an image file, or a list of image files and/or views {"image": FILE, "mask": FILE,
               "camera": {...}, "lights": [...]}, camera / lights replacing the scene's for that view.
     material  a material name or a list of names (default: every material an object uses).
-    params    "ka,kd,ks,n" or a list of names (default: `difflab.fit.fit`'s, ka, kd, ks, n).
+    params    "ka,kd,ks,n" or a list of names (default: `difflab.fit.fit`'s, ka, kd, ks, n; m for n under
+              torrance).
     method    "raster" (G-buffer) or "raytrace" (ray tree); default: chosen from the scene.
     init      parameter name -> starting value (a number or an RGB list).
     solver    options of the fit: see `OPTIONS`.

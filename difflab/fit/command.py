@@ -64,9 +64,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="where the targets clip (their values there are censored), or none: they do not (default: 1 "
                         "for PNG / TIFF; for .npy the maximum, when some surface has 3 or more values there, at "
                         "under half of its pixels: a clipped highlight)")
-    p.add_argument("--params", default="ka,kd,ks,n",
-                   help="comma-separated: ka, kd, ks, n, m, f0, kr, kt, absorption, intensity, lights[i].intensity "
-                        "(default %(default)s)")
+    p.add_argument("--params", default=None,
+                   help="comma-separated: ka, kd, ks, n (phong, blinn), m, f0 (torrance), kr, kt, absorption, "
+                        "intensity, lights[i].intensity (default ka,kd,ks,n; ka,kd,ks,m under the torrance model)")
     p.add_argument("--solver", default="lm", choices=SOLVERS)
     p.add_argument("-o", "--output", required=True, type=output_ending(".json"),
                    help="where to write the fitted scene (JSON: a name ending in .json)")
@@ -89,6 +89,7 @@ def run(args) -> int:
 
     from ..io import refuse_overwrite, write_together
     from .engine import fit
+    from .params import DEFAULT_PARAMS
 
     output = Path(args.output)
     report = Path(args.report) if args.report else output.with_name(output.stem + ".fit.json")
@@ -101,7 +102,8 @@ def run(args) -> int:
     if masks is not None and len(masks) != len(args.targets):
         raise FitError(f"--mask: give one per target ({len(args.targets)}), got {len(masks)}")
     materials = [name.strip() for item in args.material for name in item.split(",") if name.strip()]
-    result = fit(args.scene, list(args.targets), materials, args.params, method=args.method, solver=args.solver,
+    params = DEFAULT_PARAMS if args.params is None else args.params
+    result = fit(args.scene, list(args.targets), materials, params, method=args.method, solver=args.solver,
                  per_channel=not args.grey, bounded=args.bounded, loss=args.loss, masks=masks, sigma=args.sigma,
                  ceiling=args.ceiling, max_steps=args.max_steps, x64=not args.float32, device=args.device)
     print(result.table())

@@ -7,7 +7,7 @@ layout of the fitted values in one flat vector.
     kr, kt      1        [0, 1]                     the value        (ray tree only)
     absorption  RGB      [0, inf)                   the value        (ray tree only)
     f0          1        [0, 1]                     the value        (torrance specular only)
-    n, m        1        [e^-12, e^12]              log(value)       (m: torrance specular only)
+    n, m        1        [e^-12, e^12]              log(value)       (n: phong / blinn only; m: torrance only)
     texture     H_t W_t 3 [0, inf)                  the value        (texels of a material's image
                                                                       texture; G-buffer (Phong) or ray tree)
 
@@ -40,8 +40,8 @@ class Kind:
     """A parameter kind: rgb (an RGB triple, or one grey value); lower / upper bounds in scene units;
     log: the solver coordinate is log(value); tree: needs the ray-tree image model; linear: the
     image is affine in it (variable projection solves it exactly); texels: one entry per texel and
-    channel of the material's texture (`texels.py`); specular: the specular model it belongs to
-    (None: any), outside which the image does not depend on it."""
+    channel of the material's texture (`texels.py`); models: the specular models that read it
+    (None: all), under any other the image does not depend on it and it is not fitted."""
 
     rgb: bool
     lower: float
@@ -50,22 +50,34 @@ class Kind:
     tree: bool = False
     linear: bool = False
     texels: bool = False
-    specular: str | None = None
+    models: tuple[str, ...] | None = None
 
 
 KINDS = {
     "ka": Kind(True, 0.0, INF, linear=True), "kd": Kind(True, 0.0, INF, linear=True),
-    "ks": Kind(True, 0.0, INF, linear=True), "n": Kind(False, math.exp(LOG_RANGE[0]), math.exp(LOG_RANGE[1]), log=True),
-    "m": Kind(False, math.exp(LOG_RANGE[0]), math.exp(LOG_RANGE[1]), log=True, specular="torrance"),
-    "f0": Kind(False, 0.0, 1.0, specular="torrance"),
+    "ks": Kind(True, 0.0, INF, linear=True),
+    "n": Kind(False, math.exp(LOG_RANGE[0]), math.exp(LOG_RANGE[1]), log=True, models=("phong", "blinn")),
+    "m": Kind(False, math.exp(LOG_RANGE[0]), math.exp(LOG_RANGE[1]), log=True, models=("torrance",)),
+    "f0": Kind(False, 0.0, 1.0, models=("torrance",)),
     "kr": Kind(False, 0.0, 1.0, tree=True), "kt": Kind(False, 0.0, 1.0, tree=True),
     "absorption": Kind(True, 0.0, INF, tree=True), "intensity": Kind(True, 0.0, INF),
     "texture": Kind(True, 0.0, INF, linear=True, texels=True),
 }
 MATERIAL_KINDS = tuple(k for k in KINDS if k != "intensity")
 COLOR_PARAMS = ("ka", "kd", "ks")
-DEFAULT_PARAMS = ("ka", "kd", "ks", "n")
-SCENE_PARAMS = ("ka", "kd", "ks", "n", "kr", "kt", "absorption")  # fit_scene's: kr / kt only where > 0
+
+
+class Defaults(tuple):
+    """A default parameter list, whose "n" stands for the lobe width of the scene's specular model:
+    n (phong, blinn), or the roughness m (torrance), which does not read n (`for_model`). A list the
+    caller gives is taken as written."""
+
+    def for_model(self, specular: str) -> tuple[str, ...]:
+        return tuple("m" if kind == "n" and specular == "torrance" else kind for kind in self)
+
+
+DEFAULT_PARAMS = Defaults(("ka", "kd", "ks", "n"))
+SCENE_PARAMS = Defaults(("ka", "kd", "ks", "n", "kr", "kt", "absorption"))  # fit_scene's: kr / kt only where > 0
 LIGHT_PARAM = re.compile(r"^lights\[(\d+)\]\.intensity$")
 Z_FLOOR, Z_CEIL, LOGIT_RANGE = -20.0, 30.0, 20.0
 START_FLOOR = 1e-2  # an unconstrained solver starting at a bound 0 starts here (no gradient at the floor)
@@ -224,7 +236,8 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
     "intensity" every light's, "lights[i].intensity" one light's; "texture" the texels of each fitted
     material's texture, `texture_shapes` name -> (H_t, W_t). `tree`: the image model is the ray
     tree (kr, kt, absorption allowed). Raises FitError naming the offending parameter."""
-    params = name_list(params, "params")
+    model = scene.render.specular
+    params = params.for_model(model) if isinstance(params, Defaults) else name_list(params, "params")
     if not params:
         raise FitError(f"params: nothing to fit (give some of {', '.join(KINDS)})")
     if len(set(params)) != len(params):
@@ -247,9 +260,11 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
             raise FitError(f"params: unknown parameter {p!r}; {where}")
         if KINDS[kind].tree and not tree:
             raise FitError(f"params: {p!r} needs the ray-traced image model (method='raytrace')")
-        if KINDS[kind].specular not in (None, scene.render.specular):
-            raise FitError(f"params: {p!r} applies only to the {KINDS[kind].specular} specular model; the scene's is "
-                           f"{scene.render.specular!r} (its render.specular), where the image does not depend on it")
+        if KINDS[kind].models is not None and model not in KINDS[kind].models:
+            models = KINDS[kind].models
+            raise FitError(f"params: {p!r} applies only to the {' and '.join(models)} specular model"
+                           f"{'s' if len(models) > 1 else ''}; the scene's is {model!r} (its render.specular), "
+                           "which does not read it: the image does not depend on it")
         if head and not _traced(scene.materials[head], kind):
             weight = "kr" if kind == "kr" else "kt"
             raise FitError(f"params: {p!r}: {head}.{weight} is 0 at the start, so the recorded ray tree has no "
