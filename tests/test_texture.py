@@ -29,22 +29,59 @@ def test_each_mip_level_is_the_exact_box_mean_of_the_one_below(shape):
     levels = mip_pyramid(texels)
     assert levels[-1].shape[:2] == (1, 1)
     assert len(levels) == int(math.log2(max(shape))) + 1
-    for below, above in zip(levels[:-1], levels[1:]):
+    below = texels.astype(np.float64)  # the chain of box means is kept in float64, each level rounded once
+    for above in levels[1:]:
         h, w = below.shape[:2]
         if h == 1:
             below = np.concatenate([below, below])  # a 1-row level pairs its row with itself
         if w == 1:
             below = np.concatenate([below, below], axis=1)
-        want = below.astype(np.float64).reshape(above.shape[0], 2, above.shape[1], 2, 3).mean(axis=(1, 3))
-        np.testing.assert_array_equal(above, want.astype(np.float32))
+        below = below.reshape(above.shape[0], 2, above.shape[1], 2, 3).mean(axis=(1, 3))
+        np.testing.assert_array_equal(above, below.astype(np.float32))
 
 
-def test_odd_sizes_repeat_the_last_row_and_column():
-    texels = np.arange(3 * 5 * 3, dtype=np.float32).reshape(3, 5, 3)
-    level1 = mip_pyramid(texels)[1]
-    assert level1.shape == (2, 3, 3)
-    np.testing.assert_allclose(level1[1, 2], texels[2, 4])  # corner block: one texel repeated
-    np.testing.assert_allclose(level1[0, 2], texels[0:2, 4].mean(axis=0))
+def checkerboard(h, w):
+    r, c = np.mgrid[:h, :w]
+    return ((r + c) % 2).astype(np.float32)[..., None].repeat(3, axis=2)
+
+
+@pytest.mark.parametrize("shape", [(257, 257), (5, 5), (3, 3), (1, 5), (7, 2), (6, 9)])
+def test_every_level_keeps_the_mean_of_the_image_at_any_size(shape):
+    texels = np.random.default_rng(2).random(shape + (3,)).astype(np.float32)
+    levels = mip_pyramid(texels)
+    sizes = [shape]
+    while sizes[-1] != (1, 1):
+        sizes.append(tuple(max(1, n // 2) for n in sizes[-1]))  # OpenGL's level sizes
+    assert [lv.shape[:2] for lv in levels] == sizes
+    mean = texels.astype(np.float64).mean(axis=(0, 1))
+    for lv in levels:
+        np.testing.assert_allclose(lv.astype(np.float64).mean(axis=(0, 1)), mean, rtol=2e-7)
+
+
+@pytest.mark.parametrize("shape, mean", [((5, 5), 0.48), ((3, 3), 4 / 9), ((1, 5), 0.4)])
+def test_the_last_level_of_an_odd_checker_is_its_mean(shape, mean):
+    # An odd edge repeated (the old rule) gave 0.375, 0.375 and 0.25: one texel counted twice per axis.
+    np.testing.assert_allclose(mip_pyramid(checkerboard(*shape))[-1], np.full((1, 1, 3), mean), rtol=1e-6)
+
+
+def test_an_odd_level_splits_the_texel_on_a_footprint_edge():
+    row = np.arange(5, dtype=np.float32)[None, :, None]  # footprints [0, 2.5) and [2.5, 5)
+    np.testing.assert_allclose(mip_pyramid(row)[1][0, :, 0], [(0 + 1 + 0.5 * 2) / 2.5, (0.5 * 2 + 3 + 4) / 2.5])
+
+
+def test_every_texel_of_a_257_checker_pyramid_is_grey(tmp_path):
+    # Old rule: the corner texel stayed 0 or 1 at every odd level (|error| 0.5; a 16 px render's
+    # top-right pixel was 0.032 where the checker's mean is 0.5).
+    for lv in mip_pyramid(checkerboard(257, 257))[1:]:
+        np.testing.assert_allclose(lv, 0.5, atol=1e-5)
+    np.save(tmp_path / "check.npy", checkerboard(257, 257))
+    image = render(scene_dict(
+        camera={"eye": [0, 0, 5], "target": [0, 0, 0], "projection": "orthographic", "ortho_height": 1,
+                "width": 16, "height": 16, "near": 1, "far": 10},
+        ambient=[1, 1, 1], lights=[],
+        materials={"t": {"ka": 1, "kd": 0, "texture": str(tmp_path / "check.npy"), "filter": "trilinear", "texture_target": "ka"}},
+        objects=[{"type": "mesh", "builtin": "quad", "material": "t", "transform": {"rotate_deg": [90, 0, 0]}}]))
+    np.testing.assert_allclose(image, 0.5, atol=1e-4)
 
 
 def test_many_textures_of_different_sizes_share_one_array():

@@ -41,5 +41,6 @@ def apply_projective(matrix, points) -> np.ndarray:
 
 def mip_pyramid(image) -> list[np.ndarray]:
     """The mip levels of an (H, W, C) image as the texture filters use them: level 0 is the image,
-    each next level the 2x2 box mean of the previous one, down to 1 x 1."""
+    each next level half as wide and high (rounded down) and the mean of its exact footprint on the
+    previous one (the 2x2 box mean for even sizes; every level keeps the image's mean), down to 1 x 1."""
     return pyramid(np.asarray(image, np.float32))

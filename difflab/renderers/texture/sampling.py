@@ -7,8 +7,9 @@ level l (width W_l, height H_l) has texel (row r, column c) centred at uv = ((c 
 
 Storage (`TexturesW`). Every level of every texture lives in one flat `texels` array; `level[k]`
 = (offset, width, height) of level k, and texture t owns levels first_level[t] ..
-first_level[t] + n_levels[t] - 1 (level 0 the image, each next one the 2x2 box mean of the one
-below, down to 1x1: see `texture_store.mip_pyramid`).
+first_level[t] + n_levels[t] - 1 (level 0 the image, each next one half as wide and high, rounded
+down, averaging its exact footprint on the one below (the 2x2 box mean for even sizes), down to
+1x1: see `store.mip_pyramid`).
 
 Texel fetch is always in range: the wrap mode is applied to the *float* texel index (so u = 1,
 negative, huge or non-finite coordinates all land inside), and the integer is clamped again after.

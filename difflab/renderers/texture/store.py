@@ -4,10 +4,13 @@ Orientation. Arrays here are in *texture* orientation: row 0 is v = 0, the image
 (`load_texture` returns image orientation, row 0 at the top, like every difflab image;
 `TextureStore` flips it once).
 
-Mip pyramid rule. Level l + 1 has ceil(H_l / 2) x ceil(W_l / 2) texels; texel (r, c) is the mean of
-the 2x2 block rows 2r, 2r + 1, columns 2c, 2c + 1 of level l, where a row or column beyond an odd
-edge is the last one repeated (edge clamp). For even sizes every level is the exact 2x2 box mean of
-the one below. The pyramid ends at 1x1.
+Mip pyramid rule. Level l + 1 has max(1, H_l // 2) x max(1, W_l // 2) texels (OpenGL's level
+sizes). Per axis, coarse texel j of n covers the finer level's interval [j w / n, (j + 1) w / n)
+(w fine texels) and is the mean over it, each fine texel weighted by the length of its overlap:
+a box filter of width w / n that splits a texel straddling two footprints between them. Every fine
+texel's weights sum to n / w, so each level's mean equals the image's exactly (in float64; levels
+are stored in float32). For even sizes this is the 2x2 box mean; an odd size (w / n = 2 + 2 / (w - 1))
+gives no texel more weight than its neighbours. The pyramid ends at 1x1.
 """
 
 from __future__ import annotations
@@ -39,19 +42,39 @@ def load_texture(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
     return image
 
 
+def footprint_weights(w: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per coarse texel j of n = max(1, w // 2): the fine indices (n, K) its footprint
+    [j w / n, (j + 1) w / n) touches and their weights overlap / (w / n) (rows sum to 1; K = 4 >
+    2 + w / n; unused taps have weight 0 and a valid index)."""
+    n = max(1, w // 2)
+    start = np.arange(n)[:, None] * w / n
+    index = np.floor(start).astype(np.int64) + np.arange(4)[None, :]
+    overlap = np.minimum(index + 1, start + w / n) - np.maximum(index, start)
+    return np.minimum(index, w - 1), np.maximum(overlap, 0.0) / (w / n)
+
+
 def downsample(level: np.ndarray) -> np.ndarray:
-    """The next mip level: 2x2 box means, an odd last row / column repeated (see the module doc)."""
-    h, w = level.shape[:2]
-    padded = np.pad(level.astype(np.float64), ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
-    h2, w2 = padded.shape[0] // 2, padded.shape[1] // 2
-    return padded.reshape(h2, 2, w2, 2, -1).mean(axis=(1, 3)).astype(np.float32)
+    """The next mip level of an (H, W, C) array, in float64: exact-footprint means per axis (see the
+    module doc), accumulated tap by tap in place (memory: a few half-size arrays)."""
+    out = level
+    for axis in (0, 1):
+        index, weight = footprint_weights(out.shape[axis])
+        shape = [1] * out.ndim
+        shape[axis] = -1
+        acc = np.take(out, index[:, 0], axis=axis) * weight[:, 0].reshape(shape)  # float64 (weights are)
+        for k in range(1, index.shape[1]):
+            acc += np.take(out, index[:, k], axis=axis) * weight[:, k].reshape(shape)
+        out = acc
+    return out
 
 
 def mip_pyramid(texels: np.ndarray) -> list[np.ndarray]:
     """[level 0 = texels, level 1, ..., 1x1] of a (H, W, C) array (see the module doc)."""
-    levels = [np.ascontiguousarray(texels, dtype=np.float32)]
-    while levels[-1].shape[0] > 1 or levels[-1].shape[1] > 1:
-        levels.append(downsample(levels[-1]))
+    level = np.ascontiguousarray(texels, dtype=np.float32)
+    levels = [level]
+    while level.shape[0] > 1 or level.shape[1] > 1:
+        level = downsample(level)  # float64 from level 1 on: no rounding carried from level to level
+        levels.append(level.astype(np.float32))
     return levels
 
 
