@@ -194,20 +194,66 @@ def test_mandelbrot_classifies_known_points(point, inside):
     assert (nu[0, 0] == -1.0) == inside
 
 
+def _escape_reference(c, max_iter):
+    """escape.py's nu in numpy complex128 (-1 inside), and the escape iteration n (-1 inside)."""
+    c = np.asarray(c, dtype=complex)
+    z = np.zeros_like(c)
+    nu, count = np.full(c.shape, -1.0), np.full(c.shape, -1)
+    for n in range(max_iter + 1):
+        escaped = (count == -1) & (np.abs(z) > 2.0**20)
+        nu0 = n + 1 - np.log2(np.log(np.abs(z[escaped])))
+        nu[escaped], count[escaped] = np.where(nu0 >= 1.0, nu0, np.exp(nu0 - 1.0)), n
+        active = count == -1
+        z[active] = z[active] ** 2 + c[active]
+    return nu, count
+
+
 def test_escape_time_matches_a_numpy_reference():
     width, height, center, scale, max_iter = 24, 16, (-0.5, 0.1), 3.0, 64
     nu = fr.escape_time(width, height, center=center, scale=scale, max_iter=max_iter)
     step = scale / width
     re = center[0] + (np.arange(width) + 0.5 - width / 2) * step
     im = center[1] + (height / 2 - np.arange(height) - 0.5) * step
-    c = re[None, :] + 1j * im[:, None]
-    z = np.zeros_like(c)
-    expected = np.full(c.shape, -1.0)
-    for n in range(max_iter + 1):
-        escaped = (np.abs(z) > 256.0) & (expected == -1.0)
-        expected[escaped] = n + 1 - np.log2(np.log(np.abs(z[escaped])))
-        z = np.where(expected == -1.0, z * z + c, z)
+    expected, _ = _escape_reference(re[None, :] + 1j * im[:, None], max_iter)
     np.testing.assert_allclose(nu, expected, atol=1e-4)
+
+
+@pytest.mark.parametrize("c, expected", [(0.26, 30.52044), (1.0, 3.29564), (-2.0001, 8.93625)])
+def test_escape_time_keeps_the_classic_count_near_the_set(c, expected):
+    # n + 1 - log2(log|z_n|), checked by hand in Python; the continuation below 1 leaves these alone.
+    assert fr.escape_time(1, 1, center=(c, 0.0), scale=1e-9, max_iter=2000)[0, 0] == pytest.approx(expected, abs=1e-4)
+
+
+def test_points_far_outside_escape_with_a_positive_count():
+    # |c| >~ 7 escapes within 1-2 iterations far past the bailout: the classic count gave
+    # c = 100 -> -0.205, 3000 -> -1.0011 (read as INTERIOR), 1e160 -> -inf (|z|^2 overflowed).
+    cs = [20.0, 100.0, 3000.0, 1e160, 1e300]
+    nu = np.array([fr.escape_time(1, 1, center=(c, 0.0), scale=1e-9)[0, 0] for c in cs])
+    np.testing.assert_allclose(nu, _escape_reference(cs, 256)[0], rtol=1e-5)
+    assert np.all(nu > 0) and np.all(np.diff(nu) < 0)  # positive, and decreasing outward
+    wide = fr.escape_time(200, 200, center=(0.0, 0.0), scale=400.0)  # was 94 % negative
+    assert np.all((wide > 0) | (wide == -1.0)) and np.count_nonzero(wide == -1.0) <= 1
+
+
+def test_nu_is_continuous_across_the_bailout_contours():
+    # On the real axis the escape iteration drops by one at each c where some |z_n| = 2^20, and the
+    # continuation joins the classic count where it is 1: straddle each such c by 1e-9 relative.
+    def bisect(changed, lo, hi):
+        for _ in range(80):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if changed(lo, mid) else (mid, hi)
+        return 0.5 * (lo + hi)
+
+    grid = np.geomspace(0.3, 1e4, 400)
+    count = _escape_reference(grid, 256)[1]
+    edges = [bisect(lambda a, b: np.ptp(_escape_reference([a, b], 256)[1]) > 0, grid[k], grid[k + 1])
+             for k in np.flatnonzero(np.diff(count))]
+    join = bisect(lambda a, b: _escape_reference([b], 256)[0][0] < 1.0, 2.0, 50.0)
+    assert len(edges) >= 6 and 6.5 < join < 7.5
+    for c in edges + [join]:
+        pair = fr.escape_time(2, 1, center=(c, 0.0), scale=2e-9 * c)[0]
+        assert np.all(pair > 0) and abs(pair[0] - pair[1]) < 1e-5, (c, pair)
+    assert np.ptp(_escape_reference(np.array(edges) * (1 + np.array([[-1e-9], [1e-9]])), 256)[1], axis=0).min() == 1
 
 
 def test_smooth_iteration_count_has_no_band_steps():

@@ -4,9 +4,18 @@ Both iterate z <- z^2 + c: the Mandelbrot set starts at z = 0 with c the pixel, 
 at z = the pixel with a fixed c. A point whose orbit leaves the disk |z| <= R escapes; with a large
 bailout R the normalised iteration count
 
-    nu = n + 1 - log2(log |z_n|)
+    nu0 = n + 1 - log2(log |z_n|)
 
-(n the first iteration with |z_n| > R) varies continuously across the iteration bands. Points that
+(n the first iteration with |z_n| > R) varies continuously across the iteration bands: it is
+1 - log2(log|z_n| / 2^n), and log|z_n| / 2^n tends to the set's escape potential. Far outside the
+set the potential grows without bound (~ log|c|), so nu0 goes negative (points with |c| >~ 7, which
+escape in one or two iterations) and -> -inf as |c| -> inf. escape_time therefore returns
+
+    nu = nu0 if nu0 >= 1 else exp(nu0 - 1),
+
+which keeps the classic count wherever it is >= 1 (all of the Mandelbrot view |c| <= 6.9) and
+continues it below 1 with the same value and slope at the join: nu is > 0 for every escaping point,
+continuous, and decreasing outward, while INTERIOR = -1 stays the one negative value. Points that
 stay bounded for `max_iter` iterations are taken to be inside the set. The arithmetic is float64, so
 views down to a width of ~1e-12 stay sharp.
 """
@@ -21,7 +30,10 @@ from ._checks import check_float, check_image_size, check_int, check_vec
 
 wp.set_module_options({"enable_backward": False})
 
-BAILOUT = 256.0  # escape radius R: large, so that nu is smooth (log2 log R = 3)
+# Escape radius R. z_{n+1} = z_n^2 + c rather than z_n^2 makes nu0 jump by about
+# |c| / (R^2 ln(R^2) ln 2) across each contour |z_n| = R (2e-5 at c = 15 for R = 256); at R = 2^20
+# that is < 1e-12, far below float32, for 2 more iterations per escaping point.
+BAILOUT = 2.0**20
 INTERIOR = -1.0  # escape_time's value for points that never escaped
 MAX_ITERATIONS = 1_000_000
 MANDELBROT, JULIA = 0, 1
@@ -29,22 +41,24 @@ MANDELBROT, JULIA = 0, 1
 
 @wp.func
 def smooth_escape(z0: wp.vec2d, c: wp.vec2d, max_iter: int):
-    """nu = n + 1 - log2(log|z_n|) for the first |z_n| > BAILOUT, or INTERIOR if none by max_iter."""
+    """nu (module docstring) for the first |z_n| > BAILOUT, n <= max_iter, or INTERIOR if none."""
     x = z0[0]
     y = z0[1]
     r2_max = wp.float64(BAILOUT * BAILOUT)
-    for n in range(max_iter):
+    for n in range(max_iter + 1):
         x2 = x * x
         y2 = y * y
         if x2 + y2 > r2_max:
-            log_abs = wp.float64(0.5) * wp.log(x2 + y2)
-            return float(n) + 1.0 - wp.log2(float(log_abs))
+            # log|z| from the larger component, as x2 + y2 overflows for |z| > 1e154 (|c| that large)
+            big = wp.max(wp.abs(x), wp.abs(y))
+            ratio = wp.min(wp.abs(x), wp.abs(y)) / big
+            log_abs = wp.log(big) + wp.float64(0.5) * wp.log(wp.float64(1.0) + ratio * ratio)
+            nu0 = wp.float64(n) + wp.float64(1.0) - wp.log2(log_abs)
+            if nu0 < wp.float64(1.0):
+                nu0 = wp.exp(nu0 - wp.float64(1.0))  # far outside: positive, C1 at the join
+            return float(nu0)
         y = wp.float64(2.0) * x * y + c[1]
         x = x2 - y2 + c[0]
-    x2 = x * x
-    y2 = y * y
-    if x2 + y2 > r2_max:
-        return float(max_iter) + 1.0 - wp.log2(float(wp.float64(0.5) * wp.log(x2 + y2)))
     return INTERIOR
 
 
@@ -73,14 +87,14 @@ def palette(t: float):
 
 @wp.kernel
 def colour_kernel(row0: int, nu: wp.array2d(dtype=float), image: wp.array3d(dtype=float)):
-    """Interior black; outside, the palette at sqrt(nu) (colour bands widen gently away from the
-    set), squared per channel for contrast."""
+    """Interior black; outside, the palette at sqrt(nu) (nu > 0: colour bands widen gently away from
+    the set), squared per channel for contrast."""
     i, j = wp.tid()
     row = row0 + i
     value = nu[row, j]
     rgb = wp.vec3(0.0, 0.0, 0.0)
     if value != INTERIOR:
-        base = palette(0.15 * wp.sqrt(wp.max(value, 0.0)) + 0.55)
+        base = palette(0.15 * wp.sqrt(value) + 0.55)
         rgb = wp.cw_mul(base, base)
     image[row, j, 0] = rgb[0]
     image[row, j, 1] = rgb[1]
@@ -129,8 +143,9 @@ def escape_time(width: int, height: int, center=(-0.5, 0.0), scale: float = 3.0,
         device: "cpu" or "cuda[:N]"; threads: CPU worker threads (default all cores).
 
     Returns:
-        (height, width) float32: nu = n + 1 - log2(log|z_n|) > 0 for escaping points, and
-        INTERIOR = -1 for points still bounded after max_iter iterations.
+        (height, width) float32: nu > 0 for escaping points, nu = n + 1 - log2(log|z_n|) where that
+        is >= 1, else exp(n - log2(log|z_n|)) (module docstring), and INTERIOR = -1 for points still
+        bounded after max_iter iterations.
     """
     kind, c = (MANDELBROT, (0.0, 0.0)) if c is None else (JULIA, c)
     return _escape(kind, width, height, center, scale, max_iter, c, device, threads).numpy()
