@@ -634,7 +634,7 @@ def test_common_obj_layouts_are_read_by_numpy_as_trimesh_reads_them(tmp_path, mo
     path = tmp_path / "m.obj"
     path.write_bytes(text.replace("\n", "\r\n").encode() if variant == "crlf" else text.encode())
     reference = loading._trimesh_load(str(path), None)
-    monkeypatch.setattr(loading, "_trimesh_load", lambda *args: pytest.fail("trimesh was asked"))
+    monkeypatch.setattr(loading, "_trimesh_load", lambda *args, **kwargs: pytest.fail("trimesh was asked"))
     loaded = load_mesh(path)
     assert same_corners(loaded, reference)
     vertices, uvs, normals, faces, tex, norm = obj_data(vt_columns=vt_columns, unused=unused)
@@ -684,18 +684,66 @@ def test_polygon_faces_keep_their_corners_uvs_and_normals(tmp_path, name):
     assert np.all(edges[:, 2] > 0) and np.isclose(0.5 * edges[:, 2].sum(), shoelace)
 
 
-@pytest.mark.parametrize("case", ["quads", "two materials", "negative index"])
+def relative_obj(corners: int, layout: str, relative: bool) -> str:
+    """Two `corners`-gons, each after its own `v`, `vt` and `vn` lines (the second face's corners
+    with the second block's uv / normal), the corners written `a`, `a/t`, `a//n` or `a/t/n` with
+    indices absolute or `relative` (-1: the last line of its key above the face)."""
+    angles = 2 * np.pi * np.arange(corners) / corners
+    lines = []
+    for block in range(2):
+        lines += [f"v {np.cos(a) + 3 * block:.6f} {np.sin(a):.6f} {block}" for a in angles]
+        lines += [f"vt {(np.cos(a) + 1) / 2:.6f} {(np.sin(a) + 1) / 2:.6f}" for a in angles]
+        lines += [f"vn 0 {0.6 * block:.1f} {1 - 0.2 * block:.1f}"]
+        index = [k - corners if relative else block * corners + k + 1 for k in range(corners)]
+        normal = -1 if relative else block + 1
+        forms = {"a": "{v}", "a/t": "{v}/{v}", "a//n": "{v}//{n}", "a/t/n": "{v}/{v}/{n}"}
+        lines.append("f " + " ".join(forms[layout].format(v=i, n=normal) for i in index))
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("layout", ["a", "a/t", "a//n", "a/t/n"])
+@pytest.mark.parametrize("corners", [3, 4, 5])
+def test_relative_indices_read_as_the_absolute_ones(tmp_path, corners, layout):
+    """Negative (relative) `v` / `vt` / `vn` indices name the lines above their face: the file reads
+    as the same one with positive indices -- the same vertices, faces, normals, uvs and welds --,
+    triangles (numpy's reader) and polygons (trimesh's) alike. trimesh counted them from the end of
+    the file: the first face landed on the second's vertices (4 vertices for 8 in a quad file, its
+    faces [[0, 1, 2], [0, 1, 2], [2, 3, 0], [2, 3, 0]] for [[0, 1, 2], [4, 5, 6], [2, 3, 0], [6, 7, 4]])."""
+    meshes = []
+    for relative in (False, True):
+        path = tmp_path / f"{relative}.obj"
+        path.write_text(relative_obj(corners, layout, relative))
+        meshes.append(load_mesh(path))
+    absolute, relative = meshes
+    assert absolute.n_faces == 2 * (corners - 2) and absolute.n_vertices == 2 * corners
+    for field in ("vertices", "faces", "normals", "uvs", "welds"):
+        a, b = getattr(absolute, field), getattr(relative, field)
+        assert (a is None) == (b is None), field
+        if a is not None:
+            np.testing.assert_array_equal(a, b, err_msg=field)
+    assert (absolute.normals is None) == (layout not in ("a//n", "a/t/n"))
+    assert (absolute.uvs is None) == (layout not in ("a/t", "a/t/n"))
+
+
+def test_a_relative_index_before_the_first_line_is_named(tmp_path):
+    path = tmp_path / "far.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf -5 -3 -2 -1\n")
+    with pytest.raises(MeshError, match=r"far\.obj:5: face index -5 out of range \(file has 4 vertices\)"):
+        load_mesh(path)
+
+
+@pytest.mark.parametrize("case", ["quads", "two materials"])
 def test_other_obj_layouts_are_left_to_trimesh(tmp_path, monkeypatch, case):
-    """Quads, several materials and negative indices: trimesh reads these, and load_mesh gives its mesh."""
+    """Quads and several materials: trimesh reads these, and load_mesh gives its mesh."""
     from difflab.geometry import loading
 
-    text = {"quads": obj_file("a//n", quads=True), "two materials": obj_file("a", extra_lines=["usemtl b", "f 1 2 3"]),
-            "negative index": obj_file("a", extra_lines=["f -1 -2 -3"])}[case]
+    text = {"quads": obj_file("a//n", quads=True),
+            "two materials": obj_file("a", extra_lines=["usemtl b", "f 1 2 3"])}[case]
     path = tmp_path / "m.obj"
     path.write_text(text)
     asked = []
     trimesh_load = loading._trimesh_load
-    monkeypatch.setattr(loading, "_trimesh_load", lambda *args: asked.append(1) or trimesh_load(*args))
+    monkeypatch.setattr(loading, "_trimesh_load", lambda *args, **kwargs: asked.append(1) or trimesh_load(*args, **kwargs))
     loaded = load_mesh(path)
     assert asked and same_mesh(loaded, trimesh_load(str(path), None))
 

@@ -152,7 +152,7 @@ def load_mesh(path) -> TriMesh:
         raise MeshError(f"{path}: not a file")
     require_memory(os.path.getsize(path) * MESH_FILE_BYTES, f"{path}: loading a mesh file of "
                    f"{os.path.getsize(path)} bytes", MeshError)
-    text = None  # an OBJ file's text, as `read_obj` finds it
+    text = None  # an OBJ file's text, as `read_obj` finds it (its `data`: indices made absolute)
     if path.lower().endswith(".obj"):
         data = _read_obj(path)
         text = read_obj(data)
@@ -162,9 +162,9 @@ def load_mesh(path) -> TriMesh:
         vertices, faces, normals, uvs, welds = text.arrays
         mesh = TriMesh(vertices, faces, normals, uvs, name=path, welds=welds)
     else:
-        mesh = _trimesh_load(path, data if text is not None and text.plain else None)
+        mesh = _trimesh_load(path, None if text is None else text.data, plain=text is not None and text.plain)
         if text is not None and mesh.uvs is not None and mesh.normals is None:  # trimesh split `v`s per uv
-            mesh = with_file_welds(mesh, data)
+            mesh = with_file_welds(mesh, text.data)
     if text is not None and text.plain and (
             not text.vertices_parse or mesh.n_faces != text.n_face_lines  # a garbled vertex, a dropped face
             or not np.all(np.abs(mesh.vertices) <= MAX_COORD)):  # or a value is out of range
@@ -223,20 +223,26 @@ def by_positions(points: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, n
     return corners[rows[:, None], turn][order], keys[order]
 
 
-def _trimesh_load(path: str, plain_data: bytes | None) -> TriMesh:
-    """The file read by trimesh (several geometries concatenated, node transforms applied).
-    `plain_data`: the text of a plain OBJ, which the line scan checks when trimesh fails on it."""
+def _trimesh_load(path: str, obj: bytes | None = None, plain: bool = False) -> TriMesh:
+    """The file read by trimesh (several geometries concatenated, node transforms applied); `obj`:
+    an OBJ file's text to read instead (its indices made absolute: `absolute_indices`; `mtllib`
+    files still found beside `path`). `plain`: `obj` is plain text, which the line scan checks when
+    trimesh fails on it."""
     try:
         import trimesh
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            loaded = trimesh.load(path, process=False, maintain_order=False)
+            if obj is None:
+                loaded = trimesh.load(path, process=False, maintain_order=False)
+            else:
+                loaded = trimesh.load(io.BytesIO(obj), file_type="obj", resolver=trimesh.resolvers.FilePathResolver(path),
+                                      process=False, maintain_order=False)
     except MeshError:
         raise
     except Exception as exc:  # trimesh raises many kinds on bad input
-        if plain_data is not None:  # the line scan names the problem better where it finds one
-            _scan_obj_lines(plain_data.decode("utf-8", errors="replace").splitlines(), path)
+        if plain:  # the line scan names the problem better where it finds one
+            _scan_obj_lines(obj.decode("utf-8", errors="replace").splitlines(), path)
         raise MeshError(f"{path}: cannot read mesh: {type(exc).__name__}: {exc}") from None
     parts = _to_trimesh_list(loaded, path)
     if not parts:

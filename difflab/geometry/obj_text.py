@@ -13,12 +13,14 @@ continuations. With `a` corners the faces are kept as written over every vertex;
 normal indices, each distinct (v, t, n) a corner uses is one vertex (`unmerged`: a vertex met with
 two uvs, at a uv seam, or two normals, at a crease, is split), as trimesh's `unmerge_faces` does
 -- the same triangles, corner by corner, though the two may order the vertices differently.
-Anything else (polygons, negative indices, several materials, an index past its list) gives no
-arrays, and trimesh reads the file.
+Anything else (polygons, several materials, an index past its list) gives no arrays, and trimesh
+reads the file. Negative (relative) indices are made absolute first (`absolute_indices`), for
+every reader.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import re
@@ -42,13 +44,15 @@ class ObjText:
     """What `read_obj` found: `plain` (see the module doc), the numbers of `v` and `f` lines, whether
     the `v` lines parse as 3 numbers each (plain text only), and (vertices, faces, normals or None,
     uvs or None, welds or None) as trimesh reads them (welds: each vertex's `v` index, 0-based, where
-    vertices were split), or None."""
+    vertices were split), or None; `data`: the text read (CRLF as LF, indices made absolute:
+    `absolute_indices`), which trimesh reads where these arrays are None."""
 
     plain: bool
     n_vertex_lines: int
     n_face_lines: int
     vertices_parse: bool = False
     arrays: tuple | None = None
+    data: bytes = b""
 
 
 def line_keys(data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -117,11 +121,20 @@ def table(text: bytes, key: bytes, dtype) -> np.ndarray | None:
 
 
 def read_obj(data: bytes) -> ObjText:
-    """Classify and, where it can, read OBJ text (see the module doc)."""
+    """Classify and, where it can, read OBJ text (see the module doc); relative indices are made
+    absolute first (`absolute_indices`), and the text read is the result's `data`."""
     data = data.replace(b"\r\n", b"\n") if b"\r" in data else data
     if b"\r" in data:  # a carriage return inside a line: checked line by line
-        return ObjText(False, 0, 0)
-    starts, ends, code = line_keys(data)
+        return ObjText(False, 0, 0, data=data)
+    keys = line_keys(data)
+    if b"-" in key_lines(data, *keys, F)[0]:
+        data = absolute_indices(data, *keys)
+        keys = line_keys(data)
+    return dataclasses.replace(_classify(data, *keys), data=data)
+
+
+def _classify(data: bytes, starts, ends, code) -> ObjText:
+    """`read_obj` of text without CR, split into lines (`line_keys`)."""
     if not code.size or (code == OTHER).any() or np.count_nonzero(np.diff(code)) >= MAX_RUNS:
         return ObjText(False, 0, 0)
     vertex_text, n_vertices = key_lines(data, starts, ends, code, V)
@@ -189,28 +202,49 @@ def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, corners: 
     return (vertices[welds], faces, *finite, welds)
 
 
+def absolute_indices(data: bytes, starts, ends, code) -> bytes:
+    """OBJ text (split into lines by `line_keys`) with every negative (relative) index of its `f`
+    lines made the absolute one it names -- a corner's `v`, `vt` and `vn` index alike: -1 is the
+    last line of that key above the face --, so that every reader (numpy's, trimesh's,
+    `fan_corners`) sees the faces of the same file with positive indices (trimesh counts relative
+    indices from the end of the file). Only the `f` lines holding a '-' change (their comments kept,
+    line breaks kept: line numbers still name the file's lines); an index before the first line
+    stays <= 0, for the line scan to name. (A Python loop over those lines: ~8 us a face.)"""
+    above = np.stack([np.cumsum(code == key) for key in (V, VT, VN)], axis=1) + 1  # per line: 1 + lines of each key
+    pieces, done = [], 0
+    for line in np.flatnonzero(code == F):
+        body, hash_, comment = data[starts[line]:ends[line]].partition(b"#")
+        if b"-" not in body:
+            continue
+        base = above[line].tolist()
+        corners = [corner if b"-" not in corner else b"/".join(
+            b"%d" % (base[k] + int(part)) if k < 3 and part[:1] == b"-" and part[1:].isdigit() else part
+            for k, part in enumerate(corner.split(b"/"))) for corner in body[2:].split()]
+        pieces += [data[done:starts[line]], b"f " + b" ".join(corners) + (b" " + hash_ + comment if hash_ else b"")]
+        done = ends[line]
+    return b"".join(pieces) + data[done:]
+
+
 def fan_corners(data: bytes) -> np.ndarray | None:
     """(T, 3) int64: each corner's `v` index (0-based) of the triangles OBJ text's `f` lines make, in
-    file order, a polygon a b c d ... as the fan (a, b, c), (a, c, d), ... (trimesh's triangulation); a
-    negative (relative) index counts back from the `v` lines before its face. None where a corner
-    does not parse or a face has fewer than 3 corners."""
+    file order, a polygon a b c d ... as the fan (a, b, c), (a, c, d), ... (trimesh's triangulation);
+    indices absolute (`absolute_indices`). None where a corner does not parse, is not positive, or a
+    face has fewer than 3 corners."""
     data = data.replace(b"\r\n", b"\n")
     starts, ends, code = line_keys(data)
     face_text, n_faces = key_lines(data, starts, ends, code, F)
     if not n_faces:
         return None
-    n_before = np.cumsum(code == V)[code == F]  # the `v` lines above each face line
     tokens = np.array(re.sub(rb"/\S*|#[^\n]*", b"", face_text).split())  # keys and vertex indices
     is_key = tokens == b"f"
     try:
-        index = tokens[~is_key].astype(np.int64)
+        index = tokens[~is_key].astype(np.int64) - 1
     except ValueError:
         return None
     face = np.cumsum(is_key)[~is_key] - 1  # each corner's face line
     counts = np.bincount(face, minlength=n_faces)
-    if counts.min() < 3:
+    if counts.min() < 3 or index.min() < 0:
         return None
-    index = np.where(index > 0, index - 1, n_before[face] + index)
     first = np.cumsum(counts) - counts  # each face's first corner
     fans = counts - 2
     owner = np.repeat(np.arange(n_faces), fans)
