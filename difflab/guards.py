@@ -6,7 +6,7 @@ name the object and file of a mesh that cannot be rendered, and refuse to return
     object_errors(index, obj)             around building an object's mesh: errors name the object
     check_world_mesh(mesh, index, obj)    after transforming it: coordinates within +-MAX_COORD
     check_mesh_uvs(mesh, index, obj, material)  a textured material's mesh has uvs
-    check_image(image, scene)             before returning: no NaN / inf, with the likely cause named
+    check_image(image, scene, bad, textures)  before returning: no NaN / inf, with the likely cause named
 """
 
 from __future__ import annotations
@@ -111,13 +111,18 @@ def _numbers(value, path: str):
         yield path, float(value)
 
 
-def likely_causes(scene, count: int = 3) -> str:
+def likely_causes(scene, count: int = 3, textures=None) -> str:
     """The `count` numbers of largest magnitude in the scene's materials, lights, ambient, background
-    and fog, as 'path = value' (where float32 shading overflows first), or the smallest non-zero
-    attenuation (a light that divides by nearly zero)."""
+    and fog, and the largest texel of each material's texture (`textures`: a `TextureStore`, its
+    `paths` and `largest()`), as 'path = value' (where float32 shading overflows first), or the
+    smallest non-zero attenuation (a light that divides by nearly zero)."""
     d = scene.to_dict()
     values = [(p, x) for key in ("materials", "lights", "ambient", "background", "fog")
               for p, x in _numbers(d.get(key), key)]
+    if textures is not None:
+        peak = dict(zip(textures.paths, textures.largest()))
+        values += [(f"materials.{name}.texture ({limits.short_path(mat.texture)}) largest texel", peak[mat.texture])
+                   for name, mat in scene.materials.items() if mat.texture in peak]
     ranked = sorted(values, key=lambda px: -abs(px[1]))[:count]
     shown = ", ".join(f"{p} = {x:.3g}" for p, x in ranked)
     tiny = [(p, x) for p, x in values if ".attenuation[" in p and 0 < x < 1e-20]
@@ -133,12 +138,12 @@ def nonfinite_pixels(pixels: np.ndarray) -> int:
     return int(np.count_nonzero(~np.isfinite(pixels).all(axis=-1)))
 
 
-def check_image(image: np.ndarray | None, scene, bad: int | None = None) -> None:
-    """RenderError if `image` has NaN or infinite values, with their count and the likely cause;
-    `bad`: that count when the renderer has it already (else the image is scanned; None: a frame
-    without image, `bad` given)."""
+def check_image(image: np.ndarray | None, scene, bad: int | None = None, textures=None) -> None:
+    """RenderError if `image` has NaN or infinite values, with their count and the likely cause
+    (`likely_causes`, texels of `textures` among them); `bad`: that count when the renderer has it
+    already (else the image is scanned; None: a frame without image, `bad` given)."""
     bad = nonfinite_pixels(image) if bad is None else bad
     if bad:
         total = scene.camera.width * scene.camera.height if image is None else image.shape[0] * image.shape[1]
         raise RenderError(f"render: {bad} of {total} pixels are not finite (float32 "
-                          f"overflow); the largest numbers in the scene: {likely_causes(scene)}")
+                          f"overflow); the largest numbers in the scene: {likely_causes(scene, textures=textures)}")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import scene_dict
-from difflab import DifflabError, TextureError, load_image, render, render_frame
+from difflab import DifflabError, RenderError, TextureError, load_image, render, render_frame
 from difflab._warp import wp
 from difflab.io import save_image
 from difflab.renderers.camera import camera_struct, projection_matrix, view_matrix
@@ -376,6 +376,32 @@ def test_a_texture_deleted_after_loading_the_scene_raises_at_render(tmp_path):
     path.unlink()
     with pytest.raises(TextureError, match="gone.png"):
         render(scene)
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({(0, 0, 0): -1.0, (1, 1, 2): -0.25}, r"neg\.npy: texture has 2 negative texel values \(least -1\); .* >= 0"),
+    ({(0, 0, 0): np.nan, (1, 0, 1): np.inf, (1, 1, 1): -np.inf}, r"neg\.npy: texture has 3 non-finite texel values"),
+])
+def test_a_negative_or_non_finite_texel_raises_texture_error_naming_the_file(tmp_path, bad, message):
+    """A texel scales a coefficient, which must be >= 0: the old code rendered a -1 texture to a
+    minimum of -96.3 (negative light) while a scene's negative kd was refused."""
+    texels = np.full((2, 2, 3), 0.5, np.float32)
+    for index, value in bad.items():
+        texels[index] = value
+    np.save(tmp_path / "neg.npy", texels)
+    with pytest.raises(TextureError, match=message):
+        load_texture(tmp_path / "neg.npy")
+    with pytest.raises(TextureError, match=message):
+        render(scene_dict([QUAD], {"m": {"texture": str(tmp_path / "neg.npy")}}))
+
+
+def test_an_overflow_report_names_a_huge_texture_first(tmp_path):
+    """1e30 texels times kd 1e9 overflow float32: the report named only kd (1e9) before."""
+    np.save(tmp_path / "big.npy", np.full((2, 2, 3), 1e30, np.float32))
+    light = {"type": "directional", "direction": [0, 0, -1], "intensity": [1, 1, 1]}
+    with pytest.raises(RenderError, match=r"the largest numbers in the scene: materials\.m\.texture \(\S*big\.npy\) "
+                                          r"largest texel = 1e\+30, materials\.m\.kd\[0\] = 1e\+09"):
+        render(scene_dict([QUAD], {"m": {"kd": 1e9, "texture": str(tmp_path / "big.npy")}}, lights=[light]))
 
 
 def test_an_unreadable_texture_raises_texture_error(tmp_path):

@@ -131,5 +131,5 @@ def draw(scene, overrides: dict, device, width, height, threads, keep: bool, spe
 
         frame = raytrace(compiled, settings, threads, record_tree=keep, use_item_buffer=speedups[0],
                          use_light_buffer=speedups[1])
-    check_image(frame.image, compiled.scene, frame.stats["nonfinite_pixels"])  # no NaN / inf is returned
+    check_image(frame.image, compiled.scene, frame.stats["nonfinite_pixels"], compiled.textures)  # no NaN / inf
     return frame if image or frame.image is None else replace(frame, image=None)

@@ -49,8 +49,8 @@ class Material(Record):
     f0: float = spec_field(Spec("number", "Schlick reflectance at normal incidence (torrance model)", "",
                                 bounds(ge=0, le=1)), 0.04)
     checker: Checker | None = spec_field(Spec("record", "procedural checkerboard", record=Checker, nullable=True), None)
-    texture: str | None = spec_field(Spec("file", "image texture (PNG, ...; 8-bit files are sRGB-decoded)",
-                                          nullable=True), None)
+    texture: str | None = spec_field(Spec("file", "image texture: a PNG / TIFF (8- or 16-bit, sRGB-decoded unless a "
+                                          "PNG declares another gamma) or .npy (linear floats, >= 0)", nullable=True), None)
     filter: str = spec_field(Spec("choice", "texture filter", options=TEXTURE_FILTERS), "bilinear")
     wrap: str = spec_field(Spec("choice", "texture coordinates outside [0, 1]", options=TEXTURE_WRAPS), "repeat")
     texture_target: str = spec_field(Spec("choice", "the coefficient the texture modulates", options=TEXTURE_TARGETS),

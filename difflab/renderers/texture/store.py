@@ -23,23 +23,37 @@ from ..._warp import wp
 
 from ...errors import DifflabError, TextureError
 from ...io import read_image
-from ...limits import TEXEL_BYTES, require_count, require_memory
+from ...limits import TEXEL_BYTES, require_count, require_memory, short_path
 from .sampling import TexturesW
 
 
 def load_texture(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
-    """A texture image as linear float32 (H, W, 3), row 0 at the top (8-bit files are sRGB-decoded
-    when `srgb`; .npy files are taken as linear). Raises TextureError naming the path if the file is
-    missing, a folder, unreadable, empty or not finite (`io.read_image`'s checks)."""
+    """A texture image as linear float32 (H, W, 3), row 0 at the top: `io.load_image`'s decoding
+    (8- and 16-bit PNG / TIFF samples through the file's transfer function when `srgb` -- sRGB unless
+    a PNG's gAMA chunk declares another gamma; .npy files are linear). Raises TextureError naming
+    the path if the file is missing, a folder, unreadable (`io.read_image`'s checks), empty, or holds
+    non-finite or negative values (`check_texels`)."""
     try:
         image = read_image(path, srgb, what="texture").image
     except DifflabError as exc:
         raise TextureError(str(exc)) from None
     if image.shape[0] < 1 or image.shape[1] < 1:
         raise TextureError(f"{path}: texture is empty ({image.shape})")
-    if not np.all(np.isfinite(image)):
-        raise TextureError(f"{path}: texture has non-finite texels")
+    check_texels(image, path)
     return image
+
+
+def check_texels(image: np.ndarray, path) -> None:
+    """TextureError naming `path` if a texel value is non-finite or negative (a texel scales a
+    coefficient, and coefficients are >= 0), with the count and the worst value."""
+    finite = np.isfinite(image)
+    if not finite.all():
+        bad = image[~finite]
+        raise TextureError(f"{short_path(path)}: texture has {bad.size} non-finite texel values (e.g. {bad[0]}); "
+                           "texels must be finite and >= 0")
+    if image.min() < 0:
+        raise TextureError(f"{short_path(path)}: texture has {np.count_nonzero(image < 0)} negative texel values "
+                           f"(least {image.min():.6g}); texels scale a coefficient, so they must be >= 0")
 
 
 def footprint_weights(w: int) -> tuple[np.ndarray, np.ndarray]:
@@ -100,6 +114,10 @@ class TextureStore:
     @classmethod
     def from_paths(cls, paths, device: str = "cpu") -> TextureStore:
         return cls.from_images([load_texture(p) for p in paths], device, paths)
+
+    def largest(self) -> list[float]:
+        """Per texture, its largest texel value (level 0), for the overflow report (`guards.check_image`)."""
+        return [float(np.abs(pyramid[0]).max()) for pyramid in self.pyramids]
 
 
 def pack(pyramids, device: str) -> TexturesW:
