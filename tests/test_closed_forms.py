@@ -145,6 +145,22 @@ def test_attenuated_point_light_on_a_plane(method):
     np.testing.assert_allclose(render(scene, method=method), want, rtol=2e-5, atol=1e-6)
 
 
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+@pytest.mark.parametrize("thickness", [1e-150, 1e-160, 1e-250])
+def test_a_box_squashed_to_a_sheet_is_lit_face_on(method, thickness):
+    """A unit box scaled to `thickness` in z, seen face-on under a directional light along
+    -(1, 1, 3): over its footprint |x|, |y| < 1/2 every pixel is kd (N.L) = kd 3 / sqrt(11), however
+    thin the box (the rasterizer drew it black below ~1e-154: |A^-T n|^2 overflowed)."""
+    kd = np.array([0.7, 0.5, 0.3])
+    scene = scene_dict([{"type": "mesh", "builtin": "box", "material": "m",
+                         "transform": {"scale": [1, 1, thickness]}}], {"m": {"kd": kd.tolist()}}, camera=ORTHO,
+                       lights=[{"type": "directional", "direction": [-1, -1, -3]}])
+    x, y = ortho_pixel_centres(16, 16)
+    inside = (np.abs(x) < 0.5) & (np.abs(y) < 0.5)
+    want = np.where(inside[..., None], kd * 3 / math.sqrt(11), 0.0)
+    np.testing.assert_allclose(render(scene, method=method), want, atol=1e-6)
+
+
 # ---- fog --------------------------------------------------------------------------------------
 
 

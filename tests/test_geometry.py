@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from conftest import POLYGONS, polygon_obj
 from difflab.errors import MeshError
-from difflab.geometry import (TriMesh, box, concatenate, cylinder, face_areas, face_normals,
+from difflab.geometry import (TriMesh, apply_to_normals, box, concatenate, cylinder, face_areas, face_normals,
                               load_mesh, quad, rotation_matrix, teapot, teapot_control_points,
                               teapot_patches, transform_matrix, uv_sphere, vertex_normals, weld)
 
@@ -382,6 +382,22 @@ def test_transformed_mirror_keeps_outward_winding_and_rejects_singular():
         m.transformed(transform_matrix(scale=(0, 1, 1)))
     with pytest.raises(MeshError):
         m.transformed(np.eye(3))
+
+
+@pytest.mark.parametrize("scale", [(1, 1, 1e-160), (1e-150, 1, 1), (1, 1e160, 1), (-1e-160, 1e140, 1)])
+def test_transformed_normals_survive_tiny_and_huge_scales(scale):
+    # A box's face normals are the axes under any axis scale (sign flipped by a mirror). The old
+    # |A^-T n| squared 1e160 to inf, so those normals came out zero with an overflow warning.
+    m = box()
+    out = m.transformed(transform_matrix(scale=scale))
+    np.testing.assert_array_equal(out.normals, m.normals * np.sign(scale))
+
+
+def test_apply_to_normals_keeps_tiny_rows_and_refuses_a_singular_matrix():
+    np.testing.assert_array_equal(apply_to_normals(np.eye(4), [[1e-320, 0, 0], [0, 3e300, 4e300], [0, 0, 0]]),
+                                  [[1, 0, 0], [0, 0.6, 0.8], [0, 0, 0]])
+    with pytest.raises(ValueError, match="singular"):
+        apply_to_normals(np.diag([1.0, 0.0, 1.0, 1.0]), [[1, 0, 0]])
 
 
 @HYPOTHESIS

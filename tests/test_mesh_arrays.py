@@ -60,6 +60,8 @@ BAD = [
     ({"vertices": VERTICES, "faces": FACES, "uvs": UVS[:3]}, r"objects\[0\]: uvs must have shape \(4, 2\), got \(3, 2\)"),
     ({"vertices": VERTICES, "faces": FACES, "normals": np.ones((4, 3)) * np.inf},
      r"objects\[0\]: normals are not all finite"),
+    ({"vertices": VERTICES, "faces": FACES, "normals": [[0, 0, 1], [0, 0, 1], [0, 0, 0], [0, 0, 1]]},
+     r"objects\[0\]\.normals\[2\]: must not be zero-length \(a normal is a direction\)$"),
     ({"builtin": "quad", "uvs": UVS}, r"objects\[0\]\.uvs: only used with 'vertices'"),
 ]
 

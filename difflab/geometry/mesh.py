@@ -10,6 +10,7 @@ import numpy as np
 from difflab.errors import MeshError
 
 from .normals import vertex_normals
+from .transforms import apply_to_normals
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -127,7 +128,7 @@ class TriMesh:
 
         Points get the full affine map (with a homogeneous divide if the last row is not
         [0, 0, 0, 1]); normals get the inverse-transpose of the upper-left 3x3 block and are
-        renormalised (zero normals stay zero). If the 3x3 block has a negative determinant (a
+        renormalised (`apply_to_normals`: no overflow for tiny or huge scales; zero normals stay zero). If the 3x3 block has a negative determinant (a
         mirror), the face winding is reversed so that faces stay counter-clockwise seen from the
         outside. A singular matrix raises `MeshError`. uvs are unchanged.
         """
@@ -148,12 +149,7 @@ class TriMesh:
             if np.any(np.abs(w) < 1e-300):
                 raise MeshError(f"{self.name}: projective transform sends a vertex to infinity")
             points = mapped[:, :3] / w
-        normals = None
-        if self.normals is not None:
-            normal_matrix = np.linalg.inv(linear).T
-            normals = self.normals @ normal_matrix.T
-            length = np.linalg.norm(normals, axis=1, keepdims=True)
-            normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
+        normals = None if self.normals is None else apply_to_normals(linear, self.normals)
         faces = self.faces if det > 0 else self.faces[:, ::-1]
         return TriMesh(points, faces, normals, self.uvs, name=self.name, welds=self.welds)
 

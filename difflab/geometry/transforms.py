@@ -87,10 +87,22 @@ def apply_to_points(matrix, points) -> np.ndarray:
 
 
 def apply_to_normals(matrix, normals) -> np.ndarray:
-    """(N, 3) normals mapped by the inverse-transpose of the 3x3 part of `matrix`, renormalised
-    (zero rows stay zero)."""
+    """(N, 3) unit normals mapped by the inverse-transpose of the 3x3 part A of `matrix`; zero rows
+    stay zero.
+
+    A^-T is taken as sign(det A) cof(A) (= |det A| A^-T, cof(A) rows: a1 x a2, a2 x a0, a0 x a1 of
+    A's rows a_k): no inverse, so a nearly singular A (a scale of 1e-160) cannot overflow it. Each
+    mapped normal is divided by its largest |component| before its length is taken, so a length
+    of 1e160 or 1e-160 neither overflows nor underflows. A singular A (det 0) raises ValueError.
+    """
     m = np.asarray(matrix, dtype=np.float64)[:3, :3]
-    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3) @ np.linalg.inv(m)
+    det = np.linalg.det(m)
+    if not np.isfinite(det) or det == 0.0:
+        raise ValueError(f"the 3x3 part of the matrix is singular (det = {det}): normals are undefined")
+    cofactor = np.stack([np.cross(m[1], m[2]), np.cross(m[2], m[0]), np.cross(m[0], m[1])])
+    n = np.sign(det) * np.asarray(normals, dtype=np.float64).reshape(-1, 3) @ cofactor.T
+    biggest = np.abs(n).max(axis=1, keepdims=True)
+    n = np.divide(n, biggest, out=np.zeros_like(n), where=biggest > 0)
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 

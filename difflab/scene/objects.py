@@ -116,13 +116,17 @@ ARRAY_FIELDS = ("vertices", "faces", "normals", "uvs")
 
 def _arrays(v: dict, path: str) -> dict:
     """vertices (V, 3), faces (F, 3) and optional normals (V, 3), uvs (V, 2), validated as a file's
-    mesh is (`geometry.TriMesh`: finite, indices in range, at least one face), read-only arrays."""
+    mesh is (`geometry.TriMesh`: finite, indices in range, at least one face), read-only arrays.
+    A normal is a direction, so a zero row is an error, as any zero-length direction in a scene."""
     if v["faces"] is None:
         fail(join(path, "faces"), "required with 'vertices'")
     try:
         mesh = TriMesh(v["vertices"], v["faces"], v["normals"], v["uvs"], name=path)
     except MeshError as exc:
         raise SceneError(str(exc)) from None
+    zero = [] if mesh.normals is None else np.flatnonzero(~np.any(mesh.normals != 0.0, axis=1))
+    if len(zero):
+        fail(f"{join(path, 'normals')}[{zero[0]}]", "must not be zero-length (a normal is a direction)")
     return {"vertices": mesh.vertices, "faces": mesh.faces, "normals": mesh.normals, "uvs": mesh.uvs}
 
 
@@ -152,7 +156,7 @@ class Mesh(Record):
     vertices: np.ndarray | None = _array_field(3, NUMBERS, "(V, 3) vertex positions")
     faces: np.ndarray | None = _array_field(3, {"type": "integer", "minimum": 0},
                                             "(F, 3) vertex indices, counter-clockwise seen from the front")
-    normals: np.ndarray | None = _array_field(3, NUMBERS, "(V, 3) per-vertex normals (with vertices)")
+    normals: np.ndarray | None = _array_field(3, NUMBERS, "(V, 3) per-vertex normals, none of zero length (with vertices)")
     uvs: np.ndarray | None = _array_field(2, NUMBERS, "(V, 2) per-vertex texture coordinates (with vertices)")
     resolution: int = spec_field(
         Spec("integer", "tessellation of a builtin: the teapot's steps per patch side, the sphere's latitude "
