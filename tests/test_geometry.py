@@ -28,6 +28,7 @@ def welded(mesh: TriMesh) -> tuple[np.ndarray, np.ndarray]:
 
 
 def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    vertices = vertices - vertices.mean(axis=0)  # translation-invariant; about the middle, no cancellation
     a, b, c = (vertices[faces[:, k]] for k in range(3))
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
