@@ -4,6 +4,7 @@ sets against known points, the Mandelbulb render, and the failure paths."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -344,6 +345,41 @@ def test_bad_arguments_raise_fractal_errors_naming_them(call, error):
     with pytest.raises(fr.FractalError, match=error.replace("[", r"\[").replace("]", r"\]")) as info:
         call()
     assert isinstance(info.value, DifflabError) and isinstance(info.value, ValueError)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: fr.variogram(fr.diamond_square(5), lags=[0, 4]),  # was numpy's broadcast ValueError
+     r"lags: expected a list of whole grid steps in [1, 32] (a 33 x 33 grid), got [0, 4]"),
+    (lambda: fr.variogram(fr.diamond_square(5), lags=[4, 40]),  # was nan and RuntimeWarnings
+     r"lags: expected a list of whole grid steps in [1, 32] (a 33 x 33 grid), got [4, 40]"),
+    (lambda: fr.variogram(fr.diamond_square(5), lags=[2.5, 4]),  # was truncated to 2 silently
+     r"lags: expected a list of whole grid steps in [1, 32] (a 33 x 33 grid), got [2.5, 4.0]"),
+    (lambda: fr.variogram_slope(np.full((33, 33), np.nan)),  # was nan, silently
+     "heights: 1089 of 1089 values are not finite (NaN or inf)"),
+    (lambda: fr.variogram_slope(np.zeros((33, 33))),  # was nan and a divide-by-zero warning
+     "heights: no height differences at lag 4 (gamma = 0, e.g. a flat grid): log gamma has no slope"),
+    (lambda: fr.variogram_slope(fr.diamond_square(4)),  # one default lag: was a polyfit of one point
+     "lags: a slope needs at least 2 different lags, got [4] (the default below 33 x 33: give lags, e.g. [1, 2, 4])"),
+    (lambda: fr.variogram(np.eye(33) * 1e200),  # was inf and an overflow warning
+     "heights: height differences too large to square in float64 (beyond ~1e154)"),
+    (lambda: fr.box_counting_dimension(fr.cantor_mask(5).astype(int)),  # was "points: expected shape (N, D)"
+     "points_or_image: got shape (243,) of dtype int64, neither a polyline (N, D) of vertices with D in [1, 3] "
+     "nor a boolean image: for a mask of 0/1 cells pass mask.astype(bool)"),
+    (lambda: fr.box_counting_dimension(np.eye(64, dtype=np.uint8)),  # was read as 64 points in 64-D
+     "points_or_image: got shape (64, 64) of dtype uint8, neither a polyline"),
+])
+def test_bad_measure_inputs_raise_one_fractal_error(call, message):
+    with pytest.raises(fr.FractalError, match="^" + re.escape(message)):
+        call()
+
+
+def test_measures_accept_the_edges_of_their_ranges():
+    h = fr.diamond_square(5)
+    lags, gamma = fr.variogram(h, lags=[1, 32])
+    assert gamma[1] == pytest.approx(0.5 * (np.mean((h[32] - h[0]) ** 2) + np.mean((h[:, 32] - h[:, 0]) ** 2)))
+    assert 0.5 < fr.variogram_slope(fr.diamond_square(4), lags=[1, 2, 4]) < 2.5
+    mask = fr.cantor_mask(8)
+    assert fr.box_counting_dimension(mask.astype(int).astype(bool), 3 ** np.arange(6, -1, -1)) == pytest.approx(CANTOR_DIM)
 
 
 @pytest.mark.parametrize("call", [

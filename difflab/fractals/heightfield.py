@@ -136,30 +136,68 @@ def midpoint_displacement(level: int, hurst: float = 0.8, seed: int = 0, sigma: 
     return h
 
 
+def _grid(heights) -> np.ndarray:
+    """`heights` as a finite float64 grid of at least 17 x 17, or a FractalError naming it."""
+    try:
+        h = np.asarray(heights, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise FractalError(f"heights: expected a 2-D grid of numbers, got {type(heights).__name__}") from None
+    if h.ndim != 2 or min(h.shape) < 17:
+        raise FractalError(f"heights: expected a 2-D grid of at least 17 x 17, got shape {h.shape}")
+    bad = np.count_nonzero(~np.isfinite(h))
+    if bad:
+        raise FractalError(f"heights: {bad} of {h.size} values are not finite (NaN or inf)")
+    return h
+
+
+def _lags(lags, h: np.ndarray) -> np.ndarray:
+    """`lags` as int64 grid steps in [1, smaller side - 1] (the default when None), else a FractalError."""
+    longest = min(h.shape) - 1
+    if lags is None:
+        return 2 ** np.arange(2, max(3, int(np.log2(longest // 4)) + 1))
+    arr = np.asarray(lags)
+    whole = arr.dtype != bool and (np.issubdtype(arr.dtype, np.integer) or (
+        np.issubdtype(arr.dtype, np.floating) and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr))))
+    if arr.ndim != 1 or arr.size == 0 or not whole or np.any(arr < 1) or np.any(arr > longest):
+        raise FractalError(f"lags: expected a list of whole grid steps in [1, {longest}] "
+                           f"(a {h.shape[0]} x {h.shape[1]} grid), got {np.asarray(lags).tolist()!r}")
+    return arr.astype(np.int64)
+
+
 def variogram(heights, lags=None) -> tuple[np.ndarray, np.ndarray]:
     """Mean squared height difference against lag along the grid's two axes.
 
     Arguments:
-        heights: (N, N) grid.
-        lags: integer lags in grid steps; default 4, 8, 16, ... up to (N - 1) // 4. The two finest
-            octaves are left out by default: there the last refinement steps' creases (new points
-            beside new points, each with its own displacement) add variance above the power law.
+        heights: (N, N) grid of finite heights, N >= 17.
+        lags: integer lags in grid steps, each in [1, N - 1]; default 4, 8, 16, ... up to
+            (N - 1) // 4. The two finest octaves are left out by default: there the last
+            refinement steps' creases (new points beside new points, each with its own
+            displacement) add variance above the power law.
 
     Returns:
         (lags, gamma) with gamma[k] = mean of (h[i + lag, j] - h[i, j])^2 and (h[i, j + lag] - h[i, j])^2.
     """
-    h = np.asarray(heights, dtype=np.float64)
-    if h.ndim != 2 or min(h.shape) < 17:
-        raise FractalError(f"heights: expected a 2-D grid of at least 17 x 17, got shape {h.shape}")
-    if lags is None:
-        lags = 2 ** np.arange(2, max(3, int(np.log2((min(h.shape) - 1) // 4)) + 1))
-    lags = np.asarray(lags, dtype=np.int64)
-    gamma = np.array([0.5 * (np.mean((h[r:] - h[:-r]) ** 2) + np.mean((h[:, r:] - h[:, :-r]) ** 2))
-                      for r in lags])
+    h = _grid(heights)
+    lags = _lags(lags, h)
+    with np.errstate(over="ignore"):  # reported below, as one error
+        gamma = np.array([0.5 * (np.mean((h[r:] - h[:-r]) ** 2) + np.mean((h[:, r:] - h[:, :-r]) ** 2))
+                          for r in lags])
+    if not np.all(np.isfinite(gamma)):
+        raise FractalError("heights: height differences too large to square in float64 (beyond ~1e154)")
     return lags, gamma
 
 
 def variogram_slope(heights, lags=None) -> float:
-    """Least-squares slope of log gamma against log lag: 2H for fractional Brownian surfaces."""
-    lags, gamma = variogram(heights, lags)
-    return float(np.polyfit(np.log(lags), np.log(gamma), 1)[0])
+    """Least-squares slope of log gamma against log lag: 2H for fractional Brownian surfaces.
+
+    Needs at least 2 different lags (the default gives 1 below 33 x 33) and gamma > 0 at each
+    (a flat grid has no slope); otherwise a FractalError names the argument.
+    """
+    used, gamma = variogram(heights, lags)
+    if np.unique(used).size < 2:
+        hint = " (the default below 33 x 33: give lags, e.g. [1, 2, 4])" if lags is None else ""
+        raise FractalError(f"lags: a slope needs at least 2 different lags, got {used.tolist()}{hint}")
+    if np.any(gamma == 0.0):
+        raise FractalError(f"heights: no height differences at lag {int(used[gamma == 0.0][0])} "
+                           "(gamma = 0, e.g. a flat grid): log gamma has no slope")
+    return float(np.polyfit(np.log(used), np.log(gamma), 1)[0])

@@ -77,8 +77,10 @@ def box_counts(points_or_image, sizes=None) -> tuple[np.ndarray, np.ndarray]:
     """Box sizes and the number of boxes of each size that the set touches.
 
     Arguments:
-        points_or_image: a polyline, float (N, 2) (or (N, D)) vertices in world units; or a boolean
+        points_or_image: a polyline, (N, D) vertices in world units, D = 1, 2 or 3; or a boolean
             image, 1-D (a row of cells, e.g. `cantor_mask`) or 2-D, whose True cells are the set.
+            The dtype decides: bool is an image, numbers are vertices, so a 0/1 integer mask is
+            refused with advice (`mask.astype(bool)`) rather than read as a 1-D or many-D polyline.
         sizes: box sides, decreasing. Polylines: world units, default 2^-k from a quarter of the
             extent down to twice the median segment length. Images: whole pixels, default
             2^k from a quarter of the smaller side down to 1. Sizes that match the set's own
@@ -100,6 +102,10 @@ def box_counts(points_or_image, sizes=None) -> tuple[np.ndarray, np.ndarray]:
         if sizes.ndim != 1 or len(sizes) < 2 or np.any(sizes < 1) or np.any(sizes != np.round(sizes)):
             raise FractalError(f"sizes: expected at least two whole pixel sizes >= 1, got {sizes!r}")
         return sizes.astype(np.float64), _count_image(data, sizes.astype(np.int64))
+    if data.ndim != 2 or not 1 <= data.shape[1] <= 3:
+        raise FractalError(f"points_or_image: got shape {data.shape} of dtype {data.dtype}, neither a polyline "
+                           "(N, D) of vertices with D in [1, 3] nor a boolean image: for a mask of 0/1 cells "
+                           "pass mask.astype(bool)")
     points = _as_points(data)
     if points.shape[0] < 2:
         raise FractalError("points: a polyline needs at least 2 vertices")
