@@ -37,7 +37,7 @@ class Parser(argparse.ArgumentParser):
 
 def check_outputs(args) -> None:
     """Raise DifflabError for an output path that cannot be written (see OUTPUT_ARGUMENTS)."""
-    from .io import check_output_path
+    from .files import check_output_path
 
     for name, flag in OUTPUT_ARGUMENTS.items():
         value = getattr(args, name, None)

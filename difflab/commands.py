@@ -7,12 +7,13 @@ import time
 from pathlib import Path
 
 from .errors import RenderError
-from .io import add_force
+from .files import add_force
 from .vocabulary import FRACTAL_KINDS, MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS, SPECULAR_MODELS
 
 
 def run_render(args) -> int:
-    from .io import refuse_overwrite, write_image, write_together
+    from .files import refuse_overwrite, write_together
+    from .io import write_image
     from .renderers.api import prepare, render
 
     out = Path(args.output)
@@ -78,7 +79,7 @@ def add_render(sub) -> None:
 
 def run_demo(args) -> int:
     from .demos import run_demo as demo
-    from .io import refuse_overwrite
+    from .files import refuse_overwrite
 
     refuse_overwrite(args.output, force=args.force)
     demo(Path(args.output), quick=args.quick)
@@ -95,7 +96,7 @@ def add_demo(sub) -> None:
 
 def run_fractal(args) -> int:
     from .demos.fractals import CURVES, fractal_figure
-    from .io import refuse_overwrite
+    from .files import refuse_overwrite
 
     refuse_overwrite(args.output, force=args.force)
     options = {"order": args.order} if args.order is not None else {}

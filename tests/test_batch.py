@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from test_fit_helpers import scene_dict
 
-import difflab.io
+import difflab.files
 from difflab import fit_many
 from difflab.batch.manifest import load_manifest, parse_line
 from difflab.batch import runners
@@ -266,7 +266,7 @@ def test_store_keeps_one_outcome_per_job(tmp_path, monkeypatch):
     a batch of N fits O(N^2): ~10 ms a fit at 5000)."""
     (job,), _ = load_manifest([{"name": "a", "scene": "s.json", "targets": "t.png"}])
     store = Store(tmp_path)
-    monkeypatch.setattr(difflab.io, "remove_stale_temps", lambda path: pytest.fail(f"listed the folder of {path}"))
+    monkeypatch.setattr(difflab.files, "remove_stale_temps", lambda path: pytest.fail(f"listed the folder of {path}"))
     store.record(job, {"ok": False, "error": "boom", "seconds": 1.0})
     assert store.row(job)["status"] == "failed" and not store.done(job)
     store.record(job, {"ok": True, "scene": {"x": 1}, "report": {"converged": False, "result": "r"}, "seconds": 2.0})

@@ -13,7 +13,8 @@ from PIL import Image
 from conftest import scene_dict
 from difflab import DifflabError, load_image, save_image
 from difflab.cli import main
-from difflab.io import TMP_MARK, linear_to_srgb, srgb_to_linear, write_json_atomic
+from difflab.files import TMP_MARK, write_json_atomic
+from difflab.io import linear_to_srgb, srgb_to_linear
 
 
 def tiny_scene(tmp_path, **changes):

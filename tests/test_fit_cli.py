@@ -99,11 +99,11 @@ def test_fit_command_ctrl_c_while_writing_leaves_the_whole_pair(files, monkeypat
     import contextlib
     import signal
 
-    import difflab.io as io
+    import difflab.files as writers
 
     scene, target, tmp = files
     out, report = tmp / "fitted.json", tmp / "fitted.fit.json"
-    atomic_path = io.atomic_path
+    atomic_path = writers.atomic_path
 
     @contextlib.contextmanager
     def interrupted_path(path, **kwargs):
@@ -112,7 +112,7 @@ def test_fit_command_ctrl_c_while_writing_leaves_the_whole_pair(files, monkeypat
                 signal.raise_signal(signal.SIGINT)  # the user's Ctrl-C, between the two files
             yield tmp_path
 
-    monkeypatch.setattr(io, "atomic_path", interrupted_path)
+    monkeypatch.setattr(writers, "atomic_path", interrupted_path)
     assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out)]) == 130
     assert json.loads(report.read_text())["converged"] and "materials" in json.loads(out.read_text())
 
@@ -148,9 +148,9 @@ def test_output_is_atomic(files, monkeypatch, capsys, failing):
     report.write_text("old report")
     import contextlib
 
-    import difflab.io as io
+    import difflab.files as writers
 
-    atomic_path = io.atomic_path
+    atomic_path = writers.atomic_path
 
     class Full(type(tmp)):  # a temporary whose writing runs out of space midway
         def write_text(self, text, *args, **kwargs):
@@ -162,7 +162,7 @@ def test_output_is_atomic(files, monkeypatch, capsys, failing):
         with atomic_path(path, **kwargs) as tmp_path:
             yield Full(tmp_path) if path.name == failing else tmp_path
 
-    monkeypatch.setattr(io, "atomic_path", failing_path)
+    monkeypatch.setattr(writers, "atomic_path", failing_path)
     assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out), "--force"]) == 2
     assert capsys.readouterr().err == f"difflab: error: {tmp / failing}: cannot write (disk full); not written\n"
     assert out.read_text() == "old" and report.read_text() == "old report"

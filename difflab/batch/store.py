@@ -23,7 +23,7 @@ import io
 import json
 from pathlib import Path
 
-from ..io import TMP_MARK, refuse_overwrite, uninterrupted, write_json_atomic, write_text_atomic
+from ..files import TMP_MARK, refuse_overwrite, uninterrupted, write_json_atomic, write_text_atomic
 from .manifest import Invalid, Job
 
 FOLDERS = ("scenes", "reports", "failures", "timing")

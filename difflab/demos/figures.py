@@ -6,7 +6,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from ..io import atomic_path, linear_to_srgb
+from ..files import atomic_path
+from ..io import linear_to_srgb
 
 
 def save_figure(fig, path: Path, tight: bool = True) -> Path:

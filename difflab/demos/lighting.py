@@ -10,7 +10,7 @@ import csv
 import io as _io
 from pathlib import Path
 
-from ..io import write_text_atomic
+from ..files import write_text_atomic
 from ..renderers.api import render
 from .figures import image_grid
 from .illumination import (LECTURE_GEOMETRY, LECTURE_MATERIALS, lecture_intensities, lecture_material,

@@ -46,7 +46,7 @@ def ceiling_value(text: str):
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Add the `fit` subcommand to an argparse subparsers object."""
     from ..commands import output_ending
-    from ..io import add_force
+    from ..files import add_force
     from .options import SOLVERS
 
     p = subparsers.add_parser("fit", help="fit material coefficients to target images",
@@ -87,7 +87,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args) -> int:
     import json
 
-    from ..io import refuse_overwrite, write_together
+    from ..files import refuse_overwrite, write_together
     from .engine import fit
     from .params import DEFAULT_PARAMS
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from difflab.errors import MeshError
-from difflab.io import write_text_atomic
+from difflab.files import write_text_atomic
 from difflab.limits import MAX_COORD, MESH_FILE_BYTES, require_memory
 
 from .mesh import TriMesh, concatenate

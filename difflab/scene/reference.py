@@ -117,7 +117,7 @@ def docs_text(current: str) -> str:
 
 
 def main(root: Path) -> None:
-    from ..io import write_text_atomic
+    from ..files import write_text_atomic
 
     write_text_atomic(SCHEMA_FILE, schema_text())
     docs = root / "docs" / "scene-format.md"

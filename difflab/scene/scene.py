@@ -191,7 +191,7 @@ def load_scene(path: str | os.PathLike) -> Scene:
     once). Raises SceneError: for bad JSON with the file, line and column; for invalid content with
     the field path first and the file appended.
     """
-    from ..io import file_path, read_regular_file
+    from ..files import file_path, read_regular_file
     from ..limits import short_path
 
     path = file_path(path, "scene", SceneError)
@@ -214,7 +214,7 @@ def load_scene(path: str | os.PathLike) -> Scene:
 
 def save_scene(scene: Scene, path: str | os.PathLike) -> Path:
     """Write `scene.to_dict()` as indented JSON, atomically (paths inside are absolute)."""
-    from ..io import write_json_atomic
+    from ..files import write_json_atomic
 
     if not isinstance(scene, Scene):
         raise SceneError(f"scene: expected a Scene, got {type(scene).__name__}")
