@@ -271,7 +271,7 @@ class GBufferModel(eqx.Module):
         """`texels`: a `texels.TexelSource` for the fitted textures, or None."""
         points, comp, formation, point_ids = pixel_arrays(gbuffer, pixels, dtype)
         kinds = tuple(sorted(set(np.asarray(lights.kind).tolist())))  # the terms the geometry needs
-        material, cell, geometry, comp = _device_model(channel_major(points), comp, lights, formation.specular, kinds)
+        material, cell, geometry, comp = _device_model(points, comp, lights, formation.specular, kinds)
         taps = tap_weight = None
         if texels is not None:
             rows, weight = texels.taps(gbuffer, point_ids)
@@ -305,25 +305,11 @@ class GBufferModel(eqx.Module):
         return colors if self.formation.direct else compose(colors, self.comp, self.formation)
 
 
-VECTORS = ("normal", "view", "light_dir")  # the `PointsJ` fields of 3-vectors, (..., 3)
-
-
-def channel_major(points: PointsJ) -> PointsJ:
-    """`pixel_arrays`' numpy points with each vector field's components first, (3, ...), as
-    `_device_model` takes them."""
-    return points._replace(**{k: np.ascontiguousarray(np.moveaxis(getattr(points, k), -1, 0)) for k in VECTORS})
-
-
 @partial(jax.jit, static_argnums=(3, 4))
 def _device_model(points: PointsJ, comp: ComposeJ | None, lights: LightsJ, specular: int, kinds: tuple):
     """(material ids, cells, `LightGeometry`, composition) on the device from `pixel_arrays`' numpy
-    arrays, the vector fields `channel_major`: one call moves them all. `kinds`: the lights'
-    LIGHT_TYPES ids (`light_falloff`). (Their components moved back last here are the same values in
-    a layout of XLA's choosing: one component's values side by side, as they came, where XLA's CPU
-    loops over the points run ~2x the speed of those over (..., 3) rows: 0.43 against 0.87 ms for
-    the 24768 points of `bench/fit.py`'s sphere, the same numbers bit for bit.)"""
+    arrays: one call moves them all. `kinds`: the lights' LIGHT_TYPES ids (`light_falloff`)."""
     real = lambda field: field.astype(lights.intensity.dtype)  # noqa: E731 (float32 G-buffer values, exactly)
-    points = points._replace(**{k: jnp.moveaxis(getattr(points, k), 0, -1) for k in VECTORS})
     points = points._replace(**{k: real(getattr(points, k)) for k in ("normal", "view", "light_dir", "light_dist",
                                                                       "visibility")})
     geometry = light_geometry(specular, points.normal, points.view, lights, points.light_dir, points.light_dist,
