@@ -8,13 +8,13 @@ from pathlib import Path
 
 from .errors import RenderError
 from .files import add_force
-from .vocabulary import FRACTAL_KINDS, MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS, SPECULAR_MODELS
+from .vocabulary import FRACTAL_KINDS, FRACTAL_OPTIONS, MAX_DEPTH_LIMIT, METHODS, SHADING_MODELS, SPECULAR_MODELS
 
 
 def run_render(args) -> int:
     from .files import refuse_overwrite, write_together
     from .io import write_image
-    from .renderers.api import prepare, render
+    from .renderers.api import NOT_USED, prepare, render
 
     out = Path(args.output)
     linear = out.with_suffix(".npy") if args.linear and out.suffix.lower() != ".npy" else None  # (.npy is linear)
@@ -22,7 +22,8 @@ def run_render(args) -> int:
     scene = prepare(args.scene, args.width, args.height, method=args.method, shading=args.shading,
                     specular=args.specular, max_depth=args.max_depth, spp=args.spp)
     method = scene.render.method
-    refuse_unused(args, method)
+    unused, why = NOT_USED[method]
+    refuse_unused(args, unused, f"this render's method {method!r} ({why.replace('method=', '--method ')})")
     start = time.perf_counter()
     image = render(scene, device=args.device)  # the image alone: no G-buffer, no recorded ray tree
     seconds = time.perf_counter() - start
@@ -33,16 +34,13 @@ def run_render(args) -> int:
     return 0
 
 
-def refuse_unused(args, method: str) -> None:
-    """DifflabError for a render flag the renderer of `method` does not use (`--shading` with the ray
-    tracer, `--max-depth` with the rasterizer: `renderers.api.NOT_USED`), whatever its value."""
-    from .renderers.api import NOT_USED
-
-    unused, why = NOT_USED[method]
+def refuse_unused(args, unused, context: str) -> None:
+    """RenderError for a flag among `unused` that was given (not None), whatever its value: what
+    `context` does not read is refused, not ignored (`--shading` with the ray tracer, `--hurst` with
+    the Mandelbrot set). The flags of such options default to None."""
     for name in unused:
         if getattr(args, name, None) is not None:
-            flag = "--" + name.replace("_", "-")
-            raise RenderError(f"{flag}: does not apply to this render's method {method!r} ({why.replace('method=', '--method ')})")
+            raise RenderError(f"--{name.replace('_', '-')}: does not apply to {context}")
 
 
 def output_ending(*suffixes):
@@ -95,18 +93,16 @@ def add_demo(sub) -> None:
 
 
 def run_fractal(args) -> int:
-    from .demos.fractals import CURVES, fractal_figure
+    from .demos.fractals import fractal_figure
     from .files import refuse_overwrite
 
+    used = FRACTAL_OPTIONS[args.kind]
+    every = dict.fromkeys(name for names in FRACTAL_OPTIONS.values() for name in names)
+    unused = [name for name in every if name not in used]
+    reads = ", ".join("--" + name.replace("_", "-") for name in used)
+    refuse_unused(args, unused, f"the {args.kind} fractal (it reads {reads})")
     refuse_overwrite(args.output, force=args.force)
-    options = {"order": args.order} if args.order is not None else {}
-    if args.kind not in CURVES:
-        options.update(seed=args.seed, hurst=args.hurst, max_iter=args.max_iter, device=args.device)
-        if args.kind in ("mandelbrot", "julia", "mandelbulb"):
-            for key in ("order", "seed", "hurst"):
-                options.pop(key, None)
-        else:
-            options.pop("max_iter")
+    options = {name: getattr(args, name) for name in used if getattr(args, name) is not None}
     caption = fractal_figure(args.kind, Path(args.output), args.width, args.height, titled=False, **options)
     print(f"wrote {args.output}: {caption}")
     return 0
@@ -116,14 +112,14 @@ def add_fractal(sub) -> None:
     p = sub.add_parser("fractal", help="draw a fractal curve or render a fractal set")
     p.add_argument("kind", choices=FRACTAL_KINDS)
     p.add_argument("-o", "--output", required=True, type=output_ending(".png"), help="output PNG")
-    p.add_argument("--order", type=int, help="iterations / order / depth / terrain level (default: 4 for a curve, 7 "
-                   "for the terrain)")
     p.add_argument("--width", type=int, default=640, help="image width in pixels")
     p.add_argument("--height", type=int, default=480, help="image height in pixels")
-    p.add_argument("--seed", type=int, default=0, help="terrain seed")
-    p.add_argument("--hurst", type=float, default=0.8, help="terrain roughness, the Hurst exponent in (0, 1)")
-    p.add_argument("--max-iter", type=int, default=256, help="escape-time iterations")
-    p.add_argument("--device", default="cpu", help="cpu or cuda")
+    # Options a kind does not read (vocabulary.FRACTAL_OPTIONS) are errors: their defaults are None.
+    p.add_argument("--order", type=int, help="iterations / order / depth / terrain level, curves and terrain "
+                   "(default: 4 for a curve, 7 for the terrain)")
+    p.add_argument("--seed", type=int, help="terrain seed (default: 0)")
+    p.add_argument("--hurst", type=float, help="terrain roughness, the Hurst exponent in (0, 1) (default: 0.8)")
+    p.add_argument("--max-iter", type=int, help="escape iterations, mandelbrot and julia (default: 256)")
+    p.add_argument("--device", help="cpu or cuda, the sets and the terrain (default: cpu)")
     add_force(p)
     p.set_defaults(func=run_fractal)
-

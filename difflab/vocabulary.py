@@ -52,3 +52,7 @@ BECKMANN_MIN_COS = 1.0e-3
 FRACTAL_CURVES = ("koch", "peano", "hilbert", "cantor")
 FRACTAL_IMAGES = ("terrain", "mandelbrot", "julia", "mandelbulb")
 FRACTAL_KINDS = FRACTAL_CURVES + FRACTAL_IMAGES
+#: The `difflab fractal` options each kind reads (beyond -o, --width, --height, --force); another
+#: given is an error, as `difflab render` refuses the other renderer's flags.
+FRACTAL_OPTIONS = {**{kind: ("order",) for kind in FRACTAL_CURVES}, "terrain": ("order", "seed", "hurst", "device"),
+                   "mandelbrot": ("max_iter", "device"), "julia": ("max_iter", "device"), "mandelbulb": ("device",)}

@@ -162,10 +162,11 @@ def test_bad_option_exits_2(tmp_path, capsys):
     assert "spp" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("kind", ["koch", "cantor", "mandelbrot", "terrain"])
-def test_fractal_command(tmp_path, kind):
+@pytest.mark.parametrize("kind, flags", [("koch", ["--order", "3"]), ("cantor", ["--order", "3"]),
+                                         ("mandelbrot", ["--max-iter", "64"]), ("terrain", ["--order", "3", "--seed", "2"])])
+def test_fractal_command(tmp_path, kind, flags):
     out = tmp_path / f"{kind}.png"
-    assert main(["fractal", kind, "-o", str(out), "--width", "64", "--height", "48", "--order", "3"]) == 0
+    assert main(["fractal", kind, "-o", str(out), "--width", "64", "--height", "48", *flags]) == 0
     assert out.stat().st_size > 100
 
 

@@ -80,6 +80,24 @@ def test_fractal_refuses_hurst_one_and_sizes_below_one(tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("kind, flags, reads", [
+    ("mandelbrot", ["--hurst", "0.5"], "--max-iter, --device"),  # these three were ignored silently
+    ("mandelbrot", ["--seed", "3"], "--max-iter, --device"),
+    ("mandelbulb", ["--order", "3"], "--device"),
+    ("julia", ["--order", "3"], "--max-iter, --device"),
+    ("mandelbulb", ["--max-iter", "64"], "--device"),
+    ("terrain", ["--max-iter", "64"], "--order, --seed, --hurst, --device"),
+    ("koch", ["--device", "cpu"], "--order"),  # refused whatever the value, as render's --shading
+])
+def test_a_fractal_option_the_kind_does_not_read_is_an_error(tmp_path, capsys, kind, flags, reads):
+    """docs/cli.md: `difflab fractal` refuses an option its KIND does not read, as `difflab render`
+    refuses the other renderer's flags: exit 2, one line naming the option and the fractal, nothing written."""
+    out = tmp_path / "f.png"
+    assert main(["fractal", kind, "-o", str(out), "--width", "16", "--height", "12", *flags]) == 2
+    assert capsys.readouterr().err == f"difflab: error: {flags[0]}: does not apply to the {kind} fractal (it reads {reads})\n"
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("command, shown", [
     ("render", ["--device DEVICE       cpu or cuda (default: cpu)", "(default: the scene's)"]),
     ("fractal", ["(default: 640)", "(default: 480)", "(default: 0.8)", "(default: 256)", "--seed SEED           terrain seed (default: 0)"]),
