@@ -21,7 +21,7 @@ W, H = 40, 32
 
 
 def textured_scene(tmp_path, texels, filter="bilinear", name="floor.npy") -> Scene:
-    """A ray-traced floor (plane, uv = world x, z: the texture repeats every unit) whose kd the
+    """A ray-traced floor (plane, uv = world (x, -z): the texture repeats every unit) whose kd the
     texture `texels` modulates, a mirror sphere (kr 0.7) that shows it, and a ball with a texture of
     its own (trilinear, on ks: not fitted, its recorded texels stay); shadows on, depth 3."""
     np.save(tmp_path / name, np.asarray(texels, np.float32))

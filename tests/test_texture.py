@@ -189,8 +189,7 @@ def tilted_plane_scene(texture, filter="nearest", interpolation="perspective", s
 
 
 def analytic_plane_uv(scene, xs, ys):
-    """uv (compile.py: world x, z for a y-dominant normal) where the rays through raster points
-    (xs, ys) meet the plane, in float64."""
+    """uv (`Plane.uv`) where the rays through raster points (xs, ys) meet the plane, in float64."""
     scene = as_scene(scene)
     cam, plane = scene.camera, scene.objects[0]
     inv = np.linalg.inv(projection_matrix(cam) @ view_matrix(cam))
@@ -205,7 +204,7 @@ def analytic_plane_uv(scene, xs, ys):
     normal, point = np.asarray(plane.normal), np.asarray(plane.point)
     t = ((point - near) @ normal) / (d @ normal)
     p = near + t[..., None] * d
-    return p[..., [0, 2]], p
+    return plane.uv(p.reshape(-1, 3)).reshape(p.shape[:-1] + (2,)), p
 
 
 @pytest.fixture(scope="module")
@@ -264,10 +263,11 @@ def test_uv_derivatives_are_those_of_the_interpolation(checker_file, interpolati
 
 @wp.kernel
 def footprint_kernel(cam: CameraW, xs: wp.array(dtype=wp.vec2), ps: wp.array(dtype=wp.vec3), normal: wp.vec3,
-                     out_dx: wp.array(dtype=wp.vec2), out_dy: wp.array(dtype=wp.vec2)):
+                     tangent: wp.vec3, bitangent: wp.vec3, out_dx: wp.array(dtype=wp.vec2),
+                     out_dy: wp.array(dtype=wp.vec2)):
     k = wp.tid()
     dpdx, dpdy = pixel_footprint(cam, xs[k][0], xs[k][1], 1.0, ps[k], normal)
-    du, dv = plane_uv_derivatives(dpdx, dpdy, normal)
+    du, dv = plane_uv_derivatives(dpdx, dpdy, tangent, bitangent)
     out_dx[k] = du
     out_dy[k] = dv
 
@@ -286,8 +286,9 @@ def test_the_ray_tracers_footprint_rule_agrees_with_the_rasterizer(checker_file)
     ps = wp.array(p[m].astype(np.float32), dtype=wp.vec3)
     out_dx = wp.zeros(int(m.sum()), dtype=wp.vec2)
     out_dy = wp.zeros(int(m.sum()), dtype=wp.vec2)
+    tangent, bitangent = (wp.vec3(*axis) for axis in sc.objects[0].uv_frame())
     wp.launch(footprint_kernel, dim=int(m.sum()), inputs=[camera_struct(sc.camera, 64, 64), xs, ps,
-                                                           wp.vec3(*normal), out_dx, out_dy])
+                                                           wp.vec3(*normal), tangent, bitangent, out_dx, out_dy])
     np.testing.assert_allclose(out_dx.numpy(), g.duv_dx[m], rtol=0.02, atol=0.01 * np.abs(g.duv_dx[m]).max())
     np.testing.assert_allclose(out_dy.numpy(), g.duv_dy[m], rtol=0.02, atol=0.01 * np.abs(g.duv_dy[m]).max())
 

@@ -129,7 +129,7 @@ def ambient_term(mat: MaterialW, ambient: wp.vec3):
 @wp.func
 def checker_cell(p: wp.vec3, geo_normal: wp.vec3, size: float):
     """Checker cell (0 or 1) of p: (floor(a/size) + floor(b/size)) mod 2 over the two world axes
-    other than the normal's dominant one (x and z for a floor)."""
+    other than the normal's dominant one (x and z for a floor): world position, not the image uv."""
     ax = wp.abs(geo_normal[0])
     ay = wp.abs(geo_normal[1])
     az = wp.abs(geo_normal[2])

@@ -45,12 +45,6 @@ def sphere_segments(centers, radii, camera, height: int) -> np.ndarray:
     return segments.astype(np.int64)
 
 
-def plane_axes(normal) -> tuple[int, int]:
-    """The two world axes spanning a plane's checker and uv: those other than the normal's dominant one."""
-    dominant = int(np.argmax(np.abs(normal)))
-    return {0: (1, 2), 1: (0, 2), 2: (0, 1)}[dominant]
-
-
 def plane_grid_size() -> tuple[int, int]:
     """(vertices, faces) of every `plane_grid`: (2 PLANE_RINGS + 1)^2 grid points, two triangles per cell."""
     return (2 * PLANE_RINGS + 1) ** 2, 2 * (2 * PLANE_RINGS) ** 2
@@ -59,8 +53,8 @@ def plane_grid_size() -> tuple[int, int]:
 def plane_grid(plane: Plane, camera) -> geometry.TriMesh:
     """A grid of quads on the plane centred at the eye's foot, reaching 2 `far` each way, its lines
     spaced geometrically from a quarter of the eye's height: cells stay small (well-conditioned
-    float32 interpolation) near the viewer and grow with distance. uv = the plane's two world axes
-    (as the checker uses)."""
+    float32 interpolation) near the viewer and grow with distance. uv = `Plane.uv` (what a ray hit
+    on the plane takes)."""
     normal = np.asarray(plane.normal, float)
     point = np.asarray(plane.point, float)
     eye = np.asarray(camera.eye, float)
@@ -83,9 +77,8 @@ def plane_grid(plane: Plane, camera) -> geometry.TriMesh:
     if np.dot(np.cross(vertices[faces[0, 1]] - vertices[faces[0, 0]], vertices[faces[0, 2]] - vertices[faces[0, 0]]),
               normal) < 0:
         faces = faces[:, ::-1]
-    axes = plane_axes(normal)
     normals = np.repeat(normal[None], len(vertices), axis=0)
-    return geometry.TriMesh(vertices, faces, normals, vertices[:, axes])
+    return geometry.TriMesh(vertices, faces, normals, plane.uv(vertices))
 
 
 @dataclass(frozen=True)

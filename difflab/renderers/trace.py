@@ -40,6 +40,8 @@ class SceneGeomW:
     sphere_object: wp.array(dtype=wp.int32)
     plane_point: wp.array(dtype=wp.vec3)
     plane_normal: wp.array(dtype=wp.vec3)
+    plane_tangent: wp.array(dtype=wp.vec3)  # u's direction on the plane (`Plane.uv_frame`)
+    plane_bitangent: wp.array(dtype=wp.vec3)  # v's direction
     plane_material: wp.array(dtype=wp.int32)
     plane_object: wp.array(dtype=wp.int32)
     epsilon: float  # ray offset against self-intersection, in scene units

@@ -18,8 +18,9 @@ TEXTURE_TARGETS = tuple(TEXTURE_TARGET_IDS)
 
 @dataclass(frozen=True)
 class Checker(Record):
-    """A procedural checkerboard: cell = (floor(a/size) + floor(b/size)) mod 2 over the surface's two
-    in-plane axes (world x and z for a floor); cell 0 uses the material's ka / kd, cell 1 ka2 / kd2."""
+    """A procedural checkerboard of world position: cell = (floor(a/size) + floor(b/size)) mod 2 over
+    the two world coordinates other than the dominant axis of the surface's normal (x and z for a
+    floor), whatever the surface's uv; cell 0 uses the material's ka / kd, cell 1 ka2 / kd2."""
 
     size: float = spec_field(Spec("number", "edge of a cell", "scene units", bounds(gt=0)), 1.0)
     ka2: Vec3 = spec_field(colour("ambient reflectance of the odd cells"), (0.0, 0.0, 0.0))

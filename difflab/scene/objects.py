@@ -17,6 +17,8 @@ from ._spec import Spec, bounds, spec_field
 BUILTIN_MESHES = ("teapot", "sphere", "box", "cylinder", "quad")
 #: Largest tessellation resolution of a mesh (keeps the triangle count within memory).
 MAX_RESOLUTION = 1024
+#: A plane whose normal is this close to +-y (sine of the angle) takes the floor's / ceiling's uv frame.
+VERTICAL_SINE = 1e-6
 
 
 def _matrix(value, path: str) -> tuple[float, ...]:
@@ -97,7 +99,9 @@ class Sphere(Record):
 
 @dataclass(frozen=True)
 class Plane(Record):
-    """An infinite analytic plane (the rasterizer draws a large quad clipped to the view)."""
+    """An infinite analytic plane (the rasterizer draws a large quad clipped to the view). An image
+    texture lies on it with its bottom-left corner (uv = (0, 0)) at `point`, upright as seen from
+    the side the normal points to, one texture per scene unit (`uv_frame`)."""
 
     point: Vec3 = spec_field(Spec("point3", "a point on the plane", "scene units"))
     normal: Vec3 = spec_field(Spec("unit3", "normal, the side the plane faces (stored normalised)"))
@@ -108,6 +112,28 @@ class Plane(Record):
 
     def to_dict(self) -> dict:
         return {"type": self.TYPE, **super().to_dict()}
+
+    def uv_frame(self) -> tuple[np.ndarray, np.ndarray]:
+        """(t, b): the unit directions of u and v, with the normal n a right-handed orthonormal
+        frame (t x b = n), so a texture reads unmirrored from the normal's side, v up, u right.
+        b = world up (+y) made orthogonal to n; where n is vertical (|n x y| < VERTICAL_SINE) -z
+        made orthogonal to n for n ~ +y (a floor reads upright to a camera at +z looking toward -z,
+        as the builtin quad) and +z for n ~ -y. t = b x n (n = +z: t = +x, b = +y; n = +y: t = +x,
+        b = -z)."""
+        n = np.asarray(self.normal, np.float64)
+        up = np.array([0.0, 1.0, 0.0])
+        if np.linalg.norm(up - n[1] * n) < VERTICAL_SINE:
+            up = np.array([0.0, 0.0, -1.0 if n[1] > 0 else 1.0])
+        b = up - np.dot(up, n) * n
+        b /= np.linalg.norm(b)
+        return np.cross(b, n), b
+
+    def uv(self, points) -> np.ndarray:
+        """Texture coordinates (N, 2) of points (N, 3) on the plane: ((p - point).t, (p - point).b),
+        scene units (`uv_frame`)."""
+        t, b = self.uv_frame()
+        d = np.asarray(points, np.float64) - np.asarray(self.point, np.float64)
+        return np.stack([d @ t, d @ b], axis=-1)
 
 
 #: The fields of a mesh given as arrays (`vertices` and `faces` required together).

@@ -152,8 +152,8 @@ def shading_normal(mesh: MeshDataW, hit: HitW):
 @wp.func
 def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3, geo: wp.vec3, d: wp.vec3,
               xy: wp.vec2, primary: int, path: float, sample: wp.vec2):
-    """uv and the texture value at a hit. uv: interpolated vertex uvs (triangles), the plane's world
-    axes, or the sphere's (lon / 2 pi, lat / pi). Footprint of one sample (`sample`: its width in
+    """uv and the texture value at a hit. uv: interpolated vertex uvs (triangles), the plane's
+    `Plane.uv`, or the sphere's (lon / 2 pi, lat / pi). Footprint of one sample (`sample`: its width in
     pixels, its spread): a primary ray's on the tangent plane (as the rasterizer's derivatives on
     its sample grid), a secondary ray's cone of width spread x path length from the eye (the
     sample's cone carried along the path, ignoring curvature)."""
@@ -176,9 +176,10 @@ def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3
         duv_dx, duv_dy = triangle_uv_derivatives(mesh.vertices[i0], mesh.vertices[i1], mesh.vertices[i2],
                                                  mesh.uvs[i0], mesh.uvs[i1], mesh.uvs[i2], dpdx, dpdy)
     elif hit.kind == HIT_PLANE:
-        normal = scene.geom.plane_normal[hit.index]
-        uv = plane_uv(p, normal)
-        duv_dx, duv_dy = plane_uv_derivatives(dpdx, dpdy, normal)
+        tangent = scene.geom.plane_tangent[hit.index]
+        bitangent = scene.geom.plane_bitangent[hit.index]
+        uv = plane_uv(p, scene.geom.plane_point[hit.index], tangent, bitangent)
+        duv_dx, duv_dy = plane_uv_derivatives(dpdx, dpdy, tangent, bitangent)
     else:
         center = scene.geom.sphere_center[hit.index]
         uv = sphere_uv(p, center)

@@ -40,7 +40,7 @@ plane at the hit and returns dp/dx, dp/dy (central differences over one sample, 
 side under side x side supersampling); `cone_footprint` gives the same for a secondary ray from the
 spread of a sample's cone (width = spread angle x path length); and the
 `*_uv_derivatives` functions turn dp/dx, dp/dy into d(uv)/dx, d(uv)/dy for triangles, planes and
-spheres with the uv conventions of `compile.py` and `geometry.uv_sphere`.
+spheres with the uv conventions of `scene.Plane.uv_frame` and `geometry.uv_sphere`.
 """
 
 from __future__ import annotations
@@ -336,23 +336,18 @@ def triangle_uv_derivatives(p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, uv0: wp.vec2,
 
 
 @wp.func
-def plane_uv(p: wp.vec3, normal: wp.vec3):
-    """A plane's uv (compile.py's rule, as the checker): the two world coordinates other than the
-    normal's dominant axis (x and z for a floor)."""
-    ax = wp.abs(normal[0])
-    ay = wp.abs(normal[1])
-    az = wp.abs(normal[2])
-    if ax >= ay and ax >= az:
-        return wp.vec2(p[1], p[2])
-    if ay >= az:
-        return wp.vec2(p[0], p[2])
-    return wp.vec2(p[0], p[1])
+def plane_uv(p: wp.vec3, point: wp.vec3, tangent: wp.vec3, bitangent: wp.vec3):
+    """A plane's uv ((p - point).t, (p - point).b), with its `Plane.uv_frame` (t, b) (compiled once
+    into `SceneGeomW`; the rasterizer's plane grid takes the same uv at its vertices)."""
+    d = p - point
+    return wp.vec2(wp.dot(d, tangent), wp.dot(d, bitangent))
 
 
 @wp.func
-def plane_uv_derivatives(dpdx: wp.vec3, dpdy: wp.vec3, normal: wp.vec3):
-    """d(uv)/dx, d(uv)/dy on a plane: uv is linear in p, so they are `plane_uv` of dp/dx, dp/dy."""
-    return plane_uv(dpdx, normal), plane_uv(dpdy, normal)
+def plane_uv_derivatives(dpdx: wp.vec3, dpdy: wp.vec3, tangent: wp.vec3, bitangent: wp.vec3):
+    """d(uv)/dx, d(uv)/dy on a plane: uv is linear in p, so they are dp/dx, dp/dy on (t, b)."""
+    return wp.vec2(wp.dot(dpdx, tangent), wp.dot(dpdx, bitangent)), wp.vec2(wp.dot(dpdy, tangent),
+                                                                            wp.dot(dpdy, bitangent))
 
 
 @wp.func

@@ -1,0 +1,100 @@
+"""An image texture on an analytic plane: a right-handed orthonormal uv frame seen from the normal's
+side (`Plane.uv_frame`), the same in the ray tracer and the rasterizer, and the checker's own rule."""
+
+import numpy as np
+import pytest
+
+from conftest import scene_dict
+from difflab import Scene, render
+
+#: (normal, (t, b)) by hand: u to the right and v up as seen from the normal's side.
+FRAMES = [
+    ((0, 0, 1), ((1, 0, 0), (0, 1, 0))),  # a wall facing +z: the builtin quad turned upright
+    ((0, 0, -1), ((-1, 0, 0), (0, 1, 0))),
+    ((1, 0, 0), ((0, 0, -1), (0, 1, 0))),
+    ((-1, 0, 0), ((0, 0, 1), (0, 1, 0))),
+    ((0, 1, 0), ((1, 0, 0), (0, 0, -1))),  # a floor: upright for a camera at +z looking toward -z
+    ((0, -1, 0), ((1, 0, 0), (0, 0, 1))),
+    ((0, 1, 1e-9), ((1, 0, 0), (0, 0, -1))),  # nearly a floor: the floor's frame
+    ((1, 1, 0), ((0, 0, -1), (-0.5 ** 0.5, 0.5 ** 0.5, 0))),  # b: world up along the plane
+]
+
+
+def plane(normal, point=(0, 0, 0)):
+    scene = Scene.from_dict(scene_dict([{"type": "plane", "point": list(point), "normal": list(normal),
+                                         "material": "m"}], {"m": {}}))
+    return scene.objects[0]
+
+
+@pytest.mark.parametrize("normal, frame", FRAMES)
+def test_the_uv_frame_is_right_handed_orthonormal_and_upright(normal, frame):
+    p = plane(normal)
+    t, b = p.uv_frame()
+    np.testing.assert_allclose(t, frame[0], atol=1e-8)  # 1e-9 off for the nearly vertical normal
+    np.testing.assert_allclose(b, frame[1], atol=1e-8)
+    np.testing.assert_allclose(np.cross(t, b), p.normal, atol=1e-12)  # t x b = n: seen from n, unmirrored
+
+
+def test_uv_is_measured_from_the_point_in_scene_units():
+    p = plane((0, 0, 1), point=(2, 3, 5))
+    np.testing.assert_allclose(p.uv([[2, 3, 5], [2.5, 3, 5], [2, 4.25, 5]]), [[0, 0], [0.5, 0], [0, 1.25]])
+
+
+MARKER = np.zeros((64, 64, 3), np.float32)
+MARKER[:32, :32] = 1.0  # the image's top-left quarter white (row 0 is the top)
+
+
+def front_view(tmp_path, normal, point, obj=None):
+    """One texture tile (uv in [0, 1]^2 from `point`) filling an 8x8 orthographic view from the normal's
+    side, screen up along b; the marker texture, unlit and nearest."""
+    np.save(tmp_path / "marker.npy", MARKER)
+    t, b = plane(normal, point).uv_frame()
+    centre = np.asarray(point, float) + 0.5 * t + 0.5 * b
+    n = np.cross(t, b)
+    camera = {"eye": list(centre + 3 * n), "target": list(centre), "up": list(b), "projection": "orthographic",
+              "ortho_height": 1, "width": 8, "height": 8, "near": 1, "far": 10}
+    material = {"ka": 1, "kd": 0, "texture": str(tmp_path / "marker.npy"), "texture_target": "ka",
+                "filter": "nearest"}
+    obj = obj or {"type": "plane", "point": list(point), "normal": list(normal), "material": "m"}
+    return scene_dict([obj], {"m": material}, camera=camera, ambient=(1, 1, 1))
+
+
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+@pytest.mark.parametrize("normal", [n for n, _ in FRAMES])
+def test_a_plane_shows_its_texture_upright_and_unmirrored_from_the_front(tmp_path, method, normal):
+    """The old rule (uv = the two world axes other than the normal's dominant one) showed a floor's
+    white quarter at the bottom left (mirrored), a -z wall's at the top right, a +x wall's turned
+    90 degrees, and stretched the (1, 1, 0) plane's tile by sqrt(2)."""
+    image = render(front_view(tmp_path, normal, (0.25, -0.5, 0.75)), method=method)[..., 0]
+    want = np.zeros((8, 8))
+    want[:4, :4] = 1.0
+    np.testing.assert_array_equal(image, want)
+
+
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+def test_a_floor_plane_matches_the_builtin_quad(tmp_path, method):
+    """The builtin quad (normal +y, uv (x + 0.5, 0.5 - z)) and a floor plane through its corner
+    (-0.5, 0, 0.5) show the same picture."""
+    floor = render(front_view(tmp_path, (0, 1, 0), (-0.5, 0, 0.5)), method=method)
+    quad = {"type": "mesh", "builtin": "quad", "material": "m"}
+    np.testing.assert_array_equal(floor, render(front_view(tmp_path, (0, 1, 0), (-0.5, 0, 0.5), quad), method=method))
+
+
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+def test_the_checker_keeps_world_cells_wherever_the_point_is(method):
+    """A checker is a solid texture of world coordinates (as POV-Ray's), not of the plane's uv:
+    moving `point` within the plane, or flipping the normal, leaves its cells in place."""
+    def image(point, normal):
+        return render(scene_dict(
+            [{"type": "plane", "point": point, "normal": normal, "material": "c"}],
+            {"c": {"ka": 1, "kd": 0, "checker": {"size": 0.5, "ka2": [0.2, 0.2, 0.2]}}},
+            camera={"eye": [0.1, 5, 0.2], "target": [0.1, 0, 0.2], "up": [0, 0, -1], "projection": "orthographic",
+                    "ortho_height": 2, "width": 16, "height": 16, "near": 1, "far": 10},
+            ambient=(1, 1, 1)), method=method)[..., 0]
+    base = image([0, 0, 0], [0, 1, 0])
+    x = 0.1 + (np.arange(16) + 0.5) / 8 - 1  # pixel centres: x right, z down the screen
+    z = 0.2 + (np.arange(16) + 0.5) / 8 - 1
+    cell = (np.floor(x[None, :] / 0.5) + np.floor(z[:, None] / 0.5)) % 2
+    np.testing.assert_allclose(base, np.where(cell == 0, 1.0, 0.2), atol=1e-6)
+    np.testing.assert_array_equal(image([0.3, 0, -0.7], [0, 1, 0]), base)
+    np.testing.assert_array_equal(image([0, 0, 0], [0, -1, 0]), base)
