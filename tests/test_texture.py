@@ -175,6 +175,30 @@ def test_ewa_is_anisotropic_where_trilinear_is_not():
     assert abs(tri[1] - tri[0]) < 1e-6
 
 
+@pytest.mark.parametrize("level", [0, 1])
+def test_ewa_at_a_texel_per_pixel_is_pbrts_gaussian_over_five_texels(level):
+    """A footprint of 2^level texels along u and v, at texel centres of level `level`: pbrt's EWA
+    (and ours) adds a one-texel reconstruction filter to the footprint's quadratic form, so the
+    ellipse is the disc r^2 = (ds^2 + dt^2) / 2 < 1 at that level: the texel (weight 1 - e^-2) and
+    its 4 edge neighbours (r^2 = 1/2: e^-1 - e^-2); the diagonal ones lie on r^2 = 1, outside. So
+    EWA blurs at 1:1 where nearest / bilinear / trilinear return the texel (docs/scene-format.md)."""
+    image = np.random.default_rng(4).random((32, 32, 3)).astype(np.float32)
+    store = TextureStore.from_images([image])
+    texels = store.pyramids[0][level]  # texture orientation: row 0 is v = 0
+    n = texels.shape[0]
+    r, c = np.meshgrid(np.arange(2, n - 2), np.arange(2, n - 2), indexing="ij")
+    uv = np.stack([(c.ravel() + 0.5) / n, (r.ravel() + 0.5) / n], -1)
+    step = 2.0 ** level / 32
+    got = sample(store, 0, uv, np.tile([step, 0.0], (len(uv), 1)), np.tile([0.0, step], (len(uv), 1)), filter="ewa")
+    centre, edge = 1 - math.exp(-2), math.exp(-1) - math.exp(-2)
+    r, c = r.ravel(), c.ravel()
+    around = texels[r - 1, c] + texels[r + 1, c] + texels[r, c - 1] + texels[r, c + 1]
+    want = (centre * texels[r, c] + edge * around) / (centre + 4 * edge)
+    np.testing.assert_allclose(got, want, atol=2e-6)
+    tri = sample(store, 0, uv, np.tile([step, 0.0], (len(uv), 1)), np.tile([0.0, step], (len(uv), 1)), filter="trilinear")
+    np.testing.assert_allclose(tri, texels[r, c], atol=1e-6)
+
+
 # ---- 3. interpolation against the analytic ray-plane intersection ------------------------------
 
 

@@ -28,7 +28,8 @@ Filters (`sample_texture`, `filter` in the scene's TEXTURE_FILTERS order):
   axis is about one texel (lod = log2(minor axis in level-0 texels)), and levels floor(lod) and
   floor(lod) + 1 are each filtered with the Gaussian exp(-alpha r^2) - exp(-alpha) (alpha =
   EWA_ALPHA) over the ellipse r^2 < 1, whose quadratic form has the identity added (a one-texel
-  reconstruction filter, so the ellipse always covers a texel centre), then lerped. Taps are
+  reconstruction filter, so the ellipse always covers a texel centre; pbrt-v4's MIPMap::EWA adds it
+  too, and it blurs a 1:1 mapping: the texel 0.48, its 4 edge neighbours 0.13 each), then lerped. Taps are
   bounded: the search box is clamped to EWA_MAX_RADIUS texels around uv, so at most
   (2 EWA_MAX_RADIUS + 1)^2 taps per level (the ellipse itself, by construction, has a major
   semi-axis of at most 2 EWA_MAX_ANISOTROPY + 1 texels at the finer level).
