@@ -191,17 +191,17 @@ def uninterrupted():
             signal.raise_signal(caught[0])
 
 
-def write_together(writers: dict) -> None:
+def write_together(writers: dict, *, sweep: bool = True) -> None:
     """Write outputs that belong together (a fitted scene and its report, an image and its linear
     copy), all or none: `writers` maps each path to a callable writing a temporary path
     (`atomic_path`); the temporaries are renamed onto their paths once every one is written. Ctrl-C
     and SIGTERM are held meanwhile (`uninterrupted`); a writer failing midway leaves every old file
     as it was, its error naming its path. (A rename failing after another one succeeded -- two
     renames within their folders, which fail only where the folder turned read-only between the
-    writes and the renames -- leaves the earlier file new.)"""
+    writes and the renames -- leaves the earlier file new.) `sweep`: as `atomic_path`'s."""
     with uninterrupted(), contextlib.ExitStack() as stack:
         for path, write in writers.items():
-            write(stack.enter_context(atomic_path(path)))
+            write(stack.enter_context(atomic_path(path, sweep=sweep)))
 
 
 def _write_error(path: Path, exc: OSError) -> WriteError:
@@ -243,6 +243,12 @@ def write_text_atomic(path: str | os.PathLike, text: str, *, sweep: bool = True)
         tmp.write_text(text)
 
 
+def write_json(path: Path, data) -> None:
+    """Write `data` as indented JSON into `path` as it stands (a temporary: `write_together`)."""
+    path.write_text(json.dumps(data, indent=2) + "\n")
+
+
 def write_json_atomic(path: str | os.PathLike, data, *, sweep: bool = True) -> None:
     """Write `data` as indented JSON, atomically (`atomic_path`)."""
-    write_text_atomic(path, json.dumps(data, indent=2) + "\n", sweep=sweep)
+    with atomic_path(path, sweep=sweep) as tmp:
+        write_json(tmp, data)

@@ -156,11 +156,12 @@ def test_batch_recovers_each_fit_and_records_failures(reference):
     assert (summary.ran, summary.skipped, summary.all_converged, summary.mismatched) == (12, 0, False, ["patched"])
     assert summary.unjudged == []
     patched = json.loads((out / "reports" / "patched.json").read_text())
-    assert patched["converged"] and patched["model_mismatch"] and patched["chi2"] > 100
+    assert patched["converged"] and patched["model_mismatch"] and patched["chi2"] > 100 and not patched["ok"]
     for name, kd in zip(GOOD, KDS):
         np.testing.assert_allclose(load_scene(out / "scenes" / f"{name}.json").materials["red"].kd, kd, rtol=1e-4)
         report = json.loads((out / "reports" / f"{name}.json").read_text())
-        assert (report["result"], report["converged"], report["job"]["name"]) == ("successful", True, name)
+        assert (report["result"], report["converged"], report["ok"], report["job"]["name"]) == ("successful", True, True,
+                                                                                                   name)
         assert (report["model"], report["model_mismatch"]) == ("raster", False)
         assert "seconds" not in report and json.loads((out / "timing" / f"{name}.json").read_text())["seconds"] > 0
     failure = json.loads((out / "failures" / "unreachable.json").read_text())
@@ -186,17 +187,17 @@ import os, signal, sys
 from difflab.batch import store
 from difflab.cli import main
 
-stop_at, write = int(sys.argv.pop(1)), store.write_json_atomic
+stop_at, write = int(sys.argv.pop(1)), store.write_together
 scenes = []
 
-def write_then_stop(path, *args, **kwargs):
-    write(path, *args, **kwargs)
-    if path.parent.name == "scenes":
-        scenes.append(path)
+def write_then_stop(writers, *args, **kwargs):
+    write(writers, *args, **kwargs)
+    if any(path.parent.name == "scenes" for path in writers):
+        scenes.append(writers)
         if len(scenes) == stop_at:
             os.kill(os.getpid(), signal.SIGSTOP)
 
-store.write_json_atomic = write_then_stop
+store.write_together = write_then_stop
 sys.exit(main(sys.argv[1:]))
 """
 
@@ -269,7 +270,8 @@ def test_store_keeps_one_outcome_per_job(tmp_path, monkeypatch):
     monkeypatch.setattr(difflab.files, "remove_stale_temps", lambda path: pytest.fail(f"listed the folder of {path}"))
     store.record(job, {"ok": False, "error": "boom", "seconds": 1.0})
     assert store.row(job)["status"] == "failed" and not store.done(job)
-    store.record(job, {"ok": True, "scene": {"x": 1}, "report": {"converged": False, "result": "r"}, "seconds": 2.0})
+    store.record(job, {"ok": True, "scene": {"x": 1}, "textures": {}, "report": {"converged": False, "result": "r"},
+                       "seconds": 2.0})
     assert not (tmp_path / "failures" / "a.json").exists() and store.done(job)
     assert store.row(job)["status"] == "not_converged"
     changed = dataclasses.replace(job, spec={**job.spec, "params": ["kd"]})

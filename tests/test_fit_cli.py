@@ -36,7 +36,7 @@ def test_fit_command_converges_exit_0(files, capsys):
     fitted = load_scene(out)
     np.testing.assert_allclose(fitted.materials["red"].kd, TRUTH["kd"], rtol=1e-4)
     report = json.loads((tmp / "fitted.fit.json").read_text())
-    assert report["converged"] and report["result"] == "successful" and not report["model_mismatch"]
+    assert report["converged"] and report["result"] == "successful" and not report["model_mismatch"] and report["ok"]
     # nothing is overwritten without --force
     assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out)]) == 2
 
@@ -46,7 +46,7 @@ def test_fit_command_not_converged_exit_3(files):
     out = tmp / "fitted.json"
     assert main(["fit", str(scene), str(target), "--material", "red", "--max-steps", "2", "-o", str(out)]) == 3
     report = json.loads((tmp / "fitted.fit.json").read_text())
-    assert (report["converged"], report["result"]) == (False, "nonlinear_max_steps_reached")
+    assert (report["converged"], report["result"], report["ok"]) == (False, "nonlinear_max_steps_reached", False)
     assert out.exists()
 
 
@@ -62,7 +62,8 @@ def test_fit_command_model_mismatch_exit_4(tmp_path, capsys):
     args = ["fit", str(path), str(target), "--material", "red,floor", "--params", "red.kd,floor.kd", "-o", str(out)]
     assert main(args + ["--method", "raster"]) == 4
     assert "MODEL MISMATCH" in capsys.readouterr().out and out.exists()
-    assert json.loads((tmp_path / "fitted.fit.json").read_text())["model_mismatch"]
+    report = json.loads((tmp_path / "fitted.fit.json").read_text())
+    assert report["model_mismatch"] and report["converged"] and not report["ok"]
     assert main(args + ["--force"]) == 0
     assert "image model: raytrace" in capsys.readouterr().out
 
@@ -81,6 +82,7 @@ def test_fit_command_noise_unknown_exit_5(files, capsys):
     assert "NOISE UNKNOWN" in capsys.readouterr().out and out.exists()
     report = json.loads((tmp / "fitted.fit.json").read_text())
     assert report["converged"] and report["noise_unknown"] and report["sigma"] is None and report["chi2"] is None
+    assert not report["ok"]
     assert main(args + ["--sigma", "0.01", "--force"]) == 0
 
 

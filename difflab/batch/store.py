@@ -1,6 +1,8 @@
 """A batch's output folder: each result written atomically as it arrives, resume, the summary table.
 
     OUTDIR/scenes/NAME.json         the fitted scene (scene file format)
+    OUTDIR/scenes/NAME.MATERIAL.texture.npy   a fitted texture, which the fitted scene names
+                                    (`fit.result.texture_file_name`); written with the scene
     OUTDIR/reports/NAME.json        the fit report: the job as run, then `FitResult.to_dict()` less
                                     its timings; written after the scene, so it marks the job done
     OUTDIR/failures/NAME.json       a job that failed: the job and the error
@@ -21,9 +23,13 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 from pathlib import Path
 
-from ..files import TMP_MARK, refuse_overwrite, uninterrupted, write_json_atomic, write_text_atomic
+from ..files import (TMP_MARK, refuse_overwrite, uninterrupted, write_json, write_json_atomic, write_text_atomic,
+                     write_together)
+from ..fit.result import TEXTURE_FILE
+from ..io import write_image
 from .manifest import Invalid, Job
 
 FOLDERS = ("scenes", "reports", "failures", "timing")
@@ -72,16 +78,29 @@ class Store:
     def _record(self, job: Job, outcome: dict) -> None:
         if outcome["ok"]:
             self._file("failures", job.name).unlink(missing_ok=True)
-            write_json_atomic(self._file("scenes", job.name), outcome["scene"], sweep=False)
+            self._drop_textures(job.name, keep=outcome["textures"])
+            scene = self._file("scenes", job.name)
+            writers = {scene.with_name(file): lambda temporary, texels=texels: write_image(temporary, texels)
+                       for file, texels in outcome["textures"].items()}
+            writers[scene] = lambda temporary: write_json(temporary, outcome["scene"])
+            write_together(writers, sweep=False)
             write_json_atomic(self._file("reports", job.name), {"name": job.name, "job": job.spec, **outcome["report"]},
                               sweep=False)
         else:
             self._file("reports", job.name).unlink(missing_ok=True)
             self._file("scenes", job.name).unlink(missing_ok=True)
+            self._drop_textures(job.name)
             write_json_atomic(self._file("failures", job.name),
                               {"name": job.name, "job": job.spec, "error": outcome["error"]}, sweep=False)
         write_json_atomic(self._file("timing", job.name), {"name": job.name, "seconds": outcome["seconds"]},
                           sweep=False)
+
+    def _drop_textures(self, name: str, keep=()) -> None:
+        """Remove the fitted-texture files of job `name` (`fit.result.texture_file_name`) but `keep`."""
+        pattern = re.compile(re.escape(name) + TEXTURE_FILE)
+        for path in (self.root / "scenes").glob(f"{name}.*.npy"):
+            if pattern.fullmatch(path.name) and path.name not in keep:
+                path.unlink()
 
     def record_invalid(self, invalid: list[Invalid]) -> None:
         """Write one failure per invalid line, and drop those of lines that are no longer invalid."""

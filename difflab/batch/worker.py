@@ -73,8 +73,10 @@ def _unpacked(spec: dict, files: dict, folder: Path) -> dict:
 
 
 def outcome_of(spec: dict, threads: int | None = None) -> dict:
-    """Fit one job: {"ok": True, "scene": fitted scene dict, "report": FitResult.to_dict() without the
-    VOLATILE fields} or {"ok": False, "error": message}. Never raises for a failed job: a bad input
+    """Fit one job: {"ok": True, "scene": fitted scene dict, "textures": file name -> texels of each
+    fitted texture (the scene names them: `FitResult.scene_dict` and `.texture_files`, the job's name
+    as the stem), "report": FitResult.to_dict() without the VOLATILE fields} or {"ok": False,
+    "error": message}. Never raises for a failed job: a bad input
     (DifflabError) gives its message, anything else "internal error: Type: message"."""
     try:
         result = fit_job(spec, threads)
@@ -83,7 +85,8 @@ def outcome_of(spec: dict, threads: int | None = None) -> dict:
         report = result.to_dict()
         for key in VOLATILE:
             report.pop(key, None)
-        return {"ok": True, "scene": result.to_scene().to_dict(), "report": report}
+        return {"ok": True, "scene": result.scene_dict(spec["name"]), "textures": result.texture_files(spec["name"]),
+                "report": report}
     except DifflabError as exc:
         return {"ok": False, "error": str(exc)}
     except Exception as exc:  # one job's internal error must not stop the batch: record it

@@ -18,8 +18,11 @@ noise, reduced chi-square, flags -- writes the fitted scene and a report of the 
        neighbours to estimate the noise: a small, thin or scattered mask -- give --sigma) or
        UNDERDETERMINED (no more target values than unknowns)
 
-The fitted scene and the report are written as a pair: both or neither (a full disk while writing
-either leaves the old files, if any).
+A fitted texture (--params texture) is written beside the scene as OUTPUT_STEM.MATERIAL.texture.npy
+(linear float32; OUTPUT_STEM.textureI.npy, I the material's index, where its name is not a plain
+word), and the fitted scene's material names that file. The fitted scene, its texture files and the
+report are written together: all or none (a full disk while writing any leaves the old files, if
+any).
 """
 
 from __future__ import annotations
@@ -29,6 +32,17 @@ from pathlib import Path
 
 from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOT_CONVERGED, EXIT_NOT_JUDGED, EXIT_OK, FitError
 
+
+def texture_files_of(output: Path) -> list[Path]:
+    """The fitted-texture files of the scene file `output` that exist now (`result.texture_file_name`),
+    so that the one overwrite rule covers them before the fit starts."""
+    import re
+
+    from .result import TEXTURE_FILE
+
+    pattern = re.compile(re.escape(output.stem) + TEXTURE_FILE)
+    folder = output.parent if output.parent.is_dir() else None
+    return [] if folder is None else sorted(p for p in folder.iterdir() if pattern.fullmatch(p.name))
 
 
 def ceiling_value(text: str):
@@ -85,9 +99,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
-    import json
-
-    from ..files import refuse_overwrite, write_together
+    from ..files import refuse_overwrite, write_json, write_together
+    from ..io import write_image
     from .engine import fit
     from .params import DEFAULT_PARAMS
 
@@ -95,7 +108,7 @@ def run(args) -> int:
     report = Path(args.report) if args.report else output.with_name(output.stem + ".fit.json")
     if output.resolve() == report.resolve():
         raise FitError(f"--report: the same file as -o/--output ({output}): the report would replace the fitted scene")
-    refuse_overwrite(output, report, force=args.force)
+    refuse_overwrite(output, report, *texture_files_of(output), force=args.force)
     if args.max_steps < 1:
         raise FitError(f"--max-steps: must be >= 1, got {args.max_steps}")
     masks = args.mask
@@ -109,11 +122,14 @@ def run(args) -> int:
     print(result.table())
     if result.no_fit() is not None:
         raise FitError(f"no fit made: {result.no_fit()}")
-    contents = {output: result.to_scene().to_dict(), report: {
+    contents = {output: result.scene_dict(output.stem), report: {
         "scene": str(args.scene), "targets": [str(t) for t in args.targets], "materials": materials, **result.to_dict()}}
-    write_together({path: lambda temporary, data=data: temporary.write_text(json.dumps(data, indent=2) + "\n")
-                    for path, data in contents.items()})  # both written before either is renamed onto its path
-    print(f"wrote {output} and {report}")
+    writers = {output.with_name(name): lambda temporary, texels=texels: write_image(temporary, texels)
+               for name, texels in result.texture_files(output.stem).items()}
+    writers.update({path: lambda temporary, data=data: write_json(temporary, data) for path, data in contents.items()})
+    write_together(writers)  # every file written before any is renamed onto its path
+    *first, last = map(str, writers)
+    print(f"wrote {', '.join(first)} and {last}")
     if not result.converged:
         return EXIT_NOT_CONVERGED
     if result.model_mismatch:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,6 +25,18 @@ def _json(value):
         value = np.asarray(value, np.float64)
         return [_json(v) for v in value] if value.ndim > 1 else [_json_number(v) for v in value]
     return _json_number(value)
+
+
+WORD = re.compile(r"[A-Za-z0-9_-]{1,64}")  # a material name used as is in a texture file's name
+TEXTURE_FILE = r"\.(?:[A-Za-z0-9_-]{1,64}\.texture|texture[0-9]+)\.npy"  # what follows the stem
+
+
+def texture_file_name(stem: str, material: str, index: int) -> str:
+    """The file a command writes a fitted texture to, beside its scene file `stem`.json:
+    <stem>.<material>.texture.npy, or <stem>.texture<index>.npy where the material's name is not a
+    plain word (letters, digits, _ and -; at most 64): never a path, and no two (stem, material)
+    pairs share a name (`TEXTURE_FILE` matches what follows the stem)."""
+    return f"{stem}.{material}.texture.npy" if WORD.fullmatch(material) else f"{stem}.texture{index}.npy"
 
 
 NO_FIT = ("empty_mask", "nonfinite_target")  # difflab's result codes of a fit that was not made
@@ -93,8 +106,9 @@ class FitResult:
         least the ceiling"; with noise, also the channels of the pixels left out because their
         model lies within 2 sigma of a bound the target is clipped at (black or the ceiling,
         `fit.clipping`). residuals: per view (H, W, 3) float32 model - target on the pixels
-        used (0 elsewhere). seen: texture name -> (H_t, W_t) bool, the texels the pixels used
-        constrain (`FitOptions.visible_threshold`).
+        used (0 elsewhere). seen: parameter name of each fitted texture, as in `params` ("texture",
+        or "<material>.texture" when several materials were fitted) -> (H_t, W_t) bool, the texels
+        the pixels used constrain (`FitOptions.visible_threshold`).
     """
 
     params: dict
@@ -167,7 +181,46 @@ class FitResult:
     def to_scene(self, folder=None):
         """The scene with the fitted values written back (materials, and lights where fitted); a
         fitted texture is saved as `folder`/<material>_texture.npy (linear float32, atomically) and
-        the material points to it (FitError without a folder)."""
+        the material points to it (FitError without a folder). `scene_dict` names the texture files
+        without writing them, for a caller that writes them together with the scene."""
+        scene = self._with_values()
+        textures = self.fitted_textures()
+        if textures and folder is None:
+            raise FitError(f"to_scene: a fitted texture (material {', '.join(map(repr, textures))}); give folder= to "
+                           "save its texels")
+        materials = dict(scene.materials)
+        for name, texels in textures.items():
+            path = save_image(Path(folder) / f"{name}_texture.npy", texels)
+            materials[name] = dataclasses.replace(materials[name], texture=str(path))
+        return dataclasses.replace(scene, materials=materials)
+
+    def scene_dict(self, stem: str) -> dict:
+        """The fitted scene in the scene file format (`to_scene().to_dict()`), saved as a file named
+        `stem`.json beside `texture_files(stem)`: each fitted texture's material points to its file by
+        name, a relative path that resolves against the scene file's folder."""
+        data = self._with_values().to_dict()
+        for name, file in self._texture_names(stem).items():
+            data["materials"][name]["texture"] = file
+        return data
+
+    def texture_files(self, stem: str) -> dict:
+        """File name -> texels ((H_t, W_t, 3) float32 linear, for a .npy) of each fitted texture of
+        the scene `scene_dict(stem)` describes: `texture_file_name(stem, material, index)`."""
+        textures = self.fitted_textures()
+        return {file: textures[name] for name, file in self._texture_names(stem).items()}
+
+    def _texture_names(self, stem: str) -> dict:
+        """Material name -> `texture_file_name` of each fitted texture."""
+        names = self.scene.material_names
+        return {name: texture_file_name(stem, name, names.index(name)) for name in self.fitted_textures()}
+
+    def fitted_textures(self) -> dict:
+        """Material name -> its fitted texture, (H_t, W_t, 3) float32 linear, row 0 at the top."""
+        names = self.scene.material_names
+        return {names[p.index]: self.params[p.key] for p in self.layout if p.shape is not None}
+
+    def _with_values(self):
+        """The scene with every fitted value but the textures written back."""
         if self.scene is None:
             raise FitError("to_scene: this result carries no scene")
         scene = self.scene
@@ -178,13 +231,7 @@ class FitResult:
             value = self.params[p.key]
             if p.kind == "intensity":
                 lights[p.index] = dataclasses.replace(lights[p.index], intensity=tuple(value))
-            elif p.shape is not None:
-                if folder is None:
-                    raise FitError(f"to_scene: {p.key!r} is a fitted texture; give folder= to save its texels")
-                name = names[p.index]
-                path = save_image(Path(folder) / f"{name}_texture.npy", value)
-                materials[name] = dataclasses.replace(materials[name], texture=str(path))
-            else:
+            elif p.shape is None:
                 name = names[p.index]
                 new = tuple(value) if isinstance(value, list) else float(value)
                 materials[name] = dataclasses.replace(materials[name], **{p.kind: new})
@@ -197,7 +244,8 @@ class FitResult:
             "stderr": {k: _json(v) for k, v in self.stderr.items()},
             "initial": {k: _json(v) for k, v in self.initial.items()},
             "loss": _json_number(self.loss), "psnr": _json_number(self.psnr), "steps": self.steps,
-            "seconds": self.seconds, "converged": self.converged, "result": self.result, "solver": self.solver,
+            "seconds": self.seconds, "ok": self.ok, "converged": self.converged, "result": self.result,
+            "solver": self.solver,
             "poorly_determined": list(self.poorly_determined), "history": [_json_number(x) for x in self.history],
             "timings": dict(self.timings), "model": self.model, "sigma": _json_number(self.sigma),
             "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch, "noise_unknown": self.noise_unknown, "underdetermined": self.underdetermined, "at_bound": list(self.at_bound),

@@ -1,0 +1,86 @@
+"""A fitted texture written by `difflab fit` and by a batch: a texture file beside the fitted scene,
+written with it, which the scene names and renders (they used to fail: `to_scene` wants a folder)."""
+
+import json
+
+import numpy as np
+import pytest
+from test_texture_fit import quad_scene
+
+from difflab import render
+from difflab.batch.manifest import load_manifest
+from difflab.batch.store import Store
+from difflab.batch.worker import outcome_of
+from difflab.cli import main
+from difflab.fit.result import texture_file_name
+from difflab.io import save_image
+from difflab.scene import load_scene, save_scene
+
+SHAPE = (6, 6)  # 108 texels: a dense solve, seconds
+
+
+@pytest.fixture(scope="module")
+def texel_fit(tmp_path_factory):
+    """(folder, scene file starting from grey texels, target file, true texels, target image)."""
+    folder = tmp_path_factory.mktemp("texture_outputs")
+    texels = np.random.default_rng(5).uniform(0.1, 0.9, SHAPE + (3,)).astype(np.float32)
+    np.save(folder / "truth.npy", texels)
+    np.save(folder / "grey.npy", np.full(SHAPE + (3,), 0.5, np.float32))
+    target = render(quad_scene(folder / "truth.npy", size=24))
+    save_image(folder / "target.npy", target)
+    save_scene(quad_scene(folder / "grey.npy", size=24), folder / "scene.json")
+    return folder, folder / "scene.json", folder / "target.npy", texels, target
+
+
+def assert_renders_the_fit(scene_file, texture_file, fitted, texels, target):
+    """The written scene names `texture_file`, which holds the fit's texels exactly (float32), and
+    renders the target."""
+    scene = load_scene(scene_file)
+    assert scene.materials["m"].texture == str(texture_file)
+    written = np.load(texture_file)
+    assert written.dtype == np.float32 and np.array_equal(written, np.asarray(fitted, np.float32))
+    assert np.abs(written - texels).max() < 1e-4  # recovered from a noise-free render
+    np.testing.assert_allclose(render(scene), target, atol=1e-5)
+
+
+def test_the_fit_command_writes_the_texels_beside_the_scene(texel_fit, tmp_path, capsys):
+    _, scene, target, texels, image = texel_fit
+    out, report, texture = tmp_path / "fitted.json", tmp_path / "fitted.fit.json", tmp_path / "fitted.m.texture.npy"
+    code = main(["fit", str(scene), str(target), "--material", "m", "--params", "texture", "-o", str(out)])
+    written = json.loads(report.read_text())
+    assert (code, written["ok"]) == (0, True), capsys.readouterr()
+    assert written["converged"] and written["result"] == "successful"
+    assert capsys.readouterr().out.endswith(f"wrote {texture}, {out} and {report}\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fitted.fit.json", "fitted.json", "fitted.m.texture.npy"]
+    assert_renders_the_fit(out, texture, written["params"]["texture"], texels, image)
+    # the texture file falls under the overwrite rule, before any work
+    out.unlink()
+    report.unlink()
+    assert main(["fit", str(scene), str(target), "--material", "m", "--params", "texture", "-o", str(out)]) == 2
+    assert capsys.readouterr().err == f"difflab: error: {texture}: exists; use --force to overwrite\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fitted.m.texture.npy"]
+
+
+def test_a_batch_writes_the_texels_beside_the_scene_and_drops_them_with_it(texel_fit, tmp_path):
+    folder, scene, target, texels, image = texel_fit
+    (job,), _ = load_manifest([{"name": "tex", "scene": str(scene), "targets": str(target), "material": "m",
+                                "params": "texture"}])
+    outcome = outcome_of(job.spec)
+    assert outcome["ok"], outcome
+    store = Store(tmp_path)
+    store.record(job, {**outcome, "seconds": 1.0})
+    report = json.loads((tmp_path / "reports" / "tex.json").read_text())
+    assert report["converged"] and store.done(job) and store.row(job)["status"] == "converged"
+    texture = tmp_path / "scenes" / "tex.m.texture.npy"
+    assert_renders_the_fit(tmp_path / "scenes" / "tex.json", texture, report["params"]["texture"], texels, image)
+    store.record(job, {"ok": False, "error": "boom", "seconds": 1.0})  # a failed rerun leaves no result behind
+    assert not texture.exists() and list((tmp_path / "scenes").iterdir()) == []
+
+
+@pytest.mark.parametrize("material, index, name", [
+    ("m", 0, "out.m.texture.npy"), ("brick_2-a", 3, "out.brick_2-a.texture.npy"),
+    ("a.b", 1, "out.texture1.npy"), ("../x", 2, "out.texture2.npy"), ("", 4, "out.texture4.npy")])
+def test_texture_file_names_are_plain_and_distinct(material, index, name):
+    """A material named as a path, or with dots (which could make two (stem, material) pairs meet:
+    "a" + "b.c" and "a.b" + "c"), is named by its index instead."""
+    assert texture_file_name("out", material, index) == name
