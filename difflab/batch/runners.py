@@ -8,6 +8,7 @@ runs on behind the caller.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import statistics
@@ -34,10 +35,29 @@ def _exit_with(parent: int) -> None:
 
 
 def _init_worker() -> None:
-    """A pool process: Ctrl-C left to the parent, which stops the pool; and an exit when the parent
-    dies."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    """A pool process: an exit when the parent dies (Ctrl-C it ignores from its start: `_ctrl_c_held`)."""
     threading.Thread(target=_exit_with, args=(os.getppid(),), daemon=True).start()
+
+
+@contextlib.contextmanager
+def _ctrl_c_held():
+    """Start worker processes here: they ignore Ctrl-C (SIGINT) from their first instruction -- the
+    disposition SIG_IGN is inherited through fork and exec -- so that a Ctrl-C while they import
+    (before any code of theirs runs) prints no traceback of theirs: the parent stops them. This
+    thread's own Ctrl-C is held meanwhile (blocked: Linux keeps a blocked signal pending though
+    ignored) and raised after the block; one landing in the microseconds between ignoring and
+    blocking, or taken by another thread of the process that does not block it, is lost. Elsewhere
+    than in the main thread, where signals are not handled, the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def render_threads(cores: int, tasks: int) -> int:
@@ -67,14 +87,16 @@ def local_jobs(jobs, workers: int):
     """Run `jobs` in `workers` spawned processes (a process pool). Each process keeps its compiled
     solves across the jobs it runs, and its Warp renders use `render_threads(cores, workers)`
     threads. A worker process that dies fails the jobs it had not finished (the pool breaks: the
-    remaining jobs fail too, and a rerun retries them)."""
+    remaining jobs fail too, and a rerun retries them). Interrupted (Ctrl-C) or closed early at any
+    point, even while the workers start, it kills them (`_kill`) before it lets the interruption on."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     threads = render_threads(_cores(), workers)
     pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_init_worker)
-    futures = {pool.submit(run_job, job.spec, None, threads): job for job in jobs}
     try:
+        with _ctrl_c_held():  # each submit starts a worker until there are `workers`
+            futures = {pool.submit(run_job, job.spec, None, threads): job for job in jobs}
         for future in as_completed(futures):
             try:
                 outcome = future.result()
@@ -82,11 +104,22 @@ def local_jobs(jobs, workers: int):
                 outcome = _lost(f"worker process lost: {type(exc).__name__}: {exc}")
             yield futures[future], outcome
     except BaseException:  # interrupted or closed early: stop the workers now, not after their jobs
-        pool.shutdown(wait=False, cancel_futures=True)
-        for process in list((getattr(pool, "_processes", None) or {}).values()):
-            process.terminate()  # Python 3.14 has pool.terminate_workers(); 3.11 only this
+        _kill(pool)
         raise
     pool.shutdown()
+
+
+def _kill(pool) -> None:
+    """Kill a process pool's workers (SIGKILL: a worker holds no output to clean up, the parent
+    writes every file) and reap them, then shut the pool down without waiting for their jobs. (The
+    pool's shutdown forgets its processes: terminating them after it, as this did, reached none, and
+    Ctrl-C waited for the running jobs -- seconds while the workers imported JAX.)"""
+    processes = list((pool._processes or {}).values())  # Python 3.14 has pool.kill_workers(); 3.11 only this
+    for process in processes:
+        process.kill()
+    for process in processes:
+        process.join()
+    pool.shutdown(wait=False, cancel_futures=True)
 
 
 def cluster_slots(client) -> int:
