@@ -170,8 +170,8 @@ def test_batch_recovers_each_fit_and_records_failures(reference):
     assert invalid == {"line": 3, "name": "typo", "error": "unknown key(s) ['materal']; known: name, scene, targets, "
                        "material, params, method, init, solver"}
     rows = (out / "summary.csv").read_text().splitlines()
-    assert rows[0] == ("line,name,status,result,model,model_mismatch,noise_unknown,underdetermined,loss,psnr,chi2,steps,"
-                       "params,error")
+    assert rows[0] == ("line,name,status,result,model,model_mismatch,mismatch_suspected,noise_unknown,underdetermined,loss,"
+                       "psnr,chi2,steps,params,error")
     assert [r.split(",")[:3] for r in rows[1:]] == (
         [["1", "fit0", "converged"], ["2", "fit1", "converged"], ["3", "typo", "invalid"]]
         + [[str(i + 2), f"fit{i}", "converged"] for i in range(2, len(KDS))]

@@ -240,11 +240,14 @@ def test_unlit_pixels_leave_the_noise_estimate_and_the_chi_square():
     """A sphere lit from the side without ambient light: 52 % of its pixels are exactly 0 in the
     target and in the fitted model. A renderer's noise scales with its signal, so they carry none:
     Gaussian noise of sigma 0.01 on the lit pixels only. The noise estimate reads the lit pixels (over
-    every used pixel the median Laplacian sits in the unlit half: ~9x too low, the correct fit
-    flagged model_mismatch) and the chi-square counts only the lit entries: its sum of squares over
+    every used pixel the unlit half's zero Laplacians pull the mean square down: sigma ~0.7x, the
+    correct fit's chi2 ~2) and the chi-square counts only the lit entries: its sum of squares over
     dof estimates 0.01^2 within 5 standard deviations (counting the unlit entries too gives ~0.48).
-    With noise proportional to the signal (5 %), sigma is the median lit pixel's noise within 25 %."""
-    from difflab.fit.stats import estimate_sigma
+    With noise proportional to the signal (5 %), sigma is the lit pixels' rms noise within 20 % and the
+    fit is not flagged: the estimate reads only the pixels with lit neighbours, not the brightest
+    (noisiest) limb, so it runs 6-18 % low on these 443 pixels (chi2 1.07-1.54 over seeds: ok, or
+    at most `mismatch_suspected`, not judged)."""
+    from difflab.fit.noise import estimate_sigma
 
     side = {"type": "point", "position": [-4, 1.5, 1], "intensity": [1, 1, 1], "attenuation": [1, 0, 0]}
     d = scene_dict(size=48, red={"ka": [0.0] * 3, "ks": [0.0] * 3}, lights=[side])
@@ -259,9 +262,10 @@ def test_unlit_pixels_leave_the_noise_estimate_and_the_chi_square():
     result = fit(clean + 0.01 * (clean > 0) * rng.normal(size=clean.shape))
     assert result.converged and not result.model_mismatch
     assert abs(result.sigma - 0.01) < 0.0015
-    assert estimate_sigma(result.residuals, [mask]) < 0.2 * result.sigma  # the unlit pixels counted: too low
+    assert estimate_sigma(result.residuals, [mask])[0] < 0.75 * result.sigma  # the unlit pixels counted: too low
     dof = 3 * int(lit.sum()) - 3
     assert abs(result.chi2 * result.sigma ** 2 / 0.01 ** 2 - 1.0) < 5 * np.sqrt(2.0 / dof)
     proportional = fit(clean * (1.0 + 0.05 * rng.normal(size=clean.shape)))
-    median_noise = float(np.median(0.05 * clean[lit]))
-    assert proportional.converged and abs(proportional.sigma / median_noise - 1.0) < 0.25
+    rms_noise = float(np.sqrt(np.mean(np.square(0.05 * clean[lit]))))
+    assert proportional.converged and abs(proportional.sigma / rms_noise - 1.0) < 0.2
+    assert not proportional.model_mismatch and proportional.chi2 < 2.0

@@ -38,8 +38,10 @@ class BatchSummary:
     @property
     def unjudged(self) -> list:
         """Names of the fits whose image model was not judged: their noise could not be estimated
-        or they are underdetermined (`FitResult.noise_unknown`, `.underdetermined`)."""
-        return [row["name"] for row in self.rows if row.get("noise_unknown") or row.get("underdetermined")]
+        or they are underdetermined, or a mismatch is suspected against an estimated noise
+        (`FitResult.not_judged`)."""
+        return [row["name"] for row in self.rows
+                if row.get("noise_unknown") or row.get("underdetermined") or row.get("mismatch_suspected")]
 
 
 def _say(quiet: bool, text: str) -> None:

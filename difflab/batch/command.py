@@ -6,7 +6,7 @@ Bad manifest lines are listed (with their line numbers) before any fit starts an
 failures; the other fits run. Rerun the same command to finish an interrupted batch: finished fits
 are skipped. Exit code: 0 when every line gave a converged fit that its image model explains; 3 when
 any line is invalid, failed or did not converge; else 4 when any fit is flagged model_mismatch, else
-5 when any fit's model was not judged (noise unknown or underdetermined, as `difflab fit`; everything
+5 when any fit's model was not judged (noise unknown, underdetermined or a mismatch suspected, as `difflab fit`; everything
 is still written: see OUTDIR/summary.csv); 2 when the manifest cannot be read. docs/batch.md describes the manifest and the output folder.
 """
 

@@ -33,10 +33,10 @@ from ..io import write_image
 from .manifest import Invalid, Job
 
 FOLDERS = ("scenes", "reports", "failures", "timing")
-COLUMNS = ("line", "name", "status", "result", "model", "model_mismatch", "noise_unknown", "underdetermined", "loss", "psnr",
-           "chi2", "steps", "params", "error")
-REPORTED = ("result", "model", "model_mismatch", "noise_unknown", "underdetermined", "loss", "psnr", "chi2", "steps",
-            "params")  # columns from a report
+COLUMNS = ("line", "name", "status", "result", "model", "model_mismatch", "mismatch_suspected", "noise_unknown",
+           "underdetermined", "loss", "psnr", "chi2", "steps", "params", "error")
+REPORTED = ("result", "model", "model_mismatch", "mismatch_suspected", "noise_unknown", "underdetermined", "loss",
+            "psnr", "chi2", "steps", "params")  # columns from a report
 
 
 def _read_json(path: Path):

@@ -134,4 +134,4 @@ def run(args) -> int:
         return EXIT_NOT_CONVERGED
     if result.model_mismatch:
         return EXIT_MODEL_MISMATCH
-    return EXIT_NOT_JUDGED if result.noise_unknown or result.underdetermined else EXIT_OK
+    return EXIT_NOT_JUDGED if result.not_judged else EXIT_OK

@@ -26,8 +26,9 @@ from .clipping import clipped_band
 from .matfree import check_solver
 from .solvers import SUCCESSFUL, run
 from .sparse_jacobian import sparse_normal_matrix
+from .noise import silent_pixels, views_noise
 from .stats import (QUANTISATION_SIGMA, finite_gram, fit_statistics, normal_matrix, poorly_determined, psnr,
-                    silent_pixels, standard_errors, views_noise)
+                    standard_errors)
 from .texels import texel_coverage
 
 
@@ -66,25 +67,28 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         loss = 0.5 * sse if rho is counted else float(0.5 * np.sum(np.square(rho)))
         residuals = setup.residual_images(r)
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and finite_gram(gram))
-        weighted = residuals if setup.unit_weights else setup.residual_images(r, weighted=True)
         silent, silent_entries = silent_pixels(setup.views, r)
-        sigma = views_noise(setup.views, weighted, silent, setup.sigma_given, setup.sigma_floor,
-                            setup.sigma_fallback, setup.quantisation) if finite else float("nan")
+        sigma, noise_values = views_noise(setup.views, residuals, silent, setup.sigma_given, setup.sigma_floor,
+                                          setup.sigma_fallback, setup.quantisation) if finite else (float("nan"), 0)
         noise_unknown = finite and sigma is None
+        mean_weight = setup.weight_total / counted.size if counted.size else 1.0  # (unit weights: 1)
         sigma = float("nan") if sigma is None else sigma
         if finite:
             unseen = sum(int(np.count_nonzero(~seen[p.key])) * (p.size // seen[p.key].size) for p in layout
                          if p.key in seen)  # texels no pixel reads: no unknowns of the data's
             st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size - unseen, silent_entries,
-                                sigma_given=setup.sigma_given is not None, skip=skip)
+                                sigma_given=setup.sigma_given is not None, skip=skip, noise_values=noise_values,
+                                mean_weight=mean_weight)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]))
-            floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], QUANTISATION_SIGMA ** 2)))
+            floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], mean_weight * QUANTISATION_SIGMA ** 2)))
             partly_seen = [key for key, on in seen.items() if not on.all()]
             flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol, also=partly_seen)
-            chi2, mismatch, underdetermined = st["chi2"], st["mismatch"], st["underdetermined"]
+            chi2, mismatch, suspected = st["chi2"], st["mismatch"], st["suspected"]
+            underdetermined = st["underdetermined"]
         else:
             stderr = {p.key: np.full(p.size, np.nan) for p in layout}
-            flagged, chi2, mismatch, underdetermined = [p.key for p in layout], float("inf"), True, False
+            flagged, chi2, mismatch = [p.key for p in layout], float("inf"), True
+            suspected = underdetermined = False
             if result == SUCCESSFUL:
                 result = "nonfinite"
         lo, hi = layout.bounds()
@@ -93,7 +97,8 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         out = FitResult(params=public(values), stderr=public(stderr), loss=loss, psnr=psnr(sse, weight_total),
                         seconds=timings.get("solve", 0.0), converged=bool(result == SUCCESSFUL and finite),
                         result=result, history=list(history), poorly_determined=flagged, sigma=float(sigma),
-                        chi2=float(chi2), model_mismatch=bool(mismatch), noise_unknown=noise_unknown,
+                        chi2=float(chi2), model_mismatch=bool(mismatch), mismatch_suspected=bool(suspected),
+                        noise_unknown=noise_unknown,
                         underdetermined=bool(underdetermined),
                         at_bound=[p.key for p in layout if np.any(on_bound[p.key])], residuals=residuals, seen=seen,
                         timings={**timings, "stats": time.perf_counter() - start}, **common)

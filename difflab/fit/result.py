@@ -92,8 +92,12 @@ class FitResult:
         summed over both solves when the fit was made again without clipped pixels (`fit.clipping`).
     model: the image model fitted through: "raster" (the G-buffer) or "raytrace" (the recorded ray
         tree). sigma: the pixel noise used (given, or estimated from the targets; see `fit.stats`).
-    chi2: reduced chi-square of the residuals at noise sigma (about 1 when the model explains the
-        targets to their noise). model_mismatch: chi2 far above 1 (`fit.stats.MISMATCH_CHI2`).
+    chi2: reduced chi-square sum w r^2 / (dof w_mean sigma^2) of the residuals at noise sigma (about
+        1 when the model explains the targets to their noise). model_mismatch: chi2 above its
+        spread for a given sigma, and above `fit.stats.MISMATCH_CHI2` too for an estimated one.
+        mismatch_suspected: sigma estimated and chi2 above its spread (`fit.noise.chi2_spread`) but
+        not above MISMATCH_CHI2: the residuals exceed the estimated noise, by less than an estimate
+        can be off for non-white noise: the model is not judged (`ok` False; pass `sigma=` to judge it).
         noise_unknown: too few used pixels have used neighbours to estimate the noise (a small,
         thin or scattered mask) and no `sigma` was given: sigma and chi2 are nan, and whether the
         image model explains the targets is not judged (`ok` is False; pass `sigma=` to judge it).
@@ -128,6 +132,7 @@ class FitResult:
     sigma: float = float("nan")
     chi2: float = float("nan")
     model_mismatch: bool = False
+    mismatch_suspected: bool = False
     noise_unknown: bool = False
     underdetermined: bool = False
     at_bound: list = field(default_factory=list)
@@ -141,7 +146,13 @@ class FitResult:
     def ok(self) -> bool:
         """Converged, and the image model explains the targets (judged against a known noise
         level, without a mismatch flag)."""
-        return self.converged and not (self.model_mismatch or self.noise_unknown or self.underdetermined)
+        return self.converged and not (self.model_mismatch or self.not_judged)
+
+    @property
+    def not_judged(self) -> bool:
+        """Whether the image model was left unjudged: the noise unknown, the fit underdetermined, or a
+        mismatch suspected against an estimated noise (the CLI's exit 5)."""
+        return self.noise_unknown or self.underdetermined or self.mismatch_suspected
 
     def no_fit(self) -> str | None:
         """Why no fit was made -- "empty_mask: ..." or "nonfinite_target: ..." with what the targets
@@ -248,7 +259,8 @@ class FitResult:
             "solver": self.solver,
             "poorly_determined": list(self.poorly_determined), "history": [_json_number(x) for x in self.history],
             "timings": dict(self.timings), "model": self.model, "sigma": _json_number(self.sigma),
-            "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch, "noise_unknown": self.noise_unknown, "underdetermined": self.underdetermined, "at_bound": list(self.at_bound),
+            "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch,
+            "mismatch_suspected": self.mismatch_suspected, "noise_unknown": self.noise_unknown, "underdetermined": self.underdetermined, "at_bound": list(self.at_bound),
             "censored": self.censored,
         }
 
@@ -271,6 +283,9 @@ class FitResult:
             rows.append(f"{key:<22} {cells}{flag}")
         flags = [name for name, on in (("MODEL MISMATCH: the image model does not explain the targets; the standard "
                                          "errors assume it does", self.model_mismatch),
+                                        ("MISMATCH SUSPECTED: the residuals exceed the estimated noise beyond its "
+                                         "spread; the image model is not judged (give sigma to judge it)",
+                                         self.mismatch_suspected),
                                         ("NOISE UNKNOWN: too few used pixels with used neighbours to estimate it; "
                                          "the image model is not judged (give sigma)", self.noise_unknown),
                                         ("UNDERDETERMINED: no more counted target values than unknowns the data "

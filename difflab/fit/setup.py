@@ -356,16 +356,15 @@ class Setup:
             return ResultCode("empty_mask", empty_detail(self.labels, self.views, shown))
         return None
 
-    def residual_images(self, r, weighted=False) -> list[np.ndarray]:
-        """Per view (H, W, 3) float32 plain residuals min(model, ceiling) - target (`weighted`: times
-        sqrt(weight), as r is) from the flat weighted residuals r (0 outside the pixels used and
-        where the weight is 0). With every used weight 1 the two are the same images."""
+    def residual_images(self, r) -> list[np.ndarray]:
+        """Per view (H, W, 3) float32 plain residuals min(model, ceiling) - target from the flat
+        weighted residuals r (0 outside the pixels used and where the weight is 0)."""
         out, offset = [], 0
         for view in self.views:
             pixels = view.pixels
             part = np.asarray(r[offset:offset + 3 * pixels.size], np.float64).reshape(-1, 3)
             offset += 3 * pixels.size
-            if not weighted and not self.unit_weights:
+            if not self.unit_weights:
                 sqrt_w = np.sqrt(view.weights)
                 part = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w, 1.0), 0.0)
             full = np.zeros(view.image.shape, np.float32)

@@ -1,38 +1,41 @@
 """Diagnostics at the solution: the noise level, reduced chi-square, the model-mismatch flag,
 standard errors, poorly determined parameters and PSNR.
 
-Noise: `sigma` when given, else estimated from the residual images at the solution by Immerkaer's
-Laplacian operator with a robust (median) scale, sigma = 1.4826 median |L| / 6, over the pixels
-whose 3 x 3 neighbourhood is all used and uncensored -- per channel where weights of 0 leave some
-channels of used pixels out -- (L = R * [1 -2 1; -2 4 -2; 1 -2 1] has standard
-deviation 6 sigma for white noise). The Laplacian removes what a wrong model leaves smoothly (an
-offset, a gradual shading error), so the estimate sees the noise, not the mismatch. With fewer than
+Noise: `sigma` when given, else estimated from the residual images at the solution (`fit.noise`) by Immerkaer's
+Laplacian operator (L = R * [1 -2 1; -2 4 -2; 1 -2 1] has variance 36 sigma^2 for white noise) as the
+mean noise variance, sigma^2 = sum w L^2 / (36 sum w) with sharp outliers counted at their block's
+level (`estimate_sigma`), over the pixels whose 3 x 3 neighbourhood is all used and uncensored --
+per channel where weights of 0 leave some channels of used pixels out. sigma is in the targets'
+units whatever the weights. The Laplacian removes what a wrong model leaves smoothly (an offset, a
+gradual shading error), so the estimate sees the noise, not the mismatch. With fewer than
 MIN_NOISE_PIXELS such pixels (a small, thin or scattered mask) the noise is unknown -- the residuals
 alone cannot tell noise from a model's error -- unless given: the fit then reports sigma and chi2 as
 nan and `noise_unknown`, and makes no claim about the model. (A refit without clipped pixels takes
 the first fit's estimate.) It is floored at the targets' quantisation: one step / sqrt(12) for targets from
 8- or 16-bit files (`Setup.sigma_floor`), FLOAT_SIGMA for float data (float32 rounding of a render is ~1e-7).
 
-    chi2_red = sum_i r_i^2 / (sigma^2 (N - p))
+    chi2_red = sum_i w_i r_i^2 / (w_mean sigma^2 (N - p))
 
-over the N uncensored residual entries and p fitted entries.
+over the N uncensored residual entries (weights w_i, mean w_mean) and p fitted entries.
 
 Silent pixels: a used pixel whose target and fitted model are both exactly 0 in every channel (the
 unlit side of an object without ambient light) carries no noise -- a renderer's noise scales with
 its signal, so there is none where there is no light -- and says nothing about sigma: such pixels
 are left out of the noise estimate (so are their neighbours, whose Laplacian they would damp), else
-a large unlit region pulls the median, and sigma, down and flags a correct fit as a mismatch.
+a large unlit region pulls sigma down and flags a correct fit as a mismatch.
 Their entries add exactly 0 to the sum of squares and are left out of N too: the chi-square counts
 only the entries that can carry noise, so a correct fit still has chi2_red ~ 1 (and s^2 below
 estimates the lit pixels' noise). A pixel zero in only some channels stays in both. Where the noise
-level varies over the lit pixels (noise proportional to the signal), sigma is a median level and
-chi2_red, a mean square over it, exceeds 1 by the spread: (rms / median of the pixels' sigmas)^2.
+level varies over the lit pixels (noise proportional to the signal) sigma^2 is their mean variance,
+what chi2_red's mean compares with.
 
-`model_mismatch` is set when chi2_red is above 1 + 5 sqrt(2 / (N - p)), its statistical spread
-(and, for an estimated sigma, above MISMATCH_CHI2 too: `fit_statistics`): the residuals sit far
-above the noise, so the image model does not explain the target (wrong image model, wrong specular
-model, missing light...) and the fitted values answer a different question. With N <= p the fit is
-`underdetermined`: nothing is left to judge the model or the noise by.
+The verdict (`fit_statistics`): with sigma given, `model_mismatch` when chi2_red is above
+1 + 5 sqrt(2 / (N - p)), its statistical spread; with sigma estimated, above its spread with the
+estimate's (`chi2_spread`) `mismatch_suspected` (not judged), and above MISMATCH_CHI2 too
+`model_mismatch`: the residuals sit far above the noise, so the image model does not explain the
+target (wrong image model, wrong specular model, missing light...) and the fitted values answer a
+different question. With N <= p the fit is `underdetermined`: nothing is left to judge the model or
+the noise by.
 
 Standard errors are those of linearised least squares, in scene units, and assume the model holds:
 
@@ -75,121 +78,16 @@ from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import ArpackError, eigsh
 
 from .inverse_diagonal import inverse_diagonal
+from .noise import chi2_spread
 from .normal_equations import dense, linearise
-from .targets import in_channels
 
 QUANTISATION_SIGMA = 1.0 / (255.0 * math.sqrt(12.0))
 FLOAT_SIGMA = 1e-5
-MISMATCH_CHI2 = 2.0
-MIN_NOISE_PIXELS = 48  # pixel channels
+MISMATCH_CHI2 = 2.0  # an estimated noise off by sqrt(2): beyond any correct model measured (1.30)
 SINGULAR_RCOND = 1e-12
 PACKED_MAX = 256  # blocks of J^T J inverted dense (eigh) together, up to this many entries
 SPARSE_STATS_MAX = 8192  # the most entries of one block of J^T J inverted sparse (measured below)
 DENSE_STATS_MAX = 1536  # the most entries of a singular block inverted dense (eigh; measured below)
-
-
-def median(values: np.ndarray):
-    """`np.median` of a 1-D array of finite values, the same number, reordering `values` in place: one
-    partition at the upper middle and the largest value below it (numpy partitions at both middles,
-    ~10x slower: 0.66 against 0.06 ms for 70k values)."""
-    half = values.size // 2
-    values.partition(half)
-    if values.size % 2:
-        return values[half]
-    return (values[:half].max() + values[half]) / 2  # in the values' precision, as np.mean of the two
-
-
-def estimate_sigma(images, used_maps, *, interior=True) -> float | None:
-    """The robust Laplacian noise estimate of (H, W, 3) images over their used entries -- only those
-    whose 3 x 3 neighbourhood is used, when `interior` -- or None with fewer than MIN_NOISE_PIXELS.
-    A used map is (H, W) bool (every channel of a used pixel) or (H, W, 3) (per channel: where some
-    channels have weight 0, their residuals are 0, not noise, and must not enter a neighbourhood).
-    (The Laplacian kernel is [1 -2 1]^T [1 -2 1]: applied as two second differences, over the used
-    pixels' bounding box.)"""
-    values = []
-    for image, used in zip(images, used_maps):
-        pixels = used if used.ndim == 2 else used[..., 0] | used[..., 1] | used[..., 2]
-        rows, cols = np.flatnonzero(pixels.any(axis=1)), np.flatnonzero(pixels.any(axis=0))
-        if rows.size == 0 or used.shape[0] < 3 or used.shape[1] < 3:
-            continue
-        top, left = max(rows[0] - 1, 0), max(cols[0] - 1, 0)  # the box, one pixel wider (non-interior case)
-        box = (slice(top, min(rows[-1] + 2, used.shape[0])), slice(left, min(cols[-1] + 2, used.shape[1])))
-        used, image = used[box], np.asarray(image)[box]  # in its own precision (float32 residual images)
-        if used.shape[0] < 3 or used.shape[1] < 3:
-            continue
-        centre = used[1:-1, 1:-1]
-        if interior:
-            across = used[:, :-2] & used[:, 1:-1] & used[:, 2:]
-            centre = across[:-2] & across[1:-1] & across[2:]
-        rows2 = image[1:-1] * -2.0  # a - 2 b + c, summed in place (the same roundings, fewer temporaries)
-        rows2 += image[:-2]
-        rows2 += image[2:]
-        lap = rows2[:, 1:-1] * -2.0
-        lap += rows2[:, :-2]
-        lap += rows2[:, 2:]
-        if centre.ndim == 2:
-            picked = np.compress(centre.reshape(-1), lap.reshape(centre.size, -1), axis=0).reshape(-1)
-        else:
-            picked = lap[centre]
-        values.append(np.abs(picked, out=picked))
-    values = values[0] if len(values) == 1 else np.concatenate(values or [np.zeros(0)])
-    if not np.isfinite(values).all():
-        values = values[np.isfinite(values)]
-    return float(1.4826 * median(values) / 6.0) if values.size >= MIN_NOISE_PIXELS else None
-
-
-def at_ceiling(image, ceiling) -> np.ndarray:
-    """(...) bool: the pixels of an image (..., 3) with a channel at or above `ceiling` (three
-    comparisons or'ed: numpy's `any` over a last axis of 3 costs ~10x as much)."""
-    top = image >= ceiling
-    return top[..., 0] | top[..., 1] | top[..., 2]
-
-
-def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
-    """The used pixels of a fit's views (`records.View`) that carry no noise: target and model both
-    exactly 0 in every channel (an unlit side; a renderer's noise scales with its signal), from the
-    flat weighted residuals r over every used entry. Returns per view (U,) bool over its used
-    pixels, and how many of their entries have weight > 0 (left out of the chi-square's dof)."""
-    out, count, offset = [], 0, 0
-    for view in views:
-        part = r[offset:offset + 3 * view.pixels.size].reshape(-1, 3)
-        offset += 3 * view.pixels.size
-        zero = view.zeros & (part == 0)  # black in the target, and the model 0 there too
-        rows = zero[:, 0] & zero[:, 1] & zero[:, 2]
-        count += 3 * int(np.count_nonzero(rows)) if view.weighting is None else \
-            int(np.count_nonzero(np.take(view.entries, np.flatnonzero(rows), axis=0)))
-        out.append(rows)
-    return out, count
-
-
-def views_noise(views, residual_images, silent, given: float | None, floor: float, fallback=None,
-                quantisation: float = 0.0) -> float | None:
-    """The pixel noise sigma of a fit's views: `given` -- the noise before quantisation, to which
-    the targets' `quantisation` (the coarsest file target's code step / sqrt(12), 0 for float data:
-    one sigma serves every view) is added in
-    quadrature: a correct fit of an 8-bit file with its true noise 0.002 given came out at chi2
-    1.2, flagged -- or estimated from the residual images
-    (H, W, 3) at the solution over the used pixels but the `silent` (per view (U,) bool,
-    `silent_pixels`) and the censored ones -- per channel where a weight of 0 leaves a used pixel's
-    channel out -- and at least `floor` (the quantisation's). Where too few pixels allow that:
-    `fallback` when given (a refit's, the first fit's sigma), else None (unknown)."""
-    if given is not None:
-        return math.hypot(given, quantisation) if quantisation else given
-    clean = []
-    for i, view in enumerate(views):
-        left_out = silent[i] if silent else np.zeros(view.pixels.size, bool)
-        if np.isfinite(view.ceiling):
-            left_out = left_out | at_ceiling(view.values, view.ceiling)
-        clean.append(view.used)
-        if left_out.any():
-            clean[i] = view.used.copy()
-            clean[i].reshape(-1)[view.pixels[left_out]] = False
-        if view.weighting is not None and not np.all(view.weights > 0):
-            clean[i] = in_channels(clean[i]) & (view.weighting > 0)
-    estimate = estimate_sigma(residual_images, clean)
-    if estimate is None:
-        estimate = fallback
-    return None if estimate is None else max(estimate, floor)
 
 
 @eqx.filter_jit
@@ -308,34 +206,45 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
 
 
 def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, size: int, silent: int = 0,
-                   sigma_given: bool = False, skip=None) -> dict:
-    """s2 = sse / dof (sse: the sum of squares of the `entries` residuals r; dof = N - p, N entries
-    neither censored nor `silent` (noise-free zeros), p = `size` fitted entries the data reach -- a
-    texel no pixel reads is not one), chi2 = s2 / sigma^2
-    (reduced; nan when sigma is: the noise unknown, the model is not judged), the mismatch flag, and
-    diag (J^T J)^-1 (p,) from gram = J^T J (p, p), dense or sparse (`covariance_diagonal`; nan at
-    `skip`).
+                   sigma_given: bool = False, skip=None, noise_values: int = 0, mean_weight: float = 1.0) -> dict:
+    """s2 = sse / dof (sse: the sum of squares of the `entries` weighted residuals sqrt(w) r; dof =
+    N - p, N entries neither censored nor `silent` (noise-free zeros), p = `size` fitted entries the
+    data reach -- a texel no pixel reads is not one), chi2 = s2 / (w sigma^2) (reduced, w the
+    `mean_weight` of the counted entries: sigma is the targets' noise in their own units, and a
+    weighted residual's variance is w sigma^2; nan when sigma is: the noise unknown, the model is
+    not judged), the verdict on the model, and diag (J^T J)^-1 (p,) from gram = J^T J (p, p), dense
+    or sparse (`covariance_diagonal`; nan at `skip`).
 
-    The flag is raised when chi2 exceeds 1 + 5 sqrt(2 / dof) (five standard deviations of a reduced
-    chi-square) and, for an estimated sigma, MISMATCH_CHI2 too: an estimate is a median level, which
-    noise that varies over the image (a renderer's, proportional to the signal) lifts chi2 above 1
-    by the spread. A given sigma is taken as the truth: POV-Ray's brilliance 1.2 (outside the
-    model) fitted with its true sigma 0.01 gave chi2 1.83 over ~3600 entries and was not flagged.
+    With t = 1 + 5 `chi2_spread(dof, noise_values)` (five standard deviations of chi2 for a correct
+    model; `noise_values` Laplacians gave an estimated sigma, 0: given):
+    - a given sigma is the truth: `mismatch` when chi2 > t (POV-Ray's brilliance 1.2, outside the
+      model, fitted with its true sigma 0.01: chi2 1.83 over ~3600 entries, flagged);
+    - an estimated one: `mismatch` when chi2 > max(t, MISMATCH_CHI2); `suspected` when t < chi2 <=
+      MISMATCH_CHI2: the residuals exceed the estimated noise by more than the estimate's spread,
+      but an estimate can be off for a correct model where the noise is not white -- correlated
+      (a pixel filter), quantised noise-free values (POV-Ray scene A as a noise-free 8-bit PNG:
+      chi2 1.30 at the quantisation floor), a renderer's pixel integration against difflab's centre
+      sample (Mitsuba's diffuse sphere at 64 spp: chi2 1.12-1.25, kd 3e-5 off, z up to 8) -- so
+      the model is not judged: give sigma to judge it. Measured wrong models in that band: POV-Ray
+      glass without its shadow absorption and TIR rim (chi2 1.13-1.55, kt 43-73 stderr off),
+      Mitsuba's indirect light (1.18, floor kd 21-46 stderr off), an area light's soft shadows at
+      2 % noise (1.68).
     With dof <= 0 (no more counted entries than unknowns: `underdetermined`) the residuals say
-    nothing about the noise or the model: chi2 nan, no flag, s2 = sigma^2 where sigma is known,
+    nothing about the noise or the model: chi2 nan, no flag, s2 = w sigma^2 where sigma is known,
     else inf."""
     p = size
     dof = entries - censored - silent - p
     if dof <= 0:
         known = math.isfinite(sigma) and sigma > 0
-        return {"s2": sigma * sigma if known else math.inf, "chi2": math.nan, "mismatch": False,
-                "diag": covariance_diagonal(gram, skip), "underdetermined": True}
+        return {"s2": mean_weight * sigma * sigma if known else math.inf, "chi2": math.nan, "mismatch": False,
+                "suspected": False, "diag": covariance_diagonal(gram, skip), "underdetermined": True}
     s2 = sse / dof
-    chi2 = math.nan if math.isnan(sigma) else s2 / (sigma * sigma) if sigma > 0 else math.inf
-    spread = 1.0 + 5.0 * math.sqrt(2.0 / dof)
-    mismatch = bool(chi2 > (spread if sigma_given else max(MISMATCH_CHI2, spread)))
-    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "diag": covariance_diagonal(gram, skip),
-            "underdetermined": False}
+    chi2 = math.nan if math.isnan(sigma) else s2 / (mean_weight * sigma * sigma) if sigma > 0 else math.inf
+    threshold = 1.0 + 5.0 * chi2_spread(dof, 0 if sigma_given else noise_values)
+    mismatch = bool(chi2 > (threshold if sigma_given else max(MISMATCH_CHI2, threshold)))
+    suspected = bool(not sigma_given and not mismatch and chi2 > threshold)
+    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "suspected": suspected,
+            "diag": covariance_diagonal(gram, skip), "underdetermined": False}
 
 
 def poorly_determined(layout, values: dict, stderr_floor: dict, rel_tol=0.1, abs_tol=1e-3, also=()) -> list[str]:
