@@ -77,8 +77,13 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
     Raises:
         ManifestError: the manifest cannot be read or lists nothing.
         OutputError: `outdir` holds files and is not a batch's folder (without `force`).
-        DifflabError: bad `workers`, or both `client` and `scheduler`.
+        DifflabError: bad `workers`, or both `client` and `scheduler`; or a script calls fit_many
+            outside `if __name__ == "__main__":`, which the local worker processes run again as they
+            start (they import the main script), so that none could start: nothing is run.
     """
+    from .runners import leave_if_importing_main
+
+    leave_if_importing_main()  # a script's unguarded call, run again in a worker: the parent says so
     jobs, invalid = load_manifest(manifest)
     if workers is not None and not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1):
         raise DifflabError(f"workers: expected an integer >= 1, got {workers!r}")

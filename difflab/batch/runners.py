@@ -12,15 +12,44 @@ import contextlib
 import os
 import signal
 import statistics
+import sys
 import threading
 import time
 
+from ..errors import DifflabError
 from ..limits import env_count
 from .worker import pack, run_job, run_jobs
 
 TASK_SECONDS = 0.5  # s of fitting a cluster task aims at: Dask's own cost per task (10-20 ms of CPU over
 #                     client, scheduler and worker on 2 loaded cores, issue 13) then stays within a few %
 TASKS_PER_THREAD = 2  # cluster tasks in flight per worker thread: one running, one ready behind it
+
+
+UNGUARDED = 86  # the exit status of a pool worker whose import of the main script called fit_many
+
+
+def leave_if_importing_main() -> None:
+    """In a pool worker importing the parent's main script -- as a spawned process does before any job,
+    running the script's top level --, exit with status UNGUARDED: a script that calls `fit_many`
+    without `if __name__ == "__main__":` calls it again there, where no process can be started
+    (multiprocessing raises while a process bootstraps); the parent then says what to do
+    (`_refuse_unguarded`). Elsewhere, nothing. (`_inheriting` is multiprocessing's own mark of that
+    phase, which its check of the same mistake reads.)"""
+    import multiprocessing
+
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise SystemExit(UNGUARDED)
+
+
+def _refuse_unguarded(processes) -> None:
+    """DifflabError naming the fix when a worker of `processes` left with status UNGUARDED."""
+    for process in processes:
+        process.join(1.0)  # a dead worker's status: the pool broke because it ended
+    if any(process.exitcode == UNGUARDED for process in processes):
+        script = getattr(sys.modules["__main__"], "__file__", "the main script")
+        raise DifflabError(f"fit_many: the worker processes start by importing {script}, and its top level calls "
+                           "fit_many again; put the call under 'if __name__ == \"__main__\":' (docs/batch.md). "
+                           "No fit was run") from None
 
 
 def _lost(error: str) -> dict:
@@ -97,10 +126,12 @@ def local_jobs(jobs, workers: int):
     try:
         with _ctrl_c_held():  # each submit starts a worker until there are `workers`
             futures = {pool.submit(run_job, job.spec, None, threads): job for job in jobs}
+        processes = list(pool._processes.values())
         for future in as_completed(futures):
             try:
                 outcome = future.result()
             except Exception as exc:  # the pool broke: a worker process died
+                _refuse_unguarded(processes)
                 outcome = _lost(f"worker process lost: {type(exc).__name__}: {exc}")
             yield futures[future], outcome
     except BaseException:  # interrupted or closed early: stop the workers now, not after their jobs

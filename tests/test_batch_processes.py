@@ -1,11 +1,13 @@
-"""Ctrl-C on `difflab fit-batch` while its worker processes start: it stops them at once (docs/batch.md).
+"""The local worker processes of a batch (docs/batch.md): Ctrl-C while they start stops them at once;
+a script that calls fit_many without the main guard is told so.
 
-The terminal's Ctrl-C goes to the whole process group, so the test sends SIGINT to the group of a
+Ctrl-C: the terminal's Ctrl-C goes to the whole process group, so the test sends SIGINT to the group of a
 `difflab fit-batch` run in its own session, as soon as its workers exist and ignore SIGINT (the pool
 stops them, not Ctrl-C) -- while they still import, before any fit -- and checks exit 130, one line
 on stderr, no worker left and no file begun. Its fits would never end (adam, 10^9 steps, tolerances
 0), so a batch that waited for its running jobs (as it did: 5-12 s at start-up, the workers importing
-JAX) would not exit at all. Linux only: it reads the workers from /proc."""
+JAX) would not exit at all. Linux only: it reads the workers from /proc.
+"""
 
 import json
 import os
@@ -22,7 +24,7 @@ from difflab import render_frame
 from difflab.io import save_image
 from difflab.scene import Scene, save_scene
 
-pytestmark = pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads processes from /proc (Linux)")
+LINUX = pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads processes from /proc (Linux)")
 
 WORKERS = 2
 CLI = "import sys; from difflab.cli import main; sys.exit(main(sys.argv[1:]))"
@@ -55,19 +57,29 @@ def _running(pid: int) -> bool:
     return bool(state) and not state.startswith("Z")
 
 
-def test_ctrl_c_while_the_workers_start_stops_them_at_once(tmp_path):
-    save_scene(Scene.from_dict(scene_dict(size=8)), tmp_path / "scene.json")
+def _inputs(folder: Path) -> None:
+    """scene.json (kd 0.8) and the target t.npy (kd 0.3, 0.6, 0.2), 8x8."""
+    save_scene(Scene.from_dict(scene_dict(size=8)), folder / "scene.json")
     truth = scene_dict(size=8)
     truth["materials"]["red"]["kd"] = [0.3, 0.6, 0.2]
-    save_image(tmp_path / "t.npy", render_frame(Scene.from_dict(truth)).image)
+    save_image(folder / "t.npy", render_frame(Scene.from_dict(truth)).image)
+
+
+def _env() -> dict:
+    """This environment with this tree first on the path."""
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parents[1]), os.environ.get("PYTHONPATH", "")])}
+
+
+@LINUX
+def test_ctrl_c_while_the_workers_start_stops_them_at_once(tmp_path):
+    _inputs(tmp_path)
     endless = {"solver": "adam", "max_steps": 10**9, "rtol": 0.0, "atol": 0.0, "learning_rate": 1e-6}
     manifest = tmp_path / "m.jsonl"
     manifest.write_text("".join(json.dumps({"name": f"f{i}", "scene": "scene.json", "targets": "t.npy", "material": "red",
                                             "params": "kd", "solver": endless}) + "\n" for i in range(4)))
     out = tmp_path / "out"
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parents[1]), os.environ.get("PYTHONPATH", "")])}
     proc = subprocess.Popen([sys.executable, "-c", CLI, "fit-batch", str(manifest), "-o", str(out), "--workers",
-                             str(WORKERS), "--no-progress"], env=env, stderr=subprocess.PIPE, text=True,
+                             str(WORKERS), "--no-progress"], env=_env(), stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
         deadline = time.monotonic() + 60
@@ -88,3 +100,29 @@ def test_ctrl_c_while_the_workers_start_stops_them_at_once(tmp_path):
     assert not [pid for pid in workers if _running(pid)]
     assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*")) == [
         "failures", "reports", "scenes", "timing"]  # no temporary, no result begun
+
+
+UNGUARDED_SCRIPT = """
+import difflab
+job = {"name": "kd", "scene": "scene.json", "targets": "t.npy", "material": "red", "params": "kd"}
+try:
+    difflab.fit_many([job], "out", workers=2, quiet=True)
+except difflab.DifflabError as exc:
+    print(exc)
+"""
+
+
+def test_a_script_calling_fit_many_without_the_main_guard_is_told_so(tmp_path):
+    """The script's top level runs again in each worker (spawn imports the main script), which cannot
+    start processes: every job, valid or not, was recorded "worker process lost: BrokenProcessPool".
+    Now fit_many raises one DifflabError naming the fix in the script's process, and records nothing."""
+    _inputs(tmp_path)
+    script = tmp_path / "batch.py"
+    script.write_text(UNGUARDED_SCRIPT)
+    run = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=_env(), capture_output=True, text=True,
+                         timeout=120)
+    assert (run.returncode, run.stderr) == (0, "")
+    assert run.stdout == (f"fit_many: the worker processes start by importing {script}, and its top level calls "
+                          "fit_many again; put the call under 'if __name__ == \"__main__\":' (docs/batch.md). No fit "
+                          "was run\n")
+    assert [p.name for p in (tmp_path / "out").rglob("*") if p.is_file()] == []
