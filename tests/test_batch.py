@@ -21,6 +21,7 @@ from test_fit_helpers import scene_dict
 
 import difflab.files
 from difflab import fit_many
+from difflab.batch.api import BatchSummary
 from difflab.batch.manifest import load_manifest, parse_line
 from difflab.batch import runners
 from difflab.batch.runners import TASK_SECONDS, cluster_render_threads, task_size
@@ -176,6 +177,24 @@ def test_batch_recovers_each_fit_and_records_failures(reference):
         [["1", "fit0", "converged"], ["2", "fit1", "converged"], ["3", "typo", "invalid"]]
         + [[str(i + 2), f"fit{i}", "converged"] for i in range(2, len(KDS))]
         + [["12", "unreachable", "failed"], ["13", "patched", "converged"]])
+
+
+def test_the_closing_lines_name_the_fits_that_are_not_clean(reference, tmp_path, capsys):
+    """fit-batch exited 4 after "13 lines: 11 converged, ..." without saying which fit was flagged."""
+    _, out, summary = reference
+    assert summary.report() == [
+        f"13 lines: 11 converged, 1 failed, 1 invalid (12 run, 0 already done); summary in {out / 'summary.csv'}",
+        "  failed (1): unreachable", "  invalid (1): typo", "  model mismatch (1): patched"]
+    rows = ([{"line": i + 1, "name": f"f{i}", "status": "failed", "model_mismatch": None} for i in range(7)]
+            + [{"line": 8, "name": None, "status": "invalid", "model_mismatch": None},
+               {"line": 9, "name": "u", "status": "converged", "model_mismatch": False, "noise_unknown": True}])
+    assert BatchSummary(tmp_path, rows, {}, 8, 0).report()[1:] == [
+        "  failed (7): f0, f1, f2, f3, f4 and 2 more", "  invalid (1): line 8", "  not judged (1): u"]
+    fit_many([{"name": "bad", "scene": "s.json"}], tmp_path / "out")  # nothing to run: no worker started
+    assert capsys.readouterr().err == (
+        "manifest line 1: targets: missing (required: name, scene, targets)\n"
+        f"1 line: 1 invalid (0 run, 0 already done); summary in {tmp_path / 'out' / 'summary.csv'}\n"
+        "  invalid (1): bad\n")
 
 
 # `difflab fit-batch` in a process that stops itself (SIGSTOP) once it has written its `stop_at`-th

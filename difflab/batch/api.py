@@ -44,6 +44,24 @@ class BatchSummary:
                 if row.get("noise_unknown") or row.get("underdetermined") or row.get("mismatch_suspected")]
 
 
+    def report(self) -> list[str]:
+        """The lines `fit_many` ends with (on stderr): the counts, then a line per kind of fit that is
+        not clean -- failed, invalid, not converged, not run, model mismatch, not judged -- naming
+        the first SHOWN ("line N" for an invalid line without a usable name) and counting the rest."""
+        line = (f"{len(self.rows)} line{'s' * (len(self.rows) != 1)}: " + ", ".join(f"{n} {status}" for status, n in self.counts.items() if n)
+                + f" ({self.ran} run, {self.skipped} already done); summary in {self.outdir / 'summary.csv'}")
+        kinds = [(status.replace("_", " "), [row["name"] or f"line {row['line']}" for row in self.rows
+                                             if row["status"] == status])
+                 for status in ("failed", "invalid", "not_converged", "not_run")]
+        kinds += [("model mismatch", self.mismatched), ("not judged", self.unjudged)]
+        return [line] + [f"  {kind} ({len(names)}): {', '.join(names[:SHOWN])}"
+                         + (f" and {len(names) - SHOWN} more" if len(names) > SHOWN else "")
+                         for kind, names in kinds if names]
+
+
+SHOWN = 5  # names listed per kind of fit in `BatchSummary.report`
+
+
 def _say(quiet: bool, text: str) -> None:
     if not quiet:
         print(text, file=sys.stderr)
@@ -70,7 +88,7 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
         inline: send the input files' bytes to the cluster workers instead of letting them read paths.
         retries: Dask's retries of a task that raised (a task whose worker died is rescheduled anyway).
         progress: show a progress bar with ETA (default: when stderr is a terminal).
-        quiet: do not print the bad lines and the final counts on stderr.
+        quiet: do not print the bad lines and the closing lines (`BatchSummary.report`) on stderr.
         force: write into `outdir` even when it holds other files than a batch's.
     Returns:
         a `BatchSummary`.
@@ -104,8 +122,7 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
             owned.close()
     table = store.summarise(jobs, invalid)
     summary = BatchSummary(Path(outdir), table["jobs"], table["counts"], len(todo), len(jobs) - len(todo))
-    _say(quiet, f"{table['lines']} lines: " + ", ".join(f"{n} {status}" for status, n in summary.counts.items() if n)
-         + f" ({summary.ran} run, {summary.skipped} already done); summary in {Path(outdir) / 'summary.csv'}")
+    _say(quiet, "\n".join(summary.report()))
     return summary
 
 
