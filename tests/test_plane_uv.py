@@ -35,6 +35,36 @@ def test_the_uv_frame_is_right_handed_orthonormal_and_upright(normal, frame):
     np.testing.assert_allclose(np.cross(t, b), p.normal, atol=1e-12)  # t x b = n: seen from n, unmirrored
 
 
+#: Normals well inside each region of `Plane.uv_frame`'s rule: floors, ceilings, walls, slopes.
+REGION_NORMALS = [(0, 1, 0), (0, -1, 0), (1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, 0, -1), (0.3, 1, -0.2),
+                  (1, 0.4, 0.1), (-0.2, -0.5, 1)]
+
+
+@pytest.mark.parametrize("normal", REGION_NORMALS)
+@pytest.mark.parametrize("tilt", [2e-6, 1e-3])
+def test_a_small_tilt_turns_the_frame_by_at_most_the_tilt(normal, tilt):
+    """Within a region the frame is smooth in the normal: tilting it by `tilt` radians (any way)
+    moves t and b by O(tilt). The old rule (b = -z only within 1e-6 of vertical) turned a floor's
+    frame 90 degrees at a 2e-6 tilt toward x and 180 degrees at 1e-3 toward -z."""
+    base = np.asarray(normal, float) / np.linalg.norm(normal)
+    t0, b0 = plane(normal).uv_frame()
+    for axis in np.random.default_rng(0).normal(size=(8, 3)):
+        axis -= np.dot(axis, base) * base
+        tilted = np.cos(tilt) * base + np.sin(tilt) * axis / np.linalg.norm(axis)
+        t, b = plane(tilted).uv_frame()
+        assert np.abs(t - t0).max() <= 2 * tilt and np.abs(b - b0).max() <= 2 * tilt
+
+
+def test_every_frame_is_right_handed_and_orthonormal():
+    normals = np.random.default_rng(1).normal(size=(200, 3))
+    normals = np.concatenate([normals, [[1, 1, 0], [0, 1, 1], [1, 1, 1], [0, -1, 1], [1, -1, 0]]])
+    for normal in normals:
+        p = plane(normal)
+        t, b = p.uv_frame()
+        np.testing.assert_allclose([t @ t, b @ b, t @ b], [1, 1, 0], atol=1e-12)
+        np.testing.assert_allclose(np.cross(t, b), p.normal, atol=1e-12)
+
+
 def test_uv_is_measured_from_the_point_in_scene_units():
     p = plane((0, 0, 1), point=(2, 3, 5))
     np.testing.assert_allclose(p.uv([[2, 3, 5], [2.5, 3, 5], [2, 4.25, 5]]), [[0, 0], [0.5, 0], [0, 1.25]])
@@ -69,6 +99,17 @@ def test_a_plane_shows_its_texture_upright_and_unmirrored_from_the_front(tmp_pat
     want = np.zeros((8, 8))
     want[:4, :4] = 1.0
     np.testing.assert_array_equal(image, want)
+
+
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+@pytest.mark.parametrize("normal", [(2e-6, 1, 0), (0, 1, -1e-3), (1e-3, 1, 1e-3)])
+def test_a_slightly_tilted_floor_shows_the_floors_picture(tmp_path, method, normal):
+    """A ramp of 0.06 degrees or less shows what the flat floor shows (seen by the floor's camera);
+    the old rule turned (2e-6, 1, 0)'s picture 90 degrees and (0, 1, -1e-3)'s 180 degrees."""
+    point = (0.25, -0.5, 0.75)
+    floor = render(front_view(tmp_path, (0, 1, 0), point), method=method)
+    ramp = {"type": "plane", "point": list(point), "normal": list(normal), "material": "m"}
+    np.testing.assert_array_equal(render(front_view(tmp_path, (0, 1, 0), point, ramp), method=method), floor)
 
 
 @pytest.mark.parametrize("method", ["raster", "raytrace"])

@@ -17,8 +17,6 @@ from ._spec import Spec, bounds, spec_field
 BUILTIN_MESHES = ("teapot", "sphere", "box", "cylinder", "quad")
 #: Largest tessellation resolution of a mesh (keeps the triangle count within memory).
 MAX_RESOLUTION = 1024
-#: A plane whose normal is this close to +-y (sine of the angle) takes the floor's / ceiling's uv frame.
-VERTICAL_SINE = 1e-6
 
 
 def _matrix(value, path: str) -> tuple[float, ...]:
@@ -114,19 +112,24 @@ class Plane(Record):
         return {"type": self.TYPE, **super().to_dict()}
 
     def uv_frame(self) -> tuple[np.ndarray, np.ndarray]:
-        """(t, b): the unit directions of u and v, with the normal n a right-handed orthonormal
-        frame (t x b = n), so a texture reads unmirrored from the normal's side, v up, u right.
-        b = world up (+y) made orthogonal to n; where n is vertical (|n x y| < VERTICAL_SINE) -z
-        made orthogonal to n for n ~ +y (a floor reads upright to a camera at +z looking toward -z,
-        as the builtin quad) and +z for n ~ -y. t = b x n (n = +z: t = +x, b = +y; n = +y: t = +x,
-        b = -z)."""
-        n = np.asarray(self.normal, np.float64)
-        up = np.array([0.0, 1.0, 0.0])
-        if np.linalg.norm(up - n[1] * n) < VERTICAL_SINE:
-            up = np.array([0.0, 0.0, -1.0 if n[1] > 0 else 1.0])
-        b = up - np.dot(up, n) * n
+        """(t, b): the unit directions of u and v, with the normal a right-handed orthonormal frame
+        (t x b = normal), so a texture reads unmirrored from the normal's side, v up, u right.
+        b = a reference direction made orthogonal to the normal, t = b x normal. The reference is
+        chosen by the normal's dominant axis: a floor or ceiling (|normal_y| strictly the largest
+        component) takes -z sign(normal_y) -- a floor reads upright to a camera at +z looking toward
+        -z, as the builtin quad; normal +y: t = +x, b = -z; -y: t = +x, b = +z -- anything else
+        (walls, and slopes from 45 degrees up) world up +y -- normal +z: t = +x, b = +y. Within
+        each region the frame is smooth in the normal (the reference stays at least 45 degrees off
+        it); a continuous frame on every normal does not exist (hairy ball), so the switch sits at
+        45 degrees, far from floors and walls."""
+        normal = np.asarray(self.normal, np.float64)
+        if abs(normal[1]) > max(abs(normal[0]), abs(normal[2])):
+            reference = np.array([0.0, 0.0, -np.sign(normal[1])])
+        else:
+            reference = np.array([0.0, 1.0, 0.0])
+        b = reference - np.dot(reference, normal) * normal
         b /= np.linalg.norm(b)
-        return np.cross(b, n), b
+        return np.cross(b, normal), b
 
     def uv(self, points) -> np.ndarray:
         """Texture coordinates (N, 2) of points (N, 3) on the plane: ((p - point).t, (p - point).b),
