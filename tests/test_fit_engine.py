@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from test_fit_helpers import TRUTH, make_scene, mirror_scene, perturbed, scene_dict, target_of
 
-from difflab import Scene, render
+from difflab import Scene, render, render_frame
 from difflab.fit import FitOptions, fit_material
 from difflab.fit.params import KINDS, Layout, Param
 from difflab.fit.stats import MISMATCH_CHI2
@@ -137,8 +137,6 @@ def test_one_pixel_for_ten_unknowns_is_underdetermined(noisy_sphere):
 
 def scattered_mask(scene, count: int, seed: int) -> np.ndarray:
     """`count` pixels of the red sphere drawn at random: a mask with (almost) no used neighbourhoods."""
-    from difflab import render_frame
-
     ys, xs = np.nonzero(render_frame(scene).gbuffer.material == 0)
     pick = np.random.default_rng(seed).choice(ys.size, count, replace=False)
     mask = np.zeros((scene.camera.height, scene.camera.width), bool)
@@ -325,3 +323,26 @@ def test_large_linear_values_map_without_overflow():
     with jax.enable_x64(True):
         grad = jax.grad(lambda y: layout.values(y).sum())(jax.numpy.asarray(x))
     np.testing.assert_allclose(np.asarray(grad), [1.0, 20.0], rtol=1e-12)
+
+
+def test_parameters_fixed_only_in_combination_are_underdetermined():
+    """kd, ks and the light's intensity of a lit sphere (its pixels): kd c, ks c and I / c give the same image, so
+    the 9 unknowns have rank 6 -- far fewer than the pixels, yet undetermined. The fit says so:
+    `underdetermined`, `degenerate` naming the three, not ok, their stderr inf, the model still
+    judged (chi2 ~0: noise-free). `identify` finds the same rank. Without the intensity: ok."""
+    from difflab.fit.identifiability import identify
+
+    scene = make_scene(size=32)
+    target = target_of(scene)
+    sphere = render_frame(scene).gbuffer.material == 0  # (the floor's fixed kd would pin the intensity)
+    params = ("kd", "ks", "intensity")
+    result = fit_material(scene, [target], "red", params, init={"kd": [0.5] * 3}, masks=[sphere])
+    assert result.converged and result.underdetermined and not result.ok and result.not_judged
+    assert result.degenerate == ["kd", "ks", "lights[0].intensity"]
+    assert all(np.all(np.isinf(result.stderr[key])) for key in result.degenerate)
+    assert "UNDERDETERMINED: the images fix only combinations of kd, ks, lights[0].intensity" in result.table()
+    assert result.to_dict()["degenerate"] == result.degenerate and np.isfinite(result.chi2)
+    report = identify(scene, [target], "red", params, method="raster", masks=[sphere])
+    assert (report.rank, report.n_columns) == (6, 9)
+    fine = fit_material(scene, [target], "red", ("kd", "ks"), init={"kd": [0.5] * 3}, masks=[sphere])
+    assert fine.ok and fine.degenerate == [] and not fine.underdetermined

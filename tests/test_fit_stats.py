@@ -333,3 +333,34 @@ def test_the_inverse_diagonal_of_a_texel_block_with_wide_scalars(monkeypatch, ba
     gram = jac.T @ jac
     unit = gram / np.sqrt(np.outer(np.diag(gram), np.diag(gram)))
     assert np.isnan(inverse.inverse_diagonal(sp.csr_matrix(unit), top, 1e-12)).all()
+
+
+def test_a_singular_normal_matrix_names_the_degenerate_parameters():
+    """J^T J of a texture (2 x 1 texels, 6 entries) and a scalar kd: rank-deficient directions over
+    the entries the data reach are `degenerate`, whatever the count; a zero column (a texel no
+    pixel reads) is no unknown of the data's. A direction within the texels alone is the prior's to
+    fill (smoothness > 0): not counted; one that trades texels against kd is, prior or not."""
+    from difflab.fit.params import Layout, Param
+    from difflab.fit.stats import degenerate
+
+    layout = Layout((Param("texture", "texture", 0, 6, 0.0, np.inf, (2, 1)), Param("kd", "kd", 0, 1, 0.0, np.inf)))
+    rng = np.random.default_rng(3)
+
+    def gram_of(jac):
+        gram = jac.T @ jac
+        return gram, np.diag(covariance_unscaled(gram))
+
+    jac = rng.normal(size=(40, 7))
+    jac[:, 5] = 0.0  # texel (1, 0) blue: seen by no pixel
+    full, diag = gram_of(jac)
+    assert np.isinf(diag[5]) and degenerate(layout, diag, full, prior=False) == []
+    within = jac.copy()
+    within[:, 1] = within[:, 0]  # two texels seen only as their sum
+    gram, diag = gram_of(within)
+    assert degenerate(layout, diag, gram, prior=False) == ["texture"]
+    assert degenerate(layout, diag, gram, prior=True) == []
+    assert degenerate(layout, diag, sp.csc_matrix(gram), prior=False) == ["texture"]  # a matrix-free fit's
+    across = jac.copy()
+    across[:, 6] = 2.0 * across[:, 0]  # kd against a texel
+    gram, diag = gram_of(across)
+    assert degenerate(layout, diag, gram, prior=True) == ["texture", "kd"]

@@ -27,8 +27,8 @@ from .matfree import check_solver
 from .solvers import SUCCESSFUL, run
 from .sparse_jacobian import sparse_normal_matrix
 from .noise import silent_pixels, views_noise
-from .stats import (QUANTISATION_SIGMA, finite_gram, fit_statistics, normal_matrix, poorly_determined, psnr,
-                    standard_errors)
+from .stats import (QUANTISATION_SIGMA, degenerate, finite_gram, fit_statistics, normal_matrix, poorly_determined,
+                    psnr, standard_errors)
 from .texels import texel_coverage
 
 
@@ -84,11 +84,13 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             partly_seen = [key for key, on in seen.items() if not on.all()]
             flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol, also=partly_seen)
             chi2, mismatch, suspected = st["chi2"], st["mismatch"], st["suspected"]
-            underdetermined = st["underdetermined"]
+            degenerate_keys = degenerate(layout, st["diag"], gram, setup.smoothness > 0)
+            underdetermined = st["underdetermined"] or bool(degenerate_keys)
         else:
             stderr = {p.key: np.full(p.size, np.nan) for p in layout}
             flagged, chi2, mismatch = [p.key for p in layout], float("inf"), True
             suspected = underdetermined = False
+            degenerate_keys = []
             if result == SUCCESSFUL:
                 result = "nonfinite"
         lo, hi = layout.bounds()
@@ -99,7 +101,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                         result=result, history=list(history), poorly_determined=flagged, sigma=float(sigma),
                         chi2=float(chi2), model_mismatch=bool(mismatch), mismatch_suspected=bool(suspected),
                         noise_unknown=noise_unknown,
-                        underdetermined=bool(underdetermined),
+                        underdetermined=bool(underdetermined), degenerate=degenerate_keys,
                         at_bound=[p.key for p in layout if np.any(on_bound[p.key])], residuals=residuals, seen=seen,
                         timings={**timings, "stats": time.perf_counter() - start}, **common)
     if options.throw and not out.converged:

@@ -26,7 +26,7 @@ from ..errors import FitError
 from .options import DENSE_MAX
 from .params import SCENE_PARAMS
 from .setup import Setup
-from .stats import QUANTISATION_SIGMA, SINGULAR_RCOND, covariance_unscaled, normal_matrix, poorly_determined
+from .stats import QUANTISATION_SIGMA, covariance_unscaled, normal_matrix, poorly_determined, unit_spectrum
 
 CHANNELS = ("r", "g", "b")
 
@@ -125,11 +125,8 @@ def identifiability(setup: Setup, values: dict | None = None, *, sigma=None, rel
     sigma = QUANTISATION_SIGMA if sigma is None else float(sigma)
     with jax.enable_x64(setup.x64):
         gram, r = normal_matrix(setup.problem, jnp.asarray(layout.flatten(values), setup.dtype))
-    norms = np.sqrt(np.maximum(np.diagonal(gram), 0.0))
-    scale = 1.0 / np.where(norms > 0, norms, 1.0)
-    eigval, eigvec = np.linalg.eigh(gram * np.outer(scale, scale))
+    eigval, eigvec, _, _, singular = unit_spectrum(gram)  # a zero column (a parameter no pixel sees) is singular
     top = max(float(eigval.max(initial=0.0)), 1e-300)
-    singular = eigval <= SINGULAR_RCOND * top  # a zero column (a parameter no pixel sees) is one of these
     rank = int(np.count_nonzero(~singular))
     n = gram.shape[0]
     condition = float(top / eigval.min()) if rank == n and n and eigval.min() > 0 else math.inf

@@ -104,7 +104,13 @@ class FitResult:
         underdetermined: no more counted residual entries (weight > 0, uncensored, not noise-free
         zeros) than fitted unknowns: the data neither determine the values nor say anything of the
         noise or the model -- chi2 nan, every parameter poorly determined, `ok` False; the standard
-        errors use a given sigma, else are inf.
+        errors use a given sigma, else are inf. Also set -- chi2 still judged, `ok` False -- when
+        J^T J over the unknowns the data reach is singular (`degenerate` names the parameters).
+    degenerate: names of parameters the data reach that a singular direction of J^T J involves: the
+        images fix only combinations of them (kd of every material and the lights' intensities:
+        kd c and I / c give the same image), their values arbitrary along it, their stderr inf
+        (`fit.stats.degenerate`; `identify` names the directions). Directions within a texture's
+        texels alone do not count under a smoothness prior (it fills them).
     at_bound: names with a value (some channel) on a bound (ks = 0 for a matte target).
     censored: target pixel channels at the target's ceiling (clipped highlights), fitted as "at
         least the ceiling"; with noise, also the channels of the pixels left out because their
@@ -135,6 +141,7 @@ class FitResult:
     mismatch_suspected: bool = False
     noise_unknown: bool = False
     underdetermined: bool = False
+    degenerate: list = field(default_factory=list)
     at_bound: list = field(default_factory=list)
     censored: int = 0
     residuals: list = field(default_factory=list, repr=False, compare=False)
@@ -260,7 +267,8 @@ class FitResult:
             "poorly_determined": list(self.poorly_determined), "history": [_json_number(x) for x in self.history],
             "timings": dict(self.timings), "model": self.model, "sigma": _json_number(self.sigma),
             "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch,
-            "mismatch_suspected": self.mismatch_suspected, "noise_unknown": self.noise_unknown, "underdetermined": self.underdetermined, "at_bound": list(self.at_bound),
+            "mismatch_suspected": self.mismatch_suspected, "noise_unknown": self.noise_unknown, "underdetermined": self.underdetermined,
+            "degenerate": list(self.degenerate), "at_bound": list(self.at_bound),
             "censored": self.censored,
         }
 
@@ -288,8 +296,11 @@ class FitResult:
                                          self.mismatch_suspected),
                                         ("NOISE UNKNOWN: too few used pixels with used neighbours to estimate it; "
                                          "the image model is not judged (give sigma)", self.noise_unknown),
+                                        ("UNDERDETERMINED: the images fix only combinations of "
+                                         f"{', '.join(self.degenerate)} (J^T J singular; `difflab.identify` names "
+                                         "them); the model is not judged", bool(self.degenerate)),
                                         ("UNDERDETERMINED: no more counted target values than unknowns the data "
-                                         "reach; the model is not judged", self.underdetermined),
+                                         "reach; the model is not judged", self.underdetermined and not self.degenerate),
                                         (f"at bound: {', '.join(self.at_bound)}", bool(self.at_bound)),
                                         (f"censored (clipped) target values: {self.censored}", self.censored > 0)) if on]
         rows.append(f"result: {self.result}, converged: {self.converged}, steps: {self.steps}, "

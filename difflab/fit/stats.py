@@ -35,7 +35,8 @@ estimate's (`chi2_spread`) `mismatch_suspected` (not judged), and above MISMATCH
 `model_mismatch`: the residuals sit far above the noise, so the image model does not explain the
 target (wrong image model, wrong specular model, missing light...) and the fitted values answer a
 different question. With N <= p the fit is `underdetermined`: nothing is left to judge the model or
-the noise by.
+the noise by; so is one whose J^T J is singular over the unknowns the data reach, however many
+values it has (`degenerate`: the images fix only combinations of those parameters).
 
 Standard errors are those of linearised least squares, in scene units, and assume the model holds:
 
@@ -116,18 +117,27 @@ def normal_matrix(problem, values, solved=None) -> tuple[np.ndarray, np.ndarray]
     return np.asarray(gram, np.float64), np.asarray(r, np.float64)
 
 
-def covariance_unscaled(gram: np.ndarray, top: float | None = None) -> np.ndarray:
-    """(J^T J)^-1 from J^T J (p, p), with singular directions given infinite variance. Returns
-    (p, p); the diagonal is inf for parameters that a singular direction involves. Singular: an
-    eigenvalue of the unit-diagonal J^T J at most SINGULAR_RCOND times its largest, or `top` when
-    `gram` is a diagonal block of a larger J^T J (`covariance_diagonal`) whose largest that is."""
+def unit_spectrum(gram: np.ndarray, top: float | None = None):
+    """The spectrum of J^T J (p, p) with its columns scaled to unit norm (so units do not count):
+    (eigval ascending, eigvec, scale (p,) 1 / column norm (1 for a zero column), zero (p,) the zero
+    columns, singular (p,) the eigenvalues at most SINGULAR_RCOND times the largest -- or `top`
+    when `gram` is a diagonal block of a larger J^T J whose largest that is). The rank of the data
+    is the count of the others; a singular direction's eigenvector names the parameters that trade
+    off exactly (`covariance_unscaled`, `identifiability`)."""
     norms = np.sqrt(np.maximum(np.diagonal(gram), 0.0))
     zero = norms == 0
     scale = 1.0 / np.where(zero, 1.0, norms)  # (1 for a zero column)
-    outer = scale[:, None] * scale
-    eigval, eigvec = np.linalg.eigh(gram * outer)
+    eigval, eigvec = np.linalg.eigh(gram * (scale[:, None] * scale))
     top = max(float(eigval.max(initial=0.0)) if top is None else top, 1e-300)
-    singular = eigval <= SINGULAR_RCOND * top
+    return eigval, eigvec, scale, zero, eigval <= SINGULAR_RCOND * top
+
+
+def covariance_unscaled(gram: np.ndarray, top: float | None = None) -> np.ndarray:
+    """(J^T J)^-1 from J^T J (p, p), with singular directions (`unit_spectrum`) given infinite
+    variance. Returns (p, p); the diagonal is inf for parameters that a singular direction involves
+    and for zero columns."""
+    eigval, eigvec, scale, zero, singular = unit_spectrum(gram, top)
+    outer = scale[:, None] * scale
     inv = np.where(singular, 0.0, 1.0 / np.where(singular, 1.0, eigval))
     cov = (eigvec * inv) @ eigvec.T * outer
     infinite = zero | (np.abs(eigvec[:, singular]) > 1e-6).any(axis=1) if singular.any() else zero
@@ -135,6 +145,25 @@ def covariance_unscaled(gram: np.ndarray, top: float | None = None) -> np.ndarra
         cov[infinite, :] = np.inf
         cov[:, infinite] = np.inf
     return cov
+
+
+def degenerate(layout, diag: np.ndarray, gram, prior: bool) -> list[str]:
+    """Keys of the parameters the data reach (a non-zero column of J^T J, dense or sparse) that a
+    singular direction involves (inf in `diag`, diag (J^T J)^-1 from `covariance_diagonal`): the
+    data fix only combinations of them (kd and a light's intensity: kd c and I / c give the same
+    image), whatever their count. With a texture `prior` (smoothness > 0) directions within the
+    texels alone are the prior's to fill and do not count; one that involves another parameter
+    does (a texture's scale against a light's intensity)."""
+    bad = np.isinf(diag) & (gram.diagonal() > 0)
+    texel = np.concatenate([np.full(p.size, p.shape is not None) for p in layout]) if len(layout) else bad
+    if prior and not (bad & ~texel).any():
+        return []
+    flat, offset = [], 0
+    for p in layout:
+        if bad[offset:offset + p.size].any():
+            flat.append(p.key)
+        offset += p.size
+    return flat
 
 
 def covariance_diagonal(gram, skip=None) -> np.ndarray:
