@@ -209,13 +209,16 @@ def zscores(result, truth: dict | None) -> dict | None:
 
 
 def verdict(case: dict, result, err: dict | None, z: dict | None, noisy: bool) -> str:
-    """"recovered" / "flagged" (what the case asks), "failed honestly" (not ok, and says so), or
-    "WRONG & OK" (a success reported on a wrong answer, or a mismatch not flagged). A noisy target
-    is recovered when every parameter lies within 3 standard errors of the truth; a foreign effect
-    is "unseen under noise" when the noisy target's residuals sit at its noise (chi2 ~ 1)."""
+    """"recovered" / "flagged" (what the case asks), "suspected" (a foreign effect: `mismatch_suspected`,
+    not judged), "failed honestly" (not ok, and says so), or "WRONG & OK" (a success reported on a
+    wrong answer, or a mismatch not flagged). A noisy target is recovered when every parameter lies
+    within 3 standard errors of the truth; a foreign effect is "unseen under noise" when the noisy
+    target's residuals sit at its noise (chi2 within its spread: ok)."""
     if case["expect"] == "mismatch":
         if result.model_mismatch:
             return "flagged"
+        if result.mismatch_suspected:
+            return "suspected"
         if noisy and result.converged:  # the data do not show the effect: the model explains them to their noise
             return "unseen under noise"
         return "WRONG & OK" if result.converged else "failed honestly"
@@ -232,6 +235,7 @@ def row(name: str, fmt: str, case: dict, result, code: int | None) -> dict:
             "params": {k: v for k, v in result.params.items()}, "stderr": {k: v for k, v in result.stderr.items()},
             "rel_error": err, "z": z, "psnr": result.psnr,
             "chi2": result.chi2, "sigma": result.sigma, "model_mismatch": result.model_mismatch,
+            "mismatch_suspected": result.mismatch_suspected,
             "censored": result.censored, "at_bound": result.at_bound, "poorly_determined": result.poorly_determined,
             "converged": result.converged, "result": result.result, "steps": result.steps, "model": result.model,
             "cli_exit": code, "verdict": verdict(case, result, err, z, fmt.endswith("noise"))}
@@ -244,7 +248,7 @@ def print_table(rows: list[dict]) -> None:
         err = f"{max(r['rel_error'].values()):.4f}" if r["rel_error"] else "-"
         z = f"{max(r['z'].values()):.1f}" if r["z"] else "-"
         print(f"{r['case']:<13} {r['format']:<10} {err:>11} {z:>6} {r['psnr']:6.1f} {r['chi2']:9.3g} "
-              f"{'yes' if r['model_mismatch'] else 'no':>4} {r['censored']:5d} {','.join(r['at_bound']) or '-':<9} "
+              f"{'yes' if r['model_mismatch'] else 'susp' if r['mismatch_suspected'] else 'no':>4} {r['censored']:5d} {','.join(r['at_bound']) or '-':<9} "
               f"{','.join(r['poorly_determined']) or '-':<10} {'yes' if r['converged'] else 'no':>4} "
               f"{'-' if r['cli_exit'] is None else r['cli_exit']:>4}  {r['verdict']}")
 
