@@ -139,3 +139,52 @@ def test_the_checker_keeps_world_cells_wherever_the_point_is(method):
     np.testing.assert_allclose(base, np.where(cell == 0, 1.0, 0.2), atol=1e-6)
     np.testing.assert_array_equal(image([0.3, 0, -0.7], [0, 1, 0]), base)
     np.testing.assert_array_equal(image([0, 0, 0], [0, -1, 0]), base)
+
+
+def floor_texture_scene(tmp_path, point, wrap, eye=(0.3, 2.0, 0.4)):
+    """A floor plane through `point` seen straight down by a fixed 16 x 16 orthographic camera, a random
+    64 x 64 texture, unlit and nearest."""
+    np.save(tmp_path / "noise.npy", np.random.default_rng(1).random((64, 64, 3)).astype(np.float32))
+    camera = {"eye": list(eye), "target": [eye[0], 0, eye[2]], "up": [0, 0, -1], "projection": "orthographic",
+              "ortho_height": 1, "width": 16, "height": 16, "near": 0.5, "far": 10}
+    material = {"ka": 1, "kd": 0, "texture": str(tmp_path / "noise.npy"), "texture_target": "ka",
+                "filter": "nearest", "wrap": wrap}
+    return scene_dict([{"type": "plane", "point": list(point), "normal": [0, 1, 0], "material": "m"}],
+                      {"m": material}, camera=camera, ambient=(1, 1, 1))
+
+
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+@pytest.mark.parametrize("wrap", ["repeat", "mirror"])
+def test_a_repeating_texture_does_not_see_point_moved_by_whole_periods(tmp_path, method, wrap):
+    """Moving `point` by (far, 0, -far) shifts uv by whole periods (1 repeat, 2 mirror): the same image.
+    The old uv, measured from `point` in float32, changed 88 of 256 pixels (by up to 0.94) in the
+    rasterizer at far = 1e5 and all 256 in both renderers at 1e6."""
+    near = render(floor_texture_scene(tmp_path, (0, 0, 0), wrap), method=method)
+    for far in (1e5, 1e6):
+        np.testing.assert_array_equal(render(floor_texture_scene(tmp_path, (far, 0, -far), wrap), method=method), near)
+
+
+def test_the_rasterizer_keeps_its_precision_with_the_eye_and_point_far_away(tmp_path):
+    """A scene moved 1e5 along the floor (eye and point together) rasterizes the same image: uv is
+    measured from the eye's foot, not from the world origin."""
+    near = render(floor_texture_scene(tmp_path, (0.25, 0, 0.75), "repeat"), method="raster")
+    far = floor_texture_scene(tmp_path, (1e5 + 0.25, 0, 0.75), "repeat", eye=(1e5 + 0.3, 2.0, 0.4))
+    np.testing.assert_array_equal(render(far, method="raster"), near)
+
+
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+@pytest.mark.parametrize("point", [(0.25, -0.5, 0.75), (1000.25, -0.5, -2999.5)])
+def test_a_clamped_texture_keeps_its_place_at_point(tmp_path, method, point):
+    """With wrap "clamp" the image lies on uv [0, 1]^2 from `point`, its edge texels beyond: seen 4
+    units wide around uv (1, 0.5), the white top-left quarter fills u < 0.5, v > 0.5 -- not shifted by
+    the whole units a repeating texture may be."""
+    scene = front_view(tmp_path, (0, 1, 0), point)
+    t, b = plane((0, 1, 0), point).uv_frame()
+    centre = np.asarray(point, float) + 1.0 * t + 0.5 * b
+    scene["camera"].update(eye=list(centre + 3 * np.cross(t, b)), target=list(centre), ortho_height=4, width=16,
+                           height=16)
+    scene["materials"]["m"]["wrap"] = "clamp"
+    u = 1.0 + ((np.arange(16) + 0.5) / 16 - 0.5) * 4  # pixel centres' uv
+    v = 0.5 + (0.5 - (np.arange(16) + 0.5) / 16) * 4  # row 0 at the top
+    want = ((u[None, :] < 0.5) & (v[:, None] > 0.5)).astype(float)
+    np.testing.assert_array_equal(render(scene, method=method)[..., 0], want)

@@ -20,6 +20,7 @@ from ..io import save_image
 from ..renderers.api import as_scene, render, render_frame
 from ..renderers.camera import CameraW, camera_struct, primary_ray
 from ..renderers.launch import launch_rows
+from ..renderers.tessellate import plane_uv_anchor
 from ..renderers.texture.sampling import WRAPS, TexturesW, plane_uv, sample_bilinear
 from ..renderers.texture.store import TextureStore
 from .figures import image_grid
@@ -34,8 +35,8 @@ HIGH_FREQUENCY = 0.125  # cycles per pixel above which error energy counts as mo
 
 @wp.kernel
 def plane_reference_kernel(row0: int, cam: CameraW, near: float, far: float, point: wp.vec3, normal: wp.vec3,
-                           tangent: wp.vec3, bitangent: wp.vec3, tex: TexturesW, wrap: int, n: int,
-                           background: wp.vec3, image: wp.array2d(dtype=wp.vec3)):
+                           tangent: wp.vec3, bitangent: wp.vec3, anchor: wp.vec3, anchor_uv: wp.vec2,
+                           tex: TexturesW, wrap: int, n: int, background: wp.vec3, image: wp.array2d(dtype=wp.vec3)):
     """Pixel (i, j): the mean over n x n sub-pixel rays of the level-0 bilinear texture at the ray's
     hit on the plane (background where the hit is outside [near, far] along the view axis)."""
     ii, j = wp.tid()
@@ -53,7 +54,8 @@ def plane_reference_kernel(row0: int, cam: CameraW, near: float, far: float, poi
                 p = origin + t * direction
                 depth = wp.dot(p - cam.eye, cam.forward)
                 if t > 0.0 and depth >= near and depth <= far:
-                    value = sample_bilinear(tex, tex.first_level[0], plane_uv(p, point, tangent, bitangent), wrap)
+                    value = sample_bilinear(tex, tex.first_level[0], plane_uv(p, anchor, tangent, bitangent, anchor_uv),
+                                             wrap)
             total = total + value
     image[i, j] = total / float(n * n)
 
@@ -87,11 +89,12 @@ def plane_reference(scene, n: int = 32, device: str = "cpu") -> np.ndarray:
     material = scene.materials[plane.material]
     camera = scene.camera
     store = TextureStore.from_paths([material.texture], device)
+    anchor, anchor_uv = plane_uv_anchor(plane, camera.eye, material.uv_period)
     image = wp.zeros((camera.height, camera.width), dtype=wp.vec3, device=device)
     launch_rows(plane_reference_kernel, (camera.height, camera.width), [
         camera_struct(camera, camera.width, camera.height), float(camera.near), float(camera.far),
-        wp.vec3(*plane.point), wp.vec3(*plane.normal), *(wp.vec3(*axis) for axis in plane.uv_frame()), store.warp,
-        WRAPS[material.wrap], int(n),
+        wp.vec3(*plane.point), wp.vec3(*plane.normal), *(wp.vec3(*axis) for axis in plane.uv_frame()),
+        wp.vec3(*anchor), wp.vec2(*anchor_uv), store.warp, WRAPS[material.wrap], int(n),
         wp.vec3(*scene.background), image], device)
     return image.numpy()
 

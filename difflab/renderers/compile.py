@@ -25,7 +25,7 @@ from ..scene import Mesh, Plane, Scene, Sphere, load_scene
 from .camera import far_reach
 from .launch import host_empty, resolve_device
 from .soup import PER_FACE, SOUP_DTYPES, device_soup, host_aliased, raster_room, soup_with_room, triangle_soup
-from .tessellate import AnalyticParts
+from .tessellate import AnalyticParts, plane_uv_anchor
 from .texture.store import TextureStore, scene_textures
 from .trace import SceneGeomW
 
@@ -274,10 +274,11 @@ def ray_epsilon(camera, mesh_vertices: np.ndarray, spheres, planes=()) -> float:
                RAY_EPSILON_ULPS * 2.0 ** -23 * largest)
 
 
-def ray_geometry(arrays: dict, mesh_vertices: np.ndarray, spheres, planes, epsilon: float, device: str):
+def ray_geometry(arrays: dict, mesh_vertices: np.ndarray, spheres, planes, anchors, epsilon: float, device: str):
     """The ray-traceable scene's spheres and planes, and its mesh faces' ids; the BVH over the faces
     is built when a ray first needs it (`CompiledScene.traceable`), geom.mesh is 0 until then.
-    `mesh_vertices`: the vertices the mesh faces use (MeshError unless finite)."""
+    `mesh_vertices`: the vertices the mesh faces use (MeshError unless finite); `anchors`: each
+    plane's `plane_uv_anchor`."""
     def arr(values, dtype):
         return wp.array(np.ascontiguousarray(values), dtype=dtype, device=device)
 
@@ -295,6 +296,8 @@ def ray_geometry(arrays: dict, mesh_vertices: np.ndarray, spheres, planes, epsil
     frames = np.array([p.uv_frame() for p, _, _ in planes], np.float32).reshape(-1, 2, 3)
     geom.plane_tangent = arr(frames[:, 0], wp.vec3)
     geom.plane_bitangent = arr(frames[:, 1], wp.vec3)
+    geom.plane_anchor = arr(np.array([anchor for anchor, _ in anchors], np.float32).reshape(-1, 3), wp.vec3)
+    geom.plane_anchor_uv = arr(np.array([uv for _, uv in anchors], np.float32).reshape(-1, 2), wp.vec2)
     geom.plane_material = arr(np.array([m for _, m, _ in planes], np.int32), wp.int32)
     geom.plane_object = arr(np.array([o for _, _, o in planes], np.int32), wp.int32)
     geom.epsilon = float(epsilon)
@@ -325,7 +328,9 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     soup = triangle_soup(mesh_parts)
     n_mesh_faces = soup["faces"].shape[0]
     n_mesh_vertices = soup["vertices"].shape[0]
-    parts = AnalyticParts(tuple(analytic), scene.camera, scene.camera.height * scene.render.spp_side)
+    ordered = [scene.materials[name] for name in scene.material_names]
+    parts = AnalyticParts(tuple(analytic), scene.camera, scene.camera.height * scene.render.spp_side,
+                          tuple(ordered[material].uv_period for _, material, _ in analytic))
     room_vertices, room_faces = raster_room(parts, n_mesh_faces) if analytic else (0, 0)
     room = soup_with_room(soup, n_mesh_vertices + room_vertices, n_mesh_faces + room_faces) if analytic else soup
     soup = {name: values[:n_mesh_faces if name in PER_FACE else n_mesh_vertices] for name, values in room.items()}
@@ -339,8 +344,8 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     spheres = [part for part in analytic if isinstance(part[0], Sphere)]
     planes = [part for part in analytic if isinstance(part[0], Plane)]
     epsilon = ray_epsilon(scene.camera, mesh_vertices, spheres, planes)
-    geom = ray_geometry(arrays, mesh_vertices, spheres, planes, epsilon, device)
-    ordered = [scene.materials[name] for name in scene.material_names]
+    anchors = [plane_uv_anchor(plane, scene.camera.eye, ordered[material].uv_period) for plane, material, _ in planes]
+    geom = ray_geometry(arrays, mesh_vertices, spheres, planes, anchors, epsilon, device)
     textures, texture_ids = scene_textures(ordered, device)
     return CompiledScene(
         scene=scene, device=device, **soup, n_mesh_faces=n_mesh_faces, n_mesh_vertices=n_mesh_vertices,

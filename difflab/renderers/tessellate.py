@@ -50,11 +50,26 @@ def plane_grid_size() -> tuple[int, int]:
     return (2 * PLANE_RINGS + 1) ** 2, 2 * (2 * PLANE_RINGS) ** 2
 
 
-def plane_grid(plane: Plane, camera) -> geometry.TriMesh:
+def plane_uv_anchor(plane: Plane, eye, period: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """(anchor, anchor_uv): the eye's foot on the plane, rounded to float32, and its `Plane.uv` in
+    float64, reduced modulo `period` (the material's `uv_period`; None: not reduced). Both renderers
+    take uv = ((p - anchor).t, (p - anchor).b) + anchor_uv: `Plane.uv` up to whole periods, which a
+    repeating texture does not show, with every float32 term small near the eye however far `point`
+    is (uv measured from `point` in float32 changed 88 of 256 pixels of a repeating texture with
+    `point` 1e5 away, all of them 1e6 away). A clamped texture keeps its exact place, its uv
+    measured from the anchor: precise where the eye looks, as (p - point) was."""
+    normal = np.asarray(plane.normal, np.float64)
+    eye = np.asarray(eye, np.float64)
+    anchor = (eye - np.dot(eye - np.asarray(plane.point, np.float64), normal) * normal).astype(np.float32)
+    anchor_uv = plane.uv(anchor[None].astype(np.float64))[0]
+    return anchor, anchor_uv if period is None else np.mod(anchor_uv, period)
+
+
+def plane_grid(plane: Plane, camera, period: float | None = None) -> geometry.TriMesh:
     """A grid of quads on the plane centred at the eye's foot, reaching 2 `far` each way, its lines
     spaced geometrically from a quarter of the eye's height: cells stay small (well-conditioned
-    float32 interpolation) near the viewer and grow with distance. uv = `Plane.uv` (what a ray hit
-    on the plane takes)."""
+    float32 interpolation) near the viewer and grow with distance. uv as a ray hit on the plane
+    takes it (`plane_uv_anchor` with the material's texture `period`), in float64 at the vertices."""
     normal = np.asarray(plane.normal, float)
     point = np.asarray(plane.point, float)
     eye = np.asarray(camera.eye, float)
@@ -78,7 +93,9 @@ def plane_grid(plane: Plane, camera) -> geometry.TriMesh:
               normal) < 0:
         faces = faces[:, ::-1]
     normals = np.repeat(normal[None], len(vertices), axis=0)
-    return geometry.TriMesh(vertices, faces, normals, plane.uv(vertices))
+    anchor, anchor_uv = plane_uv_anchor(plane, eye, period)
+    uvs = (vertices - anchor) @ np.stack(plane.uv_frame(), axis=1) + anchor_uv
+    return geometry.TriMesh(vertices, faces, normals, uvs)
 
 
 @dataclass(frozen=True)
@@ -86,11 +103,13 @@ class AnalyticParts:
     """The analytic spheres and planes of a compiled scene as the rasterizer tessellates them, fixed
     when it is compiled (so its copies under other render settings tessellate alike): the objects as
     (Sphere | Plane, material id, object index) in scene order, the camera, and the sample rows
-    (image height x spp side) a sphere's silhouette is made fine enough for (`sphere_segments`)."""
+    (image height x spp side) a sphere's silhouette is made fine enough for (`sphere_segments`),
+    and per object its material's `uv_period` (a plane's uv is reduced by whole periods of it)."""
 
     objects: tuple = ()
     camera: object = None
     sample_height: int = 0
+    uv_periods: tuple = ()
 
     @functools.cached_property
     def sphere_grids(self) -> np.ndarray:
@@ -116,12 +135,12 @@ class AnalyticParts:
         """Per object its raster triangles as (TriMesh, material id, object index). RenderError once
         the scene's triangles -- `n_before` (the meshes') and these so far -- pass the memory budget."""
         parts, triangles = [], n_before
-        for (obj, material, index), (n_lat, n_lon) in zip(self.objects, self.sphere_grids):
+        for (obj, material, index), (n_lat, n_lon), period in zip(self.objects, self.sphere_grids, self.uv_periods):
             if isinstance(obj, Sphere):
                 with object_errors(index, obj):
                     mesh = geometry.uv_sphere(obj.radius, obj.center, int(n_lat), int(n_lon))
             else:
-                mesh = plane_grid(obj, self.camera)
+                mesh = plane_grid(obj, self.camera, period)
             parts.append((mesh, material, index))
             triangles += mesh.n_faces
             require_triangles(triangles, f"objects[0..{index}]: raster triangles of the scene", RenderError)

@@ -42,6 +42,8 @@ class SceneGeomW:
     plane_normal: wp.array(dtype=wp.vec3)
     plane_tangent: wp.array(dtype=wp.vec3)  # u's direction on the plane (`Plane.uv_frame`)
     plane_bitangent: wp.array(dtype=wp.vec3)  # v's direction
+    plane_anchor: wp.array(dtype=wp.vec3)  # where uv is measured from (`tessellate.plane_uv_anchor`)
+    plane_anchor_uv: wp.array(dtype=wp.vec2)  # its uv
     plane_material: wp.array(dtype=wp.int32)
     plane_object: wp.array(dtype=wp.int32)
     epsilon: float  # ray offset against self-intersection, in scene units

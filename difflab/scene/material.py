@@ -13,6 +13,9 @@ from ._spec import Spec, bounds, colour, spec_field
 TEXTURE_FILTERS = tuple(TEXTURE_FILTER_IDS)
 TEXTURE_WRAPS = tuple(TEXTURE_WRAP_IDS)
 TEXTURE_TARGETS = tuple(TEXTURE_TARGET_IDS)
+#: The uv shift (per axis) that leaves a texture's image unchanged, by wrap mode: 1 with "repeat", 2
+#: with "mirror" (every other tile reflected); None with "clamp" (the image has one place).
+WRAP_PERIODS = {"repeat": 1.0, "mirror": 2.0, "clamp": None}
 
 
 
@@ -58,3 +61,9 @@ class Material(Record):
                                      "kd")
 
     _PATH: ClassVar[str] = "material"
+
+    @property
+    def uv_period(self) -> float | None:
+        """`WRAP_PERIODS` of the texture's wrap mode; None without a texture (uv then shows nowhere
+        but the G-buffer, which keeps it unshifted)."""
+        return None if self.texture is None else WRAP_PERIODS[self.wrap]

@@ -178,7 +178,7 @@ def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3
     elif hit.kind == HIT_PLANE:
         tangent = scene.geom.plane_tangent[hit.index]
         bitangent = scene.geom.plane_bitangent[hit.index]
-        uv = plane_uv(p, scene.geom.plane_point[hit.index], tangent, bitangent)
+        uv = plane_uv(p, scene.geom.plane_anchor[hit.index], tangent, bitangent, scene.geom.plane_anchor_uv[hit.index])
         duv_dx, duv_dy = plane_uv_derivatives(dpdx, dpdy, tangent, bitangent)
     else:
         center = scene.geom.sphere_center[hit.index]

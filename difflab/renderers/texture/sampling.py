@@ -337,11 +337,13 @@ def triangle_uv_derivatives(p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, uv0: wp.vec2,
 
 
 @wp.func
-def plane_uv(p: wp.vec3, point: wp.vec3, tangent: wp.vec3, bitangent: wp.vec3):
-    """A plane's uv ((p - point).t, (p - point).b), with its `Plane.uv_frame` (t, b) (compiled once
-    into `SceneGeomW`; the rasterizer's plane grid takes the same uv at its vertices)."""
-    d = p - point
-    return wp.vec2(wp.dot(d, tangent), wp.dot(d, bitangent))
+def plane_uv(p: wp.vec3, anchor: wp.vec3, tangent: wp.vec3, bitangent: wp.vec3, anchor_uv: wp.vec2):
+    """A plane's uv ((p - anchor).t, (p - anchor).b) + anchor_uv, with its `Plane.uv_frame` (t, b)
+    and `tessellate.plane_uv_anchor` (the eye's foot on the plane and its uv, reduced by whole
+    periods of a repeating texture), compiled once into `SceneGeomW`; the rasterizer's plane grid
+    takes the same uv at its vertices."""
+    d = p - anchor
+    return wp.vec2(wp.dot(d, tangent), wp.dot(d, bitangent)) + anchor_uv
 
 
 @wp.func
