@@ -15,6 +15,7 @@ from difflab.errors import MeshError
 from difflab.geometry import (TriMesh, apply_to_normals, box, concatenate, cylinder, face_areas, face_normals,
                               load_mesh, quad, rotation_matrix, teapot, teapot_control_points,
                               teapot_patches, transform_matrix, uv_sphere, vertex_normals, weld)
+from difflab.geometry.obj_text import read_obj
 
 HYPOTHESIS = settings(derandomize=True, max_examples=40, deadline=None)
 
@@ -701,13 +702,15 @@ def test_polygon_faces_keep_their_corners_uvs_and_normals(tmp_path, name):
     assert np.all(edges[:, 2] > 0) and np.isclose(0.5 * edges[:, 2].sum(), shoelace)
 
 
-def relative_obj(corners: int, layout: str, relative: bool) -> str:
+def relative_obj(corners: int, layout: str, relative: bool, materials: bool = False) -> str:
     """Two `corners`-gons, each after its own `v`, `vt` and `vn` lines (the second face's corners
     with the second block's uv / normal), the corners written `a`, `a/t`, `a//n` or `a/t/n` with
-    indices absolute or `relative` (-1: the last line of its key above the face)."""
+    indices absolute or `relative` (-1: the last line of its key above the face); `materials`: each
+    face with its own (trimesh reads the file)."""
     angles = 2 * np.pi * np.arange(corners) / corners
     lines = []
     for block in range(2):
+        lines += [f"usemtl m{block}"] if materials else []
         lines += [f"v {np.cos(a) + 3 * block:.6f} {np.sin(a):.6f} {block}" for a in angles]
         lines += [f"vt {(np.cos(a) + 1) / 2:.6f} {(np.sin(a) + 1) / 2:.6f}" for a in angles]
         lines += [f"vn 0 {0.6 * block:.1f} {1 - 0.2 * block:.1f}"]
@@ -718,18 +721,19 @@ def relative_obj(corners: int, layout: str, relative: bool) -> str:
     return "\n".join(lines) + "\n"
 
 
+@pytest.mark.parametrize("materials", [False, True], ids=["numpy", "trimesh"])
 @pytest.mark.parametrize("layout", ["a", "a/t", "a//n", "a/t/n"])
 @pytest.mark.parametrize("corners", [3, 4, 5])
-def test_relative_indices_read_as_the_absolute_ones(tmp_path, corners, layout):
+def test_relative_indices_read_as_the_absolute_ones(tmp_path, corners, layout, materials):
     """Negative (relative) `v` / `vt` / `vn` indices name the lines above their face: the file reads
     as the same one with positive indices -- the same vertices, faces, normals, uvs and welds --,
-    triangles (numpy's reader) and polygons (trimesh's) alike. trimesh counted them from the end of
-    the file: the first face landed on the second's vertices (4 vertices for 8 in a quad file, its
+    numpy's reader or (two materials) trimesh's alike. trimesh counted them from the end of the file: the first face landed on the second's vertices (4 vertices for 8 in a quad file, its
     faces [[0, 1, 2], [0, 1, 2], [2, 3, 0], [2, 3, 0]] for [[0, 1, 2], [4, 5, 6], [2, 3, 0], [6, 7, 4]])."""
     meshes = []
     for relative in (False, True):
         path = tmp_path / f"{relative}.obj"
-        path.write_text(relative_obj(corners, layout, relative))
+        path.write_text(relative_obj(corners, layout, relative, materials))
+        assert (read_obj(path.read_bytes()).arrays is None) == materials  # who reads it
         meshes.append(load_mesh(path))
     absolute, relative = meshes
     assert absolute.n_faces == 2 * (corners - 2) and absolute.n_vertices == 2 * corners
@@ -749,13 +753,14 @@ def test_a_relative_index_before_the_first_line_is_named(tmp_path):
         load_mesh(path)
 
 
-@pytest.mark.parametrize("case", ["quads", "two materials"])
+@pytest.mark.parametrize("case", ["quads, two materials", "two materials", "a tab"])
 def test_other_obj_layouts_are_left_to_trimesh(tmp_path, monkeypatch, case):
-    """Quads and several materials: trimesh reads these, and load_mesh gives its mesh."""
+    """Several materials, a tab: trimesh reads these, and load_mesh gives its mesh."""
     from difflab.geometry import loading
 
-    text = {"quads": obj_file("a//n", quads=True),
-            "two materials": obj_file("a", extra_lines=["usemtl b", "f 1 2 3"])}[case]
+    text = {"quads, two materials": obj_file("a//n", quads=True, extra_lines=["usemtl b", "f 1//1 2//2 3//3 4//4"]),
+            "two materials": obj_file("a", extra_lines=["usemtl b", "f 1 2 3"]),
+            "a tab": obj_file("a", extra_lines=["f 1\t2 3"])}[case]
     path = tmp_path / "m.obj"
     path.write_text(text)
     asked = []

@@ -4,10 +4,11 @@ writes a `TriMesh` as OBJ.
 trimesh is lenient: it may drop faces that index past the vertex list or read a garbage file as an
 empty scene. For OBJ files we therefore check the raw text (vertex values, every `f` index, at least
 one face) so each problem is reported, with the path and line, instead of silently repaired: a
-file in the plain layout (`v x y z`, triangle `f a b c`, see `obj_text`) is vouched for by
-vectorised byte checks, by its `v` lines parsing as numbers and by its reading giving exactly as
-many triangles as it has `f` lines; anything else is scanned line by line. The common plain layouts are read by numpy
-(`obj_text.read_obj`) to what trimesh gives for them; trimesh reads the rest.
+file in the plain layout (`v x y z`, `f a b c ...`, see `obj_text`) is vouched for by vectorised
+byte checks, by its `v` lines parsing as numbers and by its reading giving exactly the triangles its
+`f` lines make (k - 2 a face of k corners); anything else is scanned line by line. The common plain
+layouts, triangles and polygons, are read by numpy (`obj_text.read_obj`) to what trimesh gives for
+them; trimesh reads the rest.
 """
 
 from __future__ import annotations
@@ -140,10 +141,11 @@ def load_mesh(path) -> TriMesh:
     the file, from its `f` lines: `with_file_welds`; never by equal positions, which may be a hard
     edge; a PLY's vertices are not welded), so smooth normals (`TriMesh.smooth_normals`) average
     over all a position's faces and a uv seam shades as the unsplit surface.
-    Polygons are triangulated by trimesh as fans, with their corners' uvs and normals. A scene
-    with several geometries is concatenated with its node transforms applied. Every failure raises
-    `MeshError` naming the path: missing file,
-    unreadable or unparsable file, non-finite vertex, face index out of range, no faces.
+    A polygon a b c d ... is the fan of triangles (a, b, c), (a, c, d), ..., with its corners' uvs
+    and normals (faces in file order where numpy reads the file, `obj_text`). A scene with several
+    geometries is concatenated with its node transforms applied. Every failure raises `MeshError`
+    naming the path: missing file, unreadable or unparsable file, non-finite vertex, face index out
+    of range, no faces.
     """
     path = os.fspath(path)
     if not os.path.exists(path):
@@ -166,7 +168,7 @@ def load_mesh(path) -> TriMesh:
         if text is not None and mesh.uvs is not None and mesh.normals is None:  # trimesh split `v`s per uv
             mesh = with_file_welds(mesh, text.data)
     if text is not None and text.plain and (
-            not text.vertices_parse or mesh.n_faces != text.n_face_lines  # a garbled vertex, a dropped face
+            not text.vertices_parse or mesh.n_faces != text.n_triangles  # a garbled vertex, a dropped face
             or not np.all(np.abs(mesh.vertices) <= MAX_COORD)):  # or a value is out of range
         _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)  # names the line
     if not np.all(np.isfinite(mesh.vertices)):

@@ -1,21 +1,25 @@
 """OBJ text read with numpy: lines classified by their key, `v` / `vt` / `vn` / `f` lines parsed by
-numpy's C text reader, no Python loop per line.
+numpy's C text readers, no Python loop per line.
 
 `read_obj(data)` gives an `ObjText`: whether the text is in the *plain* layout that `load_mesh`
-hands to trimesh without first checking it line by line (only `v x y z` lines of numbers, triangle
-`f` lines of positive indices, comments and `vn` / `vt` / `o` / `g` / `s` / `usemtl` / `mtllib`
-lines), its counts of `v` and `f` lines, whether its `v` lines all parse, and, for the common
-layouts, the mesh arrays themselves: the mesh trimesh's OBJ loader gives (`process=False`,
-`maintain_order=False`). Those layouts are every `f` line a triangle with corners `a`, `a/t`,
-`a//n` or `a/t/n` as its first line has them, indices positive and in range, `vn` lines of 3
-numbers, `vt` lines of 2 or 3, at most one `usemtl` line (before the faces), no line
-continuations. With `a` corners the faces are kept as written over every vertex; with uv or
-normal indices, each distinct (v, t, n) a corner uses is one vertex (`unmerged`: a vertex met with
-two uvs, at a uv seam, or two normals, at a crease, is split), as trimesh's `unmerge_faces` does
--- the same triangles, corner by corner, though the two may order the vertices differently.
-Anything else (polygons, several materials, an index past its list) gives no arrays, and trimesh
-reads the file. Negative (relative) indices are made absolute first (`absolute_indices`), for
-every reader.
+hands to a reader without first checking it line by line (only `v x y z` lines of numbers, `f`
+lines of 3 or more corners of positive indices separated by single spaces, comments and `vn` /
+`vt` / `o` / `g` / `s` / `usemtl` / `mtllib` lines), the number of triangles its `f` lines make,
+whether its `v` lines all parse, and, for the common layouts, the mesh arrays themselves: the mesh
+trimesh's OBJ loader gives (`process=False`, `maintain_order=False`). Those layouts are every
+corner of every `f` line `a`, `a/t`, `a//n` or `a/t/n` as the first corner is, indices in range,
+`vn` lines of 3 numbers, `vt` lines of 2 or 3, at most one `usemtl` line (before the faces), no
+tabs or line continuations. A face of k corners a b c d ... is the fan of k - 2 triangles
+(a, b, c), (a, c, d), ..., faces in file order (`fans`; trimesh makes the same triangles but puts
+an all-quad file's second triangles, turned to (c, d, a), after all the first ones, and otherwise
+a file's quads after its triangles). With `a` corners the faces index every `v` line's vertex;
+with uv or normal indices, each distinct (v, t, n) a corner uses is one vertex (`unmerged`: a
+vertex met with two uvs, at a uv seam, or two normals, at a crease, is split), as trimesh's
+`unmerge_faces` does -- the same vertices in the same order, though trimesh may order the uvs and
+normals of one `v` line's copies differently --, and where there are no normals `welds` gives each
+its `v` line. Anything else (several materials, an index past its list, corners of two layouts)
+gives no arrays, and trimesh reads the file. Negative (relative) indices are made absolute first
+(`absolute_indices`), for every reader.
 """
 
 from __future__ import annotations
@@ -29,27 +33,30 @@ from dataclasses import dataclass
 
 import numpy as np
 
-VERTEX_CHARS = b"0123456789.eE+- \n"  # `v x y z` lines, besides their key
-FACE_CHARS = b"0123456789/ \n"  # `f a b c` lines with positive indices, besides their key
+DIGITS = b"0123456789"
+VERTEX_CHARS = DIGITS + b".eE+- \n"  # `v x y z` lines, besides their key
+FACE_CHARS = DIGITS + b"/ \n"  # `f a b c ...` lines with positive indices, besides their key
 KEYS = (b"v ", b"vn ", b"vt ", b"f ", b"#", b"o ", b"g ", b"s ", b"usemtl ", b"mtllib ")  # the plain layout's
 V, VN, VT, F, USEMTL = 0, 1, 2, 3, 8  # their indices in KEYS
 BLANK, OTHER = len(KEYS), len(KEYS) + 1  # empty lines; lines with any other start
 MAX_RUNS = 100_000  # runs of consecutive lines of one key gathered one slice each; more: not plain
 SLASH_TO_SPACE = bytes.maketrans(b"/", b" ")
 MAX_TUPLE_KEY = 2 ** 62  # `unmerged` numbers (v, vt, vn) tuples by one int64 below this, else sorts rows
+LAYOUTS = {b"#": "a", b"#/#": "a/t", b"#//#": "a//n", b"#/#/#": "a/t/n"}  # a corner's, its numbers as '#'
+FAR = 10 ** 18  # `absolute_indices` counts a relative index past it as it (int64 holds it)
 
 
 @dataclass(frozen=True)
 class ObjText:
-    """What `read_obj` found: `plain` (see the module doc), the numbers of `v` and `f` lines, whether
-    the `v` lines parse as 3 numbers each (plain text only), and (vertices, faces, normals or None,
-    uvs or None, welds or None) as trimesh reads them (welds: each vertex's `v` index, 0-based, where
-    vertices were split), or None; `data`: the text read (CRLF as LF, indices made absolute:
-    `absolute_indices`), which trimesh reads where these arrays are None."""
+    """What `read_obj` found: `plain` (see the module doc), the number of triangles its `f` lines
+    make (a face of k corners: k - 2), whether the `v` lines parse as 3 numbers each (plain text
+    only), and (vertices, faces, normals or None, uvs or None, welds or None) as trimesh reads them
+    (welds: each vertex's `v` index, 0-based, where vertices were split and there are no normals), or
+    None; `data`: the text read (CRLF as LF, indices made absolute: `absolute_indices`), which trimesh
+    reads where these arrays are None."""
 
     plain: bool
-    n_vertex_lines: int
-    n_face_lines: int
+    n_triangles: int = 0
     vertices_parse: bool = False
     arrays: tuple | None = None
     data: bytes = b""
@@ -93,11 +100,23 @@ def key_lines(data: bytes, starts, ends, code, key: int) -> tuple[bytes, int]:
     return b"\n".join(view[starts[a]:ends[b]] for a, b in zip(first, last)), int(lines.size)
 
 
-def plain_lines(text: bytes, count: int, key: bytes, chars: bytes) -> bool:
-    """Whether `count` lines of `text` with key `key` are that key and three numbers (or corners)
-    of `chars` separated by single spaces."""
-    return (not text.translate(None, chars + key[:1]) and text.count(key[:1]) == count and b"  " not in text
+def plain_vertices(text: bytes, count: int) -> bool:
+    """Whether `count` `v` lines `text` (joined by newlines) are each the key and three numbers of
+    VERTEX_CHARS separated by single spaces."""
+    return (not text.translate(None, VERTEX_CHARS + b"v") and text.count(b"v") == count and b"  " not in text
             and text.count(b" ") == 3 * count)
+
+
+def face_sizes(text: bytes, count: int) -> np.ndarray | None:
+    """The number of corners of each of `count` `f` lines `text` (joined by newlines), where each is
+    the key and 3 or more corners of FACE_CHARS separated by single spaces, none starting with '/'
+    (a `v` index missing); else None."""
+    if (text.translate(None, FACE_CHARS + b"f") or text.count(b"f") != count or b"  " in text or b" \n" in text
+            or b" /" in text or text.endswith(b" ")):
+        return None
+    spaces = np.frombuffer(text.translate(None, DIGITS + b"/") + b"\n", np.uint8)  # per line "f", a space a corner
+    sizes = np.diff(np.flatnonzero(spaces == ord("\n")), prepend=-1) - 2
+    return sizes if sizes.min() >= 3 else None
 
 
 def has_zero_index(face_text: bytes) -> bool:
@@ -120,12 +139,31 @@ def table(text: bytes, key: bytes, dtype) -> np.ndarray | None:
         return None
 
 
+def corner_table(face_text: bytes, n_corners: int) -> tuple[np.ndarray, str] | None:
+    """Plain `f` lines' (`face_sizes`) `n_corners` corners as an (n_corners, k) int64 table, a row
+    per corner in file order, and their layout (`a`, `a/t`, `a//n` or `a/t/n`: LAYOUTS), where every
+    corner is laid out as the first; else None. Counts tell: each corner has the first's slashes (a
+    corner's slashes follow its space), together where its are (`//`), and its numbers (none missing)."""
+    first = face_text[2:].split(b" ", 1)[0]
+    layout = LAYOUTS.get(re.sub(rb"\d+", b"#", first))
+    slashes = first.count(b"/")
+    marks = face_text.translate(None, DIGITS)  # per line "f", then a space and the slashes of each corner
+    if (layout is None or marks.count(b"/") != slashes * n_corners
+            or (slashes and marks.count(b" " + b"/" * slashes) != n_corners)
+            or (slashes == 2 and face_text.count(b"//") != (n_corners if layout == "a//n" else 0))):
+        return None
+    numbers = np.fromstring(face_text.translate(SLASH_TO_SPACE, b"f"), dtype=np.int64, sep=" ")  # past int64: its max
+    if numbers.size != n_corners * len(layout.replace("//", "/").split("/")):
+        return None
+    return numbers.reshape(n_corners, -1), layout
+
+
 def read_obj(data: bytes) -> ObjText:
     """Classify and, where it can, read OBJ text (see the module doc); relative indices are made
     absolute first (`absolute_indices`), and the text read is the result's `data`."""
     data = data.replace(b"\r\n", b"\n") if b"\r" in data else data
     if b"\r" in data:  # a carriage return inside a line: checked line by line
-        return ObjText(False, 0, 0, data=data)
+        return ObjText(False, data=data)
     keys = line_keys(data)
     if b"-" in key_lines(data, *keys, F)[0]:
         data = absolute_indices(data, *keys)
@@ -136,61 +174,49 @@ def read_obj(data: bytes) -> ObjText:
 def _classify(data: bytes, starts, ends, code) -> ObjText:
     """`read_obj` of text without CR, split into lines (`line_keys`)."""
     if not code.size or (code == OTHER).any() or np.count_nonzero(np.diff(code)) >= MAX_RUNS:
-        return ObjText(False, 0, 0)
+        return ObjText(False)
     vertex_text, n_vertices = key_lines(data, starts, ends, code, V)
     face_text, n_faces = key_lines(data, starts, ends, code, F)
-    if not (n_faces and plain_lines(vertex_text, n_vertices, KEYS[V], VERTEX_CHARS)
-            and plain_lines(face_text, n_faces, KEYS[F], FACE_CHARS)):
-        return ObjText(False, n_vertices, n_faces)
+    sizes = face_sizes(face_text, n_faces) if n_faces else None
+    if sizes is None or not plain_vertices(vertex_text, n_vertices):
+        return ObjText(False)
     vertices = table(vertex_text, KEYS[V], np.float64)
-    parse = vertices is not None and vertices.shape == (n_vertices, 3)
+    text = ObjText(True, int((sizes - 2).sum()), vertices is not None and vertices.shape == (n_vertices, 3))
     usemtl = np.flatnonzero(code == USEMTL)
     corners = None  # continuations, tabs or several materials: trimesh reads the file
-    if not (b"\\" in data or b"\t" in data or usemtl.size > 1 or data.count(b"usemtl") != usemtl.size
-            or (usemtl.size and usemtl[0] > np.argmax(code == F))):
-        corners = table(face_text, KEYS[F], np.int64)
-    first_corner = face_text.split(b" ", 2)[1]
-    per_corner = len(first_corner.replace(b"/", b" ").split())
-    if corners is None or corners.shape[1] != 3 * per_corner:
-        return ObjText(not has_zero_index(face_text), n_vertices, n_faces, parse)
-    if (corners[:, ::per_corner] == 0).any():  # vertex index 0: not OBJ, the line scan names it
-        return ObjText(False, n_vertices, n_faces)
-    sample = face_text.split(b"\n", 1)[0][2:]  # trimesh reads the corners' layout off the first face line
-    arrays = mesh_arrays(data, starts, ends, code, vertices, corners, sample) if parse else None
-    return ObjText(True, n_vertices, n_faces, parse, arrays)
+    if text.vertices_parse and not (b"\\" in data or b"\t" in data or usemtl.size > 1 or data.count(b"usemtl")
+                                    != usemtl.size or (usemtl.size and usemtl[0] > np.argmax(code == F))):
+        corners = corner_table(face_text, int(sizes.sum()))
+    if has_zero_index(face_text) if corners is None else (corners[0][:, 0] == 0).any():
+        return ObjText(False)  # a vertex index 0 is not OBJ: the line scan names it
+    if corners is None:
+        return text
+    return dataclasses.replace(text, arrays=mesh_arrays(data, starts, ends, code, vertices, *corners, sizes))
 
 
-def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, corners: np.ndarray, sample: bytes):
+def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, corners: np.ndarray, layout: str,
+                sizes: np.ndarray):
     """(vertices, faces, normals or None, uvs or None, welds or None) of plain OBJ text as trimesh
-    reads it (welds: `unmerged`'s, each vertex's `v` index, None where no vertex is split), or
-    None outside the layouts of the module doc. `vertices`: the `v` lines' (N, 3) numbers;
-    `corners`: the `f` lines' numbers, a row each."""
-    per_corner = corners.shape[1] // 3
+    reads it, up to the order of the module doc (welds: `unmerged`'s, each vertex's `v` index, where
+    vertices are split and the file gives no normals), or None outside the layouts of the module doc.
+    `vertices`: the `v` lines' (N, 3) numbers; `corners`: the `f` lines' corners' numbers
+    (`corner_table`), a row each, laid out as `layout`; `sizes`: each face's number of corners."""
     corners = np.where(corners > 0, corners - 1, corners)  # 1-based (a 0 tex / normal index stays 0, as in trimesh)
-    faces = corners[:, ::per_corner]
+    triangles = corners.reshape(-1, 3, corners.shape[1]) if (sizes == 3).all() else corners[fans(sizes)]
+    columns = dict(zip(layout.replace("//", "/").split("/"), triangles.transpose(2, 0, 1)))
+    faces = columns["a"]
     if faces.max() >= len(vertices):
         return None
-    tex = norm = None
-    if per_corner == 3:
-        tex, norm = corners[:, 1::3], corners[:, 2::3]
-    elif per_corner == 2:  # `a//n` or `a/t`: trimesh counts the inner slashes of the first line
-        inner = b"".join(corner.strip(b"/") for corner in sample.split()).count(b"/")
-        if inner == 6:
-            norm = corners[:, 1::2]
-        elif inner == 3:
-            tex = corners[:, 1::2]
-        else:
-            return None
     vn_text, n_vn = key_lines(data, starts, ends, code, VN)
     vt_text, n_vt = key_lines(data, starts, ends, code, VT)
     normal_table = table(vn_text, KEYS[VN], np.float64)
     uv_table = table(vt_text, KEYS[VT], np.float64)
-    if (n_vn and (normal_table is None or normal_table.shape[1] != 3)) \
-            or (n_vt and (uv_table is None or uv_table.shape[1] not in (2, 3))):
-        return None
+    for key, values, count, widths in (("n", normal_table, n_vn, (3,)), ("t", uv_table, n_vt, (2, 3))):
+        if (count or key in columns) and (values is None or values.shape[1] not in widths):
+            return None  # lines that do not parse, or indices into no lines: trimesh reads the file
     uv_table = None if uv_table is None else uv_table[:, :2]
-    used = {name: (index, values) for name, index, values in (("normals", norm, normal_table), ("uvs", tex, uv_table))
-            if index is not None and values is not None}
+    used = {name: (columns[key], values) for name, key, values in (("normals", "n", normal_table), ("uvs", "t", uv_table))
+            if key in columns and values is not None}
     if not used:
         return vertices, faces, None, None, None  # every vertex, no normals or uvs
     if any(index.max() >= len(values) for index, values in used.values()):
@@ -198,8 +224,18 @@ def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, corners: 
     welds, faces, *values = unmerged(vertices, faces, list(used.values()))
     found = dict(zip(used, values))
     normals, uvs = (found.get(name) for name in ("normals", "uvs"))
-    finite = [None if a is None or not np.all(np.isfinite(a)) else a for a in (normals, uvs)]  # else dropped
-    return (vertices[welds], faces, *finite, welds)
+    normals, uvs = (None if a is None or not np.all(np.isfinite(a)) else a for a in (normals, uvs))  # else dropped
+    return vertices[welds], faces, normals, uvs, welds if normals is None else None
+
+
+def fans(sizes: np.ndarray) -> np.ndarray:
+    """(T, 3) int64: the triangles that faces of `sizes` corners make, each a row of three corners
+    numbered in file order over all the faces, a face a b c d ... the fan (a, b, c), (a, c, d), ...,
+    in file order."""
+    count = sizes - 2  # triangles a face
+    start = np.repeat(np.cumsum(sizes) - sizes, count)  # each triangle's face's first corner
+    step = start + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + 1  # its second corner
+    return np.stack([start, step, step + 1], axis=1)
 
 
 def absolute_indices(data: bytes, starts, ends, code) -> bytes:
@@ -207,29 +243,66 @@ def absolute_indices(data: bytes, starts, ends, code) -> bytes:
     lines made the absolute one it names -- a corner's `v`, `vt` and `vn` index alike: -1 is the
     last line of that key above the face --, so that every reader (numpy's, trimesh's,
     `fan_corners`) sees the faces of the same file with positive indices (trimesh counts relative
-    indices from the end of the file). Only the `f` lines holding a '-' change (their comments kept,
-    line breaks kept: line numbers still name the file's lines); an index before the first line
-    stays <= 0, for the line scan to name. (A Python loop over those lines: ~8 us a face.)"""
+    indices from the end of the file). A relative index is a '-' and digits making one of a corner's
+    first three numbers (between whitespace or '/' and '/', whitespace or '#'), before any '#' of an
+    `f` line; -k there becomes (1 + the lines of its key above) - k, in place: the rest of the text
+    stays as it is (line numbers still name the file's lines). An index before the first line
+    stays <= 0, for the line scan to name (k past FAR counts as FAR). numpy over the text's '-'
+    signs, no loop over lines or corners."""
+    padded = np.frombuffer(data + b"\n", np.uint8)  # the byte past the end reads as a line end
+    minus = np.flatnonzero(padded == ord("-"))
+    line = np.searchsorted(starts, minus, "right") - 1
+    minus, line = minus[code[line] == F], line[code[line] == F]
+    blank = np.flatnonzero(is_blank(padded))
+    slash, hashes = (np.flatnonzero(padded == ord(c)) for c in "/#")
+    field = np.searchsorted(slash, minus) - np.searchsorted(slash, blank[np.searchsorted(blank, minus) - 1])
+    value, digits, going = np.zeros(minus.size, np.int64), np.zeros(minus.size, np.int64), np.ones(minus.size, bool)
+    while going.any():  # the digits after each '-', a digit a round (a non-digit byte minus '0' is >= 10 as uint8)
+        digit = padded[minus + digits + going] - np.uint8(ord("0"))
+        going &= digit < 10
+        value = np.where(going, np.minimum(10 * np.minimum(value, FAR // 10) + digit, FAR), value)
+        digits += going
+    before, after = padded[minus - 1], padded[minus + 1 + digits]
+    relative = ((field < 3) & ((before == ord("/")) | is_blank(before)) & (digits > 0)
+                & ((after == ord("/")) | (after == ord("#")) | is_blank(after))
+                & (np.searchsorted(hashes, minus) == np.searchsorted(hashes, starts[line])))  # no '#' before
     above = np.stack([np.cumsum(code == key) for key in (V, VT, VN)], axis=1) + 1  # per line: 1 + lines of each key
-    pieces, done = [], 0
-    for line in np.flatnonzero(code == F):
-        body, hash_, comment = data[starts[line]:ends[line]].partition(b"#")
-        if b"-" not in body:
-            continue
-        base = above[line].tolist()
-        corners = [corner if b"-" not in corner else b"/".join(
-            b"%d" % (base[k] + int(part)) if k < 3 and part[:1] == b"-" and part[1:].isdigit() else part
-            for k, part in enumerate(corner.split(b"/"))) for corner in body[2:].split()]
-        pieces += [data[done:starts[line]], b"f " + b" ".join(corners) + (b" " + hash_ + comment if hash_ else b"")]
-        done = ends[line]
-    return b"".join(pieces) + data[done:]
+    minus, span = minus[relative], 1 + digits[relative]
+    text, width = decimal(above[line[relative], field[relative]] - value[relative])
+    kept = np.diff(minus, prepend=0) - np.concatenate([[0], span[:-1]])  # the bytes before each, after the last
+    odd = np.arange(2 * minus.size) % 2 == 1  # runs of kept bytes, then of replaced ones
+    keep = np.repeat(~odd, np.stack([kept, span], axis=1).ravel())
+    new = np.repeat(odd, np.stack([kept, width], axis=1).ravel())
+    out = np.empty(len(data) - span.sum() + width.sum(), np.uint8)
+    out[:new.size][new] = text
+    out[:new.size][~new] = padded[:keep.size][keep]
+    out[new.size:] = padded[keep.size:len(data)]
+    return out.tobytes()
+
+
+def is_blank(chars: np.ndarray) -> np.ndarray:
+    """Whether each byte (uint8) is whitespace as `bytes.split` sees it: space, or \\t to \\r."""
+    return (chars == ord(" ")) | (chars - np.uint8(ord("\t")) <= ord("\r") - ord("\t"))
+
+
+def decimal(numbers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The decimal digits (uint8 ASCII, '-' before a negative number's) of int64 `numbers` (of
+    magnitude below 10^19), all concatenated, and each number's count of them."""
+    size = 1 + np.searchsorted(10 ** np.arange(1, 19), np.abs(numbers), "right")  # digits
+    width = size + (numbers < 0)
+    columns = np.empty((numbers.size, int(width.max(initial=1))), np.uint8)  # right-aligned
+    rest = np.abs(numbers)
+    for k in range(1, columns.shape[1] + 1):
+        rest, columns[:, -k] = np.divmod(rest, 10)
+    columns += ord("0")
+    columns[numbers < 0, -1 - size[numbers < 0]] = ord("-")
+    return columns[np.arange(columns.shape[1]) >= columns.shape[1] - width[:, None]], width
 
 
 def fan_corners(data: bytes) -> np.ndarray | None:
-    """(T, 3) int64: each corner's `v` index (0-based) of the triangles OBJ text's `f` lines make, in
-    file order, a polygon a b c d ... as the fan (a, b, c), (a, c, d), ... (trimesh's triangulation);
-    indices absolute (`absolute_indices`). None where a corner does not parse, is not positive, or a
-    face has fewer than 3 corners."""
+    """(T, 3) int64: each corner's `v` index (0-based) of the triangles OBJ text's `f` lines make
+    (`fans`); indices absolute (`absolute_indices`). None where a corner does not parse, is not
+    positive, or a face has fewer than 3 corners."""
     data = data.replace(b"\r\n", b"\n")
     starts, ends, code = line_keys(data)
     face_text, n_faces = key_lines(data, starts, ends, code, F)
@@ -241,15 +314,10 @@ def fan_corners(data: bytes) -> np.ndarray | None:
         index = tokens[~is_key].astype(np.int64) - 1
     except ValueError:
         return None
-    face = np.cumsum(is_key)[~is_key] - 1  # each corner's face line
-    counts = np.bincount(face, minlength=n_faces)
-    if counts.min() < 3 or index.min() < 0:
+    sizes = np.bincount(np.cumsum(is_key)[~is_key] - 1, minlength=n_faces)  # each face line's corners
+    if sizes.min() < 3 or index.min() < 0:
         return None
-    first = np.cumsum(counts) - counts  # each face's first corner
-    fans = counts - 2
-    owner = np.repeat(np.arange(n_faces), fans)
-    step = np.arange(owner.size) - np.repeat(np.cumsum(fans) - fans, fans) + 1  # 1 .. k-2 within a face
-    return np.stack([index[first[owner]], index[first[owner] + step], index[first[owner] + step + 1]], axis=1)
+    return index[fans(sizes)]
 
 
 def unmerged(vertices: np.ndarray, faces: np.ndarray, attributes: list) -> list:
