@@ -145,6 +145,17 @@ def test_absolute_indices_rewrites_each_relative_index_in_place():
     assert obj_text.absolute_indices(data, *obj_text.line_keys(data)) == want
 
 
+def test_a_carriage_return_leaves_relative_indices_relative_to_the_lines_above(tmp_path):
+    """A lone CR (here in a comment) sends the file to the line scan and trimesh; its relative
+    indices are still made absolute first. Before, they were not, and trimesh counted them from the
+    end of the file: the first triangle landed on the second's vertices."""
+    path = tmp_path / "cr.obj"
+    path.write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nv 5 5 5\nv 6 5 5\nv 5 6 5\nf 4 5 6\n# a\rb\n")
+    mesh = load_mesh(path)
+    np.testing.assert_array_equal(mesh.vertices[mesh.faces], [[[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+                                                              [[5, 5, 5], [6, 5, 5], [5, 6, 5]]])
+
+
 @pytest.mark.parametrize("face, message", [
     ("f 1 2 3 9", "face index 9 out of range \\(file has 4 vertices\\)"),
     ("f 1 2 -5 3", "face index -5 out of range \\(file has 4 vertices\\)"),

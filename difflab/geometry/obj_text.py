@@ -162,12 +162,12 @@ def read_obj(data: bytes) -> ObjText:
     """Classify and, where it can, read OBJ text (see the module doc); relative indices are made
     absolute first (`absolute_indices`), and the text read is the result's `data`."""
     data = data.replace(b"\r\n", b"\n") if b"\r" in data else data
-    if b"\r" in data:  # a carriage return inside a line: checked line by line
-        return ObjText(False, data=data)
     keys = line_keys(data)
     if b"-" in key_lines(data, *keys, F)[0]:
         data = absolute_indices(data, *keys)
         keys = line_keys(data)
+    if b"\r" in data:  # a carriage return inside a line: checked line by line, read by trimesh
+        return ObjText(False, data=data)
     return dataclasses.replace(_classify(data, *keys), data=data)
 
 
