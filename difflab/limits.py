@@ -67,7 +67,8 @@ TRIANGLE_BYTES = 540
 #: One byte of a mesh file being loaded (text scan, trimesh, the TriMesh; measured 12.6 on OBJ
 #: spheres of 5.6 and 23.8 MB, about 480 bytes per triangle).
 MESH_FILE_BYTES = 14
-#: One texel of a texture through load, mip pyramid and packing (measured 58 at 1024^2 -> 2048^2).
+#: One texel of a texture through load, mip pyramid and packing (measured 66 at 1024^2 -> 2048^2, 74 for
+#: a one-row texture of as many texels: experiments/bench/memory.py --case texture / texture_strip).
 TEXEL_BYTES = 80
 #: One pixel of an 8-bit image file being read (decode, table lookup to float32; measured 26.5).
 IMAGE_LOAD_BYTES = 30

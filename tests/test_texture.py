@@ -1,6 +1,7 @@
 """Textures: mip pyramid, filters, wrap modes, perspective-correct uv and its derivatives, shading."""
 
 import math
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -67,6 +68,28 @@ def test_the_last_level_of_an_odd_checker_is_its_mean(shape, mean):
 def test_an_odd_level_splits_the_texel_on_a_footprint_edge():
     row = np.arange(5, dtype=np.float32)[None, :, None]  # footprints [0, 2.5) and [2.5, 5)
     np.testing.assert_allclose(mip_pyramid(row)[1][0, :, 0], [(0 + 1 + 0.5 * 2) / 2.5, (0.5 * 2 + 3 + 4) / 2.5])
+
+
+#: Most bytes per level-0 texel `mip_pyramid` may hold at once (traced numpy allocations, the
+#: input excluded): the float64 first pass and its float32 copy, an odd axis's product, the levels.
+MIP_PEAK_BYTES = 40
+
+
+@pytest.mark.parametrize("shape", [(1, 1 << 16), ((1 << 16) + 1, 1), (1, (1 << 16) + 1), (256, 256), (257, 255),
+                                   (4095, 3)])
+def test_the_pyramid_stays_within_its_memory_whatever_the_shape(shape):
+    """An axis of size 1 is not averaged (the old code gathered 4 full-size float64 taps along it:
+    93 B / texel for 1 x 65536, 68 for 65537 x 1, 52 for 4095 x 3; now 26, 34, 38), and the taps
+    are strided views, not gathered copies (256 x 256: 32 -> 20)."""
+    texels = np.random.default_rng(3).random(shape + (3,)).astype(np.float32)
+    tracemalloc.start()
+    try:
+        levels = mip_pyramid(texels)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak <= MIP_PEAK_BYTES * texels[..., 0].size
+    np.testing.assert_allclose(levels[-1][0, 0], texels.astype(np.float64).mean(axis=(0, 1)), rtol=2e-7)
 
 
 def test_every_texel_of_a_257_checker_pyramid_is_grey(tmp_path):

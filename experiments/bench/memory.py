@@ -73,10 +73,11 @@ def run(case: str, size: int) -> dict:
 
     texture_dir = Path(tempfile.mkdtemp())
 
-    def texture(n):
-        path = texture_dir / f"tex{n}.png"
+    def texture(n):  # n x n texels; "texture_strip": the same texels in one row (mip levels 1 x ...)
+        shape = (1, n * n) if case == "texture_strip" else (n, n)
+        path = texture_dir / f"tex{shape[0]}x{shape[1]}.png"
         if not path.exists():
-            difflab.save_image(path, np.random.default_rng(0).random((n, n, 3)).astype(np.float32))
+            difflab.save_image(path, np.random.default_rng(0).random(shape + (3,)).astype(np.float32))
         materials = {"m": {"kd": 1.0, "texture": str(path), "filter": "trilinear"}}
         return path, lambda: difflab.render_frame(scene(8, [WALL], materials, 1, method="raster"))
 
@@ -103,9 +104,10 @@ def run(case: str, size: int) -> dict:
     lights = 5 if case == "raster_lights" else 1
     warm = {"raster": lambda: raster(8, lights), "raster_lights": lambda: raster(8, lights),
             "raytrace": lambda: raytrace(8), "raytrace_deep": lambda: raytrace_deep(8), "teapot": lambda: teapot(2), "texture": texture(8)[1],
+            "texture_strip": texture(8)[1],
             "load": load(8), "obj": obj(4)[1], "fit": fit(8)}[case]
     warm()
-    if case == "texture":
+    if case in ("texture", "texture_strip"):
         _, work = texture(size)
     elif case == "load":
         work = load(size)
@@ -140,7 +142,7 @@ def run(case: str, size: int) -> dict:
         estimate = units * limits.MESH_FILE_BYTES
     else:
         units = size * size
-        estimate = units * (limits.TEXEL_BYTES if case == "texture" else limits.IMAGE_LOAD_BYTES)
+        estimate = units * (limits.IMAGE_LOAD_BYTES if case == "load" else limits.TEXEL_BYTES)
     return {"case": case, "size": size, "units": units, "peak_bytes": peak, "estimate_bytes": int(estimate)}
 
 
@@ -151,6 +153,7 @@ CASES = {  # case: (small sizes, full sizes, unit)
     "raytrace_deep": ((128, 256), (256, 512), f"node ({DEEP} per sample)"),
     "teapot": ((32, 64), (64, 128), "triangle"),
     "texture": ((512, 1024), (1024, 2048), "texel"),
+    "texture_strip": ((512, 1024), (1024, 2048), "texel (one row)"),
     "load": ((512, 1024), (1024, 2048), "pixel"),
     "obj": ((100, 200), (200, 400), "byte of an OBJ file"),
     "fit": ((64, 128), (128, 256), "residual x parameter (fit_material, lm)"),

@@ -56,29 +56,45 @@ def check_texels(image: np.ndarray, path) -> None:
                            f"(least {image.min():.6g}); texels scale a coefficient, so they must be >= 0")
 
 
-def footprint_weights(w: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per coarse texel j of n = max(1, w // 2): the fine indices (n, K) its footprint
-    [j w / n, (j + 1) w / n) touches and their weights overlap / (w / n) (rows sum to 1; K = 4 >
-    2 + w / n; unused taps have weight 0 and a valid index)."""
-    n = max(1, w // 2)
-    start = np.arange(n)[:, None] * w / n
-    index = np.floor(start).astype(np.int64) + np.arange(4)[None, :]
-    overlap = np.minimum(index + 1, start + w / n) - np.maximum(index, start)
-    return np.minimum(index, w - 1), np.maximum(overlap, 0.0) / (w / n)
+def halve(level: np.ndarray, axis: int) -> np.ndarray:
+    """`level` (float32 or float64, w >= 2 texels along `axis`) with that axis averaged down to
+    n = w // 2, in float64 (see the module doc). Coarse texel j's footprint [j w / n, (j + 1) w / n),
+    over the fine texels it overlaps, weighted by the overlap over w / n:
+    even w: texels 2j, 2j + 1, weights (1/2, 1/2) (the box mean);
+    odd w = 2n + 1: the footprint starts j / n into texel 2j and ends (j + 1) / n into texel 2j + 2,
+    so texels 2j, 2j + 1, 2j + 2 with weights (n - j, n, j + 1) / w -- never a fourth texel.
+    The taps are strided views of `level` (no gathered copies): memory is the float64 result, plus
+    one float64 product of its size for odd w."""
+    w = level.shape[axis]
+    n = w // 2
+    shape = [1] * level.ndim
+    shape[axis] = n
+
+    def tap(k: int) -> np.ndarray:  # fine texels 2j + k, j < n
+        index = [slice(None)] * level.ndim
+        index[axis] = slice(k, k + 2 * n, 2)
+        return level[tuple(index)]
+
+    if w % 2 == 0:
+        out = np.add(tap(0), tap(1), dtype=np.float64)
+        out *= 0.5
+        return out
+    j = np.arange(n, dtype=np.float64).reshape(shape)
+    out = np.multiply(tap(0), (n - j) / w, dtype=np.float64)
+    product = np.empty_like(out)
+    for k, weight in ((1, n / w), (2, (j + 1) / w)):
+        out += np.multiply(tap(k), weight, out=product, dtype=np.float64)
+    return out
 
 
 def downsample(level: np.ndarray) -> np.ndarray:
-    """The next mip level of an (H, W, C) array, in float64: exact-footprint means per axis (see the
-    module doc), accumulated tap by tap in place (memory: a few half-size arrays)."""
+    """The next mip level of an (H, W, C) array, in float64: `halve` along each axis longer than 1
+    (an axis of size 1 does not shrink and is left as it is). Memory: the float64 result of the first
+    pass (half the level's texels, x 8 bytes a channel), plus as much again for an odd size."""
     out = level
     for axis in (0, 1):
-        index, weight = footprint_weights(out.shape[axis])
-        shape = [1] * out.ndim
-        shape[axis] = -1
-        acc = np.take(out, index[:, 0], axis=axis) * weight[:, 0].reshape(shape)  # float64 (weights are)
-        for k in range(1, index.shape[1]):
-            acc += np.take(out, index[:, k], axis=axis) * weight[:, k].reshape(shape)
-        out = acc
+        if out.shape[axis] > 1:
+            out = halve(out, axis)
     return out
 
 
@@ -135,7 +151,7 @@ def pack(pyramids, device: str) -> TexturesW:
     if not blocks:  # no textures: one dummy texel keeps every array non-empty
         blocks, levels, first, count = [np.ones((1, 3), np.float32)], [(0, 1, 1)], [0], [1]
     out = TexturesW()
-    out.texels = wp.array(np.concatenate(blocks).astype(np.float32), dtype=wp.vec3, device=device)
+    out.texels = wp.array(np.concatenate(blocks, dtype=np.float32), dtype=wp.vec3, device=device)
     out.level = wp.array(np.asarray(levels, np.int32), dtype=wp.vec3i, device=device)
     out.first_level = wp.array(np.asarray(first, np.int32), dtype=wp.int32, device=device)
     out.n_levels = wp.array(np.asarray(count, np.int32), dtype=wp.int32, device=device)
