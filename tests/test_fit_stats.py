@@ -364,3 +364,27 @@ def test_a_singular_normal_matrix_names_the_degenerate_parameters():
     across[:, 6] = 2.0 * across[:, 0]  # kd against a texel
     gram, diag = gram_of(across)
     assert degenerate(layout, diag, gram, prior=True) == ["texture", "kd"]
+
+
+def test_prior_pull_is_the_data_only_step_in_standard_errors():
+    """delta = (J^T J)^-1 g over the entries the data determine, / sqrt(diag (J^T J)^-1 s2): for a
+    linear least-squares problem plus a quadratic prior, the regularised solution moved by delta is
+    the data-only solution exactly. Dense and sparse J^T J give the same numbers; an entry no row
+    reads (inf in diag) gets 0."""
+    from difflab.fit.stats import prior_pull
+
+    rng = np.random.default_rng(5)
+    jac = rng.normal(size=(30, 4))
+    jac[:, 3] = 0.0  # no data on entry 3
+    y = rng.normal(size=30)
+    prior = np.diag([0.5, 0.2, 0.1, 1.0])  # 0.5 x^T P x
+    gram = jac.T @ jac
+    x_prior = np.linalg.solve(gram + prior, jac.T @ y)
+    x_data = np.linalg.lstsq(jac[:, :3], y, rcond=None)[0]
+    diag = np.diag(covariance_unscaled(gram))
+    s2 = 0.04
+    want = (x_data - x_prior[:3]) / np.sqrt(diag[:3] * s2)
+    for matrix in (gram, sp.csr_matrix(gram)):
+        got = prior_pull(matrix, diag, s2, prior @ x_prior)
+        np.testing.assert_allclose(got[:3], want, rtol=1e-10)
+        assert got[3] == 0.0 and np.isinf(diag[3])

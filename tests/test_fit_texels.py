@@ -336,3 +336,29 @@ def test_the_sparse_jacobian_equals_jacfwd(tmp_path, filter, spp):
     assert jac.nnz < want.size / 10  # (measured: 2.7-5.2 % of the entries)
     unseen = np.abs(want).max(axis=0) == 0  # nearest: the masked quarter's texels (bilinear taps reach them)
     assert unseen.any() == (filter == "nearest") and jac[:, unseen].nnz == 0
+
+
+@pytest.mark.parametrize("smoothness, pulled", [(0.001, False), (1.0, True)])
+def test_a_smoothness_prior_reports_how_far_it_pulls_the_seen_texels(tmp_path, smoothness, pulled):
+    """A random 8 x 8 texture under noise 0.02 (nearest: the image is linear in the texels), fitted
+    without and with a smoothness prior. `prior_pull` is the prior's move of the values from where
+    the pixels alone put them, in their standard errors: max |T_data - T_prior| / stderr over the
+    seen texels, to 1e-3 relative (exact for a linear problem but for the float32 texels and the
+    solver's tolerance: 1e-4 measured at the weak prior). A weak prior moves them by less
+    than one standard error (not flagged); a strong one by many: the texture is poorly determined
+    and the table says PRIOR PULL -- their stderr (the pixels') do not cover that bias. chi2 is the
+    data term's in both (the prior's residuals are not the images')."""
+    base, _ = noisy_texel_setup(tmp_path, (8, 8), "nearest", ("texture",))
+    data = solve(base)
+    setup = Setup(base.scene, base.views[0].image, "m", ("texture",), masks=base.views[0].mask,
+                  init={"texture": 0.5}, smoothness=smoothness)
+    prior = solve(setup)
+    assert data.prior_pull == 0.0 and prior.converged
+    err = prior.stderr["texture"]
+    seen = np.isfinite(err)
+    moved = np.abs(data.texture.astype(np.float64) - prior.texture)[seen] / err[seen]
+    assert prior.prior_pull == pytest.approx(moved.max(), rel=1e-3)
+    assert (prior.prior_pull > 1.0) is pulled and ("PRIOR PULL" in prior.table()) is pulled
+    sse = float(np.sum(np.square(prior.residuals[0])))
+    dof = 3 * int(base.views[0].used.sum()) - 3 * int(np.count_nonzero(prior.visible))
+    assert prior.chi2 == pytest.approx(sse / dof / prior.sigma ** 2, rel=1e-4)

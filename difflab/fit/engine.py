@@ -27,9 +27,9 @@ from .matfree import check_solver
 from .solvers import SUCCESSFUL, run
 from .sparse_jacobian import sparse_normal_matrix
 from .noise import silent_pixels, views_noise
-from .stats import (QUANTISATION_SIGMA, degenerate, finite_gram, fit_statistics, normal_matrix, poorly_determined,
-                    psnr, standard_errors)
-from .texels import texel_coverage
+from .stats import (PRIOR_PULL_MAX, QUANTISATION_SIGMA, degenerate, finite_gram, fit_statistics, normal_matrix,
+                    poorly_determined, prior_pull, psnr, standard_errors)
+from .texels import smoothness_residuals, texel_coverage
 
 
 def report(setup: Setup, x, result: str, steps: int, history: list, options: FitOptions, timings: dict,
@@ -82,13 +82,16 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], mean_weight * QUANTISATION_SIGMA ** 2)))
             partly_seen = [key for key, on in seen.items() if not on.all()]
-            flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol, also=partly_seen)
+            pull = np.abs(pulled_by_prior(setup, flat, gram, st))
+            pulled = [key for key, z in layout.unflatten(pull).items() if np.max(z, initial=0.0) > PRIOR_PULL_MAX]
+            flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol,
+                                        also=partly_seen + pulled)
             chi2, mismatch, suspected = st["chi2"], st["mismatch"], st["suspected"]
             degenerate_keys = degenerate(layout, st["diag"], gram, setup.smoothness > 0)
             underdetermined = st["underdetermined"] or bool(degenerate_keys)
         else:
             stderr = {p.key: np.full(p.size, np.nan) for p in layout}
-            flagged, chi2, mismatch = [p.key for p in layout], float("inf"), True
+            flagged, chi2, mismatch, pull = [p.key for p in layout], float("inf"), True, np.full(1, np.nan)
             suspected = underdetermined = False
             degenerate_keys = []
             if result == SUCCESSFUL:
@@ -102,11 +105,23 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                         chi2=float(chi2), model_mismatch=bool(mismatch), mismatch_suspected=bool(suspected),
                         noise_unknown=noise_unknown,
                         underdetermined=bool(underdetermined), degenerate=degenerate_keys,
+                        prior_pull=float(np.max(pull, initial=0.0)),
                         at_bound=[p.key for p in layout if np.any(on_bound[p.key])], residuals=residuals, seen=seen,
                         timings={**timings, "stats": time.perf_counter() - start}, **common)
     if options.throw and not out.converged:
         raise FitError(f"fit did not converge: {out.result} after {out.steps} steps (loss {out.loss:.4g})")
     return out
+
+
+def pulled_by_prior(setup: Setup, flat, gram, st: dict) -> np.ndarray:
+    """(p,) `stats.prior_pull` of a fit's texture smoothness prior at the values `flat` (zeros
+    without one): its gradient from `texels.smoothness_residuals` (0.5 |.|^2 is the prior)."""
+    if not setup.smoothness > 0:
+        return np.zeros(setup.layout.size)
+    prior = lambda v: 0.5 * jnp.sum(jnp.square(smoothness_residuals(setup.layout, v, setup.smoothness)))  # noqa: E731
+    with jax.enable_x64(True):
+        gradient = np.asarray(jax.grad(prior)(jnp.asarray(flat, jnp.float64)), np.float64)
+    return prior_pull(gram, st["diag"], st["s2"], gradient)
 
 
 def run_fit(setup: Setup, options: FitOptions, timings: dict) -> FitResult:

@@ -67,7 +67,8 @@ class FitResult:
         and, in a matrix-free fit, for the entries of a block of J^T J too large to invert:
         `fit.stats.covariance_diagonal`). A matrix-free (texel) fit's are the dense fit's, its
         Jacobian formed sparse (`fit.sparse_jacobian`). With a texture `smoothness` prior they are
-        the pixels' alone (the prior's rows left out of J^T J).
+        the pixels' alone (the prior's rows left out of J^T J): they do not cover the prior's pull
+        (`prior_pull`).
         They assume the image model holds (see `fit.stats`): with `model_mismatch` set they
         understate the real error.
     loss: the solvers' objective 0.5 sum r^2 at the solution, summed over the channels of the pixels
@@ -106,6 +107,10 @@ class FitResult:
         noise or the model -- chi2 nan, every parameter poorly determined, `ok` False; the standard
         errors use a given sigma, else are inf. Also set -- chi2 still judged, `ok` False -- when
         J^T J over the unknowns the data reach is singular (`degenerate` names the parameters).
+    prior_pull: with a texture `smoothness` prior, the most it moves a value the pixels determine
+        from where they alone put it, in standard errors (`fit.stats.prior_pull`; 0 without a prior,
+        nan when not formed); above `fit.stats.PRIOR_PULL_MAX` (1) the moved parameters are
+        `poorly_determined` -- their values carry the prior's bias, which their stderr do not cover.
     degenerate: names of parameters the data reach that a singular direction of J^T J involves: the
         images fix only combinations of them (kd of every material and the lights' intensities:
         kd c and I / c give the same image), their values arbitrary along it, their stderr inf
@@ -142,6 +147,7 @@ class FitResult:
     noise_unknown: bool = False
     underdetermined: bool = False
     degenerate: list = field(default_factory=list)
+    prior_pull: float = 0.0
     at_bound: list = field(default_factory=list)
     censored: int = 0
     residuals: list = field(default_factory=list, repr=False, compare=False)
@@ -268,12 +274,14 @@ class FitResult:
             "timings": dict(self.timings), "model": self.model, "sigma": _json_number(self.sigma),
             "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch,
             "mismatch_suspected": self.mismatch_suspected, "noise_unknown": self.noise_unknown, "underdetermined": self.underdetermined,
-            "degenerate": list(self.degenerate), "at_bound": list(self.at_bound),
+            "degenerate": list(self.degenerate), "prior_pull": _json_number(self.prior_pull), "at_bound": list(self.at_bound),
             "censored": self.censored,
         }
 
     def table(self) -> str:
         """A plain-text table: name, value +- stderr (per channel), and a flag for poorly determined."""
+        from .stats import PRIOR_PULL_MAX  # (JAX: imported with the fit that made this result)
+
         rows = [f"{'parameter':<22} {'value ± stderr':<60}"]
         for key, value in self.params.items():
             if isinstance(value, np.ndarray):  # a texture: its size and how much of it the views see
@@ -301,6 +309,9 @@ class FitResult:
                                          "them); the model is not judged", bool(self.degenerate)),
                                         ("UNDERDETERMINED: no more counted target values than unknowns the data "
                                          "reach; the model is not judged", self.underdetermined and not self.degenerate),
+                                        (f"PRIOR PULL: the smoothness prior moves values the pixels determine by up "
+                                         f"to {self.prior_pull:.3g} standard errors; their stderr (the pixels' "
+                                         "alone) do not cover that bias", self.prior_pull > PRIOR_PULL_MAX),
                                         (f"at bound: {', '.join(self.at_bound)}", bool(self.at_bound)),
                                         (f"censored (clipped) target values: {self.censored}", self.censored > 0)) if on]
         rows.append(f"result: {self.result}, converged: {self.converged}, steps: {self.steps}, "
