@@ -40,6 +40,7 @@ def _read_obj(path: str) -> bytes:
 def _scan_obj_lines(lines: list[str], path: str) -> None:
     """The line-by-line check, naming the first problem's line."""
     n_vertices = 0
+    n_normals = 0
     n_faces = 0
     indices: list[tuple[int, int, int]] = []  # (line, index as written, absolute 1-based index)
     for number, raw in enumerate(lines, start=1):
@@ -61,6 +62,17 @@ def _scan_obj_lines(lines: list[str], path: str) -> None:
                 raise MeshError(f"{path}:{number}: vertex {n_vertices + 1} is beyond +-{MAX_COORD:g} (float32 "
                                 f"rendering overflows): {line[:80]!r}")
             n_vertices += 1
+        elif key == "vn":
+            n_normals += 1
+            try:
+                values = [float(x) for x in parts[1:4]]
+            except ValueError:
+                continue  # a line that is no normal: trimesh's reading decides
+            if not all(math.isfinite(x) for x in values):
+                raise MeshError(f"{path}:{number}: normal {n_normals} is not finite: {line[:80]!r}")
+            if len(values) == 3 and not any(values):
+                raise MeshError(f"{path}:{number}: normal {n_normals} is zero-length (a normal is a direction): "
+                                f"{line[:80]!r}")
         elif key == "f":
             corners = parts[1:]
             if len(corners) < 3:
@@ -114,8 +126,13 @@ def _convert(geometry, transform, path: str) -> TriMesh:
         has_file_normals = False
     if has_file_normals:
         normals = np.asarray(geometry.vertex_normals, dtype=np.float64)
-        if normals.shape != vertices.shape or not np.all(np.isfinite(normals)):
+        if normals.shape != vertices.shape:
             normals = None
+        else:
+            bad = np.flatnonzero(~np.isfinite(normals).all(axis=1) | ~np.any(normals != 0.0, axis=1))
+            if bad.size:  # an OBJ's were refused by its line already
+                raise MeshError(f"{path}: vertex {bad[0]}'s normal {normals[bad[0]].tolist()} is not a direction "
+                                "(zero-length or not finite)")
     uvs = None
     visual = getattr(geometry, "visual", None)
     uv = getattr(visual, "uv", None) if getattr(visual, "kind", None) == "texture" else None
@@ -144,8 +161,9 @@ def load_mesh(path) -> TriMesh:
     A polygon a b c d ... is the fan of triangles (a, b, c), (a, c, d), ..., with its corners' uvs
     and normals (faces in file order where numpy reads the file, `obj_text`). A scene with several
     geometries is concatenated with its node transforms applied. Every failure raises `MeshError`
-    naming the path: missing file, unreadable or unparsable file, non-finite vertex, face index out
-    of range, no faces.
+    naming the path: missing file, unreadable or unparsable file, non-finite vertex, a file normal
+    (OBJ `vn`, with its line) that is zero-length or not finite -- a normal is a direction, as for a
+    mesh's `normals` inline in a scene --, face index out of range, no faces.
     """
     path = os.fspath(path)
     if not os.path.exists(path):
@@ -158,7 +176,7 @@ def load_mesh(path) -> TriMesh:
     if path.lower().endswith(".obj"):
         data = _read_obj(path)
         text = read_obj(data)
-        if not text.plain:
+        if not text.plain or not text.normals_valid:  # a bad `vn` line: the scan names it
             _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)
     if text is not None and text.arrays is not None:
         vertices, faces, normals, uvs, welds = text.arrays

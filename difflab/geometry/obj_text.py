@@ -19,7 +19,8 @@ vertex met with two uvs, at a uv seam, or two normals, at a crease, is split), a
 normals of one `v` line's copies differently --, and where there are no normals `welds` gives each
 its `v` line. Anything else (several materials, an index past its list, corners of two layouts)
 gives no arrays, and trimesh reads the file. Negative (relative) indices are made absolute first
-(`absolute_indices`), for every reader.
+(`absolute_indices`), for every reader. `vn` lines that are not 3 finite numbers, not all 0
+(`valid_normals`), give no arrays either: the line scan refuses a zero-length or non-finite one.
 """
 
 from __future__ import annotations
@@ -49,8 +50,8 @@ FAR = 10 ** 18  # `absolute_indices` counts a relative index past it as it (int6
 @dataclass(frozen=True)
 class ObjText:
     """What `read_obj` found: `plain` (see the module doc), the number of triangles its `f` lines
-    make (a face of k corners: k - 2), whether the `v` lines parse as 3 numbers each (plain text
-    only), and (vertices, faces, normals or None, uvs or None, welds or None) as trimesh reads them
+    make (a face of k corners: k - 2), whether the `v` lines parse as 3 numbers each and whether the
+    `vn` lines are valid normals (`valid_normals`; plain text only), and (vertices, faces, normals or None, uvs or None, welds or None) as trimesh reads them
     (welds: each vertex's `v` index, 0-based, where vertices were split and there are no normals), or
     None; `data`: the text read (CRLF as LF, indices made absolute: `absolute_indices`), which trimesh
     reads where these arrays are None."""
@@ -58,6 +59,7 @@ class ObjText:
     plain: bool
     n_triangles: int = 0
     vertices_parse: bool = False
+    normals_valid: bool = False
     arrays: tuple | None = None
     data: bytes = b""
 
@@ -139,6 +141,13 @@ def table(text: bytes, key: bytes, dtype) -> np.ndarray | None:
         return None
 
 
+def valid_normals(normals: np.ndarray | None) -> bool:
+    """Whether a `vn` table (`table`: None where a line does not parse) is rows of 3 finite numbers,
+    none all 0 -- a normal is a direction: a zero one would shade its corners as facing nowhere."""
+    return (normals is not None and normals.shape[1] == 3 and bool(np.isfinite(normals).all())
+            and bool(np.any(normals != 0.0, axis=1).all()))
+
+
 def corner_table(face_text: bytes, n_corners: int) -> tuple[np.ndarray, str] | None:
     """Plain `f` lines' (`face_sizes`) `n_corners` corners as an (n_corners, k) int64 table, a row
     per corner in file order, and their layout (`a`, `a/t`, `a//n` or `a/t/n`: LAYOUTS), where every
@@ -181,7 +190,10 @@ def _classify(data: bytes, starts, ends, code) -> ObjText:
     if sizes is None or not plain_vertices(vertex_text, n_vertices):
         return ObjText(False)
     vertices = table(vertex_text, KEYS[V], np.float64)
-    text = ObjText(True, int((sizes - 2).sum()), vertices is not None and vertices.shape == (n_vertices, 3))
+    vn_text, n_normals = key_lines(data, starts, ends, code, VN)
+    normals = table(vn_text, KEYS[VN], np.float64) if n_normals else None
+    text = ObjText(True, int((sizes - 2).sum()), vertices is not None and vertices.shape == (n_vertices, 3),
+                   not n_normals or valid_normals(normals))
     usemtl = np.flatnonzero(code == USEMTL)
     corners = None  # continuations, tabs or several materials: trimesh reads the file
     if text.vertices_parse and not (b"\\" in data or b"\t" in data or usemtl.size > 1 or data.count(b"usemtl")
@@ -189,17 +201,18 @@ def _classify(data: bytes, starts, ends, code) -> ObjText:
         corners = corner_table(face_text, int(sizes.sum()))
     if has_zero_index(face_text) if corners is None else (corners[0][:, 0] == 0).any():
         return ObjText(False)  # a vertex index 0 is not OBJ: the line scan names it
-    if corners is None:
+    if corners is None or not text.normals_valid:  # invalid normals: the line scan names the line
         return text
-    return dataclasses.replace(text, arrays=mesh_arrays(data, starts, ends, code, vertices, *corners, sizes))
+    return dataclasses.replace(text, arrays=mesh_arrays(data, starts, ends, code, vertices, normals, *corners, sizes))
 
 
-def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, corners: np.ndarray, layout: str,
-                sizes: np.ndarray):
+def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, normal_table: np.ndarray | None,
+                corners: np.ndarray, layout: str, sizes: np.ndarray):
     """(vertices, faces, normals or None, uvs or None, welds or None) of plain OBJ text as trimesh
     reads it, up to the order of the module doc (welds: `unmerged`'s, each vertex's `v` index, where
     vertices are split and the file gives no normals), or None outside the layouts of the module doc.
-    `vertices`: the `v` lines' (N, 3) numbers; `corners`: the `f` lines' corners' numbers
+    `vertices`: the `v` lines' (N, 3) numbers; `normal_table`: the `vn` lines' numbers (valid:
+    `valid_normals`), or None where there are none; `corners`: the `f` lines' corners' numbers
     (`corner_table`), a row each, laid out as `layout`; `sizes`: each face's number of corners."""
     corners = np.where(corners > 0, corners - 1, corners)  # 1-based (a 0 tex / normal index stays 0, as in trimesh)
     triangles = corners.reshape(-1, 3, corners.shape[1]) if (sizes == 3).all() else corners[fans(sizes)]
@@ -207,13 +220,11 @@ def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, corners: 
     faces = columns["a"]
     if faces.max() >= len(vertices):
         return None
-    vn_text, n_vn = key_lines(data, starts, ends, code, VN)
     vt_text, n_vt = key_lines(data, starts, ends, code, VT)
-    normal_table = table(vn_text, KEYS[VN], np.float64)
     uv_table = table(vt_text, KEYS[VT], np.float64)
-    for key, values, count, widths in (("n", normal_table, n_vn, (3,)), ("t", uv_table, n_vt, (2, 3))):
-        if (count or key in columns) and (values is None or values.shape[1] not in widths):
-            return None  # lines that do not parse, or indices into no lines: trimesh reads the file
+    if ("n" in columns and normal_table is None) or ((n_vt or "t" in columns)
+                                                     and (uv_table is None or uv_table.shape[1] not in (2, 3))):
+        return None  # lines that do not parse, or indices into no lines: trimesh reads the file
     uv_table = None if uv_table is None else uv_table[:, :2]
     used = {name: (columns[key], values) for name, key, values in (("normals", "n", normal_table), ("uvs", "t", uv_table))
             if key in columns and values is not None}
@@ -223,8 +234,8 @@ def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, corners: 
         return None  # trimesh drops that attribute: let it read the file
     welds, faces, *values = unmerged(vertices, faces, list(used.values()))
     found = dict(zip(used, values))
-    normals, uvs = (found.get(name) for name in ("normals", "uvs"))
-    normals, uvs = (None if a is None or not np.all(np.isfinite(a)) else a for a in (normals, uvs))  # else dropped
+    normals, uvs = found.get("normals"), found.get("uvs")
+    uvs = uvs if uvs is None or np.all(np.isfinite(uvs)) else None  # non-finite uvs: dropped
     return vertices[welds], faces, normals, uvs, welds if normals is None else None
 
 
