@@ -402,6 +402,44 @@ def test_apply_to_normals_keeps_tiny_rows_and_refuses_a_singular_matrix():
         apply_to_normals(np.diag([1.0, 0.0, 1.0, 1.0]), [[1, 0, 0]])
 
 
+#: A general 3x3 map with a mirror (det < 0) and its exact inverse-transpose normals.
+SHEAR_MIRROR = np.array([[1, 0.3, 0], [0, 2, 0.5], [0.2, 0, -0.7]])
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e-160, 1e-108, 1e110, 1e160, 1e300])
+def test_apply_to_normals_does_not_see_a_uniform_scale(scale):
+    """Normals are scale-free: s A maps them as A does. The old det-based check called 1e-108 A and
+    1e-160 A singular (det underflowed to -0.0) and 1e110 A, 1e160 A too (det -inf, with numpy's
+    overflow warning, an error in this suite)."""
+    normals = np.random.default_rng(0).normal(size=(5, 3))
+    want = normals @ np.linalg.inv(SHEAR_MIRROR)
+    want /= np.linalg.norm(want, axis=1, keepdims=True)
+    np.testing.assert_allclose(apply_to_normals(scale * SHEAR_MIRROR, normals), want, atol=1e-15)
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e300, -1e300])
+def test_a_uniformly_scaled_mesh_keeps_its_lighting(scale):
+    """A mesh scaled by 1e-300 or 1e300 (a mirror too) keeps scale 1's normals (to 1e-15), so it
+    shades alike; its points are scaled and a mirror's winding flipped. The old TriMesh.transformed
+    refused both (|det| 1e-900 < 1e-300; det inf) as singular."""
+    m = box()
+    matrix = np.diag([scale, scale, scale, 1.0]) @ transform_matrix(rotate_deg=(10, 20, 30))
+    out, one = m.transformed(matrix), m.transformed(transform_matrix(rotate_deg=(10, 20, 30)) @ np.diag(
+        [np.sign(scale)] * 3 + [1.0]))
+    np.testing.assert_allclose(out.normals, one.normals, atol=1e-15)
+    np.testing.assert_allclose(out.vertices, abs(scale) * one.vertices, rtol=1e-14)
+    np.testing.assert_array_equal(out.faces, one.faces)
+
+
+def test_a_singular_or_non_finite_matrix_is_still_refused():
+    with pytest.raises(MeshError, match="singular"):
+        box().transformed(np.diag([1e300, 1e300, 0.0, 1.0]))
+    with pytest.raises(ValueError, match="singular"):
+        apply_to_normals(np.zeros((3, 3)), [[1, 0, 0]])
+    with pytest.raises(ValueError, match="not finite"):
+        apply_to_normals(np.diag([np.inf, 1, 1]), [[1, 0, 0]])
+
+
 @HYPOTHESIS
 @given(angles=st.tuples(*[st.floats(-360, 360)] * 3),
        scale=st.tuples(*[st.floats(0.1, 10)] * 3),

@@ -10,7 +10,7 @@ import numpy as np
 from difflab.errors import MeshError
 
 from .normals import vertex_normals
-from .transforms import apply_to_normals
+from .transforms import apply_to_normals, unit_linear_part
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -137,9 +137,10 @@ class TriMesh:
             raise MeshError(
                 f"{self.name}: transform must be a finite 4x4 matrix, got shape {m.shape}")
         linear = m[:3, :3]
-        det = float(np.linalg.det(linear))
-        if not np.isfinite(det) or abs(det) < 1e-300:
-            raise MeshError(f"{self.name}: transform is singular (det of 3x3 part = {det})")
+        try:
+            _, sign = unit_linear_part(linear)  # singular only at det exactly 0: relative, any scale
+        except ValueError as exc:
+            raise MeshError(f"{self.name}: transform: {exc}") from None
         homogeneous = np.concatenate([self.vertices, np.ones((self.n_vertices, 1))], axis=1)
         mapped = homogeneous @ m.T
         w = mapped[:, 3:4]
@@ -150,7 +151,7 @@ class TriMesh:
                 raise MeshError(f"{self.name}: projective transform sends a vertex to infinity")
             points = mapped[:, :3] / w
         normals = None if self.normals is None else apply_to_normals(linear, self.normals)
-        faces = self.faces if det > 0 else self.faces[:, ::-1]
+        faces = self.faces if sign > 0 else self.faces[:, ::-1]
         return TriMesh(points, faces, normals, self.uvs, name=self.name, welds=self.welds)
 
 

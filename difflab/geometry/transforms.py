@@ -86,25 +86,44 @@ def apply_to_points(matrix, points) -> np.ndarray:
     return h
 
 
+def unit_linear_part(matrix) -> tuple[np.ndarray, float]:
+    """(A / s, sign(det A)) for the 3x3 part A of `matrix`, with s = |det A|^(1/3) > 0, so that
+    |det(A / s)| = 1: the linear map up to a positive scale, which neither a normal's direction nor
+    the sign of det sees. det is never formed: A is first divided by the power of two at or below its
+    largest |entry| (exact; entries then below 2, so the LU cannot overflow) and |det| is taken in
+    log space (`slogdet`), so no uniform or per-axis scale within float64's range (1e-300, 1e300,
+    diag(1e-160, 1e140, 1)) under- or overflows. ValueError if A is not finite or is singular: a zero
+    pivot in the LU of the scaled A (det exactly 0 at any scale)."""
+    m = np.asarray(matrix, dtype=np.float64)[:3, :3]
+    biggest = float(np.abs(m).max())
+    if not np.isfinite(biggest):
+        raise ValueError(f"the 3x3 part of the matrix is not finite (largest |entry| {biggest})")
+    scaled = m / 2.0 ** np.floor(np.log2(biggest)) if biggest > 0.0 else m
+    sign, log_det = np.linalg.slogdet(scaled)
+    if sign == 0.0:
+        raise ValueError("the 3x3 part of the matrix is singular (det = 0 at any scale): it flattens some "
+                         "direction, so normals are undefined")
+    return scaled * np.exp(-log_det / 3.0), float(sign)
+
+
 def apply_to_normals(matrix, normals) -> np.ndarray:
     """(N, 3) unit normals mapped by the inverse-transpose of the 3x3 part A of `matrix`; zero rows
     stay zero.
 
-    A^-T is taken as sign(det A) cof(A) (= |det A| A^-T, cof(A) rows: a1 x a2, a2 x a0, a0 x a1 of
-    A's rows a_k): no inverse, so a nearly singular A (a scale of 1e-160) cannot overflow it. Each
-    mapped normal is divided by its largest |component| before its length is taken, so a length
-    of 1e160 or 1e-160 neither overflows nor underflows. A singular A (det 0) raises ValueError.
+    A^-T is taken as sign(det B) cof(B) for B = A / |det A|^(1/3) (`unit_linear_part`; = B^-T as
+    |det B| = 1; cof(B) rows: b1 x b2, b2 x b0, b0 x b1 of B's rows b_k): no inverse and no det, so
+    neither a uniform scale (1e-300, 1e300) nor a nearly singular A (an axis scaled by 1e-160)
+    under- or overflows it. Each mapped normal is divided by its largest |component| before its
+    length is taken, so a length of 1e160 or 1e-160 neither overflows nor underflows. A singular A
+    (det 0) raises ValueError.
     """
-    m = np.asarray(matrix, dtype=np.float64)[:3, :3]
-    det = np.linalg.det(m)
-    if not np.isfinite(det) or det == 0.0:
-        raise ValueError(f"the 3x3 part of the matrix is singular (det = {det}): normals are undefined")
+    m, sign = unit_linear_part(matrix)
     cofactor = np.stack([np.cross(m[1], m[2]), np.cross(m[2], m[0]), np.cross(m[0], m[1])])
-    n = np.sign(det) * np.asarray(normals, dtype=np.float64).reshape(-1, 3) @ cofactor.T
-    biggest = np.abs(n).max(axis=1, keepdims=True)
-    n = np.divide(n, biggest, out=np.zeros_like(n), where=biggest > 0)
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+    mapped = sign * np.asarray(normals, dtype=np.float64).reshape(-1, 3) @ cofactor.T
+    biggest = np.abs(mapped).max(axis=1, keepdims=True)
+    mapped = np.divide(mapped, biggest, out=np.zeros_like(mapped), where=biggest > 0)
+    length = np.linalg.norm(mapped, axis=1, keepdims=True)
+    return np.divide(mapped, length, out=np.zeros_like(mapped), where=length > 0)
 
 
 def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
