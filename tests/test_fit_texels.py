@@ -1,6 +1,8 @@
 """Texels through the one engine: `fit_material(..., params=("texture", ...))` on the G-buffer model,
 solved matrix-free (box LM with CG) for large layouts and densely for small ones."""
 
+import dataclasses
+
 import jax
 import lineax as lx
 import numpy as np
@@ -86,8 +88,27 @@ def test_fit_texture_is_a_front_end_and_to_scene_saves_the_texels(known, tmp_pat
     with pytest.raises(FitError, match="folder"):
         result.to_scene()
     fitted = result.to_scene(tmp_path)
-    assert fitted.materials["m"].texture == str(tmp_path / "m_texture.npy")
+    assert fitted.materials["m"].texture == str(tmp_path / "fitted.m.texture.npy")
     np.testing.assert_allclose(render(fitted), target, atol=1e-5)
+
+
+def test_to_scene_names_texture_files_as_the_commands_do(known, tmp_path):
+    """A material named "../evil" (a valid scene name) gets <stem>.texture<index>.npy inside the
+    folder, as `difflab fit` and fit-batch name it; the old <material>_texture.npy wrote
+    folder/../evil_texture.npy, outside the folder."""
+    texels, scene, target = known
+    result = fit_material(scene, target, "m", ("texture",), init={"texture": 0.5})
+    data = result.scene.to_dict()
+    data["materials"] = {"../evil": data["materials"]["m"]}
+    data["objects"][0]["material"] = "../evil"
+    evil = dataclasses.replace(result, scene=Scene.from_dict(data))
+    folder = tmp_path / "out"
+    folder.mkdir()
+    fitted = evil.to_scene(folder, stem="run")
+    assert sorted(p.name for p in tmp_path.rglob("*.npy")) == ["run.texture0.npy"]
+    assert fitted.materials["../evil"].texture == str(folder / "run.texture0.npy")
+    assert list(evil.texture_files("run")) == ["run.texture0.npy"]  # the commands' name for it
+    np.testing.assert_allclose(np.load(folder / "run.texture0.npy"), result.texture)
 
 
 def test_unseen_texels_are_flagged(known):

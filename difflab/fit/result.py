@@ -202,19 +202,21 @@ class FitResult:
         """(H_t, W_t) bool: the texels of the one fitted texture that the views constrain."""
         return self.seen[self._texture_key()]
 
-    def to_scene(self, folder=None):
+    def to_scene(self, folder=None, stem: str = "fitted"):
         """The scene with the fitted values written back (materials, and lights where fitted); a
-        fitted texture is saved as `folder`/<material>_texture.npy (linear float32, atomically) and
-        the material points to it (FitError without a folder). `scene_dict` names the texture files
-        without writing them, for a caller that writes them together with the scene."""
+        fitted texture is saved in `folder` as `texture_file_name(stem, material, index)` (linear
+        float32, atomically; the commands' rule: a material name that is not a plain word, such as
+        "../x", gives <stem>.texture<index>.npy, never a path outside `folder`) and the material
+        points to it (FitError without a folder). `scene_dict` names the texture files without
+        writing them, for a caller that writes them together with the scene."""
         scene = self._with_values()
         textures = self.fitted_textures()
         if textures and folder is None:
             raise FitError(f"to_scene: a fitted texture (material {', '.join(map(repr, textures))}); give folder= to "
                            "save its texels")
         materials = dict(scene.materials)
-        for name, texels in textures.items():
-            path = save_image(Path(folder) / f"{name}_texture.npy", texels)
+        for name, file in self._texture_names(stem).items():
+            path = save_image(Path(folder) / file, textures[name])
             materials[name] = dataclasses.replace(materials[name], texture=str(path))
         return dataclasses.replace(scene, materials=materials)
 
