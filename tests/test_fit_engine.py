@@ -66,9 +66,10 @@ def test_unequal_weights_on_a_correct_view_estimate_the_targets_noise(noisy_sphe
     """Weights are importance, not inverse variances: the sphere with noise 0.02, weight 1 on its left
     half and 0.05 on its right (times `scale`). sigma is the targets' noise in their own units, 0.02
     within 5 % (0.0194: the sphere's ~1200 pixels, most of the weight on half of them), chi2 = sum w
-    r^2 / (dof w_mean sigma^2) is 1 within 0.1 and the fit ok; weights scaled by 4 change nothing. (sigma used to come from the weighted residuals:
-    0.01-0.012 here, twice that at weights 4; a reviewer's three POV-Ray views weighted [1, 1, 0.05]
-    got sigma 0.0059 for 0.01, chi2 2.08, flagged a mismatch.)"""
+    r^2 / (dof w_mean sigma^2) is 1 within 0.1 and the fit ok; weights scaled by 4 change nothing.
+    (sigma used to come from the weighted residuals' median: 0.0086 here, 0.0173 at weights 4, chi2
+    2.6, flagged a mismatch; a reviewer's three POV-Ray views weighted [1, 1, 0.05] got sigma 0.0059
+    for 0.01, chi2 2.08, flagged.)"""
     scene, noisy = noisy_sphere
     weight = np.where(np.arange(64)[None, :] < 32, 1.0, 0.05) * np.ones((64, 64)) * scale
     result = fit_material(scene, [noisy], "red", ("kd", "ks"), weights=[weight], init={"kd": [0.5] * 3})

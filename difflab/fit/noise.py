@@ -6,7 +6,6 @@ the fit reports with them."""
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 
@@ -23,20 +22,21 @@ LAPLACIAN_CORRELATION = 2.0 * (70.0 / 36.0) ** 2  # 7.56: a mean of (L / 6)^2 ha
 def _local_levels(square: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """(h, w, 3) the local noise level of each L^2 value: the median L^2 of the picked values of its
     NOISE_BLOCK x NOISE_BLOCK block and channel / MEDIAN_CHI2_1 (the variance of L where L is
-    Gaussian), or the channel's over the whole image where a block has fewer than NOISE_BLOCK^2 / 4
-    picked values."""
+    Gaussian), or where a block has fewer than NOISE_BLOCK^2 / 4 picked values the median of its
+    channel's other blocks' (of all its picked values when none has as many)."""
     h, w, _ = square.shape
     b = NOISE_BLOCK
-    padded = np.full((-(-h // b) * b, -(-w // b) * b, 3), np.nan)
-    padded[:h, :w] = np.where(centre, square, np.nan)
+    padded = np.full((-(-h // b) * b, -(-w // b) * b, 3), np.inf)  # inf: not picked
+    padded[:h, :w] = np.where(centre, square, np.inf)
     blocks = padded.reshape(padded.shape[0] // b, b, padded.shape[1] // b, b, 3).transpose(0, 2, 4, 1, 3)
-    blocks = blocks.reshape(blocks.shape[:3] + (b * b,))
-    count = np.count_nonzero(~np.isnan(blocks), axis=-1)
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # (all-nan blocks: replaced below)
-        level = np.nanmedian(blocks, axis=-1)
-        whole = np.nanmedian(padded.reshape(-1, 3), axis=0)
-    level = np.where(count >= b * b // 4, level, whole)
+    ordered = np.sort(blocks.reshape(blocks.shape[:3] + (b * b,)), axis=-1)  # (rows, columns, 3, b * b): picked first
+    count = np.count_nonzero(ordered < np.inf, axis=-1)
+    middle = [np.maximum((count - 1) // 2, 0)[..., None], (count // 2)[..., None]]
+    level = sum(np.take_along_axis(ordered, k, axis=-1)[..., 0] for k in middle) / 2.0
+    full = count >= b * b // 4
+    whole = [np.median(level[..., c][full[..., c]]) if full[..., c].any() else  # (the blocks' median: cheaper)
+             np.median(square[..., c][centre[..., c]]) if centre[..., c].any() else 0.0 for c in range(3)]
+    level = np.where(full, level, np.asarray(whole))
     return np.repeat(np.repeat(level, b, axis=0), b, axis=1)[:h, :w] / MEDIAN_CHI2_1
 
 
@@ -68,7 +68,7 @@ def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True) -> tup
             continue
         top, left = max(rows[0] - 1, 0), max(cols[0] - 1, 0)  # the box, one pixel wider (non-interior case)
         box = (slice(top, min(rows[-1] + 2, used.shape[0])), slice(left, min(cols[-1] + 2, used.shape[1])))
-        used, image = used[box], np.asarray(image, np.float64)[box]
+        used, image = used[box], np.asarray(image)[box]  # in its own precision (float32 residual images)
         if used.shape[0] < 3 or used.shape[1] < 3:
             continue
         centre = used[1:-1, 1:-1]
@@ -81,7 +81,7 @@ def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True) -> tup
         lap = rows2[:, 1:-1] * -2.0
         lap += rows2[:, :-2]
         lap += rows2[:, 2:]
-        square = np.square(lap)
+        square = np.square(lap, dtype=np.float64)
         centre = (np.broadcast_to(centre[..., None], lap.shape) if centre.ndim == 2 else centre) & np.isfinite(square)
         level = _local_levels(square, centre)
         capped = np.where(square > CAP_Z2 * level, level, square)[centre]

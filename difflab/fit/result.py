@@ -275,9 +275,9 @@ class FitResult:
             "poorly_determined": list(self.poorly_determined), "history": [_json_number(x) for x in self.history],
             "timings": dict(self.timings), "model": self.model, "sigma": _json_number(self.sigma),
             "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch,
-            "mismatch_suspected": self.mismatch_suspected, "noise_unknown": self.noise_unknown, "underdetermined": self.underdetermined,
-            "degenerate": list(self.degenerate), "prior_pull": _json_number(self.prior_pull), "at_bound": list(self.at_bound),
-            "censored": self.censored,
+            "mismatch_suspected": self.mismatch_suspected, "noise_unknown": self.noise_unknown,
+            "underdetermined": self.underdetermined, "degenerate": list(self.degenerate),
+            "prior_pull": _json_number(self.prior_pull), "at_bound": list(self.at_bound), "censored": self.censored,
         }
 
     def table(self) -> str:
@@ -310,7 +310,8 @@ class FitResult:
                                          f"{', '.join(self.degenerate)} (J^T J singular; `difflab.identify` names "
                                          "them); the model is not judged", bool(self.degenerate)),
                                         ("UNDERDETERMINED: no more counted target values than unknowns the data "
-                                         "reach; the model is not judged", self.underdetermined and not self.degenerate),
+                                         "reach; the model is not judged",
+                                         self.underdetermined and not self.degenerate),
                                         (f"PRIOR PULL: the smoothness prior moves values the pixels determine by up "
                                          f"to {self.prior_pull:.3g} standard errors; their stderr (the pixels' "
                                          "alone) do not cover that bias", self.prior_pull > PRIOR_PULL_MAX),
