@@ -77,6 +77,34 @@ def test_a_batch_writes_the_texels_beside_the_scene_and_drops_them_with_it(texel
     assert not texture.exists() and list((tmp_path / "scenes").iterdir()) == []
 
 
+def test_fit_force_leaves_no_texture_file_of_an_earlier_run(texel_fit, tmp_path, capsys):
+    """`difflab fit --force` over an earlier run's outputs removes that run's texture files that the
+    new fit does not write (as a batch does), and nothing else: the old command left them, so
+    fitted.other.texture.npy and fitted.texture3.npy stayed beside a scene that does not name them."""
+    _, scene, target, _, _ = texel_fit
+    out = tmp_path / "fitted.json"
+    for name in ("fitted.m.texture.npy", "fitted.other.texture.npy", "fitted.texture3.npy", "fitted.notes.npy",
+                 "other.m.texture.npy"):
+        np.save(tmp_path / name, np.zeros((1, 1, 3), np.float32))
+    assert main(["fit", str(scene), str(target), "--material", "m", "--params", "kd", "-o", str(out),
+                 "--force"]) in (0, 3, 4, 5), capsys.readouterr()  # written whatever the verdict
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fitted.fit.json", "fitted.json", "fitted.notes.npy",
+                                                         "other.m.texture.npy"]
+
+
+def test_a_job_whose_texture_file_is_gone_is_not_done(texel_fit, tmp_path):
+    """Resuming, a job counts as done only with every texture file its scene names: the old check
+    (report and scene) skipped a job whose texture had been deleted, leaving a scene that cannot load."""
+    folder, scene, target, _, _ = texel_fit
+    (job,), _ = load_manifest([{"name": "tex", "scene": str(scene), "targets": str(target), "material": "m",
+                                "params": "texture"}])
+    store = Store(tmp_path)
+    store.record(job, {**outcome_of(job.spec), "seconds": 1.0})
+    assert store.done(job)
+    (tmp_path / "scenes" / "tex.m.texture.npy").unlink()
+    assert not store.done(job)
+
+
 @pytest.mark.parametrize("material, index, name", [
     ("m", 0, "out.m.texture.npy"), ("brick_2-a", 3, "out.brick_2-a.texture.npy"),
     ("a.b", 1, "out.texture1.npy"), ("../x", 2, "out.texture2.npy"), ("", 4, "out.texture4.npy")])

@@ -28,7 +28,7 @@ from pathlib import Path
 
 from ..files import (TMP_MARK, refuse_overwrite, uninterrupted, write_json, write_json_atomic, write_text_atomic,
                      write_together)
-from ..fit.result import TEXTURE_FILE
+from ..fit.result import TEXTURE_FILE, drop_texture_files
 from ..io import write_image
 from .manifest import Invalid, Job
 
@@ -65,9 +65,18 @@ class Store:
         return self.root / folder / f"{name}.json"
 
     def done(self, job: Job) -> bool:
-        """Has `job`, exactly as specified now, a result written? (A changed line is redone.)"""
+        """Has `job`, exactly as specified now, a result written -- its report, its scene, and every
+        fitted-texture file the scene names? (A changed line, or a deleted file, is redone.)"""
         report = _read_json(self._file("reports", job.name))
-        return isinstance(report, dict) and report.get("job") == job.spec and self._file("scenes", job.name).is_file()
+        if not (isinstance(report, dict) and report.get("job") == job.spec):
+            return False
+        scene = _read_json(self._file("scenes", job.name))
+        if not isinstance(scene, dict):
+            return False
+        materials = scene.get("materials") if isinstance(scene.get("materials"), dict) else {}
+        pattern = re.compile(re.escape(job.name) + TEXTURE_FILE)
+        named = [m["texture"] for m in materials.values() if isinstance(m, dict) and isinstance(m.get("texture"), str)]
+        return all((self.root / "scenes" / file).is_file() for file in named if pattern.fullmatch(file))
 
     def record(self, job: Job, outcome: dict) -> None:
         """Write a worker's outcome (`worker.run_job`): scene then report, or the failure; then the
@@ -78,7 +87,7 @@ class Store:
     def _record(self, job: Job, outcome: dict) -> None:
         if outcome["ok"]:
             self._file("failures", job.name).unlink(missing_ok=True)
-            self._drop_textures(job.name, keep=outcome["textures"])
+            drop_texture_files(self.root / "scenes", job.name, keep=outcome["textures"])
             scene = self._file("scenes", job.name)
             writers = {scene.with_name(file): lambda temporary, texels=texels: write_image(temporary, texels)
                        for file, texels in outcome["textures"].items()}
@@ -89,18 +98,11 @@ class Store:
         else:
             self._file("reports", job.name).unlink(missing_ok=True)
             self._file("scenes", job.name).unlink(missing_ok=True)
-            self._drop_textures(job.name)
+            drop_texture_files(self.root / "scenes", job.name)
             write_json_atomic(self._file("failures", job.name),
                               {"name": job.name, "job": job.spec, "error": outcome["error"]}, sweep=False)
         write_json_atomic(self._file("timing", job.name), {"name": job.name, "seconds": outcome["seconds"]},
                           sweep=False)
-
-    def _drop_textures(self, name: str, keep=()) -> None:
-        """Remove the fitted-texture files of job `name` (`fit.result.texture_file_name`) but `keep`."""
-        pattern = re.compile(re.escape(name) + TEXTURE_FILE)
-        for path in (self.root / "scenes").glob(f"{name}.*.npy"):
-            if pattern.fullmatch(path.name) and path.name not in keep:
-                path.unlink()
 
     def record_invalid(self, invalid: list[Invalid]) -> None:
         """Write one failure per invalid line, and drop those of lines that are no longer invalid."""

@@ -33,18 +33,6 @@ from pathlib import Path
 from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOT_CONVERGED, EXIT_NOT_JUDGED, EXIT_OK, FitError
 
 
-def texture_files_of(output: Path) -> list[Path]:
-    """The fitted-texture files of the scene file `output` that exist now (`result.texture_file_name`),
-    so that the one overwrite rule covers them before the fit starts."""
-    import re
-
-    from .result import TEXTURE_FILE
-
-    pattern = re.compile(re.escape(output.stem) + TEXTURE_FILE)
-    folder = output.parent if output.parent.is_dir() else None
-    return [] if folder is None else sorted(p for p in folder.iterdir() if pattern.fullmatch(p.name))
-
-
 def ceiling_value(text: str):
     """argparse type of --ceiling: a number > 0, or "none" (also "inf"): no ceiling -- the API's
     rule (`setup.check_ceiling`), read from text."""
@@ -103,12 +91,13 @@ def run(args) -> int:
     from ..io import write_image
     from .engine import fit
     from .params import DEFAULT_PARAMS
+    from .result import drop_texture_files, texture_files_beside
 
     output = Path(args.output)
     report = Path(args.report) if args.report else output.with_name(output.stem + ".fit.json")
     if output.resolve() == report.resolve():
         raise FitError(f"--report: the same file as -o/--output ({output}): the report would replace the fitted scene")
-    refuse_overwrite(output, report, *texture_files_of(output), force=args.force)
+    refuse_overwrite(output, report, *texture_files_beside(output.parent, output.stem), force=args.force)
     if args.max_steps < 1:
         raise FitError(f"--max-steps: must be >= 1, got {args.max_steps}")
     masks = args.mask
@@ -124,10 +113,12 @@ def run(args) -> int:
         raise FitError(f"no fit made: {result.no_fit()}")
     contents = {output: result.scene_dict(output.stem), report: {
         "scene": str(args.scene), "targets": [str(t) for t in args.targets], "materials": materials, **result.to_dict()}}
+    textures = result.texture_files(output.stem)
     writers = {output.with_name(name): lambda temporary, texels=texels: write_image(temporary, texels)
-               for name, texels in result.texture_files(output.stem).items()}
+               for name, texels in textures.items()}
     writers.update({path: lambda temporary, data=data: write_json(temporary, data) for path, data in contents.items()})
     write_together(writers)  # every file written before any is renamed onto its path
+    drop_texture_files(output.parent, output.stem, keep=textures)  # an earlier run's (--force), as a batch does
     *first, last = map(str, writers)
     print(f"wrote {', '.join(first)} and {last}")
     if not result.converged:

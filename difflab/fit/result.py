@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import glob
 import math
 import re
 from dataclasses import dataclass, field
@@ -37,6 +38,24 @@ def texture_file_name(stem: str, material: str, index: int) -> str:
     plain word (letters, digits, _ and -; at most 64): never a path, and no two (stem, material)
     pairs share a name (`TEXTURE_FILE` matches what follows the stem)."""
     return f"{stem}.{material}.texture.npy" if WORD.fullmatch(material) else f"{stem}.texture{index}.npy"
+
+
+def texture_files_beside(folder, stem: str) -> list[Path]:
+    """The fitted-texture files of the scene file `stem`.json in `folder` that exist now (the names
+    `texture_file_name` gives: `TEXTURE_FILE` after the stem), sorted; none where `folder` is not one."""
+    pattern = re.compile(re.escape(stem) + TEXTURE_FILE)
+    folder = Path(folder)
+    found = folder.glob(f"{glob.escape(stem)}.*.npy") if folder.is_dir() else ()
+    return sorted(path for path in found if pattern.fullmatch(path.name))
+
+
+def drop_texture_files(folder, stem: str, keep=()) -> None:
+    """Remove `texture_files_beside(folder, stem)` but the file names in `keep`: what an earlier fit of
+    the scene `stem` wrote that the new one does not (another material's texture, or any texture
+    where none is fitted now). `difflab fit --force` and a batch job both end with this."""
+    for path in texture_files_beside(folder, stem):
+        if path.name not in keep:
+            path.unlink(missing_ok=True)
 
 
 NO_FIT = ("empty_mask", "nonfinite_target")  # difflab's result codes of a fit that was not made
