@@ -98,8 +98,9 @@ def read_npy(path: Path) -> np.ndarray:
         raise DifflabError(f"{path}: not a valid .npy file ({why(exc)})") from None
     if dtype.hasobject or dtype.kind not in IMAGE_DTYPE_KINDS or dtype.fields is not None or dtype.subdtype:
         raise DifflabError(f"{path}: image array must hold real numbers (bool, int, uint or float), got dtype {dtype}")
-    if len(shape) not in (2, 3) or (len(shape) == 3 and shape[-1] not in (3, 4)) or 0 in shape:
-        raise DifflabError(f"{path}: expected an image array of shape (H, W), (H, W, 3) or (H, W, 4), got {shape}")
+    if len(shape) not in (2, 3) or (len(shape) == 3 and shape[-1] > 4) or 0 in shape:
+        raise DifflabError(f"{path}: expected an image array of shape (H, W) or (H, W, C) with C = 1 (grey), 2 (grey, "
+                           f"alpha), 3 (RGB) or 4 (RGBA), got {shape}")
     limits.require_image(shape[1], shape[0], str(path), limits.IMAGE_LOAD_BYTES)
     needed = data_start + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
     if path.stat().st_size < needed:
@@ -158,7 +159,7 @@ class LoadedImage(NamedTuple):
     """An image file as `read_image` reads it."""
     image: np.ndarray  # linear float32 (H, W, 3): `load_image`
     bits: int | None  # bits per sample: 8 or 16 (its samples' step is 1 / (2^bits - 1)); None for .npy floats
-    channels: int  # colour channels the file holds: 1 (a grey PNG / TIFF or 2-D .npy, repeated into 3) or 3
+    channels: int  # colour channels the file holds: 1 (a grey picture or .npy, repeated into 3) or 3
 
 
 def read_image(path: str | os.PathLike, srgb: bool = True, what: str = "image") -> LoadedImage:
@@ -168,7 +169,9 @@ def read_image(path: str | os.PathLike, srgb: bool = True, what: str = "image") 
     if path.suffix.lower() == ".npy":
         array = read_npy(path)
         refuse_code_values(array.dtype, short_path(path))
-        return LoadedImage(_as_image(array)[..., :3].copy(), None, 1 if array.ndim == 2 else 3)
+        grey = array.ndim == 2 or array.shape[-1] < 3  # (H, W), (H, W, 1), (H, W, 2): grey, alpha aside
+        image = _as_image(array[..., 0] if grey and array.ndim == 3 else array)
+        return LoadedImage(image[..., :3].copy(), None, 1 if grey else 3)
     pixels, gamma, bits, channels = read_picture(path)
     if pixels.dtype == np.uint8 and (not srgb or gamma is None):
         image = (_SRGB_DECODE if srgb else _LINEAR_DECODE)[pixels]  # a 256-entry table: 15 bytes per pixel
@@ -183,8 +186,8 @@ def read_image(path: str | os.PathLike, srgb: bool = True, what: str = "image") 
 def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
     """Read an image as linear float32 (H, W, 3).
 
-    `.npy` files hold linear values (float or bool dtypes; an alpha channel is dropped; a 2-D array
-    is grey, repeated into the 3 channels); an integer .npy holds code values, which are refused
+    `.npy` files hold linear values (float or bool dtypes; an alpha channel is dropped; a grey array
+    -- (H, W), or (H, W, 1) / (H, W, 2) with alpha, as a grey PNG -- is repeated into the 3 channels); an integer .npy holds code values, which are refused
     (`refuse_code_values`: how to decode them); other files are whatever Pillow reads, 8-bit, or
     16-bit PNG / TIFF (all 16 bits kept; a grey file fills the 3 channels), their samples
     s / (2^bits - 1) decoded when `srgb` is true by the file's transfer function: sRGB (IEC

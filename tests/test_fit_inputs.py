@@ -285,28 +285,32 @@ def grey_scene() -> Scene:
 def test_a_grey_target_is_refused_naming_it_and_the_channel_counts(tmp_path, capsys):
     """A luminance camera's image (Y of the RGB target, a 16-bit grey PNG) was read as equal R, G, B
     and fitted: kd [0.016, 0.038, 0.054] for the truth [0.7, 0.2, 0.1], reported successful. Grey files
-    (8-bit L and LA, 16-bit grey, a 2-D .npy) and grey arrays are refused alike, by the API and
-    `difflab fit`; the advice, followed where equal RGB is meant, fits."""
+    (8-bit L and LA, 16-bit grey, 1-bit, .npy of shape (H, W), (H, W, 1), (H, W, 2)) and grey arrays
+    are refused alike, by the API and `difflab fit`; the advice, followed where equal RGB is meant,
+    fits. (The message called 16-bit and 1-bit files "PNG L / LA", and a .npy of shape (H, W, 1) or
+    (H, W, 2) got a shape error without the advice.)"""
     scene = make_scene(size=12)
     luminance = np.clip(target_of(scene) @ np.array([0.2126, 0.7152, 0.0722], np.float32), 0, 1)
     codes = np.round(luminance * 255).astype(np.uint8)
     Image.fromarray(codes, "L").save(tmp_path / "l.png")
     Image.fromarray(np.stack([codes, np.full_like(codes, 255)], axis=-1), "LA").save(tmp_path / "la.png")
     Image.fromarray(np.round(luminance * 65535).astype(np.uint16)).save(tmp_path / "i16.png")
+    Image.fromarray(codes > 127).save(tmp_path / "bits.png")  # 1-bit
     np.save(tmp_path / "y.npy", luminance)
+    np.save(tmp_path / "y1.npy", luminance[..., None])
+    np.save(tmp_path / "y2.npy", np.stack([luminance, np.ones_like(luminance)], axis=-1))
     advice = (r" has 1 colour channel \(grey\) but the scene renders 3 \(linear RGB\); a grey target is not fitted as "
               r"equal R, G, B: give an RGB image -- if equal RGB is meant, np\.repeat\(grey\[\.\.\., None\], 3, "
               r"axis=-1\) of the \(H, W\) grey values, or the file saved as RGB$")
-    for name, kind in [("l.png", "a grey picture"), ("la.png", "a grey picture"), ("i16.png", "a grey picture"),
-                       ("y.npy", "a 2-D .npy array")]:
-        with pytest.raises(FitError, match=rf"^targets\[0\] \(.*{name}\): {kind}.*" + advice):
+    for name in ("l.png", "la.png", "i16.png", "bits.png", "y.npy", "y1.npy", "y2.npy"):
+        with pytest.raises(FitError, match=rf"^targets\[0\] \(.*{name}\): a grey image file" + advice):
             fit_material(scene, [tmp_path / name], "red", ("kd",))
     for array in (luminance, luminance[..., None], np.stack([luminance, np.ones_like(luminance)], axis=-1)):
         with pytest.raises(FitError, match=rf"^targets\[1\]: an array of shape {re.escape(str(array.shape))}" + advice):
             fit_material(scene, [target_of(scene), array], "red", ("kd",))
     path = save_scene(scene, tmp_path / "s.json")
     assert cli(["fit", str(path), str(tmp_path / "l.png"), "--material", "red", "-o", str(tmp_path / "o.json")]) == 2
-    assert re.search(r"targets\[0\] \(.*l\.png\): a grey picture.*" + advice[:-1], capsys.readouterr().err)
+    assert re.search(r"targets\[0\] \(.*l\.png\): a grey image file" + advice[:-1], capsys.readouterr().err)
     assert not (tmp_path / "o.json").exists()
     grey = grey_scene()
     equal = np.repeat(target_of(grey)[..., 0][..., None], 3, axis=-1)  # the advice, where R = G = B is meant

@@ -63,9 +63,8 @@ def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
             image, bits, channels = read_image(item)
         except DifflabError as exc:
             raise FitError(f"{where}: {exc}") from None
-        if channels == 1:
-            kind = "a 2-D .npy array" if os.fspath(item).lower().endswith(".npy") else "a grey picture (PNG L / LA)"
-            _refuse_grey(f"{where} ({short_path(item)})", kind)
+        if channels == 1:  # 8- or 16-bit, 1-bit, with alpha or not, or a .npy of shape (H, W), (H, W, 1 or 2)
+            _refuse_grey(f"{where} ({short_path(item)})", "a grey image file")
         return np.asarray(image, np.float64), (None if bits is None else 1.0 / (2 ** bits - 1))
     if not isinstance(item, np.ndarray) and not hasattr(item, "__array__"):
         raise FitError(f"{where}: expected an image array or a file path, got {type(item).__name__}")
