@@ -245,6 +245,24 @@ def test_a_parameter_the_specular_model_does_not_read_is_refused(tmp_path, capsy
     assert json.loads((tmp_path / "o.json").read_text())["materials"]["red"]["m"] == pytest.approx(0.3, rel=1e-4)
 
 
+def test_the_defaults_with_more_names_keep_reading_n_as_the_lobe_width():
+    """DEFAULT_PARAMS + ("intensity",) (either order) is still the defaults: under torrance its "n" is
+    m. The old tuple subclass lost that on +: the sum was a plain tuple, its "n" refused under
+    torrance ("params: 'n' applies only to the phong and blinn specular models"). A list built
+    otherwise is taken as written."""
+    from difflab.fit import DEFAULT_PARAMS
+    from difflab.fit.params import build_layout
+
+    scene = make_scene(size=8, specular="torrance", red={"m": 0.3})
+    for params in (DEFAULT_PARAMS + ("intensity",), ("intensity",) + DEFAULT_PARAMS):
+        layout = build_layout(scene, ["red"], params, tree=False)
+        assert {p.kind for p in layout} == {"ka", "kd", "ks", "m", "intensity"}
+    assert [p.kind for p in build_layout(make_scene(size=8), ["red"], DEFAULT_PARAMS + ("intensity",),
+                                         tree=False)][:4] == ["ka", "kd", "ks", "n"]
+    with pytest.raises(FitError, match=r"^params: 'n' applies only to the phong and blinn specular models"):
+        build_layout(scene, ["red"], [*DEFAULT_PARAMS, "intensity"], tree=False)
+
+
 def test_fit_output_must_be_json(tmp_path, capsys):
     scene = make_scene(size=8)
     path = save_scene(scene, tmp_path / "scene.json")

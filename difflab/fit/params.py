@@ -69,8 +69,16 @@ COLOR_PARAMS = ("ka", "kd", "ks")
 
 class Defaults(tuple):
     """A default parameter list, whose "n" stands for the lobe width of the scene's specular model:
-    n (phong, blinn), or the roughness m (torrance), which does not read n (`for_model`). A list the
-    caller gives is taken as written."""
+    n (phong, blinn), or the roughness m (torrance), which does not read n (`for_model`). The
+    defaults with more names added (`DEFAULT_PARAMS + ("intensity",)`, either side of the +) are
+    still the defaults, "n" read alike; a list the caller writes or builds otherwise (a list, a
+    comprehension) is taken as written, and "n" in it under torrance is refused."""
+
+    def __add__(self, other) -> Defaults:
+        return Defaults(tuple(self) + tuple(other))
+
+    def __radd__(self, other) -> Defaults:
+        return Defaults(tuple(other) + tuple(self))
 
     def for_model(self, specular: str) -> tuple[str, ...]:
         return tuple("m" if kind == "n" and specular == "torrance" else kind for kind in self)
