@@ -80,8 +80,8 @@ def front_view(tmp_path, normal, point, obj=None):
     np.save(tmp_path / "marker.npy", MARKER)
     t, b = plane(normal, point).uv_frame()
     centre = np.asarray(point, float) + 0.5 * t + 0.5 * b
-    n = np.cross(t, b)
-    camera = {"eye": list(centre + 3 * n), "target": list(centre), "up": list(b), "projection": "orthographic",
+    facing = np.cross(t, b)  # the unit normal
+    camera = {"eye": list(centre + 3 * facing), "target": list(centre), "up": list(b), "projection": "orthographic",
               "ortho_height": 1, "width": 8, "height": 8, "near": 1, "far": 10}
     material = {"ka": 1, "kd": 0, "texture": str(tmp_path / "marker.npy"), "texture_target": "ka",
                 "filter": "nearest"}
