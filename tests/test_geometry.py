@@ -431,6 +431,26 @@ def test_a_uniformly_scaled_mesh_keeps_its_lighting(scale):
     np.testing.assert_array_equal(out.faces, one.faces)
 
 
+@pytest.mark.parametrize("size", [1e200, 1e300])
+def test_a_mesh_scaled_down_by_its_transform_renders_as_at_scale_one(size):
+    """A sphere given 1e300 (1e200) times too large and scaled by 1 / size in its transform renders
+    bit for bit as the unit sphere: lit alike, the smooth normals through a uniform scale of 1e-300.
+    The old check (|det| < 1e-300) refused it: "transform is singular (det of 3x3 part = 0.0)"."""
+    from conftest import scene_dict
+    from difflab import render
+
+    sphere = uv_sphere(1.0, n_lat=8, n_lon=16)
+    light = [{"type": "directional", "direction": [-0.3, -0.5, -1], "intensity": [1, 1, 1]}]
+
+    def image(scale):
+        obj = {"type": "mesh", "vertices": (sphere.vertices / scale).tolist(), "faces": sphere.faces.tolist(),
+               "normals": sphere.normals.tolist(), "material": "m", "transform": {"scale": scale}}
+        return render(scene_dict([obj], {"m": {"kd": [0.8] * 3, "ks": [0.3] * 3, "n": 10}}, lights=light,
+                                 render={"shading": "phong"}), method="raster")
+
+    np.testing.assert_array_equal(image(1 / size), image(1.0))
+
+
 def test_a_singular_or_non_finite_matrix_is_still_refused():
     with pytest.raises(MeshError, match="singular"):
         box().transformed(np.diag([1e300, 1e300, 0.0, 1.0]))
