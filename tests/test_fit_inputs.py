@@ -261,6 +261,8 @@ def test_the_defaults_with_more_names_keep_reading_n_as_the_lobe_width():
                                          tree=False)][:4] == ["ka", "kd", "ks", "n"]
     with pytest.raises(FitError, match=r"^params: 'n' applies only to the phong and blinn specular models"):
         build_layout(scene, ["red"], [*DEFAULT_PARAMS, "intensity"], tree=False)
+    with pytest.raises(TypeError):  # a bare string is not split into letters, as with any tuple
+        DEFAULT_PARAMS + "intensity"
 
 
 def test_fit_output_must_be_json(tmp_path, capsys):

@@ -75,10 +75,10 @@ class Defaults(tuple):
     comprehension) is taken as written, and "n" in it under torrance is refused."""
 
     def __add__(self, other) -> Defaults:
-        return Defaults(tuple(self) + tuple(other))
+        return Defaults(tuple(self) + tuple(other)) if isinstance(other, (tuple, list)) else NotImplemented
 
     def __radd__(self, other) -> Defaults:
-        return Defaults(tuple(other) + tuple(self))
+        return Defaults(tuple(other) + tuple(self)) if isinstance(other, (tuple, list)) else NotImplemented
 
     def for_model(self, specular: str) -> tuple[str, ...]:
         return tuple("m" if kind == "n" and specular == "torrance" else kind for kind in self)
