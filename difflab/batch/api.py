@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import DifflabError
+from ..fit.result import NOT_JUDGED
 from .manifest import load_manifest
 from .store import Store
 
@@ -37,11 +38,10 @@ class BatchSummary:
 
     @property
     def unjudged(self) -> list:
-        """Names of the fits whose image model was not judged: their noise could not be estimated
-        or they are underdetermined, or a mismatch is suspected against an estimated noise
-        (`FitResult.not_judged`)."""
-        return [row["name"] for row in self.rows
-                if row.get("noise_unknown") or row.get("underdetermined") or row.get("mismatch_suspected")]
+        """Names of the fits left unsettled (`FitResult.not_judged`: a flag of its NOT_JUDGED set
+        in their row): their noise could not be estimated, a mismatch is suspected against an
+        estimated noise, or they are underdetermined."""
+        return [row["name"] for row in self.rows if any(row.get(flag) for flag in NOT_JUDGED)]
 
 
     def report(self) -> list[str]:

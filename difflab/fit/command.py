@@ -14,9 +14,12 @@ noise, reduced chi-square, flags -- writes the fitted scene and a report of the 
     4  converged, but MODEL MISMATCH: the residuals sit far above the noise (files written); the
        fitted values answer a different question than asked -- try --method raytrace, other params
        or another specular model
-    5  converged, but the model was not judged: NOISE UNKNOWN (too few used pixels have used
-       neighbours to estimate the noise: a small, thin or scattered mask -- give --sigma) or
-       UNDERDETERMINED (no more target values than unknowns)
+    5  converged, but not settled (`FitResult.not_judged`): NOISE UNKNOWN (too few used pixels
+       have used neighbours to estimate the noise: a small, thin or scattered mask -- give --sigma),
+       MISMATCH SUSPECTED (sigma estimated: chi2 above its spread but not above 2 -- give --sigma
+       to judge the model) or UNDERDETERMINED (no more target values than unknowns: the model is
+       not judged either; or parameters the images fix only in combination, named: their values
+       are undetermined, the model is still judged -- with a mismatch too, the exit is 4)
 
 A fitted texture (--params texture) is written beside the scene as OUTPUT_STEM.MATERIAL.texture.npy
 (linear float32; OUTPUT_STEM.textureI.npy, I the material's index, where its name is not a plain

@@ -59,6 +59,7 @@ def drop_texture_files(folder, stem: str, keep=()) -> None:
 
 
 NO_FIT = ("empty_mask", "nonfinite_target")  # difflab's result codes of a fit that was not made
+NOT_JUDGED = ("noise_unknown", "underdetermined", "mismatch_suspected")  # the flags of `FitResult.not_judged`
 
 
 class ResultCode(str):
@@ -182,9 +183,11 @@ class FitResult:
 
     @property
     def not_judged(self) -> bool:
-        """Whether the image model was left unjudged: the noise unknown, the fit underdetermined, or a
-        mismatch suspected against an estimated noise (the CLI's exit 5)."""
-        return self.noise_unknown or self.underdetermined or self.mismatch_suspected
+        """Whether the fit is left unsettled (the CLI's exit 5; a flag of NOT_JUDGED): the noise
+        unknown or a mismatch suspected against an estimated noise (the model not judged), or the
+        fit underdetermined (its values not determined; the model still judged where chi2 is not
+        nan: a degenerate fit can also be a model mismatch)."""
+        return any(getattr(self, flag) for flag in NOT_JUDGED)
 
     def no_fit(self) -> str | None:
         """Why no fit was made -- "empty_mask: ..." or "nonfinite_target: ..." with what the targets
@@ -327,7 +330,8 @@ class FitResult:
                                          "the image model is not judged (give sigma)", self.noise_unknown),
                                         ("UNDERDETERMINED: the images fix only combinations of "
                                          f"{', '.join(self.degenerate)} (J^T J singular; `difflab.identify` names "
-                                         "them); the model is not judged", bool(self.degenerate)),
+                                         "them); their values are undetermined (the model is still judged)",
+                                         bool(self.degenerate)),
                                         ("UNDERDETERMINED: no more counted target values than unknowns the data "
                                          "reach; the model is not judged",
                                          self.underdetermined and not self.degenerate),
