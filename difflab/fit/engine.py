@@ -28,7 +28,7 @@ from .solvers import SUCCESSFUL, run
 from .sparse_jacobian import sparse_normal_matrix
 from .noise import silent_pixels, views_noise
 from .stats import (PRIOR_PULL_MAX, QUANTISATION_SIGMA, degenerate, finite_gram, fit_statistics, normal_matrix,
-                    poorly_determined, prior_pull, psnr, standard_errors)
+                    poorly_determined, prior_pull, psnr, singular_rcond, standard_errors)
 from .texels import smoothness_residuals, texel_coverage
 
 
@@ -78,7 +78,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                          if p.key in seen)  # texels no pixel reads: no unknowns of the data's
             st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size - unseen, silent_entries,
                                 sigma_given=setup.sigma_given is not None, skip=skip, noise_values=noise_values,
-                                mean_weight=mean_weight)
+                                mean_weight=mean_weight, rcond=singular_rcond(setup.x64))
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], mean_weight * QUANTISATION_SIGMA ** 2)))
             partly_seen = [key for key, on in seen.items() if not on.all()]

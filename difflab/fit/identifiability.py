@@ -26,7 +26,8 @@ from ..errors import FitError
 from .options import DENSE_MAX
 from .params import SCENE_PARAMS
 from .setup import Setup
-from .stats import QUANTISATION_SIGMA, covariance_unscaled, normal_matrix, poorly_determined, unit_spectrum
+from .stats import (QUANTISATION_SIGMA, covariance_unscaled, normal_matrix, poorly_determined, singular_rcond,
+                    unit_spectrum)
 
 CHANNELS = ("r", "g", "b")
 
@@ -125,12 +126,13 @@ def identifiability(setup: Setup, values: dict | None = None, *, sigma=None, rel
     sigma = QUANTISATION_SIGMA if sigma is None else float(sigma)
     with jax.enable_x64(setup.x64):
         gram, r = normal_matrix(setup.problem, jnp.asarray(layout.flatten(values), setup.dtype))
-    eigval, eigvec, _, _, singular = unit_spectrum(gram)  # a zero column (a parameter no pixel sees) is singular
+    rcond = singular_rcond(setup.x64)
+    eigval, eigvec, _, _, singular = unit_spectrum(gram, rcond=rcond)  # a zero column (a parameter no pixel sees) is singular
     top = max(float(eigval.max(initial=0.0)), 1e-300)
     rank = int(np.count_nonzero(~singular))
     n = gram.shape[0]
     condition = float(top / eigval.min()) if rank == n and n and eigval.min() > 0 else math.inf
-    cov = covariance_unscaled(gram)
+    cov = covariance_unscaled(gram, rcond=rcond)
     diag = np.diag(cov)
     stderr, offset = {}, 0
     for p in layout:

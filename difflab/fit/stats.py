@@ -44,7 +44,8 @@ Standard errors are those of linearised least squares, in scene units, and assum
 
 with J the Jacobian of the plain weighted residuals with respect to the values (J^T J from the
 solver, or `normal_equations.linearise`). Directions of J^T J that are numerically singular (after scaling its
-columns to unit norm) give an infinite standard error to every parameter they involve. A texture's
+columns to unit norm: below 1e-12 of the largest eigenvalue formed in float64, 512 float32 eps in
+float32, `singular_rcond`) give an infinite standard error to every parameter they involve. A texture's
 smoothness prior is not in J^T J (its rows are not residuals of the images), nor in chi2: the
 standard errors are what the pixels alone determine, linearised at the regularised solution -- a
 texel only the prior fills is inf. They are not the posterior's (J^T J plus the prior's curvature):
@@ -89,7 +90,8 @@ from .normal_equations import dense, linearise
 QUANTISATION_SIGMA = 1.0 / (255.0 * math.sqrt(12.0))
 FLOAT_SIGMA = 1e-5
 MISMATCH_CHI2 = 2.0  # an estimated noise off by sqrt(2): beyond any correct model measured (1.30)
-SINGULAR_RCOND = 1e-12
+SINGULAR_RCOND = 1e-12  # a J^T J formed in float64 (`singular_rcond`)
+SINGULAR_RCOND_F32 = 512 * float(np.finfo(np.float32).eps)  # 6.1e-5: one formed in float32 (`singular_rcond`)
 PACKED_MAX = 256  # blocks of J^T J inverted dense (eigh) together, up to this many entries
 SPARSE_STATS_MAX = 8192  # the most entries of one block of J^T J inverted sparse (measured below)
 DENSE_STATS_MAX = 1536  # the most entries of a singular block inverted dense (eigh; measured below)
@@ -122,11 +124,28 @@ def normal_matrix(problem, values, solved=None) -> tuple[np.ndarray, np.ndarray]
     return np.asarray(gram, np.float64), np.asarray(r, np.float64)
 
 
-def unit_spectrum(gram: np.ndarray, top: float | None = None):
+def singular_rcond(x64: bool) -> float:
+    """How small an eigenvalue of the unit-diagonal J^T J, relative to the largest, is numerically 0
+    when J^T J was formed in float64 (`x64`) or float32. Each entry of a J^T J formed in precision
+    eps is a dot product over the N residual entries, off by up to c eps in the unit scale (c from
+    eps for pairwise sums to N eps for sequential ones), so an exactly null direction comes out at
+    +- p c eps, and J's own roundings move it only at second order (J v = 0 for a null v). Measured
+    in float32 (ka and kd of a plane under a directional light, n.l constant: exactly collinear):
+    -2.9, -26, -68, -68 eps at 32, 64, 128, 256 pixels square; the kd, ks, intensity trade-off
+    (kd c, ks c, I / c) +-1e-7 -- far above float64's 1e-12. So float32: SINGULAR_RCOND_F32 = 512
+    eps (6.1e-5), 7.5x the largest measured; a direction just above it has its eigenvalue at most
+    ~13 % off (its standard error ~7 %), and one below it the float32 J^T J cannot resolve (a plane
+    under a point light 100 units away: x64 3.2e-6, float32 2.9e-7). float64: SINGULAR_RCOND = 1e-12
+    (its exact degeneracies at 1e-16 to 1e-14; the G-buffer's float32 inputs make a degeneracy of
+    the true scene, such as n.l constant, one of ~(1e-7)^2)."""
+    return SINGULAR_RCOND if x64 else SINGULAR_RCOND_F32
+
+
+def unit_spectrum(gram: np.ndarray, top: float | None = None, rcond: float = SINGULAR_RCOND):
     """The spectrum of J^T J (p, p) with its columns scaled to unit norm (so units do not count):
     (eigval ascending, eigvec, scale (p,) 1 / column norm (1 for a zero column), zero (p,) the zero
-    columns, singular (p,) the eigenvalues at most SINGULAR_RCOND times the largest -- or `top`
-    when `gram` is a diagonal block of a larger J^T J whose largest that is). The rank of the data
+    columns, singular (p,) the eigenvalues at most `rcond` (`singular_rcond`) times the largest -- or
+    `top` when `gram` is a diagonal block of a larger J^T J whose largest that is). The rank of the data
     is the count of the others; a singular direction's eigenvector names the parameters that trade
     off exactly (`covariance_unscaled`, `identifiability`)."""
     norms = np.sqrt(np.maximum(np.diagonal(gram), 0.0))
@@ -134,14 +153,14 @@ def unit_spectrum(gram: np.ndarray, top: float | None = None):
     scale = 1.0 / np.where(zero, 1.0, norms)  # (1 for a zero column)
     eigval, eigvec = np.linalg.eigh(gram * (scale[:, None] * scale))
     top = max(float(eigval.max(initial=0.0)) if top is None else top, 1e-300)
-    return eigval, eigvec, scale, zero, eigval <= SINGULAR_RCOND * top
+    return eigval, eigvec, scale, zero, eigval <= rcond * top
 
 
-def covariance_unscaled(gram: np.ndarray, top: float | None = None) -> np.ndarray:
+def covariance_unscaled(gram: np.ndarray, top: float | None = None, rcond: float = SINGULAR_RCOND) -> np.ndarray:
     """(J^T J)^-1 from J^T J (p, p), with singular directions (`unit_spectrum`) given infinite
     variance. Returns (p, p); the diagonal is inf for parameters that a singular direction involves
     and for zero columns."""
-    eigval, eigvec, scale, zero, singular = unit_spectrum(gram, top)
+    eigval, eigvec, scale, zero, singular = unit_spectrum(gram, top, rcond)
     outer = scale[:, None] * scale
     inv = np.where(singular, 0.0, 1.0 / np.where(singular, 1.0, eigval))
     cov = (eigvec * inv) @ eigvec.T * outer
@@ -171,10 +190,11 @@ def degenerate(layout, diag: np.ndarray, gram, prior: bool) -> list[str]:
     return flat
 
 
-def covariance_diagonal(gram, skip=None) -> np.ndarray:
-    """diag (J^T J)^-1 (p,) as `covariance_unscaled` gives it, from J^T J (p, p): a numpy array, or a
-    scipy.sparse matrix (a matrix-free fit's, `sparse_jacobian`); nan at the entries `skip` (p,)
-    bool -- whole blocks left out (`sparse_jacobian.stats_blocks`) -- the rest from the others alone.
+def covariance_diagonal(gram, skip=None, rcond: float = SINGULAR_RCOND) -> np.ndarray:
+    """diag (J^T J)^-1 (p,) as `covariance_unscaled` gives it (singular below `rcond` times the
+    largest eigenvalue), from J^T J (p, p): a numpy array, or a scipy.sparse matrix (a matrix-free
+    fit's, `sparse_jacobian`); nan at the entries `skip` (p,) bool -- whole blocks left out
+    (`sparse_jacobian.stats_blocks`) -- the rest from the others alone.
 
     A sparse one of up to PACKED_MAX entries is made dense. A larger one is split into its connected
     blocks (entries no residual couples: a texture's channels, texels far apart without a scalar
@@ -193,12 +213,12 @@ def covariance_diagonal(gram, skip=None) -> np.ndarray:
         diag = np.where(skip, np.nan, np.inf)
         kept = np.flatnonzero(~skip & (gram.diagonal() > 0))
         if kept.size:
-            diag[kept] = covariance_diagonal(gram[kept][:, kept])
+            diag[kept] = covariance_diagonal(gram[kept][:, kept], rcond=rcond)
         return diag
     if not sp.issparse(gram):
-        return np.diag(covariance_unscaled(gram))
+        return np.diag(covariance_unscaled(gram, rcond=rcond))
     if gram.shape[0] <= PACKED_MAX:
-        return np.diag(covariance_unscaled(gram.toarray()))
+        return np.diag(covariance_unscaled(gram.toarray(), rcond=rcond))
     gram = gram.tocsr()
     norms = np.sqrt(np.maximum(gram.diagonal(), 0.0))
     scale = 1.0 / np.where(norms == 0, 1.0, norms)
@@ -213,15 +233,15 @@ def covariance_diagonal(gram, skip=None) -> np.ndarray:
     for block in blocks + [np.zeros(0, np.int64)]:  # (an empty block ends the last pack)
         if packed and (not block.size or packed_size + block.size > PACKED_MAX):
             index = np.concatenate(packed)
-            diag[index] = np.diag(covariance_unscaled(gram[index][:, index].toarray(), top))
+            diag[index] = np.diag(covariance_unscaled(gram[index][:, index].toarray(), top, rcond))
             packed, packed_size = [], 0
         if 0 < block.size <= PACKED_MAX:
             packed.append(block)
             packed_size += block.size
         elif PACKED_MAX < block.size <= SPARSE_STATS_MAX:
-            diag[block] = inverse_diagonal(unit[block][:, block], top, SINGULAR_RCOND) * scale[block] ** 2
+            diag[block] = inverse_diagonal(unit[block][:, block], top, rcond) * scale[block] ** 2
             if np.isnan(diag[block[0]]) and block.size <= DENSE_STATS_MAX:  # singular
-                diag[block] = np.diag(covariance_unscaled(gram[block][:, block].toarray(), top))
+                diag[block] = np.diag(covariance_unscaled(gram[block][:, block].toarray(), top, rcond))
     return diag
 
 
@@ -240,14 +260,15 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
 
 
 def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, size: int, silent: int = 0,
-                   sigma_given: bool = False, skip=None, noise_values: int = 0, mean_weight: float = 1.0) -> dict:
+                   sigma_given: bool = False, skip=None, noise_values: int = 0, mean_weight: float = 1.0,
+                   rcond: float = SINGULAR_RCOND) -> dict:
     """s2 = sse / dof (sse: the sum of squares of the `entries` weighted residuals sqrt(w) r; dof =
     N - p, N entries neither censored nor `silent` (noise-free zeros), p = `size` fitted entries the
     data reach -- a texel no pixel reads is not one), chi2 = s2 / (w sigma^2) (reduced, w the
     `mean_weight` of the counted entries: sigma is the targets' noise in their own units, and a
     weighted residual's variance is w sigma^2; nan when sigma is: the noise unknown, the model is
     not judged), the verdict on the model, and diag (J^T J)^-1 (p,) from gram = J^T J (p, p), dense
-    or sparse (`covariance_diagonal`; nan at `skip`).
+    or sparse (`covariance_diagonal`; nan at `skip`; singular below `rcond`: `singular_rcond`).
 
     With t = 1 + 5 `chi2_spread(dof, noise_values)` (five standard deviations of chi2 for a correct
     model; `noise_values` Laplacians gave an estimated sigma, 0: given):
@@ -271,14 +292,14 @@ def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, 
     if dof <= 0:
         known = math.isfinite(sigma) and sigma > 0
         return {"s2": mean_weight * sigma * sigma if known else math.inf, "chi2": math.nan, "mismatch": False,
-                "suspected": False, "diag": covariance_diagonal(gram, skip), "underdetermined": True}
+                "suspected": False, "diag": covariance_diagonal(gram, skip, rcond), "underdetermined": True}
     s2 = sse / dof
     chi2 = math.nan if math.isnan(sigma) else s2 / (mean_weight * sigma * sigma) if sigma > 0 else math.inf
     threshold = 1.0 + 5.0 * chi2_spread(dof, 0 if sigma_given else noise_values)
     mismatch = bool(chi2 > (threshold if sigma_given else max(MISMATCH_CHI2, threshold)))
     suspected = bool(not sigma_given and not mismatch and chi2 > threshold)
     return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "suspected": suspected,
-            "diag": covariance_diagonal(gram, skip), "underdetermined": False}
+            "diag": covariance_diagonal(gram, skip, rcond), "underdetermined": False}
 
 
 def prior_pull(gram, diag: np.ndarray, s2: float, gradient: np.ndarray) -> np.ndarray:
