@@ -19,25 +19,61 @@ CAP_MEAN = 0.97340891  # E[z^2 if z^2 <= 9 else 1], z ~ N(0, 1): P(chi2_3 <= 9) 
 LAPLACIAN_CORRELATION = 2.0 * (70.0 / 36.0) ** 2  # 7.56: a mean of (L / 6)^2 has variance this / M
 
 
-def _local_levels(square: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    """(h, w, 3) the local noise level of each L^2 value: the median L^2 of the picked values of its
-    NOISE_BLOCK x NOISE_BLOCK block and channel / MEDIAN_CHI2_1 (the variance of L where L is
-    Gaussian), or where a block has fewer than NOISE_BLOCK^2 / 4 picked values the median of its
-    channel's other blocks' (of all its picked values when none has as many)."""
-    h, w, _ = square.shape
+def _in_blocks(values: np.ndarray) -> np.ndarray:
+    """(rows, columns, 3, NOISE_BLOCK, NOISE_BLOCK) a view of `values` (rows NOISE_BLOCK, columns
+    NOISE_BLOCK, 3) by block and channel."""
     b = NOISE_BLOCK
-    padded = np.full((-(-h // b) * b, -(-w // b) * b, 3), np.inf)  # inf: not picked
-    padded[:h, :w] = np.where(centre, square, np.inf)
-    blocks = padded.reshape(padded.shape[0] // b, b, padded.shape[1] // b, b, 3).transpose(0, 2, 4, 1, 3)
-    ordered = np.sort(blocks.reshape(blocks.shape[:3] + (b * b,)), axis=-1)  # (rows, columns, 3, b * b): picked first
-    count = np.count_nonzero(ordered < np.inf, axis=-1)
-    middle = [np.maximum((count - 1) // 2, 0)[..., None], (count // 2)[..., None]]
-    level = sum(np.take_along_axis(ordered, k, axis=-1)[..., 0] for k in middle) / 2.0
-    full = count >= b * b // 4
-    whole = [np.median(level[..., c][full[..., c]]) if full[..., c].any() else  # (the blocks' median: cheaper)
-             np.median(square[..., c][centre[..., c]]) if centre[..., c].any() else 0.0 for c in range(3)]
-    level = np.where(full, level, np.asarray(whole))
-    return np.repeat(np.repeat(level, b, axis=0), b, axis=1)[:h, :w] / MEDIAN_CHI2_1
+    return values.reshape(values.shape[0] // b, b, values.shape[1] // b, b, 3).transpose(0, 2, 4, 1, 3)
+
+
+def _magnitudes(image, centre) -> np.ndarray:
+    """(rows, columns, 3, NOISE_BLOCK^2) |L|, the 3 x 3 Laplacians of an (h + 2, w + 2, 3) image in
+    its own precision (float32 residual images), each block's values of a channel in a row (the
+    (h, w) grid padded to whole blocks): inf outside the `centre` entries ((h, w, 3) bool) and in
+    the padding, NaN where L is. (The kernel [1 -2 1]^T [1 -2 1] as two second differences,
+    a - 2 b + c summed in place: the same roundings, fewer temporaries.)"""
+    with np.errstate(invalid="ignore"):  # (inf - inf: NaN, not picked)
+        rows2 = image[1:-1] * -2.0
+        rows2 += image[:-2]
+        rows2 += image[2:]
+        b, (h, w) = NOISE_BLOCK, centre.shape[:2]
+        lap = np.full((-(-h // b) * b, -(-w // b) * b, 3), np.inf, rows2.dtype)
+        inner = lap[:h, :w]
+        np.multiply(rows2[:, 1:-1], -2.0, out=inner)
+        inner += rows2[:, :-2]
+        inner += rows2[:, 2:]
+    np.copyto(inner, np.inf, where=~centre)
+    out = np.empty((lap.shape[0] // b, lap.shape[1] // b, 3, b * b), lap.dtype)
+    np.abs(_in_blocks(lap), out=out.reshape(out.shape[:3] + (b, b)))
+    return out
+
+
+def _middle(ordered: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(...) the two middle values (the same one for an odd count) of the first `count` (...) of
+    each sorted row of `ordered` (..., n); the row's first where count is 0."""
+    rows = ordered.reshape(-1, ordered.shape[-1])
+    flat, row = count.reshape(-1), np.arange(count.size)
+    low, high = rows[row, np.maximum(flat - 1, 0) // 2], rows[row, flat // 2]
+    return low.reshape(count.shape), high.reshape(count.shape)
+
+
+def _block_levels(square: np.ndarray, ordered: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """(rows, columns, 3, 1) the local noise level of each block and channel of L^2 values `square`
+    (rows, columns, 3, NOISE_BLOCK^2), `count` (rows, columns, 3) of them picked, first in each
+    block's sorted |L| `ordered` (the others: inf or NaN): the median of its picked values /
+    MEDIAN_CHI2_1 (the variance of L where L is Gaussian), or where a block has fewer than
+    NOISE_BLOCK^2 / 4 picked values the median of its channel's other blocks' (of all its picked
+    values when none has as many, 0 when it has none)."""
+    low, high = _middle(ordered, count)
+    level = (np.square(low, dtype=np.float64) + np.square(high, dtype=np.float64)) / 2.0
+    enough = count >= square.shape[-1] // 4
+    whole = np.sort(np.where(enough, level, np.inf).reshape(-1, 3).T, axis=-1)  # (3, blocks)
+    whole = sum(_middle(whole, np.count_nonzero(enough, axis=(0, 1)))) / 2.0
+    if not enough.any(axis=(0, 1)).all():  # a channel without such a block (a small or sparse image)
+        values = np.sort(square.transpose(2, 0, 1, 3).reshape(3, -1), axis=-1)  # (NaN after inf)
+        picked = np.sum(count, axis=(0, 1))
+        whole = np.where(enough.any(axis=(0, 1)), whole, np.where(picked > 0, sum(_middle(values, picked)) / 2.0, 0.0))
+    return (np.where(enough, level, whole) / MEDIAN_CHI2_1)[..., None]
 
 
 def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True) -> tuple[float, int] | None:
@@ -54,11 +90,12 @@ def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True) -> tup
     signal) included (a median level reads the median pixel's: a correct fit of noise proportional
     to the signal gave chi2 2.6-15). A model's sharp errors (an edge, a shadow's penumbra, a
     rim) are kept out: an L^2 above CAP_Z2 = 9 (three standard deviations) times its 8 x 8 block's
-    noise level v_c (`_local_levels`) counts as v_c; Gaussian noise keeps CAP_MEAN = 0.973 of its
+    noise level v_c (`_block_levels`) counts as v_c; Gaussian noise keeps CAP_MEAN = 0.973 of its
     mean square so, corrected for. A used map is (H, W) bool (every channel of a used pixel) or (H, W, 3) (per
     channel: where some channels have weight 0, their residuals are 0, not noise, and must not
     enter a neighbourhood). (The kernel is [1 -2 1]^T [1 -2 1]: applied as two second differences,
-    over the used pixels' bounding box.)"""
+    over the used pixels' bounding box, laid out by block: one sort of each block's |L|, the cap
+    and the sums by broadcasting each block's level over its values.)"""
     num = den = 0.0
     count = 0
     for k, (image, used) in enumerate(zip(images, used_maps)):
@@ -75,20 +112,21 @@ def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True) -> tup
         if interior:
             across = used[:, :-2] & used[:, 1:-1] & used[:, 2:]
             centre = across[:-2] & across[1:-1] & across[2:]
-        rows2 = image[1:-1] * -2.0  # a - 2 b + c, summed in place (the same roundings, fewer temporaries)
-        rows2 += image[:-2]
-        rows2 += image[2:]
-        lap = rows2[:, 1:-1] * -2.0
-        lap += rows2[:, :-2]
-        lap += rows2[:, 2:]
-        square = np.square(lap, dtype=np.float64)
-        centre = (np.broadcast_to(centre[..., None], lap.shape) if centre.ndim == 2 else centre) & np.isfinite(square)
-        level = _local_levels(square, centre)
-        capped = np.where(square > CAP_Z2 * level, level, square)[centre]
-        weight = None if weight_maps is None or weight_maps[k] is None else weight_maps[k][box][1:-1, 1:-1][centre]
-        num += float(np.sum(capped) if weight is None else np.dot(weight, capped))
-        den += float(capped.size if weight is None else np.sum(weight))
-        count += capped.size
+        magnitude = _magnitudes(image, np.repeat(centre[..., None], 3, axis=2) if centre.ndim == 2 else centre)
+        blocks = np.square(magnitude, dtype=np.float64)
+        weight = blocks < np.inf  # picked: not inf, NaN, nor beyond float64's range
+        picked = np.sum(weight, axis=-1, dtype=np.int32)
+        magnitude.sort(axis=-1)  # |L| in order is L^2 in order: each block's median from its half-size |L|
+        level = _block_levels(blocks, magnitude, picked)
+        np.copyto(blocks, level, where=~(blocks <= CAP_Z2 * level))  # capped; inf and NaN too (weight 0)
+        if weight_maps is not None and weight_maps[k] is not None:
+            inner = weight_maps[k][box][1:-1, 1:-1]
+            padded = np.zeros((blocks.shape[0] * NOISE_BLOCK, blocks.shape[1] * NOISE_BLOCK, 3))
+            padded[:inner.shape[0], :inner.shape[1]] = inner
+            weight = np.where(weight, _in_blocks(padded).reshape(blocks.shape), 0.0)
+        num += float(np.sum(np.multiply(blocks, weight, out=blocks)))  # (no BLAS dot: its threads cost ms)
+        den += float(np.sum(weight))
+        count += int(np.sum(picked))
     if count < MIN_NOISE_PIXELS or den <= 0:
         return None
     return math.sqrt(num / (36.0 * CAP_MEAN * den)), count

@@ -1,0 +1,162 @@
+"""The noise estimate's block arithmetic (`fit.noise.estimate_sigma`) against its first, plain
+implementation kept here as the reference (difflab a38417f): the same sigma to 1e-12 and the same
+number of Laplacians on random residual images -- masks per pixel and per channel, weights,
+infinite and NaN residuals, blocks cut by the image's edge or by the mask (fewer than a quarter
+picked: the channel's level), images too small for a block, several views at once."""
+
+import math
+
+import numpy as np
+import pytest
+
+from difflab.fit import noise
+from difflab.fit.noise import estimate_sigma
+
+
+def reference_levels(square, centre):
+    """(h, w, 3) each L^2 value's block level, one block at a time (the first implementation)."""
+    h, w, _ = square.shape
+    b = noise.NOISE_BLOCK
+    padded = np.full((-(-h // b) * b, -(-w // b) * b, 3), np.inf)
+    padded[:h, :w] = np.where(centre, square, np.inf)
+    blocks = padded.reshape(padded.shape[0] // b, b, padded.shape[1] // b, b, 3).transpose(0, 2, 4, 1, 3)
+    ordered = np.sort(blocks.reshape(blocks.shape[:3] + (b * b,)), axis=-1)
+    count = np.count_nonzero(ordered < np.inf, axis=-1)
+    middle = [np.maximum((count - 1) // 2, 0)[..., None], (count // 2)[..., None]]
+    level = sum(np.take_along_axis(ordered, k, axis=-1)[..., 0] for k in middle) / 2.0
+    full = count >= b * b // 4
+    whole = [np.median(level[..., c][full[..., c]]) if full[..., c].any() else
+             np.median(square[..., c][centre[..., c]]) if centre[..., c].any() else 0.0 for c in range(3)]
+    level = np.where(full, level, np.asarray(whole))
+    return np.repeat(np.repeat(level, b, axis=0), b, axis=1)[:h, :w] / noise.MEDIAN_CHI2_1
+
+
+def reference_sigma(images, used_maps, weight_maps=None, interior=True):
+    """`estimate_sigma` as first written: full-size arrays, boolean selections."""
+    num = den = 0.0
+    count = 0
+    for k, (image, used) in enumerate(zip(images, used_maps)):
+        pixels = used if used.ndim == 2 else used[..., 0] | used[..., 1] | used[..., 2]
+        rows, cols = np.flatnonzero(pixels.any(axis=1)), np.flatnonzero(pixels.any(axis=0))
+        if rows.size == 0 or used.shape[0] < 3 or used.shape[1] < 3:
+            continue
+        top, left = max(rows[0] - 1, 0), max(cols[0] - 1, 0)
+        box = (slice(top, min(rows[-1] + 2, used.shape[0])), slice(left, min(cols[-1] + 2, used.shape[1])))
+        used, image = used[box], np.asarray(image)[box]
+        if used.shape[0] < 3 or used.shape[1] < 3:
+            continue
+        centre = used[1:-1, 1:-1]
+        if interior:
+            across = used[:, :-2] & used[:, 1:-1] & used[:, 2:]
+            centre = across[:-2] & across[1:-1] & across[2:]
+        rows2 = image[1:-1] * -2.0
+        rows2 += image[:-2]
+        rows2 += image[2:]
+        lap = rows2[:, 1:-1] * -2.0
+        lap += rows2[:, :-2]
+        lap += rows2[:, 2:]
+        square = np.square(lap, dtype=np.float64)
+        centre = (np.broadcast_to(centre[..., None], lap.shape) if centre.ndim == 2 else centre) & np.isfinite(square)
+        level = reference_levels(square, centre)
+        capped = np.where(square > noise.CAP_Z2 * level, level, square)[centre]
+        weight = None if weight_maps is None or weight_maps[k] is None else weight_maps[k][box][1:-1, 1:-1][centre]
+        num += float(np.sum(capped) if weight is None else np.dot(weight, capped))
+        den += float(capped.size if weight is None else np.sum(weight))
+        count += capped.size
+    if count < noise.MIN_NOISE_PIXELS or den <= 0:
+        return None
+    return math.sqrt(num / (36.0 * noise.CAP_MEAN * den)), count
+
+
+def residual(rng, h, w, dtype, spikes, bad):
+    """(h, w, 3) noise whose level varies by region, `spikes` of its entries 30x (a model's sharp
+    errors: capped), `bad` of them inf, -inf or NaN, one channel 0 where h is odd (level 0)."""
+    scale = np.exp(rng.uniform(-3.0, 0.0, (h // 5 + 1, w // 7 + 1, 3))).repeat(5, 0).repeat(7, 1)[:h, :w]
+    image = scale * rng.normal(0.0, 0.01, (h, w, 3))
+    image = np.where(rng.random((h, w, 3)) < spikes, 30.0 * image + 0.3, image)
+    image = np.where(rng.random((h, w, 3)) < bad, rng.choice([np.inf, -np.inf, np.nan], (h, w, 3)), image)
+    if h % 2:
+        image[..., 1] = 0.0
+    return image.astype(dtype)
+
+
+def mask(rng, h, w, kind):
+    """A used map: a disc (its box smaller than the image), random holes, a sparse scatter, per
+    channel, all or none."""
+    yy, xx = np.mgrid[:h, :w]
+    if kind == "disc":
+        return np.hypot(yy - 0.55 * h, xx - 0.45 * w) < 0.4 * min(h, w)
+    if kind == "holes":
+        return rng.random((h, w)) < 0.93
+    if kind == "sparse":
+        return rng.random((h, w)) < 0.6
+    if kind == "channels":
+        return (rng.random((h, w))[..., None] < 0.95) & (rng.random((h, w, 3)) < 0.97)
+    return np.full((h, w), kind == "all")
+
+
+SIZES = [(3, 3), (4, 5), (6, 11), (9, 9), (13, 30), (23, 31), (40, 17), (64, 64), (71, 90)]
+KINDS = ["disc", "holes", "sparse", "channels", "all", "none"]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_block_arithmetic_matches_the_reference_implementation(seed):
+    """Per seed: 20 random single views (a size, mask kind, dtype, weights or none, interior or not,
+    spikes and non-finite entries) and 5 sets of 2-3 views, each equal to the reference: both None
+    (too few values, no weight), or sigma within 1e-12 and the same count. The cases cover every
+    branch: capped values, blocks short of a quarter picked, channels with no such block."""
+    rng = np.random.default_rng(seed)
+
+    def view():
+        h, w = SIZES[rng.integers(len(SIZES))]
+        kind = KINDS[rng.integers(len(KINDS))]
+        image = residual(rng, h, w, [np.float32, np.float64][rng.integers(2)], rng.choice([0.0, 0.03]),
+                         rng.choice([0.0, 0.01]))
+        weights = None if rng.random() < 0.4 else np.where(rng.random((h, w, 3)) < 0.1, 0.0,
+                                                            rng.uniform(0.1, 3.0, (h, w, 3)))
+        return image, mask(rng, h, w, kind), weights
+
+    seen = set()
+    for n in [1] * 20 + [2, 3, 2, 3, 3]:
+        images, used, weights = zip(*[view() for _ in range(n)])
+        interior = bool(rng.random() < 0.7)
+        weights = list(weights) if any(w is not None for w in weights) else None
+        with np.errstate(invalid="ignore"):  # (inf - inf in the reference's Laplacian)
+            want = reference_sigma(images, used, weights, interior)
+        got = estimate_sigma(list(images), list(used), weights, interior=interior)
+        if want is None:
+            assert got is None
+            seen.add("none")
+            continue
+        assert got[0] == pytest.approx(want[0], rel=1e-12, abs=0.0) and got[1] == want[1]
+        seen.add("zero" if want[0] == 0.0 else "sigma")
+    assert seen >= {"sigma", "none"}
+
+
+def levels_and_counts(image, centre):
+    """The new code's block levels of an image's Laplacians over `centre` (h, w, 3), their blocks of
+    L^2 and how many of each are picked."""
+    magnitude = noise._magnitudes(image, centre)
+    square = np.square(magnitude, dtype=np.float64)
+    count = np.count_nonzero(square < np.inf, axis=-1)
+    magnitude.sort(axis=-1)
+    return noise._block_levels(square, magnitude, count), square, count
+
+
+def test_the_cases_reach_every_branch():
+    """The random cases above exercise what they claim: a disc's edge blocks have fewer than a
+    quarter of their values picked beside full ones, spikes are capped, non-finite values are left
+    out; a sparse scatter's interior leaves no block with a quarter (each channel's level from all
+    its values)."""
+    rng = np.random.default_rng(0)
+    image = residual(rng, 71, 90, np.float64, 0.03, 0.01)
+    centre = np.repeat(mask(rng, 71, 90, "disc")[1:-1, 1:-1, None], 3, axis=2)
+    level, square, count = levels_and_counts(image, centre)
+    assert np.any((count > 0) & (count < 16)) and np.any(count == 64)
+    assert np.any((square > noise.CAP_Z2 * level) & (square < np.inf))  # capped
+    assert 0 < np.sum(count) < np.count_nonzero(centre)  # the non-finite ones left out
+    used = mask(rng, 40, 17, "sparse")
+    across = used[:, :-2] & used[:, 1:-1] & used[:, 2:]
+    centre = np.repeat((across[:-2] & across[1:-1] & across[2:])[..., None], 3, axis=2)
+    count = levels_and_counts(residual(rng, 40, 17, np.float32, 0.0, 0.0), centre)[2]
+    assert 0 < np.sum(count) and np.all(count < 16)
