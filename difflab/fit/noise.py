@@ -37,7 +37,8 @@ def _magnitudes(image, centre) -> np.ndarray:
         rows2 += image[:-2]
         rows2 += image[2:]
         b, (h, w) = NOISE_BLOCK, centre.shape[:2]
-        lap = np.full((-(-h // b) * b, -(-w // b) * b, 3), np.inf, rows2.dtype)
+        lap = np.empty((-(-h // b) * b, -(-w // b) * b, 3), rows2.dtype)
+        lap[h:], lap[:h, w:] = np.inf, np.inf  # the padding
         inner = lap[:h, :w]
         np.multiply(rows2[:, 1:-1], -2.0, out=inner)
         inner += rows2[:, :-2]
@@ -51,10 +52,9 @@ def _magnitudes(image, centre) -> np.ndarray:
 def _middle(ordered: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(...) the two middle values (the same one for an odd count) of the first `count` (...) of
     each sorted row of `ordered` (..., n); the row's first where count is 0."""
-    rows = ordered.reshape(-1, ordered.shape[-1])
-    flat, row = count.reshape(-1), np.arange(count.size)
-    low, high = rows[row, np.maximum(flat - 1, 0) // 2], rows[row, flat // 2]
-    return low.reshape(count.shape), high.reshape(count.shape)
+    start = np.arange(0, ordered.size, ordered.shape[-1]).reshape(count.shape)  # each row's first, flat
+    return (np.take(ordered, start + np.maximum(count - 1, 0) // 2),
+            np.take(ordered, start + count // 2))
 
 
 def _block_levels(square: np.ndarray, ordered: np.ndarray, count: np.ndarray) -> np.ndarray:
