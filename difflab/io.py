@@ -31,6 +31,25 @@ def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
+def code_step(linear, step: float, gamma: float | None = None) -> np.ndarray:
+    """The width in linear units of one code step `step` (1 / (2^bits - 1)) of a file's samples s
+    at the linear values they decode to: step * d linear / d s there. sRGB (`gamma` None, the slope of
+    `srgb_to_linear` written in linear values): 1 / 12.92 at linear <= 0.0031308 (s <= 0.04045), else
+    (2.4 / 1.055) ((s + 0.055) / 1.055)^1.4 = (2.4 / 1.055) linear^(1.4 / 2.4): 0.077 steps in the
+    darks, 2.275 at white. A file gamma g (linear = s^(1 / g)): (1 / g) linear^(1 - g), taken at least
+    half a step up from 0 (where the slope is 0 or infinite for g != 1); g = 1: `step` everywhere.
+    Its square / 12 is the variance that rounding to the code adds to a linear value."""
+    linear = np.asarray(linear, dtype=np.float64)
+    if gamma is None:
+        with np.errstate(invalid="ignore"):  # (the dark branch's power of values < 0, not taken)
+            slope = np.where(linear <= 0.0031308, 1.0 / 12.92, (2.4 / 1.055) * linear ** (1.4 / 2.4))
+    elif gamma == 1.0:
+        return np.full(linear.shape, float(step))
+    else:
+        slope = np.maximum(linear, (0.5 * step) ** (1.0 / gamma)) ** (1.0 - gamma) / gamma
+    return step * slope
+
+
 def linear_to_srgb(c: np.ndarray) -> np.ndarray:
     """IEC 61966-2-1 encoding of linear values clamped to [0, 1]."""
     c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
@@ -160,6 +179,7 @@ class LoadedImage(NamedTuple):
     image: np.ndarray  # linear float32 (H, W, 3): `load_image`
     bits: int | None  # bits per sample: 8 or 16 (its samples' step is 1 / (2^bits - 1)); None for .npy floats
     channels: int  # colour channels the file holds: 1 (a grey picture or .npy, repeated into 3) or 3
+    gamma: float | None  # how the samples were decoded: linear = s^(1 / gamma) (1.0: as linear); None: sRGB or .npy
 
 
 def read_image(path: str | os.PathLike, srgb: bool = True, what: str = "image") -> LoadedImage:
@@ -171,7 +191,7 @@ def read_image(path: str | os.PathLike, srgb: bool = True, what: str = "image") 
         refuse_code_values(array.dtype, short_path(path))
         grey = array.ndim == 2 or array.shape[-1] < 3  # (H, W), (H, W, 1), (H, W, 2): grey, alpha aside
         image = _as_image(array[..., 0] if grey and array.ndim == 3 else array)
-        return LoadedImage(image[..., :3].copy(), None, 1 if grey else 3)
+        return LoadedImage(image[..., :3].copy(), None, 1 if grey else 3, None)
     pixels, gamma, bits, channels = read_picture(path)
     if pixels.dtype == np.uint8 and (not srgb or gamma is None):
         image = (_SRGB_DECODE if srgb else _LINEAR_DECODE)[pixels]  # a 256-entry table: 15 bytes per pixel
@@ -180,7 +200,7 @@ def read_image(path: str | os.PathLike, srgb: bool = True, what: str = "image") 
         if srgb:
             samples = srgb_to_linear(samples) if gamma is None else samples ** (1.0 / gamma)
         image = samples.astype(np.float32)
-    return LoadedImage(image, bits, channels)
+    return LoadedImage(image, bits, channels, gamma if srgb else 1.0)
 
 
 def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:

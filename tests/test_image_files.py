@@ -169,9 +169,9 @@ def test_a_target_file_is_opened_once(tmp_path, monkeypatch, dtype, bits, opens)
     path = write_png(tmp_path / "t.png", samples, gamma=1.0)
     real_open, opened = Image.open, []
     monkeypatch.setattr(Image, "open", lambda *a, **k: opened.append(a[0]) or real_open(*a, **k))
-    image, step = load_target(path, "targets[0]")
+    image, step, gamma = load_target(path, "targets[0]")
     assert len(opened) == opens
-    assert step == 1.0 / (2 ** bits - 1)
+    assert step == 1.0 / (2 ** bits - 1) and gamma == 1.0
     np.testing.assert_allclose(image, samples / float(np.iinfo(dtype).max), rtol=1e-6)
 
 

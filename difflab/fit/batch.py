@@ -124,7 +124,7 @@ def _decoded(image, setup: Setup, b: int) -> np.ndarray:
     `load_target`'s, that `Setup.retarget` keeps)."""
     from .targets import load_target
 
-    array, _ = load_target(image, f"images[{b}]")
+    array = load_target(image, f"images[{b}]")[0]
     shape = setup.views[0].image.shape  # (not `target`'s: that would form the whole float64 image)
     if array.shape != shape:
         raise FitError(f"images[{b}]: shape {array.shape}, but the batch's view is {shape}")

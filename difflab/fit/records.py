@@ -90,8 +90,8 @@ class View:
     in its own float precision; `target`: float64, 0 outside the mask and where not finite); mask
     (H, W) bool; weighting (H, W, 3) >= 0, 0 outside the mask, or None: 1 inside the mask (`weight`:
     either as an image); ceiling: where its values clip (inf: nowhere); step: its samples' step (1 /
-    255 from an 8-bit file, 1 / 65535 from a 16-bit one, 0 for float data: the noise floor is step /
-    sqrt(12)); nonfinite: non-finite target values inside the mask; record: its G-buffer or ray tree;
+    255 from an 8-bit file, 1 / 65535 from a 16-bit one, 0 for float data) and gamma (the file's
+    transfer, None for sRGB: `io.code_step` gives a value's quantisation, `noise.quantisation`); nonfinite: non-finite target values inside the mask; record: its G-buffer or ray tree;
     scene: the scene of this view; used (H, W) bool: the pixels the fit reads (`pixels`: their flat
     indices, in order; `values` and `weights`: the target's and the weight's (U, 3) float64 rows
     there, `zeros`: values == 0 -- each computed once, on first use, or handed over by `Setup._seen`,
@@ -105,6 +105,7 @@ class View:
     weighting: np.ndarray | None
     ceiling: float
     step: float
+    gamma: float | None
     nonfinite: int
     record: object
     scene: object

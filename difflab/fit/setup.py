@@ -31,6 +31,7 @@ from ..renderers.compile import CompiledScene
 from ..renderers.launch import resolve_device
 from .ceiling import float_ceiling, primary_objects
 from .materials import MaterialTable
+from .noise import quantisation
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
 from .problem import LOSSES, Problem, ViewJ, to_device, value_index
 from .raytree import TreeModel, tree_influence
@@ -91,8 +92,8 @@ def _check_smoothness(value, textures) -> float:
 class Setup:
     """A fit prepared (see the module docstring). Attributes: scene (start values written in),
     materials, method, layout, initial (key -> value), x0 (solver coordinates), views, used_pixels,
-    nonfinite, censored, sigma_given, quantisation (the targets' code step / sqrt(12), 0 for float
-    data), sigma_floor, sigma_fallback (the noise when too few pixels allow an estimate, None:
+    nonfinite, censored, sigma_given, quantisation (the rms rounding error of the targets' used values,
+    `noise.quantisation`: 0 for float data), sigma_floor, sigma_fallback (the noise when too few pixels allow an estimate, None:
     unknown; `engine.without_clipped`), x64, dtype, problem, render_seconds (the Warp
     renders' wall time), base_scene (before `init`), ceiling_given, loss, loss_scale."""
 
@@ -171,7 +172,7 @@ class Setup:
         self.nonfinite = int(sum(v.nonfinite for v in self.views))
         self.censored = int(sum(np.count_nonzero(v.entries) - np.count_nonzero(v.counted)
                                 for v in self.views if np.isfinite(v.ceiling)))  # over the used pixels
-        self.quantisation = max(v.step for v in self.views) / math.sqrt(12.0)  # the coarsest view's; 0 for float data
+        self.quantisation = quantisation(self.views)  # 0 for float data
         self.sigma_floor = max(FLOAT_SIGMA, self.quantisation)
 
     def retarget(self, images, init=None) -> Setup:
@@ -225,7 +226,7 @@ class Setup:
         store = view_store(self.compiled)  # the views kept with the compiled scene (`records.py`)
         tree_ids = tuple(range(len(self.scene.materials))) if all_surfaces else tuple(ids)
         self.labels = []  # per view (target, mask or None), as messages name them
-        for view_scene, image, step, mask, weight, nonfinite, labels in prepared_targets(self.scene, targets, masks,
+        for view_scene, image, step, gamma, mask, weight, nonfinite, labels in prepared_targets(self.scene, targets, masks,
                                                                                          weights, render):
             self.labels.append(labels)
             key = view_key(view_scene, resolve_device(device)) if store is not None else None
@@ -243,7 +244,7 @@ class Setup:
                 touched = kept.touched((tree_ids, tuple(crossing)), lambda: tree_influence(record, tree_ids, crossing))
             else:
                 touched = kept.touched((tuple(ids), all_surfaces), lambda: influence(record, ids, all_surfaces))
-            views.append(self._seen(View(image=image, mask=mask, weighting=weight, ceiling=np.inf, step=step or 0.0,
+            views.append(self._seen(View(image=image, mask=mask, weighting=weight, ceiling=np.inf, step=step or 0.0, gamma=gamma,
                                          nonfinite=nonfinite, record=record, scene=view_scene, used=touched,
                                          kept=kept if store is not None else None, touched=touched), weight))
         return views

@@ -54,18 +54,19 @@ def normalise_targets(targets) -> list[tuple[object, dict]]:
     return out
 
 
-def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
+def load_target(item, where: str) -> tuple[np.ndarray, float | None, float | None]:
     """(image (H, W, 3) linear floats -- a copy of an array, in its own precision; float64 from a file --, its
     sample step: 1 / 255 for 8-bit image files, 1 / 65535 for 16-bit ones (their ceiling is 1.0),
-    None for float data)."""
+    None for float data, and the file's gamma as `io.read_image` decoded it: None for sRGB (or float
+    data), 1.0 for linear samples -- with the step, what `io.code_step` needs)."""
     if _is_path(item):
         try:
-            image, bits, channels = read_image(item)
+            image, bits, channels, gamma = read_image(item)
         except DifflabError as exc:
             raise FitError(f"{where}: {exc}") from None
         if channels == 1:  # 8- or 16-bit, 1-bit, with alpha or not, or a .npy of shape (H, W), (H, W, 1 or 2)
             _refuse_grey(f"{where} ({short_path(item)})", "a grey image file")
-        return np.asarray(image, np.float64), (None if bits is None else 1.0 / (2 ** bits - 1))
+        return np.asarray(image, np.float64), (None if bits is None else 1.0 / (2 ** bits - 1)), gamma
     if not isinstance(item, np.ndarray) and not hasattr(item, "__array__"):
         raise FitError(f"{where}: expected an image array or a file path, got {type(item).__name__}")
     image = np.asarray(item)
@@ -80,7 +81,7 @@ def load_target(item, where: str) -> tuple[np.ndarray, float | None]:
         raise FitError(str(exc)) from None
     if image.dtype.kind != "f":
         raise FitError(f"{where}: an image of dtype {image.dtype} is refused; give linear RGB floats")
-    return np.array(image), None  # (a copy: the fit reads it later)
+    return np.array(image), None, None  # (a copy: the fit reads it later)
 
 
 def _refuse_grey(where: str, what: str) -> None:
@@ -197,7 +198,7 @@ def nonfinite_count(image, mask) -> int:
 
 def prepared_targets(scene, targets, masks, weights, render: dict):
     """For each target: (its view's scene, target image (`load_target`: a copy, in its own precision),
-    sample step (`load_target`), mask, weight, count of non-finite masked values, labels: (the
+    sample step and gamma (`load_target`), mask, weight, count of non-finite masked values, labels: (the
     target's, e.g. "targets[0] (a.png)"; the mask's, e.g. "masks[0] (m.png)", or None without one)).
     A view's scene is
     `scene` with the target's camera / lights override and the `render` settings; the target must have
@@ -208,7 +209,7 @@ def prepared_targets(scene, targets, masks, weights, render: dict):
     weights = per_view(weights, len(items), "weights")
     for i, ((item, overrides), mask, weight) in enumerate(zip(items, masks, weights)):
         where = f"targets[{i}]"
-        image, step = load_target(item, where)
+        image, step, gamma = load_target(item, where)
         height, width = image.shape[:2]
         try:
             same = not overrides and all(getattr(scene.render, k) == v for k, v in render.items())
@@ -224,7 +225,7 @@ def prepared_targets(scene, targets, masks, weights, render: dict):
         if weight is not None:
             weight = view_weight(weight, (height, width), f"weights[{i}]") * in_channels(mask)
         labels = (_label(where, item), None if masks[i] is None else _label(f"masks[{i}]", masks[i]))
-        yield view_scene, image, step, mask, weight, nonfinite_count(image, mask), labels
+        yield view_scene, image, step, gamma, mask, weight, nonfinite_count(image, mask), labels
 
 
 def _label(where: str, item) -> str:
