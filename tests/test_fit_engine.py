@@ -113,15 +113,16 @@ def test_a_given_sigma_below_the_noise_is_flagged_within_the_spread(noisy_sphere
 
 def test_a_given_sigma_of_an_8_bit_file_adds_its_quantisation(tmp_path):
     """The sphere with noise 0.002 saved as an 8-bit sRGB PNG, the right model, sigma = 0.002 given:
-    the file's quantisation (one code step / sqrt(12)) adds to it, so chi2 is ~1 and the fit ok.
-    (The given sigma was taken as the whole noise: chi2 1.2, flagged a mismatch.)"""
+    the file's quantisation (the rms of each used value's code step in linear units / sqrt(12):
+    `fit.noise.quantisation`) adds to it, so chi2 is ~1 and the fit ok. (The given sigma was taken as
+    the whole noise: chi2 1.2, flagged a mismatch.)"""
     from difflab.io import save_image
 
     scene = make_scene(size=64)
     noisy = target_of(scene) + np.random.default_rng(4).normal(0.0, 0.002, (64, 64, 3))
     save_image(tmp_path / "t.png", np.clip(noisy, 0.0, None).astype(np.float32))
     result = fit_material(scene, [tmp_path / "t.png"], "red", init=START, sigma=0.002)
-    assert result.ok and 0.8 < result.chi2 < 1.1 and result.sigma > 0.002
+    assert result.ok and 0.9 < result.chi2 < 1.1 and result.sigma > 0.002
 
 
 def test_one_pixel_for_ten_unknowns_is_underdetermined(noisy_sphere):

@@ -14,8 +14,9 @@ BAND sigma of a bound the target is clipped at; `engine.fit` leaves them out (we
 again from the first solution, counting their values as censored -- unless that would leave no more
 entries than unknowns: then the first fit is kept, every parameter flagged poorly determined (its
 values rest on clipped noise). Only when the noise is real
-(sigma above twice the targets' quantisation floor: a noise-free render keeps its pixels, whose
-residuals are 0 there anyway) and the fit has no texels.
+(sigma above twice the targets' quantisation floor -- the rms rounding of their used values,
+`noise.quantisation`, where a noise-free file's sigma sits --: a noise-free render keeps its pixels,
+whose residuals are the rounding there) and the fit has no texels.
 
 A zero is not always clipped noise: where no light reaches a surface and nothing is ambient (the
 unlit side of a sphere), the target is 0 because the scene is dark there, and the model is exactly

@@ -190,8 +190,9 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
         masks: per target (H, W) bool (True: the pixel counts); weights: per target (H, W[, 3]) >= 0.
         init: name -> starting value, overriding the scene's (a texture: an (H_t, W_t, 3) image,
             row 0 at the top, which also sets the texel grid, or a value for every texel).
-        sigma: the targets' pixel noise (linear units) before quantisation: a file's (one code
-            step / sqrt(12)) is added in quadrature; default: estimated (see `fit.stats`).
+        sigma: the targets' pixel noise (linear units) before quantisation: a file's (the rms
+            rounding of the used values, `fit.noise.quantisation`) is added in quadrature; default:
+            estimated (see `fit.stats`).
         ceiling: the value where the targets clip (censored pixels: the model need only reach it);
             default: 1.0 for 8/16-bit targets, detected from ties at the maximum for float data;
             False: none.

@@ -11,8 +11,10 @@ gradual shading error), so the estimate sees the noise, not the mismatch. With f
 MIN_NOISE_PIXELS such pixels (a small, thin or scattered mask) the noise is unknown -- the residuals
 alone cannot tell noise from a model's error -- unless given: the fit then reports sigma and chi2 as
 nan and `noise_unknown`, and makes no claim about the model. (A refit without clipped pixels takes
-the first fit's estimate.) It is floored at the targets' quantisation: one step / sqrt(12) for targets from
-8- or 16-bit files (`Setup.sigma_floor`), FLOAT_SIGMA for float data (float32 rounding of a render is ~1e-7).
+the first fit's estimate.) It is floored at the targets' quantisation (`Setup.sigma_floor`): for targets from 8- or 16-bit
+files the rms rounding error of the used values, each value's own code step in linear units /
+sqrt(12) (`noise.quantisation`: an sRGB file's step is 1 / 12.92 of the sample step in the darks,
+2.275 times it at white), FLOAT_SIGMA for float data (float32 rounding of a render is ~1e-7).
 
     chi2_red = sum_i w_i r_i^2 / (w_mean sigma^2 (N - p))
 
