@@ -279,8 +279,7 @@ def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, 
     - an estimated one: `mismatch` when chi2 > max(t, MISMATCH_CHI2); `suspected` when t < chi2 <=
       MISMATCH_CHI2: the residuals exceed the estimated noise by more than the estimate's spread,
       but an estimate can be off for a correct model where the noise is not white -- correlated
-      (a pixel filter), quantised noise-free values (POV-Ray scene A as a noise-free 8-bit PNG:
-      chi2 1.30 at the quantisation floor), a renderer's pixel integration against difflab's centre
+      (a pixel filter), a renderer's pixel integration against difflab's centre
       sample (Mitsuba's diffuse sphere at 64 spp: chi2 1.12-1.25, kd 3e-5 off, z up to 8) -- so
       the model is not judged: give sigma to judge it. Measured wrong models in that band: POV-Ray
       glass without its shadow absorption and TIR rim (chi2 1.13-1.55, kt 43-73 stderr off),
