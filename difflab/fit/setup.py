@@ -244,8 +244,8 @@ class Setup:
                 touched = kept.touched((tree_ids, tuple(crossing)), lambda: tree_influence(record, tree_ids, crossing))
             else:
                 touched = kept.touched((tuple(ids), all_surfaces), lambda: influence(record, ids, all_surfaces))
-            views.append(self._seen(View(image=image, mask=mask, weighting=weight, ceiling=np.inf, step=step or 0.0, gamma=gamma,
-                                         nonfinite=nonfinite, record=record, scene=view_scene, used=touched,
+            views.append(self._seen(View(image=image, mask=mask, weighting=weight, ceiling=np.inf, step=step or 0.0,
+                                         gamma=gamma, nonfinite=nonfinite, record=record, scene=view_scene, used=touched,
                                          kept=kept if store is not None else None, touched=touched), weight))
         return views
 
