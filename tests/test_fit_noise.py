@@ -1,8 +1,9 @@
-"""The noise estimate's block arithmetic (`fit.noise.estimate_sigma`) against its first, plain
-implementation kept here as the reference (difflab a38417f): the same sigma to 1e-12 and the same
-number of Laplacians on random residual images -- masks per pixel and per channel, weights,
-infinite and NaN residuals, blocks cut by the image's edge or by the mask (fewer than a quarter
-picked: the channel's level), images too small for a block, several views at once."""
+"""The noise estimate's arithmetic (`fit.noise.estimate_sigma`) against a plain implementation kept
+here as the reference, for one level per channel (no signal: the median of its picked L^2 values,
+read from all of them below NOISE_SAMPLE): the same sigma to 1e-12 and the same number of
+Laplacians on random residual images -- masks per pixel and per channel, weights, infinite and NaN
+residuals, boxes cut by the mask, images too small for a Laplacian, several views at once. (The
+levels by intensity: `test_fit_stats`.)"""
 
 import math
 
@@ -14,25 +15,13 @@ from difflab.fit.noise import estimate_sigma
 
 
 def reference_levels(square, centre):
-    """(h, w, 3) each L^2 value's block level, one block at a time (the first implementation)."""
-    h, w, _ = square.shape
-    b = noise.NOISE_BLOCK
-    padded = np.full((-(-h // b) * b, -(-w // b) * b, 3), np.inf)
-    padded[:h, :w] = np.where(centre, square, np.inf)
-    blocks = padded.reshape(padded.shape[0] // b, b, padded.shape[1] // b, b, 3).transpose(0, 2, 4, 1, 3)
-    ordered = np.sort(blocks.reshape(blocks.shape[:3] + (b * b,)), axis=-1)
-    count = np.count_nonzero(ordered < np.inf, axis=-1)
-    middle = [np.maximum((count - 1) // 2, 0)[..., None], (count // 2)[..., None]]
-    level = sum(np.take_along_axis(ordered, k, axis=-1)[..., 0] for k in middle) / 2.0
-    full = count >= b * b // 4
-    whole = [np.median(level[..., c][full[..., c]]) if full[..., c].any() else
-             np.median(square[..., c][centre[..., c]]) if centre[..., c].any() else 0.0 for c in range(3)]
-    level = np.where(full, level, np.asarray(whole))
-    return np.repeat(np.repeat(level, b, axis=0), b, axis=1)[:h, :w] / noise.MEDIAN_CHI2_1
+    """(h, w, 3) each L^2 value's level: its channel's median picked value / MEDIAN_CHI2_1."""
+    median = [np.median(square[..., c][centre[..., c]]) if centre[..., c].any() else 0.0 for c in range(3)]
+    return np.broadcast_to(np.asarray(median), square.shape) / noise.MEDIAN_CHI2_1
 
 
 def reference_sigma(images, used_maps, weight_maps=None, interior=True):
-    """`estimate_sigma` as first written: full-size arrays, boolean selections."""
+    """`estimate_sigma` without a signal, plainly: full-size arrays, boolean selections."""
     num = den = 0.0
     count = 0
     for k, (image, used) in enumerate(zip(images, used_maps)):
@@ -100,11 +89,11 @@ KINDS = ["disc", "holes", "sparse", "channels", "all", "none"]
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_block_arithmetic_matches_the_reference_implementation(seed):
+def test_the_estimate_matches_the_reference_implementation(seed):
     """Per seed: 20 random single views (a size, mask kind, dtype, weights or none, interior or not,
     spikes and non-finite entries) and 5 sets of 2-3 views, each equal to the reference: both None
     (too few values, no weight), or sigma within 1e-12 and the same count. The cases cover every
-    branch: capped values, blocks short of a quarter picked, channels with no such block."""
+    branch: capped values, non-finite ones left out, channels with none picked."""
     rng = np.random.default_rng(seed)
 
     def view():
@@ -133,30 +122,17 @@ def test_block_arithmetic_matches_the_reference_implementation(seed):
     assert seen >= {"sigma", "none"}
 
 
-def levels_and_counts(image, centre):
-    """The new code's block levels of an image's Laplacians over `centre` (h, w, 3), their blocks of
-    L^2 and how many of each are picked."""
-    magnitude = noise._magnitudes(image, centre)
-    square = np.square(magnitude, dtype=np.float64)
-    count = np.count_nonzero(square < np.inf, axis=-1)
-    magnitude.sort(axis=-1)
-    return noise._block_levels(square, magnitude, count), square, count
-
-
 def test_the_cases_reach_every_branch():
-    """The random cases above exercise what they claim: a disc's edge blocks have fewer than a
-    quarter of their values picked beside full ones, spikes are capped, non-finite values are left
-    out; a sparse scatter's interior leaves no block with a quarter (each channel's level from all
-    its values)."""
+    """The random cases above exercise what they claim: spikes are capped, non-finite values are
+    left out of the count."""
     rng = np.random.default_rng(0)
     image = residual(rng, 71, 90, np.float64, 0.03, 0.01)
-    centre = np.repeat(mask(rng, 71, 90, "disc")[1:-1, 1:-1, None], 3, axis=2)
-    level, square, count = levels_and_counts(image, centre)
-    assert np.any((count > 0) & (count < 16)) and np.any(count == 64)
-    assert np.any((square > noise.CAP_Z2 * level) & (square < np.inf))  # capped
-    assert 0 < np.sum(count) < np.count_nonzero(centre)  # the non-finite ones left out
-    used = mask(rng, 40, 17, "sparse")
-    across = used[:, :-2] & used[:, 1:-1] & used[:, 2:]
-    centre = np.repeat((across[:-2] & across[1:-1] & across[2:])[..., None], 3, axis=2)
-    count = levels_and_counts(residual(rng, 40, 17, np.float32, 0.0, 0.0), centre)[2]
-    assert 0 < np.sum(count) and np.all(count < 16)
+    used = mask(rng, 71, 90, "disc")
+    centre = np.repeat(used[1:-1, 1:-1, None], 3, axis=2)
+    r2 = image[:-2] - 2 * image[1:-1] + image[2:]
+    with np.errstate(invalid="ignore"):
+        square = np.square(r2[:, :-2] - 2 * r2[:, 1:-1] + r2[:, 2:])
+    picked = centre & np.isfinite(square)
+    level = reference_levels(square, picked)
+    assert np.any(picked & (square > noise.CAP_Z2 * level))  # capped
+    assert 0 < estimate_sigma([image], [used], interior=False)[1] == np.count_nonzero(picked) < np.count_nonzero(centre)

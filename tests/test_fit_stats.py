@@ -7,13 +7,16 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 from scipy.sparse.linalg import ArpackNoConvergence
+from test_fit_helpers import scene_dict
 
+from difflab import Scene
 from difflab.fit import inverse_diagonal as inverse
 from difflab.fit import noise, stats
 from difflab.fit.noise import chi2_spread, estimate_sigma
 from difflab.fit.stats import MISMATCH_CHI2, covariance_diagonal, covariance_unscaled, fit_statistics, standard_errors
 from difflab.fit.solvers import result_name
 from difflab.fit.sparse_jacobian import read_graph, stats_blocks
+from difflab.renderers.api import render_frame
 
 
 def test_reduced_chi_square_counts_uncensored_values_less_parameters():
@@ -88,12 +91,54 @@ def test_chi_square_spread_with_an_estimated_sigma_is_what_white_noise_gives():
     chi2 = []
     for _ in range(400):
         image = rng.normal(size=(40, 40, 3))
-        sigma, count = estimate_sigma([image], [used])
+        sigma, count, _ = estimate_sigma([image], [used])
         chi2.append(np.mean(image * image) / sigma ** 2)
     predicted = chi2_spread(image.size, count)
     assert count == 38 * 38 * 3
     assert np.std(chi2) == pytest.approx(predicted, rel=0.15)
     assert abs(np.mean(chi2) - 1.0) < 3 * predicted / 20
+
+
+def test_chi_square_spread_counts_the_values_that_weights_and_varying_noise_leave():
+    """A weighted chi-square of noise that varies spreads as one of fewer values: n_eff = (sum w v)^2 /
+    sum w^2 v^2 (v the entries' noise levels), `share` = n_eff / n. Pure noise, 40 x 40 x 3, 300 seeds:
+    a 7 x 7 spot weighted 100 spreads 0.149 (predicted 0.155; the formula without share 0.036), noise
+    rising 0.1 to 1 across the image with a signal of the same ramp 0.048 (predicted 0.047): within
+    20 %."""
+    rng = np.random.default_rng(5)
+    used = np.ones((40, 40), bool)
+    yy, xx = np.mgrid[:40, :40]
+    spot = np.where((abs(yy - 20) < 4) & (abs(xx - 20) < 4), 100.0, 1.0)
+    ramp = 0.1 + 0.9 * xx / 40.0
+    for weight, scale, signal in ((spot, np.ones((40, 40)), None), (np.ones((40, 40)), ramp, ramp)):
+        weight, scale = (np.repeat(a[..., None], 3, axis=2) for a in (weight, scale))
+        chi2, predicted = [], []
+        for _ in range(300):
+            image = scale * rng.normal(size=scale.shape)
+            sigma, count, share = estimate_sigma([image], [used], [weight], signals=None if signal is None else [scale])
+            chi2.append(np.sum(weight * image ** 2) / np.sum(weight) / sigma ** 2)
+            predicted.append(chi2_spread(image.size, count, share))
+        assert np.std(chi2) == pytest.approx(np.mean(predicted), rel=0.2)
+        assert np.std(chi2) > 1.2 * chi2_spread(image.size, count)  # (without the share: too narrow)
+
+
+def test_noise_levels_follow_the_signal_on_a_high_contrast_texture():
+    """difflab's sphere over a checker floor of kd 0.9 / 0.05 (48 x 48) and noise of 3 % of the
+    signal, the true noise alone: the estimate is its mean variance within 12 % (0.97-1.10 over
+    seeds 0-9), with the levels binned by the model's intensity. One level for all (or 8 x 8 spatial
+    blocks, whose median in a block straddling a bright and a dark square is the dark pixels') caps
+    the bright pixels' real noise away: 3.6-4.2 (the blocks: 1.46 at 64 x 64), so a correct fit read
+    as a mismatch."""
+    d = scene_dict(size=48)
+    d["materials"]["floor"] = {"kd": [0.9] * 3, "checker": {"size": 0.5, "ka2": [0, 0, 0], "kd2": [0.05] * 3}}
+    d["camera"]["eye"] = [0, 3, 4]
+    clean = render_frame(Scene.from_dict(d)).image.astype(np.float64)
+    used = np.ones(clean.shape[:2], bool)
+    for seed in range(3):
+        noise = 0.03 * clean * np.random.default_rng(seed).normal(size=clean.shape)
+        variance = np.mean(noise[1:-1, 1:-1] ** 2)
+        assert variance / estimate_sigma([noise], [used], signals=[clean])[0] ** 2 == pytest.approx(1.0, abs=0.12)
+        assert variance / estimate_sigma([noise], [used])[0] ** 2 > 3.0
 
 
 @pytest.mark.parametrize("censored, silent", [(1, 0), (0, 1), (2, 0)])
@@ -243,7 +288,7 @@ def test_noise_estimate_is_the_robust_laplacian_over_the_used_pixels(interior, p
     assert lap[centre].min() ** 2 * 16 > lap[centre].max() ** 2
     plain = math.sqrt(np.mean(lap[centre] ** 2) / 36.0 / noise.CAP_MEAN)
     weighted = math.sqrt(np.sum(weights[centre] * lap[centre] ** 2) / np.sum(weights[centre]) / 36.0 / noise.CAP_MEAN)
-    got, count = estimate_sigma([image], [used], interior=interior)
+    got, count, _ = estimate_sigma([image], [used], interior=interior)
     assert got == pytest.approx(plain, rel=1e-12) and count == np.count_nonzero(centre)
     assert estimate_sigma([image], [used], [weights], interior=interior)[0] == pytest.approx(weighted, rel=1e-12)
     assert estimate_sigma([image], [np.zeros_like(used)], interior=interior) is None  # too few pixels
@@ -285,19 +330,22 @@ def test_noise_estimate_leaves_out_zero_weight_channels():
 @pytest.mark.parametrize("seed", [0, 1])
 def test_noise_estimate_is_the_mean_variance_of_noise_that_varies(seed):
     """Noise whose standard deviation varies over the image (a renderer's, with the signal: here 0.002
-    to 0.05 along a smooth ramp, 96 x 96): sigma^2 is the mean of the variances over the interior
-    pixels within 5 % (0.965-1.003 over seeds 0-3) -- what a chi-square's mean of r^2 compares with
-    (a median of |L| read 0.48-0.50 of it: a correct fit's chi2 2.0). With weights, the weighted
-    mean of the variances."""
+    to 0.05 along a smooth ramp, 96 x 96, proportional to a signal of the same ramp): sigma^2 is the
+    mean of the variances over the interior pixels within 5 % (0.968-1.004 over seeds 0-3) -- what
+    a chi-square's mean of r^2 compares with (a median of |L| read 0.48-0.50 of it: a correct fit's
+    chi2 2.0). With weights, the weighted mean of the variances. Without the signal one level per
+    channel caps the noisiest pixels' real noise away: 0.61-0.63 of it (the levels follow the signal)."""
     rng = np.random.default_rng(seed)
     scale = np.linspace(0.002, 0.05, 96)[None, :, None] * np.ones((96, 96, 3))
     image = scale * rng.normal(size=scale.shape)
     used = np.ones((96, 96), bool)
     inner = scale[1:-1, 1:-1]
-    assert estimate_sigma([image], [used])[0] ** 2 == pytest.approx(np.mean(inner ** 2), rel=0.05)
+    got = estimate_sigma([image], [used], signals=[scale])[0] ** 2
+    assert got == pytest.approx(np.mean(inner ** 2), rel=0.05)
+    assert estimate_sigma([image], [used])[0] ** 2 < 0.7 * got
     weights = np.where(np.arange(96)[None, :, None] < 48, 1.0, 0.1) * np.ones((96, 96, 3))
     want = np.sum(weights[1:-1, 1:-1] * inner ** 2) / np.sum(weights[1:-1, 1:-1])
-    assert estimate_sigma([image], [used], [weights])[0] ** 2 == pytest.approx(want, rel=0.05)
+    assert estimate_sigma([image], [used], [weights], signals=[scale])[0] ** 2 == pytest.approx(want, rel=0.05)
 
 
 def texture_jacobian(rng, side=12, scalars=2):

@@ -68,8 +68,9 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         residuals = setup.residual_images(r)
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and finite_gram(gram))
         silent, silent_entries = silent_pixels(setup.views, r)
-        sigma, noise_values = views_noise(setup.views, residuals, silent, setup.sigma_given, setup.sigma_floor,
-                                          setup.sigma_fallback, setup.quantisation) if finite else (float("nan"), 0)
+        sigma, noise_values, share = (views_noise(setup.views, residuals, silent, setup.sigma_given, setup.sigma_floor,
+                                                  setup.sigma_fallback, setup.quantisation)
+                                      if finite else (float("nan"), 0, 1.0))
         noise_unknown = finite and sigma is None
         mean_weight = setup.weight_total / counted.size if counted.size else 1.0  # (unit weights: 1)
         sigma = float("nan") if sigma is None else sigma
@@ -77,7 +78,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             unseen = sum(int(np.count_nonzero(~seen[p.key])) * (p.size // seen[p.key].size) for p in layout
                          if p.key in seen)  # texels no pixel reads: no unknowns of the data's
             st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size - unseen, silent_entries,
-                                sigma_given=setup.sigma_given is not None, skip=skip, noise_values=noise_values,
+                                sigma_given=setup.sigma_given is not None, skip=skip, noise_values=noise_values, noise_share=share,
                                 mean_weight=mean_weight, rcond=singular_rcond(setup.x64))
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], mean_weight * QUANTISATION_SIGMA ** 2)))

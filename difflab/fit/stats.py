@@ -3,8 +3,9 @@ standard errors, poorly determined parameters and PSNR.
 
 Noise: `sigma` when given, else estimated from the residual images at the solution (`fit.noise`) by Immerkaer's
 Laplacian operator (L = R * [1 -2 1; -2 4 -2; 1 -2 1] has variance 36 sigma^2 for white noise) as the
-mean noise variance, sigma^2 = sum w L^2 / (36 sum w) with sharp outliers counted at their block's
-level (`estimate_sigma`), over the pixels whose 3 x 3 neighbourhood is all used and uncensored --
+mean noise variance, sigma^2 = sum w L^2 / (36 sum w) with sharp outliers counted at the noise level
+of the values of their intensity in the fitted model's image (`estimate_sigma`), over the pixels
+whose 3 x 3 neighbourhood is all used and uncensored --
 per channel where weights of 0 leave some channels of used pixels out. sigma is in the targets'
 units whatever the weights. The Laplacian removes what a wrong model leaves smoothly (an offset, a
 gradual shading error), so the estimate sees the noise, not the mismatch. With fewer than
@@ -262,7 +263,8 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
 
 
 def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, size: int, silent: int = 0,
-                   sigma_given: bool = False, skip=None, noise_values: int = 0, mean_weight: float = 1.0,
+                   sigma_given: bool = False, skip=None, noise_values: int = 0, noise_share: float = 1.0,
+                   mean_weight: float = 1.0,
                    rcond: float = SINGULAR_RCOND) -> dict:
     """s2 = sse / dof (sse: the sum of squares of the `entries` weighted residuals sqrt(w) r; dof =
     N - p, N entries neither censored nor `silent` (noise-free zeros), p = `size` fitted entries the
@@ -272,8 +274,9 @@ def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, 
     not judged), the verdict on the model, and diag (J^T J)^-1 (p,) from gram = J^T J (p, p), dense
     or sparse (`covariance_diagonal`; nan at `skip`; singular below `rcond`: `singular_rcond`).
 
-    With t = 1 + 5 `chi2_spread(dof, noise_values)` (five standard deviations of chi2 for a correct
-    model; `noise_values` Laplacians gave an estimated sigma, 0: given):
+    With t = 1 + 5 `chi2_spread(dof, noise_values, noise_share)` (five standard deviations of chi2
+    for a correct model; `noise_values` Laplacians gave an estimated sigma, 0: given; `noise_share`:
+    the share of them that unequal weights and noise levels leave, `estimate_sigma`):
     - a given sigma is the truth: `mismatch` when chi2 > t (POV-Ray's brilliance 1.2, outside the
       model, fitted with its true sigma 0.01: chi2 1.83 over ~3600 entries, flagged);
     - an estimated one: `mismatch` when chi2 > max(t, MISMATCH_CHI2); `suspected` when t < chi2 <=
@@ -296,7 +299,7 @@ def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, 
                 "suspected": False, "diag": covariance_diagonal(gram, skip, rcond), "underdetermined": True}
     s2 = sse / dof
     chi2 = math.nan if math.isnan(sigma) else s2 / (mean_weight * sigma * sigma) if sigma > 0 else math.inf
-    threshold = 1.0 + 5.0 * chi2_spread(dof, 0 if sigma_given else noise_values)
+    threshold = 1.0 + 5.0 * chi2_spread(dof, 0 if sigma_given else noise_values, noise_share)
     mismatch = bool(chi2 > (threshold if sigma_given else max(MISMATCH_CHI2, threshold)))
     suspected = bool(not sigma_given and not mismatch and chi2 > threshold)
     return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "suspected": suspected,
