@@ -239,7 +239,7 @@ def test_a_textured_material_goes_through_the_ray_tree(tmp_path):
 def test_a_correct_model_of_a_high_contrast_texture_with_noise_that_grows_with_the_signal_is_ok():
     """The sphere over a checker floor of kd 0.9 / 0.05 (48 x 48), noise 3 % of the signal, fitted
     with the right model (kd, ks, n of both): ok, chi2 0.97-1.02 over seeds 0-2 (the noise levels
-    by the model's intensity). With 8 x 8 spatial blocks' levels it read 1.15-1.26: 2 of 3
+    by the target's intensity). With 8 x 8 spatial blocks' levels it read 1.15-1.26: 2 of 3
     `mismatch_suspected` (64 x 64: 20 of 20 at chi2 1.38)."""
     d = scene_dict(size=48)
     d["materials"]["floor"] = {"kd": [0.9] * 3, "checker": {"size": 0.5, "ka2": [0, 0, 0], "kd2": [0.05] * 3}}
@@ -263,7 +263,7 @@ def test_unlit_pixels_leave_the_noise_estimate_and_the_chi_square():
     fit is not flagged: the estimate reads only the pixels with lit neighbours, not the brightest
     (noisiest) limb, so it runs up to 17 % low on these 443 pixels (0.83-1.05 of it, chi2 0.95-1.52
     over 6 seeds: ok, the threshold of so few values being wide). (The noise levels binned by the
-    model's intensity: 5 bins a channel here; in one, the limb's noise was capped away: chi2 1.9-2.4,
+    target's intensity: 5 bins a channel here; in one, the limb's noise was capped away: chi2 1.9-2.4,
     5 of 6 flagged model_mismatch.)"""
     from difflab.fit.noise import estimate_sigma
 

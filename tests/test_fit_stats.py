@@ -125,7 +125,7 @@ def test_chi_square_spread_counts_the_values_that_weights_and_varying_noise_leav
 def test_noise_levels_follow_the_signal_on_a_high_contrast_texture():
     """difflab's sphere over a checker floor of kd 0.9 / 0.05 (48 x 48) and noise of 3 % of the
     signal, the true noise alone: the estimate is its mean variance within 12 % (0.97-1.10 over
-    seeds 0-9), with the levels binned by the model's intensity. One level for all (or 8 x 8 spatial
+    seeds 0-9), with the levels binned by the signal's intensity. One level for all (or 8 x 8 spatial
     blocks, whose median in a block straddling a bright and a dark square is the dark pixels') caps
     the bright pixels' real noise away: 3.6-4.2 (the blocks: 1.46 at 64 x 64), so a correct fit read
     as a mismatch."""

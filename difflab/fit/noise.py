@@ -1,8 +1,7 @@
 """The pixel noise of a fit's targets, from its residual images at the solution (`estimate_sigma`,
 `views_noise`), the pixels that carry none (`silent_pixels`), the rounding error of their files'
-codes (`quantisation`), and how far a reduced chi-square
-against an estimated noise spreads for a correct model (`chi2_spread`). `fit.stats` describes what
-the fit reports with them."""
+codes (`quantisation`), and how far a reduced chi-square against an estimated noise spreads for a
+correct model (`chi2_spread`). `fit.stats` describes what the fit reports with them."""
 
 from __future__ import annotations
 
@@ -45,13 +44,12 @@ def _levels(square: np.ndarray, intensity: np.ndarray | None) -> tuple[np.ndarra
     narrow enough to follow the level (a side-lit sphere's 400 values a channel, one bin: its
     bright limb's noise capped away, a correct fit read chi2 2.0-2.4, flagged; 5 bins: 0.95-1.52,
     ok), wide enough that a median is a level (bins of 64 values: a flat signal's chi2 spread 1.5x
-    the formula's; of 4 sqrt(m): 1.2x). Where the noise
-    grows with the signal (a camera's, a renderer's, 8-bit code steps), the level follows it, and a
-    model's sharp errors -- an edge, a penumbra, a rim: few values among those of their intensity --
-    stay outliers of their bin. (Spatial blocks did not: in a block straddling bright and dark
-    pixels the median was the dark pixels', the bright ones' real noise was capped away, and a
-    correct model of a checker floor with noise of 3 % of the signal read chi2 1.38:
-    `mismatch_suspected` 20 times of 20.)"""
+    the formula's; of 4 sqrt(m): 1.2x). Where the noise grows with the signal (a camera's, a
+    renderer's, 8-bit code steps), the level follows it, and a model's sharp errors -- an edge, a
+    penumbra, a rim: few values among those of their intensity -- stay outliers of their bin.
+    (Spatial blocks did not: in a block straddling bright and dark pixels the median was the dark
+    pixels', the bright ones' real noise was capped away, and a correct model of a checker floor
+    with noise of 3 % of the signal read chi2 1.38: `mismatch_suspected` 20 times of 20.)"""
     bins = 1 if intensity is None else min(max(int(math.sqrt(square.size)) // 4, 1), NOISE_BINS)
     if bins == 1:
         return np.zeros(1), np.array([np.median(square) / MEDIAN_CHI2_1])
@@ -79,8 +77,8 @@ def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True, signal
     errors (an edge, a shadow's penumbra, a rim) are kept out: an L^2 above CAP_Z2 = 9 (three
     standard deviations) times its noise level v_c counts as v_c; Gaussian noise keeps CAP_MEAN =
     0.973 of its mean square so, corrected for. v_c is the level of the values of similar signal
-    (`_levels`): each L's intensity is the mean of `signals` (per image (H, W, 3): the model's
-    image; None: one level per channel) over its nine pixels weighted as their variances are. share:
+    (`_levels`): each L's intensity is the mean of `signals` (per image (H, W, 3): the target;
+    None: one level per channel) over its nine pixels weighted as their variances are. share:
     how many of M equally weighted values of equal noise the weighted values of unequal noise count
     as, per value (`chi2_spread`; its sums from the levels' sample). A used map is (H, W) bool (every
     channel of a used pixel) or (H, W, 3) (per channel: where some channels have weight 0, their
@@ -164,17 +162,16 @@ def views_noise(views, residual_images, silent, given: float | None, floor: floa
                 quantisation: float = 0.0) -> tuple[float | None, int, float]:
     """The pixel noise sigma of a fit's views, in the targets' units, the number of Laplacian values
     M it was estimated from (0 when given or taken from `fallback`) and their `estimate_sigma`
-    share (1 for none): `given` -- the noise
-    before quantisation, to which the targets' `quantisation` (the rms rounding error of their used
-    values, 0 for float data: one sigma serves every view) is added in quadrature: a correct fit
-    of an 8-bit file with its true noise 0.002 given came out at chi2 1.2, flagged -- or estimated
-    (`estimate_sigma`, each entry weighted by its view's weight) from the plain residual images
-    (H, W, 3) at the solution, their levels by the model's image (target + residual), over the used
-    pixels but the `silent` (per view (U,) bool,
-    `silent_pixels`) and the censored ones -- per channel where a weight of 0 leaves a used pixel's
-    channel out -- and at least `floor` (the quantisation's, `Setup.sigma_floor`). Where too few
-    pixels allow that:
-    `fallback` when given (a refit's, the first fit's sigma), else None (unknown)."""
+    share (1 for none): `given` -- the noise before quantisation, to which the targets'
+    `quantisation` (the rms rounding error of their used values, 0 for float data: one sigma serves
+    every view) is added in quadrature: a correct fit of an 8-bit file with its true noise 0.002
+    given came out at chi2 1.2, flagged -- or estimated (`estimate_sigma`, each entry weighted by
+    its view's weight) from the plain residual images (H, W, 3) at the solution, their levels by the
+    targets' intensities (the data's: two fits a hair apart bin alike), over the used pixels but
+    the `silent` (per view (U,) bool, `silent_pixels`) and the censored ones -- per channel where a
+    weight of 0 leaves a used pixel's channel out -- and at least `floor` (the quantisation's,
+    `Setup.sigma_floor`). Where too few pixels allow that: `fallback` when given (a refit's, the
+    first fit's sigma), else None (unknown)."""
     if given is not None:
         return (math.hypot(given, quantisation) if quantisation else given), 0, 1.0
     clean = []
@@ -188,8 +185,8 @@ def views_noise(views, residual_images, silent, given: float | None, floor: floa
             clean[i].reshape(-1)[view.pixels[left_out]] = False
         if view.weighting is not None and not np.all(view.weights > 0):
             clean[i] = in_channels(clean[i]) & (view.weighting > 0)
-    models = [view.image + residual for view, residual in zip(views, residual_images)]  # (finite where picked)
-    estimate = estimate_sigma(residual_images, clean, [view.weighting for view in views], signals=models)
+    estimate = estimate_sigma(residual_images, clean, [view.weighting for view in views],
+                              signals=[view.image for view in views])
     if estimate is None:
         return fallback, 0, 1.0
     return max(estimate[0], floor), estimate[1], estimate[2]

@@ -4,7 +4,7 @@ standard errors, poorly determined parameters and PSNR.
 Noise: `sigma` when given, else estimated from the residual images at the solution (`fit.noise`) by Immerkaer's
 Laplacian operator (L = R * [1 -2 1; -2 4 -2; 1 -2 1] has variance 36 sigma^2 for white noise) as the
 mean noise variance, sigma^2 = sum w L^2 / (36 sum w) with sharp outliers counted at the noise level
-of the values of their intensity in the fitted model's image (`estimate_sigma`), over the pixels
+of the values of their intensity in the targets (`estimate_sigma`), over the pixels
 whose 3 x 3 neighbourhood is all used and uncensored --
 per channel where weights of 0 leave some channels of used pixels out. sigma is in the targets'
 units whatever the weights. The Laplacian removes what a wrong model leaves smoothly (an offset, a
