@@ -14,7 +14,7 @@ from .targets import in_channels
 
 MIN_NOISE_PIXELS = 48  # pixel channels
 NOISE_BINS = 32  # the most intensity bins of a channel (sqrt(m) / 4 of m values: 4 sqrt(m) values each)
-NOISE_SAMPLE = 8192  # the most Laplacians of a channel the levels are read from (every s-th)
+NOISE_SAMPLE = 4096  # the most Laplacians of a channel the levels are read from (every s-th)
 CAP_Z2 = 9.0  # an L^2 above 9 times its noise level (three standard deviations) counts as that level
 MEDIAN_CHI2_1 = 0.454936423119572  # the median of a chi-square of 1 degree of freedom
 CAP_MEAN = 0.97340891  # E[z^2 if z^2 <= 9 else 1], z ~ N(0, 1): P(chi2_3 <= 9) + P(chi2_1 > 9)
