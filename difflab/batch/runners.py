@@ -43,9 +43,12 @@ def leave_if_importing_main() -> None:
 
 def _refuse_unguarded(processes) -> None:
     """DifflabError naming the fix when a worker of `processes` left with status UNGUARDED."""
-    for process in processes:
-        process.join(1.0)  # a dead worker's status: the pool broke because it ended
-    if any(process.exitcode == UNGUARDED for process in processes):
+    deadline = time.monotonic() + 5.0  # a dead worker's status: the pool broke because one ended, but its exit
+    codes = [p.exitcode for p in processes]  # status can lag the pool's noticing (join(1.0) returned None in 3 of 5)
+    while UNGUARDED not in codes and None in codes and time.monotonic() < deadline:
+        time.sleep(0.01)
+        codes = [p.exitcode for p in processes]
+    if UNGUARDED in codes:
         script = getattr(sys.modules["__main__"], "__file__", "the main script")
         raise DifflabError(f"fit_many: the worker processes start by importing {script}, and its top level calls "
                            "fit_many again; put the call under 'if __name__ == \"__main__\":' (docs/batch.md). "
