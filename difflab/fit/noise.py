@@ -166,7 +166,7 @@ def views_noise(views, residual_images, silent, given: float | None, floor: floa
     share (1 for none): `given` -- the noise before quantisation, to which the targets'
     `quantisation` (the rms rounding error of their used values, 0 for float data: one sigma serves
     every view) is added in quadrature: a correct fit of an 8-bit file with its true noise 0.002
-    given came out at chi2 1.2, flagged -- or estimated (`estimate_sigma`, each entry weighted by
+    given came out at chi2 1.2, flagged; its share is the weights' (`weight_share`) -- or estimated (`estimate_sigma`, each entry weighted by
     its view's weight) from the plain residual images (H, W, 3) at the solution, their levels by the
     targets' intensities (the data's: two fits a hair apart bin alike), over the used pixels but
     the `silent` (per view (U,) bool, `silent_pixels`) and the censored ones -- per channel where a
@@ -174,7 +174,7 @@ def views_noise(views, residual_images, silent, given: float | None, floor: floa
     `Setup.sigma_floor`). Where too few pixels allow that: `fallback` when given (a refit's, the
     first fit's sigma), else None (unknown)."""
     if given is not None:
-        return (math.hypot(given, quantisation) if quantisation else given), 0, 1.0
+        return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views)
     clean = []
     for i, view in enumerate(views):
         left_out = silent[i] if silent else np.zeros(view.pixels.size, bool)
@@ -191,6 +191,24 @@ def views_noise(views, residual_images, silent, given: float | None, floor: floa
     if estimate is None:
         return fallback, 0, 1.0
     return max(estimate[0], floor), estimate[1], estimate[2]
+
+
+def weight_share(views) -> float:
+    """n_eff / n of the entries a fit counts (`View.counted`) under their weights w, for noise of one
+    level: (sum w)^2 / (n sum w^2) -- 1 for equal weights. A chi-square sum w r^2 / (sigma^2 sum w)
+    of white noise has variance 2 sum w^2 / (sum w)^2 = 2 / (n share) (`chi2_spread`)."""
+    total = square = 0.0
+    count = 0
+    for view in views:
+        if view.weighting is None:  # w = 1
+            n = int(np.count_nonzero(view.counted))
+            count, total, square = count + n, total + n, square + n
+            continue
+        weight = view.weights[view.counted]
+        count += weight.size
+        total += float(np.sum(weight))
+        square += float(np.dot(weight, weight))
+    return total * total / (count * square) if square > 0 else 1.0
 
 
 def quantisation(views) -> float:
@@ -222,7 +240,7 @@ def quantisation(views) -> float:
 
 def chi2_spread(dof: int, noise_values: int = 0, share: float = 1.0) -> float:
     """The standard deviation of a reduced chi-square over dof degrees of freedom for a correct model
-    (white noise): sqrt(2 / dof) with sigma known; with sigma estimated from M = `noise_values`
+    (white noise): sqrt(2 / (dof share)) with sigma known (share: `weight_share`); with sigma estimated from M = `noise_values`
     Laplacians of the same residuals (`estimate_sigma`: a mean of squares of L / 6, whose nine
     taps make neighbouring values correlated, sum of squared correlations (70 / 36)^2 = 3.78), the
     ratio of the two means of squares has variance 2 (3.78) / M + 2 / dof - 2 (2 / dof) (the two
@@ -234,7 +252,8 @@ def chi2_spread(dof: int, noise_values: int = 0, share: float = 1.0) -> float:
     share (pure noise, 40 x 40 x 3, 300 seeds: a 7 x 7 spot weighted 100 spreads 0.149, this 0.155,
     the formula without share 0.036; noise rising 0.1 to 1 across, 0.048, this 0.047; the
     reviewer's sphere with 3 % proportional noise, fitted: 0.085 over 40 seeds, all ok)."""
-    if noise_values <= 0:
-        return math.sqrt(2.0 / dof)
-    dof_eff, values_eff = dof * share, noise_values * share
+    dof_eff = dof * share
+    if noise_values <= 0:  # sigma given: sqrt(2 / n_eff) (`weight_share`)
+        return math.sqrt(2.0 / dof_eff)
+    values_eff = noise_values * share
     return math.sqrt(max(LAPLACIAN_CORRELATION / values_eff - 2.0 / dof_eff, 2.0 / dof_eff))
