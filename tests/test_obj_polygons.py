@@ -146,8 +146,9 @@ def test_absolute_indices_rewrites_each_relative_index_in_place():
 
 
 def test_a_carriage_return_leaves_relative_indices_relative_to_the_lines_above(tmp_path):
-    """A lone CR (here in a comment) sends the file to the line scan and trimesh; its relative
-    indices are still made absolute first. Before, they were not, and trimesh counted them from the
+    """A lone CR (here in a comment) ends a line, as in an old Mac file, and the `b` after it is no
+    plain line: the file goes to the line scan and trimesh; its relative indices are still made
+    absolute first. Before, they were not, and trimesh counted them from the
     end of the file: the first triangle landed on the second's vertices."""
     path = tmp_path / "cr.obj"
     path.write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nv 5 5 5\nv 6 5 5\nv 5 6 5\nf 4 5 6\n# a\rb\n")

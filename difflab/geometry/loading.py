@@ -26,7 +26,7 @@ from difflab.files import write_text_atomic
 from difflab.limits import MAX_COORD, MESH_FILE_BYTES, require_memory
 
 from .mesh import TriMesh, concatenate
-from .obj_text import KEYS, V, fan_corners, key_lines, line_keys, read_obj, table
+from .obj_text import KEYS, V, fan_corners, key_lines, line_keys, obj_lines, read_obj, table
 
 
 def _read_obj(path: str) -> bytes:
@@ -37,13 +37,13 @@ def _read_obj(path: str) -> bytes:
         raise MeshError(f"{path}: cannot read mesh file: {exc}") from None
 
 
-def _scan_obj_lines(lines: list[str], path: str) -> None:
-    """The line-by-line check, naming the first problem's line."""
+def _scan_obj_lines(data: bytes, path: str) -> None:
+    """The line-by-line check of LF-ended OBJ text (`obj_lines`), naming the first problem's line."""
     n_vertices = 0
     n_normals = 0
     n_faces = 0
     indices: list[tuple[int, int, int]] = []  # (line, index as written, absolute 1-based index)
-    for number, raw in enumerate(lines, start=1):
+    for number, raw in enumerate(data.decode("utf-8", errors="replace").split("\n"), start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
@@ -160,7 +160,8 @@ def load_mesh(path) -> TriMesh:
     over all a position's faces and a uv seam shades as the unsplit surface.
     A polygon a b c d ... is the fan of triangles (a, b, c), (a, c, d), ..., with its corners' uvs
     and normals (faces in file order where numpy reads the file, `obj_text`). A scene with several
-    geometries is concatenated with its node transforms applied. Every failure raises `MeshError`
+    geometries is concatenated with its node transforms applied. An OBJ's lines end at CR, LF or
+    CR LF alike (`obj_lines`). Every failure raises `MeshError`
     naming the path: missing file, unreadable or unparsable file, non-finite vertex, a file normal
     (OBJ `vn`, with its line) that is zero-length or not finite -- a normal is a direction, as for a
     mesh's `normals` inline in a scene --, face index out of range, no faces.
@@ -174,10 +175,10 @@ def load_mesh(path) -> TriMesh:
                    f"{os.path.getsize(path)} bytes", MeshError)
     text = None  # an OBJ file's text, as `read_obj` finds it (its `data`: indices made absolute)
     if path.lower().endswith(".obj"):
-        data = _read_obj(path)
+        data = obj_lines(_read_obj(path))
         text = read_obj(data)
         if not text.plain or not text.normals_valid:  # a bad `vn` line: the scan names it
-            _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)
+            _scan_obj_lines(data, path)
     if text is not None and text.arrays is not None:
         vertices, faces, normals, uvs, welds = text.arrays
         mesh = TriMesh(vertices, faces, normals, uvs, name=path, welds=welds)
@@ -188,7 +189,7 @@ def load_mesh(path) -> TriMesh:
     if text is not None and text.plain and (
             not text.vertices_parse or mesh.n_faces != text.n_triangles  # a garbled vertex, a dropped face
             or not np.all(np.abs(mesh.vertices) <= MAX_COORD)):  # or a value is out of range
-        _scan_obj_lines(data.decode("utf-8", errors="replace").splitlines(), path)  # names the line
+        _scan_obj_lines(data, path)  # names the line
     if not np.all(np.isfinite(mesh.vertices)):
         raise MeshError(f"{path}: vertex coordinates are not finite")
     if not np.all(np.abs(mesh.vertices) <= MAX_COORD):
@@ -198,7 +199,7 @@ def load_mesh(path) -> TriMesh:
 
 
 def with_file_welds(mesh: TriMesh, data: bytes) -> TriMesh:
-    """`mesh` (trimesh's reading of the OBJ text `data`) with `welds`: each vertex numbered by the
+    """`mesh` (trimesh's reading of the OBJ text `data`, LF-ended: `obj_lines`) with `welds`: each vertex numbered by the
     `v` line its corners name in the `f` lines (`fan_corners`) -- only the file says which copies of
     a position are one vertex (an OBJ without normals marks a hard edge by repeating a position in
     another `v` line). trimesh reorders the triangles (a polygon's fans after the triangles, a fan
@@ -206,7 +207,6 @@ def with_file_welds(mesh: TriMesh, data: bytes) -> TriMesh:
     corner positions (`by_positions`); triangles at the same positions pair in any order where they
     name the same `v` lines (a repeated face). Unchanged (no welds) where they do not match one to
     one, or two triangles at the same positions name different `v` lines (which is which is unknown)."""
-    data = data.replace(b"\r\n", b"\n")
     corners = fan_corners(data)
     starts, ends, code = line_keys(data)
     positions = table(key_lines(data, starts, ends, code, V)[0], KEYS[V], np.float64)
@@ -262,7 +262,7 @@ def _trimesh_load(path: str, obj: bytes | None = None, plain: bool = False) -> T
         raise
     except Exception as exc:  # trimesh raises many kinds on bad input
         if plain:  # the line scan names the problem better where it finds one
-            _scan_obj_lines(obj.decode("utf-8", errors="replace").splitlines(), path)
+            _scan_obj_lines(obj, path)
         raise MeshError(f"{path}: cannot read mesh: {type(exc).__name__}: {exc}") from None
     parts = _to_trimesh_list(loaded, path)
     if not parts:

@@ -53,7 +53,7 @@ class ObjText:
     make (a face of k corners: k - 2), whether the `v` lines parse as 3 numbers each and whether the
     `vn` lines are valid normals (`valid_normals`; plain text only), and (vertices, faces, normals or None, uvs or None, welds or None) as trimesh reads them
     (welds: each vertex's `v` index, 0-based, where vertices were split and there are no normals), or
-    None; `data`: the text read (CRLF as LF, indices made absolute: `absolute_indices`), which trimesh
+    None; `data`: the text read (LF-ended: `obj_lines`; indices made absolute: `absolute_indices`), which trimesh
     reads where these arrays are None."""
 
     plain: bool
@@ -167,21 +167,26 @@ def corner_table(face_text: bytes, n_corners: int) -> tuple[np.ndarray, str] | N
     return numbers.reshape(n_corners, -1), layout
 
 
+def obj_lines(data: bytes) -> bytes:
+    """OBJ text with every line ended by LF alone: CR LF (DOS) and a lone CR (old Mac) end a line
+    as LF does, so each reader, and each line number in a message, sees the file's lines."""
+    return data.replace(b"\r\n", b"\n").replace(b"\r", b"\n") if b"\r" in data else data
+
+
 def read_obj(data: bytes) -> ObjText:
-    """Classify and, where it can, read OBJ text (see the module doc); relative indices are made
-    absolute first (`absolute_indices`), and the text read is the result's `data`."""
-    data = data.replace(b"\r\n", b"\n") if b"\r" in data else data
+    """Classify and, where it can, read OBJ text (see the module doc); its lines are made LF-ended
+    (`obj_lines`) and relative indices absolute (`absolute_indices`) first, and the text read is
+    the result's `data`."""
+    data = obj_lines(data)
     keys = line_keys(data)
     if b"-" in key_lines(data, *keys, F)[0]:
         data = absolute_indices(data, *keys)
         keys = line_keys(data)
-    if b"\r" in data:  # a carriage return inside a line: checked line by line, read by trimesh
-        return ObjText(False, data=data)
     return dataclasses.replace(_classify(data, *keys), data=data)
 
 
 def _classify(data: bytes, starts, ends, code) -> ObjText:
-    """`read_obj` of text without CR, split into lines (`line_keys`)."""
+    """`read_obj` of LF-ended text (`obj_lines`), split into lines (`line_keys`)."""
     if not code.size or (code == OTHER).any() or np.count_nonzero(np.diff(code)) >= MAX_RUNS:
         return ObjText(False)
     vertex_text, n_vertices = key_lines(data, starts, ends, code, V)
@@ -312,9 +317,8 @@ def decimal(numbers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def fan_corners(data: bytes) -> np.ndarray | None:
     """(T, 3) int64: each corner's `v` index (0-based) of the triangles OBJ text's `f` lines make
-    (`fans`); indices absolute (`absolute_indices`). None where a corner does not parse, is not
+    (`fans`); lines LF-ended (`obj_lines`), indices absolute (`absolute_indices`). None where a corner does not parse, is not
     positive, or a face has fewer than 3 corners."""
-    data = data.replace(b"\r\n", b"\n")
     starts, ends, code = line_keys(data)
     face_text, n_faces = key_lines(data, starts, ends, code, F)
     if not n_faces:

@@ -1,0 +1,74 @@
+"""How OBJ text is split into lines and what a line holds: CR (old Mac), LF and CR LF end a line
+alike; a comment runs from a '#' anywhere on a line to its end. Each is checked on both readings --
+numpy's (the plain layout) and trimesh's (here: two materials) -- against the same file written
+with LF ends and no comments, and a bad line is still named by its number in the file."""
+
+import re
+
+import numpy as np
+import pytest
+
+from difflab.errors import MeshError
+from difflab.geometry import load_mesh, loading
+from difflab.geometry.obj_text import read_obj
+
+#: A quad (two uvs a corner, so the numpy path splits nothing) and a triangle, uvs and normals.
+LINES = ["v -1 -1 0", "v 1 -1 0", "v 1 1 0", "v -1 1 0", "v 0 2 0",
+         "vt 0 0", "vt 1 0", "vt 1 1", "vt 0 1", "vn 0 0 1", "vn 0 0.6 0.8"]
+FACES = {"numpy": ["f 1/1/1 2/2/1 3/3/1 4/4/1", "f 4/4/2 3/3/2 5/2/2"],
+         "trimesh": ["usemtl a", "f 1/1/1 2/2/1 3/3/1 4/4/1", "usemtl b", "f 4/4/2 3/3/2 5/2/2"]}
+ENDS = {"LF": "\n", "CR": "\r", "CRLF": "\r\n"}
+
+
+def obj_bytes(lines, end="\n") -> bytes:
+    return (end.join(lines) + end).encode()
+
+
+def reference(tmp_path, reading):
+    path = tmp_path / "reference.obj"
+    path.write_bytes(obj_bytes(LINES + FACES[reading]))
+    return load_mesh(path)
+
+
+def assert_same_mesh(got, want):
+    for a, b in [(got.vertices, want.vertices), (got.faces, want.faces), (got.normals, want.normals),
+                 (got.uvs, want.uvs), (got.welds, want.welds)]:
+        assert (a is None) == (b is None) and (a is None or np.array_equal(a, b))
+
+
+def who_reads(monkeypatch) -> list:
+    """A list that gets an entry each time trimesh is asked to read a file."""
+    asked = []
+    trimesh_load = loading._trimesh_load
+    monkeypatch.setattr(loading, "_trimesh_load", lambda *args, **kw: asked.append(1) or trimesh_load(*args, **kw))
+    return asked
+
+
+@pytest.mark.parametrize("end", sorted(ENDS))
+@pytest.mark.parametrize("reading", sorted(FACES))
+def test_cr_lf_and_crlf_line_ends_read_the_same_mesh(tmp_path, monkeypatch, reading, end):
+    """The reference (LF) is 3 triangles over 7 vertices with the file's uvs and normals; CR and
+    CR LF files give it bitwise, on the same reader. Before, a CR-only file was one line."""
+    want = reference(tmp_path, reading)
+    assert want.n_faces == 3 and want.n_vertices == 7  # v 3 and v 4 met with two normals
+    corners = want.vertices[want.faces]  # (3, 3, 3)
+    uv_at = {(-1, -1): (0, 0), (1, -1): (1, 0), (1, 1): (1, 1), (-1, 1): (0, 1), (0, 2): (1, 0)}
+    np.testing.assert_array_equal(want.uvs[want.faces], [[uv_at[tuple(p[:2])] for p in t] for t in corners.tolist()])
+    top = (corners[:, :, 1] == 2).any(axis=1)[:, None, None]  # the triangle at v 5 has the second normal
+    np.testing.assert_array_equal(want.normals[want.faces], np.where(top, [0, 0.6, 0.8], [0.0, 0, 1]).repeat(3, 1))
+    path = tmp_path / "m.obj"
+    path.write_bytes(obj_bytes(LINES + FACES[reading], ENDS[end]))
+    asked = who_reads(monkeypatch)
+    assert_same_mesh(load_mesh(path), want)
+    assert bool(asked) == (reading == "trimesh") == (read_obj(path.read_bytes()).arrays is None)
+
+
+@pytest.mark.parametrize("end", sorted(ENDS))
+@pytest.mark.parametrize("reading", sorted(FACES))
+def test_a_bad_face_in_a_cr_file_is_named_by_its_line(tmp_path, reading, end):
+    path = tmp_path / "bad.obj"
+    lines = LINES + FACES[reading] + ["f 1 2 9"]
+    path.write_bytes(obj_bytes(lines, ENDS[end]))
+    with pytest.raises(MeshError, match=rf"^{re.escape(str(path))}:{len(lines)}: face index 9 out of range "
+                                        r"\(file has 5 vertices\)$"):
+        load_mesh(path)
