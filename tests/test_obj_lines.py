@@ -72,3 +72,36 @@ def test_a_bad_face_in_a_cr_file_is_named_by_its_line(tmp_path, reading, end):
     with pytest.raises(MeshError, match=rf"^{re.escape(str(path))}:{len(lines)}: face index 9 out of range "
                                         r"\(file has 5 vertices\)$"):
         load_mesh(path)
+
+
+def commented(lines):
+    """`lines` with a comment after each, in turn a '# ...' after a blank, a '#' right after the
+    last number and one after a tab, and comment lines between them."""
+    tails = [" # a comment", "#tight", "\t# tab # twice"]
+    return [line + tails[k % 3] for k, line in enumerate(lines)] + ["# a comment line", "   # an indented one"]
+
+
+@pytest.mark.parametrize("reading", sorted(FACES))
+def test_a_comment_anywhere_on_a_line_is_ignored(tmp_path, monkeypatch, reading):
+    """Every `v`, `vt`, `vn`, `usemtl` and `f` line with a comment after it reads as without, on the
+    same reader. Before, trimesh failed on them (`cannot read mesh: ValueError: ...`)."""
+    want = reference(tmp_path, reading)
+    path = tmp_path / "m.obj"
+    path.write_bytes(obj_bytes(commented(LINES + FACES[reading])))
+    asked = who_reads(monkeypatch)
+    assert_same_mesh(load_mesh(path), want)
+    assert bool(asked) == (reading == "trimesh")
+
+
+@pytest.mark.parametrize("reading", sorted(FACES))
+def test_a_bad_line_after_comments_is_named_by_its_line_without_the_comment(tmp_path, reading):
+    path = tmp_path / "bad.obj"
+    lines = commented(LINES + FACES[reading]) + ["f 1 2 9 # out of range"]
+    path.write_bytes(obj_bytes(lines))
+    with pytest.raises(MeshError, match=rf"^{re.escape(str(path))}:{len(lines)}: face index 9 out of range "
+                                        r"\(file has 5 vertices\)$"):
+        load_mesh(path)
+    lines[2] = "v 1 nan 0 # not finite"
+    path.write_bytes(obj_bytes(lines))
+    with pytest.raises(MeshError, match=rf"^{re.escape(str(path))}:3: vertex 3 is not finite: 'v 1 nan 0'$"):
+        load_mesh(path)

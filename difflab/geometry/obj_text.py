@@ -45,6 +45,7 @@ SLASH_TO_SPACE = bytes.maketrans(b"/", b" ")
 MAX_TUPLE_KEY = 2 ** 62  # `unmerged` numbers (v, vt, vn) tuples by one int64 below this, else sorts rows
 LAYOUTS = {b"#": "a", b"#/#": "a/t", b"#//#": "a//n", b"#/#/#": "a/t/n"}  # a corner's, its numbers as '#'
 FAR = 10 ** 18  # `absolute_indices` counts a relative index past it as it (int64 holds it)
+INLINE_COMMENT = re.compile(rb"[ \t]*#[^\n]*")  # a comment and the blanks before it (`obj_lines`)
 
 
 @dataclass(frozen=True)
@@ -168,9 +169,16 @@ def corner_table(face_text: bytes, n_corners: int) -> tuple[np.ndarray, str] | N
 
 
 def obj_lines(data: bytes) -> bytes:
-    """OBJ text with every line ended by LF alone: CR LF (DOS) and a lone CR (old Mac) end a line
-    as LF does, so each reader, and each line number in a message, sees the file's lines."""
-    return data.replace(b"\r\n", b"\n").replace(b"\r", b"\n") if b"\r" in data else data
+    """OBJ text with every line ended by LF alone -- CR LF (DOS) and a lone CR (old Mac) end a line
+    as LF does -- and no comment after a line's content: a comment runs from a '#' anywhere on a
+    line to its end (`f 1 2 3 # tri`), and goes with the blanks before it (a comment line stays:
+    every reader skips it). So each reader, and each line number in a message, sees the file's
+    lines as the OBJ format means them. Text with neither is returned as it is."""
+    if b"\r" in data:
+        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    if data.count(b"#") > data.count(b"\n#") + data.startswith(b"#"):  # a '#' after a line's start
+        data = INLINE_COMMENT.sub(b"", data)
+    return data
 
 
 def read_obj(data: bytes) -> ObjText:
@@ -317,13 +325,14 @@ def decimal(numbers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def fan_corners(data: bytes) -> np.ndarray | None:
     """(T, 3) int64: each corner's `v` index (0-based) of the triangles OBJ text's `f` lines make
-    (`fans`); lines LF-ended (`obj_lines`), indices absolute (`absolute_indices`). None where a corner does not parse, is not
-    positive, or a face has fewer than 3 corners."""
+    (`fans`); lines LF-ended and comments removed (`obj_lines`), indices absolute
+    (`absolute_indices`). None where a corner does not parse, is not positive, or a face has fewer
+    than 3 corners."""
     starts, ends, code = line_keys(data)
     face_text, n_faces = key_lines(data, starts, ends, code, F)
     if not n_faces:
         return None
-    tokens = np.array(re.sub(rb"/\S*|#[^\n]*", b"", face_text).split())  # keys and vertex indices
+    tokens = np.array(re.sub(rb"/\S*", b"", face_text).split())  # keys and vertex indices
     is_key = tokens == b"f"
     try:
         index = tokens[~is_key].astype(np.int64) - 1
