@@ -199,9 +199,9 @@ def load_mesh(path) -> TriMesh:
 
 
 def with_file_welds(mesh: TriMesh, data: bytes) -> TriMesh:
-    """`mesh` (trimesh's reading of the OBJ text `data`, LF-ended: `obj_lines`) with `welds`: each vertex numbered by the
-    `v` line its corners name in the `f` lines (`fan_corners`) -- only the file says which copies of
-    a position are one vertex (an OBJ without normals marks a hard edge by repeating a position in
+    """`mesh` (trimesh's reading of the OBJ text `data`, as `obj_lines` gives it) with `welds`: each
+    vertex numbered by the `v` line its corners name in the `f` lines (`fan_corners`) -- only the
+    file says which copies of a position are one vertex (an OBJ without normals marks a hard edge by repeating a position in
     another `v` line). trimesh reorders the triangles (a polygon's fans after the triangles, a fan
     started at another corner), so each of its triangles is matched to the file's with the same
     corner positions (`by_positions`); triangles at the same positions pair in any order where they
