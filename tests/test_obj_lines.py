@@ -105,3 +105,46 @@ def test_a_bad_line_after_comments_is_named_by_its_line_without_the_comment(tmp_
     path.write_bytes(obj_bytes(lines))
     with pytest.raises(MeshError, match=rf"^{re.escape(str(path))}:3: vertex 3 is not finite: 'v 1 nan 0'$"):
         load_mesh(path)
+
+
+#: A `vn` line (line 10, normal 1) that is not 3 numbers, and its message after the file and line.
+BAD_VN = {"vn 0 1": "normal 1 needs 3 numbers \\(vn x y z\\), got 2: 'vn 0 1'",
+          "vn 0 0 1 5": "normal 1 needs 3 numbers \\(vn x y z\\), got 4: 'vn 0 0 1 5'",
+          "vn": "normal 1 needs 3 numbers \\(vn x y z\\), got 0: 'vn'",
+          "vn 0 1 0 extra": "cannot parse normal 1: 'vn 0 1 0 extra'",
+          "vn 0 x 1": "cannot parse normal 1: 'vn 0 x 1'"}
+#: A `vt` line (line 6, uv 1) that is not 2 or 3 finite numbers, and its message.
+BAD_VT = {"vt 0": "uv 1 needs 2 or 3 numbers \\(vt u v \\[w\\]\\), got 1: 'vt 0'",
+          "vt 0 0 0 0": "uv 1 needs 2 or 3 numbers \\(vt u v \\[w\\]\\), got 4: 'vt 0 0 0 0'",
+          "vt 0 y": "cannot parse uv 1: 'vt 0 y'",
+          "vt nan 0": "uv 1 is not finite: 'vt nan 0'", "vt 0 inf": "uv 1 is not finite: 'vt 0 inf'",
+          "vt 0 0 -inf": "uv 1 is not finite: 'vt 0 0 -inf'", "vt NaN 1 # c": "uv 1 is not finite: 'vt NaN 1'"}
+
+
+@pytest.mark.parametrize("used", [True, False], ids=["used", "unused"])
+@pytest.mark.parametrize("bad", sorted(BAD_VN) + sorted(BAD_VT))
+@pytest.mark.parametrize("reading", sorted(FACES))
+def test_a_vn_or_vt_line_that_is_no_normal_or_uv_is_named(tmp_path, reading, bad, used):
+    """As a `v` line that is not 3 numbers or not finite is refused with its line, so is a `vn` line
+    that is not exactly 3 numbers and a `vt` line that is not 2 or 3 finite numbers, used by a face or
+    not. Before, trimesh failed on some (`cannot read mesh`), and the others read as a mesh without
+    normals or uvs -- a textured object without its texture, a smooth one with its creases lost."""
+    line, message = (10, BAD_VN[bad]) if bad.startswith("vn") else (6, BAD_VT[bad])
+    lines = LINES.copy()
+    lines[line - 1] = bad
+    faces = [face if used else re.sub(r"/1\b", "/2", face) for face in FACES[reading]]  # unused: uv 2, normal 2
+    assert bool(re.search(r"/1\b", " ".join(faces))) == used
+    path = tmp_path / "bad.obj"
+    path.write_bytes(obj_bytes(lines + faces))
+    with pytest.raises(MeshError, match=rf"^{re.escape(str(path))}:{line}: {message}$"):
+        load_mesh(path)
+
+
+@pytest.mark.parametrize("uv", ["nan 0", "0 inf"])
+def test_a_ply_uv_that_is_not_finite_names_the_file_and_vertex(tmp_path, uv):
+    path = tmp_path / "tri.ply"
+    path.write_text("ply\nformat ascii 1.0\nelement vertex 3\n" + "".join(f"property float {c}\n" for c in "xyzst")
+                    + "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                    + f"0 0 0 0 0\n1 0 0 {uv}\n0 1 0 0 1\n3 0 1 2\n")
+    with pytest.raises(MeshError, match=rf"^{re.escape(str(path))}: vertex 1's uv \[.*\] is not finite$"):
+        load_mesh(path)

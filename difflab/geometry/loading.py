@@ -41,6 +41,7 @@ def _scan_obj_lines(data: bytes, path: str) -> None:
     """The line-by-line check of LF-ended OBJ text (`obj_lines`), naming the first problem's line."""
     n_vertices = 0
     n_normals = 0
+    n_uvs = 0
     n_faces = 0
     indices: list[tuple[int, int, int]] = []  # (line, index as written, absolute 1-based index)
     for number, raw in enumerate(data.decode("utf-8", errors="replace").split("\n"), start=1):
@@ -64,15 +65,13 @@ def _scan_obj_lines(data: bytes, path: str) -> None:
             n_vertices += 1
         elif key == "vn":
             n_normals += 1
-            try:
-                values = [float(x) for x in parts[1:4]]
-            except ValueError:
-                continue  # a line that is no normal: trimesh's reading decides
-            if not all(math.isfinite(x) for x in values):
-                raise MeshError(f"{path}:{number}: normal {n_normals} is not finite: {line[:80]!r}")
-            if len(values) == 3 and not any(values):
+            values = _numbers(parts, (3,), f"{path}:{number}: ", f"normal {n_normals}", "vn x y z", line)
+            if not any(values):
                 raise MeshError(f"{path}:{number}: normal {n_normals} is zero-length (a normal is a direction): "
                                 f"{line[:80]!r}")
+        elif key == "vt":
+            n_uvs += 1
+            _numbers(parts, (2, 3), f"{path}:{number}: ", f"uv {n_uvs}", "vt u v [w]", line)
         elif key == "f":
             corners = parts[1:]
             if len(corners) < 3:
@@ -95,6 +94,22 @@ def _scan_obj_lines(data: bytes, path: str) -> None:
     if n_faces == 0:
         what = "no vertices and no faces (not an OBJ mesh?)" if n_vertices == 0 else "no faces"
         raise MeshError(f"{path}: mesh has {what}")
+
+
+def _numbers(parts: list[str], counts: tuple[int, ...], where: str, what: str, form: str, line: str) -> list[float]:
+    """The numbers after a `vn` / `vt` line's key (`parts`: the line split), which must be finite
+    and `counts` many (`form`: the line's form, for the message); else `MeshError` naming `what`
+    (e.g. 'normal 3'), prefixed by `where` (the file and line), and the line's text."""
+    try:
+        values = [float(x) for x in parts[1:]]
+    except ValueError:
+        raise MeshError(f"{where}cannot parse {what}: {line[:80]!r}") from None
+    if len(values) not in counts:
+        raise MeshError(f"{where}{what} needs {' or '.join(map(str, counts))} numbers ({form}), got {len(values)}: "
+                        f"{line[:80]!r}")
+    if not all(math.isfinite(x) for x in values):
+        raise MeshError(f"{where}{what} is not finite: {line[:80]!r}")
+    return values
 
 
 def _to_trimesh_list(loaded, path: str) -> list:
@@ -138,7 +153,10 @@ def _convert(geometry, transform, path: str) -> TriMesh:
     uv = getattr(visual, "uv", None) if getattr(visual, "kind", None) == "texture" else None
     if uv is not None:
         uv = np.asarray(uv, dtype=np.float64)
-        if uv.shape == (len(vertices), 2) and np.all(np.isfinite(uv)):
+        if uv.shape == (len(vertices), 2):
+            bad = np.flatnonzero(~np.isfinite(uv).all(axis=1))
+            if bad.size:  # an OBJ's were refused by its line already
+                raise MeshError(f"{path}: vertex {bad[0]}'s uv {uv[bad[0]].tolist()} is not finite")
             uvs = uv
     mesh = TriMesh(vertices, faces, normals, uvs, name=path)  # no welds: equal positions may be a hard edge
     if transform is not None and not np.allclose(transform, np.eye(4)):
@@ -177,7 +195,7 @@ def load_mesh(path) -> TriMesh:
     if path.lower().endswith(".obj"):
         data = obj_lines(_read_obj(path))
         text = read_obj(data)
-        if not text.plain or not text.normals_valid:  # a bad `vn` line: the scan names it
+        if not text.plain or not text.attributes_valid:  # a bad `vn` / `vt` line: the scan names it
             _scan_obj_lines(data, path)
     if text is not None and text.arrays is not None:
         vertices, faces, normals, uvs, welds = text.arrays

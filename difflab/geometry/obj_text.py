@@ -20,7 +20,8 @@ normals of one `v` line's copies differently --, and where there are no normals 
 its `v` line. Anything else (several materials, an index past its list, corners of two layouts)
 gives no arrays, and trimesh reads the file. Negative (relative) indices are made absolute first
 (`absolute_indices`), for every reader. `vn` lines that are not 3 finite numbers, not all 0
-(`valid_normals`), give no arrays either: the line scan refuses a zero-length or non-finite one.
+(`valid_normals`), and `vt` lines that are not 2 or 3 finite numbers (`valid_uvs`) give no arrays
+either: the line scan refuses them, naming the line.
 """
 
 from __future__ import annotations
@@ -52,7 +53,8 @@ INLINE_COMMENT = re.compile(rb"[ \t]*#[^\n]*")  # a comment and the blanks befor
 class ObjText:
     """What `read_obj` found: `plain` (see the module doc), the number of triangles its `f` lines
     make (a face of k corners: k - 2), whether the `v` lines parse as 3 numbers each and whether the
-    `vn` lines are valid normals (`valid_normals`; plain text only), and (vertices, faces, normals or None, uvs or None, welds or None) as trimesh reads them
+    `vn` and `vt` lines are valid (`valid_normals`, `valid_uvs`; plain text only), and (vertices,
+    faces, normals or None, uvs or None, welds or None) as trimesh reads them
     (welds: each vertex's `v` index, 0-based, where vertices were split and there are no normals), or
     None; `data`: the text read (LF-ended: `obj_lines`; indices made absolute: `absolute_indices`), which trimesh
     reads where these arrays are None."""
@@ -60,7 +62,7 @@ class ObjText:
     plain: bool
     n_triangles: int = 0
     vertices_parse: bool = False
-    normals_valid: bool = False
+    attributes_valid: bool = False
     arrays: tuple | None = None
     data: bytes = b""
 
@@ -149,6 +151,12 @@ def valid_normals(normals: np.ndarray | None) -> bool:
             and bool(np.any(normals != 0.0, axis=1).all()))
 
 
+def valid_uvs(uvs: np.ndarray | None) -> bool:
+    """Whether a `vt` table (`table`: None where a line does not parse) is rows of 2 or 3 finite
+    numbers (u v [w])."""
+    return uvs is not None and uvs.shape[1] in (2, 3) and bool(np.isfinite(uvs).all())
+
+
 def corner_table(face_text: bytes, n_corners: int) -> tuple[np.ndarray, str] | None:
     """Plain `f` lines' (`face_sizes`) `n_corners` corners as an (n_corners, k) int64 table, a row
     per corner in file order, and their layout (`a`, `a/t`, `a//n` or `a/t/n`: LAYOUTS), where every
@@ -205,8 +213,10 @@ def _classify(data: bytes, starts, ends, code) -> ObjText:
     vertices = table(vertex_text, KEYS[V], np.float64)
     vn_text, n_normals = key_lines(data, starts, ends, code, VN)
     normals = table(vn_text, KEYS[VN], np.float64) if n_normals else None
+    vt_text, n_uvs = key_lines(data, starts, ends, code, VT)
+    uvs = table(vt_text, KEYS[VT], np.float64) if n_uvs else None
     text = ObjText(True, int((sizes - 2).sum()), vertices is not None and vertices.shape == (n_vertices, 3),
-                   not n_normals or valid_normals(normals))
+                   (not n_normals or valid_normals(normals)) and (not n_uvs or valid_uvs(uvs)))
     usemtl = np.flatnonzero(code == USEMTL)
     corners = None  # continuations, tabs or several materials: trimesh reads the file
     if text.vertices_parse and not (b"\\" in data or b"\t" in data or usemtl.size > 1 or data.count(b"usemtl")
@@ -214,30 +224,28 @@ def _classify(data: bytes, starts, ends, code) -> ObjText:
         corners = corner_table(face_text, int(sizes.sum()))
     if has_zero_index(face_text) if corners is None else (corners[0][:, 0] == 0).any():
         return ObjText(False)  # a vertex index 0 is not OBJ: the line scan names it
-    if corners is None or not text.normals_valid:  # invalid normals: the line scan names the line
+    if corners is None or not text.attributes_valid:  # invalid normals or uvs: the line scan names the line
         return text
-    return dataclasses.replace(text, arrays=mesh_arrays(data, starts, ends, code, vertices, normals, *corners, sizes))
+    return dataclasses.replace(text, arrays=mesh_arrays(vertices, normals, uvs, *corners, sizes))
 
 
-def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, normal_table: np.ndarray | None,
+def mesh_arrays(vertices: np.ndarray, normal_table: np.ndarray | None, uv_table: np.ndarray | None,
                 corners: np.ndarray, layout: str, sizes: np.ndarray):
     """(vertices, faces, normals or None, uvs or None, welds or None) of plain OBJ text as trimesh
     reads it, up to the order of the module doc (welds: `unmerged`'s, each vertex's `v` index, where
     vertices are split and the file gives no normals), or None outside the layouts of the module doc.
-    `vertices`: the `v` lines' (N, 3) numbers; `normal_table`: the `vn` lines' numbers (valid:
-    `valid_normals`), or None where there are none; `corners`: the `f` lines' corners' numbers
-    (`corner_table`), a row each, laid out as `layout`; `sizes`: each face's number of corners."""
+    `vertices`: the `v` lines' (N, 3) numbers; `normal_table` / `uv_table`: the `vn` / `vt` lines'
+    numbers (valid: `valid_normals`, `valid_uvs`), or None where there are none; `corners`: the `f`
+    lines' corners' numbers (`corner_table`), a row each, laid out as `layout`; `sizes`: each face's
+    number of corners."""
     corners = np.where(corners > 0, corners - 1, corners)  # 1-based (a 0 tex / normal index stays 0, as in trimesh)
     triangles = corners.reshape(-1, 3, corners.shape[1]) if (sizes == 3).all() else corners[fans(sizes)]
     columns = dict(zip(layout.replace("//", "/").split("/"), triangles.transpose(2, 0, 1)))
     faces = columns["a"]
     if faces.max() >= len(vertices):
         return None
-    vt_text, n_vt = key_lines(data, starts, ends, code, VT)
-    uv_table = table(vt_text, KEYS[VT], np.float64)
-    if ("n" in columns and normal_table is None) or ((n_vt or "t" in columns)
-                                                     and (uv_table is None or uv_table.shape[1] not in (2, 3))):
-        return None  # lines that do not parse, or indices into no lines: trimesh reads the file
+    if ("n" in columns and normal_table is None) or ("t" in columns and uv_table is None):
+        return None  # indices into no lines: trimesh reads the file
     uv_table = None if uv_table is None else uv_table[:, :2]
     used = {name: (columns[key], values) for name, key, values in (("normals", "n", normal_table), ("uvs", "t", uv_table))
             if key in columns and values is not None}
@@ -247,9 +255,8 @@ def mesh_arrays(data: bytes, starts, ends, code, vertices: np.ndarray, normal_ta
         return None  # trimesh drops that attribute: let it read the file
     welds, faces, *values = unmerged(vertices, faces, list(used.values()))
     found = dict(zip(used, values))
-    normals, uvs = found.get("normals"), found.get("uvs")
-    uvs = uvs if uvs is None or np.all(np.isfinite(uvs)) else None  # non-finite uvs: dropped
-    return vertices[welds], faces, normals, uvs, welds if normals is None else None
+    normals = found.get("normals")
+    return vertices[welds], faces, normals, found.get("uvs"), welds if normals is None else None
 
 
 def fans(sizes: np.ndarray) -> np.ndarray:
