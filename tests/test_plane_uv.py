@@ -188,3 +188,45 @@ def test_a_clamped_texture_keeps_its_place_at_point(tmp_path, method, point):
     v = 0.5 + (0.5 - (np.arange(16) + 0.5) / 16) * 4  # row 0 at the top
     want = ((u[None, :] < 0.5) & (v[:, None] > 0.5)).astype(float)
     np.testing.assert_array_equal(render(scene, method=method)[..., 0], want)
+
+
+#: An asymmetric 4 x 4 picture (row 0 at the top): an "F", read upright and unmirrored.
+LETTER_F = np.array([[1, 1, 1, 0], [1, 0, 0, 0], [1, 1, 0, 0], [1, 0, 0, 0]], np.float32)
+
+
+RANDOM_NORMALS = [tuple(n) for n in np.random.default_rng(2).normal(size=(6, 3))]
+
+
+@pytest.mark.parametrize("normal", [n for n, _ in FRAMES] + RANDOM_NORMALS)
+def test_planar_uv_is_the_planes_uv(normal):
+    """`planar_uv` about an axis is a plane's uv (`Plane.uv_frame`) with that normal, centred (+ 0.5)
+    and divided by `scale`: one frame for both. Before, its frame was (axis x z, axis x t) (x for
+    axes near z): a wall facing +z got u = +y, v = -x, its picture turned 90 degrees."""
+    from difflab.geometry import planar_uv
+
+    point = np.array([0.25, -0.5, 0.75])
+    p = plane(normal, point)
+    points = np.random.default_rng(3).normal(size=(20, 3))
+    np.testing.assert_allclose(planar_uv(points, normal, point, 2.0), p.uv(points) / 2.0 + 0.5, atol=1e-12)
+    np.testing.assert_allclose(planar_uv(points, 3 * np.asarray(normal), point), p.uv(points) + 0.5, atol=1e-12)
+
+
+@pytest.mark.parametrize("method", ["raster", "raytrace"])
+@pytest.mark.parametrize("normal", [n for n, _ in FRAMES])
+def test_a_mesh_with_planar_uvs_shows_its_texture_upright_from_the_front(tmp_path, method, normal):
+    """A square mesh, its uvs by `planar_uv` about its normal, seen from the front (screen up along
+    the plane's b: world +y for a wall) shows the "F" upright: texel (row r, column c) in the view's
+    2 x 2 pixel block (r, c) -- the top-left texel at the top left, the bar at the top."""
+    from difflab.geometry import planar_uv
+
+    point = np.array([0.25, -0.5, 0.75])
+    t, b = plane(normal, point).uv_frame()
+    corners = np.array([point + i * t + j * b for i, j in ((0, 0), (1, 0), (1, 1), (0, 1))])
+    uvs = planar_uv(corners, normal, point + 0.5 * t + 0.5 * b)
+    np.testing.assert_allclose(uvs, [[0, 0], [1, 0], [1, 1], [0, 1]], atol=1e-12)  # the tile: (0, 0) bottom left
+    square = {"type": "mesh", "vertices": corners.tolist(), "faces": [[0, 1, 2], [0, 2, 3]], "uvs": uvs.tolist(),
+              "material": "m"}
+    scene = front_view(tmp_path, normal, point, square)
+    np.save(tmp_path / "f.npy", np.repeat(LETTER_F[..., None], 3, axis=2))
+    scene["materials"]["m"].update(texture=str(tmp_path / "f.npy"), wrap="clamp")
+    np.testing.assert_array_equal(render(scene, method=method)[..., 0], np.kron(LETTER_F, np.ones((2, 2))))

@@ -9,7 +9,7 @@ from typing import ClassVar, Union
 import numpy as np
 
 from ..errors import MeshError, SceneError
-from ..geometry import TriMesh
+from ..geometry import TriMesh, uv_frame
 from ._check import Vec3, choice, coordinate, fail, join, mapping, number, show
 from ._record import Record
 from ._spec import Spec, bounds, spec_field
@@ -112,24 +112,10 @@ class Plane(Record):
         return {"type": self.TYPE, **super().to_dict()}
 
     def uv_frame(self) -> tuple[np.ndarray, np.ndarray]:
-        """(t, b): the unit directions of u and v, with the normal a right-handed orthonormal frame
-        (t x b = normal), so a texture reads unmirrored from the normal's side, v up, u right.
-        b = a reference direction made orthogonal to the normal, t = b x normal. The reference is
-        chosen by the normal's dominant axis: a floor or ceiling (|normal_y| strictly the largest
-        component) takes -z sign(normal_y) -- a floor reads upright to a camera at +z looking toward
-        -z, as the builtin quad; normal +y: t = +x, b = -z; -y: t = +x, b = +z -- anything else
-        (walls, and slopes from 45 degrees up) world up +y -- normal +z: t = +x, b = +y. Within
-        each region the frame is smooth in the normal (the reference stays at least 45 degrees off
-        it); a continuous frame on every normal does not exist (hairy ball), so the switch sits at
-        45 degrees, far from floors and walls."""
-        normal = np.asarray(self.normal, np.float64)
-        if abs(normal[1]) > max(abs(normal[0]), abs(normal[2])):
-            reference = np.array([0.0, 0.0, -np.sign(normal[1])])
-        else:
-            reference = np.array([0.0, 1.0, 0.0])
-        b = reference - np.dot(reference, normal) * normal
-        b /= np.linalg.norm(b)
-        return np.cross(b, normal), b
+        """(t, b): the unit directions of u and v, `geometry.uv_frame` of the normal -- right-handed
+        with it (t x b = normal), upright seen from its side: a wall's v is world up (+z: t = +x,
+        b = +y), a floor's -z (+y: t = +x, b = -z). `geometry.planar_uv` projects in the same frame."""
+        return uv_frame(self.normal)
 
     def uv(self, points) -> np.ndarray:
         """Texture coordinates (N, 2) of points (N, 3) on the plane: ((p - point).t, (p - point).b),
