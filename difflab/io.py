@@ -209,7 +209,8 @@ def load_image(path: str | os.PathLike, srgb: bool = True) -> np.ndarray:
     `.npy` files hold linear values (float or bool dtypes; an alpha channel is dropped; a grey array
     -- (H, W), or (H, W, 1) / (H, W, 2) with alpha, as a grey PNG -- is repeated into the 3 channels); an integer .npy holds code values, which are refused
     (`refuse_code_values`: how to decode them); other files are whatever Pillow reads, 8-bit, or
-    16-bit PNG / TIFF (all 16 bits kept; a grey file fills the 3 channels), their samples
+    16-bit PNG / TIFF (all 16 bits kept; a grey file fills the 3 channels; a palette file reads as
+    its entries' colours, alpha dropped, and is grey where they all are), their samples
     s / (2^bits - 1) decoded when `srgb` is true by the file's transfer function: sRGB (IEC
     61966-2-1), unless a PNG declares a gamma g without an sRGB chunk (linear = s^(1/g); g = 1: the
     samples are linear, as POV-Ray writes with File_Gamma=1.0). With `srgb` false the samples are

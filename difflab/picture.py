@@ -99,7 +99,13 @@ _GREY_MODES = ("1", "L", "LA", "La", "I;16", "I;16B", "I;16L")
 
 def colour_channels(im) -> int:
     """Colour channels an image Pillow opened stores (alpha not counted): 1 for a grey file (PNG
-    colour types 0 and 4 at any depth, bilevel), else 3 (RGB, palette, CMYK, ...)."""
+    colour types 0 and 4 at any depth, bilevel, and a palette -- "P", "PA" -- whose every entry is
+    grey, R = G = B: what a grey picture saved with a palette holds), else 3 (RGB, a palette with
+    colours, CMYK, ...). (Pillow decodes a palette image to give its palette: call this after
+    `sample_depth`, which reads the tiles that decoding drops.)"""
+    if im.mode in ("P", "PA"):
+        entries = np.reshape(im.getpalette("RGB") or [0, 0, 0], (-1, 3))
+        return 1 if (entries == entries[:, :1]).all() else 3
     return 1 if im.mode in _GREY_MODES or wide(im) in ("grey", "grey+alpha") else 3
 
 
@@ -127,8 +133,8 @@ def read_picture(path: Path, alpha: bool = False) -> Picture:
                 if samples is None and im.mode in ("I", "F"):
                     raise DifflabError(f"{path}: 32-bit integer or float samples (mode {im.mode!r}) are not read: "
                                        "save 8- or 16-bit samples, or the linear array as .npy")
-                if samples is None:
-                    samples = np.asarray(im.convert("RGBA" if alpha and _has_alpha(im) else "RGB"))
+                if samples is None:  # (a palette with alphas converts to RGBA: to RGB Pillow warns)
+                    samples = np.asarray(im.convert("RGBA" if _has_alpha(im) and (alpha or im.mode == "P") else "RGB"))
                 return Picture(samples if alpha else samples[..., :3], transfer(im.info), bits, channels)
     except DifflabError:
         raise

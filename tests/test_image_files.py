@@ -8,6 +8,7 @@ import zlib
 
 import numpy as np
 import pytest
+from PIL import Image
 
 from difflab import fit_material, load_image
 from difflab.errors import DifflabError
@@ -188,3 +189,54 @@ def test_a_grey_npy_reads_as_a_grey_picture_does(tmp_path, shape):
     loaded = read_image(tmp_path / "g.npy")
     assert loaded.channels == 1 and loaded.bits is None
     np.testing.assert_array_equal(loaded.image, np.repeat(grey[..., None], 3, axis=-1))
+
+
+#: Palettes of 3 entries (R, G, B each): all grey, or with colours.
+PALETTES = {"grey": [0, 0, 0, 128, 128, 128, 255, 255, 255], "colour": [0, 0, 0, 255, 0, 0, 30, 200, 90]}
+#: A palette PNG's transparency: none, one transparent entry, or an alpha per entry (both tRNS chunks).
+TRANSPARENCY = {"opaque": None, "tRNS index": 1, "tRNS alphas": b"\x00\xff\x80"}
+
+
+@pytest.mark.parametrize("transparency", sorted(TRANSPARENCY))
+@pytest.mark.parametrize("palette", sorted(PALETTES))
+def test_a_palette_png_is_grey_exactly_when_its_palette_is(tmp_path, palette, transparency):
+    """A palette (mode "P") PNG reads as its entries' colours, sRGB-decoded, alpha dropped; it holds
+    1 colour channel when every palette entry is grey (R = G = B) -- a fit target of it is refused
+    as an L PNG is --, else 3. Before, a grey palette passed as an RGB target, and a palette with an
+    alpha per entry failed to load under warnings as errors (Pillow warns converting it to RGB)."""
+    from difflab.errors import FitError
+    from difflab.fit.targets import load_target
+    from difflab.io import read_image
+
+    codes = np.array([[0, 1, 2], [2, 1, 0]], np.uint8)
+    picture = Image.fromarray(codes, "P")
+    picture.putpalette(PALETTES[palette])
+    path = tmp_path / "p.png"
+    extra = {} if TRANSPARENCY[transparency] is None else {"transparency": TRANSPARENCY[transparency]}
+    picture.save(path, **extra)
+    with Image.open(path) as opened:
+        assert opened.mode == "P" and ("transparency" in opened.info) == bool(extra)
+    loaded = read_image(path)
+    colours = np.reshape(PALETTES[palette], (-1, 3))[codes]
+    np.testing.assert_array_equal(loaded.image, srgb_to_linear(colours / 255.0).astype(np.float32))
+    assert loaded.bits == 8 and loaded.channels == (1 if palette == "grey" else 3)
+    if palette == "grey":
+        with pytest.raises(FitError, match=r"^targets\[0\] \(.*p\.png\): a grey image file has 1 colour channel "):
+            load_target(path, "targets[0]")
+    else:
+        image, step, gamma = load_target(path, "targets[0]")
+        assert step == 1 / 255 and gamma is None
+        np.testing.assert_array_equal(image, loaded.image)
+
+
+@pytest.mark.parametrize("palette", sorted(PALETTES))
+def test_a_palette_with_alpha_counts_its_palette_colours(palette):
+    """Mode "PA" (palette + alpha, which Pillow makes, though PNG stores it as "P" + tRNS) is grey as
+    "P" is: by its palette."""
+    from difflab.picture import colour_channels
+
+    picture = Image.fromarray(np.array([[0, 1, 2]], np.uint8), "P")
+    picture.putpalette(PALETTES[palette])
+    with_alpha = picture.convert("PA")
+    assert with_alpha.mode == "PA"
+    assert colour_channels(picture) == colour_channels(with_alpha) == (1 if palette == "grey" else 3)

@@ -5,9 +5,9 @@ Image arrays are linear RGB floats. Integer arrays and integer .npy files (code 
 Pillow returns, or a 16-bit file read by another reader) are refused with a message saying how to
 decode them for their dtype -- never read as linear (`io.refuse_code_values`, the one rule) --,
 and so are boolean, complex and object arrays, and grey images (files and arrays with one colour
-channel: `_refuse_grey`), which are not equal R, G, B. Image files are read by `io.read_image`
-(as `load_image`: 8- and 16-bit files decoded by their transfer function, sRGB unless a PNG says
-otherwise); a decoded file saturates at 1.0: its ceiling, where highlights clip, and its samples
+channel, a palette PNG of greys only too: `_refuse_grey`), which are not equal R, G, B. Image files
+are read by `io.read_image` (as `load_image`: 8- and 16-bit files decoded by their transfer
+function, sRGB unless a PNG says otherwise); a decoded file saturates at 1.0: its ceiling, where highlights clip, and its samples
 are quantised in steps of 1 / (2^bits - 1). A target must have its view's camera size.
 """
 
@@ -64,7 +64,7 @@ def load_target(item, where: str) -> tuple[np.ndarray, float | None, float | Non
             image, bits, channels, gamma = read_image(item)
         except DifflabError as exc:
             raise FitError(f"{where}: {exc}") from None
-        if channels == 1:  # 8- or 16-bit, 1-bit, with alpha or not, or a .npy of shape (H, W), (H, W, 1 or 2)
+        if channels == 1:  # 8- or 16-bit, 1-bit, with alpha or not, a grey palette, a .npy (H, W), (H, W, 1 or 2)
             _refuse_grey(f"{where} ({short_path(item)})", "a grey image file")
         return np.asarray(image, np.float64), (None if bits is None else 1.0 / (2 ** bits - 1)), gamma
     if not isinstance(item, np.ndarray) and not hasattr(item, "__array__"):
