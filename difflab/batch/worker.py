@@ -82,7 +82,7 @@ def outcome_of(spec: dict, threads: int | None = None) -> dict:
         result = fit_job(spec, threads)
         if result.no_fit() is not None:  # a failed job
             raise FitError(f"no fit made: {result.no_fit()}")
-        report = result.to_dict()
+        report = result.to_dict(spec["name"], "scenes")  # a texture's file, in the batch folder
         for key in VOLATILE:
             report.pop(key, None)
         return {"ok": True, "scene": result.scene_dict(spec["name"]), "textures": result.texture_files(spec["name"]),

@@ -23,8 +23,8 @@ noise, reduced chi-square, flags -- writes the fitted scene and a report of the 
 
 A fitted texture (--params texture) is written beside the scene as OUTPUT_STEM.MATERIAL.texture.npy
 (linear float32; OUTPUT_STEM.textureI.npy, I the material's index, where its name is not a plain
-word), and the fitted scene's material names that file. The fitted scene, its texture files and the
-report are written together: all or none (a full disk while writing any leaves the old files, if
+word), and the fitted scene's material names that file; the report names it too, with the texels'
+statistics (not the texels). The fitted scene, its texture files and the report are written together: all or none (a full disk while writing any leaves the old files, if
 any).
 """
 
@@ -115,7 +115,8 @@ def run(args) -> int:
     if result.no_fit() is not None:
         raise FitError(f"no fit made: {result.no_fit()}")
     contents = {output: result.scene_dict(output.stem), report: {
-        "scene": str(args.scene), "targets": [str(t) for t in args.targets], "materials": materials, **result.to_dict()}}
+        "scene": str(args.scene), "targets": [str(t) for t in args.targets], "materials": materials,
+        **result.to_dict(output.stem, output.parent)}}
     textures = result.texture_files(output.stem)
     writers = {output.with_name(name): lambda temporary, texels=texels: write_image(temporary, texels)
                for name, texels in textures.items()}

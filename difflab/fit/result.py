@@ -28,6 +28,26 @@ def _json(value):
     return _json_number(value)
 
 
+def texel_summary(values) -> dict:
+    """A texture's values (H_t, W_t, 3) -- texels, or their standard errors -- as a report gives them,
+    not texel by texel: {"size": [W_t, H_t], "min", "max", "mean": per channel, over its finite
+    entries (null where there are none), "nonfinite": how many entries are not (a stderr's inf: the
+    texels the data do not determine)}."""
+    values = np.asarray(values, np.float64)
+    out = {"size": [values.shape[1], values.shape[0]], "min": [], "max": [], "mean": []}
+    for channel in values.reshape(-1, values.shape[-1]).T:
+        kept = channel[np.isfinite(channel)]
+        for name, reduce in (("min", np.min), ("max", np.max), ("mean", np.mean)):
+            out[name].append(_json_number(reduce(kept)) if kept.size else None)
+    out["nonfinite"] = int(np.count_nonzero(~np.isfinite(values)))
+    return out
+
+
+def _reported(value):
+    """A parameter's value in a report: `_json`, a texture (a 3-D array) by its `texel_summary`."""
+    return texel_summary(value) if np.ndim(value) == 3 else _json(value)
+
+
 WORD = re.compile(r"[A-Za-z0-9_-]{1,64}")  # a material name used as is in a texture file's name
 TEXTURE_FILE = r"\.(?:[A-Za-z0-9_-]{1,64}\.texture|texture[0-9]+)\.npy"  # what follows the stem
 
@@ -285,12 +305,25 @@ class FitResult:
                 materials[name] = dataclasses.replace(materials[name], **{p.kind: new})
         return dataclasses.replace(scene, materials=materials, lights=tuple(lights))
 
-    def to_dict(self) -> dict:
-        """A JSON-able summary (non-finite numbers become null)."""
+    def to_dict(self, stem: str | None = None, folder=None) -> dict:
+        """A JSON-able summary (non-finite numbers become null). A texture -- fitted, its stderr, its
+        start -- is given by its statistics (`texel_summary`), not texel by texel (a 256 x 256 one was
+        ~1.5 MB of JSON): the texels are in the file `texture_files(stem)` writes, which, with `stem`,
+        the fitted texture's entry names ("file": `folder` / that name, the name alone without
+        `folder`), beside the share of its texels the views see ("seen")."""
+        textures = {}
+        if stem is not None:
+            names, files = self.scene.material_names, self._texture_names(stem)
+            textures = {p.key: files[names[p.index]] for p in self.layout if p.shape is not None}
+        params = {k: _reported(v) for k, v in self.params.items()}
+        for key, file in textures.items():
+            seen = self.seen.get(key)
+            params[key] = {"file": str(Path(folder) / file) if folder is not None else file, **params[key],
+                           "seen": None if seen is None else float(np.mean(seen))}
         return {
-            "params": {k: _json(v) for k, v in self.params.items()},
-            "stderr": {k: _json(v) for k, v in self.stderr.items()},
-            "initial": {k: _json(v) for k, v in self.initial.items()},
+            "params": params,
+            "stderr": {k: _reported(v) for k, v in self.stderr.items()},
+            "initial": {k: _reported(v) for k, v in self.initial.items()},
             "loss": _json_number(self.loss), "psnr": _json_number(self.psnr), "steps": self.steps,
             "seconds": self.seconds, "ok": self.ok, "converged": self.converged, "result": self.result,
             "solver": self.solver,
