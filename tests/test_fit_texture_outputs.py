@@ -71,9 +71,9 @@ def test_a_report_gives_a_texture_by_its_statistics():
     result = FitResult({"texture": texels, "kd": [0.5, 0.25, 0.125]}, {"texture": stderr, "kd": [0.1, np.inf, 0.1]},
                        0.0, 99.0, 3, 1.0, True, "successful", initial={"texture": np.zeros((2, 4, 3)), "kd": [0.4] * 3})
     report = result.to_dict()
-    assert report["params"] == {"texture": {"size": [4, 2], "min": [0.0, 1 / 32, 2 / 32],
-                                            "max": [21 / 32, 22 / 32, 23 / 32], "mean": [10.5 / 32, 11.5 / 32, 12.5 / 32],
-                                            "nonfinite": 0}, "kd": [0.5, 0.25, 0.125]}
+    texture = {"size": [4, 2], "min": [0.0, 1 / 32, 2 / 32], "max": [21 / 32, 22 / 32, 23 / 32],
+               "mean": [10.5 / 32, 11.5 / 32, 12.5 / 32], "nonfinite": 0}
+    assert report["params"] == {"texture": texture, "kd": [0.5, 0.25, 0.125]}
     assert report["stderr"] == {"texture": {"size": [4, 2], "min": [0.25, 0.25, None], "max": [0.25, 0.5, None],
                                             "mean": [0.25, 2.25 / 8, None], "nonfinite": 9}, "kd": [0.1, None, 0.1]}
     assert report["initial"]["texture"] == {"size": [4, 2], "min": [0.0] * 3, "max": [0.0] * 3, "mean": [0.0] * 3,
