@@ -36,6 +36,13 @@ def assert_same_mesh(got, want):
         assert (a is None) == (b is None) and (a is None or np.array_equal(a, b))
 
 
+def triangles(mesh) -> list:
+    """Each triangle's corners (position, uv, normal), turned to start at its least, all sorted: the
+    mesh as it renders, whatever the order and turn of its triangles."""
+    corners = np.concatenate([mesh.vertices, mesh.uvs, mesh.normals], axis=1)[mesh.faces].tolist()
+    return sorted(min(t[k:] + t[:k] for k in range(3)) for t in ([tuple(c) for c in tri] for tri in corners))
+
+
 def who_reads(monkeypatch) -> list:
     """A list that gets an entry each time trimesh is asked to read a file."""
     asked = []
@@ -147,4 +154,23 @@ def test_a_ply_uv_that_is_not_finite_names_the_file_and_vertex(tmp_path, uv):
                     + "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
                     + f"0 0 0 0 0\n1 0 0 {uv}\n0 1 0 0 1\n3 0 1 2\n")
     with pytest.raises(MeshError, match=rf"^{re.escape(str(path))}: vertex 1's uv \[.*\] is not finite$"):
+        load_mesh(path)
+
+
+@pytest.mark.parametrize("reading", sorted(FACES))
+def test_a_v_line_with_a_word_after_its_numbers_is_named(tmp_path, reading):
+    """A `v` line is 3 numbers, then optionally a weight or a colour (numbers too): a word after
+    them is named with its line, as a word among them is. Before, it reached trimesh, which failed
+    without a line (`cannot read mesh: ValueError: ...`). With a weight, or a colour, the mesh has
+    the reference's triangles (trimesh reads it: their order and turn may differ)."""
+    want = triangles(reference(tmp_path, reading))
+    path = tmp_path / "m.obj"
+    for extra in (" 1", " 0.5 0.25 1"):
+        lines = LINES.copy()
+        lines[1] += extra
+        path.write_bytes(obj_bytes(lines + FACES[reading]))
+        assert triangles(load_mesh(path)) == want
+    lines[1] = "v 1 -1 0 x"
+    path.write_bytes(obj_bytes(lines + FACES[reading]))
+    with pytest.raises(MeshError, match=rf"^{re.escape(str(path))}:2: cannot parse vertex 'v 1 -1 0 x'$"):
         load_mesh(path)

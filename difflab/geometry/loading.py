@@ -52,7 +52,7 @@ def _scan_obj_lines(data: bytes, path: str) -> None:
         key = parts[0]
         if key == "v":
             try:
-                values = [float(x) for x in parts[1:4]]
+                values = [float(x) for x in parts[1:]][:3]  # (then a weight or a colour: numbers too)
             except ValueError:
                 raise MeshError(f"{path}:{number}: cannot parse vertex {line!r}") from None
             if len(values) < 3:
