@@ -31,7 +31,6 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from .records import take_pixels
 from .setup import images_jit
 
 BAND = 2.0  # sigmas: the bias left at the band's edge is under 1 % of sigma a pixel
@@ -79,5 +78,6 @@ def _clipped_bounds(view, residual) -> tuple[bool, bool]:
     zero = view.zeros if view.weighting is None else view.zeros & (view.weights > 0)
     if np.count_nonzero(zero) < MIN_CLIPPED or target.min() < 0.0:
         return False, top
-    lit = take_pixels(residual, view.pixels) > 0.0  # a channel the model puts at 0 is dark in the scene
+    lit = np.stack([residual[..., c].reshape(-1)[view.pixels] for c in range(3)], axis=1) > 0.0  # a channel the
+    # model puts at 0 is dark in the scene (a channel at a time: the residual images are channel-major)
     return np.count_nonzero(zero & lit) >= MIN_CLIPPED, top

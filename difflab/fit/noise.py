@@ -1,11 +1,13 @@
 """The pixel noise of a fit's targets, from its residual images at the solution (`estimate_sigma`,
-`views_noise`), the pixels that carry none (`silent_pixels`), the rounding error of their files'
+`views_noise`; what they read of the targets, masks and weights alone, `noise_plan`, is found while
+the solve runs), the pixels that carry none (`silent_pixels`), the rounding error of their files'
 codes (`quantisation`), and how far a reduced chi-square against an estimated noise spreads for a
 correct model (`chi2_spread`). `fit.stats` describes what the fit reports with them."""
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -34,30 +36,156 @@ def _stencil(planes: np.ndarray, middle: float) -> np.ndarray:
     return out
 
 
-def _levels(square: np.ndarray, intensity: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """The noise level -- the variance of L where it is Gaussian -- of a channel's L^2 values as a
-    function of their intensity (the mean signal of each L's pixels, weighted as their variances
-    are: `_stencil`), from a sample of them, `square` (m,) and `intensity` (m,) (None: one level):
-    (x, v), the level at intensity i being np.interp(i, x, v). The sample (m values) in order of
-    intensity is cut into runs of equal count -- sqrt(m) / 4 bins of 4 sqrt(m) values, at most
-    NOISE_BINS --, each a point (its median intensity, its median L^2 / MEDIAN_CHI2_1): the bins
-    narrow enough to follow the level (a side-lit sphere's 400 values a channel, one bin: its
-    bright limb's noise capped away, a correct fit read chi2 2.0-2.4, flagged; 5 bins: 0.95-1.52,
-    ok), wide enough that a median is a level (bins of 64 values: a flat signal's chi2 spread 1.5x
-    the formula's; of 4 sqrt(m): 1.2x). Where the noise grows with the signal (a camera's, a
-    renderer's, 8-bit code steps), the level follows it, and a model's sharp errors -- an edge, a
-    penumbra, a rim: few values among those of their intensity -- stay outliers of their bin.
-    (Spatial blocks did not: in a block straddling bright and dark pixels the median was the dark
-    pixels', the bright ones' real noise was capped away, and a correct model of a checker floor
-    with noise of 3 % of the signal read chi2 1.38: `mismatch_suspected` 20 times of 20.)"""
-    bins = 1 if intensity is None else min(max(int(math.sqrt(square.size)) // 4, 1), NOISE_BINS)
-    if bins == 1:
-        return np.zeros(1), np.array([np.median(square) / MEDIAN_CHI2_1])
-    count = square.size // bins
-    trim = (square.size - bins * count) // 2
-    order = np.argsort(intensity)[trim:trim + bins * count].reshape(bins, count)
-    middle = np.partition(square[order], [(count - 1) // 2, count // 2], axis=1)  # each bin's median, as np.median's
-    return intensity[order[:, count // 2]], (middle[:, (count - 1) // 2] + middle[:, count // 2]) / 2.0 / MEDIAN_CHI2_1
+class Picks(NamedTuple):
+    """What a noise estimate reads of one channel's Laplacians, none of it from the residuals:
+    index (M,) the picked ones' flat positions in the box's centre grid; step: the levels' sample
+    is every step-th of them, index[::step] (step = max(M // NOISE_SAMPLE, 1)); binned (bins,
+    count): the sample's positions in index in order of intensity, the runs `_levels` takes
+    medians of (None: one level); x (bins,) each bin's median intensity (one level: 0); bright:
+    the intensities over the centre grid, flat (None: one level), and at the sample; weight: the
+    entries' weights at index and at the sample (None: 1), and den, their sum."""
+
+    index: np.ndarray
+    step: int
+    binned: np.ndarray | None
+    x: np.ndarray
+    bright: np.ndarray | None
+    bright_sample: np.ndarray | None
+    weight: np.ndarray | None
+    weight_sample: np.ndarray | None
+    den: float
+
+
+class ViewPicks(NamedTuple):
+    """What a noise estimate reads of one view, none of it from the residuals: box (the used
+    pixels' bounding box one pixel wider: its rows' and columns' slices), centre (3, h - 2, w - 2)
+    bool over the box's centre grid (the Laplacians picked, non-finite ones aside), the Laplacians'
+    intensities and weights (3, h - 2, w - 2) or None, and per channel its `Picks` (None: none)."""
+
+    box: tuple
+    centre: np.ndarray
+    bright: np.ndarray | None
+    weights: np.ndarray | None
+    picks: list
+
+
+def _picks(index, bright, weight) -> Picks:
+    """A channel's `Picks` for its picked Laplacians `index`, its intensities and weights over the
+    centre grid, flat (None: one level; 1). The levels' bins (`_levels`): the sample (m values) in
+    order of intensity cut into runs of equal count, sqrt(m) / 4 bins of 4 sqrt(m) values, at most
+    NOISE_BINS, the middle bins * count values kept."""
+    step = max(index.size // NOISE_SAMPLE, 1)
+    sample = index[::step]
+    bright_sample = None if bright is None else bright[sample]
+    bins = 1 if bright is None else min(max(int(math.sqrt(sample.size)) // 4, 1), NOISE_BINS)
+    binned, x = None, np.zeros(1)
+    if bins > 1:
+        count = sample.size // bins
+        trim = (sample.size - bins * count) // 2
+        order = np.argsort(bright_sample)[trim:trim + bins * count].reshape(bins, count)
+        binned, x = order * step, bright_sample[order[:, count // 2]]
+    at_index = None if weight is None else weight[index]
+    return Picks(index, step, binned, x, bright, bright_sample, at_index,
+                 None if weight is None else weight[sample],
+                 float(index.size if weight is None else np.sum(at_index)))
+
+
+def _levels(values: np.ndarray, picks: Picks) -> np.ndarray:
+    """The noise level -- the variance of L where it is Gaussian -- of a channel's L^2 values (at
+    its `Picks`' index) as a function of their intensity (the mean signal of each L's pixels,
+    weighted as their variances are: `_stencil`), read from their sample: v (bins,), the level at
+    intensity i being np.interp(i, x, v). Each bin of the sample in order of intensity is a point
+    (its median intensity x, its median L^2 / MEDIAN_CHI2_1): the bins narrow enough to follow the
+    level (a side-lit sphere's 400 values a channel, one bin: its bright limb's noise capped away,
+    a correct fit read chi2 2.0-2.4, flagged; 5 bins: 0.95-1.52, ok), wide enough that a median is
+    a level (bins of 64 values: a flat signal's chi2 spread 1.5x the formula's; of 4 sqrt(m):
+    1.2x). Where the noise grows with the signal (a camera's, a renderer's, 8-bit code steps), the
+    level follows it, and a model's sharp errors -- an edge, a penumbra, a rim: few values among
+    those of their intensity -- stay outliers of their bin. (Spatial blocks did not: in a block
+    straddling bright and dark pixels the median was the dark pixels', the bright ones' real noise
+    was capped away, and a correct model of a checker floor with noise of 3 % of the signal read
+    chi2 1.38: `mismatch_suspected` 20 times of 20.)"""
+    if picks.binned is None:
+        return np.array([np.median(values[::picks.step]) / MEDIAN_CHI2_1])
+    count = picks.binned.shape[1]
+    middle = np.partition(values[picks.binned], [(count - 1) // 2, count // 2], axis=1)  # each bin's median, as np.median's
+    return (middle[:, (count - 1) // 2] + middle[:, count // 2]) / 2.0 / MEDIAN_CHI2_1
+
+
+def _view_picks(used, weights, signal, interior: bool) -> ViewPicks | None:
+    """A view's `ViewPicks` from its used map, weights and signal (`estimate_sigma`'s), or None
+    when it has no Laplacian (no used pixel, or a box under 3 x 3)."""
+    pixels = used if used.ndim == 2 else used[..., 0] | used[..., 1] | used[..., 2]
+    rows, cols = np.flatnonzero(pixels.any(axis=1)), np.flatnonzero(pixels.any(axis=0))
+    if rows.size == 0 or used.shape[0] < 3 or used.shape[1] < 3:
+        return None
+    top, left = max(rows[0] - 1, 0), max(cols[0] - 1, 0)  # the box, one pixel wider (non-interior case)
+    box = (slice(top, min(rows[-1] + 2, used.shape[0])), slice(left, min(cols[-1] + 2, used.shape[1])))
+    used = used[box]
+    if used.shape[0] < 3 or used.shape[1] < 3:
+        return None
+    centre = used[1:-1, 1:-1]
+    if interior:
+        across = used[:, :-2] & used[:, 1:-1] & used[:, 2:]
+        centre = across[:-2] & across[1:-1] & across[2:]
+    shared = np.flatnonzero(centre) if centre.ndim == 2 else None  # (every channel's)
+    centre = np.broadcast_to(centre, (3, *centre.shape)) if centre.ndim == 2 else _planes(centre)
+    bright = None if signal is None else _stencil(_planes(np.asarray(signal)[box], np.float32), 4.0)  # (binned:
+    # float32 is plenty)
+    weights = None if weights is None else _planes(weights[box][1:-1, 1:-1])
+    picks = [_channel(np.flatnonzero(centre[c]) if shared is None else shared, bright, weights, c) for c in range(3)]
+    return ViewPicks(box, centre, bright, weights, picks)
+
+
+def _channel(index, bright, weights, c: int) -> Picks | None:
+    """Channel c's `Picks` at `index` (None where it is empty)."""
+    if not index.size:
+        return None
+    return _picks(index, None if bright is None else bright[c].reshape(-1),
+                  None if weights is None else weights[c].reshape(-1))
+
+
+def _planes(image, dtype=None) -> np.ndarray:
+    """(3, ...) contiguous channel planes of an (..., 3) image."""
+    return np.ascontiguousarray(np.moveaxis(image, -1, 0), dtype)
+
+
+def _sums(views: list, planes) -> tuple[float, float, float, float, int]:
+    """(num, den, spread, square_spread, M) of `estimate_sigma` from each view's `ViewPicks` (None:
+    none) and its residuals as (3, H, W) planes, in their own precision (float32 residual images):
+    the Laplacians over the box, squared in float64 where picked."""
+    num = den = spread = square_spread = 0.0
+    count = 0
+    for view, image in zip(views, planes):
+        if view is None:
+            continue
+        with np.errstate(invalid="ignore", over="ignore"):  # (inf - inf: NaN; either is left out)
+            laplacian = _stencil(image[:, view.box[0], view.box[1]], -2.0)
+        for c in range(3):
+            picks, flat = view.picks[c], laplacian[c].reshape(-1)
+            values = None if picks is None else np.square(flat[picks.index], dtype=np.float64)
+            if values is not None and not np.isfinite(values.max()):  # (rare: a NaN or inf) the picks without them
+                picks = _channel(np.flatnonzero(view.centre[c] & np.isfinite(laplacian[c])), view.bright,
+                                 view.weights, c)
+                values = None if picks is None else np.square(flat[picks.index], dtype=np.float64)
+            if picks is None:
+                continue
+            v = _levels(values, picks)
+            level = (lambda at: np.interp(at, picks.x, v)) if picks.bright is not None else lambda at: v[0]  # noqa: E731
+            over = np.flatnonzero(values > CAP_Z2 * v.min())  # (only these can be above 9 times their level)
+            if over.size:
+                high = level(picks.bright[picks.index[over]] if picks.bright is not None else None)
+                values[over] = np.where(values[over] > CAP_Z2 * high, high, values[over])
+            num += float(np.sum(values if picks.weight is None else values * picks.weight))  # (no BLAS dot: slow threads)
+            den += picks.den
+            weighted = level(picks.bright_sample)  # the share, from the sample
+            if picks.weight_sample is not None:
+                weighted = weighted * picks.weight_sample
+            scale = picks.index.size / -(-picks.index.size // picks.step)  # M / m
+            spread += float(np.sum(weighted)) * scale
+            square_spread += float(np.sum(np.square(weighted))) * scale
+            count += picks.index.size
+    return num, den, spread, square_spread, count
 
 
 def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True, signals=None):
@@ -84,51 +212,15 @@ def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True, signal
     as, per value (`chi2_spread`; its sums from the levels' sample). A used map is (H, W) bool (every
     channel of a used pixel) or (H, W, 3) (per channel: where some channels have weight 0, their
     residuals are 0, not noise, and must not enter a neighbourhood). (Over the used pixels'
-    bounding box.)"""
-    num = den = spread = square_spread = 0.0
-    count = 0
-    for k, (image, used) in enumerate(zip(images, used_maps)):
-        pixels = used if used.ndim == 2 else used[..., 0] | used[..., 1] | used[..., 2]
-        rows, cols = np.flatnonzero(pixels.any(axis=1)), np.flatnonzero(pixels.any(axis=0))
-        if rows.size == 0 or used.shape[0] < 3 or used.shape[1] < 3:
-            continue
-        top, left = max(rows[0] - 1, 0), max(cols[0] - 1, 0)  # the box, one pixel wider (non-interior case)
-        box = (slice(top, min(rows[-1] + 2, used.shape[0])), slice(left, min(cols[-1] + 2, used.shape[1])))
-        used, image = used[box], np.asarray(image)[box]  # in its own precision (float32 residual images)
-        if used.shape[0] < 3 or used.shape[1] < 3:
-            continue
-        centre = used[1:-1, 1:-1]
-        if interior:
-            across = used[:, :-2] & used[:, 1:-1] & used[:, 2:]
-            centre = across[:-2] & across[1:-1] & across[2:]
-        planes = lambda a, dtype=None: np.ascontiguousarray(np.moveaxis(a, -1, 0), dtype)  # noqa: E731 (3, ...)
-        with np.errstate(invalid="ignore", over="ignore"):  # (inf - inf: NaN; either is left out)
-            square = np.square(_stencil(planes(image), -2.0), dtype=np.float64)
-        centre = np.broadcast_to(centre, square.shape) if centre.ndim == 2 else planes(centre)
-        signal = None if signals is None or signals[k] is None else \
-            _stencil(planes(np.asarray(signals[k])[box], np.float32), 4.0)  # (binned: float32 is plenty)
-        weights = None if weight_maps is None or weight_maps[k] is None else planes(weight_maps[k][box][1:-1, 1:-1])
-        for c in range(3):
-            index = np.flatnonzero(centre[c] & np.isfinite(square[c]))
-            if not index.size:
-                continue
-            step = max(index.size // NOISE_SAMPLE, 1)
-            sample, flat = index[::step], square[c].reshape(-1)
-            bright = None if signal is None else signal[c].reshape(-1)
-            x, v = _levels(flat[sample], None if bright is None else bright[sample])
-            level = (lambda at: np.interp(bright[at], x, v)) if bright is not None else lambda at: v[0]  # noqa: E731
-            values = flat[index]
-            over = np.flatnonzero(values > CAP_Z2 * v.min())  # (only these can be above 9 times their level)
-            if over.size:
-                high = level(index[over])
-                values[over] = np.where(values[over] > CAP_Z2 * high, high, values[over])
-            weight = None if weights is None else weights[c].reshape(-1)
-            num += float(np.sum(values if weight is None else values * weight[index]))  # (no BLAS dot: slow threads)
-            den += float(index.size if weight is None else np.sum(weight[index]))
-            weighted = level(sample) * (1.0 if weight is None else weight[sample])  # the share, from the sample
-            spread += float(np.sum(weighted)) * (index.size / sample.size)
-            square_spread += float(np.sum(np.square(weighted))) * (index.size / sample.size)
-            count += index.size
+    bounding box. What depends on no residual -- `ViewPicks` -- can be found before them.)"""
+    views = [_view_picks(used, None if weight_maps is None else weight_maps[k],
+                         None if signals is None else signals[k], interior) for k, used in enumerate(used_maps)]
+    return _estimate(views, [np.moveaxis(np.asarray(image), -1, 0) for image in images])
+
+
+def _estimate(views: list, planes):
+    """`estimate_sigma` from the views' `ViewPicks` and residual planes (3, H, W)."""
+    num, den, spread, square_spread, count = _sums(views, planes)
     if count < MIN_NOISE_PIXELS or den <= 0:
         return None
     share = spread * spread / (count * square_spread) if square_spread > 0 else 1.0
@@ -142,52 +234,75 @@ def at_ceiling(image, ceiling) -> np.ndarray:
     return top[..., 0] | top[..., 1] | top[..., 2]
 
 
+def black_pixels(views) -> list[np.ndarray]:
+    """Per view (U,) bool: the used pixels whose target is 0 in every channel."""
+    return [view.zeros[:, 0] & view.zeros[:, 1] & view.zeros[:, 2] for view in views]
+
+
 def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
     """The used pixels of a fit's views (`records.View`) that carry no noise: target and model both
     exactly 0 in every channel (an unlit side; a renderer's noise scales with its signal), from the
     flat weighted residuals r over every used entry. Returns per view (U,) bool over its used
     pixels, and how many of their entries have weight > 0 (left out of the chi-square's dof)."""
     out, count, offset = [], 0, 0
-    for view in views:
+    for view, black in zip(views, black_pixels(views)):
         part = r[offset:offset + 3 * view.pixels.size].reshape(-1, 3)
         offset += 3 * view.pixels.size
-        zero = view.zeros & (part == 0)  # black in the target, and the model 0 there too
-        rows = zero[:, 0] & zero[:, 1] & zero[:, 2]
+        zero = part == 0  # the model 0 too
+        rows = black & zero[:, 0] & zero[:, 1] & zero[:, 2]
         count += 3 * int(np.count_nonzero(rows)) if view.weighting is None else \
             int(np.count_nonzero(np.take(view.entries, np.flatnonzero(rows), axis=0)))
         out.append(rows)
     return out, count
 
 
-def views_noise(views, residual_images, silent, given: float | None, floor: float, fallback=None,
-                quantisation: float = 0.0) -> tuple[float | None, int, float]:
+class NoisePlan(NamedTuple):
+    """What `views_noise` reads of a fit's targets, masks and weights, found before the residuals
+    are (`noise_plan`, while the solve runs): each view's `ViewPicks` (None: none) for the silent
+    pixels `silent` (per view (U,) bool) -- good for a fit whose silent pixels are these."""
+
+    silent: list
+    views: list
+
+
+def noise_plan(views, silent=None) -> NoisePlan:
+    """The `NoisePlan` of a fit's views for its `silent` pixels (per view (U,) bool; default: every
+    black pixel -- what `silent_pixels` finds unless the model lights one: a pixel the target shows
+    black is mostly one no light reaches). Over the used pixels but the silent and the censored ones
+    -- per channel where a weight of 0 leaves a used pixel's channel out --, their Laplacians'
+    levels by the targets' intensities (the data's: two fits a hair apart bin alike)."""
+    silent = black_pixels(views) if silent is None else silent
+    picks = []
+    for view, quiet in zip(views, silent):
+        left_out = quiet | at_ceiling(view.values, view.ceiling) if np.isfinite(view.ceiling) else quiet
+        clean = view.used
+        if left_out.any():
+            clean = view.used.copy()
+            clean.reshape(-1)[view.pixels[left_out]] = False
+        if view.weighting is not None and not np.all(view.weights > 0):
+            clean = in_channels(clean) & (view.weighting > 0)
+        picks.append(_view_picks(clean, view.weighting, view.image, interior=True))
+    return NoisePlan(silent, picks)
+
+
+def views_noise(views, residual_planes, silent, given: float | None, floor: float, fallback=None,
+                quantisation: float = 0.0, plan: NoisePlan | None = None) -> tuple[float | None, int, float]:
     """The pixel noise sigma of a fit's views, in the targets' units, the number of Laplacian values
     M it was estimated from (0 when given or taken from `fallback`) and their `estimate_sigma`
     share (1 for none): `given` -- the noise before quantisation, to which the targets'
     `quantisation` (the rms rounding error of their used values, 0 for float data: one sigma serves
     every view) is added in quadrature: a correct fit of an 8-bit file with its true noise 0.002
-    given came out at chi2 1.2, flagged; its share is the weights' (`weight_share`) -- or estimated (`estimate_sigma`, each entry weighted by
-    its view's weight) from the plain residual images (H, W, 3) at the solution, their levels by the
-    targets' intensities (the data's: two fits a hair apart bin alike), over the used pixels but
-    the `silent` (per view (U,) bool, `silent_pixels`) and the censored ones -- per channel where a
-    weight of 0 leaves a used pixel's channel out -- and at least `floor` (the quantisation's,
-    `Setup.sigma_floor`). Where too few pixels allow that: `fallback` when given (a refit's, the
-    first fit's sigma), else None (unknown)."""
+    given came out at chi2 1.2, flagged; its share is the weights' (`weight_share`) -- or estimated
+    (`estimate_sigma`, each entry weighted by its view's weight) from the plain residuals at the
+    solution, per view (3, H, W) planes, over the entries of `noise_plan` for the `silent` pixels
+    (per view (U,) bool, `silent_pixels`; `plan` when made for these, else made here), and at least
+    `floor` (the quantisation's, `Setup.sigma_floor`). Where too few pixels allow that: `fallback`
+    when given (a refit's, the first fit's sigma), else None (unknown)."""
     if given is not None:
         return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views)
-    clean = []
-    for i, view in enumerate(views):
-        left_out = silent[i] if silent else np.zeros(view.pixels.size, bool)
-        if np.isfinite(view.ceiling):
-            left_out = left_out | at_ceiling(view.values, view.ceiling)
-        clean.append(view.used)
-        if left_out.any():
-            clean[i] = view.used.copy()
-            clean[i].reshape(-1)[view.pixels[left_out]] = False
-        if view.weighting is not None and not np.all(view.weights > 0):
-            clean[i] = in_channels(clean[i]) & (view.weighting > 0)
-    estimate = estimate_sigma(residual_images, clean, [view.weighting for view in views],
-                              signals=[view.image for view in views])
+    if plan is None or not all(np.array_equal(a, b) for a, b in zip(plan.silent, silent)):
+        plan = noise_plan(views, silent)
+    estimate = _estimate(plan.views, residual_planes)
     if estimate is None:
         return fallback, 0, 1.0
     return max(estimate[0], floor), estimate[1], estimate[2]

@@ -357,9 +357,9 @@ class Setup:
             return ResultCode("empty_mask", empty_detail(self.labels, self.views, shown))
         return None
 
-    def residual_images(self, r) -> list[np.ndarray]:
-        """Per view (H, W, 3) float32 plain residuals min(model, ceiling) - target from the flat
-        weighted residuals r (0 outside the pixels used and where the weight is 0)."""
+    def residual_planes(self, r) -> list[np.ndarray]:
+        """Per view (3, H, W) float32 plain residuals min(model, ceiling) - target, channel-major,
+        from the flat weighted residuals r (0 outside the pixels used and where the weight is 0)."""
         out, offset = [], 0
         for view in self.views:
             pixels = view.pixels
@@ -368,11 +368,11 @@ class Setup:
             if not self.unit_weights:
                 sqrt_w = np.sqrt(view.weights)
                 part = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w, 1.0), 0.0)
-            full = np.zeros(view.image.shape, np.float32)
-            rows, part = full.reshape(-1, 3), part.astype(np.float32)
-            for c in range(3):  # a channel at a time, cast before: ~1.5x the speed of scattering rows of 3
-                rows[:, c][pixels] = part[:, c]
-            out.append(full)
+            planes = np.zeros((3, view.used.size), np.float32)
+            part = part.astype(np.float32)
+            for c in range(3):
+                planes[c, pixels] = part[:, c]
+            out.append(planes.reshape(3, *view.used.shape))
         return out
 
     def values(self, x) -> dict:
