@@ -51,7 +51,8 @@ MAX_INDEX = 2 ** 31 - 1
 RASTER_SAMPLE_BYTES = 220
 RASTER_LIGHT_POINT_BYTES = 24
 #: Ray tracer, per sample (colour, fog, counts, sample points; measured ~76) and per recorded
-#: ray-tree node (device arrays and numpy copies; measured ~132 with one light, of which ~40 per light).
+#: ray-tree node (device arrays and numpy copies; measured ~132 with one light, of which ~40 per light;
+#: ~140 since `tir_share` added a float32 on the device and its copy: still under 110 + 40).
 RAYTRACE_SAMPLE_BYTES = 90
 TREE_NODE_BYTES = 110
 TREE_NODE_LIGHT_BYTES = 40

@@ -123,6 +123,54 @@ def test_schlick_fresnel_weights_reflection_and_refraction_at_oblique_angles(sid
     np.testing.assert_allclose(image, f + 0.5 * (1 - f), atol=2e-6)
 
 
+def exact_fresnel(cos_i, eta):
+    """Unpolarised dielectric reflectance (r_s^2 + r_p^2) / 2 for eta = n1 / n2 (1 under TIR)."""
+    sin2_t = eta * eta * (1 - cos_i * cos_i)
+    if sin2_t >= 1:
+        return 1.0
+    cos_t = math.sqrt(1 - sin2_t)
+    r_s = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    r_p = (eta * cos_t - cos_i) / (eta * cos_t + cos_i)
+    return 0.5 * (r_s * r_s + r_p * r_p)
+
+
+def interface_scene(side, angle_deg, material, fresnel):
+    """The interface y = 0 (`material`, no local light) under a white background, seen at angle
+    theta from its normal, from above (entering, eta = 1 / ior) or below (leaving, eta = ior) by a
+    4x4 orthographic camera at depth 2: every child ray meets the background."""
+    theta = math.radians(angle_deg)
+    sign = 1.0 if side == "above" else -1.0
+    camera = dict(ORTHO, eye=[5 * math.sin(theta), sign * 5 * math.cos(theta), 0], up=[0, 0, 1], width=4, height=4)
+    return scene_dict([{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "m"}],
+                      {"m": {"ka": [0, 0, 0], "kd": [0, 0, 0], **material}}, camera=camera, background=[1, 1, 1],
+                      render={"max_depth": 2, "fresnel": fresnel})
+
+
+@pytest.mark.parametrize("fresnel, form", [("exact", exact_fresnel), ("schlick", schlick)])
+@pytest.mark.parametrize("side, angle_deg", [("above", 0), ("above", 50), ("above", 70), ("below", 0),
+                                             ("below", 30), ("below", 60)])
+def test_fresnel_weights_an_opaque_mirror(fresnel, form, side, angle_deg):
+    """An opaque mirror (kr = 0.8, kt = 0, ior 1.5) with Fresnel on reflects kr F(cos theta, eta),
+    as a transparent one does (POV-Ray's `reflection {0, 1 fresnel on}`): head-on 0.8 x 0.04, and
+    kr past the critical angle seen from below (F = 1). Fresnel used to be skipped at kt = 0."""
+    scene = interface_scene(side, angle_deg, {"kr": 0.8, "ior": 1.5}, fresnel)
+    f = form(math.cos(math.radians(angle_deg)), 1 / 1.5 if side == "above" else 1.5)
+    np.testing.assert_allclose(render(scene, method="raytrace"), 0.8 * f, atol=2e-6)
+
+
+@pytest.mark.parametrize("kr", [0.0, 0.3])
+@pytest.mark.parametrize("side, angle_deg", [("above", 30), ("above", 80), ("below", 20), ("below", 40),
+                                             ("below", 45), ("below", 60), ("below", 70)])
+def test_plain_weights_move_the_refracted_share_to_the_reflection_under_tir(kr, side, angle_deg):
+    """Without Fresnel weighting (kt = 0.5, ior 1.5) the reflected ray takes kr and the refracted
+    one kt; past the critical angle seen from below (41.8 deg) no ray refracts and the reflected
+    one takes kr + kt (POV-Ray's total internal reflection): every pixel is kr + kt (it was kr
+    under TIR, black glass with the docs' kr = 0). With Fresnel weighting the refracted share
+    kt (1 - F) is 0 there: `test_schlick_fresnel_weights_reflection_and_refraction_at_oblique_angles`."""
+    scene = interface_scene(side, angle_deg, {"kr": kr, "kt": 0.5, "ior": 1.5}, "none")
+    np.testing.assert_allclose(render(scene, method="raytrace"), kr + 0.5, atol=2e-6)
+
+
 # ---- point-light attenuation ----------------------------------------------------------------
 
 

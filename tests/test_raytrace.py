@@ -230,11 +230,13 @@ def test_primary_hits_and_phong_image_agree_with_the_rasterizer(compare_images):
 
 
 def lecture_like(**render_block):
+    """MIXED with mirrors (the red ball, the floor) and a glass ball; the mirrors have ior 1.5, so that
+    they reflect under Fresnel weighting too (F = 0 at ior 1)."""
     materials = dict(MIXED["materials"], red={"ka": [0.05, 0, 0], "kd": [0.3, 0.05, 0.05], "ks": [0.5, 0.5, 0.5],
-                                              "n": 30, "kr": 0.7},
+                                              "n": 30, "kr": 0.7, "ior": 1.5},
                      glass={"ka": [0, 0, 0], "kd": [0, 0, 0], "ks": [0.5, 0.5, 0.5], "n": 100, "kr": 0.9, "kt": 0.9,
                             "ior": 1.5, "absorption": [0.2, 0.05, 0.0]})
-    materials["floor"] = dict(materials["floor"], kr=0.4)
+    materials["floor"] = dict(materials["floor"], kr=0.4, ior=1.5)
     objects = MIXED["objects"] + [{"type": "sphere", "center": [0.2, 0.35, 1.0], "radius": 0.35, "material": "glass"}]
     return scene_dict(objects, materials, camera=MIXED["camera"], lights=MIXED["lights"], ambient=MIXED["ambient"],
                       background=[0.1, 0.2, 0.3], render={"method": "raytrace", **render_block})

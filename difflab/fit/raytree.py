@@ -7,7 +7,9 @@ sample is the weighted sum of its nodes' local colours:
     sample = f * sum_nodes weight(node) * local(node) + (1 - f) * fog_color
     weight(root)  = beer(root)
     weight(child) = weight(parent) * edge(child) * beer(child)
-    edge = kr[parent's material] * fresnel_r[parent]   (a reflected child)
+    edge = kr[parent's material] * fresnel_r[parent] + kt[parent's material] * tir_share[parent]
+                                                       (a reflected child; tir_share > 0 only under
+                                                        total internal reflection without Fresnel)
          | kt[parent's material] * fresnel_t[parent]   (a refracted child)
     beer = exp(-absorption[medium] * distance)          (1 outside any medium)
     local = the one illumination model (`lighting.jax_model.shade`; a texture modulates its target)
@@ -57,6 +59,8 @@ class TreeJ(eqx.Module):
     parent_local: (N,) index of the node's parent within the level above (0 for roots).
     edge_material, edge_fresnel, edge_reflected: (N,) the parent's material id, the Fresnel factor of
         the edge (fresnel_r or fresnel_t of the parent) and whether the edge is a reflection.
+    edge_tir: (N,) the factor of the parent's kt in a reflected edge (the parent's tir_share; 0 for a
+        refracted one), or None where no edge has one.
     medium: (N,) material id the ray travelled inside (-1: none); distance (N,) (0 where infinite);
         escaped (N,) bool: the ray inside a medium hit nothing (infinite distance).
     sample: (N,) the node's sample, 0..S-1 (S = U * samples_per_pixel, pixel-major).
@@ -73,6 +77,7 @@ class TreeJ(eqx.Module):
     edge_material: jnp.ndarray
     edge_fresnel: jnp.ndarray
     edge_reflected: jnp.ndarray
+    edge_tir: jnp.ndarray | None
     medium: jnp.ndarray
     distance: jnp.ndarray
     escaped: jnp.ndarray
@@ -151,6 +156,7 @@ def tree_to_jax(tree, pixels=None, dtype=jnp.float32, texels=None) -> TreeJ:
     kind = tree.kind[order]
     edge_material = np.where(has_parent, np.maximum(tree.material[safe_parent], 0), 0)
     edge_fresnel = np.where(kind == REFLECTED, tree.fresnel_r[safe_parent], tree.fresnel_t[safe_parent])
+    edge_tir = np.where(has_parent & (kind == REFLECTED), tree.tir_share[safe_parent], 0.0)
     distance = tree.distance[order].astype(np.float64)
     finite = np.isfinite(distance)
 
@@ -175,6 +181,7 @@ def tree_to_jax(tree, pixels=None, dtype=jnp.float32, texels=None) -> TreeJ:
         crossings=f(crossings) if crossings.any() else None,
         parent_local=jnp.asarray(parent_local, jnp.int32), edge_material=jnp.asarray(edge_material, jnp.int32),
         edge_fresnel=f(edge_fresnel), edge_reflected=jnp.asarray(kind == REFLECTED),
+        edge_tir=f(edge_tir) if edge_tir.any() else None,
         medium=jnp.asarray(tree.medium[order], jnp.int32), distance=f(np.where(finite, distance, 0.0)),
         escaped=jnp.asarray(~finite), sample=jnp.asarray(new_sample[tree.sample[order]], jnp.int32),
         fog=f(fog), fog_color=f(tree.fog_color), levels=tuple(levels), samples_per_pixel=int(per_pixel.shape[1]),
@@ -219,6 +226,8 @@ def node_factors(tree: TreeJ, mats: MaterialTable):
     """(N, 3) per node: edge weight from its parent (1 for roots) times its Beer factor."""
     edge = jnp.where(tree.edge_reflected, mats.kr[tree.edge_material], mats.kt[tree.edge_material])
     edge = edge * tree.edge_fresnel
+    if tree.edge_tir is not None:  # total internal reflection: the refracted share kt joins the reflection
+        edge = edge + mats.kt[tree.edge_material] * tree.edge_tir
     start = tree.levels[0][1] if tree.levels else 0
     edge = edge.at[:start].set(1.0)  # roots have no edge
     inside = tree.medium >= 0

@@ -10,7 +10,8 @@ node adds
     weight * local            (or weight * background where the ray hits nothing)
 
 to the sample. A node at depth k < max_depth spawns a reflected ray with weight
-weight * kr * F_r and a refracted ray with weight weight * kt * F_t (`surface.fresnel_split`).
+weight * (kr F_r + kt T) and a refracted ray with weight weight * kt F_t (`surface.fresnel_split`;
+T > 0 only under total internal reflection, where no refracted ray exists).
 A ray travelling inside a medium (refracted into an object, until it refracts out) is multiplied
 by Beer's exp(-alpha d) over its length d, alpha being that object's absorption. A child is not
 traced when its weight is 0, when its depth would pass `max_depth` (it then contributes black), or
@@ -215,7 +216,7 @@ def make_whitted_kernel(stack_size: int):
                             stack[sp] = child_ray(scene.geom, ray, node, hit, surf, split.t_dir, w_t, REFRACTED,
                                                   medium)
                             sp = sp + 1
-                        w_r = w * (surf.mat.kr * split.f_r)
+                        w_r = w * (surf.mat.kr * split.f_r + surf.mat.kt * split.tir_share)
                         if worth_tracing(w_r, params.threshold):
                             r_dir = reflect(ray.direction, surf.normal)
                             stack[sp] = child_ray(scene.geom, ray, node, hit, surf, r_dir, w_r, REFLECTED, ray.medium)

@@ -46,6 +46,7 @@ class TreeW:
     fresnel: wp.array(dtype=float)
     fresnel_r: wp.array(dtype=float)
     fresnel_t: wp.array(dtype=float)
+    tir_share: wp.array(dtype=float)
     light_dir: wp.array2d(dtype=wp.vec3)
     light_dist: wp.array2d(dtype=float)
     visibility: wp.array2d(dtype=float)
@@ -113,6 +114,7 @@ def record_surface(tree: TreeW, k: int, surf: SurfaceW, local: wp.vec3, split: S
     tree.fresnel[k] = split.fresnel
     tree.fresnel_r[k] = split.f_r
     tree.fresnel_t[k] = split.f_t
+    tree.tir_share[k] = split.tir_share
 
 
 def has_textures(scene) -> bool:
@@ -130,7 +132,7 @@ def empty_tree(shape: tuple[int, int], n_nodes: int, n_lights: int, device: str,
     tree.offset = wp.zeros(shape, dtype=wp.int32, device=device)
     for name in ("sample", "parent", "kind", "depth", "material", "object", "face", "cell", "medium"):
         setattr(tree, name, wp.zeros(n, dtype=wp.int32, device=device))
-    for name in ("distance", "fresnel", "fresnel_r", "fresnel_t"):
+    for name in ("distance", "fresnel", "fresnel_r", "fresnel_t", "tir_share"):
         setattr(tree, name, wp.zeros(n, dtype=float, device=device))
     for name in ("position", "normal", "view", "local"):
         setattr(tree, name, wp.zeros(n, dtype=wp.vec3, device=device))
@@ -180,7 +182,7 @@ def tree_to_numpy(wp_tree: TreeW, offsets: np.ndarray, n_lights: int, fog, scene
         fog_color=np.asarray(fog_params(scene.fog)[1], np.float32),
         **{name: get(name) for name in ("sample", "parent", "kind", "depth", "material", "object", "face", "cell",
                                         "medium", "distance", "position", "normal", "view", "fresnel", "fresnel_r",
-                                        "fresnel_t", "local")}, **texture,
+                                        "fresnel_t", "tir_share", "local")}, **texture,
         light_dir=get("light_dir")[:, :n_lights], light_dist=get("light_dist")[:, :n_lights],
         visibility=get("visibility")[:, :n_lights], crossings=crossed,
     )

@@ -7,9 +7,12 @@ New rays start `epsilon` (scene units, from `compile_scene`) off the surface alo
 normal on the side they travel to; a ray leaving a sphere outwards, and every ray leaving a plane,
 also skips that object (it cannot meet it again).
 
-The split between the reflected and the refracted child is (F_r, F_t) = (1, 1) without Fresnel
-weighting (or at opaque surfaces, kt = 0) and (F, 1 - F) with it; total internal reflection leaves
-no refracted ray (F_t = 0, F = 1).
+The split between the reflected and the refracted child: the reflected one takes kr F_r, the
+refracted one kt F_t, with (F_r, F_t) = (1, 1) without Fresnel weighting and (F, 1 - F) with it,
+F = F(cos_i, eta) (`optics.fresnel`) at every surface, opaque (kt = 0) or not. Total internal
+reflection leaves no refracted ray: F = 1, and the share the refracted ray would have taken,
+kt (1 - F) = 0 with Fresnel weighting, kt without it, goes to the reflected ray, which then takes
+kr F_r + kt T (T: `SplitW.tir_share`, 1 without Fresnel, else 0), as POV-Ray traces it.
 """
 
 from __future__ import annotations
@@ -88,9 +91,11 @@ class SplitW:
 
     refracts: int  # 0 under total internal reflection
     t_dir: wp.vec3  # the refracted direction (where refracts = 1)
-    fresnel: float  # F (0 where Fresnel weighting is off or the surface is opaque; 1 under TIR)
-    f_r: float  # the reflected child's weight is weight * kr * f_r
-    f_t: float  # the refracted child's weight is weight * kt * f_t
+    fresnel: float  # F (0 where Fresnel weighting is off; 1 under TIR)
+    f_r: float  # the reflected child's weight is weight * (kr * f_r + kt * tir_share)
+    f_t: float  # the refracted child's weight is weight * kt * f_t (0 under TIR)
+    tir_share: float  # under TIR, the refracted ray's share that goes to the reflected one (1 - F
+    # with Fresnel weighting, = 0; 1 without), else 0
 
 
 @wp.func
@@ -228,15 +233,16 @@ def fresnel_split(d: wp.vec3, surf: SurfaceW, mode: int):
     split.fresnel = 0.0
     split.f_r = 1.0
     split.f_t = 1.0
-    if surf.mat.kt > 0.0:
-        if mode != FRESNEL_NONE:
-            split.fresnel = fresnel(mode, wp.clamp(-wp.dot(d, surf.normal), 0.0, 1.0), eta)
-            split.f_r = split.fresnel
-            split.f_t = 1.0 - split.fresnel
-        if split.refracts == 0:  # total internal reflection
-            split.fresnel = 1.0
-            split.f_r = 1.0
-            split.f_t = 0.0
+    split.tir_share = 0.0
+    if mode != FRESNEL_NONE:  # at every surface: kr F weights an opaque mirror's reflection too
+        split.fresnel = fresnel(mode, wp.clamp(-wp.dot(d, surf.normal), 0.0, 1.0), eta)
+        split.f_r = split.fresnel
+        split.f_t = 1.0 - split.fresnel
+    if split.refracts == 0:  # total internal reflection: the refracted share goes to the reflected ray
+        split.tir_share = split.f_t  # (F is exactly 1 here: `refract` and `fresnel` test eta sin_i > 1 alike)
+        split.fresnel = 1.0
+        split.f_r = 1.0
+        split.f_t = 0.0
     return split
 
 

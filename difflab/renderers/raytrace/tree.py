@@ -8,7 +8,7 @@ forms it (the one place the tree's image is formed, in JAX, differentiably). The
 depend on ior, and the directions on ior and the normals, so ior is not re-evaluable.
 
 Two caveats make the tree's *shape* depend on material values: a child ray exists only where its
-weight kr F_r (or kt F_t) was > 0 when the tree was recorded, and Hall's adaptive control drops
+weight kr F_r + kt T (or kt F_t) was > 0 when the tree was recorded, and Hall's adaptive control drops
 children whose weight fell below its threshold. Record with kr / kt > 0 on every material whose kr /
 kt is to be fitted, and with `adaptive_threshold` 0.
 """
@@ -54,11 +54,13 @@ class RayTree:
       crossings   (N, P, M) uint8: how many surfaces of each material the light's shadow ray crossed
                   (transparent shadows); the visibility of an unblocked shadow ray is
                   prod_m kt_m ^ crossings[.., m], so it follows new kt values (0: blocked, stays 0).
-      fresnel     F at the node (0 where Fresnel weighting is off or the surface is opaque).
-      fresnel_r, fresnel_t  the factors the node's children's edges take: a REFLECTED child's edge
-                  weight is kr * fresnel_r and a REFRACTED child's kt * fresnel_t (kr, kt of the
-                  node's material): (1, 1) plain, (F, 1 - F) with Fresnel, (1, 0) under total
-                  internal reflection.
+      fresnel     F at the node (0 where Fresnel weighting is off; 1 under total internal reflection).
+      fresnel_r, fresnel_t, tir_share  the factors the node's children's edges take: a REFLECTED
+                  child's edge weight is kr * fresnel_r + kt * tir_share and a REFRACTED child's
+                  kt * fresnel_t (kr, kt of the node's material): (1, 1, 0) plain, (F, 1 - F, 0) with
+                  Fresnel (at every surface, opaque or not), and under total internal reflection
+                  (1, 0, 1) plain, (1, 0, 0) with Fresnel -- the refracted ray's share, kt or
+                  kt (1 - F) = 0, goes to the reflected ray.
       local       (N, 3) float32: the node's local colour as rendered (background for misses).
       texel       (N, 3) float32: the texture value a textured material took at the node (it multiplies
                   the coefficient named by the material's texture_target), else 0.
@@ -106,6 +108,7 @@ class RayTree:
     fresnel: np.ndarray
     fresnel_r: np.ndarray
     fresnel_t: np.ndarray
+    tir_share: np.ndarray
     local: np.ndarray
     texel: np.ndarray
     uv: np.ndarray
