@@ -158,6 +158,20 @@ def test_fresnel_weights_an_opaque_mirror(fresnel, form, side, angle_deg):
     np.testing.assert_allclose(render(scene, method="raytrace"), 0.8 * f, atol=2e-6)
 
 
+@pytest.mark.parametrize("fresnel, form", [("exact", exact_fresnel), ("schlick", schlick)])
+@pytest.mark.parametrize("ior", [1e-3, 1e3])
+@pytest.mark.parametrize("side, angle_deg", [("above", 0), ("above", 30), ("below", 0), ("below", 30)])
+def test_fresnel_at_the_ends_of_the_accepted_ior_range(fresnel, form, ior, side, angle_deg):
+    """At ior 1e-3 and 1e3 (the accepted range: `material.IOR_RANGE`) the float32 optics still give
+    kr F to float32 precision: head-on F = ((1 - eta) / (1 + eta))^2 = 0.996, at 30 degrees from the
+    side where eta = 1e3 total internal reflection (F = 1), from the other F(cos, 1e-3). Beyond the
+    range eta^2 overflows float32 (ior 1e30 rendered wrong without a sign) and the scene is refused."""
+    scene = interface_scene(side, angle_deg, {"kr": 1.0, "ior": ior}, fresnel)
+    eta = 1 / ior if side == "above" else ior
+    np.testing.assert_allclose(render(scene, method="raytrace"), form(math.cos(math.radians(angle_deg)), eta),
+                               rtol=2e-6, atol=2e-6)
+
+
 @pytest.mark.parametrize("kr", [0.0, 0.3])
 @pytest.mark.parametrize("side, angle_deg", [("above", 30), ("above", 80), ("below", 20), ("below", 40),
                                              ("below", 45), ("below", 60), ("below", 70)])

@@ -16,6 +16,12 @@ TEXTURE_TARGETS = tuple(TEXTURE_TARGET_IDS)
 #: The uv shift (per axis) that leaves a texture's image unchanged, by wrap mode: 1 with "repeat", 2
 #: with "mirror" (every other tile reflected); None with "clamp" (the image has one place).
 WRAP_PERIODS = {"repeat": 1.0, "mirror": 2.0, "clamp": None}
+#: Accepted indices of refraction: the ray tracer's float32 optics square eta = n1 / n2 (Snell's
+#: eta^2 sin_i^2; Fresnel's r_s, r_p hold eta cos_i), which overflows past ior ~2e19 (and 1 / ior
+#: past ior ~5e-20) and went wrong silently (a head-on slab of ior 1e30 rendered 0.49995 for 0.566);
+#: within [1e-3, 1e3] every product stays below ~1e6 and F keeps float32 precision
+#: (tests/test_closed_forms.py checks both ends).
+IOR_RANGE = (1e-3, 1e3)
 
 
 
@@ -46,7 +52,8 @@ class Material(Record):
     n: float = spec_field(Spec("number", "specular exponent of the phong and blinn models", "", bounds(ge=0)), 1.0)
     kr: float = spec_field(Spec("number", "weight of the reflected ray (ray tracer)", "", bounds(ge=0, le=1)), 0.0)
     kt: float = spec_field(Spec("number", "weight of the transmitted ray (ray tracer)", "", bounds(ge=0, le=1)), 0.0)
-    ior: float = spec_field(Spec("number", "index of refraction", "", bounds(gt=0)), 1.0)
+    ior: float = spec_field(Spec("number", "index of refraction (docs/limits.md: float32 optics)", "",
+                                 bounds(ge=IOR_RANGE[0], le=IOR_RANGE[1])), 1.0)
     absorption: Vec3 = spec_field(Spec("vec3", "Beer absorption coefficient inside the object", "per scene unit",
                                        bounds(ge=0), grey=True), (0.0, 0.0, 0.0))
     m: float = spec_field(Spec("number", "Beckmann roughness (torrance model)", "", bounds(gt=0)), 0.3)
