@@ -19,14 +19,40 @@ from . import limits
 from .errors import MeshError, RenderError, SceneError
 
 
-def tree_shape(scene) -> tuple[int, float]:
-    """(branching, weight) of the scene's ray trees: rays one hit can spawn (a reflected ray where
-    kr > 0, a refracted one where kt > 0; the most over all materials) and the largest factor a
-    spawned ray's weight carries (kr or kt, times a Fresnel factor <= 1)."""
+def tree_shape(scene) -> tuple[int, float, float]:
+    """(branching, weight, spread) of the scene's ray trees (`limits.ray_tree_nodes`), the most over
+    all materials: rays one hit can spawn (a reflected ray where kr > 0, a refracted one where
+    kt > 0), the largest factor one spawned ray's weight carries, and the largest sum of a hit's
+    children's factors. With Fresnel weighting the children take kr F and kt (1 - F): at most
+    max(kr, kt) each and together. Without it they take kr and kt, and under total internal
+    reflection (possible where kt > 0 and ior != 1) the reflected ray alone takes kr + kt."""
     materials = list(scene.materials.values())
+    plain = scene.render.fresnel == "none"
     branching = max([int(m.kr > 0) + int(m.kt > 0) for m in materials], default=0)
-    weight = max([max(m.kr, m.kt) for m in materials], default=0.0)
-    return branching, weight
+    weight = max([m.kr + m.kt if plain and m.kt > 0 and m.ior != 1 else max(m.kr, m.kt) for m in materials],
+                 default=0.0)
+    spread = max([m.kr + m.kt if plain else max(m.kr, m.kt) for m in materials], default=0.0)
+    return branching, weight, spread
+
+
+def ray_budget_hint(scene, shape: tuple[int, float, float], n_lights: int) -> str:
+    """What can bring a refused render's ray count down: max_depth, kr / kt, spp and the image size
+    where they would, and -- only where a threshold <= 1 brings the bound within the budget -- the
+    smallest adaptive_threshold of 1, 2, 5 x 10^-k that does (none can where a ray keeps its whole
+    weight at a bounce, kr + kt >= 1 under total internal reflection without Fresnel)."""
+    settings = scene.render
+    levers = [name for name, useful in (("max_depth", settings.max_depth > 1), ("kr / kt", shape[0] > 0),
+                                        ("spp", settings.spp > 1), ("the image size", True)) if useful]
+    hint = "lower " + (", ".join(levers[:-1]) + " or " if len(levers) > 1 else "") + levers[-1]
+    samples = scene.camera.width * scene.camera.height * settings.spp
+    budget = limits.ray_budget()
+    for exponent in range(-6, 1):
+        for mantissa in (1, 2, 5):
+            threshold = mantissa * 10.0 ** exponent
+            if threshold > max(settings.adaptive_threshold, 0.0) and threshold <= 1.0 and samples * (1 + n_lights) * \
+                    limits.ray_tree_nodes(settings.max_depth, shape[0], shape[1], threshold, shape[2]) <= budget:
+                return f"{hint}, or raise render.adaptive_threshold (Hall's control) to {threshold:g}"
+    return hint
 
 
 def check_render(scene, record_tree: bool = True) -> None:
@@ -40,9 +66,10 @@ def check_render(scene, record_tree: bool = True) -> None:
         limits.require_memory(limits.raster_frame_bytes(samples, samples, n_lights, 0), what, RenderError,
                               "lower the image size or spp")
         return
-    branching, weight = tree_shape(scene)
-    nodes = limits.ray_tree_nodes(settings.max_depth, branching, weight, settings.adaptive_threshold)
-    limits.check_rays(samples, nodes, n_lights, f"{what} at max_depth {settings.max_depth}", RenderError)
+    shape = tree_shape(scene)
+    nodes = limits.ray_tree_nodes(settings.max_depth, shape[0], shape[1], settings.adaptive_threshold, shape[2])
+    limits.check_rays(samples, nodes, n_lights, f"{what} at max_depth {settings.max_depth}", RenderError,
+                      ray_budget_hint(scene, shape, n_lights))
     textured = any(mat.texture is not None for mat in scene.materials.values())
     limits.require_memory(limits.raytrace_bytes(samples, samples, n_lights, record_tree, textured), what, RenderError,
                           "lower the image size or spp")

@@ -223,18 +223,31 @@ def raster_frame_bytes(samples: int, n_points: int, n_lights: int, n_faces: int)
     return samples * RASTER_SAMPLE_BYTES + n_points * n_lights * RASTER_LIGHT_POINT_BYTES + n_faces * TRIANGLE_BYTES
 
 
-def ray_tree_nodes(max_depth: int, branching: int, weight: float = 1.0, threshold: float = 0.0) -> int:
+def ray_tree_nodes(max_depth: int, branching: int, weight: float = 1.0, threshold: float = 0.0,
+                   spread: float | None = None) -> int:
     """Upper bound on the nodes of one sample's ray tree: 1 + b + b^2 + ... over the levels a ray can
     reach. b = rays a hit can spawn (0, 1: reflection or refraction, 2: both). With Hall's adaptive
-    control (threshold > 0) and every spawned ray's weight at most `weight` (< 1) times its parent's,
-    a ray at level k has weight <= weight^(k-1), so levels stop at 1 + log(threshold) / log(weight)."""
+    control (threshold t > 0) a ray is traced only while its weight is >= t:
+    - every spawned ray's weight is at most `weight` w times its parent's, so a ray at level k weighs
+      <= w^(k-1) and (w < 1) levels stop at 1 + log(t) / log(w);
+    - the weights of one hit's children sum to at most `spread` s times its own (default b w), so a
+      level's weights sum to <= s^(k-1) and level k holds at most s^(k-1) / t rays (and b^(k-1))."""
     levels = int(max_depth)
     if threshold > 0.0 and 0.0 <= weight < 1.0:
         cut = 1 if weight == 0.0 else 1 + math.floor(math.log(threshold) / math.log(weight)) + 1
         levels = max(1, min(levels, cut))
     if branching <= 1:
         return levels if branching == 1 else 1
-    return min(2 ** 62, branching ** levels - 1)
+    if threshold <= 0.0:
+        return min(2 ** 62, branching ** levels - 1)
+    s = branching * weight if spread is None else spread
+    nodes = count = 1  # the primary ray
+    for k in range(1, levels):  # level k + 1 holds <= min(b x level k's, s^k / t) rays
+        count = min(branching * count, math.floor(s ** k / threshold * (1.0 + 1e-9)))  # (rounding drops no ray)
+        nodes += count
+        if count == 0 or nodes >= 2 ** 62:
+            break
+    return min(nodes, 2 ** 62)
 
 
 def raytrace_bytes(samples: int, nodes: int, n_lights: int, record: bool, textured: bool = False) -> int:
@@ -246,14 +259,16 @@ def raytrace_bytes(samples: int, nodes: int, n_lights: int, record: bool, textur
 
 
 def check_rays(samples: int, nodes_per_sample: int, n_lights: int, what: str,
-               error: type[DifflabError] = DifflabError) -> None:
-    """Refuse a render whose worst-case ray count (samples x nodes x (1 + lights)) is over the ray budget."""
+               error: type[DifflabError] = DifflabError, hint: str = "lower max_depth, kr / kt, spp or the image size"
+               ) -> None:
+    """Refuse a render whose worst-case ray count (samples x nodes x (1 + lights)) is over the ray
+    budget; the message ends with `hint` (what can bring the count down)."""
     rays = samples * nodes_per_sample * (1 + n_lights)
     budget = ray_budget()
     if rays > budget:
         raise error(f"{what}: up to {rays:.3g} rays ({samples} samples x {nodes_per_sample:.3g} ray-tree nodes x "
                     f"{1 + n_lights} rays per node) is over the budget of {budget:.3g} rays (set DIFFLAB_MAX_RAYS to "
-                    "raise it); lower max_depth, kr / kt, spp or the image size, or set render.adaptive_threshold")
+                    f"raise it); {hint}")
 
 
 def check_raster_work(tests: int, n_triangles: int, what: str, error: type[DifflabError] = DifflabError) -> None:

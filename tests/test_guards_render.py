@@ -2,6 +2,8 @@
 allocated, meshes that cannot be rendered name their object and file, and no NaN or inf pixel is
 ever returned."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -50,11 +52,55 @@ CAMERA_32x24 = {"eye": [0, 1, 5], "target": [0, 0, 0], "width": 32, "height": 24
 
 def test_an_exponential_glass_tree_is_refused_up_front():
     glass = scene(GLASS_SCENE, GLASS, CAMERA_32x24, method="raytrace", max_depth=64)
-    assert tree_shape(glass) == (2, 1.0)
+    assert tree_shape(glass) == (2, 2.0, 2.0)  # kr + kt = 2 without Fresnel
     with pytest.raises(RenderError, match=r"^render: 32 x 24 pixels at spp 1 \(raytrace\) at max_depth 64: up to "
                                           r"7\.08e\+21 rays \(768 samples x 4\.61e\+18 ray-tree nodes x 2 rays per "
-                                          r"node\) is over the budget of 1\.07e\+09 rays"):
+                                          r"node\) is over the budget of 1\.07e\+09 rays \(set DIFFLAB_MAX_RAYS to "
+                                          r"raise it\); lower max_depth, kr / kt or the image size$"):
         render(glass)
+    # the weights double at every bounce: no adaptive threshold (<= 1) bounds the tree, nor is one advised
+    with pytest.raises(RenderError, match=r"lower max_depth, kr / kt or the image size$"):
+        render(glass.with_overrides(render={"adaptive_threshold": 0.5}))
+
+
+@pytest.mark.parametrize("fresnel, kr, kt, shape", [("none", 0.1, 0.9, (2, 1.0, 1.0)), ("none", 0.5, 0.4, (2, 0.9, 0.9)),
+                                                    ("exact", 1.0, 1.0, (2, 1.0, 1.0)), ("none", 0.5, 0.0, (1, 0.5, 0.5))])
+def test_the_refusal_names_the_adaptive_threshold_that_brings_the_tree_within_the_budget(monkeypatch, fresnel, kr, kt,
+                                                                                         shape):
+    """Glass at depth 40 over a budget of 10^6 rays: with kr + kt <= 1 (a ray's weight never grows:
+    total internal reflection without Fresnel gives kr + kt, Fresnel's kr F + kt (1 - F) <= 1) a
+    threshold t bounds each level's rays by 1 / t, and the message names the smallest t of
+    1, 2, 5 x 10^-k that fits (the next smaller does not); a mirror chain (one child, weight 0.5)
+    at spp 4 over 10^5 rays names spp too."""
+    monkeypatch.setenv("DIFFLAB_MAX_RAYS", str(10 ** 5 if kt == 0 else 10 ** 6))
+    glass = scene(GLASS_SCENE, {"g": {"kd": 0.1, "kr": kr, "kt": kt, "ior": 1.5}}, CAMERA_32x24, method="raytrace",
+                  max_depth=40, fresnel=fresnel, spp=4 if kt == 0 else 1)
+    assert tree_shape(glass) == shape
+    with pytest.raises(RenderError) as refused:
+        check_render(glass)
+    levers = "max_depth, kr / kt, spp or the image size" if kt == 0 else "max_depth, kr / kt or the image size"
+    advice = re.search(rf"; lower {re.escape(levers)}, or raise render\.adaptive_threshold \(Hall's control\) to "
+                       r"([0-9.e-]+)$", str(refused.value))
+    assert advice, str(refused.value)
+    threshold = float(advice.group(1))
+    digit = f"{threshold:.0e}"[0]
+    assert float(f"{threshold:.0e}") == threshold and digit in "125"
+    check_render(glass.with_overrides(render={"adaptive_threshold": threshold}))  # fits
+    smaller = threshold / (2.5 if digit == "5" else 2.0)  # the grid's value below
+    with pytest.raises(RenderError):
+        check_render(glass.with_overrides(render={"adaptive_threshold": smaller}))
+
+
+def test_fresnel_glass_at_depth_20_renders_within_the_bound():
+    """The reviewer's case: glass (kr = kt = 1, exact Fresnel) at max_depth 20, adaptive_threshold
+    0.01, was refused (bound 2^20 - 1 nodes a sample): each level's weights sum to <= 1, so it holds
+    at most 100 rays -- the bound is 1427 nodes a sample, and the render stays within it."""
+    glass = scene(GLASS_SCENE, GLASS, {**CAMERA_32x24, "width": 16, "height": 12}, method="raytrace", max_depth=20,
+                  fresnel="exact", adaptive_threshold=0.01)
+    check_render(glass)
+    frame = render_frame(glass)
+    assert frame.stats["nodes"] <= 16 * 12 * limits.ray_tree_nodes(20, 2, 1.0, 0.01, 1.0) == 16 * 12 * 1427
+    assert all(n <= 16 * 12 * min(2 ** k, 100) for k, n in enumerate(frame.stats["depth_histogram"]))
 
 
 def test_hall_adaptive_control_bounds_the_tree():

@@ -73,11 +73,26 @@ def test_require_memory_names_the_request_and_the_setting(monkeypatch):
     (5, 1, 1.0, 0.0, 5),          # a mirror chain: one node per level
     (5, 2, 1.0, 0.0, 31),         # glass: 1 + 2 + 4 + 8 + 16
     (64, 2, 1.0, 0.0, 2 ** 62),   # capped
-    (64, 2, 0.5, 0.01, 2 ** 8 - 1),  # Hall's cut: 0.5^(k-1) >= 0.01 for k <= 7, so levels 1..8 can exist
+    # Hall's cut: 0.5^(k-1) >= 0.01 for k <= 7, so levels 1..8 can exist; their weights sum to <= (2 x 0.5)^(k-1)
+    # = 1, so each holds <= 1 / 0.01 = 100 rays: 1 + 2 + ... + 64 + 100 (it was 2^8 - 1 = 255 before that count)
+    (64, 2, 0.5, 0.01, 127 + 100),
     (64, 2, 0.0, 0.01, 1),        # nothing is spawned with weight 0
 ])
 def test_ray_tree_bound(depth, branching, weight, threshold, nodes):
     assert limits.ray_tree_nodes(depth, branching, weight, threshold) == nodes
+
+
+@pytest.mark.parametrize("depth, weight, spread, threshold, nodes", [
+    (64, 1.0, 1.0, 0.01, 127 + 57 * 100),  # Fresnel glass kr = kt = 1: every level's weights sum to <= 1
+    (20, 1.0, 1.0, 0.01, 127 + 13 * 100),  # the reviewer's glass_sphere at max_depth 20 (was 2^20 - 1)
+    (10, 2.0, 2.0, 0.01, 2 ** 10 - 1),     # kr = kt = 1 without Fresnel: the weights double, no bound
+    (64, 1.0, 0.9, 0.1, 1 + 2 + 4 + 7 + 6 + 5 + 5 + 4 + 4 + 3 + 3 + 3 + 2 + 2 + 2 + 2 + 1 + 1 + 1 + 1 + 1 + 1),
+    (64, 0.9, 1.8, 0.0, 2 ** 62),          # no threshold: no count by weight
+])
+def test_ray_tree_bound_counts_each_level_by_its_total_weight(depth, weight, spread, threshold, nodes):
+    """Level k + 1 holds at most min(2 x level k's rays, spread^k / threshold): with 0.9^k / 0.1 the
+    levels hold 1, 2, 4, floor(7.29), 6.56, 5.9, ... and none once 0.9^k < 0.1 (k = 22)."""
+    assert limits.ray_tree_nodes(depth, 2, weight, threshold, spread) == nodes
 
 
 def test_ray_budget_refuses_an_exponential_tree(monkeypatch):
