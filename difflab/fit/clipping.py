@@ -78,6 +78,7 @@ def _clipped_bounds(view, residual) -> tuple[bool, bool]:
     zero = view.zeros if view.weighting is None else view.zeros & (view.weights > 0)
     if np.count_nonzero(zero) < MIN_CLIPPED or target.min() < 0.0:
         return False, top
-    lit = np.stack([residual[..., c].reshape(-1)[view.pixels] for c in range(3)], axis=1) > 0.0  # a channel the
-    # model puts at 0 is dark in the scene (a channel at a time: the residual images are channel-major)
-    return np.count_nonzero(zero & lit) >= MIN_CLIPPED, top
+    lit = sum(int(np.count_nonzero(residual[..., c].reshape(-1)[view.pixels[zero[:, c]]] > 0.0))  # a channel
+              for c in range(3))  # the model puts at 0 is dark in the scene (a channel at a time: the residual
+    # images are channel-major)
+    return lit >= MIN_CLIPPED, top
