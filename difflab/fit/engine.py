@@ -11,7 +11,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from concurrent.futures import ThreadPoolExecutor
 
 import jax
 import jax.numpy as jnp
@@ -27,21 +26,17 @@ from .clipping import clipped_band
 from .matfree import check_solver
 from .solvers import SUCCESSFUL, run
 from .sparse_jacobian import sparse_normal_matrix
-from .noise import noise_plan, silent_pixels, views_noise
+from .noise import silent_pixels, views_noise
 from .stats import (PRIOR_PULL_MAX, QUANTISATION_SIGMA, degenerate, finite_gram, fit_statistics, normal_matrix,
                     poorly_determined, prior_pull, psnr, singular_rcond, standard_errors)
 from .texels import smoothness_residuals, texel_coverage
 
-PLANNER = ThreadPoolExecutor(1, thread_name_prefix="difflab-noise-plan")  # what the noise estimate reads of the
-# targets, found while the solve runs
-
 
 def report(setup: Setup, x, result: str, steps: int, history: list, options: FitOptions, timings: dict,
-           solved=None, plan=None) -> FitResult:
+           solved=None) -> FitResult:
     """The FitResult of a solve at solver coordinates x (None: no fit was made): values in scene
     units, standard errors, noise, chi-square, flags; raises FitError for a failure when
-    `options.throw`. `solved`: the solver's (r, J^T J) at x, when it has them; `plan`: a future of
-    the views' `noise.noise_plan`, made while the solve ran (None: made here when needed)."""
+    `options.throw`. `solved`: the solver's (r, J^T J) at x, when it has them."""
     layout = setup.layout
     public = lambda values: {p.key: public_value(p, values[p.key]) for p in layout}  # noqa: E731
     common = dict(steps=steps, solver=options.solver, initial=public(setup.initial), scene=setup.scene, layout=layout,
@@ -73,10 +68,9 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         planes = setup.residual_planes(r)
         residuals = [np.moveaxis(p, 0, -1) for p in planes]  # (H, W, 3) views
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and finite_gram(gram))
-        plan = None if plan is None else plan.result()
         silent, silent_entries = silent_pixels(setup.views, r)
         sigma, noise_values, share = (views_noise(setup.views, planes, silent, setup.sigma_given, setup.sigma_floor,
-                                                  setup.sigma_fallback, setup.quantisation, plan)
+                                                  setup.sigma_fallback, setup.quantisation)
                                       if finite else (float("nan"), 0, 1.0))
         noise_unknown = finite and sigma is None
         mean_weight = setup.weight_total / counted.size if counted.size else 1.0  # (unit weights: 1)
@@ -142,12 +136,10 @@ def run_fit(setup: Setup, options: FitOptions, timings: dict) -> FitResult:
     if code is not None:
         return report(setup, None, code, 0, [], options, timings)
     start = time.perf_counter()
-    plan = PLANNER.submit(noise_plan, setup.views) if setup.sigma_given is None else None  # (numpy beside XLA:
-    # both let go of the GIL)
     with jax.enable_x64(setup.x64):
         out = run(setup.problem, setup.x0, options)
     timings["solve"] = time.perf_counter() - start
-    return report(setup, out.x, out.result, out.steps, out.history, options, timings, out.linearised, plan)
+    return report(setup, out.x, out.result, out.steps, out.history, options, timings, out.linearised)
 
 
 def solve(setup: Setup, options=None, **option_fields) -> FitResult:

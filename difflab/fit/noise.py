@@ -1,6 +1,5 @@
 """The pixel noise of a fit's targets, from its residual images at the solution (`estimate_sigma`,
-`views_noise`; what they read of the targets, masks and weights alone, `noise_plan`, is found while
-the solve runs), the pixels that carry none (`silent_pixels`), the rounding error of their files'
+`views_noise`), the pixels that carry none (`silent_pixels`), the rounding error of their files'
 codes (`quantisation`), and how far a reduced chi-square against an estimated noise spreads for a
 correct model (`chi2_spread`). `fit.stats` describes what the fit reports with them."""
 
@@ -212,7 +211,7 @@ def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True, signal
     as, per value (`chi2_spread`; its sums from the levels' sample). A used map is (H, W) bool (every
     channel of a used pixel) or (H, W, 3) (per channel: where some channels have weight 0, their
     residuals are 0, not noise, and must not enter a neighbourhood). (Over the used pixels'
-    bounding box. What depends on no residual -- `ViewPicks` -- can be found before them.)"""
+    bounding box: what depends on no residual, `ViewPicks`, first.)"""
     views = [_view_picks(used, None if weight_maps is None else weight_maps[k],
                          None if signals is None else signals[k], interior) for k, used in enumerate(used_maps)]
     return _estimate(views, [np.moveaxis(np.asarray(image), -1, 0) for image in images])
@@ -234,44 +233,40 @@ def at_ceiling(image, ceiling) -> np.ndarray:
     return top[..., 0] | top[..., 1] | top[..., 2]
 
 
-def black_pixels(views) -> list[np.ndarray]:
-    """Per view (U,) bool: the used pixels whose target is 0 in every channel."""
-    return [view.zeros[:, 0] & view.zeros[:, 1] & view.zeros[:, 2] for view in views]
-
-
 def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
     """The used pixels of a fit's views (`records.View`) that carry no noise: target and model both
     exactly 0 in every channel (an unlit side; a renderer's noise scales with its signal), from the
     flat weighted residuals r over every used entry. Returns per view (U,) bool over its used
     pixels, and how many of their entries have weight > 0 (left out of the chi-square's dof)."""
     out, count, offset = [], 0, 0
-    for view, black in zip(views, black_pixels(views)):
+    for view in views:
         part = r[offset:offset + 3 * view.pixels.size].reshape(-1, 3)
         offset += 3 * view.pixels.size
-        zero = part == 0  # the model 0 too
-        rows = black & zero[:, 0] & zero[:, 1] & zero[:, 2]
+        zero = view.zeros & (part == 0)  # black in the target, and the model 0 there too
+        rows = zero[:, 0] & zero[:, 1] & zero[:, 2]
         count += 3 * int(np.count_nonzero(rows)) if view.weighting is None else \
             int(np.count_nonzero(np.take(view.entries, np.flatnonzero(rows), axis=0)))
         out.append(rows)
     return out, count
 
 
-class NoisePlan(NamedTuple):
-    """What `views_noise` reads of a fit's targets, masks and weights, found before the residuals
-    are (`noise_plan`, while the solve runs): each view's `ViewPicks` (None: none) for the silent
-    pixels `silent` (per view (U,) bool) -- good for a fit whose silent pixels are these."""
-
-    silent: list
-    views: list
-
-
-def noise_plan(views, silent=None) -> NoisePlan:
-    """The `NoisePlan` of a fit's views for its `silent` pixels (per view (U,) bool; default: every
-    black pixel -- what `silent_pixels` finds unless the model lights one: a pixel the target shows
-    black is mostly one no light reaches). Over the used pixels but the silent and the censored ones
-    -- per channel where a weight of 0 leaves a used pixel's channel out --, their Laplacians'
-    levels by the targets' intensities (the data's: two fits a hair apart bin alike)."""
-    silent = black_pixels(views) if silent is None else silent
+def views_noise(views, residual_planes, silent, given: float | None, floor: float, fallback=None,
+                quantisation: float = 0.0) -> tuple[float | None, int, float]:
+    """The pixel noise sigma of a fit's views, in the targets' units, the number of Laplacian values
+    M it was estimated from (0 when given or taken from `fallback`) and their `estimate_sigma`
+    share (1 for none): `given` -- the noise before quantisation, to which the targets'
+    `quantisation` (the rms rounding error of their used values, 0 for float data: one sigma serves
+    every view) is added in quadrature: a correct fit of an 8-bit file with its true noise 0.002
+    given came out at chi2 1.2, flagged; its share is the weights' (`weight_share`) -- or estimated
+    (`estimate_sigma`, each entry weighted by its view's weight) from the plain residuals at the
+    solution, per view (3, H, W) planes, their levels by the targets' intensities (the data's: two
+    fits a hair apart bin alike), over the used pixels but the `silent` (per view (U,) bool,
+    `silent_pixels`) and the censored ones -- per channel where a weight of 0 leaves a used pixel's
+    channel out -- and at least `floor` (the quantisation's, `Setup.sigma_floor`). Where too few
+    pixels allow that: `fallback` when given (a refit's, the first fit's sigma), else None
+    (unknown)."""
+    if given is not None:
+        return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views)
     picks = []
     for view, quiet in zip(views, silent):
         left_out = quiet | at_ceiling(view.values, view.ceiling) if np.isfinite(view.ceiling) else quiet
@@ -282,27 +277,7 @@ def noise_plan(views, silent=None) -> NoisePlan:
         if view.weighting is not None and not np.all(view.weights > 0):
             clean = in_channels(clean) & (view.weighting > 0)
         picks.append(_view_picks(clean, view.weighting, view.image, interior=True))
-    return NoisePlan(silent, picks)
-
-
-def views_noise(views, residual_planes, silent, given: float | None, floor: float, fallback=None,
-                quantisation: float = 0.0, plan: NoisePlan | None = None) -> tuple[float | None, int, float]:
-    """The pixel noise sigma of a fit's views, in the targets' units, the number of Laplacian values
-    M it was estimated from (0 when given or taken from `fallback`) and their `estimate_sigma`
-    share (1 for none): `given` -- the noise before quantisation, to which the targets'
-    `quantisation` (the rms rounding error of their used values, 0 for float data: one sigma serves
-    every view) is added in quadrature: a correct fit of an 8-bit file with its true noise 0.002
-    given came out at chi2 1.2, flagged; its share is the weights' (`weight_share`) -- or estimated
-    (`estimate_sigma`, each entry weighted by its view's weight) from the plain residuals at the
-    solution, per view (3, H, W) planes, over the entries of `noise_plan` for the `silent` pixels
-    (per view (U,) bool, `silent_pixels`; `plan` when made for these, else made here), and at least
-    `floor` (the quantisation's, `Setup.sigma_floor`). Where too few pixels allow that: `fallback`
-    when given (a refit's, the first fit's sigma), else None (unknown)."""
-    if given is not None:
-        return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views)
-    if plan is None or not all(np.array_equal(a, b) for a, b in zip(plan.silent, silent)):
-        plan = noise_plan(views, silent)
-    estimate = _estimate(plan.views, residual_planes)
+    estimate = _estimate(picks, residual_planes)
     if estimate is None:
         return fallback, 0, 1.0
     return max(estimate[0], floor), estimate[1], estimate[2]
