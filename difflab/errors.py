@@ -57,3 +57,7 @@ class FitError(DifflabError, RuntimeError):
 
 class ManifestError(DifflabError, ValueError):
     """A batch manifest cannot be read, or its lines are invalid; the message names the line."""
+
+__all__ = ["DifflabError", "SceneError", "MeshError", "TextureError", "RenderError", "OutputError", "WriteError",
+           "FitError", "ManifestError", "EXIT_OK", "EXIT_INTERNAL", "EXIT_INVALID", "EXIT_NOT_CONVERGED",
+           "EXIT_MODEL_MISMATCH", "EXIT_NOT_JUDGED", "EXIT_INTERRUPTED"]

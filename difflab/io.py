@@ -24,6 +24,9 @@ from .files import write_together as write_together
 from .limits import short_path
 from .picture import read_picture, sample_depth, why
 
+__all__ = ["load_image", "save_image", "read_image", "LoadedImage", "sample_bits", "srgb_to_linear", "linear_to_srgb",
+           "code_step", "write_text_atomic", "write_json_atomic", "write_together", "uninterrupted"]
+
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     """IEC 61966-2-1 decoding: c/12.92 for c <= 0.04045, else ((c + 0.055)/1.055)^2.4 (c in [0, 1])."""

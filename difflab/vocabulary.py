@@ -56,3 +56,5 @@ FRACTAL_KINDS = FRACTAL_CURVES + FRACTAL_IMAGES
 #: given is an error, as `difflab render` refuses the other renderer's flags.
 FRACTAL_OPTIONS = {**{kind: ("order",) for kind in FRACTAL_CURVES}, "terrain": ("order", "seed", "hurst", "device"),
                    "mandelbrot": ("max_iter", "device"), "julia": ("max_iter", "device"), "mandelbulb": ("device",)}
+
+__all__ = sorted(name for name in dir() if name.isupper())  # every table and id above

@@ -78,3 +78,18 @@ def test_lazy_fit_names_are_not_rebound_by_their_modules():
     for name in modules - {"command"}:
         importlib.import_module(f"difflab.fit.{name}")
     assert callable(fit.identify) and callable(fit.fit) and not isinstance(fit.identify, type(fit))
+
+
+@pytest.mark.parametrize("module", ["scene", "geometry", "fractals", "fit", "demos", "vocabulary", "errors", "io"])
+def test_public_modules_declare_their_names(module):
+    """docs/architecture.md: these modules' own `__all__` is public API -- each has one, every name
+    in it resolves, none twice; the package's names are the same objects."""
+    import importlib
+
+    mod = importlib.import_module(f"difflab.{module}")
+    names = mod.__all__
+    assert names and len(set(names)) == len(names)
+    for name in names:
+        assert getattr(mod, name) is not None, name
+    for name in set(names) & set(difflab.__all__):
+        assert getattr(difflab, name) is getattr(mod, name), name

@@ -10,6 +10,7 @@ import jsonschema
 import pytest
 
 import difflab
+from difflab import Scene, SceneError
 from difflab.demos import example_names, scene_path
 from difflab.scene import SCHEMA_FILE, scene_schema
 from difflab.scene.reference import docs_text, schema_text
@@ -87,3 +88,14 @@ def test_schema_rejects_what_load_scene_rejects(path, value, message):
 
 def test_every_exception_is_a_case():
     assert set(SCHEMA_CANNOT) <= {(tuple(p), repr(v)) for p, v, _ in BAD}
+
+
+@pytest.mark.parametrize("field, value", [("fov_y", 1e-7), ("ortho_height", 1e-10)])
+def test_schema_holds_the_cameras_float32_floors(field, value):
+    """fov_y >= 1e-6 and ortho_height >= 1e-9 (the camera's float32 matrices degenerate below) are
+    ranges of their fields: the schema refuses what load_scene refuses (it once said only > 0)."""
+    d = json.loads(DESIGN_EXAMPLE)
+    d["camera"][field] = value
+    assert any(field in e.json_path for e in VALIDATOR.iter_errors(d))
+    with pytest.raises(SceneError, match=rf"camera\.{field}: must be >= "):
+        Scene.from_dict(d)

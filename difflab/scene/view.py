@@ -19,20 +19,13 @@ MAX_PIXELS = 64 * 1024 * 1024
 #: within one float32 ulp (6e-8) of 1 for every z beyond ~1e7 near, so its z-buffer cannot order them.
 #: (The ray tracer builds its rays from the camera basis and has no such limit.)
 MAX_FAR_NEAR = 1e6
-#: Smallest field of view (degrees) and orthographic height (scene units) the camera matrices and
-#: the sphere tessellation stay finite for.
+#: Smallest field of view (degrees) and orthographic height (scene units) the camera's float32
+#: matrices and the sphere tessellation stay finite for (the fields' lower bounds, in the schema too).
 MIN_FOV_Y = 1e-6
 MIN_ORTHO_HEIGHT = 1e-9
 #: Shortest `up` vector, and shortest eye -> target distance per unit of |eye| (squares of shorter
 #: ones underflow, or their float32 difference is noise).
 MIN_VECTOR = 1e-9
-
-
-def at_least(x: float, smallest: float, path: str) -> float:
-    """x, if x >= smallest (a positive number too small for float32 rendering is an error)."""
-    if x < smallest:
-        fail(path, f"must be >= {smallest:g} (the camera's float32 matrices degenerate below), got {x:g}")
-    return x
 
 
 @dataclass(frozen=True)
@@ -43,15 +36,14 @@ class Camera(Record):
     eye: Vec3 = spec_field(Spec("point3", "position of the eye", "scene units"))
     target: Vec3 = spec_field(Spec("point3", "point looked at (differs from eye)", "scene units"))
     up: Vec3 = spec_field(Spec("vec3", "up direction (not parallel to target - eye)"), (0.0, 1.0, 0.0))
-    fov_y: float = spec_field(Spec("number", "vertical field of view (perspective)", "degrees", bounds(gt=0, lt=180)),
-                              40.0)
+    fov_y: float = spec_field(Spec("number", "vertical field of view (perspective)", "degrees", bounds(ge=MIN_FOV_Y, lt=180)), 40.0)
     width: int = spec_field(Spec("integer", "image width", "pixels", bounds(gt=0)), 320)
     height: int = spec_field(Spec("integer", "image height", "pixels", bounds(gt=0)), 240)
     projection: str = spec_field(Spec("choice", "projection", options=PROJECTIONS), "perspective")
     near: float = spec_field(Spec("coordinate", "near clip distance", "scene units", bounds(gt=0)), 0.1)
     far: float = spec_field(Spec("coordinate", "far clip distance (> near, far / near <= 1e6)", "scene units"), 100.0)
     ortho_height: float = spec_field(Spec("coordinate", "full height of the orthographic view volume", "scene units",
-                                          bounds(gt=0)), 2.0)
+                                          bounds(ge=MIN_ORTHO_HEIGHT)), 2.0)
 
     _PATH: ClassVar[str] = "camera"
     JSON_RULES: ClassVar[tuple[dict, ...]] = ({"properties": {"up": {"not": {"const": [0, 0, 0]}}}},)
@@ -82,8 +74,6 @@ class Camera(Record):
         if far / near > MAX_FAR_NEAR:
             fail(p("near"), f"far / near = {far / near:.3g} is over {MAX_FAR_NEAR:.0e} (the rasterizer's float32 "
                  f"depth loses all precision); raise near or lower far")
-        at_least(out["fov_y"], MIN_FOV_Y, p("fov_y"))
-        at_least(out["ortho_height"], MIN_ORTHO_HEIGHT, p("ortho_height"))
         return out
 
 
