@@ -17,7 +17,12 @@ from ..scene import Plane, Sphere
 wp.set_module_options({"enable_backward": False})
 
 HIT_NONE, HIT_TRIANGLE, HIT_SPHERE, HIT_PLANE = 0, 1, 2, 3
-MAX_SHADOW_CROSSINGS = 16  # transparent surfaces a shadow ray may pass through before it counts as blocked
+#: Transparent surfaces a shadow ray may pass through: one that meets another (the 256th) counts as
+#: blocked, as a ray cut by max_depth contributes black. 255 is what the ray tree's per-material
+#: crossing counts (uint8) hold; the walk is a loop (Warp unrolls none past 16), so a higher cap
+#: costs nothing where fewer surfaces are crossed. The ray tracer counts the cut rays
+#: (`frame.stats["shadow_rays_cut"]`); the light buffer's rays are cut alike.
+MAX_SHADOW_CROSSINGS = 255
 
 
 def object_kinds(objects) -> np.ndarray:
@@ -218,37 +223,49 @@ def closest_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: fl
 
 
 @wp.func
-def light_visibility(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: wp.vec3, l: wp.vec3,
-                     distance: float, ignore_object: int, transparent: int):
-    """Shadow-ray visibility in [0, 1] of a light at `distance` along unit `l` from p.
+def shadow_ray(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: wp.vec3, l: wp.vec3, distance: float,
+               ignore_object: int, transparent: int):
+    """(visibility in [0, 1], cut) of a light at `distance` along unit `l` from p.
 
     An opaque surface in between gives 0. With `transparent` set, each surface with kt > 0 crossed
-    multiplies the visibility by kt (the ray is not refracted). The caller offsets p off the surface.
+    multiplies the visibility by kt (the ray is not refracted), up to MAX_SHADOW_CROSSINGS of them:
+    a ray meeting one more gives 0 and cut = 1. The caller offsets p off the surface.
     """
     visibility = float(1.0)
     origin = p
     remaining = distance
-    for crossing in range(MAX_SHADOW_CROSSINGS):
+    for crossing in range(MAX_SHADOW_CROSSINGS + 1):
         hit = closest_hit(geom, origin, l, 0.0, remaining, ignore_object)
         if hit.kind == HIT_NONE:
-            return visibility
+            return visibility, 0
         kt = materials[hit.material].kt
         if transparent == 0 or kt <= 0.0:
-            return 0.0
+            return 0.0, 0
+        if crossing == MAX_SHADOW_CROSSINGS:
+            return 0.0, 1
         visibility = visibility * kt
         origin = origin + (hit.t + geom.epsilon) * l
         remaining = remaining - hit.t - geom.epsilon
         if remaining <= 0.0:
-            return visibility
-    return 0.0
+            return visibility, 0
+    return 0.0, 1  # (not reached: the last pass returns)
+
+
+@wp.func
+def light_visibility(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: wp.vec3, l: wp.vec3,
+                     distance: float, ignore_object: int, transparent: int):
+    """`shadow_ray`'s visibility alone (the rasterizer's shadow rays)."""
+    visibility, cut = shadow_ray(geom, materials, p, l, distance, ignore_object, transparent)
+    return visibility
 
 
 @wp.func
 def count_shadow_crossings(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: wp.vec3, l: wp.vec3,
                            distance: float, ignore_object: int, crossings: wp.array3d(dtype=wp.int32), k: int,
                            q: int):
-    """Walk `light_visibility`'s transparent shadow ray again, adding 1 to crossings[k, q, material] for
-    every transparent surface it crosses, so that its visibility prod(kt) can be re-evaluated for new kt."""
+    """Walk `shadow_ray`'s transparent shadow ray again (one that was not blocked nor cut: at most
+    MAX_SHADOW_CROSSINGS crossings), adding 1 to crossings[k, q, material] for every transparent
+    surface it crosses, so that its visibility prod(kt) can be re-evaluated for new kt."""
     origin = p
     remaining = distance
     for crossing in range(MAX_SHADOW_CROSSINGS):

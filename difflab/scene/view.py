@@ -183,7 +183,8 @@ class RenderSettings(Record):
     fresnel: str = spec_field(Spec("choice", "Fresnel weighting of kr / kt (none: the plain weights)",
                                    options=tuple(FRESNEL_MODES)), "none")
     transparent_shadows: bool = spec_field(Spec("boolean", "shadow rays are multiplied by kt at each transparent "
-                                                "surface (not blocked)"), True)
+                                                "surface (not blocked), up to 255 of them: a shadow ray meeting "
+                                                "more counts as blocked (frame.stats['shadow_rays_cut'])"), True)
     clamp_vertex_colors: bool = spec_field(Spec("boolean", "clamp Gouraud vertex colours to [0, 1] (OpenGL)"), False)
     interpolation: str = spec_field(Spec("choice", "attribute interpolation", options=INTERPOLATIONS), "perspective")
     cull_backfaces: bool = spec_field(Spec("boolean", "skip triangles facing away (rasterizer)"), False)

@@ -29,7 +29,8 @@ def raytrace_adaptive(compiled, settings, threshold: float = 0.05, refine: int =
         threshold: corner disagreement (linear RGB, largest channel) above which a pixel is refined, >= 0.
         refine: side of the regular sample grid of a refined pixel (refine^2 samples), >= 2.
 
-    Returns: a `Frame` (image (H, W, 3) float32, no ray tree) whose stats add `refined_pixels`,
+    Returns: a `Frame` (image (H, W, 3) float32, no ray tree) whose stats (rays, `shadow_rays_cut`:
+    as `raytrace`'s, over both passes) add `refined_pixels`,
     `refined_fraction` and `refine_mask` (H, W) bool.
     """
     if not threshold >= 0:
@@ -47,6 +48,7 @@ def raytrace_adaptive(compiled, settings, threshold: float = 0.05, refine: int =
     spread = (quad.max(axis=0) - quad.min(axis=0)).max(axis=-1)
     mask = ~(spread <= threshold)  # NaN corners refine too
     rays = dict(corners.rays)
+    cut = corners.shadow_rays_cut
     rows, cols = np.nonzero(mask)
     if rows.size:
         offsets = (np.arange(refine) + 0.5) / refine
@@ -55,10 +57,11 @@ def raytrace_adaptive(compiled, settings, threshold: float = 0.05, refine: int =
         refined = trace_points(compiled, settings, pts.astype(np.float32), threads, footprint=1.0 / refine)
         image[rows, cols] = refined.color.mean(axis=1, dtype=np.float64).astype(np.float32)
         rays = {k: rays[k] + refined.rays[k] for k in rays}
+        cut += refined.shadow_rays_cut
     seconds = time.perf_counter() - start
     total = sum(rays.values())
     stats = {"method": "raytrace", "adaptive_supersampling": True, "threshold": threshold, "refine": refine,
              "seconds": seconds, "rays": rays, "total_rays": total, "rays_per_second": total / max(seconds, 1e-9),
-             "refined_pixels": int(mask.sum()), "refined_fraction": float(mask.mean()), "refine_mask": mask,
-             "nonfinite_pixels": nonfinite_pixels(image)}
+             "shadow_rays_cut": cut, "refined_pixels": int(mask.sum()), "refined_fraction": float(mask.mean()),
+             "refine_mask": mask, "nonfinite_pixels": nonfinite_pixels(image)}
     return Frame(image=image, buffers=None, stats=stats, ray_tree=None)

@@ -32,8 +32,8 @@ from ..launch import host_empty, launch_row_loops, load_kernels
 from .itembuffer import asked_bvh, item_buffer, item_struct
 from .lightbuffer import build_light_buffer, no_light_buffer
 from .medium import camera_media
-from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, TraceOutW, TraceParamsW, \
-    whitted_kernel
+from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, COUNT_SHADOW_CUT, TraceOutW, \
+    TraceParamsW, whitted_kernel
 from .record import empty_tree, has_textures, sized_tree, tree_to_numpy
 from .surface import MeshDataW, SceneW
 from .tree import RayTree
@@ -53,6 +53,7 @@ class Traced:
     depth_histogram: list  # rays traced at depth 1, 2, ...
     tree: RayTree | None
     shadow_tests: int = 0  # candidates the light buffer's shadow rays tested (0 without one)
+    shadow_rays_cut: int = 0  # shadow rays cut past trace.MAX_SHADOW_CROSSINGS transparent surfaces
     asked_bvh: int = 0  # samples whose primary mesh hit the item buffer left to the BVH (ambiguous hints)
     nonfinite_samples: int = 0  # samples whose colour is not finite
 
@@ -159,7 +160,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         out.color = host_empty(shape, wp.vec3, device)  # every element written by the kernel
         out.fog = compiled.scratch("trace.fog", shape, wp.float32)  # read before this render returns
         out.node_count = compiled.scratch("trace.node_count", shape, wp.int32)
-        out.rays = wp.zeros((rows, 4), dtype=wp.int32, device=device)
+        out.rays = wp.zeros((rows, 5), dtype=wp.int32, device=device)
         out.depth_hist = wp.zeros((rows, settings.max_depth), dtype=wp.int32, device=device)
         out.nonfinite = wp.empty(rows, dtype=wp.int32, device=device)
         launch_row_loops(kernel, rows, [wp_points, cam, scene_w, params, item, tree, out], device, threads)
@@ -184,7 +185,8 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         tree = tree_to_numpy(wp_tree, offsets, n_lights, fog, scene, settings, shape, crossings)
     return Traced(color=out.color.numpy(), fog=fog, node_count=counts, rays=stats_rays,
                   depth_histogram=histogram, tree=tree, shadow_tests=shadow_tests,
-                  asked_bvh=asked, nonfinite_samples=int(out.nonfinite.numpy().sum()))
+                  asked_bvh=asked, nonfinite_samples=int(out.nonfinite.numpy().sum()),
+                  shadow_rays_cut=int(ray_counts[COUNT_SHADOW_CUT]))
 
 
 def raytrace(compiled, settings, threads: int | None = None, *, record_tree: bool = True,
@@ -209,7 +211,9 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
 
     Returns: a `Frame` with `image` (H, W, 3) float32 linear RGB, no G-buffer, `ray_tree` (a
     `RayTree` or None) and `stats`: rays traced per kind, `depth_histogram` (rays per depth, from
-    1), `nodes`, `seconds`, `rays_per_second`, `nonfinite_pixels`; with the light buffer also
+    1), `nodes`, `seconds`, `rays_per_second`, `nonfinite_pixels`, `shadow_rays_cut` (shadow rays
+    that met more than `trace.MAX_SHADOW_CROSSINGS` transparent surfaces, counted as blocked); with
+    the light buffer also
     `light_buffer_seconds` (building it, included in `seconds`), `light_buffer_entries` and
     `shadow_tests` (candidates tested by all shadow rays).
     """
@@ -239,7 +243,7 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
              "rays": dict(traced.rays), "total_rays": total_rays, "rays_per_second": total_rays / max(seconds, 1e-9),
              "depth_histogram": traced.depth_histogram, "nodes": int(traced.node_count.sum()),
              "item_buffer": bool(use_item_buffer), "item_buffer_kept": kept, "item_buffer_culled": culled,
-             "item_buffer_asked_bvh": traced.asked_bvh,
+             "item_buffer_asked_bvh": traced.asked_bvh, "shadow_rays_cut": traced.shadow_rays_cut,
              "recorded_tree": bool(record_tree),
              "nonfinite_pixels": nonfinite_pixels(image) if traced.nonfinite_samples else 0}
     if lights is not None:

@@ -21,8 +21,10 @@ below `threshold`.
 A primary ray's mesh hit comes from the item buffer (`itembuffer.py`: the rasterizer's z-buffer,
 the same hit as the BVH's) when the kernel is given one. Shadow rays are cast as the rasterizer
 casts them: to lights on the front side of the geometric normal (a light behind it is left to the
-model's N.L gating), transparent occluders multiplying by kt when `transparent` is set -- through the BVH, or through the light buffer's candidate lists
-(`lightbuffer.py`) when the scene struct carries one.
+model's N.L gating), transparent occluders multiplying by kt when `transparent` is set (up to
+`trace.MAX_SHADOW_CROSSINGS` of them: past that a shadow ray counts as blocked and is counted in
+COUNT_SHADOW_CUT) -- through the BVH, or through the light buffer's candidate lists (`lightbuffer.py`)
+when the scene struct carries one.
 
 With `record` set, the same walk writes every node into the flat arrays of `record.TreeW` at the
 sample's offset (see `tree.RayTree` for the layout); without it, it counts nodes per sample so that
@@ -37,7 +39,7 @@ from ...lighting.warp_model import FogW, LightW, MaterialW, ambient_term, fog_bl
 from ...vocabulary import MAX_DEPTH_LIMIT
 from ..camera import CameraW
 from ..launch import dealt_row
-from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, light_visibility
+from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, shadow_ray
 from .itembuffer import ItemBufferW, item_hit
 from .lightbuffer import LightBufferW, buffered_visibility
 from .medium import primary_medium
@@ -50,6 +52,7 @@ from .tree import PRIMARY, REFLECTED, REFRACTED
 wp.set_module_options({"enable_backward": False})
 
 COUNT_PRIMARY, COUNT_SHADOW, COUNT_REFLECTED, COUNT_REFRACTED = 0, 1, 2, 3  # columns of TraceOutW.rays
+COUNT_SHADOW_CUT = 4  # column of the shadow rays cut past trace.MAX_SHADOW_CROSSINGS (among COUNT_SHADOW's)
 
 
 @wp.struct
@@ -82,7 +85,7 @@ class TraceOutW:
     color: wp.array2d(dtype=wp.vec3)
     fog: wp.array2d(dtype=float)  # the fog blend of the primary hit (1: none)
     node_count: wp.array2d(dtype=wp.int32)
-    rays: wp.array2d(dtype=wp.int32)  # (rows, 4): rays traced per COUNT_* kind
+    rays: wp.array2d(dtype=wp.int32)  # (rows, 5): rays traced per COUNT_* kind, and COUNT_SHADOW_CUT
     depth_hist: wp.array2d(dtype=wp.int32)  # (rows, max_depth): rays traced per depth
     nonfinite: wp.array(dtype=wp.int32)  # per row: samples whose colour is not finite
 
@@ -119,11 +122,14 @@ def shade_hit(geom: SceneGeomW, lights: wp.array(dtype=LightW), materials: wp.ar
             wp.atomic_add(rays, i, COUNT_SHADOW, 1)
             origin = surf.p + geom.epsilon * surf.geo
             skip = skip_object(geom, hit, l)
+            cut = int(0)
             if buffer.use == 1 and buffer.light_cell0[q] >= 0:
-                s = buffered_visibility(geom, buffer, vertices, faces, materials, q, lights[q].position, origin, l,
-                                        light_d - geom.epsilon, skip, params.transparent)
+                s, cut = buffered_visibility(geom, buffer, vertices, faces, materials, q, lights[q].position, origin,
+                                             l, light_d - geom.epsilon, skip, params.transparent)
             else:
-                s = light_visibility(geom, materials, origin, l, light_d - geom.epsilon, skip, params.transparent)
+                s, cut = shadow_ray(geom, materials, origin, l, light_d - geom.epsilon, skip, params.transparent)
+            if cut == 1:
+                wp.atomic_add(rays, i, COUNT_SHADOW_CUT, 1)
             if params.count_crossings == 1 and s > 0.0:
                 count_shadow_crossings(geom, materials, origin, l, light_d - geom.epsilon, skip, rec.crossings, k, q)
         if s > 0.0:

@@ -130,8 +130,9 @@ def buffered_visibility(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(d
                         faces: wp.array2d(dtype=wp.int32), materials: wp.array(dtype=MaterialW), q: int,
                         light_p: wp.vec3, p: wp.vec3, l: wp.vec3, distance: float, ignore_object: int,
                         transparent: int):
-    """`trace.light_visibility` through light q's buffer: 0 at the first opaque candidate crossed,
-    else the product of kt over transparent crossings (0 past MAX_SHADOW_CROSSINGS, as there)."""
+    """`trace.shadow_ray` through light q's buffer, (visibility, cut): 0 at the first opaque candidate
+    crossed, else the product of kt over transparent crossings -- (0, 1) past MAX_SHADOW_CROSSINGS of
+    them, as there."""
     cell = lb.light_cell0[q] + cube_cell(p - light_p, lb.resolution)
     reach = wp.length(p - light_p)
     visibility = float(1.0)
@@ -148,6 +149,7 @@ def buffered_visibility(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(d
             if n > 0:
                 kt = materials[candidate_material(geom, kind, index)].kt
                 if transparent == 0 or kt <= 0.0:
+                    crossed = 0
                     visibility = 0.0
                     break
                 for _ in range(n):
@@ -155,8 +157,8 @@ def buffered_visibility(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(d
                 crossed = crossed + n
     wp.atomic_add(lb.tests, 0, wp.int64(tested))
     if crossed > MAX_SHADOW_CROSSINGS:
-        return 0.0
-    return visibility
+        return 0.0, 1
+    return visibility, 0
 
 
 # ----------------------------------------------------------------------------- building (numpy)
