@@ -174,7 +174,8 @@ def _sums(views: list, planes) -> tuple[float, float, float, float, int]:
             over = np.flatnonzero(values > CAP_Z2 * v.min())  # (only these can be above 9 times their level)
             if over.size:
                 high = level(picks.bright[picks.index[over]] if picks.bright is not None else None)
-                values[over] = np.where(values[over] > CAP_Z2 * high, high, values[over])
+                capped = values[over]
+                values[over] = np.where(capped > CAP_Z2 * high, high, capped)
             num += float(np.sum(values if picks.weight is None else values * picks.weight))  # (no BLAS dot: slow threads)
             den += picks.den
             weighted = level(picks.bright_sample)  # the share, from the sample
