@@ -103,7 +103,8 @@ def run_fractal(args) -> int:
     refuse_unused(args, unused, f"the {args.kind} fractal (it reads {reads})")
     refuse_overwrite(args.output, force=args.force)
     options = {name: getattr(args, name) for name in used if getattr(args, name) is not None}
-    caption = fractal_figure(args.kind, Path(args.output), args.width, args.height, titled=False, **options)
+    caption = fractal_figure(args.kind, Path(args.output), args.width, args.height, titled=False, order_name="--order",
+                             **options)
     print(f"wrote {args.output}: {caption}")
     return 0
 

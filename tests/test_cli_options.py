@@ -128,3 +128,52 @@ def test_a_texture_path_that_is_a_folder_is_named_as_such(tmp_path, capsys):
                                        f"(in {scene})\n")
     with pytest.raises(TextureError, match=r"^.*bricks: a folder, not a texture file$"):
         load_texture(tmp_path / "bricks")
+
+
+
+@pytest.mark.parametrize("kind, order, accepted", [
+    ("koch", "10", "0..9 (orders up to 9: at most 1048576 curve vertices, drawn and box-counted in seconds)"),
+    ("koch", "11", "0..9 (orders up to 9"), ("koch", "-1", "0..9 (orders up to 9"),
+    ("peano", "7", "0..6 (orders up to 6: at most 1048576 curve vertices"),
+    ("hilbert", "11", "0..10 (orders up to 10: at most 1048576 curve vertices"),
+    ("cantor", "0", "1..60 (the staircase's ternary digits)"), ("cantor", "61", "1..60"),
+    ("terrain", "11", "1..10 (levels up to 10: at most 2097152 triangles, rendered in seconds)"),
+])
+def test_fractal_order_outside_its_work_budget_is_refused_naming_the_option(tmp_path, capsys, kind, order, accepted):
+    """docs/cli.md: --order's range per kind is bounded by work (2^20 curve vertices, 2^21 terrain
+    triangles: seconds each); beyond it the command ran for minutes (koch 11: over 10 minutes, 1.5 GB).
+    The message names the CLI option, not the library's argument (was `iterations: must be in [0, 11]`)."""
+    out = tmp_path / "f.png"
+    assert main(["fractal", kind, "-o", str(out), "--width", "16", "--height", "12", "--order", order]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"difflab: error: --order: the {kind} fractal takes {accepted}")
+    assert err.endswith(f", got {order}\n") and len(err.splitlines()) == 1
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("kind, order, what", [
+    ("koch", "9", "--order 9: the koch curve (786433 vertices)"),
+    ("hilbert", "10", "--order 10: the hilbert curve (1048576 vertices)"),
+    ("terrain", "10", "--order 10: the terrain (2097152 triangles)"),
+])
+def test_fractal_order_within_range_is_priced_against_the_memory_budget(tmp_path, capsys, monkeypatch, kind, order,
+                                                                         what):
+    """docs/limits.md: an accepted order's curve (190 B a vertex, measured 158-172) or terrain (540 B a
+    triangle) is priced before anything is built; under DIFFLAB_MEMORY_BUDGET=50M these ran on (koch 11
+    and peano 7 still running at 25 s)."""
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "50M")
+    out = tmp_path / "f.png"
+    assert main(["fractal", kind, "-o", str(out), "--width", "16", "--height", "12", "--order", order]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"difflab: error: {what}: needs about ") and "over the memory budget of 50.0 MiB" in err
+    assert not out.exists()
+
+
+def test_fractal_figure_from_python_names_its_own_argument(tmp_path):
+    """The Python API (difflab.demos.fractals.fractal_figure) names its argument `order`, not the option."""
+    from difflab.demos.fractals import fractal_figure
+    from difflab.errors import DifflabError
+
+    with pytest.raises(DifflabError, match=r"^order: the koch fractal takes 0\.\.9 .*, got 12$"):
+        fractal_figure("koch", tmp_path / "k.png", 16, 12, titled=False, order=12)
+    assert not (tmp_path / "k.png").exists()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 import tempfile
 from pathlib import Path
 
@@ -10,14 +11,65 @@ import numpy as np
 from ..fractals import (box_counting_dimension, cantor_staircase, hilbert, julia, koch_snowflake, mandelbrot,
                         mandelbulb, peano, polyline_length, terrain, terrain_scene)
 from ..errors import RenderError
-from ..fractals._checks import check_int
+from ..fractals._checks import FractalError, check_int
+from ..fractals.cantor import MAX_STAIRCASE_DEPTH
 from ..io import save_image
-from ..limits import CURVE_PIXEL_BYTES, require_image
+from ..limits import CURVE_PIXEL_BYTES, require_image, require_memory, require_triangles
 from ..renderers.api import render
 from ..vocabulary import FRACTAL_CURVES as CURVES
 from ..vocabulary import FRACTAL_IMAGES as IMAGES
 from ..vocabulary import FRACTAL_KINDS as KINDS
 from .figures import image_grid, save_figure
+
+
+#: Work budget of `fractal_figure` (so of `difflab fractal --order`): a curve of at most 2^20 vertices
+#: (koch 9, peano 6, hilbert 10) is drawn and box-counted in ~4 s and ~170 MiB on 2 cores, each order
+#: more takes 4 (9) times that; a terrain of at most 2^21 triangles (level 10) renders in ~16 s and
+#: ~1 GB, level 11 would take a minute and 4 GB. Measured 2026-11-30 with `difflab fractal`.
+MAX_CURVE_VERTICES = 2 ** 20
+MAX_TERRAIN_TRIANGLES = 2 ** 21
+#: Peak bytes a curve vertex costs through its points, box counting and drawing (measured 158-172:
+#: koch 8 -> 9, hilbert 9 -> 10).
+CURVE_VERTEX_BYTES = 190
+
+
+def curve_vertices(kind: str, order: int) -> int:
+    """Vertices of a curve's polyline at `order` (the cantor staircase is always 4097 samples)."""
+    return {"koch": 3 * 4 ** order + 1, "peano": 9 ** order, "hilbert": 4 ** order}.get(kind, 4097)
+
+
+def _largest(count, lo: int, cap: int) -> int:
+    order = lo
+    while count(order + 1) <= cap:
+        order += 1
+    return order
+
+
+#: Orders `fractal_figure` accepts per kind (the work budget above; cantor: the staircase's digits).
+ORDER_RANGES = {**{kind: (0, _largest(lambda n, kind=kind: curve_vertices(kind, n), 0, MAX_CURVE_VERTICES))
+                   for kind in ("koch", "peano", "hilbert")},
+                "cantor": (1, MAX_STAIRCASE_DEPTH),
+                "terrain": (1, _largest(lambda n: 2 * 4 ** n, 1, MAX_TERRAIN_TRIANGLES))}
+
+
+def check_order(kind: str, order, name: str = "order") -> int:
+    """`order` of a curve or the terrain as an int within ORDER_RANGES[kind] and priced against the
+    memory budget (curve vertices x CURVE_VERTEX_BYTES, terrain triangles x TRIANGLE_BYTES), before
+    anything is built; else a FractalError / RenderError naming `name` (the CLI's `--order`)."""
+    lo, hi = ORDER_RANGES[kind]
+    if isinstance(order, bool) or not isinstance(order, numbers.Integral) or not lo <= order <= hi:
+        why = {"cantor": "the staircase's ternary digits",
+               "terrain": f"levels up to {hi}: at most {MAX_TERRAIN_TRIANGLES} triangles, rendered in seconds"}.get(
+            kind, f"orders up to {hi}: at most {MAX_CURVE_VERTICES} curve vertices, drawn and box-counted in seconds")
+        raise FractalError(f"{name}: the {kind} fractal takes {lo}..{hi} ({why}), got {order!r}")
+    label = name if name.startswith("-") else f"{name} ="
+    if kind == "terrain":
+        require_triangles(2 * 4 ** order, f"{label} {order}: the terrain", RenderError)
+    elif kind != "cantor":
+        count = curve_vertices(kind, order)
+        require_memory(count * CURVE_VERTEX_BYTES, f"{label} {order}: the {kind} curve ({count} vertices)",
+                       RenderError)
+    return int(order)
 
 
 def curve_points(kind: str, order: int) -> tuple[np.ndarray, str]:
@@ -28,8 +80,8 @@ def curve_points(kind: str, order: int) -> tuple[np.ndarray, str]:
     if kind in ("peano", "hilbert"):
         points = (peano if kind == "peano" else hilbert)(order)
         return points, f"{kind.capitalize()} curve, order {order}: {len(points)} cells, length {polyline_length(points):.4g}"
-    x = np.linspace(0.0, 1.0, 4097)
-    return np.stack([x, cantor_staircase(x, depth=max(order, 1))], axis=1), \
+    x = np.linspace(0.0, 1.0, curve_vertices(kind, order))
+    return np.stack([x, cantor_staircase(x, depth=order)], axis=1), \
         f"Cantor staircase, depth {order}: 1/2 on [1/3, 2/3], steps summing to 1"
 
 
@@ -86,12 +138,16 @@ SET_TITLES = {
 }
 
 
-def fractal_figure(kind: str, path: Path, width: int, height: int, *, titled: bool = True, **options) -> str:
+def fractal_figure(kind: str, path: Path, width: int, height: int, *, titled: bool = True, order_name: str = "order",
+                   **options) -> str:
     """Write one fractal picture to `path`; returns what it shows. When `titled` (the demo's
     figures) a curve is drawn with its caption as title and a set with its title above the image;
-    else (`difflab fractal KIND -o out.png`) either is the bare width x height image."""
+    else (`difflab fractal KIND -o out.png`) either is the bare width x height image. `order` is
+    checked by `check_order` (its range and memory), errors naming it `order_name` (the CLI: --order)."""
+    if kind in ORDER_RANGES:
+        options["order"] = check_order(kind, options.get("order", 4 if kind in CURVES else 7), order_name)
     if kind in CURVES:
-        return draw_curve(kind, options.get("order", 4), path, width, height, titled=titled)
+        return draw_curve(kind, options["order"], path, width, height, titled=titled)
     image = render_set(kind, width, height, **options)
     values = {"hurst": options.get("hurst", 0.8), "order": options.get("order", 7), "max_iter": options.get("max_iter", 256)}
     caption = SET_TITLES[kind].format(**values) + f" ({width}x{height})"

@@ -55,9 +55,21 @@ def _count_polyline(points: np.ndarray, sizes: np.ndarray) -> np.ndarray:
     origin = samples.min(axis=0)
     counts = []
     for s in sizes:
-        cells = np.floor((samples - origin) / s).astype(np.int64)
-        counts.append(len(np.unique(cells, axis=0)))
+        counts.append(_distinct_cells(np.floor((samples - origin) / s).astype(np.int64)))
     return np.asarray(counts, dtype=np.int64)
+
+
+def _distinct_cells(cells: np.ndarray) -> int:
+    """Distinct rows of non-negative integer cells (N, D): each row as one int64 key c_0 + r_0 (c_1 +
+    r_1 (...)), r_d = max c_d + 1, counted by one flat sort (a row-wise np.unique is ~5x slower); rows
+    whose key would pass 2^62 are counted row-wise."""
+    ranges = [int(c) + 1 for c in cells.max(axis=0)]
+    if float(np.prod(ranges, dtype=np.float64)) >= 2.0 ** 62:
+        return len(np.unique(cells, axis=0))
+    keys = np.zeros(len(cells), dtype=np.int64)
+    for d in reversed(range(cells.shape[1])):
+        keys = keys * ranges[d] + cells[:, d]
+    return len(np.unique(keys))
 
 
 def _count_image(mask: np.ndarray, sizes: np.ndarray) -> np.ndarray:
