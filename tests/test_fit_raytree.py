@@ -13,7 +13,7 @@ from difflab.demos import scene_path
 from difflab.errors import FitError
 from difflab.fit import identify
 from difflab.fit import MaterialTable, SceneSetup, fit_scene
-from difflab.fit.params import build_layout
+from difflab.fit.params import SCENE_PARAMS, build_layout
 from difflab.fit.raytree import evaluate_tree, tree_image, tree_to_jax
 from difflab.lighting.jax_model import lights_to_jax
 
@@ -253,9 +253,13 @@ def test_bad_input_raises_fit_error(lecture, kwargs, match):
 
 
 def test_generic_kr_kt_apply_only_where_the_tree_traces_them(lecture):
+    """fit_scene's defaults fit kr / kt / absorption only where the start traces them (frame: kr = kt
+    = 0; floor: kt = 0); named, they are refused there (test_fit_requests.py)."""
     scene, _ = lecture
-    layout = build_layout(scene, ("floor", "frame"), ("kd", "kr", "kt", "absorption"), tree=True)
-    assert [p.key for p in layout] == ["floor.kd", "floor.kr", "frame.kd"]  # frame: kr = kt = 0
+    layout = build_layout(scene, ("floor", "frame"), SCENE_PARAMS, tree=True)
+    assert [p.key for p in layout if p.kind in ("kr", "kt", "absorption")] == ["floor.kr"]
+    with pytest.raises(FitError, match=r"^params: 'kr': frame\.kr is 0 at the start.*name the others alone \(floor\.kr\)$"):
+        build_layout(scene, ("floor", "frame"), ("kd", "kr", "kt", "absorption"), tree=True)
 
 
 def test_failure_is_a_value(lecture):

@@ -31,6 +31,7 @@ any).
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 
 from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOT_CONVERGED, EXIT_NOT_JUDGED, EXIT_OK, FitError
@@ -108,9 +109,12 @@ def run(args) -> int:
         raise FitError(f"--mask: give one per target ({len(args.targets)}), got {len(masks)}")
     materials = [name.strip() for item in args.material for name in item.split(",") if name.strip()]
     params = DEFAULT_PARAMS if args.params is None else args.params
-    result = fit(args.scene, list(args.targets), materials, params, method=args.method, solver=args.solver,
-                 per_channel=not args.grey, bounded=args.bounded, loss=args.loss, masks=masks, sigma=args.sigma,
-                 ceiling=args.ceiling, max_steps=args.max_steps, x64=not args.float32, device=args.device)
+    try:
+        result = fit(args.scene, list(args.targets), materials, params, method=args.method, solver=args.solver,
+                     per_channel=not args.grey, bounded=args.bounded, loss=args.loss, masks=masks, sigma=args.sigma,
+                     ceiling=args.ceiling, max_steps=args.max_steps, x64=not args.float32, device=args.device)
+    except FitError as exc:  # the engine's advice in this command's words: --method raytrace, not method='raytrace'
+        raise FitError(re.sub(r"method='(\w+)'", r"--method \1", str(exc))) from None
     print(result.table())
     if result.no_fit() is not None:
         raise FitError(f"no fit made: {result.no_fit()}")

@@ -176,9 +176,11 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
             "kd" with one material, "red.kd" with several.
         params: any of "ka", "kd", "ks" (RGB), "n", "m", "f0", and with the ray tree "kr", "kt",
             "absorption" (RGB) -- for every fitted material, or "name.kind" for one -- and
-            "intensity" (every light's) or "lights[i].intensity"; a tuple or "ka,kd". A generic
-            kr (kt, absorption) applies only where kr (kt) starts > 0: the tree has no such rays
-            otherwise. "texture": the texels of the material's image texture (H_t x W_t x 3
+            "intensity" (every light's) or "lights[i].intensity"; a tuple or "ka,kd". A kr (kt,
+            absorption) named here is fitted for every material it names, or refused (FitError)
+            where that material's kr (kt) starts at 0: the recorded tree holds only the rays that
+            exist; start it above 0 (scene or `init`). Only `fit_scene`'s defaults (SCENE_PARAMS)
+            skip such materials. "texture": the texels of the material's image texture (H_t x W_t x 3
             unknowns; filters "nearest" / "bilinear"; through either image model: the G-buffer
             with Phong shading, or the ray tree, whose nodes keep the uv their texture was read
             at, so texels seen in mirrors count), alone or beside the other kinds; more than

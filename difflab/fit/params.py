@@ -72,20 +72,28 @@ class Defaults(tuple):
     n (phong, blinn), or the roughness m (torrance), which does not read n (`for_model`). The
     defaults with more names added (`DEFAULT_PARAMS + ("intensity",)`, either side of the +) are
     still the defaults, "n" read alike; a list the caller writes or builds otherwise (a list, a
-    comprehension) is taken as written, and "n" in it under torrance is refused."""
+    comprehension) is taken as written, and "n" in it under torrance is refused. `optional`: the
+    default's ray-tree kinds (SCENE_PARAMS' kr, kt, absorption), fitted only for the materials whose
+    start traces them (`_traced`); a name added, like any name the caller writes, is fitted for every
+    material it names or refused."""
+
+    def __new__(cls, names, optional=()):
+        out = super().__new__(cls, names)
+        out.optional = frozenset(optional)
+        return out
 
     def __add__(self, other) -> Defaults:
-        return Defaults(tuple(self) + tuple(other)) if isinstance(other, (tuple, list)) else NotImplemented
+        return Defaults(tuple(self) + tuple(other), self.optional) if isinstance(other, (tuple, list)) else NotImplemented
 
     def __radd__(self, other) -> Defaults:
-        return Defaults(tuple(other) + tuple(self)) if isinstance(other, (tuple, list)) else NotImplemented
+        return Defaults(tuple(other) + tuple(self), self.optional) if isinstance(other, (tuple, list)) else NotImplemented
 
     def for_model(self, specular: str) -> tuple[str, ...]:
         return tuple("m" if kind == "n" and specular == "torrance" else kind for kind in self)
 
 
 DEFAULT_PARAMS = Defaults(("ka", "kd", "ks", "n"))
-SCENE_PARAMS = Defaults(("ka", "kd", "ks", "n", "kr", "kt", "absorption"))  # fit_scene's: kr / kt only where > 0
+SCENE_PARAMS = Defaults(("ka", "kd", "ks", "n", "kr", "kt", "absorption"), optional=("kr", "kt", "absorption"))
 LIGHT_PARAM = re.compile(r"^lights\[(\d+)\]\.intensity$")
 Z_FLOOR, Z_CEIL, LOGIT_RANGE = -20.0, 30.0, 20.0
 START_FLOOR = 1e-2  # an unconstrained solver starting at a bound 0 starts here (no gradient at the floor)
@@ -237,14 +245,30 @@ def _traced(mat, kind: str) -> bool:
     return True
 
 
+def _untraced(scene, p: str, kind: str, names, materials) -> FitError:
+    """The refusal of a named kr / kt / absorption (`p`) of the materials `names`, whose start weight
+    is 0: the ray tree records only the rays that exist, so there is nothing to fit it through."""
+    weight = "kr" if kind == "kr" else "kt"
+    keys = [f"{name}.{weight}" for name in names]
+    one = len(keys) == 1
+    others = [f"{name}.{kind}" for name in materials if _traced(scene.materials[name], kind)]
+    rest = f"name the others alone ({', '.join(others)})" if others else "leave it out"
+    return FitError(f"params: {p!r}: {', '.join(keys)} {'is' if one else 'are'} 0 at the start, so the recorded ray "
+                    f"tree has no {'reflected' if weight == 'kr' else 'refracted'} rays from {'it' if one else 'them'}: "
+                    f"start {'it' if one else 'them'} above 0 (e.g. 0.05: the scene's materials.{keys[0]}, or init "
+                    f"{{'{keys[0]}': 0.05}}), or {rest}")
+
+
 def build_layout(scene, materials, params, *, tree: bool, per_channel=True, bounded=False,
                  texture_shapes=None) -> Layout:
-    """The fitted parameters of `materials` (names): "kd" means every fitted material's (kr only
-    where kr > 0 at the start, kt and absorption only where kt > 0), "red.kd" one material's;
+    """The fitted parameters of `materials` (names): "kd" means every fitted material's, "red.kd" one material's;
     "intensity" every light's, "lights[i].intensity" one light's; "texture" the texels of each fitted
     material's texture, `texture_shapes` name -> (H_t, W_t). `tree`: the image model is the ray
-    tree (kr, kt, absorption allowed). Raises FitError naming the offending parameter."""
+    tree (kr, kt, absorption allowed). Raises FitError naming the offending parameter: a kr (kt,
+    absorption) the caller names is fitted for every material it names, or refused where the start's
+    kr (kt) is 0; only the defaults' `optional` kinds skip those materials."""
     model = scene.render.specular
+    optional = params.optional if isinstance(params, Defaults) else frozenset()
     params = params.for_model(model) if isinstance(params, Defaults) else name_list(params, "params")
     if not params:
         raise FitError(f"params: nothing to fit (give some of {', '.join(KINDS)})")
@@ -273,13 +297,11 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
             raise FitError(f"params: {p!r} applies only to the {' and '.join(models)} specular model"
                            f"{'s' if len(models) > 1 else ''}; the scene's is {model!r} (its render.specular), "
                            "which does not read it: the image does not depend on it")
-        if head and not _traced(scene.materials[head], kind):
-            weight = "kr" if kind == "kr" else "kt"
-            raise FitError(f"params: {p!r}: {head}.{weight} is 0 at the start, so the recorded ray tree has no "
-                           f"{'reflected' if weight == 'kr' else 'refracted'} rays from it; start {weight} > 0 "
-                           "(scene or init)")
-        wanted.update((name, kind) for name in ((head,) if head else materials)
-                      if _traced(scene.materials[name], kind))
+        names = [name for name in ((head,) if head else materials) if _traced(scene.materials[name], kind)]
+        untraced = [name for name in ((head,) if head else materials) if name not in names]
+        if untraced and p not in optional:
+            raise _untraced(scene, p, kind, untraced, materials)
+        wanted.update((name, kind) for name in names)
     qualify = len(materials) > 1
     layout = []
     for name in materials:
@@ -297,8 +319,8 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
     for i in sorted(set(lights)):
         layout.append(Param(f"lights[{i}].intensity", "intensity", i, 3 if per_channel else 1, 0.0, INF))
     if not layout:
-        raise FitError(f"params: nothing to fit in {list(params)} for materials {list(materials)} (kr needs kr > 0 "
-                       "at the start, kt and absorption kt > 0)")
+        raise FitError(f"params: nothing to fit in {list(params)} for materials {list(materials)} and "
+                       f"{len(scene.lights)} light(s)")
     return Layout(tuple(layout))
 
 
