@@ -392,11 +392,3 @@ def test_settings_the_chosen_renderer_does_not_use_are_errors_not_ignored():
     assert np.array_equal(traced, render(scene, method="raytrace", max_depth=1, width=8, height=8))
     rastered = render(scene, method="raster", max_depth=1, sampling="grid", width=8, height=8)
     assert np.array_equal(rastered, render(scene, method="raster", width=8, height=8))
-
-
-def test_a_ray_traced_frame_says_it_has_no_gbuffer():
-    frame = render_frame(mixed_scene(), method="raytrace", width=8, height=8)
-    assert frame.ray_tree.primary().shape == (8, 8)
-    with pytest.raises(RenderError, match="gbuffer: a raytrace frame has no G-buffer.*method='raster'"):
-        frame.gbuffer
-    assert render_frame(mixed_scene(), method="raster", width=8, height=8).gbuffer.mask.shape == (8, 8)

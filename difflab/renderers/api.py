@@ -74,13 +74,15 @@ def render_frame(scene, *, method=None, shading=None, specular=None, max_depth=N
             Their costs are in `frame.stats`. True with the rasterizer: RenderError.
         image: False for the G-buffer (or ray tree) alone: `frame.image` is then None, and a
             Phong-shaded rasterized frame skips forming it (stage 7; its samples' colours are in
-            the G-buffer's points). The G-buffer is the same either way.
+            the G-buffer's points). The G-buffer and the ray tree are the same either way.
 
     Raises RenderError before allocating a render over the memory or ray budget (`difflab.limits`),
     and instead of returning non-finite pixels (naming the scene's largest numbers).
 
-    Returns: a `Frame`. A ray-traced frame has no G-buffer (`frame.gbuffer` raises) but its
-    recorded `ray_tree`, whose root nodes are the primary hits.
+    Returns: a `Frame`. A ray-traced frame always records its `ray_tree`; its `gbuffer` is the
+    G-buffer of the tree's root nodes (the primary hits), built on first read and kept
+    (`raytrace.gbuffer.tree_gbuffer`: two-sided shading normals facing the incoming ray, `face`
+    -1 on exact spheres and planes, no uv derivatives).
     """
     if not isinstance(image, bool):
         raise RenderError(f"image: expected True or False, got {image!r}")

@@ -9,6 +9,7 @@ box filter of the sample grid down to pixels.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -108,23 +109,35 @@ class GBuffer:
 
 @dataclass(frozen=True)
 class Frame:
-    """A rendered frame: `image` (H, W, 3) float32 linear RGB, its `gbuffer` (rasterizer), and `stats`
-    (counts, timings, non-finite pixels). The ray tracer gives its recorded `ray_tree` instead of a
-    G-buffer: `gbuffer` then raises RenderError saying so (rather than returning None)."""
+    """A rendered frame: `image` (H, W, 3) float32 linear RGB, its `gbuffer`, `stats` (counts, timings,
+    non-finite pixels) and, from the ray tracer, its recorded `ray_tree`.
+
+    A rasterized frame carries its G-buffer (`buffers`). A ray-traced frame carries `gbuffer_source`
+    instead, which builds the G-buffer of its primary hits from the ray tree (the tree's root nodes,
+    `raytrace.gbuffer.tree_gbuffer`: shading "phong", two-sided shading normals facing the incoming
+    ray, mesh-only `face` ids, no uv derivatives) the first time `gbuffer` is read, and keeps it: a
+    frame whose G-buffer is never read never builds it. `gbuffer` raises RenderError for a frame
+    with neither (`render`'s and `raytrace(record_tree=False)`'s, adaptive supersampling's)."""
 
     image: np.ndarray
     buffers: GBuffer | None
     stats: dict = field(default_factory=dict)
     ray_tree: object = None
+    gbuffer_source: Callable[[], GBuffer] | None = field(default=None, repr=False, compare=False)
+    _built: GBuffer | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def gbuffer(self) -> GBuffer:
-        if self.buffers is None:
-            raise RenderError(f"gbuffer: a {self.stats.get('method', 'raytrace')} frame has no G-buffer (only "
-                              f"render_frame's rasterized frames keep one; the ray tracer records its ray tree, "
-                              f"frame.ray_tree, whose root nodes are the primary hits) -- use render_frame with "
-                              f"method='raster'")
-        return self.buffers
+        if self.buffers is not None:
+            return self.buffers
+        if self._built is None:
+            if self.gbuffer_source is None:
+                raise RenderError(f"gbuffer: this {self.stats.get('method', 'raytrace')} frame kept no G-buffer "
+                                  f"(nor a recorded ray tree to build one from); render it with render_frame "
+                                  f"(method 'raster' or 'raytrace'), which keeps it -- not render, "
+                                  f"raytrace(record_tree=False) or adaptive supersampling")
+            object.__setattr__(self, "_built", self.gbuffer_source())  # frozen: the one cached value
+        return self._built
 
 
 def box_downsample(samples: np.ndarray, side: int) -> np.ndarray:

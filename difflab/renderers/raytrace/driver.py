@@ -16,6 +16,7 @@ output element is written by one thread, so renders are bitwise deterministic.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 
@@ -29,6 +30,7 @@ from ...vocabulary import FRESNEL_MODES, SPECULAR_MODELS
 from ..camera import camera_struct, half_height
 from ..frame import Frame, box_downsample
 from ..launch import host_empty, launch_row_loops, load_kernels
+from .gbuffer import tree_gbuffer
 from .itembuffer import asked_bvh, item_buffer, item_struct
 from .lightbuffer import build_light_buffer, no_light_buffer
 from .medium import camera_media
@@ -209,11 +211,12 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
             `light_buffer_resolution` cells per cube-face edge (None: scaled to the mesh size);
             the image is the same.
 
-    Returns: a `Frame` with `image` (H, W, 3) float32 linear RGB, no G-buffer, `ray_tree` (a
-    `RayTree` or None) and `stats`: rays traced per kind, `depth_histogram` (rays per depth, from
-    1), `nodes`, `seconds`, `rays_per_second`, `nonfinite_pixels`, `shadow_rays_cut` (shadow rays
-    that met more than `trace.MAX_SHADOW_CROSSINGS` transparent surfaces, counted as blocked); with
-    the light buffer also
+    Returns: a `Frame` with `image` (H, W, 3) float32 linear RGB, `ray_tree` (a `RayTree` or None),
+    the G-buffer of its primary hits built from the tree when `frame.gbuffer` is first read
+    (`gbuffer.tree_gbuffer`; RenderError without a recorded tree) and `stats`: rays traced per
+    kind, `depth_histogram` (rays per depth, from 1), `nodes`, `seconds`, `rays_per_second`,
+    `nonfinite_pixels`, `shadow_rays_cut` (shadow rays that met more than
+    `trace.MAX_SHADOW_CROSSINGS` transparent surfaces, counted as blocked); with the light buffer also
     `light_buffer_seconds` (building it, included in `seconds`), `light_buffer_entries` and
     `shadow_tests` (candidates tested by all shadow rays).
     """
@@ -248,4 +251,6 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
              "nonfinite_pixels": nonfinite_pixels(image) if traced.nonfinite_samples else 0}
     if lights is not None:
         stats.update(light_buffer_seconds=built, light_buffer_entries=lights.entries, shadow_tests=traced.shadow_tests)
-    return Frame(image=image, buffers=None, stats=stats, ray_tree=traced.tree)
+    source = None if traced.tree is None else \
+        functools.partial(tree_gbuffer, traced.tree, scene, compiled.vertices, compiled.faces)
+    return Frame(image=image, buffers=None, stats=stats, ray_tree=traced.tree, gbuffer_source=source)
