@@ -126,8 +126,9 @@ def test_a_camera_far_from_the_origin_sees_what_it_sees_at_the_origin():
     line or the silhouette: pixels on an edge of the reference) a pixel may flip (measured: 8 of 1567
     edge pixels); every other pixel must keep its value within 0.02 (measured 0.006: the sphere's
     normal, from a point off by an ulp over a radius of 0.7, under an n = 30 highlight). Shadows are
-    off: their rays start a few ulps (`ray_epsilon`) off the surface, which moves shadow edges by
-    about as much. The unprojected rays moved hits by 3.2 units: 823 pixels changed by > 0.1."""
+    off: their rays start 8 x 2^-23 of the coordinates (`trace.ray_offset`: 0.1 here) off the
+    surface, which moves shadow edges by about as much. The unprojected rays moved hits by 3.2
+    units: 823 pixels changed by > 0.1."""
     ref = render(Scene.from_dict(BASE), shadows=False)
     far = render(Scene.from_dict(transformed(BASE, shift=(1e5, 0, 0))), shadows=False)
     err = np.abs(far - ref).max(-1)
@@ -178,44 +179,34 @@ def test_shadows_of_a_thin_scene_stay_dark():
     assert np.abs(got - ref).max() <= 1e-4
 
 
-def test_ray_offsets_follow_the_scene_down_to_float32_rounding():
-    """`ray_epsilon`: 1e-4 x the scene's diagonal at any scale, but never below 2 x 2^-23 (2 to 4
-    float32 ulps) of the largest coordinate a hit can have (the far plane's reach from the eye
-    included): 1e-4 x the diagonal, 4.5e-4 here, is under an ulp of 1e5 (0.0078), so a hit's
-    offset point would round back onto it."""
-    for scale in (1e-3, 1.0, 1e3):
-        compiled = compile_scene(transformed(GRAZING, scale=scale, far=10 * scale))
-        assert compiled.epsilon / scale == pytest.approx(compile_scene(transformed(GRAZING, far=10)).epsilon, rel=1e-6)
-    moved = transformed(GRAZING, shift=(1e5, 0, 0), far=10)
-    corners = far_corners(moved["camera"]) - np.asarray(moved["camera"]["eye"])  # the floor plane: hits out to them
-    reach = 1e5 + np.abs(corners).max()
-    assert compile_scene(moved).epsilon == pytest.approx(2 * 2.0 ** -23 * reach, rel=1e-6)
-
-
-def far_corners(camera):
-    """(4, 3) float64 corners of a perspective camera's far plane (default fov_y 45)."""
-    eye, target = np.asarray(camera["eye"], float), np.asarray(camera["target"], float)
-    forward = (target - eye) / np.linalg.norm(target - eye)
-    right = np.cross(forward, [0, 1, 0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-    half = np.tan(np.radians(camera.get("fov_y", 45)) / 2)
-    return np.array([eye + camera["far"] * (forward + a * half * camera["width"] / camera["height"] * right
-                                              + b * half * up) for a in (-1, 1) for b in (-1, 1)])
+def test_the_rasterizers_least_offset_follows_the_objects_not_the_eye_or_far():
+    """`compile.object_offset` (what a rasterized point's shadow rays start off its surface at least):
+    8 x 2^-23 x the largest coordinate of the objects -- the plane's point, the sphere's |c_i| + r,
+    the teapot's vertices -- at any scale, wherever the eye is and however far the far plane (it was
+    1e-4 x the diagonal of a box that held the eye, and 2 ulps of the far plane's reach)."""
+    compiled = compile_scene(transformed(GRAZING, far=10))
+    largest = max(1.4, float(np.abs(compiled.vertices[:compiled.n_mesh_vertices]).max()))
+    assert compiled.epsilon == pytest.approx(8 * 2.0 ** -23 * largest, rel=1e-6)
+    for scale in (1e-3, 1e3):
+        scaled = compile_scene(transformed(GRAZING, scale=scale, far=10 * scale))
+        assert scaled.epsilon / scale == pytest.approx(compiled.epsilon, rel=1e-6)
+    moved = transformed(GRAZING, near=0.1, far=1e5)
+    moved["camera"] = {**moved["camera"], "eye": [0, 100, 4000]}
+    assert compile_scene(moved).epsilon == compiled.epsilon
 
 
 def test_without_planes_the_far_plane_beyond_everything_changes_nothing():
     """A glass sphere, a Phong sphere and a quad mesh (a 6 x 6 wall at z = 0), no planes: every hit lies in the box around
-    the eye and the objects, so far = 10 or 1e5 gives the same offsets and the same image (bit for
-    bit). The offsets' floor took |eye| + far for every scene: 0.00097 became 0.0238 at far 1e5 and
-    18 of these 1728 pixels changed by > 0.02, up to 0.127."""
+    the eye and the objects, so far = 10 or 1e5 gives the same image (bit for bit). An offset floor
+    of |eye| + far for every scene once made 0.00097 into 0.0238 at far 1e5 and changed 18 of these
+    1728 pixels by > 0.02, up to 0.127."""
     d = {**GLASS, "camera": {**GLASS["camera"], "width": 48, "height": 36}, "objects": [
         {"type": "sphere", "center": [0, 0.7, 0], "radius": 0.7, "material": "g"},
         {"type": "sphere", "center": [0.9, 0.3, 0.6], "radius": 0.3, "material": "r"},
         {"type": "mesh", "builtin": "quad", "material": "f", "transform": {"rotate_deg": [-90, 0, 0], "scale": 6}}]}
     near = compile_scene(d)
     distant = compile_scene(transformed(d, far=1e5))
-    assert distant.epsilon == near.epsilon == pytest.approx(1e-4 * np.linalg.norm([6, 6, 4.7]), rel=1e-6)  # the box: quad, sphere, eye
+    assert distant.epsilon == near.epsilon == pytest.approx(8 * 2.0 ** -23 * 3, rel=1e-6)  # the quad's corners
     np.testing.assert_array_equal(render(distant), render(near))
 
 
@@ -247,15 +238,16 @@ def test_a_camera_inside_an_absorbing_sphere_sees_through_its_medium():
 
 def test_outside_the_sphere_only_its_chord_absorbs():
     """Eye at z = 3: each ray absorbs over its chord through the sphere, exp(-chord) red (the centre
-    pixel's 0.1366 as before), 1 where it misses -- within 0.5 % (measured 0.19 %: the refracted ray
-    starts epsilon = 4.9e-4 off the surface along its normal, on a line that much off the true one)."""
+    pixel's 0.1366 as before), 1 where it misses -- within 1e-5 relative (measured 4.8e-7; it was
+    0.19 % while refracted rays started 4.9e-4 off the surface along its normal, on a line that much
+    off the true one: `trace.spawn_origin` keeps them on it)."""
     d = inside([{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "g"}], [0, 0, 3], fov_y=40)
     image = render(Scene.from_dict(d))
     rays = pinhole_directions(d["camera"], np.arange(16 * 16))
     h = rays @ np.array([0.0, 0.0, -3.0])
     chord = 2 * np.sqrt(np.maximum(1.0 - (9.0 - h ** 2), 0.0))
     clear = np.abs(9.0 - h ** 2 - 1.0) > 0.05  # off the silhouette
-    np.testing.assert_allclose(image[..., 0].ravel()[clear], np.exp(-chord[clear]), rtol=5e-3)
+    np.testing.assert_allclose(image[..., 0].ravel()[clear], np.exp(-chord[clear]), rtol=1e-5)
     assert image[8, 8, 0] == pytest.approx(0.1366, abs=1e-4)
 
 

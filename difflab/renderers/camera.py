@@ -71,20 +71,6 @@ def half_height(camera) -> float:
     return camera.ortho_height / 2.0
 
 
-def far_reach(camera) -> float:
-    """The largest coordinate (max-norm, scene units) a primary ray's point can have before the far
-    plane: |eye| + the view volume's far corners' reach, max over a, b = +-1 of
-    |far (forward + a half_w right + b half_h up)| (perspective) or |a half_w right + b half_h up +
-    far forward| (orthographic), half_w = half_h width / height."""
-    right, up, forward = camera_frame(camera)
-    half_h = half_height(camera)
-    half_w = half_h * camera.width / camera.height
-    scale = camera.far if camera.projection == "perspective" else 1.0
-    reach = max(float(np.abs(scale * (a * half_w * right + b * half_h * up) + camera.far * forward).max())
-                for a in (-1.0, 1.0) for b in (-1.0, 1.0))
-    return float(np.abs(np.asarray(camera.eye, float)).max()) + reach
-
-
 def pixel_size_at(camera, distance: float, height: int) -> float:
     """World-space height of one raster row at `distance` in front of the camera."""
     if camera.projection == "perspective":

@@ -22,15 +22,12 @@ from ..guards import check_mesh_uvs, check_world_mesh, object_errors
 from ..limits import require_triangles
 from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Scene, Sphere, load_scene
-from .camera import far_reach
 from .launch import host_empty, resolve_device
 from .soup import PER_FACE, SOUP_DTYPES, device_soup, host_aliased, raster_room, soup_with_room, triangle_soup
 from .tessellate import AnalyticParts, plane_uv_anchor
 from .texture.store import TextureStore, scene_textures
-from .trace import SceneGeomW
+from .trace import RAY_OFFSET_ULPS, SceneGeomW
 
-RAY_EPSILON_SCALE = 1e-4  # ray offset = this x the scene's extent (bounding-box diagonal) ...
-RAY_EPSILON_ULPS = 2.0  # ... but at least this x 2^-23 (2 to 4 float32 ulps) of its largest coordinate
 RASTER_SOUP = "raster soup"  # the key in CompiledScene.built of the mesh and analytic triangles (`raster`)
 RASTER_ROOM = "raster room"  # ... and of the host arrays the mesh fields are the first rows of (`soup_with_room`),
 # with their device arrays where these alias them (`host_aliased`), else None
@@ -253,25 +250,15 @@ def scene_parts(scene):
     return mesh_parts, analytic
 
 
-def ray_epsilon(camera, mesh_vertices: np.ndarray, spheres, planes=()) -> float:
-    """How far (scene units) a new ray starts off the surface it leaves: RAY_EPSILON_SCALE x the
-    diagonal of the box around the eye, the meshes and the spheres -- so a uniformly scaled scene
-    scales its offsets and renders the same image -- but at least RAY_EPSILON_ULPS float32 ulps of
-    the largest coordinate a hit can have, where float32 rounding of hit points, not the scene's
-    size, sets the offset a ray needs: that box's, and with planes (unbounded) the farthest a
-    primary ray reaches before the far plane (`camera.far_reach`: |eye| + the far corners'); a
-    scene without planes does not depend on `far` (its hits lie in that box). Secondary rays can
-    meet a plane farther out (a reflection grazing a floor); their offsets there may round."""
-    eye = np.asarray(camera.eye, float)
-    extent_points = [eye[None], mesh_vertices.reshape(-1, 3)]
-    for sphere, _, _ in spheres:
-        extent_points.append(np.asarray(sphere.center)[None] + np.array([[sphere.radius] * 3, [-sphere.radius] * 3]))
-    points = np.concatenate(extent_points)
-    largest = float(np.abs(points).max())
-    if planes:
-        largest = max(largest, far_reach(camera))
-    return max(RAY_EPSILON_SCALE * float(np.linalg.norm(points.max(0) - points.min(0))),
-               RAY_EPSILON_ULPS * 2.0 ** -23 * largest)
+def object_offset(mesh_vertices: np.ndarray, spheres, planes=()) -> float:
+    """The least offset (scene units) of a rasterized point's shadow rays (`trace.point_offset`):
+    RAY_OFFSET_ULPS x 2^-23 x the largest coordinate (max-norm) of the scene's objects -- the mesh
+    vertices, the spheres' |c_i| + r, the planes' points -- whose rounding reaches a point
+    interpolated on their triangles. Neither the eye nor the far plane counts."""
+    extent = [0.0, float(np.abs(mesh_vertices).max(initial=0.0))]
+    extent += [float(np.abs(sphere.center).max()) + sphere.radius for sphere, _, _ in spheres]
+    extent += [float(np.abs(plane.point).max()) for plane, _, _ in planes]
+    return RAY_OFFSET_ULPS * 2.0 ** -23 * max(extent)
 
 
 def ray_geometry(arrays: dict, mesh_vertices: np.ndarray, spheres, planes, anchors, epsilon: float, device: str):
@@ -343,7 +330,7 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     mesh_vertices = soup["vertices"][used]
     spheres = [part for part in analytic if isinstance(part[0], Sphere)]
     planes = [part for part in analytic if isinstance(part[0], Plane)]
-    epsilon = ray_epsilon(scene.camera, mesh_vertices, spheres, planes)
+    epsilon = object_offset(mesh_vertices, spheres, planes)
     anchors = [plane_uv_anchor(plane, scene.camera.eye, ordered[material].uv_period) for plane, material, _ in planes]
     geom = ray_geometry(arrays, mesh_vertices, spheres, planes, anchors, epsilon, device)
     textures, texture_ids = scene_textures(ordered, device)

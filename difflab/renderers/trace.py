@@ -4,6 +4,17 @@ The rasterizer uses these for shadow rays; the ray tracer for everything. A hit 
 t along the unit ray, what was hit (kind, index, object, material), the geometric normal (as stored:
 outward for spheres, the plane's normal, the triangle's winding normal) and the triangle's
 barycentrics in Warp's `mesh_query_ray` convention: p = u p0 + v p1 + (1 - u - v) p2.
+
+Where a ray leaves a surface (as pbrt-v4's OffsetRayOrigin and Mitsuba 3's spawn_ray do): the hit
+point is computed from the surface, not as origin + t d (`hit_point`), so that its float32 error is
+a few ulps of its own coordinates and the surface's, whatever the ray's origin (an eye 5000 away
+put ulp(5000) = 5e-4 into origin + t d). A new ray starts `ray_offset` -- RAY_OFFSET_ULPS x 2^-23
+x those coordinates -- off it, measured along the geometric normal on the side it travels to
+(`spawn_origin`: along the ray itself, so that a refracted ray's path is not shifted): enough that
+neither that point's rounding nor the next intersection test's puts the surface in front of it.
+The offset depends on where the hit is, not on where the eye or the far plane is, and scales with
+the scene (8 x 2^-23: 2.9e-6 at coordinates of 3; 2 was the least that showed no acne in
+tests/test_raytrace_offsets.py, 1 shadowed 1 % of a faceted sphere's lit facets 1e4 from the origin).
 """
 
 from __future__ import annotations
@@ -17,6 +28,8 @@ from ..scene import Plane, Sphere
 wp.set_module_options({"enable_backward": False})
 
 HIT_NONE, HIT_TRIANGLE, HIT_SPHERE, HIT_PLANE = 0, 1, 2, 3
+RAY_OFFSET_ULPS = 8.0  # a new ray starts this many x 2^-23 of its hit's coordinates off the surface (`ray_offset`)
+SPAWN_GRAZING = 0.125  # |cos| below which a new ray steps off along the normal, not along itself (`spawn_origin`)
 #: Transparent surfaces a shadow ray may pass through: one that meets another (the 256th) counts as
 #: blocked, as a ray cut by max_depth contributes black. 255 is what the ray tree's per-material
 #: crossing counts (uint8) hold; the walk is a loop (Warp unrolls none past 16), so a higher cap
@@ -51,7 +64,7 @@ class SceneGeomW:
     plane_anchor_uv: wp.array(dtype=wp.vec2)  # its uv
     plane_material: wp.array(dtype=wp.int32)
     plane_object: wp.array(dtype=wp.int32)
-    epsilon: float  # ray offset against self-intersection, in scene units
+    epsilon: float  # the least offset of a rasterized point's shadow rays, scene units (`compile.object_offset`)
 
 
 @wp.struct
@@ -223,6 +236,82 @@ def closest_hit(geom: SceneGeomW, origin: wp.vec3, direction: wp.vec3, t_min: fl
 
 
 @wp.func
+def max_abs(v: wp.vec3):
+    return wp.max(wp.abs(v[0]), wp.max(wp.abs(v[1]), wp.abs(v[2])))
+
+
+@wp.func
+def hit_point(geom: SceneGeomW, hit: HitW, origin: wp.vec3, direction: wp.vec3):
+    """Where `hit` (not a miss) of the unit ray lies, computed from its surface (module doc): on a
+    sphere c - f -+ s d, f = c - (the ray's point nearest c), s = half the chord (Ray Tracing Gems
+    ch. 7: no large t in it); on a plane origin + t d moved onto the plane along its normal; on a
+    triangle the blend of its corners by the hit's barycentrics (pbrt-v4)."""
+    if hit.kind == HIT_SPHERE:
+        center = geom.sphere_center[hit.index]
+        radius = geom.sphere_radius[hit.index]
+        oc = center - origin
+        h = wp.dot(direction, oc)
+        f = oc - h * direction
+        s = wp.sqrt(wp.max(radius * radius - wp.dot(f, f), 0.0))
+        if hit.t > h:  # the far root, h + s
+            return center - f + s * direction
+        return center - f - s * direction
+    if hit.kind == HIT_PLANE:
+        normal = geom.plane_normal[hit.index]
+        p = origin + hit.t * direction
+        return p - wp.dot(p - geom.plane_point[hit.index], normal) * normal
+    return wp.mesh_eval_position(geom.mesh, hit.index, hit.u, hit.v)
+
+
+@wp.func
+def ray_offset(geom: SceneGeomW, hit: HitW, p: wp.vec3):
+    """How far (scene units) a ray leaving `hit` at its `hit_point` p starts off the surface:
+    RAY_OFFSET_ULPS x 2^-23 x the largest coordinate whose float32 rounding reaches p or an
+    intersection test with the surface -- max_i |p_i|, and a sphere's max_i |c_i| + r, a plane's
+    max_i |point_i|, a triangle's corners' max |v_i|."""
+    scale = max_abs(p)
+    if hit.kind == HIT_SPHERE:
+        scale = wp.max(scale, max_abs(geom.sphere_center[hit.index]) + geom.sphere_radius[hit.index])
+    elif hit.kind == HIT_PLANE:
+        scale = wp.max(scale, max_abs(geom.plane_point[hit.index]))
+    else:
+        mesh = wp.mesh_get(geom.mesh)
+        for k in range(3):
+            scale = wp.max(scale, max_abs(mesh.points[mesh.indices[3 * hit.index + k]]))
+    return RAY_OFFSET_ULPS * 1.1920928955078125e-07 * scale
+
+
+@wp.func
+def point_offset(geom: SceneGeomW, p: wp.vec3):
+    """`ray_offset` for a rasterized point p, whose triangle is not known here: RAY_OFFSET_ULPS x
+    2^-23 x max_i |p_i|, and at least `geom.epsilon` (the same of the objects' largest coordinate)."""
+    return wp.max(geom.epsilon, RAY_OFFSET_ULPS * 1.1920928955078125e-07 * max_abs(p))
+
+
+@wp.func
+def spawn_origin(p: wp.vec3, normal: wp.vec3, direction: wp.vec3, offset: float):
+    """Where a ray leaving surface point p in unit `direction` starts: `offset` off the surface (unit
+    geometric `normal`), on the side the ray travels to -- along the ray itself, offset / |d.n| on
+    (so its line still passes through p: a refracted ray is not shifted), unless the ray leaves
+    within SPAWN_GRAZING of the surface (|d.n| < that), then along the normal."""
+    cos = wp.dot(direction, normal)
+    if wp.abs(cos) >= SPAWN_GRAZING:
+        return p + (offset / wp.abs(cos)) * direction
+    if cos >= 0.0:
+        return p + offset * normal
+    return p - offset * normal
+
+
+@wp.func
+def past_surface(geom: SceneGeomW, hit: HitW, origin: wp.vec3, direction: wp.vec3):
+    """Where a unit ray from `origin` that crosses `hit` (not a miss) goes on from: `spawn_origin`
+    beyond the surface, and how far along the ray that is from `origin`."""
+    p = hit_point(geom, hit, origin, direction)
+    beyond = spawn_origin(p, hit.normal, direction, ray_offset(geom, hit, p))
+    return beyond, wp.dot(beyond - origin, direction)
+
+
+@wp.func
 def shadow_ray(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: wp.vec3, l: wp.vec3, distance: float,
                ignore_object: int, transparent: int):
     """(visibility in [0, 1], cut) of a light at `distance` along unit `l` from p.
@@ -244,8 +333,8 @@ def shadow_ray(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: wp.vec
         if crossing == MAX_SHADOW_CROSSINGS:
             return 0.0, 1
         visibility = visibility * kt
-        origin = origin + (hit.t + geom.epsilon) * l
-        remaining = remaining - hit.t - geom.epsilon
+        origin, step = past_surface(geom, hit, origin, l)
+        remaining = remaining - step
         if remaining <= 0.0:
             return visibility, 0
     return 0.0, 1  # (not reached: the last pass returns)
@@ -275,7 +364,7 @@ def count_shadow_crossings(geom: SceneGeomW, materials: wp.array(dtype=MaterialW
         if materials[hit.material].kt <= 0.0:
             return
         crossings[k, q, hit.material] = crossings[k, q, hit.material] + 1
-        origin = origin + (hit.t + geom.epsilon) * l
-        remaining = remaining - hit.t - geom.epsilon
+        origin, step = past_surface(geom, hit, origin, l)
+        remaining = remaining - step
         if remaining <= 0.0:
             return

@@ -24,7 +24,7 @@ from ...vocabulary import FOG_NONE, PHONG_SHADING
 from ..camera import CameraW
 from ..launch import dealt_row
 from ..texture.sampling import TexturesW, sample_texture
-from ..trace import SceneGeomW, light_visibility
+from ..trace import SceneGeomW, light_visibility, point_offset
 from .coverage import NO_HIT
 from .resolve import (GBufferW, PointsW, PointW, RasterMeshW, SampleW, ScreenW, load_point, mesh_point, resolve_into,
                       resolve_sample,
@@ -86,8 +86,9 @@ def light_point(point: PointW, lighting: LightingW, textured: int, texel: wp.vec
         l, d = light_vector(lighting.lights[q], point.p)
         s = float(1.0)
         if lighting.shadows == 1 and wp.dot(point.geo, l) > 0.0:
-            origin = point.p + geom.epsilon * point.geo
-            s = light_visibility(geom, materials, origin, l, d - geom.epsilon, point.ignore, lighting.transparent)
+            offset = point_offset(geom, point.p)  # along geo, not the ray: Gouraud's geo is a vertex normal
+            s = light_visibility(geom, materials, point.p + offset * point.geo, l, d - offset, point.ignore,
+                                 lighting.transparent)
         if record == 1:
             lit.light_dir[k, q] = l
             lit.light_dist[k, q] = d

@@ -39,7 +39,8 @@ from ...lighting.warp_model import FogW, LightW, MaterialW, ambient_term, fog_bl
 from ...vocabulary import MAX_DEPTH_LIMIT
 from ..camera import CameraW
 from ..launch import dealt_row
-from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, shadow_ray
+from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, hit_point, shadow_ray, \
+    spawn_origin
 from .itembuffer import ItemBufferW, item_hit
 from .lightbuffer import LightBufferW, buffered_visibility
 from .medium import primary_medium
@@ -120,18 +121,19 @@ def shade_hit(geom: SceneGeomW, lights: wp.array(dtype=LightW), materials: wp.ar
         s = float(1.0)
         if params.shadows == 1 and wp.dot(surf.geo, l) > 0.0:
             wp.atomic_add(rays, i, COUNT_SHADOW, 1)
-            origin = surf.p + geom.epsilon * surf.geo
+            origin = spawn_origin(surf.p, surf.geo, l, surf.offset)
+            reach = light_d - surf.offset
             skip = skip_object(geom, hit, l)
             cut = int(0)
             if buffer.use == 1 and buffer.light_cell0[q] >= 0:
                 s, cut = buffered_visibility(geom, buffer, vertices, faces, materials, q, lights[q].position, origin,
-                                             l, light_d - geom.epsilon, skip, params.transparent)
+                                             l, reach, skip, params.transparent)
             else:
-                s, cut = shadow_ray(geom, materials, origin, l, light_d - geom.epsilon, skip, params.transparent)
+                s, cut = shadow_ray(geom, materials, origin, l, reach, skip, params.transparent)
             if cut == 1:
                 wp.atomic_add(rays, i, COUNT_SHADOW_CUT, 1)
             if params.count_crossings == 1 and s > 0.0:
-                count_shadow_crossings(geom, materials, origin, l, light_d - geom.epsilon, skip, rec.crossings, k, q)
+                count_shadow_crossings(geom, materials, origin, l, reach, skip, rec.crossings, k, q)
         if s > 0.0:
             local = local + s * light_term(lights[q], surf.mat, params.specular, surf.normal, surf.view, l, light_d)
         if params.record == 1:
@@ -186,9 +188,11 @@ def make_whitted_kernel(stack_size: int):
                 node = count
                 count = count + 1
                 hit = trace_ray(scene.geom, item, out, ray, i, j, t_far)
+                p = wp.vec3(0.0)
                 distance = wp.inf  # from the surface (not the offset origin); Beer's law and the record need it
-                if hit.kind != HIT_NONE and (ray.medium >= 0 or params.record == 1):
-                    distance = wp.length(ray.origin + hit.t * ray.direction - ray.start)
+                if hit.kind != HIT_NONE:
+                    p = hit_point(scene.geom, hit, ray.origin, ray.direction)
+                    distance = wp.length(p - ray.start)
                 w = ray.weight
                 if ray.medium >= 0:  # Beer absorption along this ray inside its medium
                     w = wp.cw_mul(w, beer(scene.materials[ray.medium].absorption, distance))
@@ -200,7 +204,7 @@ def make_whitted_kernel(stack_size: int):
                         tree.local[base + node] = params.background
                     continue
 
-                surf = surface_at(scene, cam, hit, ray, xy, int(ray.kind == PRIMARY), params.sample)
+                surf = surface_at(scene, cam, hit, ray, p, xy, int(ray.kind == PRIMARY), params.sample)
                 if ray.kind == PRIMARY:
                     fog_f = fog_blend(params.fog, wp.dot(surf.p - cam.eye, cam.forward))
                 local = shade_hit(scene.geom, scene.lights, scene.materials, scene.light_buffer, scene.mesh.vertices,

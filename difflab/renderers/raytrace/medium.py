@@ -2,9 +2,10 @@
 
 A ray refracted into an object travels in its medium (`RayW.medium`, its material) until it leaves
 through a surface's back side (`surface.py`). Which medium holds a point is found by walking a ray
-from it (`medium_at`) through every surface it crosses (each crossing counted from `epsilon` past
-the last), keeping a depth count: +1 entering a surface (hitting the side its stored normal points
-to: outward for spheres, the plane's normal, the winding normal for triangles), -1 leaving one. The
+from it (`medium_at`) through every surface it crosses (each walked on from just past it:
+`trace.past_surface`), keeping a depth count: +1 entering a surface (hitting the side its stored
+normal points to: outward for spheres, the plane's normal, the winding normal for triangles), -1
+leaving one. The
 first crossing that takes the count below 0 leaves an object the point was inside -- the innermost
 one where objects nest -- and its material is the medium (if that object is transparent, kt > 0; an
 opaque one has none). Closed objects give the same answer along any walk. A plane, or a mesh that
@@ -41,7 +42,7 @@ from ...lighting.warp_model import MaterialW
 from ...scene import Plane, Sphere
 from ..camera import camera_frame, half_height
 from ..launch import load_kernels
-from ..trace import HIT_NONE, SceneGeomW, closest_hit
+from ..trace import HIT_NONE, SceneGeomW, closest_hit, past_surface
 
 wp.set_module_options({"enable_backward": False})
 
@@ -58,7 +59,7 @@ def medium_at(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), point: wp.
         hit = closest_hit(geom, origin, direction, 0.0, wp.inf, -1)
         if hit.kind == HIT_NONE:
             break
-        origin = origin + (hit.t + geom.epsilon) * direction
+        origin, step = past_surface(geom, hit, origin, direction)
         if wp.dot(direction, hit.normal) < 0.0:
             depth = depth + 1
         else:

@@ -3,9 +3,10 @@
 Surfaces are two-sided: the geometric and shading normals are flipped to face the incoming ray
 (so inside a refracting object they point inwards). A ray hitting the side its geometric normal
 points to is *entering* (eta = 1 / ior); from the other side it is *leaving* (eta = ior).
-New rays start `epsilon` (scene units, from `compile_scene`) off the surface along the geometric
-normal on the side they travel to; a ray leaving a sphere outwards, and every ray leaving a plane,
-also skips that object (it cannot meet it again).
+New rays start the hit's own `trace.ray_offset` off the surface (a few float32 ulps of its
+coordinates, from its `trace.hit_point`), measured along the geometric normal on the side they
+travel to, stepped along the ray itself (`trace.spawn_origin`); a ray leaving a sphere outwards,
+and every ray leaving a plane, also skips that object (it cannot meet it again).
 
 The split between the reflected and the refracted child: the reflected one takes kr F_r, the
 refracted one kt F_t, with (F_r, F_t) = (1, 1) without Fresnel weighting and (F, 1 - F) with it,
@@ -24,7 +25,7 @@ from ...vocabulary import FRESNEL_NONE
 from ..camera import CameraW, near_distance, primary_ray
 from ..texture.sampling import TexturesW, cone_footprint, pixel_footprint, plane_uv, plane_uv_derivatives, \
     sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
-from ..trace import HIT_PLANE, HIT_TRIANGLE, HitW, SceneGeomW, leaving_skip
+from ..trace import HIT_PLANE, HIT_TRIANGLE, HitW, SceneGeomW, leaving_skip, ray_offset, spawn_origin
 from .lightbuffer import LightBufferW
 from .optics import fresnel, refract
 
@@ -57,7 +58,8 @@ class SceneW:
 class RayW:
     """A ray waiting on the walk's stack."""
 
-    origin: wp.vec3  # where it is traced from: `start` moved epsilon off the surface (primary: onto the near plane)
+    origin: wp.vec3  # where it is traced from: `start` moved `SurfaceW.offset` off the surface (primary: onto
+    # the near plane)
     start: wp.vec3  # the surface point it leaves, where its absorption counts from (the primary ray:
     # `camera.primary_ray`'s origin, or the last surface before the near plane: `medium.primary_medium`)
     direction: wp.vec3  # unit
@@ -74,7 +76,8 @@ class RayW:
 class SurfaceW:
     """A hit as shading sees it: two-sided, checker cell and texture applied to the material."""
 
-    p: wp.vec3  # the hit point
+    p: wp.vec3  # the hit point (`trace.hit_point`)
+    offset: float  # how far rays leaving it start off it (`trace.ray_offset`)
     geo: wp.vec3  # unit geometric normal, facing the incoming ray
     normal: wp.vec3  # unit shading normal, facing the incoming ray
     view: wp.vec3  # unit direction back along the incoming ray
@@ -193,11 +196,14 @@ def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3
 
 
 @wp.func(inline=True)
-def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, xy: wp.vec2, primary: int, sample: wp.vec2):
-    """The surface `ray` meets at `hit` (not a miss): two-sided normals, checker cell, texture."""
+def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, p: wp.vec3, xy: wp.vec2, primary: int,
+               sample: wp.vec2):
+    """The surface `ray` meets at `hit` (not a miss), at its `trace.hit_point` p: two-sided normals,
+    checker cell, texture."""
     surf = SurfaceW()
     d = ray.direction
-    surf.p = ray.origin + hit.t * d
+    surf.p = p
+    surf.offset = ray_offset(scene.geom, hit, p)
     surf.geo = hit.normal
     surf.normal = shading_normal(scene.mesh, hit)
     surf.entering = int(wp.dot(d, surf.geo) < 0.0)
@@ -256,9 +262,6 @@ def skip_object(geom: SceneGeomW, hit: HitW, direction: wp.vec3):
 @wp.func
 def child_ray(geom: SceneGeomW, parent: RayW, node: int, hit: HitW, surf: SurfaceW, direction: wp.vec3,
               weight: wp.vec3, kind: int, medium: int):
-    """The ray a hit spawns in `direction`: started epsilon off the surface on the side it leaves to."""
-    origin = surf.p - geom.epsilon * surf.geo
-    if wp.dot(direction, surf.geo) >= 0.0:
-        origin = surf.p + geom.epsilon * surf.geo
-    return new_ray(surf.p, origin, direction, weight, parent.path + hit.t, parent.depth + 1, node, kind, medium,
-                   skip_object(geom, hit, direction))
+    """The ray a hit spawns in `direction`: started `surf.offset` off the surface on the side it leaves to."""
+    return new_ray(surf.p, spawn_origin(surf.p, surf.geo, direction, surf.offset), direction, weight,
+                   parent.path + hit.t, parent.depth + 1, node, kind, medium, skip_object(geom, hit, direction))
