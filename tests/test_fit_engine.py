@@ -125,16 +125,31 @@ def test_a_given_sigma_of_an_8_bit_file_adds_its_quantisation(tmp_path):
     assert result.ok and 0.9 < result.chi2 < 1.1 and result.sigma > 0.002
 
 
+TOO_FEW = "UNDERDETERMINED: no more counted target values than unknowns the data reach; the model is not judged"
+
+
 def test_one_pixel_for_ten_unknowns_is_underdetermined(noisy_sphere):
     """A single pixel (3 values) for ka, kd, ks, n (10 unknowns), sigma given: underdetermined -- chi2
-    nan, every parameter poorly determined, not ok. (It reported chi2 1.6e-16 and ok, exit 0.)"""
+    nan, every parameter poorly determined, not ok. (It reported chi2 1.6e-16 and ok, exit 0.) Its
+    J^T J is singular too (ka and kd fixed only in combination): the table says both, and not that
+    the model is still judged (it said so, leaving out the too-few line)."""
     scene, noisy = noisy_sphere
     mask = np.zeros(noisy.shape[:2], bool)
     mask[32, 32] = True
     result = fit_material(scene, [noisy], "red", init=START, masks=[mask], sigma=0.02)
     assert result.underdetermined and np.isnan(result.chi2) and not result.model_mismatch and not result.ok
+    assert result.too_few_values and result.degenerate == ["ka", "kd"]
     assert sorted(result.poorly_determined) == sorted(("ka", "kd", "ks", "n"))
-    assert "UNDERDETERMINED" in result.table() and result.to_dict()["underdetermined"]
+    verdicts = [line for line in result.table().splitlines() if line.startswith("UNDERDETERMINED")]
+    assert verdicts == [TOO_FEW, "UNDERDETERMINED: the images fix only combinations of ka, kd (J^T J singular; "
+                                 "`difflab.identify` names them); their values are undetermined"]
+    report = result.to_dict()
+    assert (report["underdetermined"], report["too_few_values"], report["degenerate"], report["chi2"]) == \
+        (True, True, ["ka", "kd"], None)
+    mask[32, 30:32] = True  # 3 pixels, 9 values: too few still, J^T J regular -- the one line
+    three = fit_material(scene, [noisy], "red", init=START, masks=[mask], sigma=0.02)
+    assert three.too_few_values and three.degenerate == [] and np.isnan(three.chi2) and not three.ok
+    assert [line for line in three.table().splitlines() if line.startswith("UNDERDETERMINED")] == [TOO_FEW]
 
 
 def scattered_mask(scene, count: int, seed: int) -> np.ndarray:
@@ -342,8 +357,13 @@ def test_parameters_fixed_only_in_combination_are_underdetermined():
     assert result.converged and result.underdetermined and not result.ok and result.not_judged
     assert result.degenerate == ["kd", "ks", "lights[0].intensity"]
     assert all(np.all(np.isinf(result.stderr[key])) for key in result.degenerate)
-    assert "UNDERDETERMINED: the images fix only combinations of kd, ks, lights[0].intensity" in result.table()
-    assert result.to_dict()["degenerate"] == result.degenerate and np.isfinite(result.chi2)
+    verdicts = [line for line in result.table().splitlines() if line.startswith("UNDERDETERMINED")]
+    assert verdicts == ["UNDERDETERMINED: the images fix only combinations of kd, ks, lights[0].intensity (J^T J "
+                        "singular; `difflab.identify` names them); their values are undetermined (the model is "
+                        "still judged)"]
+    report = result.to_dict()
+    assert report["degenerate"] == result.degenerate and np.isfinite(result.chi2) and report["chi2"] == result.chi2
+    assert report["underdetermined"] and not report["too_few_values"] and not result.too_few_values
     report = identify(scene, [target], "red", params, method="raster", masks=[sphere])
     assert (report.rank, report.n_columns) == (6, 9)
     fine = fit_material(scene, [target], "red", ("kd", "ks"), init={"kd": [0.5] * 3}, masks=[sphere])

@@ -19,7 +19,8 @@ noise, reduced chi-square, flags -- writes the fitted scene and a report of the 
        MISMATCH SUSPECTED (sigma estimated: chi2 above its spread but not above 2 -- give --sigma
        to judge the model) or UNDERDETERMINED (no more target values than unknowns: the model is
        not judged either; or parameters the images fix only in combination, named: their values
-       are undetermined, the model is still judged -- with a mismatch too, the exit is 4)
+       are undetermined, the model still judged where the values are enough -- with a mismatch too, the
+       exit is 4; both can hold, each printed)
 
 A fitted texture (--params texture) is written beside the scene as OUTPUT_STEM.MATERIAL.texture.npy
 (linear float32; OUTPUT_STEM.textureI.npy, I the material's index, where its name is not a plain

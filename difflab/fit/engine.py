@@ -90,11 +90,12 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                                         also=partly_seen + pulled)
             chi2, mismatch, suspected = st["chi2"], st["mismatch"], st["suspected"]
             degenerate_keys = degenerate(layout, st["diag"], gram, setup.smoothness > 0)
-            underdetermined = st["underdetermined"] or bool(degenerate_keys)
+            too_few = st["underdetermined"]
+            underdetermined = too_few or bool(degenerate_keys)
         else:
             stderr = {p.key: np.full(p.size, np.nan) for p in layout}
             flagged, chi2, mismatch, pull = [p.key for p in layout], float("inf"), True, np.full(1, np.nan)
-            suspected = underdetermined = False
+            suspected = underdetermined = too_few = False
             degenerate_keys = []
             if result == SUCCESSFUL:
                 result = "nonfinite"
@@ -106,7 +107,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                         result=result, history=list(history), poorly_determined=flagged, sigma=float(sigma),
                         chi2=float(chi2), model_mismatch=bool(mismatch), mismatch_suspected=bool(suspected),
                         noise_unknown=noise_unknown,
-                        underdetermined=bool(underdetermined), degenerate=degenerate_keys,
+                        underdetermined=bool(underdetermined), too_few_values=bool(too_few), degenerate=degenerate_keys,
                         prior_pull=float(np.max(pull, initial=0.0)),
                         at_bound=[p.key for p in layout if np.any(on_bound[p.key])], residuals=residuals, seen=seen,
                         timings={**timings, "stats": time.perf_counter() - start}, **common)

@@ -142,11 +142,13 @@ class FitResult:
         noise_unknown: too few used pixels have used neighbours to estimate the noise (a small,
         thin or scattered mask) and no `sigma` was given: sigma and chi2 are nan, and whether the
         image model explains the targets is not judged (`ok` is False; pass `sigma=` to judge it).
-        underdetermined: no more counted residual entries (weight > 0, uncensored, not noise-free
+        underdetermined: `too_few_values`, or J^T J over the unknowns the data reach is singular
+        (`degenerate` names the parameters; with enough values the model is still judged by chi2);
+        either way `ok` is False.
+    too_few_values: no more counted residual entries (weight > 0, uncensored, not noise-free
         zeros) than fitted unknowns: the data neither determine the values nor say anything of the
-        noise or the model -- chi2 nan, every parameter poorly determined, `ok` False; the standard
-        errors use a given sigma, else are inf. Also set -- chi2 still judged, `ok` False -- when
-        J^T J over the unknowns the data reach is singular (`degenerate` names the parameters).
+        noise or the model -- chi2 nan, not judged, every parameter poorly determined; the standard
+        errors use a given sigma, else are inf.
     prior_pull: with a texture `smoothness` prior, the most it moves a value the pixels determine
         from where they alone put it, in standard errors (`fit.stats.prior_pull`; 0 without a prior,
         nan when not formed); above `fit.stats.PRIOR_PULL_MAX` (1) the moved parameters are
@@ -186,6 +188,7 @@ class FitResult:
     mismatch_suspected: bool = False
     noise_unknown: bool = False
     underdetermined: bool = False
+    too_few_values: bool = False
     degenerate: list = field(default_factory=list)
     prior_pull: float = 0.0
     at_bound: list = field(default_factory=list)
@@ -331,7 +334,8 @@ class FitResult:
             "timings": dict(self.timings), "model": self.model, "sigma": _json_number(self.sigma),
             "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch,
             "mismatch_suspected": self.mismatch_suspected, "noise_unknown": self.noise_unknown,
-            "underdetermined": self.underdetermined, "degenerate": list(self.degenerate),
+            "underdetermined": self.underdetermined, "too_few_values": self.too_few_values,
+            "degenerate": list(self.degenerate),
             "prior_pull": _json_number(self.prior_pull), "at_bound": list(self.at_bound), "censored": self.censored,
         }
 
@@ -361,13 +365,13 @@ class FitResult:
                                          self.mismatch_suspected),
                                         ("NOISE UNKNOWN: too few used pixels with used neighbours to estimate it; "
                                          "the image model is not judged (give sigma)", self.noise_unknown),
+                                        ("UNDERDETERMINED: no more counted target values than unknowns the data "
+                                         "reach; the model is not judged", self.too_few_values),
                                         ("UNDERDETERMINED: the images fix only combinations of "
                                          f"{', '.join(self.degenerate)} (J^T J singular; `difflab.identify` names "
-                                         "them); their values are undetermined (the model is still judged)",
+                                         "them); their values are undetermined"
+                                         + ("" if math.isnan(self.chi2) else " (the model is still judged)"),
                                          bool(self.degenerate)),
-                                        ("UNDERDETERMINED: no more counted target values than unknowns the data "
-                                         "reach; the model is not judged",
-                                         self.underdetermined and not self.degenerate),
                                         (f"PRIOR PULL: the smoothness prior moves values the pixels determine by up "
                                          f"to {self.prior_pull:.3g} standard errors; their stderr (the pixels' "
                                          "alone) do not cover that bias", self.prior_pull > PRIOR_PULL_MAX),
