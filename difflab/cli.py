@@ -10,6 +10,7 @@ import os
 import sys
 import traceback
 
+from . import interrupts
 from .errors import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK, DifflabError
 from .limits import short_path
 
@@ -64,12 +65,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def main(argv=None, *, interrupted: bool = False) -> int:
+    """Run the command line; returns its exit code. Ctrl-C is handled by `interrupts.install` for the
+    whole run (parsing included): never lost, exit 130. `interrupted`: a SIGINT already arrived (the
+    console entry point, `difflab_cli`, saw one during the imports)."""
+    run, restore = interrupts.install(interrupted)
     try:
+        interrupts.check()
+        args = build_parser().parse_args(argv)
         check_outputs(args)
-        return int(args.func(args) or EXIT_OK)
+        code = int(args.func(args) or EXIT_OK)
+        interrupts.check()  # a Ctrl-C swallowed at the very end is still an interrupt
+        return code
     except DifflabError as exc:
         print(f"difflab: error: {' '.join(str(exc).split())}", file=sys.stderr)  # one line
         return EXIT_INVALID
@@ -78,11 +85,14 @@ def main(argv=None) -> int:
               "spp or mesh resolution, or DIFFLAB_MEMORY_BUDGET", file=sys.stderr)
         return EXIT_INVALID
     except KeyboardInterrupt:  # outputs are written atomically: an interrupted write leaves nothing
+        run.done = True  # first, by an attribute store: no repeat of the interrupt can be raised after it
         print("difflab: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception:  # an internal error: show where, so it can be reported
         traceback.print_exc()
         return EXIT_INTERNAL
+    finally:
+        restore()
 
 
 if __name__ == "__main__":

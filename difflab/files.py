@@ -17,6 +17,7 @@ import threading
 from pathlib import Path
 
 from .errors import DifflabError, OutputError, WriteError
+from .interrupts import check
 from .limits import short_path, shorten
 
 _UMASK = os.umask(0o022)  # read the process umask once (setting it is not thread-safe), then restore it
@@ -145,6 +146,7 @@ def atomic_path(path: str | os.PathLike, *, sweep: bool = True):
     skips that listing, for a writer that swept the folder itself once before writing many files into
     it (a batch's output folder: N writes, N listings of up to N files, took ~10 ms a file at 5000).
     """
+    check()  # a command interrupted before (its KeyboardInterrupt swallowed somewhere) writes nothing
     path = check_output_path(path, create_parent=True)
     if sweep:
         remove_stale_temps(path)

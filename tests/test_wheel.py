@@ -21,13 +21,13 @@ def run(command, cwd, env=None) -> str:
 def test_wheel_install_runs_the_demo_from_an_empty_folder(tmp_path):
     source = tmp_path / "source"  # a copy, so the build leaves nothing in the repository
     shutil.copytree(ROOT / "difflab", source / "difflab", ignore=shutil.ignore_patterns("__pycache__"))
-    for name in ("pyproject.toml", "README.md"):
+    for name in ("pyproject.toml", "README.md", "difflab_cli.py"):
         shutil.copy(ROOT / name, source / name)
     run([sys.executable, "-m", "pip", "wheel", ".", "--no-deps", "-w", tmp_path / "dist", "-q"], source)
     (wheel,) = (tmp_path / "dist").glob("difflab-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
     assert {"difflab/demos/scenes/lecture_teapot.json", "difflab/demos/scenes/glass_sphere.json",
-            "difflab/scene/scene.schema.json"} <= names
+            "difflab/scene/scene.schema.json", "difflab_cli.py"} <= names  # (the console entry point)
     assert not any(n.startswith(("tests/", "experiments/")) for n in names)
 
     site = tmp_path / "site"

@@ -1,0 +1,96 @@
+"""Ctrl-C on the command line, never lost: a SIGINT ends the command with exit 130 wherever it lands.
+
+Python's own handler raises KeyboardInterrupt wherever the main thread happens to be, and where that
+is a gc callback (JAX's `_xla_gc_callback`), a `__del__` or a weakref callback, the exception is
+printed as "Exception ignored in ..." and dropped: the command ran on, wrote its files and exited 0.
+`install` replaces the handler while a command runs: a SIGINT marks the run interrupted and raises
+KeyboardInterrupt, and until the command has caught it (`Run.done`) a helper thread makes the handler
+run again every REPEAT_S seconds (`_thread.interrupt_main`): where no KeyboardInterrupt is being
+handled (the first was swallowed) it raises anew, at the next bytecode that does not swallow it, and
+where one is on its way out (cleanup in finally blocks) it lets that one go on; swallowed KeyboardInterrupts are not printed
+(`sys.unraisablehook`). `check` raises for a run that is interrupted, so that no output is written
+after a Ctrl-C (`files.uninterrupted`, the writers' guard). Main thread only; stdlib only.
+"""
+
+from __future__ import annotations
+
+import _thread
+import signal
+import sys
+import threading
+import time
+
+#: Seconds between the repeats of an interrupt the command has not caught yet.
+REPEAT_S = 0.05
+
+
+class Run:
+    """One command's interrupt state: `interrupted` once a SIGINT arrived, `done` once the command
+    caught it (set by a plain attribute store, which runs no handler in between)."""
+
+    def __init__(self, interrupted: bool = False):
+        self.interrupted = interrupted
+        self.done = False
+        self.repeater: threading.Thread | None = None
+
+    def on_sigint(self, signum, frame):
+        if self.done or (self.repeater is not None and _unwinding()):
+            return  # a repeat while the KeyboardInterrupt is on its way out (a finally, an __exit__): let it
+        self.interrupted = True
+        if self.repeater is None:
+            self.repeater = threading.Thread(target=self._repeat, name="difflab-sigint", daemon=True)
+            self.repeater.start()
+        raise KeyboardInterrupt
+
+    def _repeat(self) -> None:
+        while not self.done:
+            time.sleep(REPEAT_S)
+            if not self.done:
+                _thread.interrupt_main(signal.SIGINT)
+
+
+def _unwinding() -> bool:
+    """Whether the main thread (where handlers run) is handling a KeyboardInterrupt now: in an except
+    or finally block or an __exit__ it runs through, directly or as the context of a later error."""
+    error = sys.exc_info()[1]
+    while error is not None:
+        if isinstance(error, KeyboardInterrupt):
+            return True
+        error = error.__context__
+    return False
+
+
+_RUN: Run | None = None
+
+
+def install(interrupted: bool = False):
+    """Handle SIGINT as above until the returned `restore()` is called; returns (run, restore). In a
+    thread other than the main one nothing is installed (signals reach the main thread only).
+    `interrupted`: a SIGINT arrived before (the console entry point's, during the imports)."""
+    global _RUN
+    run = Run(interrupted)
+    if threading.current_thread() is not threading.main_thread():
+        return run, lambda: None
+    previous_run, previous_handler, previous_hook = _RUN, signal.getsignal(signal.SIGINT), sys.unraisablehook
+
+    def hook(unraisable):
+        if not (run.interrupted and issubclass(unraisable.exc_type, KeyboardInterrupt)):
+            previous_hook(unraisable)
+
+    def restore():
+        global _RUN
+        run.done = True
+        signal.signal(signal.SIGINT, previous_handler)
+        sys.unraisablehook = previous_hook
+        _RUN = previous_run
+
+    _RUN = run
+    sys.unraisablehook = hook
+    signal.signal(signal.SIGINT, run.on_sigint)
+    return run, restore
+
+
+def check() -> None:
+    """Raise KeyboardInterrupt if the running command was interrupted and has not caught it yet."""
+    if _RUN is not None and _RUN.interrupted and not _RUN.done:
+        raise KeyboardInterrupt
