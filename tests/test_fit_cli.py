@@ -169,3 +169,35 @@ def test_output_is_atomic(files, monkeypatch, capsys, failing):
     assert capsys.readouterr().err == f"difflab: error: {tmp / failing}: cannot write (disk full); not written\n"
     assert out.read_text() == "old" and report.read_text() == "old report"
     assert sorted(os.listdir(tmp)) == sorted(["fitted.json", "fitted.fit.json", "scene.json", "target.npy"])
+
+
+@pytest.mark.parametrize("case, message", [
+    ("nan", r"no fit made: nonfinite_target: targets\[0\] \(.*bad\.npy\) holds 2 non-finite values \(1 NaN, 1 inf\) "
+            r"in 2 pixels"),
+    ("mask", r"no fit made: empty_mask: targets\[0\] \(.*target\.npy\): the mask masks\[0\] \(.*mask\.npy\) holds 4 "
+             r"pixels, none showing material red"),
+])
+def test_fit_command_that_makes_no_fit_prints_one_error_line_only(files, capsys, case, message):
+    """docs/cli.md: exit 2 is one `difflab: error:` line; a fit that could not be made (a non-finite
+    target, a mask showing none of the material) printed the whole parameter table before it (start
+    values '± nan (poorly determined)') and a result line, on stdout."""
+    import re
+
+    scene, target, tmp = files
+    extra = []
+    if case == "nan":
+        image = np.load(target)
+        image[0, 0, 0], image[3, 5, 1] = np.nan, np.inf
+        np.save(tmp / "bad.npy", image)
+        target = tmp / "bad.npy"
+    else:
+        mask = np.zeros(np.load(target).shape[:2], dtype=bool)
+        mask[:2, :2] = True  # a corner: the background, no red sphere
+        np.save(tmp / "mask.npy", mask)
+        extra = ["--mask", str(tmp / "mask.npy")]
+    out = tmp / "fitted.json"
+    assert main(["fit", str(scene), str(target), "--material", "red", "-o", str(out), *extra]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert re.fullmatch(f"difflab: error: {message}\n", captured.err), captured.err
+    assert not out.exists() and not (tmp / "fitted.fit.json").exists()

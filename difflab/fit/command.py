@@ -116,9 +116,9 @@ def run(args) -> int:
                      ceiling=args.ceiling, max_steps=args.max_steps, x64=not args.float32, device=args.device)
     except FitError as exc:  # the engine's advice in this command's words: --method raytrace, not method='raytrace'
         raise FitError(re.sub(r"method='(\w+)'", r"--method \1", str(exc))) from None
-    print(result.table())
-    if result.no_fit() is not None:
+    if result.no_fit() is not None:  # one error line (exit 2), not a table of start values +- nan
         raise FitError(f"no fit made: {result.no_fit()}")
+    print(result.table())
     contents = {output: result.scene_dict(output.stem), report: {
         "scene": str(args.scene), "targets": [str(t) for t in args.targets], "materials": materials,
         **result.to_dict(output.stem, output.parent)}}
