@@ -90,7 +90,8 @@ def check_tree(n_nodes: int, n_lights: int, n_crossing_counts: int, textured: bo
     nbytes = limits.raytrace_bytes(0, n_nodes, n_lights, True, textured) + \
         n_nodes * n_crossing_counts * limits.TREE_CROSSING_BYTES
     limits.require_memory(nbytes, f"record_tree: a ray tree of {n_nodes} nodes", RenderError,
-                          "render with record_tree=False, fewer samples or a lower max_depth")
+                          "lower the image size, spp, max_depth or kr / kt; difflab.render (and `difflab render`) "
+                          "forms the image alone, recording no tree")
 
 
 def _object_label(index: int, obj) -> str:
