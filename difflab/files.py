@@ -125,14 +125,19 @@ def add_force(parser) -> None:
     parser.add_argument("--force", action="store_true", help="overwrite existing output files")
 
 
-def refuse_overwrite(*paths, force: bool = False) -> None:
+#: How the overwrite refusal names its way out: the command line's option, the Python keyword.
+FORCE_ADVICE = {"cli": "use --force to overwrite", "python": "pass force=True to overwrite"}
+
+
+def refuse_overwrite(*paths, force: bool = False, caller: str = "cli") -> None:
     """The one rule of every command: an output that exists (a file, or a folder with anything in
-    it) is not overwritten unless `force`. Raises OutputError naming the first such path; call it
-    before any work, so a refused command writes nothing."""
+    it) is not overwritten unless `force`. Raises OutputError naming the first such path and, in the
+    `caller`'s words (FORCE_ADVICE), how to overwrite; call it before any work, so a refused command
+    writes nothing."""
     for path in map(Path, paths):
         taken = any(path.iterdir()) if path.is_dir() else path.exists()
         if taken and not force:
-            raise OutputError(f"{short_path(path)}: exists; use --force to overwrite")
+            raise OutputError(f"{short_path(path)}: exists; {FORCE_ADVICE[caller]}")
 
 
 @contextlib.contextmanager

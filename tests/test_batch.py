@@ -143,9 +143,21 @@ def test_manifest_that_cannot_run(tmp_path):
         fit_many([BASE], tmp_path / "out", workers=0, quiet=True)
     (tmp_path / "photos").mkdir()
     (tmp_path / "photos" / "a.png").write_bytes(b"")
-    with pytest.raises(OutputError, match="photos: exists; use --force to overwrite"):
+    with pytest.raises(OutputError, match=r"photos: exists; pass force=True to overwrite$"):  # Python's words
         fit_many([BASE], tmp_path / "photos", quiet=True)
     assert sorted(p.name for p in (tmp_path / "photos").iterdir()) == ["a.png"]  # nothing written
+
+
+def test_fit_batch_command_names_its_force_option(tmp_path, capsys):
+    """The same refusal from the command line names --force (fit_many's Python error said --force too)."""
+    from difflab.cli import main
+
+    (tmp_path / "m.jsonl").write_text(json.dumps(BASE) + "\n")
+    (tmp_path / "photos").mkdir()
+    (tmp_path / "photos" / "a.png").write_bytes(b"")
+    assert main(["fit-batch", str(tmp_path / "m.jsonl"), "-o", str(tmp_path / "photos"), "--no-progress"]) == 2
+    assert capsys.readouterr().err == f"difflab: error: {tmp_path / 'photos'}: exists; use --force to overwrite\n"
+    assert sorted(p.name for p in (tmp_path / "photos").iterdir()) == ["a.png"]
 
 
 # -- a local run -------------------------------------------------------------------------------------

@@ -36,11 +36,16 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
+    from ..errors import OutputError
+    from ..files import FORCE_ADVICE
     from .api import fit_many
 
-    summary = fit_many(args.manifest, args.output, workers=args.workers, scheduler=args.scheduler,
-                       inline=args.inline, retries=args.retries, progress=False if args.no_progress else None,
-                       force=args.force)
+    try:
+        summary = fit_many(args.manifest, args.output, workers=args.workers, scheduler=args.scheduler,
+                           inline=args.inline, retries=args.retries, progress=False if args.no_progress else None,
+                           force=args.force)
+    except OutputError as exc:  # fit_many's advice (force=True) in this command's words (--force)
+        raise OutputError(str(exc).replace(FORCE_ADVICE["python"], FORCE_ADVICE["cli"])) from None
     if not summary.all_converged:
         return EXIT_NOT_CONVERGED  # a line invalid, failed or not converged
     if summary.mismatched:

@@ -54,7 +54,7 @@ class Store:
         with something in it is refused (OutputError) unless `force`, by the one overwrite rule."""
         self.root = Path(outdir)
         if not any((self.root / name).exists() for name in (*FOLDERS, "summary.json")):
-            refuse_overwrite(self.root, force=force)
+            refuse_overwrite(self.root, force=force, caller="python")  # (fit_many's force=)
         for folder in FOLDERS:
             (self.root / folder).mkdir(parents=True, exist_ok=True)
         for folder in (self.root, *(self.root / f for f in FOLDERS)):  # temporaries of a killed writer
