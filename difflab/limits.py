@@ -195,16 +195,29 @@ def ray_budget() -> int:
     return env_count("DIFFLAB_MAX_RAYS", MAX_RAYS)
 
 
-def gib(nbytes: float) -> str:
-    """Bytes as '1.23 GiB' (or MiB below 1 GiB)."""
-    return f"{nbytes / 2 ** 30:.2f} GiB" if nbytes >= 2 ** 30 else f"{nbytes / 2 ** 20:.1f} MiB"
+def gib(nbytes: float, digits: int | None = None) -> str:
+    """Bytes as '1.23 GiB' (or '1.2 MiB' below 1 GiB); `digits` after the point if given."""
+    if nbytes >= 2 ** 30:
+        return f"{nbytes / 2 ** 30:.{2 if digits is None else digits}f} GiB"
+    return f"{nbytes / 2 ** 20:.{1 if digits is None else digits}f} MiB"
+
+
+def sizes_apart(a: float, b: float) -> tuple[str, str]:
+    """`a` and `b` bytes as `gib` writes them, with as many more digits (up to 6) as tell two unequal
+    sizes apart, else as exact bytes: never 'needs 1.0 MiB, over the budget of 1.0 MiB'."""
+    for digits in (None, 2, 3, 4, 5, 6):
+        pair = gib(a, digits), gib(b, digits)
+        if pair[0] != pair[1] or a == b:
+            return pair
+    return f"{int(a)} bytes", f"{int(b)} bytes"
 
 
 def require_memory(nbytes: float, what: str, error: type[DifflabError] = DifflabError, hint: str = "") -> None:
     """Raise `error("what: needs about X, over the memory budget of Y ...")` if `nbytes` > the budget."""
     budget = memory_budget()
     if nbytes > budget:
-        raise error(f"{what}: needs about {gib(nbytes)}, over the memory budget of {gib(budget)} "
+        need, have = sizes_apart(nbytes, budget)
+        raise error(f"{what}: needs about {need}, over the memory budget of {have} "
                     f"({'DIFFLAB_MEMORY_BUDGET' if os.environ.get('DIFFLAB_MEMORY_BUDGET') else 'half the available memory'}"
                     f"; set DIFFLAB_MEMORY_BUDGET to raise it){'; ' + hint if hint else ''}")
 

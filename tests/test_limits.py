@@ -3,6 +3,7 @@
 
 import json
 import math
+import re
 import subprocess
 import sys
 import textwrap
@@ -66,6 +67,20 @@ def test_require_memory_names_the_request_and_the_setting(monkeypatch):
     with pytest.raises(SceneError, match=r"^frame: needs about 2\.00 GiB, over the memory budget of 1\.00 GiB "
                                          r"\(DIFFLAB_MEMORY_BUDGET; set DIFFLAB_MEMORY_BUDGET to raise it\); try less$"):
         limits.require_memory(2 * 2 ** 30, "frame", SceneError, "try less")
+
+
+@pytest.mark.parametrize("budget, nbytes, need, have", [
+    ("1M", 2 ** 20 + 1000, "1.001 MiB", "1.000 MiB"),  # was "needs about 1.0 MiB, over the memory budget of 1.0 MiB"
+    ("1M", 2 ** 20 + 1, "1.000001 MiB", "1.000000 MiB"),
+    ("1G", 2 ** 30 + 1, "1073741825 bytes", "1073741824 bytes"),  # no 6 digits tell them apart: the bytes
+    ("1G", 2 ** 30 + 2 ** 21, "1.002 GiB", "1.000 GiB"),
+    ("1M", 3 * 2 ** 20, "3.0 MiB", "1.0 MiB"),  # apart at the usual digits: as before
+])
+def test_a_refusal_prints_its_need_and_budget_apart(monkeypatch, budget, nbytes, need, have):
+    monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", budget)
+    with pytest.raises(SceneError, match=f"^frame: needs about {re.escape(need)}, over the memory budget of "
+                                         f"{re.escape(have)} "):
+        limits.require_memory(nbytes, "frame", SceneError)
 
 
 @pytest.mark.parametrize("depth, branching, weight, threshold, nodes", [
@@ -147,8 +162,10 @@ CAMERA = {"eye": [0, 0, 5], "target": [0, 0, 0], "width": 8, "height": 8}
 @pytest.mark.parametrize("change, message", [
     ({"fov_y": 1e-300}, r"camera\.fov_y: must be >= 1e-06, got 1e-300"),
     ({"projection": "orthographic", "ortho_height": 1e-30}, r"camera\.ortho_height: must be >= 1e-09"),
-    ({"near": 1e-20}, r"camera\.near: far / near = 1e\+22 is over 1e\+06"),
-    ({"far": 1e7}, r"camera\.near: far / near = 1e\+08 is over 1e\+06"),
+    ({"near": 1e-20}, r"camera\.far / camera\.near: 1e\+22 is over 1e\+06 .*; raise near or lower far$"),
+    ({"far": 1e7}, r"camera\.far / camera\.near: 1e\+08 is over 1e\+06"),  # was reported as camera.near's
+    ({"width": 8192, "height": 8193}, r"camera\.width: 8192 x 8193 = 67117056 pixels is over the limit of 64 "
+                                      r"megapixels \(67108864 pixels; below it the memory budget applies\)$"),
     ({"eye": [0, 0, 1e30], "target": [0, 0, 1e29]}, r"camera\.eye\[2\]: must be within \+-1e12 scene units"),
     ({"target": [1e13, 0, 0]}, r"camera\.target\[0\]: must be within \+-1e12 scene units"),
     ({"up": [0, 1e-259, 0]}, r"camera\.up: is 1e-259 long, too short to give a direction \(must be >= 1e-09\)"),
@@ -157,6 +174,13 @@ CAMERA = {"eye": [0, 0, 5], "target": [0, 0, 0], "width": 8, "height": 8}
 def test_extreme_cameras_name_their_field(change, message):
     with pytest.raises(SceneError, match="^" + message):
         Scene.from_dict(scene_dict([], {}, camera={**CAMERA, **change}))
+
+
+def test_the_sample_cap_is_not_called_the_memory_budget():
+    """width * height * spp <= 64 M is a fixed cap (docs/limits.md), the memory budget applying below it."""
+    with pytest.raises(SceneError, match=r"^render\.spp: 4096 x 4096 pixels at spp 16 is 268435456 samples, over the "
+                                         r"limit of 64 M samples \(67108864; below it the memory budget applies\)$"):
+        Scene.from_dict(scene_dict([], {}, camera={**CAMERA, "width": 4096, "height": 4096}, render={"spp": 16}))
 
 
 @pytest.mark.parametrize("obj, message", [

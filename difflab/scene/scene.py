@@ -87,7 +87,8 @@ class Scene(Record):
         camera, spp = v["camera"], v["render"].spp
         if camera.width * camera.height * spp > MAX_PIXELS:
             fail("render.spp", f"{camera.width} x {camera.height} pixels at spp {spp} is "
-                 f"{camera.width * camera.height * spp} samples, over the budget of {MAX_PIXELS} (64 megapixels)")
+                 f"{camera.width * camera.height * spp} samples, over the limit of 64 M samples ({MAX_PIXELS}; below "
+                 "it the memory budget applies)")
         base_dir = v["base_dir"]
         if base_dir is not None:
             base_dir = os.path.abspath(os.fspath(base_dir))

@@ -12,8 +12,8 @@ from ._check import Vec3, fail, integer, join, normalised, number, show
 from ._record import Record
 from ._spec import Spec, bounds, colour, spec_field
 
-#: Largest image (width * height) a scene may ask for: 64 megapixels, the memory budget of a frame
-#: and its G-buffer. A supersampled render's sample grid (width * height * spp) is held to it too.
+#: Largest image (width * height) a scene may ask for: 64 megapixels, a fixed cap on a frame and its
+#: G-buffer (below it the memory budget, `difflab.limits`, applies). A supersampled render's sample grid (width * height * spp) is held to it too.
 MAX_PIXELS = 64 * 1024 * 1024
 #: Largest far / near ratio: the rasterizer's float32 depth z_ndc ~ 1 - 2 near / z (far >> near) is
 #: within one float32 ulp (6e-8) of 1 for every z beyond ~1e7 near, so its z-buffer cannot order them.
@@ -66,14 +66,14 @@ class Camera(Record):
             fail(p("up"), f"must not be parallel to the view direction (target - eye), got {list(up)}")
         width, height = out["width"], out["height"]
         if width * height > MAX_PIXELS:
-            fail(p("width"), f"{width} x {height} = {width * height} pixels exceeds the memory budget "
-                 f"of 64 megapixels ({MAX_PIXELS} pixels)")
+            fail(p("width"), f"{width} x {height} = {width * height} pixels is over the limit of 64 megapixels "
+                 f"({MAX_PIXELS} pixels; below it the memory budget applies)")
         near, far = out["near"], out["far"]
         if not far > near:
             fail(p("far"), f"must be > near ({near}), got {show(v['far'])}")
         if far / near > MAX_FAR_NEAR:
-            fail(p("near"), f"far / near = {far / near:.3g} is over {MAX_FAR_NEAR:.0e} (the rasterizer's float32 "
-                 f"depth loses all precision); raise near or lower far")
+            fail(f"{p('far')} / {p('near')}", f"{far / near:.3g} is over {MAX_FAR_NEAR:.0e} (the rasterizer's "
+                 f"float32 depth loses all precision); raise near or lower far")
         return out
 
 
