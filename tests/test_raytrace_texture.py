@@ -87,8 +87,8 @@ def test_supersampled_texture_filtering_converges_like_the_rasterizers(tmp_path)
 def test_adaptive_refinement_filters_textures_over_its_samples(tmp_path):
     """A refined pixel of adaptive supersampling is the mean of a refine x refine grid of sample
     centres -- the "grid" pattern of spp refine^2 -- so its textured primary and mirror hits must read
-    the same footprints (1/refine of a pixel, and that sample's cone) and give the same value. (They
-    read a whole pixel, and a cone per refined pixel, before.)"""
+    the same footprints (1/refine of a pixel, and that sample's ray differentials) and give the same
+    value. (They read a whole pixel, and a cone per refined pixel, before.)"""
     scene = Scene.from_dict(textured_scene(tmp_path, filter="trilinear", target="kd"))
     scene = scene.with_overrides(render={"max_depth": 2})
     frame = raytrace_adaptive(compile_scene(scene), scene.render, threshold=0.02, refine=4)

@@ -27,7 +27,7 @@ from ...errors import RenderError
 from ...guards import nonfinite_pixels
 from ...lighting.warp_model import fog_struct
 from ...vocabulary import FRESNEL_MODES, SPECULAR_MODELS
-from ..camera import camera_struct, half_height
+from ..camera import camera_struct
 from ..frame import Frame, box_downsample
 from ..launch import host_empty, launch_row_loops, load_kernels
 from .gbuffer import tree_gbuffer
@@ -76,7 +76,7 @@ def sample_points(width: int, height: int, side: int, sampling: str = "grid") ->
     return np.stack([x, y], axis=-1).astype(np.float32)
 
 
-def trace_params(scene, settings, record: bool, sample: tuple[float, float], side: int,
+def trace_params(scene, settings, record: bool, footprint: float, side: int,
                  media: tuple[int, bool]) -> TraceParamsW:
     params = TraceParamsW()
     params.medium, params.start_check = int(media[0]), int(media[1])
@@ -93,7 +93,7 @@ def trace_params(scene, settings, record: bool, sample: tuple[float, float], sid
     params.fog = fog_struct(scene.fog)
     params.record = int(record)
     params.count_crossings = int(record and count_crossings(scene, settings))
-    params.sample = wp.vec2(*sample)
+    params.footprint = float(footprint)
     return params
 
 
@@ -153,9 +153,6 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
     item = item if item is not None else item_struct(compiled)
     scene_w = scene_struct(compiled, light_buffer)
     media = camera_media(compiled)
-    # a sample's width per unit distance (texture footprints of secondary rays; 0 for orthographic views)
-    spread = 2.0 * half_height(scene.camera) / height * footprint if scene.camera.projection == "perspective" \
-        else 0.0
 
     def launch(params, tree) -> TraceOutW:
         out = TraceOutW()
@@ -169,7 +166,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         return out
 
     unrecorded = read_only(compiled, "unrecorded tree", lambda: empty_tree((1, 1), 0, 0, device))  # not read
-    out = launch(trace_params(scene, settings, False, (footprint, spread), side, media), unrecorded)
+    out = launch(trace_params(scene, settings, False, footprint, side, media), unrecorded)
     shadow_tests = int(light_buffer.warp.tests.numpy()[0]) if light_buffer is not None else 0
     asked = asked_bvh(item)  # read before the recording pass adds its own
     counts = out.node_count.numpy()
@@ -183,7 +180,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         crossings = count_crossings(scene, settings)
         wp_tree, offsets = sized_tree(counts, n_lights, len(scene.materials) if crossings else 0, device,
                                       has_textures(scene))
-        launch(trace_params(scene, settings, True, (footprint, spread), side, media), wp_tree)
+        launch(trace_params(scene, settings, True, footprint, side, media), wp_tree)
         tree = tree_to_numpy(wp_tree, offsets, n_lights, fog, scene, settings, shape, crossings)
     return Traced(color=out.color.numpy(), fog=fog, node_count=counts, rays=stats_rays,
                   depth_histogram=histogram, tree=tree, shadow_tests=shadow_tests,

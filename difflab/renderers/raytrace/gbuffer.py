@@ -57,8 +57,8 @@ def tree_gbuffer(tree, scene, vertices: np.ndarray, faces: np.ndarray) -> GBuffe
                 tree's `uv`); 0 elsewhere -- the ray tracer computes uv only where a texture reads it,
                 the rasterizer interpolates it on every covered sample.
       texture   the texel at those samples (the tree's `texel`), 0 elsewhere.
-      duv_dx, duv_dy  None: the ray tracer filters textures from a ray-cone footprint, not from
-                screen-space uv derivatives.
+      duv_dx, duv_dy  None: the ray tracer filters textures from its rays' footprints (a primary
+                hit's sample, a secondary ray's differentials), not from screen-space uv derivatives.
       point_index (s, s, s), point_weight (1, 0, 0): every sample is its own shading point, as under
                 the rasterizer's Phong shading (`shading` "phong").
     `points` (one per sample, in sample order): the root nodes' position, normal, view, material,

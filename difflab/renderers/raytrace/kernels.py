@@ -46,7 +46,8 @@ from .lightbuffer import LightBufferW, buffered_visibility
 from .medium import primary_medium
 from .optics import beer, reflect
 from .record import LightRecW, TreeW, light_arrays, record_light, record_ray, record_surface
-from .surface import RayW, SceneW, SurfaceW, child_ray, fresnel_split, new_ray, primary_sample, skip_object, \
+from .surface import RayW, SceneW, SurfaceW, child_ray, fresnel_split, new_ray, primary_diff, primary_sample, \
+    skip_object, \
     surface_at
 from .tree import PRIMARY, REFLECTED, REFRACTED
 
@@ -72,8 +73,7 @@ class TraceParamsW:
     fog: FogW
     record: int
     count_crossings: int  # record the materials transparent shadow rays cross
-    sample: wp.vec2  # texture footprints: a sample's width in pixels (1 / side), and per unit path length
-    # (its spread: 2 tan(fov_y / 2) / height x that; 0 for orthographic views)
+    footprint: float  # a sample's width in pixels (1 / side), what texture filters cover (`surface.hit_footprint`)
     side: int  # > 0: the regular grid of `side` x `side` samples per pixel; 0: the samples are `points`
     medium: int  # material id of the medium a perspective camera's eye is in (`medium.camera_media`), -1 outside
     start_check: int  # 1: each primary ray finds its own medium (`medium.primary_medium`), 0: `medium` is every ray's
@@ -171,7 +171,8 @@ def make_whitted_kernel(stack_size: int):
             if params.start_check == 1:  # its absorption counts from `start` in `medium`
                 medium, start = primary_medium(scene.geom, scene.materials, start, direction, near, params.medium,
                                                cam.perspective)
-            first = new_ray(start, origin, direction, wp.vec3(1.0), near, 1, -1, PRIMARY, medium, -1)
+            first = new_ray(start, origin, direction, wp.vec3(1.0), primary_diff(cam, xy, params.footprint), 1, -1,
+                            PRIMARY, medium, -1)
             if wp.static(stack_size > 1):  # (a one-ray stack is the primary ray alone: no array to clear)
                 stack = wp.zeros(shape=stack_size, dtype=RayW)
                 stack[0] = first
@@ -204,7 +205,7 @@ def make_whitted_kernel(stack_size: int):
                         tree.local[base + node] = params.background
                     continue
 
-                surf = surface_at(scene, cam, hit, ray, p, xy, int(ray.kind == PRIMARY), params.sample)
+                surf = surface_at(scene, cam, hit, ray, p, xy, params.footprint)
                 if ray.kind == PRIMARY:
                     fog_f = fog_blend(params.fog, wp.dot(surf.p - cam.eye, cam.forward))
                 local = shade_hit(scene.geom, scene.lights, scene.materials, scene.light_buffer, scene.mesh.vertices,

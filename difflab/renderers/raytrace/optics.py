@@ -43,6 +43,16 @@ def refract(d: wp.vec3, normal: wp.vec3, eta: float):
 
 
 @wp.func
+def refracted_differential(dd: wp.vec3, d: wp.vec3, normal: wp.vec3, t: wp.vec3, eta: float):
+    """How `refract`'s unit t = eta d + (eta cos_i - cos_t) N changes with a change dd of the unit d
+    (N unchanged: surface curvature ignored; Igehy 1999): dt = eta dd + (eta - eta^2 cos_i / cos_t)
+    dcos_i N, dcos_i = -dd.N, cos_i = -d.N, cos_t = -t.N (kept >= 1e-6 at grazing exits)."""
+    cos_i = -wp.dot(d, normal)
+    cos_t = wp.max(-wp.dot(t, normal), 1.0e-6)
+    return eta * dd - (eta - eta * eta * cos_i / cos_t) * wp.dot(dd, normal) * normal
+
+
+@wp.func
 def fresnel_exact(cos_i: float, eta: float):
     """Unpolarised dielectric reflectance for eta = n1 / n2 (1 under total internal reflection)."""
     sin2_t = eta * eta * (1.0 - cos_i * cos_i)

@@ -23,11 +23,12 @@ from ..._warp import wp
 from ...lighting.warp_model import LightW, MaterialW, checker_cell, surface_material, textured_material
 from ...vocabulary import FRESNEL_NONE
 from ..camera import CameraW, near_distance, primary_ray
-from ..texture.sampling import TexturesW, cone_footprint, pixel_footprint, plane_uv, plane_uv_derivatives, \
-    sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
+from ..texture.sampling import TexturesW, pixel_footprint, plane_uv, plane_uv_derivatives, primary_differentials, \
+    ray_footprint, sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
 from ..trace import HIT_PLANE, HIT_TRIANGLE, HitW, SceneGeomW, leaving_skip, ray_offset, spawn_origin
 from .lightbuffer import LightBufferW
-from .optics import fresnel, refract
+from .optics import fresnel, reflect, refract, refracted_differential
+from .tree import PRIMARY, REFLECTED
 
 wp.set_module_options({"enable_backward": False})
 
@@ -55,6 +56,19 @@ class SceneW:
 
 
 @wp.struct
+class DifferentialsW:
+    """A ray's differentials over one sample (Igehy 1999): how its origin and its unit direction
+    change from the ray through one side of the sample to the other's, across x and across y
+    (`texture.sampling.primary_differentials`); reflection and refraction carry them on
+    (`child_differentials`), ignoring the surfaces' curvature."""
+
+    dpdx: wp.vec3
+    dpdy: wp.vec3
+    dddx: wp.vec3
+    dddy: wp.vec3
+
+
+@wp.struct
 class RayW:
     """A ray waiting on the walk's stack."""
 
@@ -64,7 +78,7 @@ class RayW:
     # `camera.primary_ray`'s origin, or the last surface before the near plane: `medium.primary_medium`)
     direction: wp.vec3  # unit
     weight: wp.vec3  # path weight, before this ray's own absorption
-    path: float  # path length from the eye to `origin` (texture footprints)
+    diff: DifferentialsW  # its footprint over one sample (texture filtering)
     depth: int  # 1 for the primary ray
     parent: int  # the parent's node index within the sample (-1: the primary ray)
     kind: int  # tree.PRIMARY / REFLECTED / REFRACTED
@@ -85,6 +99,8 @@ class SurfaceW:
     cell: int  # checker cell 0 / 1
     uv: wp.vec2  # where a textured material read its texture (`hit_texel`), else 0
     texel: wp.vec3  # the texture value a textured material took, else 0
+    dpdx: wp.vec3  # the sample's footprint on the surface (`hit_footprint`)
+    dpdy: wp.vec3
     mat: MaterialW
 
 
@@ -102,14 +118,14 @@ class SplitW:
 
 
 @wp.func
-def new_ray(start: wp.vec3, origin: wp.vec3, direction: wp.vec3, weight: wp.vec3, path: float, depth: int,
+def new_ray(start: wp.vec3, origin: wp.vec3, direction: wp.vec3, weight: wp.vec3, diff: DifferentialsW, depth: int,
             parent: int, kind: int, medium: int, skip: int):
     ray = RayW()
     ray.origin = origin
     ray.start = start
     ray.direction = direction
     ray.weight = weight
-    ray.path = path
+    ray.diff = diff
     ray.depth = depth
     ray.parent = parent
     ray.kind = kind
@@ -143,6 +159,18 @@ def primary_sample(points: wp.array2d(dtype=wp.vec2), side: int, cam: CameraW, f
     return xy, start, direction, near, (far - cam.near) / wp.dot(direction, cam.forward)
 
 
+@wp.func
+def primary_diff(cam: CameraW, xy: wp.vec2, width: float):
+    """The differentials of the primary ray through raster point xy over a sample `width` pixels wide."""
+    dpdx, dpdy, dddx, dddy = primary_differentials(cam, xy[0], xy[1], width)
+    diff = DifferentialsW()
+    diff.dpdx = dpdx
+    diff.dpdy = dpdy
+    diff.dddx = dddx
+    diff.dddy = dddy
+    return diff
+
+
 @wp.func(inline=True)
 def shading_normal(mesh: MeshDataW, hit: HitW):
     """Unit shading normal at a hit: interpolated vertex normals on triangles, else the geometric one."""
@@ -158,19 +186,22 @@ def shading_normal(mesh: MeshDataW, hit: HitW):
 
 
 @wp.func
-def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3, geo: wp.vec3, d: wp.vec3,
-              xy: wp.vec2, primary: int, path: float, sample: wp.vec2):
+def hit_footprint(cam: CameraW, ray: RayW, hit: HitW, geo: wp.vec3, p: wp.vec3, xy: wp.vec2, width: float):
+    """dp/dx, dp/dy of one sample (`width` pixels wide) on the surface `ray` meets at p (unit normal
+    `geo`): a primary ray's from the rays through the sample's sides met with the tangent plane
+    (`pixel_footprint`, as the rasterizer's derivatives on its sample grid), a secondary ray's from
+    its differentials carried to the hit (`ray_footprint`: exact for plane mirrors)."""
+    if ray.kind == PRIMARY:
+        return pixel_footprint(cam, xy[0], xy[1], width, p, geo)
+    d = ray.diff
+    return ray_footprint(ray.direction, geo, d.dpdx + hit.t * d.dddx, d.dpdy + hit.t * d.dddy)
+
+
+@wp.func
+def hit_texel(scene: SceneW, mat: MaterialW, hit: HitW, p: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3):
     """uv and the texture value at a hit. uv: interpolated vertex uvs (triangles), the plane's
-    `Plane.uv`, or the sphere's (lon / 2 pi, lat / pi). Footprint of one sample (`sample`: its width in
-    pixels, its spread): a primary ray's on the tangent plane (as the rasterizer's derivatives on
-    its sample grid), a secondary ray's cone of width spread x path length from the eye (the
-    sample's cone carried along the path, ignoring curvature)."""
-    dpdx = wp.vec3(0.0)
-    dpdy = wp.vec3(0.0)
-    if primary == 1:
-        dpdx, dpdy = pixel_footprint(cam, xy[0], xy[1], sample[0], p, geo)
-    else:
-        dpdx, dpdy = cone_footprint(d, geo, sample[1] * path)
+    `Plane.uv`, or the sphere's (lon / 2 pi, lat / pi), filtered over the sample's footprint
+    dp/dx, dp/dy (`hit_footprint`)."""
     uv = wp.vec2(0.0)
     duv_dx = wp.vec2(0.0)
     duv_dy = wp.vec2(0.0)
@@ -196,10 +227,9 @@ def hit_texel(scene: SceneW, mat: MaterialW, cam: CameraW, hit: HitW, p: wp.vec3
 
 
 @wp.func(inline=True)
-def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, p: wp.vec3, xy: wp.vec2, primary: int,
-               sample: wp.vec2):
+def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, p: wp.vec3, xy: wp.vec2, width: float):
     """The surface `ray` meets at `hit` (not a miss), at its `trace.hit_point` p: two-sided normals,
-    checker cell, texture."""
+    checker cell, the footprint of a sample `width` pixels wide, texture."""
     surf = SurfaceW()
     d = ray.direction
     surf.p = p
@@ -218,8 +248,11 @@ def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, p: wp.vec3, xy
     surf.mat = surface_material(base, surf.cell)
     surf.uv = wp.vec2(0.0)
     surf.texel = wp.vec3(0.0)
+    dpdx, dpdy = hit_footprint(cam, ray, hit, surf.geo, p, xy, width)
+    surf.dpdx = dpdx
+    surf.dpdy = dpdy
     if surf.mat.texture >= 0:
-        uv, texel = hit_texel(scene, surf.mat, cam, hit, surf.p, surf.geo, d, xy, primary, ray.path + hit.t, sample)
+        uv, texel = hit_texel(scene, surf.mat, hit, surf.p, surf.dpdx, surf.dpdy)
         surf.uv = uv
         surf.texel = texel
         surf.mat = textured_material(surf.mat, surf.mat.texture_target, surf.texel)
@@ -260,8 +293,30 @@ def skip_object(geom: SceneGeomW, hit: HitW, direction: wp.vec3):
 
 
 @wp.func
+def child_differentials(parent: RayW, surf: SurfaceW, direction: wp.vec3, kind: int):
+    """The differentials of the ray a hit spawns in unit `direction`: its origins spread over the
+    sample's footprint there, its directions the parent's reflected (dr = dd - 2 (dd.N) N) or
+    refracted (`optics.refracted_differential`) about the shading normal, its change ignored."""
+    diff = DifferentialsW()
+    diff.dpdx = surf.dpdx
+    diff.dpdy = surf.dpdy
+    d = parent.diff
+    if kind == REFLECTED:
+        diff.dddx = reflect(d.dddx, surf.normal)
+        diff.dddy = reflect(d.dddy, surf.normal)
+    else:
+        eta = surf.mat.ior
+        if surf.entering == 1:
+            eta = 1.0 / surf.mat.ior
+        diff.dddx = refracted_differential(d.dddx, parent.direction, surf.normal, direction, eta)
+        diff.dddy = refracted_differential(d.dddy, parent.direction, surf.normal, direction, eta)
+    return diff
+
+
+@wp.func
 def child_ray(geom: SceneGeomW, parent: RayW, node: int, hit: HitW, surf: SurfaceW, direction: wp.vec3,
               weight: wp.vec3, kind: int, medium: int):
     """The ray a hit spawns in `direction`: started `surf.offset` off the surface on the side it leaves to."""
     return new_ray(surf.p, spawn_origin(surf.p, surf.geo, direction, surf.offset), direction, weight,
-                   parent.path + hit.t, parent.depth + 1, node, kind, medium, skip_object(geom, hit, direction))
+                   child_differentials(parent, surf, direction, kind), parent.depth + 1, node, kind, medium,
+                   skip_object(geom, hit, direction))

@@ -38,8 +38,9 @@ Pixel footprint for ray hits (the ray tracer's rule; the rasterizer computes the
 analytically from its perspective-correct interpolation on its sample grid): `pixel_footprint`
 intersects the rays through the raster points (x +- w/2, y) and (x, y +- w/2) with the tangent
 plane at the hit and returns dp/dx, dp/dy (central differences over one sample, w pixels wide: 1 /
-side under side x side supersampling); `cone_footprint` gives the same for a secondary ray from the
-spread of a sample's cone (width = spread angle x path length); and the
+side under side x side supersampling); a secondary ray carries its sample's ray differentials
+(`primary_differentials`, reflected and refracted at each surface by `raytrace.optics`) and
+`ray_footprint` moves them onto the surface it meets; and the
 `*_uv_derivatives` functions turn dp/dx, dp/dy into d(uv)/dx, d(uv)/dy for triangles, planes and
 spheres with the uv conventions of `scene.Plane.uv_frame` and `geometry.uv_sphere`.
 """
@@ -294,19 +295,28 @@ def pixel_footprint(cam: CameraW, x: float, y: float, width: float, p: wp.vec3, 
 
 
 @wp.func
-def cone_footprint(direction: wp.vec3, normal: wp.vec3, width: float):
-    """dp/dx, dp/dy for a secondary ray: two orthogonal offsets of length `width` (= the pixel's
-    spread angle x the distance travelled from the eye) across the unit `direction`, projected
-    along the ray onto the tangent plane with `normal`."""
-    helper = wp.vec3(1.0, 0.0, 0.0)
-    if wp.abs(direction[0]) > 0.9:
-        helper = wp.vec3(0.0, 1.0, 0.0)
-    e1 = wp.normalize(wp.cross(direction, helper)) * width
-    e2 = wp.normalize(wp.cross(direction, e1)) * width
+def primary_differentials(cam: CameraW, x: float, y: float, width: float):
+    """A primary ray's differentials over a sample `width` raster units wide (Igehy's ray
+    differentials): how its origin and its unit direction change between the rays through
+    (x -+ w/2, y) and through (x, y -+ w/2) -- (dp/dx, dp/dy, dd/dx, dd/dy). Origins move only in an
+    orthographic view, directions only in a perspective one."""
+    h = 0.5 * width
+    o_r, d_r = primary_ray(cam, x + h, y)
+    o_l, d_l = primary_ray(cam, x - h, y)
+    o_d, d_d = primary_ray(cam, x, y + h)
+    o_u, d_u = primary_ray(cam, x, y - h)
+    return o_r - o_l, o_d - o_u, d_r - d_l, d_d - d_u
+
+
+@wp.func
+def ray_footprint(direction: wp.vec3, normal: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3):
+    """dp/dx, dp/dy on the tangent plane with `normal` of a ray arriving along unit `direction` whose
+    positional differentials there are dpdx, dpdy (its origin's plus the distance travelled times
+    its direction's: Igehy's transfer): each moved along the ray onto the plane."""
     denom = wp.dot(direction, normal)
     if wp.abs(denom) < 1.0e-6:
         denom = 1.0e-6
-    return e1 - direction * (wp.dot(e1, normal) / denom), e2 - direction * (wp.dot(e2, normal) / denom)
+    return dpdx - direction * (wp.dot(dpdx, normal) / denom), dpdy - direction * (wp.dot(dpdy, normal) / denom)
 
 
 @wp.func
