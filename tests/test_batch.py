@@ -27,6 +27,7 @@ from difflab.batch import runners
 from difflab.batch.runners import TASK_SECONDS, cluster_render_threads, task_size
 from difflab.batch.store import Store
 from difflab.batch.worker import adaptive_allocator, outcome_of
+from difflab.cli import main
 from difflab.errors import DifflabError, ManifestError, OutputError
 from difflab.io import load_image, save_image
 from difflab import render_frame
@@ -111,7 +112,11 @@ BASE = {"name": "a", "scene": "s.json", "targets": ["t.png"]}
     ({**BASE, "solver": {"rtol": True}}, "solver.rtol: expected int or float, got True"),
     ({**BASE, "solver": {"ceiling": "1"}}, "solver.ceiling: expected int or float or bool, got '1'"),
     ({**BASE, "solver": {"tol": 1}}, "solver.tol: unknown option; known: solver, max_steps, rtol, atol, "
-     "learning_rate, x64, rel_tol, abs_tol, per_channel, bounded, loss, loss_scale, sigma, ceiling, max_depth, spp"),
+     "learning_rate, x64, rel_tol, abs_tol, per_channel, bounded, loss, loss_scale, sigma, ceiling, max_depth, spp, "
+     "device"),
+    ({**BASE, "solver": {"device": 0}}, "solver.device: expected str, got 0"),
+    ({**BASE, "method": "raster", "solver": {"max_depth": 2}},  # (was accepted, and ignored by the fit)
+     "solver.max_depth: does not apply to method 'raster' (the G-buffer has no secondary rays; use method 'raytrace')"),
 ])
 def test_bad_line_names_its_problem(line, message):
     with pytest.raises(ManifestError) as info:
@@ -158,6 +163,53 @@ def test_fit_batch_command_names_its_force_option(tmp_path, capsys):
     assert main(["fit-batch", str(tmp_path / "m.jsonl"), "-o", str(tmp_path / "photos"), "--no-progress"]) == 2
     assert capsys.readouterr().err == f"difflab: error: {tmp_path / 'photos'}: exists; use --force to overwrite\n"
     assert sorted(p.name for p in (tmp_path / "photos").iterdir()) == ["a.png"]
+
+
+@pytest.mark.parametrize("flags, keywords, flag_message, keyword_message", [
+    (["--inline"], {"inline": True}, "--inline: applies only with --scheduler (a Dask cluster): local worker "
+     "processes read the input files themselves", "inline: applies only to a Dask cluster (client= or scheduler=): "
+     "local worker processes read the input files themselves"),
+    (["--retries", "3"], {"retries": 3}, "--retries: applies only with --scheduler (a Dask cluster): local worker "
+     "processes do not retry a job that raised (a failed job is recorded)", "retries: applies only to a Dask cluster "
+     "(client= or scheduler=): local worker processes do not retry a job that raised (a failed job is recorded)"),
+    (["--scheduler", "tcp://127.0.0.1:9", "--workers", "2"], {"scheduler": "tcp://127.0.0.1:9", "workers": 2},
+     "--workers: applies only to local worker processes; a Dask cluster's workers are its own (dask worker "
+     "--nworkers N)", "workers: applies only to local worker processes; a Dask cluster's workers are its own"),
+])
+def test_options_of_the_other_backend_are_refused(tmp_path, capsys, flags, keywords, flag_message, keyword_message):
+    """--inline and --retries without --scheduler (and --workers with it) did nothing, silently: now
+    exit 2 naming the flag (fit_many: the keyword), before anything is written or connected."""
+    (tmp_path / "m.jsonl").write_text(json.dumps(BASE) + "\n")
+    assert main(["fit-batch", str(tmp_path / "m.jsonl"), "-o", str(tmp_path / "out"), *flags]) == 2
+    assert capsys.readouterr().err == f"difflab: error: {flag_message}\n"
+    with pytest.raises(DifflabError) as info:
+        fit_many([BASE], tmp_path / "out", quiet=True, **keywords)
+    assert str(info.value) == keyword_message
+    assert not any((tmp_path / "out").iterdir())
+
+
+def test_a_device_applies_to_every_line_without_its_own_and_is_checked_as_fit_does(tmp_path, capsys, monkeypatch):
+    """--device (fit_many's device=) fills solver.device of each line that names none, recorded in
+    its job; a device this machine lacks is refused before any fit, with `difflab fit --device`'s
+    own message. (fit-batch had no --device, and a line's solver.device was an unknown option.)"""
+    import difflab.batch.api as api
+
+    lines = [BASE, {**BASE, "name": "b", "solver": {"device": "cuda:7", "max_steps": 5}}]
+    ran = []
+    monkeypatch.setattr(api, "_run", lambda store, todo, *args: ran.extend(job.spec["solver"] for job in todo))
+    fit_many(lines, tmp_path / "out", device="cpu", quiet=True)
+    assert ran == [{"device": "cpu"}, {"device": "cuda:7", "max_steps": 5}]
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps(scene_dict(size=8)))
+    save_image(tmp_path / "t.npy", np.zeros((8, 8, 3), np.float32))
+    (tmp_path / "m.jsonl").write_text(json.dumps({"name": "a", "scene": "s.json", "targets": "t.npy"}) + "\n")
+    for device in ("cuda:99", "gpu"):
+        fit = main(["fit", str(scene), str(tmp_path / "t.npy"), "--material", "red", "--device", device,
+                    "-o", str(tmp_path / "fitted.json")])
+        fit_err = capsys.readouterr().err
+        batch = main(["fit-batch", str(tmp_path / "m.jsonl"), "-o", str(tmp_path / device), "--device", device])
+        assert (fit, batch) == (2, 2) and capsys.readouterr().err == fit_err and fit_err.startswith("difflab: error: device: ")
+        assert not any((tmp_path / device).iterdir())
 
 
 # -- a local run -------------------------------------------------------------------------------------

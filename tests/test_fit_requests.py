@@ -7,7 +7,7 @@ import re
 
 import numpy as np
 import pytest
-from test_fit_helpers import make_scene, mirror_scene, target_of
+from test_fit_helpers import TRUTH, make_scene, mirror_scene, target_of
 
 from difflab import Scene, fit_material
 from difflab.cli import main
@@ -104,3 +104,45 @@ def test_the_cli_names_its_method_flag_in_the_ray_tree_refusal(ball, capsys):
     assert err == "difflab: error: params: 'kr' needs the ray-traced image model (--method raytrace)\n"
     with pytest.raises(FitError, match=re.escape("params: 'kr' needs the ray-traced image model (method='raytrace')")):
         fit_material(scene, [BLANK], "red", ("kd", "kr"))
+
+
+def test_max_depth_is_refused_with_the_g_buffer_and_spp_applies_to_it():
+    """max_depth shapes only the ray tree: with the G-buffer it is a FitError (it was ignored),
+    whether method="raster" is given or the scene's. spp supersamples either image model: a raster
+    fit with spp=4 is the fit of the scene whose render.spp is 4 (it was ignored: the spp-1 fit)."""
+    scene = make_scene(size=16)
+    want = "max_depth: 2 does not apply to method='raster' (the G-buffer has no secondary rays; use method='raytrace')"
+    for method in ("raster", None):
+        with pytest.raises(FitError, match=f"^{re.escape(want)}$"):
+            fit_material(scene, [BLANK], "red", ("kd",), method=method, max_depth=2)
+    supersampled = make_scene(size=16, spp=4)
+    target = target_of(supersampled)
+    given = fit_material(scene, [target], "red", ("kd", "ks"), method="raster", spp=4)
+    scenes = fit_material(supersampled, [target], "red", ("kd", "ks"), method="raster")
+    for key in ("kd", "ks"):
+        np.testing.assert_allclose(given.params[key], scenes.params[key], rtol=1e-12)
+    np.testing.assert_allclose(given.params["kd"], TRUTH["kd"], rtol=1e-5)
+
+
+@pytest.mark.parametrize("params,material,flag,given", [
+    ("ka,,kd", "red", "--params", "ka,,kd"), ("kd,", "red", "--params", "kd,"),
+    ("kd", "red,,floor", "--material", "red,,floor"),
+])
+def test_an_empty_name_is_refused(ball, capsys, params, material, flag, given):
+    """`--params ka,,kd` fitted ka and kd, the empty name dropped: now exit 2 naming the flag; from
+    Python the keyword."""
+    folder, scene = ball
+    code = main(["fit", str(folder / "ball.json"), str(folder / "target.npy"), "--material", material,
+                 "--params", params, "-o", str(folder / "out.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and err == f"difflab: error: {flag}: an empty name in {given!r}; separate names by single commas\n"
+    assert not (folder / "out.json").exists()
+    with pytest.raises(FitError, match=f"^params: an empty name in {re.escape(repr(['ka', '', 'kd']))}"):
+        fit_material(scene, [BLANK], "red", ["ka", "", "kd"])
+
+
+def test_fit_help_lists_texture_among_the_params(capsys):
+    with pytest.raises(SystemExit):
+        main(["fit", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "kr, kt, absorption, texture, intensity" in help_text

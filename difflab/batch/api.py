@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 from contextlib import closing
@@ -60,6 +61,8 @@ class BatchSummary:
 
 
 SHOWN = 5  # names listed per kind of fit in `BatchSummary.report`
+LOCAL_ONLY = {"inline": "local worker processes read the input files themselves",
+              "retries": "local worker processes do not retry a job that raised (a failed job is recorded)"}
 
 
 def _say(quiet: bool, text: str) -> None:
@@ -68,8 +71,8 @@ def _say(quiet: bool, text: str) -> None:
 
 
 def fit_many(manifest, outdir, *, workers: int | None = None, client=None, scheduler: str | None = None,
-             inline: bool = False, retries: int = 2, progress: bool | None = None, quiet: bool = False,
-             force: bool = False) -> BatchSummary:
+             inline: bool = False, retries: int | None = None, device: str | None = None, progress: bool | None = None,
+             quiet: bool = False, force: bool = False) -> BatchSummary:
     """Run every fit of a manifest and write each result as it finishes.
 
     The manifest is validated whole before any fit starts; each bad line is reported (on stderr,
@@ -82,11 +85,18 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
     Arguments:
         manifest: a JSON Lines file, or a list of line objects (dicts).
         outdir: the output folder (created if needed).
-        workers: processes on this machine (default: the number of cores).
+        workers: processes on this machine (default: the number of cores; not with a cluster, whose
+            workers are its own).
         client: a `distributed.Client`: run the fits on its cluster instead; or
         scheduler: a Dask scheduler address ("tcp://host:8786") to connect a client to.
-        inline: send the input files' bytes to the cluster workers instead of letting them read paths.
-        retries: Dask's retries of a task that raised (a task whose worker died is rescheduled anyway).
+        inline: send the input files' bytes to the cluster workers instead of letting them read paths
+            (a cluster only: local workers read the files).
+        retries: Dask's retries of a task that raised (a cluster only; default 2; a task whose worker
+            died is rescheduled anyway).
+        device: where Warp renders each fit's G-buffers / ray trees, "cpu" or "cuda[:N]", for every
+            line whose solver options name none (recorded in its job as solver.device); default: a
+            line's own, else "cpu". Checked here for local workers (as `difflab fit --device`), by
+            each job on a cluster's workers.
         progress: show a progress bar with ETA (default: when stderr is a terminal).
         quiet: do not print the bad lines and the closing lines (`BatchSummary.report`) on stderr.
         force: write into `outdir` even when it holds other files than a batch's.
@@ -95,7 +105,8 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
     Raises:
         ManifestError: the manifest cannot be read or lists nothing.
         OutputError: `outdir` holds files and is not a batch's folder (without `force`).
-        DifflabError: bad `workers`, or both `client` and `scheduler`; or a script calls fit_many
+        DifflabError: bad `workers`, `retries`, `device`; `inline` or `retries` without a cluster,
+            `workers` with one; or both `client` and `scheduler`; or a script calls fit_many
             outside `if __name__ == "__main__":`, which the local worker processes run again as they
             start (they import the main script), so that none could start: nothing is run.
     """
@@ -107,8 +118,21 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
         raise DifflabError(f"workers: expected an integer >= 1, got {workers!r}")
     if client is not None and scheduler is not None:
         raise DifflabError("client, scheduler: give one or the other")
-    if not (isinstance(retries, int) and not isinstance(retries, bool) and retries >= 0):
+    cluster = client is not None or scheduler is not None
+    if retries is not None and not (isinstance(retries, int) and not isinstance(retries, bool) and retries >= 0):
         raise DifflabError(f"retries: expected an integer >= 0, got {retries!r}")
+    for name, given in (("inline", inline), ("retries", retries is not None)):
+        if given and not cluster:
+            raise DifflabError(f"{name}: applies only to a Dask cluster (client= or scheduler=): {LOCAL_ONLY[name]}")
+    if workers is not None and cluster:
+        raise DifflabError("workers: applies only to local worker processes; a Dask cluster's workers are its own")
+    if device is not None:
+        if not cluster:  # (a cluster's workers may have the GPU this machine lacks: each job checks it there)
+            from ..renderers.launch import resolve_device
+
+            resolve_device(device)
+        jobs = [dataclasses.replace(job, spec={**job.spec, "solver": {"device": device, **job.spec["solver"]}})
+                for job in jobs]
     store = Store(outdir, force)
     for bad in invalid:
         _say(quiet, f"manifest line {bad.line}: {bad.error}")
@@ -116,7 +140,8 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
     todo = [job for job in jobs if not store.done(job)]
     owned = _connect(scheduler) if scheduler is not None and todo else None
     try:
-        _run(store, todo, owned or client, min(workers or os.cpu_count() or 1, len(todo)), inline, retries, progress)
+        _run(store, todo, owned or client, min(workers or os.cpu_count() or 1, len(todo)), inline,
+             2 if retries is None else retries, progress)
     finally:
         if owned is not None:
             owned.close()

@@ -1,6 +1,7 @@
 """`difflab fit-batch`: every fit of a manifest, resumable, locally or on a Dask cluster.
 
-    difflab fit-batch MANIFEST.jsonl -o OUTDIR [--workers N] [--scheduler tcp://host:8786 [--inline]]
+    difflab fit-batch MANIFEST.jsonl -o OUTDIR [--workers N | --scheduler tcp://host:8786 [--inline] [--retries R]]
+                      [--device cpu|cuda]
 
 Bad manifest lines are listed (with their line numbers) before any fit starts and recorded as
 failures; the other fits run. Rerun the same command to finish an interrupted batch: finished fits
@@ -23,11 +24,15 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("manifest", help="JSON Lines file: one fit per line")
     p.add_argument("-o", "--output", required=True, help="output folder (rerun into it to resume)")
-    p.add_argument("--workers", type=int, help="worker processes on this machine (default: one per core)")
+    p.add_argument("--workers", type=int,
+                   help="worker processes on this machine (default: one per core; not with --scheduler)")
     p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786 (needs difflab[cluster])")
     p.add_argument("--inline", action="store_true",
-                   help="send input files to the Dask workers as bytes (default: workers read the paths)")
-    p.add_argument("--retries", type=int, default=2, help="Dask retries of a task that raised (default %(default)s)")
+                   help="with --scheduler: send input files to the Dask workers as bytes (default: workers read the "
+                        "paths)")
+    p.add_argument("--retries", type=int, help="with --scheduler: Dask retries of a task that raised (default 2)")
+    p.add_argument("--device", help="where Warp renders each fit: cpu or cuda[:N], for every line whose solver "
+                                    "options name no device (default: the line's, else cpu)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--force", action="store_true",
                    help="write into an output folder that holds other files (a batch's folder is resumed without it)")
@@ -36,14 +41,20 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
-    from ..errors import OutputError
+    from ..errors import DifflabError, OutputError
     from ..files import FORCE_ADVICE
-    from .api import fit_many
+    from .api import LOCAL_ONLY, fit_many
 
+    for name, given in (("inline", args.inline), ("retries", args.retries is not None)):
+        if given and args.scheduler is None:
+            raise DifflabError(f"--{name}: applies only with --scheduler (a Dask cluster): {LOCAL_ONLY[name]}")
+    if args.workers is not None and args.scheduler is not None:
+        raise DifflabError("--workers: applies only to local worker processes; a Dask cluster's workers are its own "
+                           "(dask worker --nworkers N)")
     try:
         summary = fit_many(args.manifest, args.output, workers=args.workers, scheduler=args.scheduler,
-                           inline=args.inline, retries=args.retries, progress=False if args.no_progress else None,
-                           force=args.force)
+                           inline=args.inline, retries=args.retries, device=args.device,
+                           progress=False if args.no_progress else None, force=args.force)
     except OutputError as exc:  # fit_many's advice (force=True) in this command's words (--force)
         raise OutputError(str(exc).replace(FORCE_ADVICE["python"], FORCE_ADVICE["cli"])) from None
     if not summary.all_converged:

@@ -13,7 +13,7 @@ Keys of a line (docs/batch.md is the reference):
               torrance).
     method    "raster" (G-buffer) or "raytrace" (ray tree); default: chosen from the scene.
     init      parameter name -> starting value (a number or an RGB list).
-    solver    options of the fit: see `OPTIONS`.
+    solver    options of the fit: see `OPTIONS` (max_depth: not with method "raster").
 Relative file paths resolve against the manifest's folder. Blank lines are skipped; line numbers
 count every line of the file from 1.
 """
@@ -39,8 +39,9 @@ NUMBER = (int, float)
 OPTIONS = {
     "solver": str, "max_steps": int, "rtol": NUMBER, "atol": NUMBER, "learning_rate": NUMBER, "x64": bool,
     "rel_tol": NUMBER, "abs_tol": NUMBER, "per_channel": bool, "bounded": bool, "loss": str, "loss_scale": NUMBER,
-    "sigma": NUMBER, "ceiling": (int, float, bool), "max_depth": int, "spp": int,
+    "sigma": NUMBER, "ceiling": (int, float, bool), "max_depth": int, "spp": int, "device": str,
 }
+RAYTRACE_ONLY = ("max_depth",)  # options the G-buffer image model does not read: refused with method "raster"
 
 
 @dataclass(frozen=True)
@@ -162,6 +163,10 @@ def parse_line(data, base: Path) -> dict:
         spec["params"] = _names(data["params"], "params")
     spec["init"] = _init(data.get("init", {}))
     spec["solver"] = _solver(data.get("solver", {}))
+    for key in RAYTRACE_ONLY:
+        if key in spec["solver"] and spec.get("method") == "raster":
+            raise ManifestError(f"solver.{key}: does not apply to method 'raster' (the G-buffer has no secondary "
+                                "rays; use method 'raytrace')")
     return spec
 
 

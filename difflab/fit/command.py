@@ -73,7 +73,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         "under half of its pixels: a clipped highlight)")
     p.add_argument("--params", default=None,
                    help="comma-separated: ka, kd, ks, n (phong, blinn), m, f0 (torrance), kr, kt, absorption, "
-                        "intensity, lights[i].intensity (default ka,kd,ks,n; ka,kd,ks,m under the torrance model)")
+                        "texture, intensity, lights[i].intensity, or material.kind (default ka,kd,ks,n; ka,kd,ks,m "
+                        "under the torrance model)")
     p.add_argument("--solver", default="lm", choices=SOLVERS)
     p.add_argument("-o", "--output", required=True, type=output_ending(".json"),
                    help="where to write the fitted scene (JSON: a name ending in .json)")
@@ -95,7 +96,7 @@ def run(args) -> int:
     from ..files import refuse_overwrite, write_json, write_together
     from ..io import write_image
     from .engine import fit
-    from .params import DEFAULT_PARAMS
+    from .params import DEFAULT_PARAMS, name_list
     from .result import drop_texture_files, texture_files_beside
 
     output = Path(args.output)
@@ -108,8 +109,8 @@ def run(args) -> int:
     masks = args.mask
     if masks is not None and len(masks) != len(args.targets):
         raise FitError(f"--mask: give one per target ({len(args.targets)}), got {len(masks)}")
-    materials = [name.strip() for item in args.material for name in item.split(",") if name.strip()]
-    params = DEFAULT_PARAMS if args.params is None else args.params
+    materials = [name for item in args.material for name in name_list(item, "--material")]
+    params = DEFAULT_PARAMS if args.params is None else name_list(args.params, "--params")
     try:
         result = fit(args.scene, list(args.targets), materials, params, method=args.method, solver=args.solver,
                      per_channel=not args.grey, bounded=args.bounded, loss=args.loss, masks=masks, sigma=args.sigma,

@@ -213,10 +213,16 @@ def _entries(layout: Layout, attribute: str) -> np.ndarray:
 
 
 def name_list(value, argument: str) -> tuple[str, ...]:
-    """A name, a comma-separated string or a sequence of names, as a tuple (FitError otherwise)."""
+    """A name, a comma-separated string or a sequence of names, as a tuple (FitError otherwise; also
+    for an empty name among them, "ka,,kd" or "kd,": a name given is used or refused, never dropped)."""
     if isinstance(value, str):
-        return tuple(part.strip() for part in value.split(",") if part.strip())
+        names = tuple(part.strip() for part in value.split(","))
+        if value.strip() and not all(names):
+            raise FitError(f"{argument}: an empty name in {value!r}; separate names by single commas")
+        return tuple(name for name in names if name)
     if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
+        if not all(v.strip() for v in value):
+            raise FitError(f"{argument}: an empty name in {list(value)!r}")
         return tuple(value)
     raise FitError(f"{argument}: expected a name, a comma-separated string or a list of names, got {value!r}")
 

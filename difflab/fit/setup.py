@@ -212,13 +212,14 @@ class Setup:
     def _record(self, targets, masks, weights, max_depth, spp, device, threads) -> list[View]:
         """One Warp render per target: its G-buffer, or its ray tree (adaptive_threshold 0, so that
         no child is cut by weight)."""
-        render = {"method": self.method}
+        render = {"method": self.method} if spp is None else {"method": self.method, "spp": spp}
         if self.method == "raytrace":
             render["adaptive_threshold"] = 0.0
             if max_depth is not None:
                 render["max_depth"] = max_depth
-            if spp is not None:
-                render["spp"] = spp
+        elif max_depth is not None:
+            raise FitError(f"max_depth: {max_depth!r} does not apply to method='raster' (the G-buffer has no "
+                           "secondary rays; use method='raytrace')")
         ids = sorted({p.index for p in self.layout if p.kind != "intensity"})
         all_surfaces = any(p.kind == "intensity" for p in self.layout)
         crossing = sorted({p.index for p in self.layout if p.kind == "kt"})
