@@ -363,8 +363,9 @@ def test_load_scene_errors(tmp_path):
         load_scene(tmp_path / "missing.json")
     dup = tmp_path / "dup.json"
     dup.write_text('{"camera": {"eye": [0, 0, 5], "target": [0, 0, 0], "eye": [0, 0, 1]}, "objects": []}')
-    with pytest.raises(SceneError, match=r"duplicate key 'eye'"):
+    with pytest.raises(SceneError) as refused:
         load_scene(dup)
+    assert str(refused.value) == f"{dup}: duplicate key 'eye' in a JSON object"  # the file named once
     nan = tmp_path / "nan.json"
     nan.write_text(json.dumps(minimal()).replace('"radius": 1', '"radius": NaN'))
     with pytest.raises(SceneError, match=r"^objects\[0\]\.radius: must be finite, got nan \(in .*nan\.json\)$"):

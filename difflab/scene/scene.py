@@ -163,15 +163,14 @@ class Scene(Record):
         return dataclasses.replace(self, **changes)
 
 
-def _no_duplicates(path):
-    def hook(pairs):
-        out = {}
-        for key, value in pairs:
-            if key in out:
-                raise SceneError(f"{path}: duplicate key {show(key)} in a JSON object")
-            out[key] = value
-        return out
-    return hook
+def _no_duplicates(pairs):
+    """json's object_pairs_hook: a dict, or SceneError for a key given twice (`load_scene` names the file)."""
+    out = {}
+    for key, value in pairs:
+        if key in out:
+            raise SceneError(f"duplicate key {show(key)} in a JSON object")
+        out[key] = value
+    return out
 
 
 #: Largest scene file read (bytes): scene files are small; anything bigger is not one.
@@ -202,9 +201,11 @@ def load_scene(path: str | os.PathLike) -> Scene:
     except UnicodeDecodeError as exc:
         raise SceneError(f"{short_path(path)}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     try:
-        data = json.loads(text, object_pairs_hook=_no_duplicates(path), parse_int=_parse_int)
+        data = json.loads(text, object_pairs_hook=_no_duplicates, parse_int=_parse_int)
     except json.JSONDecodeError as exc:
         raise SceneError(f"{path}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+    except SceneError as exc:  # (a ValueError: before the clause below, which would name the file twice)
+        raise SceneError(f"{path}: {exc}") from None
     except (RecursionError, ValueError) as exc:
         raise SceneError(f"{path}: invalid JSON: {'nested too deeply' if isinstance(exc, RecursionError) else exc}") from None
     try:
