@@ -76,10 +76,12 @@ def add_render(sub) -> None:
 
 
 def run_demo(args) -> int:
+    from .demos import is_demo_folder
     from .demos import run_demo as demo
     from .files import refuse_overwrite
 
-    refuse_overwrite(args.output, force=args.force)
+    if not is_demo_folder(args.output):  # the demo's own folder is written again, as a batch's is resumed
+        refuse_overwrite(args.output, force=args.force)
     demo(Path(args.output), quick=args.quick)
     return 0
 

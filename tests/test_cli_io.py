@@ -175,9 +175,36 @@ def test_demo_writes_every_figure(tmp_path):
     result = subprocess.run([sys.executable, "-m", "difflab.cli", "demo", "--quick", "-o", str(tmp_path)],
                             capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
+    index = (tmp_path / "difflab-demo.txt").read_text()
     for name in ["shading_models.png", "decomposition.png", "materials.png", "materials.csv", "fractal_koch.png"]:
         assert (tmp_path / name).stat().st_size > 100, name
-        assert name in result.stdout
+        assert name in result.stdout and f"\n{name}: " in index
+
+
+def test_demo_runs_again_into_its_own_folder(tmp_path, capsys, monkeypatch):
+    """README's quickstart `difflab demo` works a second time (it exited 2: difflab-demo exists): the
+    demo's own folder -- marked by its index, difflab-demo.txt -- is written again without --force, as a
+    batch's folder is resumed; a folder of other files, or an index.txt the demo did not write, is not."""
+    import difflab.demos as demos
+
+    def section(out, size):
+        (out / "figure.png").write_bytes(b"figure %d" % size)
+        return [(out / "figure.png", "a figure")]
+
+    monkeypatch.setattr(demos, "sections", lambda: [section])
+    folder = tmp_path / "difflab-demo"
+    assert main(["demo", "--quick", "-o", str(folder)]) == 0
+    (folder / "figure.png").write_bytes(b"old")
+    assert main(["demo", "--quick", "-o", str(folder)]) == 0  # was exit 2: exists; use --force
+    assert (folder / "figure.png").read_bytes() == b"figure 96"
+    assert (folder / "difflab-demo.txt").read_text().splitlines()[1:] == ["figure.png: a figure"]
+    capsys.readouterr()
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "difflab-demo.txt").write_text("my notes")
+    assert main(["demo", "--quick", "-o", str(other)]) == 2
+    assert capsys.readouterr().err == f"difflab: error: {other}: exists; use --force to overwrite\n"
+    assert sorted(p.name for p in other.iterdir()) == ["difflab-demo.txt"]
 
 
 # ---- one overwrite rule for every command, exit codes through the real main ----------------------

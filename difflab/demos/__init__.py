@@ -69,11 +69,30 @@ def sections() -> list:
     return [shading_models, decomposition, materials_table, texture_figures, ray_tracing, gallery]
 
 
+#: The demo's index in its folder: INDEX_HEADER, then `name: what it shows` a line. It marks the folder
+#: as the demo's own, which `difflab demo` writes again without --force (`is_demo_folder`).
+INDEX_NAME = "difflab-demo.txt"
+INDEX_HEADER = "Figures written by `difflab demo` (docs/cli.md); what each shows:"
+
+
+def is_demo_folder(folder) -> bool:
+    """Whether `folder` holds the demo's index (a run of the demo wrote it, finished or not)."""
+    index = Path(folder) / INDEX_NAME
+    try:
+        return index.is_file() and index.read_text(encoding="utf-8").startswith(INDEX_HEADER)
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
 def run_demo(out, quick: bool = False) -> list[tuple[Path, str]]:
     """Write every section's figures to the folder `out` (created if needed) and print where they
-    are and what each shows; `quick` uses QUICK_SIZE panels. Returns (path, description) pairs."""
+    are and what each shows; `quick` uses QUICK_SIZE panels. The index (INDEX_NAME) is written
+    first, with its header alone, and at the end with every figure. Returns (path, description) pairs."""
+    from ..files import write_text_atomic
+
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out / INDEX_NAME, INDEX_HEADER + "\n")
     size = QUICK_SIZE if quick else DEMO_SIZE
     written = []
     for section in sections():
@@ -81,13 +100,15 @@ def run_demo(out, quick: bool = False) -> list[tuple[Path, str]]:
         written += section(out, size)
         print(f"[{section.__module__.rsplit('.', 1)[-1]}.{section.__name__}] {time.perf_counter() - start:.1f} s",
               flush=True)
-    print(f"difflab demo: {len(written)} files in {out.resolve()}")
+    write_text_atomic(out / INDEX_NAME, "".join(f"{line}\n" for line in
+                                                 [INDEX_HEADER, *(f"{path.name}: {what}" for path, what in written)]))
+    print(f"difflab demo: {len(written)} files in {out.resolve()} (listed in {INDEX_NAME})")
     for path, description in written:
         print(f"  {path.name}: {description}")
     return written
 
 
-__all__ = ["DEMO_SIZE", "forward_scene", "forward_trace", "light_buffer_counts", "FILTER_ORDER", "FILTER_TITLES", "apply_projective", "checker_texture", "compare_filters",
+__all__ = ["DEMO_SIZE", "INDEX_NAME", "is_demo_folder", "forward_scene", "forward_trace", "light_buffer_counts", "FILTER_ORDER", "FILTER_TITLES", "apply_projective", "checker_texture", "compare_filters",
            "mip_pyramid", "receding_plane_scene", "texture_to_object", "texture_to_screen", "LECTURE_GEOMETRY", "lecture_intensities", "lecture_material", "lecture_phong_table",
            "lit_patch", "QUICK_SIZE", "edge_kinks", "example_names", "example_scene", "image_grid", "incremental_span",
            "polygon_scanline_shade", "run_demo", "save_figure", "scene_path", "sections", "tiled_surface",
