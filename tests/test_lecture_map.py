@@ -26,8 +26,10 @@ def test_the_map_has_a_row_per_lecture_topic():
     (m.group(1), int(m.group(2)), m.group(3)) for row in ROWS
     for m in re.finditer(r"(0\d), cell (\d+) \"([^\"]+?)(?:…)?\"", row)])
 def test_notebook_cells_are_where_the_map_says(notebook, cell, title):
+    """The cell cited opens with the section's heading (04's cell 15 held it in its middle, after the
+    previous section's closing paragraph)."""
     source = "".join(cells(notebook)[cell]["source"]).replace('"', "")
-    assert f"## {title.rstrip('. ')}" in source, (notebook, cell, source[:80])
+    assert source.startswith(f"## {title.rstrip('. ')}"), (notebook, cell, source[:80])
 
 
 @pytest.mark.parametrize("module, names", [
