@@ -9,7 +9,7 @@ The names below are the public API (`docs/api.md`). Public subpackages: `difflab
 `difflab.geometry`, `difflab.fractals`, `difflab.fit`, `difflab.demos`, `difflab.vocabulary`,
 `difflab.errors`, `difflab.io`; every other module is internal and may change. The rendering names
 (`render`, `render_frame`, `compile_scene`, `CompiledScene`, `Frame`, `GBuffer`, `ShadingPoints`,
-`example_scene`) and the fitting names (`fit_material`, `fit_scene`, `identify`, `FitResult`,
+`RayTree`, `example_scene`) and the fitting names (`fit_material`, `fit_scene`, `identify`, `FitResult`,
 `Identifiability`) are imported on first use, so `import difflab` loads neither Warp nor JAX.
 """
 
@@ -45,6 +45,7 @@ _LAZY = {
     "render": ".renderers.api", "render_frame": ".renderers.api",
     "CompiledScene": ".renderers.compile", "compile_scene": ".renderers.compile",
     "Frame": ".renderers.frame", "GBuffer": ".renderers.frame", "ShadingPoints": ".renderers.frame",
+    "RayTree": ".renderers.raytrace.tree",
     "example_scene": ".demos.examples",
     "FitResult": ".fit", "Identifiability": ".fit", "fit_material": ".fit", "fit_scene": ".fit", "identify": ".fit",
 }
@@ -69,7 +70,7 @@ __all__ = [
     "Scene", "Camera", "Light", "Material", "Checker", "Sphere", "Plane", "Mesh", "Transform", "Fog",
     "RenderSettings", "load_scene", "save_scene", "example_scene",
     # rendering
-    "render", "render_frame", "compile_scene", "CompiledScene", "Frame", "GBuffer", "ShadingPoints",
+    "render", "render_frame", "compile_scene", "CompiledScene", "Frame", "GBuffer", "ShadingPoints", "RayTree",
     # images
     "load_image", "save_image",
     # fitting (lazy)
