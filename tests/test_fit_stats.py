@@ -476,3 +476,13 @@ def test_a_correct_fit_with_sigma_given_and_a_heavily_weighted_spot_is_not_a_mis
     out = fit_material(scene, [target], "red", ("kd",), weights=[weight], sigma=0.01, progress=False)
     assert out.chi2 == pytest.approx(1.26, abs=0.01)
     assert out.converged and not out.model_mismatch and out.ok
+
+
+def test_share_is_one_for_equal_weights_and_one_noise_level():
+    """White noise, no weights, no signals (one level a channel): share (sum_c v_c)^2 / (3 sum_c v_c^2),
+    within 1 % of 1 for three channels of equal noise -- every value counts (it was ~1 / m, 7e-4
+    here: the one level summed once instead of once per sampled value)."""
+    image = np.random.default_rng(2).normal(size=(40, 40, 3))
+    sigma, count, share = estimate_sigma([image], [np.ones((40, 40), bool)])
+    assert share == pytest.approx(1.0, abs=0.01) and count == 38 * 38 * 3
+    assert sigma == pytest.approx(1.0, rel=0.05)

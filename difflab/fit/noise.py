@@ -178,10 +178,11 @@ def _sums(views: list, planes) -> tuple[float, float, float, float, int]:
                 values[over] = np.where(capped > CAP_Z2 * high, high, capped)
             num += float(np.sum(values if picks.weight is None else values * picks.weight))  # (no BLAS dot: slow threads)
             den += picks.den
-            weighted = level(picks.bright_sample)  # the share, from the sample
-            if picks.weight_sample is not None:
+            sampled = -(-picks.index.size // picks.step)  # m
+            weighted = np.broadcast_to(level(picks.bright_sample), (sampled,))  # the share, from the sample (one
+            if picks.weight_sample is not None:                                # level: m times it)
                 weighted = weighted * picks.weight_sample
-            scale = picks.index.size / -(-picks.index.size // picks.step)  # M / m
+            scale = picks.index.size / sampled  # M / m
             spread += float(np.sum(weighted)) * scale
             square_spread += float(np.sum(np.square(weighted))) * scale
             count += picks.index.size
