@@ -65,18 +65,35 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None, *, interrupted: bool = False) -> int:
+def main(argv=None, *, interrupted=()) -> int:
     """Run the command line; returns its exit code. Ctrl-C is handled by `interrupts.install` for the
-    whole run (parsing included): never lost, exit 130. `interrupted`: a SIGINT already arrived (the
-    console entry point, `difflab_cli`, saw one during the imports)."""
-    run, restore = interrupts.install(interrupted)
+    whole run (parsing included): never lost, exit 130. `interrupted`: the SIGINTs that arrived
+    before, read once the handler is in place (the console entry point, `difflab_cli`, passes the
+    list its own handler fills during the imports, so that none falls between the two)."""
+    run, restore = interrupts.install()
     try:
+        run.armed = True  # (an attribute store: no handler runs before the try is entered)
+        run.interrupted = run.interrupted or bool(interrupted)
         interrupts.check()
-        args = build_parser().parse_args(argv)
-        check_outputs(args)
-        code = int(args.func(args) or EXIT_OK)
+        code = run_command(argv)
         interrupts.check()  # a Ctrl-C swallowed at the very end is still an interrupt
         return code
+    except KeyboardInterrupt:  # outputs are written atomically: an interrupted write leaves nothing
+        run.done = True  # first, by an attribute store: no repeat of the interrupt can be raised after it
+        print("difflab: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        run.done = True
+        restore()
+
+
+def run_command(argv) -> int:
+    """Parse `argv` and run its command: its exit code, or the one-line error's (EXIT_INVALID), or
+    EXIT_INTERNAL with the traceback. KeyboardInterrupt goes to `main`, also from these handlers."""
+    try:
+        args = build_parser().parse_args(argv)
+        check_outputs(args)
+        return int(args.func(args) or EXIT_OK)
     except DifflabError as exc:
         print(f"difflab: error: {' '.join(str(exc).split())}", file=sys.stderr)  # one line
         return EXIT_INVALID
@@ -84,15 +101,9 @@ def main(argv=None, *, interrupted: bool = False) -> int:
         print("difflab: error: out of memory: the request is too big for this machine; lower the image size, "
               "spp or mesh resolution, or DIFFLAB_MEMORY_BUDGET", file=sys.stderr)
         return EXIT_INVALID
-    except KeyboardInterrupt:  # outputs are written atomically: an interrupted write leaves nothing
-        run.done = True  # first, by an attribute store: no repeat of the interrupt can be raised after it
-        print("difflab: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
     except Exception:  # an internal error: show where, so it can be reported
         traceback.print_exc()
         return EXIT_INTERNAL
-    finally:
-        restore()
 
 
 if __name__ == "__main__":

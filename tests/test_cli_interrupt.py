@@ -78,8 +78,8 @@ def _run(folder, module, how):
 
 
 @pytest.mark.parametrize("module, how", [
-    ("difflab.scene", "5"),  # the package's own imports, before difflab.cli's main runs
-    ("jax", "5"),  # the fit's imports (JAX's gc callback is installed as it loads)
+    ("difflab.scene", "1"),  # the package's own imports, before difflab.cli's main runs
+    ("jax", "1"),  # the fit's imports (JAX's gc callback is installed as it loads)
     ("optimistix", "gc"),  # swallowed inside a gc callback, as JAX's did
     ("optimistix", "0"),  # the fit under way: its solvers imported, tracing and compiling
 ])
