@@ -8,13 +8,15 @@ barycentrics in Warp's `mesh_query_ray` convention: p = u p0 + v p1 + (1 - u - v
 Where a ray leaves a surface (as pbrt-v4's OffsetRayOrigin and Mitsuba 3's spawn_ray do): the hit
 point is computed from the surface, not as origin + t d (`hit_point`), so that its float32 error is
 a few ulps of its own coordinates and the surface's, whatever the ray's origin (an eye 5000 away
-put ulp(5000) = 5e-4 into origin + t d). A new ray starts `ray_offset` -- RAY_OFFSET_ULPS x 2^-23
-x those coordinates -- off it, measured along the geometric normal on the side it travels to
-(`spawn_origin`: along the ray itself, so that a refracted ray's path is not shifted): enough that
-neither that point's rounding nor the next intersection test's puts the surface in front of it.
-The offset depends on where the hit is, not on where the eye or the far plane is, and scales with
-the scene (8 x 2^-23: 2.9e-6 at coordinates of 3; 2 was the least that showed no acne in
-tests/test_raytrace_offsets.py, 1 shadowed 1 % of a faceted sphere's lit facets 1e4 from the origin).
+put ulp(5000) = 5e-4 into origin + t d); an orthographic view's primary hit is seen from its
+ray's point beside the target (`hit_from`), and a sphere's normal is taken at the point found
+(`normal_at`). A new ray starts `ray_offset` -- RAY_OFFSET_ULPS x 2^-23 x those coordinates
+-- off it, measured along the geometric normal on the side it travels to (`spawn_origin`: along
+the ray itself, so that a refracted ray's path is not shifted): enough that neither that point's
+rounding nor the next intersection test's puts the surface in front of it. The offset depends on
+where the hit is, not on where the eye or the far plane is, and scales with the scene (8 x 2^-23:
+2.9e-6 at coordinates of 3; 2 was the least that showed no acne in tests/test_raytrace_offsets.py,
+1 shadowed 1 % of a faceted sphere's lit facets 1e4 from the origin).
 """
 
 from __future__ import annotations
@@ -258,9 +260,43 @@ def hit_point(geom: SceneGeomW, hit: HitW, origin: wp.vec3, direction: wp.vec3):
         return center - f - s * direction
     if hit.kind == HIT_PLANE:
         normal = geom.plane_normal[hit.index]
-        p = origin + hit.t * direction
-        return p - wp.dot(p - geom.plane_point[hit.index], normal) * normal
+        point = geom.plane_point[hit.index]
+        p = origin + (wp.dot(point - origin, normal) / wp.dot(direction, normal)) * direction
+        return p - wp.dot(p - point, normal) * normal
     return wp.mesh_eval_position(geom.mesh, hit.index, hit.u, hit.v)
+
+
+@wp.func
+def normal_at(geom: SceneGeomW, hit: HitW, p: wp.vec3):
+    """`hit`'s geometric normal at its `hit_point` p: a sphere's (p - c) / |p - c| from that point
+    (`surface_hit` took it from origin + t d), the others' as found."""
+    if hit.kind == HIT_SPHERE:
+        return wp.normalize(p - geom.sphere_center[hit.index])
+    return hit.normal
+
+
+@wp.func
+def hit_from(geom: SceneGeomW, hit: HitW, origin: wp.vec3, line: wp.vec3, direction: wp.vec3):
+    """`hit` (not a miss) of the unit ray from `origin`, seen from `line`, another point of the ray's
+    line (one float32 holds more precisely: `camera.line_point`): t measured from there, and a
+    triangle's barycentrics found again from there (`ray_triangle`), for `hit_point` to use."""
+    out = no_hit(hit.t - wp.dot(line - origin, direction))
+    out.kind = hit.kind
+    out.index = hit.index
+    out.object = hit.object
+    out.material = hit.material
+    out.normal = hit.normal
+    out.u = hit.u
+    out.v = hit.v
+    if hit.kind == HIT_TRIANGLE:
+        mesh = wp.mesh_get(geom.mesh)
+        t, b1, b2 = ray_triangle(line, direction, mesh.points[mesh.indices[3 * hit.index]],
+                                 mesh.points[mesh.indices[3 * hit.index + 1]],
+                                 mesh.points[mesh.indices[3 * hit.index + 2]])
+        if t != -1.0:  # (-1: parallel to its plane)
+            out.u = 1.0 - b1 - b2
+            out.v = b1
+    return out
 
 
 @wp.func

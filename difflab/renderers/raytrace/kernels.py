@@ -37,10 +37,10 @@ from ..._warp import wp
 
 from ...lighting.warp_model import FogW, LightW, MaterialW, ambient_term, fog_blend, light_term, light_vector
 from ...vocabulary import MAX_DEPTH_LIMIT
-from ..camera import CameraW
+from ..camera import CameraW, line_point
 from ..launch import dealt_row
-from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, hit_point, shadow_ray, \
-    spawn_origin
+from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, hit_from, hit_point, normal_at, \
+    shadow_ray, spawn_origin
 from .itembuffer import ItemBufferW, item_hit
 from .lightbuffer import LightBufferW, buffered_visibility
 from .medium import primary_medium
@@ -141,6 +141,22 @@ def shade_hit(geom: SceneGeomW, lights: wp.array(dtype=LightW), materials: wp.ar
     return local
 
 
+@wp.func(inline=True)
+def located(geom: SceneGeomW, hit: HitW, ray: RayW, line: wp.vec3, perspective: int):
+    """`hit` (a miss: as it is) and its `trace.hit_point`. An orthographic view's primary hit is seen
+    from `line`, its ray's point beside the target (`camera.line_point`, `trace.hit_from`), and a
+    sphere's normal taken at the point found (`trace.normal_at`): neither carries the rounding of
+    the ray's origin on the eye's plane, however far the eye."""
+    if hit.kind == HIT_NONE:
+        return hit, wp.vec3(0.0)
+    if ray.kind == PRIMARY and perspective == 0:
+        found = hit_from(geom, hit, ray.origin, line, ray.direction)
+        p = hit_point(geom, found, line, ray.direction)
+        found.normal = normal_at(geom, found, p)
+        return found, p
+    return hit, hit_point(geom, hit, ray.origin, ray.direction)
+
+
 @wp.func
 def worth_tracing(weight: wp.vec3, threshold: float):
     """Whether a child of this weight is traced: not zero, and not under Hall's threshold."""
@@ -167,6 +183,7 @@ def make_whitted_kernel(stack_size: int):
             if params.record == 1:
                 base = tree.offset[i, j]
             origin = start + near * direction
+            line = line_point(cam, xy[0], xy[1])
             medium = params.medium
             if params.start_check == 1:  # its absorption counts from `start` in `medium`
                 medium, start = primary_medium(scene.geom, scene.materials, start, direction, near, params.medium,
@@ -188,11 +205,10 @@ def make_whitted_kernel(stack_size: int):
                     ray = stack[sp]
                 node = count
                 count = count + 1
-                hit = trace_ray(scene.geom, item, out, ray, i, j, t_far)
-                p = wp.vec3(0.0)
+                hit, p = located(scene.geom, trace_ray(scene.geom, item, out, ray, i, j, t_far), ray, line,
+                                 cam.perspective)
                 distance = wp.inf  # from the surface (not the offset origin); Beer's law and the record need it
                 if hit.kind != HIT_NONE:
-                    p = hit_point(scene.geom, hit, ray.origin, ray.direction)
                     distance = wp.length(p - ray.start)
                 w = ray.weight
                 if ray.medium >= 0:  # Beer absorption along this ray inside its medium
