@@ -15,7 +15,7 @@ from difflab.fit import SceneSetup
 
 W, H = 32, 24
 MATERIALS = ("glass", "orange", "floor")
-PARAMS = ("ka", "kd", "ks", "n", "kr", "kt", "absorption")
+PARAMS = ("ka", "kd", "ks", "n", "glass.kr", "glass.kt", "glass.absorption")  # (kr, kt: the glass alone traces them)
 # Grey coefficients (one value per coefficient, per_channel=False): moving the fitted grey value
 # moves the material exactly as the fit does. ka, kd > 0 on the glass so that every term is seen.
 GREY = {"glass": {"ka": 0.05, "kd": 0.08, "ks": 0.6, "n": 60.0, "kr": 0.6, "kt": 0.8, "absorption": 0.3},
