@@ -246,8 +246,10 @@ def max_abs(v: wp.vec3):
 def hit_point(geom: SceneGeomW, hit: HitW, origin: wp.vec3, direction: wp.vec3):
     """Where `hit` (not a miss) of the unit ray lies, computed from its surface (module doc): on a
     sphere c - f -+ s d, f = c - (the ray's point nearest c), s = half the chord (Ray Tracing Gems
-    ch. 7: no large t in it); on a plane origin + t d moved onto the plane along its normal; on a
-    triangle the blend of its corners by the hit's barycentrics (pbrt-v4)."""
+    ch. 7: no large t in it), moved radially onto the sphere (pbrt-v4: a reflected direction
+    several bounces deep is unit only to a few ulps, which s d carried); on a plane origin + t d
+    moved onto the plane along its normal; on a triangle the blend of its corners by the hit's
+    barycentrics (pbrt-v4)."""
     if hit.kind == HIT_SPHERE:
         center = geom.sphere_center[hit.index]
         radius = geom.sphere_radius[hit.index]
@@ -255,9 +257,10 @@ def hit_point(geom: SceneGeomW, hit: HitW, origin: wp.vec3, direction: wp.vec3):
         h = wp.dot(direction, oc)
         f = oc - h * direction
         s = wp.sqrt(wp.max(radius * radius - wp.dot(f, f), 0.0))
+        q = -f - s * direction
         if hit.t > h:  # the far root, h + s
-            return center - f + s * direction
-        return center - f - s * direction
+            q = -f + s * direction
+        return center + (radius / wp.length(q)) * q  # onto the sphere: |d| may be off 1 by ulps
     if hit.kind == HIT_PLANE:
         normal = geom.plane_normal[hit.index]
         point = geom.plane_point[hit.index]
