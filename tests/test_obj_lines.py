@@ -120,9 +120,9 @@ BAD_VN = {"vn 0 1": "normal 1 needs 3 numbers \\(vn x y z\\), got 2: 'vn 0 1'",
           "vn": "normal 1 needs 3 numbers \\(vn x y z\\), got 0: 'vn'",
           "vn 0 1 0 extra": "cannot parse normal 1: 'vn 0 1 0 extra'",
           "vn 0 x 1": "cannot parse normal 1: 'vn 0 x 1'"}
-#: A `vt` line (line 6, uv 1) that is not 2 or 3 finite numbers, and its message.
-BAD_VT = {"vt 0": "uv 1 needs 2 or 3 numbers \\(vt u v \\[w\\]\\), got 1: 'vt 0'",
-          "vt 0 0 0 0": "uv 1 needs 2 or 3 numbers \\(vt u v \\[w\\]\\), got 4: 'vt 0 0 0 0'",
+#: A `vt` line (line 6, uv 1) that is not 1 to 3 finite numbers, and its message.
+BAD_VT = {"vt": "uv 1 needs 1 to 3 numbers \\(vt u \\[v\\] \\[w\\]\\), got 0: 'vt'",
+          "vt 0 0 0 0": "uv 1 needs 1 to 3 numbers \\(vt u \\[v\\] \\[w\\]\\), got 4: 'vt 0 0 0 0'",
           "vt 0 y": "cannot parse uv 1: 'vt 0 y'",
           "vt nan 0": "uv 1 is not finite: 'vt nan 0'", "vt 0 inf": "uv 1 is not finite: 'vt 0 inf'",
           "vt 0 0 -inf": "uv 1 is not finite: 'vt 0 0 -inf'", "vt NaN 1 # c": "uv 1 is not finite: 'vt NaN 1'"}
@@ -133,7 +133,7 @@ BAD_VT = {"vt 0": "uv 1 needs 2 or 3 numbers \\(vt u v \\[w\\]\\), got 1: 'vt 0'
 @pytest.mark.parametrize("reading", sorted(FACES))
 def test_a_vn_or_vt_line_that_is_no_normal_or_uv_is_named(tmp_path, reading, bad, used):
     """As a `v` line that is not 3 numbers or not finite is refused with its line, so is a `vn` line
-    that is not exactly 3 numbers and a `vt` line that is not 2 or 3 finite numbers, used by a face or
+    that is not exactly 3 numbers and a `vt` line that is not 1 to 3 finite numbers, used by a face or
     not. Before, trimesh failed on some (`cannot read mesh`), and the others read as a mesh without
     normals or uvs -- a textured object without its texture, a smooth one with its creases lost."""
     line, message = (10, BAD_VN[bad]) if bad.startswith("vn") else (6, BAD_VT[bad])
@@ -145,6 +145,30 @@ def test_a_vn_or_vt_line_that_is_no_normal_or_uv_is_named(tmp_path, reading, bad
     path.write_bytes(obj_bytes(lines + faces))
     with pytest.raises(MeshError, match=rf"^{re.escape(str(path))}:{line}: {message}$"):
         load_mesh(path)
+
+
+@pytest.mark.parametrize("short", [(6, 7, 8, 9), (7,)], ids=["all", "one"])
+@pytest.mark.parametrize("reading", sorted(FACES))
+def test_a_vt_line_of_u_alone_reads_with_v_0(tmp_path, reading, short):
+    """The OBJ format's `vt u [v] [w]`: a `vt` line of u alone (all of them, or one among `vt u v`
+    lines; blanks or a comment after it) reads as `vt u 0`, on both readings. Before, it was refused
+    (`uv 1 needs 2 or 3 numbers`); before that, trimesh read the file without its uvs."""
+    lines = LINES.copy()
+    for line in short:
+        lines[line - 1] = lines[line - 1].rsplit(" ", 1)[0] + " 0"
+    want = reference_of(tmp_path, lines + FACES[reading])
+    assert want.uvs is not None and (want.uvs[:, 1] == 0).any()
+    for line in short:
+        lines[line - 1] = lines[line - 1][:-2] + (" \t# u alone" if line == 7 else "")
+    path = tmp_path / "short.obj"
+    path.write_bytes(obj_bytes(lines + FACES[reading]))
+    assert_same_mesh(load_mesh(path), want)
+
+
+def reference_of(tmp_path, lines):
+    path = tmp_path / "want.obj"
+    path.write_bytes(obj_bytes(lines))
+    return load_mesh(path)
 
 
 @pytest.mark.parametrize("uv", ["nan 0", "0 inf"])

@@ -71,7 +71,7 @@ def _scan_obj_lines(data: bytes, path: str) -> None:
                                 f"{line[:80]!r}")
         elif key == "vt":
             n_uvs += 1
-            _numbers(parts, (2, 3), f"{path}:{number}: ", f"uv {n_uvs}", "vt u v [w]", line)
+            _numbers(parts, (1, 2, 3), f"{path}:{number}: ", f"uv {n_uvs}", "vt u [v] [w]", line)
         elif key == "f":
             corners = parts[1:]
             if len(corners) < 3:
@@ -98,15 +98,15 @@ def _scan_obj_lines(data: bytes, path: str) -> None:
 
 def _numbers(parts: list[str], counts: tuple[int, ...], where: str, what: str, form: str, line: str) -> list[float]:
     """The numbers after a `vn` / `vt` line's key (`parts`: the line split), which must be finite
-    and `counts` many (`form`: the line's form, for the message); else `MeshError` naming `what`
+    and `counts` many (consecutive; `form`: the line's form, for the message); else `MeshError` naming `what`
     (e.g. 'normal 3'), prefixed by `where` (the file and line), and the line's text."""
     try:
         values = [float(x) for x in parts[1:]]
     except ValueError:
         raise MeshError(f"{where}cannot parse {what}: {line[:80]!r}") from None
     if len(values) not in counts:
-        raise MeshError(f"{where}{what} needs {' or '.join(map(str, counts))} numbers ({form}), got {len(values)}: "
-                        f"{line[:80]!r}")
+        needs = str(counts[0]) if len(counts) == 1 else f"{counts[0]} to {counts[-1]}"
+        raise MeshError(f"{where}{what} needs {needs} numbers ({form}), got {len(values)}: {line[:80]!r}")
     if not all(math.isfinite(x) for x in values):
         raise MeshError(f"{where}{what} is not finite: {line[:80]!r}")
     return values
@@ -182,7 +182,8 @@ def load_mesh(path) -> TriMesh:
     CR LF alike (`obj_lines`). Every failure raises `MeshError`
     naming the path: missing file, unreadable or unparsable file, non-finite vertex, a file normal
     (OBJ `vn`, with its line) that is zero-length or not finite -- a normal is a direction, as for a
-    mesh's `normals` inline in a scene --, face index out of range, no faces.
+    mesh's `normals` inline in a scene --, an OBJ `vt` line that is not 1 to 3 finite numbers (`vt
+    u` is `vt u 0`, as the OBJ format says: `short_uvs_padded`), face index out of range, no faces.
     """
     path = os.fspath(path)
     if not os.path.exists(path):

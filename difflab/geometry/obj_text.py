@@ -21,7 +21,8 @@ its `v` line. Anything else (several materials, an index past its list, corners 
 gives no arrays, and trimesh reads the file. Negative (relative) indices are made absolute first
 (`absolute_indices`), for every reader. `vn` lines that are not 3 finite numbers, not all 0
 (`valid_normals`), and `vt` lines that are not 2 or 3 finite numbers (`valid_uvs`) give no arrays
-either: the line scan refuses them, naming the line.
+either: the line scan refuses them, naming the line. A `vt` line of u alone is read as `vt u 0`
+(the OBJ format's `vt u [v] [w]`, v and w default 0: `short_uvs_padded`).
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ MAX_TUPLE_KEY = 2 ** 62  # `unmerged` numbers (v, vt, vn) tuples by one int64 be
 LAYOUTS = {b"#": "a", b"#/#": "a/t", b"#//#": "a//n", b"#/#/#": "a/t/n"}  # a corner's, its numbers as '#'
 FAR = 10 ** 18  # `absolute_indices` counts a relative index past it as it (int64 holds it)
 INLINE_COMMENT = re.compile(rb"[ \t]*#[^\n]*")  # a comment and the blanks before it (`obj_lines`)
+SHORT_UV = re.compile(rb"(?m)^(vt[ \t]+[^ \t\n]+)[ \t]*$")  # a `vt` line of u alone (`short_uvs_padded`)
 
 
 @dataclass(frozen=True)
@@ -56,7 +58,8 @@ class ObjText:
     `vn` and `vt` lines are valid (`valid_normals`, `valid_uvs`; plain text only), and (vertices,
     faces, normals or None, uvs or None, welds or None) as trimesh reads them
     (welds: each vertex's `v` index, 0-based, where vertices were split and there are no normals), or
-    None; `data`: the text read (LF-ended: `obj_lines`; indices made absolute: `absolute_indices`), which trimesh
+    None; `data`: the text read (LF-ended: `obj_lines`; indices made absolute: `absolute_indices`; `vt u`
+    lines made `vt u 0`: `short_uvs_padded`), which trimesh
     reads where these arrays are None."""
 
     plain: bool
@@ -211,7 +214,20 @@ def read_obj(data: bytes) -> ObjText:
     if b"-" in key_lines(data, *keys, F)[0]:
         data = absolute_indices(data, *keys)
         keys = line_keys(data)
-    return dataclasses.replace(_classify(data, *keys), data=data)
+    text = _classify(data, *keys)
+    if not text.attributes_valid and SHORT_UV.search(data):
+        data = short_uvs_padded(data)
+        text = _classify(data, *line_keys(data))
+    return dataclasses.replace(text, data=data)
+
+
+def short_uvs_padded(data: bytes) -> bytes:
+    """LF-ended OBJ text (`obj_lines`) with each `vt u` line written `vt u 0`: the OBJ format's `vt
+    u [v] [w]` gives an omitted v the value 0 (trimesh drops such lines' uvs, numpy's table needs
+    rows of one length). Only within lines: line numbers still name the file's lines. `read_obj`
+    looks for such lines only in text that is not plain or whose `vn` / `vt` lines are not valid:
+    a regex over a file of 10 MB takes ~0.1 s."""
+    return SHORT_UV.sub(rb"\1 0", data)
 
 
 def _classify(data: bytes, starts, ends, code) -> ObjText:
