@@ -73,7 +73,7 @@ class TraceParamsW:
     fog: FogW
     record: int
     count_crossings: int  # record the materials transparent shadow rays cross
-    footprint: float  # a sample's width in pixels (1 / side), what texture filters cover (`surface.hit_footprint`)
+    footprint: float  # a sample's width in pixels (1 / side), what texture filters cover (`surface.surface_at`)
     side: int  # > 0: the regular grid of `side` x `side` samples per pixel; 0: the samples are `points`
     medium: int  # material id of the medium a perspective camera's eye is in (`medium.camera_media`), -1 outside
     start_check: int  # 1: each primary ray finds its own medium (`medium.primary_medium`), 0: `medium` is every ray's
@@ -188,8 +188,8 @@ def make_whitted_kernel(stack_size: int):
             if params.start_check == 1:  # its absorption counts from `start` in `medium`
                 medium, start = primary_medium(scene.geom, scene.materials, start, direction, near, params.medium,
                                                cam.perspective)
-            first = new_ray(start, origin, direction, wp.vec3(1.0), primary_diff(cam, xy, params.footprint), 1, -1,
-                            PRIMARY, medium, -1)
+            diff = primary_diff(cam, direction, near, params.footprint)
+            first = new_ray(start, origin, direction, wp.vec3(1.0), diff, 1, -1, PRIMARY, medium, -1)
             if wp.static(stack_size > 1):  # (a one-ray stack is the primary ray alone: no array to clear)
                 stack = wp.zeros(shape=stack_size, dtype=RayW)
                 stack[0] = first

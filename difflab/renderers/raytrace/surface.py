@@ -160,12 +160,13 @@ def primary_sample(points: wp.array2d(dtype=wp.vec2), side: int, cam: CameraW, f
 
 
 @wp.func
-def primary_diff(cam: CameraW, xy: wp.vec2, width: float):
-    """The differentials of the primary ray through raster point xy over a sample `width` pixels wide."""
-    dpdx, dpdy, dddx, dddy = primary_differentials(cam, xy[0], xy[1], width)
+def primary_diff(cam: CameraW, direction: wp.vec3, near: float, width: float):
+    """The differentials of the primary ray in unit `direction` over a sample `width` pixels wide,
+    at its origin `near` on from its start (`primary_sample`)."""
+    dpdx, dpdy, dddx, dddy = primary_differentials(cam, direction, width)
     diff = DifferentialsW()
-    diff.dpdx = dpdx
-    diff.dpdy = dpdy
+    diff.dpdx = dpdx + near * dddx
+    diff.dpdy = dpdy + near * dddy
     diff.dddx = dddx
     diff.dddy = dddy
     return diff
@@ -186,13 +187,10 @@ def shading_normal(mesh: MeshDataW, hit: HitW):
 
 
 @wp.func
-def hit_footprint(cam: CameraW, ray: RayW, hit: HitW, geo: wp.vec3, p: wp.vec3, xy: wp.vec2, width: float):
-    """dp/dx, dp/dy of one sample (`width` pixels wide) on the surface `ray` meets at p (unit normal
-    `geo`): a primary ray's from the rays through the sample's sides met with the tangent plane
-    (`pixel_footprint`, as the rasterizer's derivatives on its sample grid), a secondary ray's from
-    its differentials carried to the hit (`ray_footprint`: exact for plane mirrors)."""
-    if ray.kind == PRIMARY:
-        return pixel_footprint(cam, xy[0], xy[1], width, p, geo)
+def hit_footprint(ray: RayW, hit: HitW, geo: wp.vec3):
+    """dp/dx, dp/dy of the ray's sample on the surface it meets (unit normal `geo`): its
+    differentials carried to the hit (`ray_footprint`: exact for plane mirrors). (A primary ray's
+    t is from its origin, or any point of its line where its directions do not spread.)"""
     d = ray.diff
     return ray_footprint(ray.direction, geo, d.dpdx + hit.t * d.dddx, d.dpdy + hit.t * d.dddy)
 
@@ -201,7 +199,7 @@ def hit_footprint(cam: CameraW, ray: RayW, hit: HitW, geo: wp.vec3, p: wp.vec3, 
 def hit_texel(scene: SceneW, mat: MaterialW, hit: HitW, p: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3):
     """uv and the texture value at a hit. uv: interpolated vertex uvs (triangles), the plane's
     `Plane.uv`, or the sphere's (lon / 2 pi, lat / pi), filtered over the sample's footprint
-    dp/dx, dp/dy (`hit_footprint`)."""
+    dp/dx, dp/dy."""
     uv = wp.vec2(0.0)
     duv_dx = wp.vec2(0.0)
     duv_dy = wp.vec2(0.0)
@@ -229,7 +227,9 @@ def hit_texel(scene: SceneW, mat: MaterialW, hit: HitW, p: wp.vec3, dpdx: wp.vec
 @wp.func(inline=True)
 def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, p: wp.vec3, xy: wp.vec2, width: float):
     """The surface `ray` meets at `hit` (not a miss), at its `trace.hit_point` p: two-sided normals,
-    checker cell, the footprint of a sample `width` pixels wide, texture."""
+    checker cell, the footprint of its sample (`hit_footprint`), texture -- filtered over a primary
+    hit's sample (`width` pixels wide) as the rasterizer does (`pixel_footprint`), over the
+    footprint otherwise."""
     surf = SurfaceW()
     d = ray.direction
     surf.p = p
@@ -248,11 +248,13 @@ def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, p: wp.vec3, xy
     surf.mat = surface_material(base, surf.cell)
     surf.uv = wp.vec2(0.0)
     surf.texel = wp.vec3(0.0)
-    dpdx, dpdy = hit_footprint(cam, ray, hit, surf.geo, p, xy, width)
+    dpdx, dpdy = hit_footprint(ray, hit, surf.geo)
     surf.dpdx = dpdx
     surf.dpdy = dpdy
     if surf.mat.texture >= 0:
-        uv, texel = hit_texel(scene, surf.mat, hit, surf.p, surf.dpdx, surf.dpdy)
+        if ray.kind == PRIMARY:
+            dpdx, dpdy = pixel_footprint(cam, xy[0], xy[1], width, p, surf.geo)
+        uv, texel = hit_texel(scene, surf.mat, hit, surf.p, dpdx, dpdy)
         surf.uv = uv
         surf.texel = texel
         surf.mat = textured_material(surf.mat, surf.mat.texture_target, surf.texel)

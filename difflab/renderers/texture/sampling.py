@@ -295,17 +295,19 @@ def pixel_footprint(cam: CameraW, x: float, y: float, width: float, p: wp.vec3, 
 
 
 @wp.func
-def primary_differentials(cam: CameraW, x: float, y: float, width: float):
-    """A primary ray's differentials over a sample `width` raster units wide (Igehy's ray
-    differentials): how its origin and its unit direction change between the rays through
-    (x -+ w/2, y) and through (x, y -+ w/2) -- (dp/dx, dp/dy, dd/dx, dd/dy). Origins move only in an
-    orthographic view, directions only in a perspective one."""
-    h = 0.5 * width
-    o_r, d_r = primary_ray(cam, x + h, y)
-    o_l, d_l = primary_ray(cam, x - h, y)
-    o_d, d_d = primary_ray(cam, x, y + h)
-    o_u, d_u = primary_ray(cam, x, y - h)
-    return o_r - o_l, o_d - o_u, d_r - d_l, d_d - d_u
+def primary_differentials(cam: CameraW, direction: wp.vec3, width: float):
+    """The differentials of the primary ray in unit `direction` over a sample `width` raster units
+    wide (Igehy's ray differentials): how its origin and its direction change across the sample,
+    (dp/dx, dp/dy, dd/dx, dd/dy). The camera-plane offset moves by e_x = 2 w / W half_w right and
+    e_y = -2 w / H half_h up (`camera.primary_ray`); an orthographic ray's origin moves by them, a
+    perspective ray's direction d = v / |v| (v = forward + offset) by (e - d (d.e)) / |v|."""
+    e_x = (2.0 * width / float(cam.width)) * cam.half_w * cam.right
+    e_y = (-2.0 * width / float(cam.height)) * cam.half_h * cam.up
+    if cam.perspective == 0:
+        return e_x, e_y, wp.vec3(0.0), wp.vec3(0.0)
+    scale = wp.dot(direction, cam.forward)  # 1 / |v|: v's forward component is 1
+    return wp.vec3(0.0), wp.vec3(0.0), scale * (e_x - direction * wp.dot(direction, e_x)), \
+        scale * (e_y - direction * wp.dot(direction, e_y))
 
 
 @wp.func
