@@ -45,6 +45,8 @@ def test_notebook_is_stored_with_figures_and_no_errors(path):
     figures = sum("image/png" in o.get("data", {}) for o in outputs)
     assert figures >= 3, f"{path.name}: {figures} figures stored; run experiments/notebooks/run_all.py"
     assert not [o for o in outputs if o.output_type == "error"]
+    noise = [o.text[:80] for o in outputs if o.output_type == "stream" and o.name == "stderr"]
+    assert not noise, f"{path.name}: stderr stored (a one-time notice? run run_all.py again): {noise}"
     assert path.stat().st_size <= load_run_all().MAX_BYTES
 
 

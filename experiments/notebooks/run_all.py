@@ -51,8 +51,12 @@ def main(argv=None) -> int:
         text = nbformat.writes(notebook) + "\n"
         write_text_atomic(path, text)
         size = len(text.encode())
+        noisy = [i for i, cell in enumerate(notebook.cells) if cell.cell_type == "code"
+                 and any(o.output_type == "stream" and o.name == "stderr" for o in cell.outputs)]
         print(f"{path.name}: {time.perf_counter() - start:.0f} s, {size / 1e6:.2f} MB"
-              + ("  (over the 2 MB budget)" if size > MAX_BYTES else ""), flush=True)
+              + ("  (over the 2 MB budget)" if size > MAX_BYTES else "")
+              + (f"  (stderr stored in cells {noisy}, e.g. a first-run compile notice: run it again)" if noisy else ""),
+              flush=True)
     return 0
 
 
