@@ -150,11 +150,35 @@ def interface_scene(side, angle_deg, material, fresnel):
 @pytest.mark.parametrize("side, angle_deg", [("above", 0), ("above", 50), ("above", 70), ("below", 0),
                                              ("below", 30), ("below", 60)])
 def test_fresnel_weights_an_opaque_mirror(fresnel, form, side, angle_deg):
-    """An opaque mirror (kr = 0.8, kt = 0, ior 1.5) with Fresnel on reflects kr F(cos theta, eta),
-    as a transparent one does (POV-Ray's `reflection {0, 1 fresnel on}`): head-on 0.8 x 0.04, and
-    kr past the critical angle seen from below (F = 1). Fresnel used to be skipped at kt = 0."""
+    """An opaque mirror (kr = 0.8, kt = 0, ior 1.5) with Fresnel on reflects kr F(cos theta, 1 / ior),
+    as a transparent one does from outside (POV-Ray's `reflection {0, 1 fresnel on}`): head-on
+    0.8 x 0.04. An opaque object has no inside, so its back is seen from outside too: the same F
+    from below (there used to be total internal reflection, F = 1, past 41.8 deg from below)."""
     scene = interface_scene(side, angle_deg, {"kr": 0.8, "ior": 1.5}, fresnel)
-    f = form(math.cos(math.radians(angle_deg)), 1 / 1.5 if side == "above" else 1.5)
+    f = form(math.cos(math.radians(angle_deg)), 1 / 1.5)
+    np.testing.assert_allclose(render(scene, method="raytrace"), 0.8 * f, atol=2e-6)
+
+
+QUAD = [[-20, 0, -20], [20, 0, -20], [20, 0, 20], [-20, 0, 20]]
+#: The interface y = 0 as four surfaces an opaque mirror must not tell apart: a plane with normal +y
+#: or -y, a two-triangle quad wound with normal +y or -y.
+OPAQUE_SHEETS = {"plane +y": {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0]},
+                 "plane -y": {"type": "plane", "point": [0, 0, 0], "normal": [0, -1, 0]},
+                 "mesh +y": {"type": "mesh", "vertices": QUAD, "faces": [[0, 2, 1], [0, 3, 2]]},
+                 "mesh -y": {"type": "mesh", "vertices": QUAD, "faces": [[0, 1, 2], [0, 2, 3]]}}
+
+
+@pytest.mark.parametrize("fresnel, form", [("exact", exact_fresnel), ("schlick", schlick)])
+@pytest.mark.parametrize("sheet", list(OPAQUE_SHEETS))
+@pytest.mark.parametrize("side, angle_deg", [("above", 30), ("above", 60), ("below", 30), ("below", 60)])
+def test_an_opaque_fresnel_mirror_ignores_winding_and_normal_sign(fresnel, form, sheet, side, angle_deg):
+    """An opaque (kt = 0) Fresnel mirror of ior 1.5 has no inside: from either side, whatever its
+    triangles' winding or its plane's normal sign, it reflects kr F(cos theta, 1 / 1.5) -- at 60 deg
+    too, past the 41.8 deg where a ray leaving glass would be totally reflected. It used to take
+    eta = 1.5 on the back side (F = 1 past 41.8 deg: 0.95 brighter there)."""
+    scene = interface_scene(side, angle_deg, {"kr": 0.8, "ior": 1.5}, fresnel)
+    scene["objects"] = [{**OPAQUE_SHEETS[sheet], "material": "m"}]
+    f = form(math.cos(math.radians(angle_deg)), 1 / 1.5)
     np.testing.assert_allclose(render(scene, method="raytrace"), 0.8 * f, atol=2e-6)
 
 
@@ -163,11 +187,12 @@ def test_fresnel_weights_an_opaque_mirror(fresnel, form, side, angle_deg):
 @pytest.mark.parametrize("side, angle_deg", [("above", 0), ("above", 30), ("below", 0), ("below", 30)])
 def test_fresnel_at_the_ends_of_the_accepted_ior_range(fresnel, form, ior, side, angle_deg):
     """At ior 1e-3 and 1e3 (the accepted range: `material.IOR_RANGE`) the float32 optics still give
-    kr F to float32 precision: head-on F = ((1 - eta) / (1 + eta))^2 = 0.996, at 30 degrees from the
-    side where eta = 1e3 total internal reflection (F = 1), from the other F(cos, 1e-3). Beyond the
-    range eta^2 overflows float32 (ior 1e30 rendered wrong without a sign) and the scene is refused."""
+    an opaque mirror's kr F(cos, 1 / ior), from either side, to float32 precision: head-on
+    F = ((1 - eta) / (1 + eta))^2 = 0.996, at 30 degrees total internal reflection (F = 1) where
+    eta = 1e3 (ior 1e-3), F(cos, 1e-3) where ior is 1e3. Beyond the range eta^2 overflows float32
+    (ior 1e30 rendered wrong without a sign) and the scene is refused."""
     scene = interface_scene(side, angle_deg, {"kr": 1.0, "ior": ior}, fresnel)
-    eta = 1 / ior if side == "above" else ior
+    eta = 1 / ior
     np.testing.assert_allclose(render(scene, method="raytrace"), form(math.cos(math.radians(angle_deg)), eta),
                                rtol=2e-6, atol=2e-6)
 

@@ -2,7 +2,9 @@
 
 Surfaces are two-sided: the geometric and shading normals are flipped to face the incoming ray
 (so inside a refracting object they point inwards). A ray hitting the side its geometric normal
-points to is *entering* (eta = 1 / ior); from the other side it is *leaving* (eta = ior).
+points to is *entering* (eta = 1 / ior); from the other side it is *leaving* (eta = ior) -- where
+the object is transparent (kt > 0). An opaque one has no inside: eta = 1 / ior on both its sides,
+whatever its winding or its plane's normal sign (`surface_eta`).
 New rays start the hit's own `trace.ray_offset` off the surface (a few float32 ulps of its
 coordinates, from its `trace.hit_point`), measured along the geometric normal on the side they
 travel to, stepped along the ray itself (`trace.spawn_origin`); a ray leaving a sphere outwards,
@@ -262,12 +264,19 @@ def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, p: wp.vec3, xy
 
 
 @wp.func
+def surface_eta(surf: SurfaceW):
+    """eta = n1 / n2 at a hit: 1 / ior entering, and on both sides of an opaque (kt = 0) surface,
+    which has no inside (no medium: `medium.py`); ior leaving a transparent object."""
+    if surf.entering == 1 or surf.mat.kt == 0.0:
+        return 1.0 / surf.mat.ior
+    return surf.mat.ior
+
+
+@wp.func
 def fresnel_split(d: wp.vec3, surf: SurfaceW, mode: int):
     """The Fresnel split of a ray arriving along `d` (see the module doc)."""
     split = SplitW()
-    eta = surf.mat.ior
-    if surf.entering == 1:
-        eta = 1.0 / surf.mat.ior
+    eta = surface_eta(surf)
     refracts, t_dir = refract(d, surf.normal, eta)
     split.refracts = refracts
     split.t_dir = t_dir
@@ -307,9 +316,7 @@ def child_differentials(parent: RayW, surf: SurfaceW, direction: wp.vec3, kind: 
         diff.dddx = reflect(d.dddx, surf.normal)
         diff.dddy = reflect(d.dddy, surf.normal)
     else:
-        eta = surf.mat.ior
-        if surf.entering == 1:
-            eta = 1.0 / surf.mat.ior
+        eta = surface_eta(surf)
         diff.dddx = refracted_differential(d.dddx, parent.direction, surf.normal, direction, eta)
         diff.dddy = refracted_differential(d.dddy, parent.direction, surf.normal, direction, eta)
     return diff
