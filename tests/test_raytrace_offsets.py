@@ -173,3 +173,21 @@ def test_rays_inside_a_glass_sphere_cross_it(shift):
     inside = np.flatnonzero(tree.medium == 0)
     assert inside.size > 4000 and np.all(tree.material[inside] == 0)
     assert tree.distance[inside].min() > 2 * np.sqrt(1 - 1 / 1.5 ** 2) - 0.02
+
+
+def test_a_light_on_a_wall_lights_what_faces_it():
+    """A point light set exactly on a wall (the plane z = 0) and a sphere in front of it: the shadow
+    rays end the offset short of the light, so the wall it sits on does not shadow the sphere, and
+    the image equals the unshadowed render exactly. (Rays that stepped off along themselves,
+    offset / cos, then ran to the offset short of the light ran past it into the wall: 53 of the
+    576 pixels dark.)"""
+    d = {"camera": {"eye": [5, 0.5, 1.0], "target": [0, 0, 1.6], "fov_y": 30, "width": 24, "height": 24},
+         "ambient": [0, 0, 0], "lights": [{"type": "point", "position": [0.3, 0.2, 0.0]}],
+         "materials": {"m": {"kd": [0.8, 0.8, 0.8]}},
+         "objects": [{"type": "sphere", "center": [0, 0, 2], "radius": 0.8, "material": "m"},
+                     {"type": "plane", "point": [0, 0, 0], "normal": [0, 0, 1], "material": "m"}],
+         "render": {"method": "raytrace", "max_depth": 1}}
+    shadowed, free = render(Scene.from_dict(d), shadows=True), render(Scene.from_dict(d), shadows=False)
+    sphere = free[..., 0] > 0
+    assert sphere.sum() > 50
+    np.testing.assert_array_equal(shadowed, free)

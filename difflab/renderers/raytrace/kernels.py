@@ -122,7 +122,7 @@ def shade_hit(geom: SceneGeomW, lights: wp.array(dtype=LightW), materials: wp.ar
         if params.shadows == 1 and wp.dot(surf.geo, l) > 0.0:
             wp.atomic_add(rays, i, COUNT_SHADOW, 1)
             origin = spawn_origin(surf.p, surf.geo, l, surf.offset)
-            reach = light_d - surf.offset
+            reach = light_d - wp.dot(origin - surf.p, l) - surf.offset  # ends the offset short of the light
             skip = skip_object(geom, hit, l)
             cut = int(0)
             if buffer.use == 1 and buffer.light_cell0[q] >= 0:
