@@ -131,8 +131,9 @@ TOO_FEW = "UNDERDETERMINED: no more counted target values than unknowns the data
 def test_one_pixel_for_ten_unknowns_is_underdetermined(noisy_sphere):
     """A single pixel (3 values) for ka, kd, ks, n (10 unknowns), sigma given: underdetermined -- chi2
     nan, every parameter poorly determined, not ok. (It reported chi2 1.6e-16 and ok, exit 0.) Its
-    J^T J is singular too (ka and kd fixed only in combination): the table says both, and not that
-    the model is still judged (it said so, leaving out the too-few line)."""
+    J^T J is singular too (ka and kd fixed only in combination), and the pixel has no highlight (ks
+    and n reach none of its values: `unreached`): the table says all three, and not that the model
+    is still judged (it said so, leaving out the too-few line)."""
     scene, noisy = noisy_sphere
     mask = np.zeros(noisy.shape[:2], bool)
     mask[32, 32] = True
@@ -142,14 +143,15 @@ def test_one_pixel_for_ten_unknowns_is_underdetermined(noisy_sphere):
     assert sorted(result.poorly_determined) == sorted(("ka", "kd", "ks", "n"))
     verdicts = [line for line in result.table().splitlines() if line.startswith("UNDERDETERMINED")]
     assert verdicts == [TOO_FEW, "UNDERDETERMINED: the images fix only combinations of ka, kd (J^T J singular; "
-                                 "`difflab.identify` names them); their values are undetermined"]
+                                 "`difflab.identify` names them); their values are undetermined",
+                        "UNDERDETERMINED: ks, n reach no value the fit counts (left at their start)"]
     report = result.to_dict()
-    assert (report["underdetermined"], report["too_few_values"], report["degenerate"], report["chi2"]) == \
-        (True, True, ["ka", "kd"], None)
-    mask[32, 30:32] = True  # 3 pixels, 9 values: too few still, J^T J regular -- the one line
+    assert (report["underdetermined"], report["too_few_values"], report["degenerate"], report["unreached"],
+            report["chi2"]) == (True, True, ["ka", "kd"], ["ks", "n"], None)
+    mask[32, 30:32] = True  # 3 pixels, 9 values: too few still, J^T J regular where reached -- no degenerate line
     three = fit_material(scene, [noisy], "red", init=START, masks=[mask], sigma=0.02)
     assert three.too_few_values and three.degenerate == [] and np.isnan(three.chi2) and not three.ok
-    assert [line for line in three.table().splitlines() if line.startswith("UNDERDETERMINED")] == [TOO_FEW]
+    assert [line for line in three.table().splitlines() if line.startswith("UNDERDETERMINED")] == [TOO_FEW, verdicts[2]]
 
 
 def scattered_mask(scene, count: int, seed: int) -> np.ndarray:

@@ -486,3 +486,22 @@ def test_share_is_one_for_equal_weights_and_one_noise_level():
     sigma, count, share = estimate_sigma([image], [np.ones((40, 40), bool)])
     assert share == pytest.approx(1.0, abs=0.01) and count == 38 * 38 * 3
     assert sigma == pytest.approx(1.0, rel=0.05)
+
+
+def test_parameters_no_counted_value_depends_on_are_unreached_and_the_fit_not_ok():
+    """The light straight behind the sphere (32 x 32): no used pixel is lit, so kd, ks and n reach
+    no value the fit counts -- zero columns of J^T J, their stderr inf, their values the start's.
+    The fit is `underdetermined` with them in `unreached`, `ok` False (it was ok: a zero column
+    is no singular direction of the columns the data reach); ka, which the ambient term shows,
+    is determined."""
+    from test_fit_helpers import make_scene
+
+    from difflab import fit_material, render
+
+    behind = make_scene(size=32).with_overrides(lights=[{"type": "point", "position": [0, 3, -3]}])
+    out = fit_material(behind, [render(behind)], "red", ("ka", "kd", "ks", "n"), progress=False)
+    assert out.unreached == ["kd", "ks", "n"] and out.degenerate == []
+    assert out.underdetermined and out.converged and not out.ok
+    assert not np.isfinite(out.stderr["n"]) and np.all(np.isfinite(out.stderr["ka"]))
+    assert "UNDERDETERMINED: kd, ks, n reach no value the fit counts" in out.table()
+    assert out.to_dict()["unreached"] == ["kd", "ks", "n"]

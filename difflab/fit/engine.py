@@ -28,7 +28,7 @@ from .solvers import SUCCESSFUL, run
 from .sparse_jacobian import sparse_normal_matrix
 from .noise import silent_pixels, views_noise
 from .stats import (PRIOR_PULL_MAX, QUANTISATION_SIGMA, degenerate, finite_gram, fit_statistics, normal_matrix,
-                    poorly_determined, prior_pull, psnr, singular_rcond, standard_errors)
+                    poorly_determined, prior_pull, psnr, singular_rcond, standard_errors, unreached)
 from .texels import smoothness_residuals, texel_coverage
 
 
@@ -90,13 +90,14 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                                         also=partly_seen + pulled)
             chi2, mismatch, suspected = st["chi2"], st["mismatch"], st["suspected"]
             degenerate_keys = degenerate(layout, st["diag"], gram, setup.smoothness > 0)
+            unreached_keys = unreached(layout, gram)
             too_few = st["underdetermined"]
-            underdetermined = too_few or bool(degenerate_keys)
+            underdetermined = too_few or bool(degenerate_keys) or bool(unreached_keys)
         else:
             stderr = {p.key: np.full(p.size, np.nan) for p in layout}
             flagged, chi2, mismatch, pull = [p.key for p in layout], float("inf"), True, np.full(1, np.nan)
             suspected = underdetermined = too_few = False
-            degenerate_keys = []
+            degenerate_keys, unreached_keys = [], []
             if result == SUCCESSFUL:
                 result = "nonfinite"
         lo, hi = layout.bounds()
@@ -108,6 +109,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                         chi2=float(chi2), model_mismatch=bool(mismatch), mismatch_suspected=bool(suspected),
                         noise_unknown=noise_unknown,
                         underdetermined=bool(underdetermined), too_few_values=bool(too_few), degenerate=degenerate_keys,
+                        unreached=unreached_keys,
                         prior_pull=float(np.max(pull, initial=0.0)),
                         at_bound=[p.key for p in layout if np.any(on_bound[p.key])], residuals=residuals, seen=seen,
                         timings={**timings, "stats": time.perf_counter() - start}, **common)

@@ -143,8 +143,8 @@ class FitResult:
         thin or scattered mask) and no `sigma` was given: sigma and chi2 are nan, and whether the
         image model explains the targets is not judged (`ok` is False; pass `sigma=` to judge it).
         underdetermined: `too_few_values`, or J^T J over the unknowns the data reach is singular
-        (`degenerate` names the parameters; with enough values the model is still judged by chi2);
-        either way `ok` is False.
+        (`degenerate` names the parameters; with enough values the model is still judged by chi2),
+        or a parameter reaches no counted value (`unreached`); either way `ok` is False.
     too_few_values: no more counted residual entries (weight > 0, uncensored, not noise-free
         zeros) than fitted unknowns: the data neither determine the values nor say anything of the
         noise or the model -- chi2 nan, not judged, every parameter poorly determined; the standard
@@ -158,6 +158,9 @@ class FitResult:
         kd c and I / c give the same image), their values arbitrary along it, their stderr inf
         (`fit.stats.degenerate`; `identify` names the directions). Directions within a texture's
         texels alone do not count under a smoothness prior (it fills them).
+    unreached: names of parameters (not texels) with an entry no counted value depends on -- a zero
+        column of J^T J: kd where no used pixel of the material is lit, a light that reaches no used
+        pixel --, left at their start, stderr inf (`fit.stats.unreached`).
     at_bound: names with a value (some channel) on a bound (ks = 0 for a matte target).
     censored: target pixel channels at the target's ceiling (clipped highlights), fitted as "at
         least the ceiling"; with noise, also the channels of the pixels left out because their
@@ -190,6 +193,7 @@ class FitResult:
     underdetermined: bool = False
     too_few_values: bool = False
     degenerate: list = field(default_factory=list)
+    unreached: list = field(default_factory=list)
     prior_pull: float = 0.0
     at_bound: list = field(default_factory=list)
     censored: int = 0
@@ -335,7 +339,7 @@ class FitResult:
             "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch,
             "mismatch_suspected": self.mismatch_suspected, "noise_unknown": self.noise_unknown,
             "underdetermined": self.underdetermined, "too_few_values": self.too_few_values,
-            "degenerate": list(self.degenerate),
+            "degenerate": list(self.degenerate), "unreached": list(self.unreached),
             "prior_pull": _json_number(self.prior_pull), "at_bound": list(self.at_bound), "censored": self.censored,
         }
 
@@ -372,6 +376,8 @@ class FitResult:
                                          "them); their values are undetermined"
                                          + ("" if math.isnan(self.chi2) else " (the model is still judged)"),
                                          bool(self.degenerate)),
+                                        (f"UNDERDETERMINED: {', '.join(self.unreached)} reach no value the fit counts "
+                                         "(left at their start)", bool(self.unreached)),
                                         (f"PRIOR PULL: the smoothness prior moves values the pixels determine by up "
                                          f"to {self.prior_pull:.3g} standard errors; their stderr (the pixels' "
                                          "alone) do not cover that bias", self.prior_pull > PRIOR_PULL_MAX),

@@ -193,6 +193,20 @@ def degenerate(layout, diag: np.ndarray, gram, prior: bool) -> list[str]:
     return flat
 
 
+def unreached(layout, gram) -> list[str]:
+    """Keys of the parameters other than texels with an entry (a channel) that no residual the fit
+    counts depends on: a zero column of J^T J (dense or sparse) -- a kd on a material no used pixel
+    shows lit, a light that reaches no used pixel. Their values are the start's, undetermined
+    (a texel no pixel reads is the smoothness prior's to fill, or unseen: `seen`)."""
+    zero = np.asarray(gram.diagonal()) <= 0
+    flat, offset = [], 0
+    for p in layout:
+        if p.shape is None and zero[offset:offset + p.size].any():
+            flat.append(p.key)
+        offset += p.size
+    return flat
+
+
 def covariance_diagonal(gram, skip=None, rcond: float = SINGULAR_RCOND) -> np.ndarray:
     """diag (J^T J)^-1 (p,) as `covariance_unscaled` gives it (singular below `rcond` times the
     largest eigenvalue), from J^T J (p, p): a numpy array, or a scipy.sparse matrix (a matrix-free
