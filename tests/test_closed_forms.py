@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from conftest import scene_dict
-from difflab import render
+from difflab import render, render_frame
 from difflab._warp import wp
 from difflab.renderers.raytrace.optics import beer, fresnel, reflect, refract
 from difflab.vocabulary import FRESNEL_MODES
@@ -36,6 +36,8 @@ def schlick(cos_i, eta):
     for eta > 1 (1 under total internal reflection)."""
     r0 = ((1 - eta) / (1 + eta)) ** 2
     sin2_t = eta * eta * (1 - cos_i * cos_i)
+    if eta == 1:  # no interface: nothing reflects (the formula's (1 - c)^5 would)
+        return 0.0
     if sin2_t >= 1:
         return 1.0
     c = cos_i if eta <= 1 else math.sqrt(1 - sin2_t)
@@ -62,7 +64,7 @@ def test_optics_functions_against_their_formulas():
     """The ray tree's optics on 2000 random incidences (float64 formulas from the module doc):
     mirror r = d - 2 (d.N) N; Snell t = eta d + (eta cos_i - sqrt(k)) N, k = 1 - eta^2 (1 - cos_i^2),
     none where k < 0; F = 0 (none), Schlick and the exact dielectric F (1 under total internal
-    reflection); Beer exp(-alpha l), exactly 1 where alpha = 0 (also at l = inf), 0 at l = inf."""
+    reflection; exactly 0 at eta = 1); Beer exp(-alpha l), exactly 1 where alpha = 0 (also at l = inf), 0 at l = inf."""
     rng = np.random.default_rng(11)
     n = 2000
     normal = rng.normal(size=(n, 3))
@@ -90,6 +92,7 @@ def test_optics_functions_against_their_formulas():
     assert np.all(t[~ok.astype(bool)] == 0.0)
     assert FRESNEL_MODES == {"none": 0, "schlick": 1, "exact": 2}  # the kernel's columns
     np.testing.assert_array_equal(f[:, 0], 0.0)
+    assert (eta == 1).sum() > 100 and np.all(f[eta == 1] == 0.0)  # no interface: exactly 0 in every form
     want_schlick = np.array([schlick(c, e) for c, e in zip(cos_i, eta)])
     np.testing.assert_allclose(f[clear, 1], want_schlick[clear], atol=2e-6)
     cos_t = np.sqrt(np.maximum(k, 0))
@@ -208,6 +211,23 @@ def test_plain_weights_move_the_refracted_share_to_the_reflection_under_tir(kr, 
     kt (1 - F) is 0 there: `test_schlick_fresnel_weights_reflection_and_refraction_at_oblique_angles`."""
     scene = interface_scene(side, angle_deg, {"kr": kr, "kt": 0.5, "ior": 1.5}, "none")
     np.testing.assert_allclose(render(scene, method="raytrace"), kr + 0.5, atol=2e-6)
+
+
+@pytest.mark.parametrize("fresnel", ["exact", "schlick"])
+@pytest.mark.parametrize("side, angle_deg", [("above", 0), ("above", 60), ("above", 85), ("below", 30),
+                                             ("below", 85)])
+def test_fresnel_at_ior_1_is_exactly_zero(fresnel, side, angle_deg):
+    """At ior 1 there is no interface: F = 0 exactly in both forms, so a clear sheet (kt = 1, kr = 0)
+    passes the white background at exactly 1 and its recorded F is 0 at every hit (at 85 deg a
+    4x4 orthographic view meets the sheet with 12 of its rays, the others start past it). Schlick's
+    R0 + (1 - R0)(1 - cos)^5 is (1 - cos)^5 there (0.62 of the light kept at 85 deg), the exact
+    form's float32 rounding up to ~6e-10."""
+    scene = interface_scene(side, angle_deg, {"kt": 1.0, "ior": 1.0}, fresnel)
+    frame = render_frame(scene, method="raytrace")
+    np.testing.assert_array_equal(frame.image, 1.0)
+    tree = frame.ray_tree
+    hits = tree.material == 0
+    assert hits.sum() >= 8 and np.all(tree.fresnel[hits] == 0.0) and np.all(tree.fresnel_t[hits] == 1.0)
 
 
 # ---- point-light attenuation ----------------------------------------------------------------

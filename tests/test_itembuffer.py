@@ -34,13 +34,13 @@ def assert_same_frames(bvh, item):
 
 def random_view(seed):
     """The mixed scene (teapot mesh, sphere, checkered plane) from a seeded random eye, with a mirror floor
-    and a glass sphere, depth 4, 2 x 2 supersampling."""
+    (ior 1.5) and a glass sphere, depth 4, 2 x 2 supersampling."""
     rng = np.random.default_rng(seed)
     d = mixed_scene(max_depth=4, spp=4, fresnel="schlick")
     angle, height, distance = rng.uniform(0, 2 * np.pi), rng.uniform(0.3, 2.5), rng.uniform(2.0, 4.5)
     d["camera"] = dict(MIXED["camera"], eye=[distance * np.sin(angle), height, distance * np.cos(angle)],
                        width=48, height=36)
-    d["materials"]["floor"] = dict(d["materials"]["floor"], kr=0.4)
+    d["materials"]["floor"] = dict(d["materials"]["floor"], kr=0.4, ior=1.5)  # (F = 0 at ior 1: no reflection)
     d["materials"]["red"] = dict(d["materials"]["red"], kt=0.8, ior=1.5)
     return d
 

@@ -14,6 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from difflab import render
 from difflab.errors import SceneError
 from difflab.scene import (Camera, Checker, Fog, Light, Material, Mesh, Plane, RenderSettings, Scene,
                            Sphere, Transform, load_scene, save_scene)
@@ -347,6 +348,32 @@ def test_supersampled_grid_is_held_to_the_pixel_budget():
     small = Scene.from_dict(minimal(render={"spp": 16}))
     with pytest.raises(SceneError, match=r"^render\.spp: 10000 x 1000 pixels at spp 16"):
         small.with_overrides(camera={"eye": [0, 0, 5], "target": [0, 0, 0], "width": 10000, "height": 1000})
+
+
+@pytest.mark.parametrize("fresnel", ["schlick", "exact"])
+def test_a_fresnel_mirror_of_ior_1_is_refused_naming_the_material_and_the_fix(fresnel):
+    """With Fresnel weighting a surface reflects kr F, and F = 0 at ior 1 (the default): a material
+    with kr > 0 would reflect nothing (and a fit of its kr would find no effect), so the scene is
+    refused naming the material and the two fixes -- from a file, a render override or a Scene
+    variant alike. With an ior, or without Fresnel weighting, the same mirror loads."""
+    want = (rf"^materials\.mirror\.kr: 0\.5 reflects nothing with render\.fresnel '{fresnel}' "
+            r"\(a surface then reflects kr F, and F = 0 at ior 1, the default\): give materials\.mirror\.ior "
+            r"\(e\.g\. 1\.5\) or set render\.fresnel 'none' \(a plain kr mirror\)$")
+    mirror = minimal(materials={"m": {}, "mirror": {"kr": 0.5, "kt": 0.5}},
+                     objects=[{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "mirror"}])
+    with pytest.raises(SceneError, match=want):
+        Scene.from_dict({**mirror, "render": {"fresnel": fresnel}})
+    plain = Scene.from_dict(mirror)
+    with pytest.raises(SceneError, match=want):
+        plain.with_overrides(render={"fresnel": fresnel})
+    with pytest.raises(SceneError, match=want):
+        render(plain, method="raytrace", fresnel=fresnel)
+    glassy = copy.deepcopy(mirror)
+    glassy["materials"]["mirror"]["ior"] = 1.5
+    assert Scene.from_dict({**glassy, "render": {"fresnel": fresnel}}).materials["mirror"].ior == 1.5
+    clear = copy.deepcopy(mirror)  # kr 0: a clear sheet of ior 1 is fine (it transmits kt exactly)
+    clear["materials"]["mirror"]["kr"] = 0.0
+    assert Scene.from_dict({**clear, "render": {"fresnel": fresnel}}).materials["mirror"].kt == 0.5
 
 
 def test_not_an_object():

@@ -13,6 +13,7 @@ of the refractive indices on the incoming and the outgoing side.
       "schlick": F = R0 + (1 - R0) (1 - c)^5,  R0 = ((1 - eta) / (1 + eta))^2, c = cos_i entering a
                  denser medium (eta <= 1), c = cos_t leaving it (the form that stays right past
                  the critical angle)
+      both:      F = 0 exactly at eta = 1 (no interface), where Schlick's form would give (1 - c)^5
     Beer:     exp(-alpha d) per channel, exactly 1 where alpha = 0 (also for d = inf).
 """
 
@@ -80,7 +81,11 @@ def fresnel_schlick(cos_i: float, eta: float):
 
 @wp.func
 def fresnel(mode: int, cos_i: float, eta: float):
-    """F for the chosen mode (FRESNEL_NONE gives 0: the caller then uses the plain kr / kt)."""
+    """F for the chosen mode (FRESNEL_NONE gives 0: the caller then uses the plain kr / kt); exactly
+    0 at eta = 1, where there is no interface (Schlick's (1 - c)^5 and the exact form's float32
+    rounding, up to ~6e-10, are not)."""
+    if eta == 1.0:
+        return 0.0
     if mode == FRESNEL_EXACT:
         return fresnel_exact(cos_i, eta)
     if mode == FRESNEL_SCHLICK:
