@@ -88,13 +88,15 @@ def test_standard_errors_are_calibrated():
 
 def test_matte_target_puts_ks_on_its_bound_in_a_few_steps():
     """No highlight (ks = 0): ks lands on its bound 0 within 25 steps, reported in at_bound; ks and n
-    are flagged poorly determined (n has no effect at ks = 0), kd is recovered."""
+    are flagged poorly determined (n has no effect at ks = 0), kd is recovered -- and n, switched off
+    by ks = 0 rather than unseen, is not `unreached`: the matte fit is settled (ok)."""
     scene = make_scene(size=24, red={"ks": [0.0, 0.0, 0.0]})
     result = fit_material(scene, [target_of(scene)], "red", init={"ks": [0.2, 0.2, 0.2], "n": 10.0})
     assert result.converged and result.steps <= 25
     assert max(result.params["ks"]) <= 1e-8 and "ks" in result.at_bound
     assert "ks" in result.poorly_determined and "n" in result.poorly_determined
     assert "kd" not in result.poorly_determined
+    assert result.unreached == [] and not result.underdetermined and result.ok
     np.testing.assert_allclose(result.params["kd"], TRUTH["kd"], rtol=1e-6)
 
 

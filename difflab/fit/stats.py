@@ -193,15 +193,24 @@ def degenerate(layout, diag: np.ndarray, gram, prior: bool) -> list[str]:
     return flat
 
 
-def unreached(layout, gram) -> list[str]:
+#: The coefficient whose value 0 switches a kind off: the lobe's shape does nothing without ks,
+#: the absorption nothing without kt (a matte fit's n at ks = 0 is no lack of data).
+SWITCHED_BY = {"n": "ks", "m": "ks", "f0": "ks", "absorption": "kt"}
+
+
+def unreached(layout, gram, coefficient) -> list[str]:
     """Keys of the parameters other than texels with an entry (a channel) that no residual the fit
     counts depends on: a zero column of J^T J (dense or sparse) -- a kd on a material no used pixel
     shows lit, a light that reaches no used pixel. Their values are the start's, undetermined
-    (a texel no pixel reads is the smoothness prior's to fill, or unseen: `seen`)."""
+    (a texel no pixel reads is the smoothness prior's to fill, or unseen: `seen`). Not those that
+    their material's SWITCHED_BY coefficient, 0 in every channel at the solution, switches off:
+    `coefficient(material index, kind)` gives its value (ks = 0 at its bound: n's column is 0)."""
     zero = np.asarray(gram.diagonal()) <= 0
     flat, offset = [], 0
     for p in layout:
-        if p.shape is None and zero[offset:offset + p.size].any():
+        switch = SWITCHED_BY.get(p.kind)
+        off = switch is not None and not np.any(np.asarray(coefficient(p.index, switch)) != 0)
+        if p.shape is None and not off and zero[offset:offset + p.size].any():
             flat.append(p.key)
         offset += p.size
     return flat
