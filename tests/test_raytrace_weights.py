@@ -77,21 +77,21 @@ LIGHT_DIR = np.array([1.0, 0.12, 0.0]) / np.linalg.norm([1.0, 0.12, 0.0])
 LIGHT_AT = 30.0 * LIGHT_DIR
 
 
-def sphere_stack(n: int, radius: float, fov: float, around_light: bool) -> Scene:
+def sphere_stack(n: int, radius: float, fov: float, around_light: bool, shell: str = "g") -> Scene:
     """n clear spheres (kt 0.95, ior 1, kd 0) 2.25 radii apart in a row from near the origin toward a
     point light 30 units away (elevation 6.8 degrees), and with `around_light` one more (radius 0.2) around the
-    light, over a floor y = 0 seen from above, depth 1: a floor point whose shadow ray passes the
-    row crosses 2 surfaces per sphere of the row (and 1 of the light's)."""
+    light, of material `shell` ("g" clear, "o" opaque), over a floor y = 0 seen from above, depth 1: a
+    floor point whose shadow ray passes the row crosses 2 surfaces per sphere of the row (and 1 of the light's)."""
     centres = [(3.0 * radius + 2.25 * radius * k) * LIGHT_DIR for k in range(n)]  # apart, as the surfaces
     objects = [{"type": "sphere", "center": c.tolist(), "radius": radius, "material": "g"} for c in centres]
     if around_light:
-        objects.append({"type": "sphere", "center": LIGHT_AT.tolist(), "radius": 0.2, "material": "g"})
+        objects.append({"type": "sphere", "center": LIGHT_AT.tolist(), "radius": 0.2, "material": shell})
     objects.append({"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "f"})
     return Scene.from_dict({
         "camera": {"eye": [-1.5, 2.5, 2.5], "target": [radius, 0, 0], "fov_y": fov, "width": 48,
                    "height": 36, "far": 20},
         "lights": [{"type": "point", "position": LIGHT_AT.tolist(), "intensity": 1}],
-        "materials": {"g": {"kd": 0, "kt": 0.95, "ior": 1.0}, "f": {"kd": 0.8}},
+        "materials": {"g": {"kd": 0, "kt": 0.95, "ior": 1.0}, "f": {"kd": 0.8}, "o": {"kd": 0}},
         "objects": objects, "render": {"method": "raytrace", "max_depth": 1}})
 
 
@@ -140,3 +140,20 @@ def test_transparent_shadow_through_many_spheres_is_kt_per_crossing(n, radius, f
         assert cut == int(np.sum(tree.visibility == 0.0)) and (cut > 0) == (2 * n + around_light == 256)
         seen = (got > 0) & ~unclear
         assert np.all(tree.crossings[floor, 0, 0][seen] == count[seen])  # what the fit re-evaluates
+
+
+def test_a_shadow_ray_blocked_beyond_its_255th_crossing_is_not_cut_on_either_path():
+    """128 clear spheres in the row (256 crossings) and an opaque shell around the light: every
+    shadow ray is blocked (visibility 0) whether or not it met 256 transparent surfaces first, and
+    none is cut -- a ray counts as cut only where it would otherwise reach the light past the 255th
+    crossing -- on the BVH's path and the light buffer's alike. The BVH's counted 256-crossing rays as
+    cut (the light buffer, which sees the opaque shell among its candidates, did not)."""
+    scene = sphere_stack(128, 0.05, 12, True, shell="o")
+    for light_buffer in (False, True):
+        frame = render_frame(scene, light_buffer=light_buffer, threads=2)
+        tree = frame.ray_tree
+        floor = (tree.material == 1) & (tree.parent == -1)
+        count, unclear = crossings_to_light(tree.position[floor].astype(np.float64), scene)
+        assert (count[~unclear] >= 2 * 128 + 1).sum() > 20  # rays that meet 256 clear surfaces, then the shell
+        np.testing.assert_array_equal(tree.visibility[floor, 0], 0.0)
+        assert frame.stats["shadow_rays_cut"] == 0, light_buffer

@@ -35,8 +35,9 @@ SPAWN_GRAZING = 0.125  # |cos| below which a new ray steps off along the normal,
 #: Transparent surfaces a shadow ray may pass through: one that meets another (the 256th) counts as
 #: blocked, as a ray cut by max_depth contributes black. 255 is what the ray tree's per-material
 #: crossing counts (uint8) hold; the walk is a loop (Warp unrolls none past 16), so a higher cap
-#: costs nothing where fewer surfaces are crossed. The ray tracer counts the cut rays
-#: (`frame.stats["shadow_rays_cut"]`); the light buffer's rays are cut alike.
+#: costs nothing where fewer surfaces are crossed. The ray tracer counts the cut rays, those that
+#: would otherwise reach the light (`frame.stats["shadow_rays_cut"]`; a ray an opaque surface blocks
+#: anywhere is blocked, not cut); the light buffer's rays are cut and counted alike.
 MAX_SHADOW_CROSSINGS = 255
 
 
@@ -351,13 +352,32 @@ def past_surface(geom: SceneGeomW, hit: HitW, origin: wp.vec3, direction: wp.vec
 
 
 @wp.func
+def opaque_ahead(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), hit: HitW, origin: wp.vec3, l: wp.vec3,
+                 remaining: float, ignore_object: int):
+    """1 if an opaque (kt = 0) surface lies past transparent `hit` within `remaining` along unit l
+    from `origin`, walking on through every transparent one (only a cut shadow ray asks), else 0."""
+    while True:
+        origin, step = past_surface(geom, hit, origin, l)
+        remaining = remaining - step
+        if remaining <= 0.0:
+            return 0
+        hit = closest_hit(geom, origin, l, 0.0, remaining, ignore_object)
+        if hit.kind == HIT_NONE:
+            return 0
+        if materials[hit.material].kt <= 0.0:
+            return 1
+
+
+@wp.func
 def shadow_ray(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: wp.vec3, l: wp.vec3, distance: float,
                ignore_object: int, transparent: int):
     """(visibility in [0, 1], cut) of a light at `distance` along unit `l` from p.
 
     An opaque surface in between gives 0. With `transparent` set, each surface with kt > 0 crossed
     multiplies the visibility by kt (the ray is not refracted), up to MAX_SHADOW_CROSSINGS of them:
-    a ray meeting one more gives 0 and cut = 1. The caller offsets p off the surface.
+    a ray meeting one more gives 0, and cut = 1 where it would otherwise reach the light (no opaque
+    surface lies further on: `opaque_ahead`), as the light buffer's, which sees every candidate, counts
+    it. The caller offsets p off the surface.
     """
     visibility = float(1.0)
     origin = p
@@ -370,7 +390,7 @@ def shadow_ray(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: wp.vec
         if transparent == 0 or kt <= 0.0:
             return 0.0, 0
         if crossing == MAX_SHADOW_CROSSINGS:
-            return 0.0, 1
+            return 0.0, 1 - opaque_ahead(geom, materials, hit, origin, l, remaining, ignore_object)
         visibility = visibility * kt
         origin, step = past_surface(geom, hit, origin, l)
         remaining = remaining - step

@@ -55,7 +55,7 @@ class Traced:
     depth_histogram: list  # rays traced at depth 1, 2, ...
     tree: RayTree | None
     shadow_tests: int = 0  # candidates the light buffer's shadow rays tested (0 without one)
-    shadow_rays_cut: int = 0  # shadow rays cut past trace.MAX_SHADOW_CROSSINGS transparent surfaces
+    shadow_rays_cut: int = 0  # shadow rays cut past trace.MAX_SHADOW_CROSSINGS transparent surfaces (`shadow_ray`)
     asked_bvh: int = 0  # samples whose primary mesh hit the item buffer left to the BVH (ambiguous hints)
     nonfinite_samples: int = 0  # samples whose colour is not finite
 
@@ -213,7 +213,8 @@ def raytrace(compiled, settings, threads: int | None = None, *, record_tree: boo
     (`gbuffer.tree_gbuffer`; RenderError without a recorded tree) and `stats`: rays traced per
     kind, `depth_histogram` (rays per depth, from 1), `nodes`, `seconds`, `rays_per_second`,
     `nonfinite_pixels`, `shadow_rays_cut` (shadow rays that met more than
-    `trace.MAX_SHADOW_CROSSINGS` transparent surfaces, counted as blocked); with the light buffer also
+    `trace.MAX_SHADOW_CROSSINGS` transparent surfaces and would otherwise have reached the light,
+    counted as blocked; one an opaque surface blocks anywhere is not cut, on either shadow path); with the light buffer also
     `light_buffer_seconds` (building it, included in `seconds`), `light_buffer_entries` and
     `shadow_tests` (candidates tested by all shadow rays).
     """

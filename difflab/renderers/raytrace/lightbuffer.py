@@ -132,7 +132,7 @@ def buffered_visibility(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(d
                         transparent: int):
     """`trace.shadow_ray` through light q's buffer, (visibility, cut): 0 at the first opaque candidate
     crossed, else the product of kt over transparent crossings -- (0, 1) past MAX_SHADOW_CROSSINGS of
-    them, as there."""
+    them with no opaque candidate crossed (a ray that would otherwise reach the light), as there."""
     cell = lb.light_cell0[q] + cube_cell(p - light_p, lb.resolution)
     reach = wp.length(p - light_p)
     visibility = float(1.0)
