@@ -89,21 +89,29 @@ def main(argv=None, *, interrupted=()) -> int:
 
 def run_command(argv) -> int:
     """Parse `argv` and run its command: its exit code, or the one-line error's (EXIT_INVALID), or
-    EXIT_INTERNAL with the traceback. KeyboardInterrupt goes to `main`, also from these handlers."""
+    EXIT_INTERNAL with the traceback. KeyboardInterrupt goes to `main`, also from these handlers, and
+    so does an error after a Ctrl-C (a library that caught the KeyboardInterrupt raised its own)."""
     try:
         args = build_parser().parse_args(argv)
         check_outputs(args)
         return int(args.func(args) or EXIT_OK)
-    except DifflabError as exc:
+    except Exception as exc:
+        interrupts.check()  # interrupted: exit 130 in `main`, whatever error the interrupt became
+        return report_error(exc)
+
+
+def report_error(exc: Exception) -> int:
+    """Print a command's error on stderr and return its exit code: a DifflabError or MemoryError in
+    one line (EXIT_INVALID), anything else, an internal error, with its traceback (EXIT_INTERNAL)."""
+    if isinstance(exc, DifflabError):
         print(f"difflab: error: {' '.join(str(exc).split())}", file=sys.stderr)  # one line
         return EXIT_INVALID
-    except MemoryError:  # the budgets (docs/limits.md) should refuse such a request before it starts
+    if isinstance(exc, MemoryError):  # the budgets (docs/limits.md) should refuse such a request before it starts
         print("difflab: error: out of memory: the request is too big for this machine; lower the image size, "
               "spp or mesh resolution, or DIFFLAB_MEMORY_BUDGET", file=sys.stderr)
         return EXIT_INVALID
-    except Exception:  # an internal error: show where, so it can be reported
-        traceback.print_exc()
-        return EXIT_INTERNAL
+    traceback.print_exception(exc)  # an internal error: show where, so it can be reported
+    return EXIT_INTERNAL
 
 
 if __name__ == "__main__":

@@ -4,17 +4,21 @@ imports, inside a gc callback (where JAX's `_xla_gc_callback` swallowed the Keyb
 fit then finished, wrote both files and exited 0), during the solve -- must each give exit 130, the
 one line `difflab: interrupted` on stderr and no file written."""
 
+import argparse
+import functools
 import json
 import os
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
 from test_fit_helpers import TRUTH, make_scene, perturbed, target_of
 
-from difflab import Scene
+from difflab import Scene, cli
+from difflab.errors import EXIT_INTERRUPTED, DifflabError
 from difflab.io import save_image
 from difflab.scene import save_scene
 
@@ -101,3 +105,57 @@ def test_the_same_fit_uninterrupted_writes_both_files(fit_files, tmp_path):
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert run.stdout.startswith("at optimistix\n") and run.returncode == 3, run.stderr[-2000:]
     assert json.loads((tmp_path / "out.fit.json").read_text())["steps"] == 8 and (tmp_path / "out.json").exists()
+
+
+def _main_running(monkeypatch, command):
+    """`cli.main` running `command()` as its subcommand (a parser of its own in place of difflab's)."""
+    parser = argparse.ArgumentParser()
+    parser.set_defaults(func=lambda args: command())
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    return cli.main([])
+
+
+def _sigint_main_thread(after_s=0.0):
+    """A SIGINT to the main thread, as a Ctrl-C (now, or from a timer thread after `after_s`)."""
+    send = functools.partial(signal.pthread_kill, threading.main_thread().ident, signal.SIGINT)
+    if not after_s:
+        send()
+        return len([])  # a call: the handler runs here
+    threading.Timer(after_s, send).start()
+
+
+def test_a_second_ctrl_c_breaks_a_blocking_cleanup(monkeypatch, capsys):
+    """The first Ctrl-C's KeyboardInterrupt runs a cleanup that blocks (closing a Dask client whose
+    workers hang): the user's second Ctrl-C breaks it -- the repeats of the first are let go while it
+    unwinds, a new one is not. Before, every SIGINT was ignored while the first was being handled:
+    the cleanup ran its full 30 s and the command ended only then."""
+    cleanup = []
+
+    def command():
+        try:
+            _sigint_main_thread()
+        finally:
+            _sigint_main_thread(after_s=0.3)  # the second Ctrl-C, while the cleanup blocks
+            cleanup.append("blocked")
+            threading.Event().wait(30)
+            cleanup.append("finished")
+
+    assert _main_running(monkeypatch, command) == EXIT_INTERRUPTED
+    assert cleanup == ["blocked"] and capsys.readouterr().err == "difflab: interrupted\n"
+
+
+@pytest.mark.parametrize("error", [RuntimeError, DifflabError, MemoryError])
+def test_a_ctrl_c_a_library_turned_into_another_error_exits_130(monkeypatch, capsys, error):
+    """A library that catches the KeyboardInterrupt and raises its own error (an internal error, or
+    one difflab reports as invalid input: a reader's failure turned into MeshError) -- the command was
+    interrupted all the same: exit 130 and the one line, no traceback. Before: exit 1 with the
+    traceback, or 2 with the error's line."""
+
+    def command():
+        try:
+            _sigint_main_thread()
+        except KeyboardInterrupt:
+            raise error("cancelled") from None
+
+    assert _main_running(monkeypatch, command) == EXIT_INTERRUPTED
+    assert capsys.readouterr().err == "difflab: interrupted\n"
