@@ -376,7 +376,7 @@ class FitResult:
                                          "them); their values are undetermined"
                                          + ("" if math.isnan(self.chi2) else " (the model is still judged)"),
                                          bool(self.degenerate)),
-                                        (f"UNDERDETERMINED: {', '.join(self.unreached)} reach no value the fit counts "
+                                        (f"UNDERDETERMINED: {', '.join(self.unreached)} reach{'es' if len(self.unreached) == 1 else ''} no value the fit counts "
                                          "(left at their start)", bool(self.unreached)),
                                         (f"PRIOR PULL: the smoothness prior moves values the pixels determine by up "
                                          f"to {self.prior_pull:.3g} standard errors; their stderr (the pixels' "

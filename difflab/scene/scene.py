@@ -84,12 +84,6 @@ class Scene(Record):
             fail("fog", f"expected a Fog or None, got {v['fog']!r:.60}")
         if not isinstance(v["render"], RenderSettings):
             fail("render", f"expected RenderSettings, got {v['render']!r:.60}")
-        fresnel = v["render"].fresnel
-        for name, material in materials.items():
-            if fresnel != "none" and material.kr > 0 and material.ior == 1:
-                fail(f"{join('materials', name)}.kr", f"{material.kr:g} reflects nothing with render.fresnel {fresnel!r} "
-                     "(a surface then reflects kr F, and F = 0 at ior 1, the default): give "
-                     f"{join('materials', name)}.ior (e.g. 1.5) or set render.fresnel 'none' (a plain kr mirror)")
         camera, spp = v["camera"], v["render"].spp
         if camera.width * camera.height * spp > MAX_PIXELS:
             fail("render.spp", f"{camera.width} x {camera.height} pixels at spp {spp} is "
