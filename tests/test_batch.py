@@ -212,6 +212,28 @@ def test_a_device_applies_to_every_line_without_its_own_and_is_checked_as_fit_do
         assert not any((tmp_path / device).iterdir())
 
 
+def test_a_rerun_with_another_device_fits_nothing_again_and_reports_keep_their_device(tmp_path, monkeypatch):
+    """The device says where a fit's renders run, not what is fitted: a finished batch rerun with a
+    --device added or changed fits nothing again (it is no part of the job's identity), and each
+    report names the device its fit ran on (the default, cpu, too). Before, --device went into each
+    job, so Store.done saw another job and every finished fit was redone."""
+    import difflab.renderers.launch as launch
+
+    save_scene(Scene.from_dict(scene_dict(size=8)), tmp_path / "s.json")
+    save_image(tmp_path / "t.npy", np.full((8, 8, 3), 0.2, np.float32))
+    line = {"name": "a", "scene": str(tmp_path / "s.json"), "targets": str(tmp_path / "t.npy"), "material": "red",
+            "params": "kd", "solver": {"max_steps": 3}}
+    first = fit_many([line], tmp_path / "out", workers=1, quiet=True)
+    report = (tmp_path / "out" / "reports" / "a.json").read_bytes()
+    assert (first.ran, json.loads(report)["job"]["solver"]) == (1, {"device": "cpu", "max_steps": 3})
+    monkeypatch.setattr(launch, "resolve_device", lambda device: device)  # a GPU for this check (none runs)
+    for device in ("cpu", "cuda:1"):
+        again = fit_many([line], tmp_path / "out", device=device, workers=1, quiet=True)
+        assert (again.ran, again.skipped, again.rows[0]["status"]) == (0, 1, first.rows[0]["status"])
+        assert (tmp_path / "out" / "reports" / "a.json").read_bytes() == report
+    assert fit_many([{**line, "solver": {"max_steps": 4}}], tmp_path / "out", workers=1, quiet=True).ran == 1
+
+
 # -- a local run -------------------------------------------------------------------------------------
 
 

@@ -94,8 +94,9 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
         retries: Dask's retries of a task that raised (a cluster only; default 2; a task whose worker
             died is rescheduled anyway).
         device: where Warp renders each fit's G-buffers / ray trees, "cpu" or "cuda[:N]", for every
-            line whose solver options name none (recorded in its job as solver.device); default: a
-            line's own, else "cpu". Checked here for local workers (as `difflab fit --device`), by
+            line whose solver options name none (recorded in its report's job as solver.device, but
+            no part of the job's identity: a rerun with another device fits nothing again); default:
+            a line's own, else "cpu". Checked here for local workers (as `difflab fit --device`), by
             each job on a cluster's workers.
         progress: show a progress bar with ETA (default: when stderr is a terminal).
         quiet: do not print the bad lines and the closing lines (`BatchSummary.report`) on stderr.
@@ -126,13 +127,12 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
             raise DifflabError(f"{name}: applies only to a Dask cluster (client= or scheduler=): {LOCAL_ONLY[name]}")
     if workers is not None and cluster:
         raise DifflabError("workers: applies only to local worker processes; a Dask cluster's workers are its own")
-    if device is not None:
-        if not cluster:  # (a cluster's workers may have the GPU this machine lacks: each job checks it there)
-            from ..renderers.launch import resolve_device
+    if device is not None and not cluster:  # (a cluster's workers may have the GPU this machine lacks: each job checks it there)
+        from ..renderers.launch import resolve_device
 
-            resolve_device(device)
-        jobs = [dataclasses.replace(job, spec={**job.spec, "solver": {"device": device, **job.spec["solver"]}})
-                for job in jobs]
+        resolve_device(device)
+    jobs = [dataclasses.replace(job, spec={**job.spec, "solver": {"device": device or "cpu", **job.spec["solver"]}})
+            for job in jobs]  # where each fit runs, in its report (not its identity: `store.same_job`)
     store = Store(outdir, force)
     for bad in invalid:
         _say(quiet, f"manifest line {bad.line}: {bad.error}")

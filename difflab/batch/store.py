@@ -65,10 +65,10 @@ class Store:
         return self.root / folder / f"{name}.json"
 
     def done(self, job: Job) -> bool:
-        """Has `job`, exactly as specified now, a result written -- its report, its scene, and every
-        fitted-texture file the scene names? (A changed line, or a deleted file, is redone.)"""
+        """Has `job`, as specified now (`same_job`), a result written -- its report, its scene, and
+        every fitted-texture file the scene names? (A changed line, or a deleted file, is redone.)"""
         report = _read_json(self._file("reports", job.name))
-        if not (isinstance(report, dict) and report.get("job") == job.spec):
+        if not (isinstance(report, dict) and same_job(report.get("job"), job.spec)):
             return False
         scene = _read_json(self._file("scenes", job.name))
         if not isinstance(scene, dict):
@@ -120,10 +120,10 @@ class Store:
         row = {**dict.fromkeys(COLUMNS), "line": job.line, "name": job.name, "status": "not_run"}
         report = _read_json(self._file("reports", job.name))
         failure = _read_json(self._file("failures", job.name))
-        if isinstance(report, dict) and report.get("job") == job.spec:
+        if isinstance(report, dict) and same_job(report.get("job"), job.spec):
             row.update({k: report.get(k) for k in REPORTED},
                        status="converged" if report.get("converged") else "not_converged")
-        elif isinstance(failure, dict) and failure.get("job") == job.spec:
+        elif isinstance(failure, dict) and same_job(failure.get("job"), job.spec):
             row.update(status="failed", error=failure.get("error"))
         return row
 
@@ -148,3 +148,13 @@ class Store:
             write_json_atomic(self.root / "summary.json", summary)
             write_text_atomic(self.root / "summary.csv", text.getvalue())
         return summary
+
+
+def same_job(recorded, spec: dict) -> bool:
+    """Whether a report's or failure's `recorded` job is the job `spec`: equal but for solver.device,
+    which says where the fit's renders ran, not what is fitted, so that a rerun with another
+    `--device` does not redo finished fits."""
+    def identity(job):
+        return {**job, "solver": {k: v for k, v in job.get("solver", {}).items() if k != "device"}}
+
+    return isinstance(recorded, dict) and isinstance(recorded.get("solver", {}), dict) and identity(recorded) == identity(spec)
