@@ -124,6 +124,23 @@ def test_max_depth_is_refused_with_the_g_buffer_and_spp_applies_to_it():
     np.testing.assert_allclose(given.params["kd"], TRUTH["kd"], rtol=1e-5)
 
 
+@pytest.mark.parametrize("keywords, want", [
+    ({"spp": True}, "spp: expected an integer, got True"),
+    ({"spp": "4"}, "spp: expected an integer, got '4'"),
+    ({"spp": 0}, "spp: must be >= 1, got 0"),
+    ({"spp": 3, "method": "raytrace"}, "spp: must be a perfect square (1, 4, 9, 16, ...): both renderers take a side x "
+                                       "side pattern of samples per pixel, got 3"),
+    ({"max_depth": 0, "method": "raytrace"}, "max_depth: must be >= 1, got 0"),
+    ({"max_depth": True, "method": "raytrace"}, "max_depth: expected an integer, got True"),
+])
+def test_a_bad_spp_or_max_depth_is_refused_naming_its_keyword(keywords, want):
+    """spp and max_depth are checked as the scene's render block checks them, and the message names
+    the keyword. spp=True was taken for 1 (True == the scene's spp, so nothing was checked); the
+    others read 'targets[0]: render.spp: ...', as if the first target's file were wrong."""
+    with pytest.raises(FitError, match=f"^{re.escape(want)}$"):
+        fit_material(make_scene(size=8), [BLANK], "red", ("kd",), **keywords)
+
+
 @pytest.mark.parametrize("params,material,flag,given", [
     ("ka,,kd", "red", "--params", "ka,,kd"), ("kd,", "red", "--params", "kd,"),
     ("kd", "red,,floor", "--material", "red,,floor"),

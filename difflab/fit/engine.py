@@ -208,7 +208,8 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
         smoothness: weight of a first-difference prior on fitted texels (0: none); it also fills
             texels that no pixel sees.
         max_depth: the ray tree's depth (default: the scene's; a FitError with the G-buffer).
-        spp: samples per pixel of the G-buffer or ray tree (default: the scene's).
+        spp: samples per pixel of the G-buffer or ray tree (default: the scene's). Both are checked
+            as the scene's render block is (a bool is no integer), a FitError naming the keyword.
         device: where Warp renders ("cpu" or "cuda"). threads: CPU threads for the render.
     Returns:
         a `FitResult`: `converged` false and `result` naming why when the fit failed;

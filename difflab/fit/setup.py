@@ -29,6 +29,7 @@ from ..lighting.jax_model import lights_to_jax
 from ..renderers.api import as_scene, render_frame
 from ..renderers.compile import CompiledScene
 from ..renderers.launch import resolve_device
+from ..scene import RenderSettings
 from .ceiling import float_ceiling, primary_objects
 from .materials import MaterialTable
 from .noise import quantisation
@@ -220,6 +221,10 @@ class Setup:
         elif max_depth is not None:
             raise FitError(f"max_depth: {max_depth!r} does not apply to method='raster' (the G-buffer has no "
                            "secondary rays; use method='raytrace')")
+        try:  # checked as the scene's render block is, named by keyword (spp=True is no 1)
+            RenderSettings.parse({**self.scene.render.to_dict(), **render}, "")
+        except DifflabError as exc:
+            raise FitError(str(exc)) from None
         ids = sorted({p.index for p in self.layout if p.kind != "intensity"})
         all_surfaces = any(p.kind == "intensity" for p in self.layout)
         crossing = sorted({p.index for p in self.layout if p.kind == "kt"})
