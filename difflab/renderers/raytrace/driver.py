@@ -36,6 +36,7 @@ from .lightbuffer import build_light_buffer, no_light_buffer
 from .medium import camera_media
 from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, COUNT_SHADOW_CUT, TraceOutW, \
     TraceParamsW, whitted_kernel
+from .nesting import media_struct
 from .record import empty_tree, has_textures, sized_tree, tree_to_numpy
 from .surface import MeshDataW, SceneW
 from .tree import RayTree
@@ -77,9 +78,9 @@ def sample_points(width: int, height: int, side: int, sampling: str = "grid") ->
 
 
 def trace_params(scene, settings, record: bool, footprint: float, side: int,
-                 media: tuple[int, bool]) -> TraceParamsW:
+                 media: tuple[tuple, bool]) -> TraceParamsW:
     params = TraceParamsW()
-    params.medium, params.start_check = int(media[0]), int(media[1])
+    params.media, params.start_check = media_struct(media[0]), int(media[1])
     params.side = int(side)
     params.max_depth = int(settings.max_depth)
     params.shadows = int(settings.shadows)

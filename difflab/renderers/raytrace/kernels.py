@@ -44,6 +44,7 @@ from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossi
 from .itembuffer import ItemBufferW, item_hit
 from .lightbuffer import LightBufferW, buffered_visibility
 from .medium import primary_medium
+from .nesting import MediaW, medium_of, refracted_media
 from .optics import beer, reflect
 from .record import LightRecW, TreeW, light_arrays, record_light, record_ray, record_surface
 from .surface import RayW, SceneW, SurfaceW, child_ray, fresnel_split, new_ray, primary_diff, primary_sample, \
@@ -75,8 +76,8 @@ class TraceParamsW:
     count_crossings: int  # record the materials transparent shadow rays cross
     footprint: float  # a sample's width in pixels (1 / side), what texture filters cover (`surface.surface_at`)
     side: int  # > 0: the regular grid of `side` x `side` samples per pixel; 0: the samples are `points`
-    medium: int  # material id of the medium a perspective camera's eye is in (`medium.camera_media`), -1 outside
-    start_check: int  # 1: each primary ray finds its own medium (`medium.primary_medium`), 0: `medium` is every ray's
+    media: MediaW  # the transparent objects around a perspective camera's eye (`medium.camera_media`)
+    start_check: int  # 1: each primary ray finds its own media (`medium.primary_medium`), 0: `media` are every ray's
 
 
 @wp.struct
@@ -184,12 +185,12 @@ def make_whitted_kernel(stack_size: int):
                 base = tree.offset[i, j]
             origin = start + near * direction
             line = line_point(cam, xy[0], xy[1])
-            medium = params.medium
-            if params.start_check == 1:  # its absorption counts from `start` in `medium`
-                medium, start = primary_medium(scene.geom, scene.materials, start, direction, near, params.medium,
-                                               cam.perspective)
+            media = params.media
+            if params.start_check == 1:  # its absorption counts from `start` in `media`
+                media, start = primary_medium(scene.geom, scene.materials, start, direction, near, params.media,
+                                              cam.perspective)
             diff = primary_diff(cam, direction, near, params.footprint)
-            first = new_ray(start, origin, direction, wp.vec3(1.0), diff, 1, -1, PRIMARY, medium, -1)
+            first = new_ray(start, origin, direction, wp.vec3(1.0), diff, 1, -1, PRIMARY, media, -1)
             if wp.static(stack_size > 1):  # (a one-ray stack is the primary ray alone: no array to clear)
                 stack = wp.zeros(shape=stack_size, dtype=RayW)
                 stack[0] = first
@@ -211,8 +212,9 @@ def make_whitted_kernel(stack_size: int):
                 if hit.kind != HIT_NONE:
                     distance = wp.length(p - ray.start)
                 w = ray.weight
-                if ray.medium >= 0:  # Beer absorption along this ray inside its medium
-                    w = wp.cw_mul(w, beer(scene.materials[ray.medium].absorption, distance))
+                medium = medium_of(ray.media)
+                if medium >= 0:  # Beer absorption along this ray inside its medium
+                    w = wp.cw_mul(w, beer(scene.materials[medium].absorption, distance))
                 if params.record == 1:
                     record_ray(tree, base, node, i * out.color.shape[1] + j, ray, hit, distance)
                 if hit.kind == HIT_NONE:
@@ -237,16 +239,14 @@ def make_whitted_kernel(stack_size: int):
                     if ray.depth < params.max_depth:  # refracted child pushed first: the reflected one is walked first
                         w_t = w * (surf.mat.kt * split.f_t)
                         if split.refracts == 1 and worth_tracing(w_t, params.threshold):
-                            medium = int(-1)
-                            if surf.entering == 1:
-                                medium = hit.material
+                            inside = refracted_media(ray.media, hit.object, hit.material, surf.entering)
                             stack[sp] = child_ray(scene.geom, ray, node, hit, surf, split.t_dir, w_t, REFRACTED,
-                                                  medium)
+                                                  inside)
                             sp = sp + 1
                         w_r = w * (surf.mat.kr * split.f_r + surf.mat.kt * split.tir_share)
                         if worth_tracing(w_r, params.threshold):
                             r_dir = reflect(ray.direction, surf.normal)
-                            stack[sp] = child_ray(scene.geom, ray, node, hit, surf, r_dir, w_r, REFLECTED, ray.medium)
+                            stack[sp] = child_ray(scene.geom, ray, node, hit, surf, r_dir, w_r, REFLECTED, ray.media)
                             sp = sp + 1
 
             out.fog[i, j] = fog_f

@@ -43,6 +43,7 @@ from ...scene import Plane, Sphere
 from ..camera import camera_frame, half_height
 from ..launch import load_kernels
 from ..trace import HIT_NONE, SceneGeomW, closest_hit, past_surface
+from .nesting import MEDIA_DEPTH, MediaW, no_media, outward
 
 wp.set_module_options({"enable_backward": False})
 
@@ -50,10 +51,12 @@ MAX_CROSSINGS = 256  # surfaces a walk crosses before it gives up (the point the
 
 
 @wp.func
-def medium_at(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), point: wp.vec3, direction: wp.vec3):
-    """The material id of the medium containing `point` (module doc: the walk along unit
-    `direction`), -1 for none."""
+def media_at(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), point: wp.vec3, direction: wp.vec3):
+    """The transparent objects around `point`, innermost first (`nesting.MediaW`; module doc: the
+    walk along unit `direction`)."""
+    media = no_media()
     depth = int(0)
+    lowest = int(0)
     origin = point
     for crossing in range(MAX_CROSSINGS):
         hit = closest_hit(geom, origin, direction, 0.0, wp.inf, -1)
@@ -64,32 +67,33 @@ def medium_at(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), point: wp.
             depth = depth + 1
         else:
             depth = depth - 1
-            if depth < 0:
-                if materials[hit.material].kt > 0.0:
-                    return hit.material
-                return -1
-    return -1
+            if depth < lowest:  # leaves an object around the point
+                lowest = depth
+                if materials[hit.material].kt <= 0.0 or media.count == MEDIA_DEPTH:
+                    break  # an opaque one: no medium in it or past it
+                media = outward(media, hit.object, hit.material)
+    return media
 
 
 @wp.func
 def primary_medium(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), start: wp.vec3, direction: wp.vec3,
-                   near: float, eye_medium: int, perspective: int):
-    """A primary ray's medium and the point its absorption counts from (module doc): the ray leaves
-    `start` along unit `direction` and is traced from `near` further on; `eye_medium` is the eye's
+                   near: float, eye_media: MediaW, perspective: int):
+    """A primary ray's media and the point its absorption counts from (module doc): the ray leaves
+    `start` along unit `direction` and is traced from `near` further on; `eye_media` are the eye's
     (`camera_media`), which a perspective ray keeps when no surface lies before its near plane."""
     origin = start + near * direction
     clipped = closest_hit(geom, origin, -direction, 0.0, near, -1)  # the last surface before the near plane
     if clipped.kind == HIT_NONE:
         if perspective == 1:
-            return eye_medium, start
-        return medium_at(geom, materials, origin, direction), start
-    return medium_at(geom, materials, origin, direction), origin - clipped.t * direction
+            return eye_media, start
+        return media_at(geom, materials, origin, direction), start
+    return media_at(geom, materials, origin, direction), origin - clipped.t * direction
 
 
 @wp.kernel
-def eye_medium_kernel(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), eye: wp.vec3, direction: wp.vec3,
-                      out: wp.array(dtype=wp.int32)):
-    out[0] = medium_at(geom, materials, eye, direction)
+def eye_media_kernel(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), eye: wp.vec3, direction: wp.vec3,
+                     out: wp.array(dtype=MediaW)):
+    out[0] = media_at(geom, materials, eye, direction)
 
 
 def near_ball(camera) -> tuple[np.ndarray, float]:
@@ -133,29 +137,31 @@ def per_ray_check(compiled, transparent: set) -> bool:
     return bool(np.linalg.norm(centre - nearest) <= radius)
 
 
-def camera_media(compiled) -> tuple[int, bool]:
-    """(the material id of the medium the perspective camera's eye is in, -1: none or an
-    orthographic camera; whether primary rays check their own medium, `per_ray_check`), for the
-    compiled scene; (-1, False) without a transparent material. The last camera's answer is kept with
+def camera_media(compiled) -> tuple[tuple, bool]:
+    """(the transparent objects around the perspective camera's eye, innermost first, as (object id,
+    material id) pairs -- () for none or an orthographic camera; whether primary rays check their
+    own media, `per_ray_check`), for the compiled scene; ((), False) without a transparent material. The last camera's answer is kept with
     the compiled scene: the frames of one view (a fit's, an animation's still camera) do not walk
     again (the check's loop over the objects cost 43 ms a frame with 20k spheres)."""
     scene = compiled.scene
     transparent = {i for i, name in enumerate(scene.material_names) if scene.materials[name].kt > 0}
     if not transparent:
-        return -1, False
+        return (), False
     key = (scene.camera, tuple(sorted(transparent)))
     kept = compiled.built.get("camera media")
     if kept is not None and kept[0] == key:
         return kept[1]
     check = per_ray_check(compiled, transparent)
-    media = (-1, check)
+    media = ((), check)
     if scene.camera.projection == "perspective":
-        load_kernels(compiled.device, eye_medium_kernel)
-        out = wp.empty(1, dtype=wp.int32, device=compiled.device)
+        load_kernels(compiled.device, eye_media_kernel)
+        out = wp.empty(1, dtype=MediaW, device=compiled.device)
         forward = np.asarray(camera_frame(scene.camera)[2], np.float32)
-        wp.launch(eye_medium_kernel, dim=1, inputs=[compiled.traceable(), compiled.materials,
+        wp.launch(eye_media_kernel, dim=1, inputs=[compiled.traceable(), compiled.materials,
                                                     wp.vec3(*scene.camera.eye), wp.vec3(*forward), out],
                   device=compiled.device)
-        media = (int(out.numpy()[0]), check)
+        found = out.numpy()[0]
+        pairs = tuple((int(found["objects"][k]), int(found["materials"][k])) for k in range(int(found["count"])))
+        media = (pairs, check)
     compiled.built["camera media"] = (key, media)  # (two threads may both walk: the same answer)
     return media

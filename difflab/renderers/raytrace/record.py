@@ -16,6 +16,7 @@ from ..._warp import wp
 from ...guards import check_tree
 from ...lighting.warp_model import fog_params
 from ..trace import HIT_TRIANGLE, HitW
+from .nesting import medium_of
 from .surface import RayW, SplitW, SurfaceW
 from .tree import RayTree
 
@@ -83,7 +84,7 @@ def record_ray(tree: TreeW, base: int, node: int, sample: int, ray: RayW, hit: H
         tree.parent[k] = base + ray.parent
     tree.kind[k] = ray.kind
     tree.depth[k] = ray.depth
-    tree.medium[k] = ray.medium
+    tree.medium[k] = medium_of(ray.media)
     tree.distance[k] = distance
     tree.material[k] = hit.material
     tree.object[k] = hit.object

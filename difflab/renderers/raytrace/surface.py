@@ -29,6 +29,7 @@ from ..texture.sampling import TexturesW, pixel_footprint, plane_uv, plane_uv_de
     ray_footprint, sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
 from ..trace import HIT_PLANE, HIT_TRIANGLE, HitW, SceneGeomW, leaving_skip, ray_offset, spawn_origin
 from .lightbuffer import LightBufferW
+from .nesting import MediaW, interface_eta
 from .optics import fresnel, reflect, refract, refracted_differential
 from .tree import PRIMARY, REFLECTED
 
@@ -84,7 +85,7 @@ class RayW:
     depth: int  # 1 for the primary ray
     parent: int  # the parent's node index within the sample (-1: the primary ray)
     kind: int  # tree.PRIMARY / REFLECTED / REFRACTED
-    medium: int  # material id of the object the ray travels inside, -1 outside
+    media: MediaW  # the transparent objects it travels inside (`nesting`): the innermost's medium
     skip: int  # the object it cannot meet again, -1: none
 
 
@@ -98,6 +99,7 @@ class SurfaceW:
     normal: wp.vec3  # unit shading normal, facing the incoming ray
     view: wp.vec3  # unit direction back along the incoming ray
     entering: int  # 1 where the ray hit the side the stored normal points to
+    eta: float  # n_outside / n_inside there, the ratio Snell and Fresnel take (`nesting.interface_eta`)
     cell: int  # checker cell 0 / 1
     uv: wp.vec2  # where a textured material read its texture (`hit_texel`), else 0
     texel: wp.vec3  # the texture value a textured material took, else 0
@@ -121,7 +123,7 @@ class SplitW:
 
 @wp.func
 def new_ray(start: wp.vec3, origin: wp.vec3, direction: wp.vec3, weight: wp.vec3, diff: DifferentialsW, depth: int,
-            parent: int, kind: int, medium: int, skip: int):
+            parent: int, kind: int, media: MediaW, skip: int):
     ray = RayW()
     ray.origin = origin
     ray.start = start
@@ -131,7 +133,7 @@ def new_ray(start: wp.vec3, origin: wp.vec3, direction: wp.vec3, weight: wp.vec3
     ray.depth = depth
     ray.parent = parent
     ray.kind = kind
-    ray.medium = medium
+    ray.media = media
     ray.skip = skip
     return ray
 
@@ -244,6 +246,7 @@ def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, p: wp.vec3, xy
         surf.normal = -surf.normal
     surf.view = -d
     base = scene.materials[hit.material]
+    surf.eta = interface_eta(scene.materials, ray.media, hit.object, surf.entering, base.kt, base.ior)
     surf.cell = int(0)
     if base.checker_size > 0.0:
         surf.cell = checker_cell(surf.p, surf.geo, base.checker_size)
@@ -264,19 +267,10 @@ def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, p: wp.vec3, xy
 
 
 @wp.func
-def surface_eta(surf: SurfaceW):
-    """eta = n1 / n2 at a hit: 1 / ior entering, and on both sides of an opaque (kt = 0) surface,
-    which has no inside (no medium: `medium.py`); ior leaving a transparent object."""
-    if surf.entering == 1 or surf.mat.kt == 0.0:
-        return 1.0 / surf.mat.ior
-    return surf.mat.ior
-
-
-@wp.func
 def fresnel_split(d: wp.vec3, surf: SurfaceW, mode: int):
     """The Fresnel split of a ray arriving along `d` (see the module doc)."""
     split = SplitW()
-    eta = surface_eta(surf)
+    eta = surf.eta
     refracts, t_dir = refract(d, surf.normal, eta)
     split.refracts = refracts
     split.t_dir = t_dir
@@ -316,16 +310,16 @@ def child_differentials(parent: RayW, surf: SurfaceW, direction: wp.vec3, kind: 
         diff.dddx = reflect(d.dddx, surf.normal)
         diff.dddy = reflect(d.dddy, surf.normal)
     else:
-        eta = surface_eta(surf)
-        diff.dddx = refracted_differential(d.dddx, parent.direction, surf.normal, direction, eta)
-        diff.dddy = refracted_differential(d.dddy, parent.direction, surf.normal, direction, eta)
+        diff.dddx = refracted_differential(d.dddx, parent.direction, surf.normal, direction, surf.eta)
+        diff.dddy = refracted_differential(d.dddy, parent.direction, surf.normal, direction, surf.eta)
     return diff
 
 
 @wp.func
 def child_ray(geom: SceneGeomW, parent: RayW, node: int, hit: HitW, surf: SurfaceW, direction: wp.vec3,
-              weight: wp.vec3, kind: int, medium: int):
-    """The ray a hit spawns in `direction`: started `surf.offset` off the surface on the side it leaves to."""
+              weight: wp.vec3, kind: int, media: MediaW):
+    """The ray a hit spawns in `direction`, inside `media`: started `surf.offset` off the surface on
+    the side it leaves to."""
     return new_ray(surf.p, spawn_origin(surf.p, surf.geo, direction, surf.offset), direction, weight,
-                   child_differentials(parent, surf, direction, kind), parent.depth + 1, node, kind, medium,
+                   child_differentials(parent, surf, direction, kind), parent.depth + 1, node, kind, media,
                    skip_object(geom, hit, direction))

@@ -1,0 +1,155 @@
+"""Nested media: the transparent objects around a ray, and the index ratio at the surfaces it meets.
+
+Each ray carries the transparent (kt > 0) objects it is inside, innermost first (`MediaW`, up to
+MEDIA_DEPTH of them, on the walk's stack with the ray: Warp has no recursion). It travels in the
+innermost one's medium (`medium_of`), absorbing by that material's absorption, and refracts at a
+surface by eta = n_outside / n_inside (the ratio `optics.refract` and `optics.fresnel` take), the
+indices read from that list (`interface_eta`), as POV-Ray's interior stack and pbrt's medium
+interfaces trace glass in water:
+
+    entering an object (hitting the side its stored normal points to):  eta = n_out / ior
+    leaving a transparent object:                                        eta = ior / n_out
+    either side of an opaque one (kt = 0, no inside):                    eta = n_out / ior
+
+n_out being the index of the object's outside: of the innermost object around the ray other than
+it (`left`), 1 (air) for none. The refracted ray's list gains the object entered, innermost
+(`entered`), or loses the object left (wherever it is in the list: overlapping objects are left in
+any order); a reflected ray keeps its parent's. A ray that leaves an object not in its list (the
+list lost it, or a crossing was missed) keeps its list, and one that enters an object already in
+it (a miscounted crossing) moves it innermost: so a scene without nesting traces as it would with
+one medium per ray. Entering an object with MEDIA_DEPTH already around the ray forgets the
+outermost one: a ray that later leaves all the inner ones takes the forgotten one's surroundings
+for air (index 1, no absorption).
+"""
+
+from __future__ import annotations
+
+from ..._warp import wp
+
+from ...lighting.warp_model import MaterialW
+
+wp.set_module_options({"enable_backward": False})
+
+MEDIA_DEPTH = 4  # transparent objects a ray keeps track of around it (module doc)
+IdsW = wp.types.vector(length=MEDIA_DEPTH, dtype=wp.int32)
+
+
+@wp.struct
+class MediaW:
+    """The transparent objects around a ray, innermost first: their scene object ids and material
+    ids (entries from `count` on are -1)."""
+
+    objects: IdsW
+    materials: IdsW
+    count: int
+
+
+@wp.func
+def no_media():
+    """A ray in no medium (air)."""
+    media = MediaW()
+    media.objects = IdsW(-1)
+    media.materials = IdsW(-1)
+    media.count = 0
+    return media
+
+
+@wp.func
+def medium_of(media: MediaW):
+    """The material id of the medium a ray travels in (its innermost object's), -1: none."""
+    if media.count > 0:
+        return media.materials[0]
+    return -1
+
+
+@wp.func
+def medium_ior(materials: wp.array(dtype=MaterialW), media: MediaW):
+    """The refractive index of the medium a ray travels in, 1 outside every object."""
+    if media.count > 0:
+        return materials[media.materials[0]].ior
+    return 1.0
+
+
+@wp.func
+def outward(media: MediaW, obj: int, material: int):
+    """`media` with object `obj` (of `material`) added outside all of them (as a walk from a point
+    meets the objects around it, `medium.media_at`); unchanged when full."""
+    if media.count == MEDIA_DEPTH:
+        return media
+    objects = media.objects
+    materials = media.materials
+    objects[media.count] = obj
+    materials[media.count] = material
+    out = MediaW()
+    out.objects = objects
+    out.materials = materials
+    out.count = media.count + 1
+    return out
+
+
+@wp.func
+def entered(media: MediaW, obj: int, material: int):
+    """`media` (not holding `obj`) with object `obj` (of `material`) added innermost. When full, the
+    outermost is forgotten (module doc)."""
+    objects = IdsW(-1)
+    materials = IdsW(-1)
+    objects[0] = obj
+    materials[0] = material
+    for k in range(MEDIA_DEPTH - 1):
+        objects[k + 1] = media.objects[k]
+        materials[k + 1] = media.materials[k]
+    out = MediaW()
+    out.objects = objects
+    out.materials = materials
+    out.count = wp.min(media.count + 1, MEDIA_DEPTH)
+    return out
+
+
+@wp.func
+def left(media: MediaW, obj: int):
+    """`media` without object `obj` (unchanged where it is not there): what lies outside it."""
+    objects = IdsW(-1)
+    materials = IdsW(-1)
+    count = int(0)
+    for k in range(MEDIA_DEPTH):
+        if k < media.count and media.objects[k] != obj:
+            objects[count] = media.objects[k]
+            materials[count] = media.materials[k]
+            count = count + 1
+    out = MediaW()
+    out.objects = objects
+    out.materials = materials
+    out.count = count
+    return out
+
+
+@wp.func
+def interface_eta(materials: wp.array(dtype=MaterialW), media: MediaW, obj: int, entering: int, kt: float,
+                  ior: float):
+    """eta = n_outside / n_inside at a surface of object `obj` (material index `ior`, transmission
+    `kt`) that a ray inside `media` meets, `entering` it or not (module doc)."""
+    n_out = medium_ior(materials, left(media, obj))
+    if entering == 0 and kt > 0.0:
+        return ior / n_out
+    return n_out / ior
+
+
+@wp.func
+def refracted_media(media: MediaW, obj: int, material: int, entering: int):
+    """What a ray refracted through a surface of transparent object `obj` travels in."""
+    outside = left(media, obj)
+    if entering == 1:
+        return entered(outside, obj, material)
+    return outside
+
+
+def media_struct(pairs) -> MediaW:
+    """A `MediaW` from Python: `pairs` of (object id, material id), innermost first (`medium.camera_media`)."""
+    objects, materials = [-1] * MEDIA_DEPTH, [-1] * MEDIA_DEPTH
+    for k, (obj, material) in enumerate(pairs):
+        objects[k], materials[k] = int(obj), int(material)
+    media = MediaW()
+    media.objects = IdsW(*objects)
+    media.materials = IdsW(*materials)
+    media.count = len(pairs)
+    return media
