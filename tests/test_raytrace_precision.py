@@ -254,18 +254,22 @@ def test_outside_the_sphere_only_its_chord_absorbs():
 def test_a_camera_inside_a_closed_mesh_or_nested_objects_starts_in_the_innermost_medium():
     """Eye at the centre of a transparent box mesh (half-size 0.5): each ray absorbs over 0.5 / max |d_i|
     to the wall it leaves by. Inside a sphere of radius 0.3 nested in that box, with an opaque ball
-    in front that is not around the eye: the sphere's medium, over the 0.3 to its wall (a ray that
-    leaves an object travels in no medium after it: the tracer does not nest media)."""
+    in front that is not around the eye: the sphere's medium, over the 0.3 to its wall, then the
+    box's (media nest: `camera_media` lists the sphere, then the box), 0.5 / max |d_i| in all."""
     box = {"type": "mesh", "builtin": "box", "resolution": 1, "material": "g"}
     image = render(Scene.from_dict(inside([box], [0, 0, 0])))
     rays = pinhole_directions(inside([box], [0, 0, 0])["camera"], np.arange(16 * 16))
     np.testing.assert_allclose(image[..., 0].ravel(), np.exp(-0.5 / np.abs(rays).max(axis=1)), rtol=1e-4)
     nested = inside([box, {"type": "sphere", "center": [0, 0, 0], "radius": 0.3, "material": "g"},
                      {"type": "sphere", "center": [0, 0, -10], "radius": 0.5, "material": "opaque"}], [0, 0, 0])
-    tree = render_frame(Scene.from_dict(nested)).ray_tree
+    g = Scene.from_dict(nested).material_index("g")
+    assert camera_media(compile_scene(nested))[0] == ((1, g), (0, g))
+    frame = render_frame(Scene.from_dict(nested))
+    tree = frame.ray_tree
     primary = tree.parent == -1
-    assert np.all(tree.medium[primary] == Scene.from_dict(nested).material_index("g"))
+    assert np.all(tree.medium[primary] == g)
     np.testing.assert_allclose(tree.distance[primary], 0.3, rtol=1e-5)
+    np.testing.assert_allclose(frame.image[..., 0].ravel(), np.exp(-0.5 / np.abs(rays).max(axis=1)), rtol=1e-4)
 
 
 def test_outside_every_object_primary_rays_start_in_no_medium():
@@ -289,12 +293,12 @@ def test_the_near_plane_clips_a_bubble_around_the_eye_and_its_medium():
     g = Scene.from_dict(d).material_index("g")
     for near in (0.001, 0.01):
         scene = Scene.from_dict(transformed(d, near=near))
-        assert camera_media(compile_scene(scene)) == (g, False)
+        assert camera_media(compile_scene(scene)) == (((0, g),), False)
         image = render(scene)
         np.testing.assert_allclose(image[..., 0], np.exp(-0.05), rtol=1e-5)
         np.testing.assert_array_equal(image[..., 1:], 1.0)
     clipped = Scene.from_dict(transformed(d, near=0.1))
-    assert camera_media(compile_scene(clipped)) == (g, True)
+    assert camera_media(compile_scene(clipped)) == (((0, g),), True)
     np.testing.assert_array_equal(render(clipped), 1.0)
     np.testing.assert_array_equal(render(clipped, method="raster"), 1.0)
 

@@ -11,15 +11,16 @@ interfaces trace glass in water:
     leaving a transparent object:                                        eta = ior / n_out
     either side of an opaque one (kt = 0, no inside):                    eta = n_out / ior
 
-n_out being the index of the object's outside: of the innermost object around the ray other than
-it (`left`), 1 (air) for none. The refracted ray's list gains the object entered, innermost
-(`entered`), or loses the object left (wherever it is in the list: overlapping objects are left in
-any order); a reflected ray keeps its parent's. A ray that leaves an object not in its list (the
-list lost it, or a crossing was missed) keeps its list, and one that enters an object already in
-it (a miscounted crossing) moves it innermost: so a scene without nesting traces as it would with
-one medium per ray. Entering an object with MEDIA_DEPTH already around the ray forgets the
-outermost one: a ray that later leaves all the inner ones takes the forgotten one's surroundings
-for air (index 1, no absorption).
+n_out being the index of the object's outside -- of the innermost object around the ray other than
+it (`outside`), 1 (air) for none. The refracted ray's list gains the object entered, innermost
+(`entered`), or loses the object left, wherever it is in the list (overlapping objects are left in
+any order); a reflected ray keeps its parent's. Two rules keep a list that missed a crossing
+consistent, and a scene without nesting traced as with one medium per ray: a ray that enters an
+object already in its list moves it innermost, and one that leaves an object not in its list
+leaves the innermost one (a slab of two planes facing out is entered through one and left through
+the other; an open mesh's back side counts as its inside). A ray entering an object with
+MEDIA_DEPTH objects already around it forgets the outermost: after leaving the inner ones it takes
+that one's inside for air (index 1, no absorption).
 """
 
 from __future__ import annotations
@@ -89,8 +90,8 @@ def outward(media: MediaW, obj: int, material: int):
 
 @wp.func
 def entered(media: MediaW, obj: int, material: int):
-    """`media` (not holding `obj`) with object `obj` (of `material`) added innermost. When full, the
-    outermost is forgotten (module doc)."""
+    """`media` (not holding `obj`) with object `obj` (of `material`) added innermost; the outermost
+    forgotten when full (module doc)."""
     objects = IdsW(-1)
     materials = IdsW(-1)
     objects[0] = obj
@@ -106,13 +107,21 @@ def entered(media: MediaW, obj: int, material: int):
 
 
 @wp.func
-def left(media: MediaW, obj: int):
-    """`media` without object `obj` (unchanged where it is not there): what lies outside it."""
+def outside(media: MediaW, obj: int, leaving: int):
+    """What lies outside object `obj` at a surface a ray inside `media` crosses: `media` without
+    `obj`; where it is not among them, `media` as they are, or without the innermost when `leaving`
+    (module doc)."""
+    drop = int(-1)
+    for k in range(MEDIA_DEPTH):
+        if drop < 0 and k < media.count and media.objects[k] == obj:
+            drop = k
+    if drop < 0 and leaving == 1:
+        drop = 0
     objects = IdsW(-1)
     materials = IdsW(-1)
     count = int(0)
     for k in range(MEDIA_DEPTH):
-        if k < media.count and media.objects[k] != obj:
+        if k < media.count and k != drop:
             objects[count] = media.objects[k]
             materials[count] = media.materials[k]
             count = count + 1
@@ -128,19 +137,17 @@ def interface_eta(materials: wp.array(dtype=MaterialW), media: MediaW, obj: int,
                   ior: float):
     """eta = n_outside / n_inside at a surface of object `obj` (material index `ior`, transmission
     `kt`) that a ray inside `media` meets, `entering` it or not (module doc)."""
-    n_out = medium_ior(materials, left(media, obj))
     if entering == 0 and kt > 0.0:
-        return ior / n_out
-    return n_out / ior
+        return ior / medium_ior(materials, outside(media, obj, 1))
+    return medium_ior(materials, outside(media, obj, 0)) / ior
 
 
 @wp.func
 def refracted_media(media: MediaW, obj: int, material: int, entering: int):
     """What a ray refracted through a surface of transparent object `obj` travels in."""
-    outside = left(media, obj)
     if entering == 1:
-        return entered(outside, obj, material)
-    return outside
+        return entered(outside(media, obj, 0), obj, material)
+    return outside(media, obj, 1)
 
 
 def media_struct(pairs) -> MediaW:
