@@ -13,7 +13,8 @@ to the sample. A node at depth k < max_depth spawns a reflected ray with weight
 weight * (kr F_r + kt T) and a refracted ray with weight weight * kt F_t (`surface.fresnel_split`;
 T > 0 only under total internal reflection, where no refracted ray exists).
 A ray travelling inside a medium (refracted into an object, until it refracts out) is multiplied
-by Beer's exp(-alpha d) over its length d, alpha being that object's absorption. A child is not
+by Beer's exp(-alpha d) over its length d, alpha being that medium's absorption: the innermost of
+the transparent objects the ray carries (`nesting`: media nest, glass in water). A child is not
 traced when its weight is 0, when its depth would pass `max_depth` (it then contributes black), or
 -- Hall's adaptive control -- when the largest channel of its weight before its own absorption is
 below `threshold`.

@@ -1,14 +1,14 @@
-"""The medium a primary ray starts in: where its Beer absorption begins.
+"""The media a primary ray starts in: where its Beer absorption begins.
 
-A ray refracted into an object travels in its medium (`RayW.medium`, its material) until it leaves
-through a surface's back side (`surface.py`). Which medium holds a point is found by walking a ray
-from it (`medium_at`) through every surface it crosses (each walked on from just past it:
-`trace.past_surface`), keeping a depth count: +1 entering a surface (hitting the side its stored
-normal points to: outward for spheres, the plane's normal, the winding normal for triangles), -1
-leaving one. The
-first crossing that takes the count below 0 leaves an object the point was inside -- the innermost
-one where objects nest -- and its material is the medium (if that object is transparent, kt > 0; an
-opaque one has none). Closed objects give the same answer along any walk. A plane, or a mesh that
+A ray refracted into an object travels in its medium until it leaves through a surface's back side,
+carrying the transparent objects it is inside (`nesting.MediaW`, innermost first). Which objects
+hold a point is found by walking a ray from it (`media_at`) through every surface it crosses (each
+walked on from just past it: `trace.past_surface`), keeping a depth count: +1 entering a surface
+(hitting the side its stored normal points to: outward for spheres, the plane's normal, the winding
+normal for triangles), -1 leaving one. Each crossing that takes the count to a new low leaves an
+object the point is inside: the first the innermost, the next the one around it, and so on, out to
+`nesting.MEDIA_DEPTH` of them or to an opaque one (kt = 0: no medium in it, nor past it for a ray
+that cannot leave it). Closed objects give the same answer along any walk. A plane, or a mesh that
 is not closed, has no inside of its own: its back side counts as inside, as for the rays refracted
 through it, so a point is in its medium when the walk meets its back first (a slab of two planes
 facing out: entered, then left -- no medium).
@@ -22,7 +22,7 @@ inside the eye's medium -- else from the last such (clipped) surface. An eye ins
 lies wholly before the near plane sees what is behind the bubble unabsorbed, as the rasterizer
 shows it without the bubble.
 
-Cost: a perspective camera's medium is walked once per frame, from the eye along the view
+Cost: a perspective camera's media are walked once per frame, from the eye along the view
 direction; each ray then looks back from its near-plane point for a clipped surface (one short
 ray), and walks only if it finds one -- and only when some surface comes within the ball around
 the eye that holds the near plane's corners (`per_ray_check`). An orthographic camera's rays start

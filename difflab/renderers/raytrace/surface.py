@@ -2,9 +2,10 @@
 
 Surfaces are two-sided: the geometric and shading normals are flipped to face the incoming ray
 (so inside a refracting object they point inwards). A ray hitting the side its geometric normal
-points to is *entering* (eta = 1 / ior); from the other side it is *leaving* (eta = ior) -- where
-the object is transparent (kt > 0). An opaque one has no inside: eta = 1 / ior on both its sides,
-whatever its winding or its plane's normal sign (`surface_eta`).
+points to is *entering* (eta = n_out / ior, n_out the index of the medium around the object, 1 in
+air); from the other side it is *leaving* (eta = ior / n_out) -- where the object is transparent
+(kt > 0). An opaque one has no inside: eta = n_out / ior on both its sides, whatever its winding or
+its plane's normal sign (`SurfaceW.eta`, from the ray's media: `nesting.interface_eta`).
 New rays start the hit's own `trace.ray_offset` off the surface (a few float32 ulps of its
 coordinates, from its `trace.hit_point`), measured along the geometric normal on the side they
 travel to, stepped along the ray itself (`trace.spawn_origin`); a ray leaving a sphere outwards,

@@ -42,7 +42,8 @@ class RayTree:
                   nothing and the node sees the background.
       object      scene object index hit (-1: none); face: mesh triangle index hit (-1: none).
       cell        checker cell 0 / 1 at the hit (cell 1 swaps in ka2 / kd2).
-      medium      material id of the object the ray travelled inside to get here (-1: outside);
+      medium      material id of the medium the ray travelled in to get here: the innermost
+                  transparent object around it (`nesting`: media nest), -1 outside every one;
       distance    (float32) how far it travelled in it (inf where it hit nothing; a primary ray: from
                   the eye, or from the last surface before the near plane, `medium.primary_medium`).
                   The path weight takes exp(-alpha d) over it, alpha = absorption of `medium`
