@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..errors import FitError
 from ..lighting.jax_model import (LightGeometry, LightsJ, fog_factor, light_geometry, lights_to_jax, shade_geometry,
                                   sum_axis, textured_surface)
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS
@@ -198,14 +199,22 @@ def shade_gbuffer(gbuffer, materials, lights, ambient=None, *, dtype=jnp.float32
         ambient: (3,) Ia; default: the G-buffer's.
     Returns:
         (H, W, 3) JAX array of linear RGB, equal to `Frame.image` (to float32 rounding) when the
-        arguments are the scene's own.
+        arguments are the scene's own. A textured material's samples take the G-buffer's filtered
+        texel (`GBuffer.texture`) times the coefficient the texture targets, as the renderer does
+        under Phong shading (a ray-traced G-buffer is Phong's); under flat and Gouraud shading the
+        texel modulates interpolated lighting, which is not formed here: a FitError.
     """
     table = materials if isinstance(materials, MaterialTable) else MaterialTable.from_scene(materials, dtype)
     lights = lights if isinstance(lights, LightsJ) else lights_to_jax(tuple(lights), dtype)
     ambient = jnp.asarray(gbuffer.ambient if ambient is None else ambient, dtype)
     side = int(gbuffer.spp_side)
     shape = (gbuffer.mask.shape[0] // side, gbuffer.mask.shape[1] // side, 3)
-    return _pixels_jit(GBufferModel.build(gbuffer, None, lights, dtype), table, lights, ambient).reshape(shape)
+    model = GBufferModel.build(gbuffer, None, lights, dtype, fixed_texels=True)
+    textured = [m for m in model.material_ids if m >= 0 and int(table.texture_target[m]) >= 0]
+    if textured and model.texel is None:
+        raise FitError(f"shade_gbuffer: materials[{textured[0]}] has an image texture, which the {gbuffer.shading} "
+                       "G-buffer's image model does not form (textures are re-formed under phong shading only)")
+    return _pixels_jit(model, table, lights, ambient).reshape(shape)
 
 
 def is_one_of(ids: np.ndarray, chosen) -> np.ndarray:
@@ -252,7 +261,9 @@ class GBufferModel(eqx.Module):
     `LightGeometry` under the lights it was built for, the composition and the formation
     (`pixel_arrays`), and -- when texels are fitted -- each point's taps into the table's stacked
     texels (rows (R, K), -1: none; tap_weight (R, K); targets: the TARGET_* ids those textures
-    modulate; see `texels.py`); material_ids: the distinct material ids among its points (static).
+    modulate; see `texels.py`); or -- `shade_gbuffer` -- texel (R, 3): each point's filtered texel,
+    `GBuffer.texture` at its sample (Phong shading: the points are the samples), fixed; material_ids:
+    the distinct material ids among its points (static).
     `pixels` is the (U, 3) image for given materials, light intensities (the lights' other fields
     are those it was built with) and ambient."""
 
@@ -265,10 +276,12 @@ class GBufferModel(eqx.Module):
     tap_weight: jnp.ndarray | None = None
     targets: tuple | None = eqx.field(static=True, default=None)
     material_ids: tuple = eqx.field(static=True, default=())
+    texel: jnp.ndarray | None = None
 
     @classmethod
-    def build(cls, gbuffer, pixels, lights: LightsJ, dtype, texels=None) -> GBufferModel:
-        """`texels`: a `texels.TexelSource` for the fitted textures, or None."""
+    def build(cls, gbuffer, pixels, lights: LightsJ, dtype, texels=None, fixed_texels=False) -> GBufferModel:
+        """`texels`: a `texels.TexelSource` for the fitted textures, or None; `fixed_texels`: the
+        points' texels from `GBuffer.texture` (`texel`), where the G-buffer has them under Phong shading."""
         points, comp, formation, point_ids = pixel_arrays(gbuffer, pixels, dtype)
         kinds = tuple(sorted(set(np.asarray(lights.kind).tolist())))  # the terms the geometry needs
         material, cell, geometry, comp = _device_model(points, comp, lights, formation.specular, kinds)
@@ -278,9 +291,12 @@ class GBufferModel(eqx.Module):
             if point_ids.size == 0:  # the dummy point of `pixel_arrays`
                 rows, weight = np.full((1, 4), -1, np.int32), np.zeros((1, 4))
             taps, tap_weight = jnp.asarray(rows), jnp.asarray(np.asarray(weight, np.float64), dtype)
+        texel = None
+        if fixed_texels and gbuffer.shading == "phong" and gbuffer.texture is not None and point_ids.size:
+            texel = jnp.asarray(np.take(gbuffer.texture.reshape(-1, 3), point_ids, axis=0), dtype)
         return cls(material=material, cell=cell, geometry=geometry, comp=comp, formation=formation,
                    taps=taps, tap_weight=tap_weight, targets=None if texels is None else texels.targets,
-                   material_ids=distinct_ids(points.material))  # (the dummy point's id: -1)
+                   material_ids=distinct_ids(points.material), texel=texel)  # (the dummy point's id: -1)
 
     def point_texels(self, texels):
         """(R, 3) each point's texture value from the stacked `texels` (its filter taps)."""
@@ -297,9 +313,10 @@ class GBufferModel(eqx.Module):
         return pixel_texels(pixel, index.reshape(-1), self.taps)
 
     def pixels(self, table: MaterialTable, lights: LightsJ, ambient, texel=None):
-        """`texel` (R, 3): the points' texture values (default: `point_texels(table.texels)`)."""
-        if texel is None and self.taps is not None:
-            texel = self.point_texels(table.texels)
+        """`texel` (R, 3): the points' texture values (default: `point_texels(table.texels)`, or the
+        fixed `self.texel`)."""
+        if texel is None:
+            texel = self.texel if self.taps is None else self.point_texels(table.texels)
         colors = point_colors(self.material, self.cell, self.geometry, table, lights.intensity, ambient,
                               self.formation.specular, texel, self.targets)
         return colors if self.formation.direct else compose(colors, self.comp, self.formation)
