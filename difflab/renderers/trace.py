@@ -145,6 +145,19 @@ def ray_triangle(origin: wp.vec3, direction: wp.vec3, a: wp.vec3, b: wp.vec3, c:
     return wp.dot(e2, qvec) * inv_det, b1, b2
 
 
+@wp.func_native("""
+float t = 0.0f, u = 0.0f, v = 0.0f, sign = 0.0f;
+if (wp::intersect_ray_tri_woop(start, dir, a, b, c, t, u, v, sign, nullptr))
+    return wp::vec4(t, u, v, 1.0f);
+return wp::vec4(0.0f, 0.0f, 0.0f, 0.0f);
+""")
+def woop_triangle(start: wp.vec3, dir: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.vec4:
+    """`mesh_query_ray`'s own triangle test (Warp's watertight intersect_ray_tri_woop: Woop, Benthin
+    and Wald 2013): (t, u, v, 1) on a hit, t >= 0 and start + t dir = u a + v b + (1 - u - v) c,
+    else 0. Whatever asks a mesh triangle what the BVH would answer uses it, bit for bit."""
+    ...
+
+
 @wp.func
 def no_hit(t_max: float):
     """A miss (nothing before t_max)."""
@@ -368,34 +381,55 @@ def opaque_ahead(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), hit: Hi
             return 1
 
 
+SHADOW_GOES_ON, SHADOW_LIT, SHADOW_BLOCKED, SHADOW_CUT = 0, 1, 2, 3  # `shadow_step`'s verdicts
+
+
+@wp.func
+def shadow_step(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), hit: HitW, crossing: int, transparent: int,
+                visibility: float, origin: wp.vec3, l: wp.vec3, remaining: float, ignore_object: int):
+    """What a shadow ray makes of the nearest surface `hit` it meets (or a miss) as its `crossing`-th
+    (from 0): (verdict, visibility, origin, remaining). A miss: SHADOW_LIT. An opaque surface, or any
+    with `transparent` off: SHADOW_BLOCKED, visibility 0. A transparent one (kt > 0): visibility x kt
+    and the ray goes on from `past_surface` (SHADOW_GOES_ON; SHADOW_LIT if that passes the light),
+    except the one past MAX_SHADOW_CROSSINGS: visibility 0, SHADOW_CUT where the ray would otherwise
+    reach the light, SHADOW_BLOCKED where an opaque surface lies further on (`opaque_ahead`, through
+    the BVH). `shadow_ray` and the light buffer's walk (`lightbuffer.buffered_visibility`) both step
+    with it."""
+    if hit.kind == HIT_NONE:
+        return SHADOW_LIT, visibility, origin, remaining
+    kt = materials[hit.material].kt
+    if transparent == 0 or kt <= 0.0:
+        return SHADOW_BLOCKED, 0.0, origin, remaining
+    if crossing == MAX_SHADOW_CROSSINGS:
+        if opaque_ahead(geom, materials, hit, origin, l, remaining, ignore_object) == 1:
+            return SHADOW_BLOCKED, 0.0, origin, remaining
+        return SHADOW_CUT, 0.0, origin, remaining
+    beyond, step = past_surface(geom, hit, origin, l)
+    verdict = SHADOW_GOES_ON
+    if remaining - step <= 0.0:
+        verdict = SHADOW_LIT
+    return verdict, visibility * kt, beyond, remaining - step
+
+
 @wp.func
 def shadow_ray(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), p: wp.vec3, l: wp.vec3, distance: float,
                ignore_object: int, transparent: int):
-    """(visibility in [0, 1], cut) of a light at `distance` along unit `l` from p.
+    """(visibility in [0, 1], cut) of a light at `distance` along unit `l` from p, through the BVH.
 
     An opaque surface in between gives 0. With `transparent` set, each surface with kt > 0 crossed
     multiplies the visibility by kt (the ray is not refracted), up to MAX_SHADOW_CROSSINGS of them:
     a ray meeting one more gives 0, and cut = 1 where it would otherwise reach the light (no opaque
-    surface lies further on: `opaque_ahead`), as the light buffer's, which sees every candidate, counts
-    it. The caller offsets p off the surface.
+    surface lies further on: `shadow_step`). The caller offsets p off the surface.
     """
     visibility = float(1.0)
     origin = p
     remaining = distance
     for crossing in range(MAX_SHADOW_CROSSINGS + 1):
         hit = closest_hit(geom, origin, l, 0.0, remaining, ignore_object)
-        if hit.kind == HIT_NONE:
-            return visibility, 0
-        kt = materials[hit.material].kt
-        if transparent == 0 or kt <= 0.0:
-            return 0.0, 0
-        if crossing == MAX_SHADOW_CROSSINGS:
-            return 0.0, 1 - opaque_ahead(geom, materials, hit, origin, l, remaining, ignore_object)
-        visibility = visibility * kt
-        origin, step = past_surface(geom, hit, origin, l)
-        remaining = remaining - step
-        if remaining <= 0.0:
-            return visibility, 0
+        verdict, visibility, origin, remaining = shadow_step(geom, materials, hit, crossing, transparent, visibility,
+                                                             origin, l, remaining, ignore_object)
+        if verdict != SHADOW_GOES_ON:
+            return visibility, int(verdict == SHADOW_CUT)
     return 0.0, 1  # (not reached: the last pass returns)
 
 

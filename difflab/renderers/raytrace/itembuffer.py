@@ -49,7 +49,7 @@ from ..camera import camera_frame, camera_struct
 from ..launch import load_kernels
 from ..raster.coverage import NO_HIT
 from ..raster.driver import mark_key_cleared, zbuffer
-from ..trace import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triangle_hit
+from ..trace import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triangle_hit, woop_triangle
 from .selfcross import passes_through_itself
 
 wp.set_module_options({"enable_backward": False})
@@ -79,17 +79,6 @@ class ItemBufferW:
     faces: wp.array2d(dtype=wp.int32)
     face_normal: wp.array(dtype=wp.vec3)  # unit
     asked: wp.array(dtype=wp.int32)  # per row: the ambiguous samples, whose mesh hit came from the BVH
-
-
-@wp.func_native("""
-float t = 0.0f, u = 0.0f, v = 0.0f, sign = 0.0f;
-if (wp::intersect_ray_tri_woop(start, dir, a, b, c, t, u, v, sign, nullptr))
-    return wp::vec4(t, u, v, 1.0f);
-return wp::vec4(0.0f, 0.0f, 0.0f, 0.0f);
-""")
-def woop_triangle(start: wp.vec3, dir: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.vec4:
-    """`mesh_query_ray`'s triangle test (Warp's intersect_ray_tri_woop): (t, u, v, 1) on a hit, else 0."""
-    ...
 
 
 @wp.func(inline=True)

@@ -3,17 +3,27 @@
 Around every point or spot light sits a cube of directions, each face cut into R x R cells. A cell
 lists every surface that can be seen from the light through it -- the only surfaces a shadow ray
 from a point in that direction can hit on its way to the light -- sorted by a lower bound of their
-distance to the light ("z-ordered"). A shadow ray from p looks up the cell of p - L, tests the list
-in order, and stops at the first opaque hit, or at the first candidate that starts farther from the
-light than p. Directional lights keep the ordinary BVH query.
+distance to the light ("z-ordered"). A shadow ray from p looks up the cell of p - L and finds the
+nearest surface among its candidates (stopping at the first that starts farther from the light than
+p) with the BVH path's own tests and choice (`buffered_hit`: the BVH's watertight `woop_triangle`,
+not another triangle test, so that a ray grazing an edge is blocked or not alike), and walks on past
+transparent ones as `trace.shadow_ray` does (`trace.shadow_step`): the visibility is the BVH's, bit
+for bit. Directional lights keep the ordinary BVH query.
 
 Cells: d = p - L, a = the axis of d's largest |component|, s = its sign; face = 2 a + (s < 0); with
 (b, c) the other two axes in increasing order, u = d_b / |d_a| and v = d_c / |d_a| in [-1, 1];
 column = floor((u + 1) R / 2), row = floor((v + 1) R / 2), both clamped to [0, R - 1].
 
-A triangle (or a sphere's bounding box) entirely on the face's side of the light projects to a
-convex region whose bounding box of cells is a conservative candidate set; one that straddles the
-plane through the light is listed in every cell of that face; planes are listed everywhere.
+The lists are conservative for float32 rays: a shadow ray's line passes the light only within a few
+ulps (its offset origin, its rounded direction), its cell is looked up and its triangles tested in
+float32. So every surface is listed as if grown by DILATION x the light's `scene_scale` (2^-12:
+~2000 ulps, under 1e-3 of a cell at R = 256) on every side: a triangle (or a sphere's bounding box)
+whose grown set lies on the face's side of the light projects within its corners' cell box widened
+accordingly (`cell_ranges`); one that reaches the plane through the light is listed in every cell
+of that face; planes are listed everywhere; the distance bounds are lowered by sqrt(3) x the growth.
+A ray whose line passes the light farther than a quarter of that growth, less TRUST_ULPS of its
+rounding (`follows_cell`: an origin far out on a plane, a transparent walk stepped off its line at
+a grazing crossing) asks the BVH instead.
 """
 
 from __future__ import annotations
@@ -25,11 +35,14 @@ import numpy as np
 from ..._warp import wp
 
 from ...lighting.warp_model import MaterialW
-from ..trace import HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, MAX_SHADOW_CROSSINGS, SceneGeomW, ray_plane, ray_triangle
+from ..trace import HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, MAX_SHADOW_CROSSINGS, SHADOW_CUT, SHADOW_GOES_ON, SceneGeomW, \
+    closest_hit, finish_hit, max_abs, no_hit, ray_plane, ray_sphere, shadow_step, triangle_hit, woop_triangle
 
 wp.set_module_options({"enable_backward": False})
 
 DEFAULT_RESOLUTION = 32  # cells per cube-face edge for ~10^4 triangles (see `auto_resolution`)
+DILATION = 2.0 ** -12  # candidates are listed for their surface grown by this x the light's `scene_scale` (module doc)
+TRUST_ULPS = 64.0  # float32 ulps of |origin| + scale a ray's tests may be off by (`follows_cell`)
 
 
 @wp.struct
@@ -43,7 +56,8 @@ class LightBufferW:
     cell_start: wp.array(dtype=wp.int32)
     kind: wp.array(dtype=wp.int32)  # trace.HIT_TRIANGLE / HIT_SPHERE / HIT_PLANE
     index: wp.array(dtype=wp.int32)
-    near: wp.array(dtype=float)  # lower bound of the candidate's distance to the light
+    near: wp.array(dtype=float)  # lower bound of the candidate's grown surface's distance to the light
+    scale: wp.array(dtype=float)  # per light: `scene_scale`, what its lists' DILATION is a fraction of
     tests: wp.array(dtype=wp.int64)  # (1,): candidates tested by every shadow ray together
 
 
@@ -77,88 +91,96 @@ def cube_cell(d: wp.vec3, resolution: int):
 
 
 @wp.func
-def crossings_of(geom: SceneGeomW, vertices: wp.array(dtype=wp.vec3), faces: wp.array2d(dtype=wp.int32), kind: int,
-                 index: int, origin: wp.vec3, l: wp.vec3, distance: float):
-    """How many times the segment origin + t l, 0 < t < distance, crosses candidate (kind, index)."""
-    if kind == HIT_TRIANGLE:
-        t, b1, b2 = ray_triangle(origin, l, vertices[faces[index, 0]], vertices[faces[index, 1]],
-                                 vertices[faces[index, 2]])
-        if t > 0.0 and t < distance and b1 >= 0.0 and b2 >= 0.0 and b1 + b2 <= 1.0:
-            return 1
-        return 0
-    if kind == HIT_SPHERE:
-        oc = geom.sphere_center[index] - origin
-        h = wp.dot(l, oc)
-        closest = oc - h * l
-        radius = geom.sphere_radius[index]
-        disc = radius * radius - wp.dot(closest, closest)
-        if disc < 0.0:
-            return 0
-        s = wp.sqrt(disc)
-        count = int(0)
-        if h - s > 0.0 and h - s < distance:
-            count = count + 1
-        if h + s > 0.0 and h + s < distance:
-            count = count + 1
-        return count
-    t = ray_plane(origin, l, geom.plane_point[index], geom.plane_normal[index], 0.0)
-    if t > 0.0 and t < distance:
-        return 1
-    return 0
+def follows_cell(lb: LightBufferW, q: int, light_p: wp.vec3, origin: wp.vec3, l: wp.vec3):
+    """Whether the shadow ray from `origin` along unit `l` keeps to the cell of `origin`: its line passes
+    the light closer than the lists' dilation allows, with room for the float32 rounding of this
+    test, of the cell's look-up and of the triangle test (module doc)."""
+    w = light_p - origin
+    off_line = wp.length(w - wp.dot(w, l) * l)
+    rounding = TRUST_ULPS * 1.1920928955078125e-07 * (max_abs(origin) + lb.scale[q])
+    return off_line + rounding <= 0.25 * DILATION * lb.scale[q]
 
 
 @wp.func
-def candidate_object(geom: SceneGeomW, kind: int, index: int):
-    if kind == HIT_TRIANGLE:
-        return geom.face_object[index]
-    if kind == HIT_SPHERE:
-        return geom.sphere_object[index]
-    return geom.plane_object[index]
-
-
-@wp.func
-def candidate_material(geom: SceneGeomW, kind: int, index: int):
-    if kind == HIT_TRIANGLE:
-        return geom.face_material[index]
-    if kind == HIT_SPHERE:
-        return geom.sphere_material[index]
-    return geom.plane_material[index]
+def buffered_hit(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(dtype=wp.vec3),
+                 faces: wp.array2d(dtype=wp.int32), q: int, light_p: wp.vec3, origin: wp.vec3, l: wp.vec3, t_max: float,
+                 ignore_object: int, first: int):
+    """`trace.closest_hit(geom, origin, l, 0, t_max, ignore_object)` among the candidates of origin's
+    cell of light q: the same tests (`ray_sphere`, `ray_plane`, the BVH's `woop_triangle` with its
+    0 <= t < t_max), the same choice (the nearest sphere or plane, a sphere before a plane and the
+    lower index at equal t; a triangle only when strictly nearer) -- the same hit, as long as
+    `follows_cell`. Stops at the first candidate lying beyond origin (z-order); with `first` set, at
+    the first candidate hit (an opaque shadow ray needs only to know that something is: a hit that
+    is not the nearest, but a hit whenever the BVH finds one -- `trace.leaving_skip` never skips a
+    mesh, so no triangle is skipped)."""
+    cell = lb.light_cell0[q] + cube_cell(origin - light_p, lb.resolution)
+    reach = wp.length(origin - light_p)
+    hit = no_hit(t_max)
+    face = int(-1)
+    found = wp.vec4(0.0)
+    nearest = t_max  # the nearest triangle's t
+    tested = int(0)
+    for e in range(lb.cell_start[cell], lb.cell_start[cell + 1]):
+        if lb.near[e] >= reach:
+            break  # z-ordered: this candidate and every later one lie beyond origin
+        tested = tested + 1
+        k = lb.index[e]
+        if lb.kind[e] == HIT_TRIANGLE:
+            tri = woop_triangle(origin, l, vertices[faces[k, 0]], vertices[faces[k, 1]], vertices[faces[k, 2]])
+            if tri[3] > 0.0 and (tri[0] < nearest or (tri[0] == nearest and face >= 0 and k < face)):
+                nearest = tri[0]
+                face = k
+                found = tri
+                if first == 1:
+                    break
+        elif lb.kind[e] == HIT_SPHERE:
+            if geom.sphere_object[k] != ignore_object:
+                t = ray_sphere(origin, l, geom.sphere_center[k], geom.sphere_radius[k], 0.0)
+                if t > 0.0 and (t < hit.t or (t == hit.t and (hit.kind == HIT_PLANE or (hit.kind == HIT_SPHERE
+                                                                                         and k < hit.index)))):
+                    hit.t = t
+                    hit.kind = HIT_SPHERE
+                    hit.index = k
+                    if first == 1:
+                        break
+        elif geom.plane_object[k] != ignore_object:
+            t = ray_plane(origin, l, geom.plane_point[k], geom.plane_normal[k], 0.0)
+            if t > 0.0 and (t < hit.t or (t == hit.t and hit.kind == HIT_PLANE and k < hit.index)):
+                hit.t = t
+                hit.kind = HIT_PLANE
+                hit.index = k
+                if first == 1:
+                    break
+    wp.atomic_add(lb.tests, 0, wp.int64(tested))
+    if face >= 0 and found[0] < hit.t and geom.face_object[face] != ignore_object:
+        a = vertices[faces[face, 0]]
+        normal = wp.cross(vertices[faces[face, 1]] - a, vertices[faces[face, 2]] - a)  # as mesh_query_ray's
+        return triangle_hit(geom, face, found[0], found[1], found[2], wp.normalize(normal), origin, l)
+    return finish_hit(geom, hit, origin, l)
 
 
 @wp.func
 def buffered_visibility(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(dtype=wp.vec3),
-                        faces: wp.array2d(dtype=wp.int32), materials: wp.array(dtype=MaterialW), q: int,
-                        light_p: wp.vec3, p: wp.vec3, l: wp.vec3, distance: float, ignore_object: int,
-                        transparent: int):
-    """`trace.shadow_ray` through light q's buffer, (visibility, cut): 0 at the first opaque candidate
-    crossed, else the product of kt over transparent crossings -- (0, 1) past MAX_SHADOW_CROSSINGS of
-    them with no opaque candidate crossed (a ray that would otherwise reach the light), as there."""
-    cell = lb.light_cell0[q] + cube_cell(p - light_p, lb.resolution)
-    reach = wp.length(p - light_p)
+                        faces: wp.array2d(dtype=wp.int32), materials: wp.array(dtype=MaterialW), q: int, light_p: wp.vec3,
+                        p: wp.vec3, l: wp.vec3, distance: float, ignore_object: int, transparent: int):
+    """`trace.shadow_ray` with light q's buffer, (visibility, cut): the same walk (`shadow_step`), each
+    surface found among its cell's candidates (`buffered_hit`) while the ray `follows_cell`, else
+    through the BVH -- the same surfaces, hence the same visibility, bit for bit."""
     visibility = float(1.0)
-    crossed = int(0)
-    tested = int(0)
-    for e in range(lb.cell_start[cell], lb.cell_start[cell + 1]):
-        if lb.near[e] >= reach:
-            break  # z-ordered: this candidate and every later one lie beyond p
-        kind = lb.kind[e]
-        index = lb.index[e]
-        if candidate_object(geom, kind, index) != ignore_object:
-            tested = tested + 1
-            n = crossings_of(geom, vertices, faces, kind, index, p, l, distance)
-            if n > 0:
-                kt = materials[candidate_material(geom, kind, index)].kt
-                if transparent == 0 or kt <= 0.0:
-                    crossed = 0
-                    visibility = 0.0
-                    break
-                for _ in range(n):
-                    visibility = visibility * kt
-                crossed = crossed + n
-    wp.atomic_add(lb.tests, 0, wp.int64(tested))
-    if crossed > MAX_SHADOW_CROSSINGS:
-        return 0.0, 1
-    return visibility, 0
+    origin = p
+    remaining = distance
+    for crossing in range(MAX_SHADOW_CROSSINGS + 1):
+        hit = no_hit(remaining)
+        if follows_cell(lb, q, light_p, origin, l):
+            hit = buffered_hit(geom, lb, vertices, faces, q, light_p, origin, l, remaining, ignore_object,
+                               1 - transparent)
+        else:
+            hit = closest_hit(geom, origin, l, 0.0, remaining, ignore_object)
+        verdict, visibility, origin, remaining = shadow_step(geom, materials, hit, crossing, transparent, visibility,
+                                                             origin, l, remaining, ignore_object)
+        if verdict != SHADOW_GOES_ON:
+            return visibility, int(verdict == SHADOW_CUT)
+    return 0.0, 1  # (not reached: the last pass returns)
 
 
 # ----------------------------------------------------------------------------- building (numpy)
@@ -173,18 +195,24 @@ class LightBuffer:
     entries: int
 
 
-def cell_ranges(points: np.ndarray, light: np.ndarray, axis: int, sign: float, resolution: int):
-    """For K-point convex sets (N, K, 3): per set its (row0, row1, col0, col1) cell box on cube face
-    (axis, sign), and whether it appears on that face at all."""
+def cell_ranges(points: np.ndarray, light: np.ndarray, axis: int, sign: float, resolution: int, grow: float):
+    """For K-point convex sets (N, K, 3), each grown by `grow` along every axis (Minkowski sum with a
+    cube): per set its (row0, row1, col0, col1) cell box on cube face (axis, sign), and whether it
+    appears on that face at all. A grown set whose depth d along the face's axis stays > 0 projects
+    within the box of its points' (u, v) widened by grow (1 + max |u|) / (min d - grow) (and so for
+    v): a shift e (|e_i| <= grow) moves u = x_b / x_a by (e_b - u e_a) / (x_a + e_a)."""
     b, c = [k for k in range(3) if k != axis]
     rel = points - light
     depth = sign * rel[..., axis]
-    ahead, behind = (depth > 1e-12).all(axis=1), (depth <= 1e-12).all(axis=1)
+    near_depth = depth.min(axis=1) - grow
+    ahead, behind = near_depth > 1e-12, depth.max(axis=1) + grow <= 0.0
     safe = np.where(depth > 1e-12, depth, 1.0)
     u, v = rel[..., b] / safe, rel[..., c] / safe
-    lo_u, hi_u, lo_v, hi_v = u.min(1), u.max(1), v.min(1), v.max(1)
+    wide = grow / np.where(ahead, near_depth, 1.0)
+    margin_u, margin_v = wide * (1.0 + np.abs(u).max(1)), wide * (1.0 + np.abs(v).max(1))
+    lo_u, hi_u, lo_v, hi_v = u.min(1) - margin_u, u.max(1) + margin_u, v.min(1) - margin_v, v.max(1) + margin_v
     seen = ~behind & (~ahead | ((hi_u >= -1) & (lo_u <= 1) & (hi_v >= -1) & (lo_v <= 1)))
-    full = ~ahead  # straddles the plane through the light: the whole face
+    full = ~ahead  # reaches the plane through the light: the whole face
     cell = lambda x: np.clip(np.floor((x + 1.0) * 0.5 * resolution), 0, resolution - 1).astype(np.int64)  # noqa: E731
     col0, col1 = np.where(full, 0, cell(lo_u)), np.where(full, resolution - 1, cell(hi_u))
     row0, row1 = np.where(full, 0, cell(lo_v)), np.where(full, resolution - 1, cell(hi_v))
@@ -202,9 +230,9 @@ def expand(ids, row0, row1, col0, col1, face, resolution):
     return ids[owner], (face * resolution + rows) * resolution + cols
 
 
-def light_entries(light: np.ndarray, prims: list, resolution: int):
-    """(kind, index, near, cell) arrays of one light's buffer. `prims`: (kind, points (N, K, 3),
-    near (N,), everywhere) per primitive kind."""
+def light_entries(light: np.ndarray, prims: list, resolution: int, grow: float):
+    """(kind, index, near, cell) arrays of one light's buffer, its surfaces grown by `grow`. `prims`:
+    (kind, points (N, K, 3), near (N,), everywhere) per primitive kind."""
     kinds, indices, nears, cells = [], [], [], []
     for kind, points, near, everywhere in prims:
         if not len(near):
@@ -217,7 +245,7 @@ def light_entries(light: np.ndarray, prims: list, resolution: int):
                     full = np.zeros(len(ids), np.int64)
                     owner, cell = expand(ids, full, full + resolution - 1, full, full + resolution - 1, face, resolution)
                 else:
-                    row0, row1, col0, col1, seen = cell_ranges(points, light, axis, sign, resolution)
+                    row0, row1, col0, col1, seen = cell_ranges(points, light, axis, sign, resolution, grow)
                     owner, cell = expand(ids[seen], row0[seen], row1[seen], col0[seen], col1[seen], face, resolution)
                 kinds.append(np.full(len(owner), kind))
                 indices.append(owner)
@@ -236,6 +264,13 @@ def scene_primitives(compiled) -> list:
     boxes = centres[:, None, :] + radii[:, None, None] * corners[None]
     return [(HIT_TRIANGLE, triangles, None, False), (HIT_SPHERE, boxes, (centres, radii), False),
             (HIT_PLANE, None, (geom.plane_point.numpy(), geom.plane_normal.numpy()), True)]
+
+
+def scene_scale(prims: list, light: np.ndarray) -> float:
+    """The largest |coordinate| of the light and of every mesh vertex and sphere's box: what the
+    float32 rounding of a shadow ray's origin and direction, and of its tests, is a few ulps of."""
+    boxes = [np.abs(points).max(initial=0.0) for _, points, _, everywhere in prims if not everywhere]
+    return float(max(np.abs(light).max(), *boxes))
 
 
 def near_bounds(kind, points, extra, light):
@@ -267,21 +302,25 @@ def build_light_buffer(compiled, resolution: int | None = None) -> LightBuffer:
     scene, device = compiled.scene, compiled.device
     resolution = auto_resolution(compiled.n_mesh_faces) if resolution is None else int(resolution)
     cells_per_light = 6 * resolution * resolution
-    cell0, counts, per_cells, kinds, indices, nears = [], [], [], [], [], []
+    cell0, scales, counts, per_cells, kinds, indices, nears = [], [], [], [], [], [], []
     base = 0
     prims = scene_primitives(compiled)
     for light in scene.lights:
         if light.type == "directional":
             cell0.append(-1)
+            scales.append(0.0)
             counts.append(None)
             continue
-        position = np.asarray(light.position, float)
-        per_kind = [(kind, points, near_bounds(kind, points, extra, position), everywhere)
-                    for kind, points, extra, everywhere in prims]
-        kind, index, near, cell = light_entries(position, per_kind, resolution)
+        position = np.asarray(light.position, np.float32).astype(float)  # where the kernels see it
+        scale = scene_scale(prims, position)
+        grow = DILATION * scale
+        per_kind = [(kind, points, np.maximum(near_bounds(kind, points, extra, position) - np.sqrt(3.0) * grow, 0.0),
+                     everywhere) for kind, points, extra, everywhere in prims]
+        kind, index, near, cell = light_entries(position, per_kind, resolution, grow)
         order = np.lexsort((near, cell))
         per_cell = np.bincount(cell.astype(np.int64), minlength=cells_per_light)
         cell0.append(base)
+        scales.append(scale)
         base += cells_per_light
         counts.append(per_cell.reshape(6, resolution, resolution))
         per_cells.append(per_cell)
@@ -300,6 +339,8 @@ def build_light_buffer(compiled, resolution: int | None = None) -> LightBuffer:
     out.kind = wp.array(cat(kinds, np.int32), dtype=wp.int32, device=device)
     out.index = wp.array(cat(indices, np.int32), dtype=wp.int32, device=device)
     out.near = wp.array(cat(nears, np.float32), dtype=float, device=device)
+    out.scale = wp.array(np.asarray(scales, np.float32).reshape(-1) if scales else np.zeros(1, np.float32),
+                         dtype=float, device=device)
     out.tests = wp.zeros(1, dtype=wp.int64, device=device)
     return LightBuffer(warp=out, counts=counts, entries=int(sum(len(k) for k in kinds)))
 
@@ -315,5 +356,6 @@ def no_light_buffer(compiled) -> LightBufferW:
     out.kind = wp.zeros(1, dtype=wp.int32, device=device)
     out.index = wp.zeros(1, dtype=wp.int32, device=device)
     out.near = wp.zeros(1, dtype=float, device=device)
+    out.scale = wp.zeros(1, dtype=float, device=device)
     out.tests = wp.zeros(1, dtype=wp.int64, device=device)
     return out
