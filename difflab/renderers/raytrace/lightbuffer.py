@@ -52,6 +52,7 @@ class LightBufferW:
 
     use: int
     resolution: int
+    opaque: int  # 1: no surface of the scene has kt > 0 (a shadow ray stops at its first blocker)
     light_cell0: wp.array(dtype=wp.int32)
     cell_start: wp.array(dtype=wp.int32)
     kind: wp.array(dtype=wp.int32)  # trace.HIT_TRIANGLE / HIT_SPHERE / HIT_PLANE
@@ -110,9 +111,10 @@ def buffered_hit(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(dtype=wp
     0 <= t < t_max), the same choice (the nearest sphere or plane, a sphere before a plane and the
     lower index at equal t; a triangle only when strictly nearer) -- the same hit, as long as
     `follows_cell`. Stops at the first candidate lying beyond origin (z-order); with `first` set, at
-    the first candidate hit (an opaque shadow ray needs only to know that something is: a hit that
-    is not the nearest, but a hit whenever the BVH finds one -- `trace.leaving_skip` never skips a
-    mesh, so no triangle is skipped)."""
+    the first candidate hit (a shadow ray that no surface lets through -- transparent shadows off, or
+    no kt > 0 in the scene -- needs only to know that something is: a hit that is not the nearest,
+    but a hit whenever the BVH finds one; `trace.leaving_skip` never skips a mesh, so no triangle is
+    skipped)."""
     cell = lb.light_cell0[q] + cube_cell(origin - light_p, lb.resolution)
     reach = wp.length(origin - light_p)
     hit = no_hit(t_max)
@@ -123,9 +125,9 @@ def buffered_hit(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(dtype=wp
     for e in range(lb.cell_start[cell], lb.cell_start[cell + 1]):
         if lb.near[e] >= reach:
             break  # z-ordered: this candidate and every later one lie beyond origin
-        tested = tested + 1
         k = lb.index[e]
         if lb.kind[e] == HIT_TRIANGLE:
+            tested = tested + 1
             tri = woop_triangle(origin, l, vertices[faces[k, 0]], vertices[faces[k, 1]], vertices[faces[k, 2]])
             if tri[3] > 0.0 and (tri[0] < nearest or (tri[0] == nearest and face >= 0 and k < face)):
                 nearest = tri[0]
@@ -135,6 +137,7 @@ def buffered_hit(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(dtype=wp
                     break
         elif lb.kind[e] == HIT_SPHERE:
             if geom.sphere_object[k] != ignore_object:
+                tested = tested + 1
                 t = ray_sphere(origin, l, geom.sphere_center[k], geom.sphere_radius[k], 0.0)
                 if t > 0.0 and (t < hit.t or (t == hit.t and (hit.kind == HIT_PLANE or (hit.kind == HIT_SPHERE
                                                                                          and k < hit.index)))):
@@ -144,6 +147,7 @@ def buffered_hit(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(dtype=wp
                     if first == 1:
                         break
         elif geom.plane_object[k] != ignore_object:
+            tested = tested + 1
             t = ray_plane(origin, l, geom.plane_point[k], geom.plane_normal[k], 0.0)
             if t > 0.0 and (t < hit.t or (t == hit.t and hit.kind == HIT_PLANE and k < hit.index)):
                 hit.t = t
@@ -161,19 +165,22 @@ def buffered_hit(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(dtype=wp
 
 @wp.func
 def buffered_visibility(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(dtype=wp.vec3),
-                        faces: wp.array2d(dtype=wp.int32), materials: wp.array(dtype=MaterialW), q: int, light_p: wp.vec3,
-                        p: wp.vec3, l: wp.vec3, distance: float, ignore_object: int, transparent: int):
+                        faces: wp.array2d(dtype=wp.int32), materials: wp.array(dtype=MaterialW), q: int,
+                        light_p: wp.vec3, p: wp.vec3, l: wp.vec3, distance: float, ignore_object: int,
+                        transparent: int):
     """`trace.shadow_ray` with light q's buffer, (visibility, cut): the same walk (`shadow_step`), each
     surface found among its cell's candidates (`buffered_hit`) while the ray `follows_cell`, else
     through the BVH -- the same surfaces, hence the same visibility, bit for bit."""
+    first = int(0)  # no surface lets light through: the first blocker found will do
+    if transparent == 0 or lb.opaque == 1:
+        first = 1
     visibility = float(1.0)
     origin = p
     remaining = distance
     for crossing in range(MAX_SHADOW_CROSSINGS + 1):
         hit = no_hit(remaining)
         if follows_cell(lb, q, light_p, origin, l):
-            hit = buffered_hit(geom, lb, vertices, faces, q, light_p, origin, l, remaining, ignore_object,
-                               1 - transparent)
+            hit = buffered_hit(geom, lb, vertices, faces, q, light_p, origin, l, remaining, ignore_object, first)
         else:
             hit = closest_hit(geom, origin, l, 0.0, remaining, ignore_object)
         verdict, visibility, origin, remaining = shadow_step(geom, materials, hit, crossing, transparent, visibility,
@@ -333,6 +340,7 @@ def build_light_buffer(compiled, resolution: int | None = None) -> LightBuffer:
     out = LightBufferW()
     out.use = 1
     out.resolution = int(resolution)
+    out.opaque = int(all(material.kt <= 0 for material in scene.materials.values()))
     out.light_cell0 = wp.array(np.asarray(cell0, np.int32).reshape(-1) if cell0 else np.full(1, -1, np.int32),
                                dtype=wp.int32, device=device)
     out.cell_start = wp.array(offsets, dtype=wp.int32, device=device)
@@ -350,6 +358,7 @@ def no_light_buffer(compiled) -> LightBufferW:
     out = LightBufferW()
     out.use = 0
     out.resolution = 1
+    out.opaque = 1
     device = compiled.device
     out.light_cell0 = wp.full(1, -1, dtype=wp.int32, device=device)
     out.cell_start = wp.zeros(2, dtype=wp.int32, device=device)
