@@ -122,7 +122,7 @@ def local_jobs(jobs, workers: int):
     remaining jobs fail too, and a rerun retries them). Interrupted (Ctrl-C) or closed early at any
     point, even while the workers start, it kills them (`_kill`) before it lets the interruption on."""
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import ProcessPoolExecutor
 
     threads = render_threads(_cores(), workers)
     pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_init_worker)
@@ -130,7 +130,7 @@ def local_jobs(jobs, workers: int):
         with _ctrl_c_held():  # each submit starts a worker until there are `workers`
             futures = {pool.submit(run_job, job.spec, None, threads): job for job in jobs}
         processes = list(pool._processes.values())
-        for future in as_completed(futures):
+        for future in _completed(futures):
             try:
                 outcome = future.result()
             except Exception as exc:  # the pool broke: a worker process died
@@ -141,6 +141,19 @@ def local_jobs(jobs, workers: int):
         _kill(pool)
         raise
     pool.shutdown()
+
+
+def _completed(futures, poll: float = 0.1):
+    """The futures as they finish (`as_completed`), waiting at most `poll` seconds at a time: a
+    Ctrl-C whose signal another thread of this process took (one that does not block SIGINT) only
+    sets Python's flag, which the main thread reads between waits -- blocked in one endless wait it
+    never would (fit-batch hung, Ctrl-C lost, ~1 run in 20 of a start-up interrupt at load 4)."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+
+    pending = set(futures)
+    while pending:
+        done, pending = wait(pending, timeout=poll, return_when=FIRST_COMPLETED)
+        yield from done
 
 
 def _kill(pool) -> None:
