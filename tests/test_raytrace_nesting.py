@@ -51,10 +51,10 @@ def pixel_offsets():
 
 def test_a_ray_through_glass_in_water_exits_as_snell_gives_and_absorbs_in_both():
     """Every ray through the glass (b < 0.6: 109 of 625 pixels): its exit direction is the closed
-    form's within 1e-6 (measured 1.9e-7) (it came out as for glass in air: x -0.233 where -0.131 at b 0.155), and
-    its colour exp(-a_w d_w) red, exp(-a_g d_g) green within 1e-6 relative -- the water's absorption continuing after the
-    glass (the centre gave exp(-0.25) where exp(-0.5)). The recorded tree says so too: medium water,
-    glass, water, none on the four segments after the primary ray's."""
+    form's within 1e-6 (measured 1.9e-7; it came out as for glass in air: x -0.233 where -0.131 at
+    b 0.155), and its colour exp(-a_w d_w) red, exp(-a_g d_g) green within 1e-6 relative -- the
+    water's absorption continuing after the glass (the centre gave exp(-0.25) where exp(-0.5)). The
+    recorded tree says so too: medium none, water, glass, water, none on the path's five segments."""
     scene = nested()
     frame = render_frame(scene)
     tree = frame.ray_tree
@@ -134,3 +134,46 @@ def test_past_the_nesting_limit_the_outermost_object_is_forgotten():
                      for r, m in ((1, "red"), (0.8, "clear"), (0.6, "clear"), (0.4, "clear"), (0.2, "green"))],
          "render": {"method": "raytrace", "max_depth": 12, "shadows": False}}
     np.testing.assert_allclose(render(Scene.from_dict(d))[0, 0], [np.exp(-0.2), np.exp(-0.4), 1.0], rtol=1e-5)
+
+
+@pytest.mark.parametrize("water_kind", ["plane", "box"])
+@pytest.mark.parametrize("glass_first", [True, False])
+def test_touching_transparent_objects_cross_as_one_interface(water_kind, glass_first):
+    """A glass box (1 thick, absorbing green) resting exactly on water (a plane, or a box 1 deep,
+    absorbing red), seen along one ray from the air: the shared face is one interface, whichever
+    of the two the tracer meets first (the order of the objects, the BVH's pick), so the ray goes
+    air -> glass -> water (-> air) with Snell's sines sin_air / n, leaves the water box along its
+    first direction, and absorbs exp(-a / cos) in each layer. (Meeting the glass's face first, it
+    left into air and never saw the water; meeting the water's, the water box's bottom let it out
+    into the glass's medium.)"""
+    eye, target = np.array([0.0, 3.0, 2.2]), np.array([0.0, 0.5, 0.0])
+    d0 = (target - eye) / np.linalg.norm(target - eye)
+    glass = {"type": "mesh", "builtin": "box", "material": "glass", "smooth": False,
+             "transform": {"translate": [0, 0.5, 0], "scale": [4, 1, 4]}}
+    water = {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "water"} if water_kind == "plane" \
+        else {"type": "mesh", "builtin": "box", "material": "water", "smooth": False,
+              "transform": {"translate": [0, -0.5, 0], "scale": [4, 1, 4]}}
+    back = {"type": "plane", "point": [0, -1.5 if water_kind == "box" else -1.0, 0], "normal": [0, 1, 0],
+            "material": "back"}
+    scene = Scene.from_dict({
+        "camera": {"eye": eye.tolist(), "target": target.tolist(), "fov_y": 20, "width": 1, "height": 1, "far": 20},
+        "ambient": [1, 1, 1], "lights": [],
+        "materials": {"glass": {"kd": 0, "kt": 1, "ior": N_GLASS, "absorption": [0, A_GLASS, 0]},
+                      "water": {"kd": 0, "kt": 1, "ior": N_WATER, "absorption": [A_WATER, 0, 0]},
+                      "back": {"kd": 0, "ka": 1}},
+        "objects": [glass, water, back] if glass_first else [water, glass, back],
+        "render": {"method": "raytrace", "fresnel": "none", "max_depth": 6, "shadows": False}})
+    frame = render_frame(scene)
+    tree = frame.ray_tree
+    sin_air = np.hypot(d0[0], d0[2])
+    cos_g, cos_w = np.sqrt(1 - (sin_air / N_GLASS) ** 2), np.sqrt(1 - (sin_air / N_WATER) ** 2)
+    np.testing.assert_allclose(frame.image[0, 0], [np.exp(-A_WATER / cos_w), np.exp(-A_GLASS / cos_g), 1.0],
+                               rtol=1e-5)
+    w, back_id = scene.material_index("water"), scene.material_index("back")
+    in_water = np.flatnonzero(tree.medium == w)
+    assert len(in_water) == 1
+    np.testing.assert_allclose(-tree.view[in_water[0], 1], -cos_w, rtol=1e-6)
+    last = np.flatnonzero(tree.material == back_id)
+    assert len(last) == 1
+    expected = d0 if water_kind == "box" else -tree.view[in_water[0]]
+    np.testing.assert_allclose(-tree.view[last[0]], expected, atol=1e-6)

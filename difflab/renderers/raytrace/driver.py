@@ -33,7 +33,7 @@ from ..launch import host_empty, launch_row_loops, load_kernels
 from .gbuffer import tree_gbuffer
 from .itembuffer import asked_bvh, item_buffer, item_struct
 from .lightbuffer import build_light_buffer, no_light_buffer
-from .medium import camera_media
+from .medium import camera_media, transparent_objects
 from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, COUNT_SHADOW_CUT, TraceOutW, \
     TraceParamsW, whitted_kernel
 from .nesting import media_struct
@@ -113,6 +113,7 @@ def scene_struct(compiled, light_buffer=None) -> SceneW:
     out = SceneW()
     out.geom, out.mesh, out.lights, out.materials = compiled.traceable(), mesh, compiled.lights, compiled.materials
     out.textures = compiled.textures.warp
+    out.probe_coincident = int(transparent_objects(compiled) >= 2)
     out.light_buffer = light_buffer.warp if light_buffer is not None else \
         read_only(compiled, "no light buffer", lambda: no_light_buffer(compiled))
     return out

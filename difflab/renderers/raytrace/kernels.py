@@ -45,7 +45,7 @@ from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossi
 from .itembuffer import ItemBufferW, item_hit
 from .lightbuffer import LightBufferW, buffered_visibility
 from .medium import primary_medium
-from .nesting import MediaW, medium_of, refracted_media
+from .nesting import MediaW, medium_of
 from .optics import beer, reflect
 from .record import LightRecW, TreeW, light_arrays, record_light, record_ray, record_surface
 from .surface import RayW, SceneW, SurfaceW, child_ray, fresnel_split, new_ray, primary_diff, primary_sample, \
@@ -189,7 +189,7 @@ def make_whitted_kernel(stack_size: int):
             media = params.media
             if params.start_check == 1:  # its absorption counts from `start` in `media`
                 media, start = primary_medium(scene.geom, scene.materials, start, direction, near, params.media,
-                                              cam.perspective)
+                                              cam.perspective, scene.probe_coincident)
             diff = primary_diff(cam, direction, near, params.footprint)
             first = new_ray(start, origin, direction, wp.vec3(1.0), diff, 1, -1, PRIMARY, media, -1)
             if wp.static(stack_size > 1):  # (a one-ray stack is the primary ray alone: no array to clear)
@@ -240,9 +240,8 @@ def make_whitted_kernel(stack_size: int):
                     if ray.depth < params.max_depth:  # refracted child pushed first: the reflected one is walked first
                         w_t = w * (surf.mat.kt * split.f_t)
                         if split.refracts == 1 and worth_tracing(w_t, params.threshold):
-                            inside = refracted_media(ray.media, hit.object, hit.material, surf.entering)
                             stack[sp] = child_ray(scene.geom, ray, node, hit, surf, split.t_dir, w_t, REFRACTED,
-                                                  inside)
+                                                  surf.beyond)
                             sp = sp + 1
                         w_r = w * (surf.mat.kr * split.f_r + surf.mat.kt * split.tir_share)
                         if worth_tracing(w_r, params.threshold):

@@ -42,8 +42,8 @@ from ...lighting.warp_model import MaterialW
 from ...scene import Plane, Sphere
 from ..camera import camera_frame, half_height
 from ..launch import load_kernels
-from ..trace import HIT_NONE, SceneGeomW, closest_hit, past_surface
-from .nesting import MEDIA_DEPTH, MediaW, no_media, outward
+from ..trace import HIT_NONE, SPAWN_GRAZING, HitW, SceneGeomW, closest_hit, hit_point, ray_offset, spawn_origin
+from .nesting import MEDIA_DEPTH, MediaW, coincident, no_media, outward
 
 wp.set_module_options({"enable_backward": False})
 
@@ -51,9 +51,23 @@ MAX_CROSSINGS = 256  # surfaces a walk crosses before it gives up (the point the
 
 
 @wp.func
-def media_at(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), point: wp.vec3, direction: wp.vec3):
+def walked(materials: wp.array(dtype=MaterialW), media: MediaW, depth: int, lowest: int, hit: HitW,
+           direction: wp.vec3):
+    """A walk's (media, depth, lowest depth, stop) after it crosses `hit` (module doc)."""
+    if wp.dot(direction, hit.normal) < 0.0:
+        return media, depth + 1, lowest, 0
+    if depth - 1 >= lowest:
+        return media, depth - 1, lowest, 0
+    if materials[hit.material].kt <= 0.0 or media.count == MEDIA_DEPTH:  # an opaque one: no medium in it or past it
+        return media, depth - 1, depth - 1, 1
+    return outward(media, hit.object, hit.material), depth - 1, depth - 1, 0  # leaves an object around the point
+
+
+@wp.func
+def media_at(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), point: wp.vec3, direction: wp.vec3, probe: int):
     """The transparent objects around `point`, innermost first (`nesting.MediaW`; module doc: the
-    walk along unit `direction`)."""
+    walk along unit `direction`). With `probe`, a surface coincident with one crossed (within its
+    offset: `nesting.coincident`) is crossed with it, as the tracer's rays cross it."""
     media = no_media()
     depth = int(0)
     lowest = int(0)
@@ -62,22 +76,23 @@ def media_at(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), point: wp.v
         hit = closest_hit(geom, origin, direction, 0.0, wp.inf, -1)
         if hit.kind == HIT_NONE:
             break
-        origin, step = past_surface(geom, hit, origin, direction)
-        if wp.dot(direction, hit.normal) < 0.0:
-            depth = depth + 1
-        else:
-            depth = depth - 1
-            if depth < lowest:  # leaves an object around the point
-                lowest = depth
-                if materials[hit.material].kt <= 0.0 or media.count == MEDIA_DEPTH:
-                    break  # an opaque one: no medium in it or past it
-                media = outward(media, hit.object, hit.material)
+        p = hit_point(geom, hit, origin, direction)
+        offset = ray_offset(geom, hit, p)
+        origin = spawn_origin(p, hit.normal, direction, offset)
+        media, depth, lowest, stop = walked(materials, media, depth, lowest, hit, direction)
+        if probe == 1 and stop == 0:
+            other = coincident(geom, hit.object, p, direction,
+                               offset / wp.max(wp.abs(wp.dot(direction, hit.normal)), SPAWN_GRAZING))
+            if other.kind != HIT_NONE:
+                media, depth, lowest, stop = walked(materials, media, depth, lowest, other, direction)
+        if stop == 1:
+            break
     return media
 
 
 @wp.func
 def primary_medium(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), start: wp.vec3, direction: wp.vec3,
-                   near: float, eye_media: MediaW, perspective: int):
+                   near: float, eye_media: MediaW, perspective: int, probe: int):
     """A primary ray's media and the point its absorption counts from (module doc): the ray leaves
     `start` along unit `direction` and is traced from `near` further on; `eye_media` are the eye's
     (`camera_media`), which a perspective ray keeps when no surface lies before its near plane."""
@@ -86,14 +101,14 @@ def primary_medium(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), start
     if clipped.kind == HIT_NONE:
         if perspective == 1:
             return eye_media, start
-        return media_at(geom, materials, origin, direction), start
-    return media_at(geom, materials, origin, direction), origin - clipped.t * direction
+        return media_at(geom, materials, origin, direction, probe), start
+    return media_at(geom, materials, origin, direction, probe), origin - clipped.t * direction
 
 
 @wp.kernel
 def eye_media_kernel(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), eye: wp.vec3, direction: wp.vec3,
-                     out: wp.array(dtype=MediaW)):
-    out[0] = media_at(geom, materials, eye, direction)
+                     probe: int, out: wp.array(dtype=MediaW)):
+    out[0] = media_at(geom, materials, eye, direction, probe)
 
 
 def near_ball(camera) -> tuple[np.ndarray, float]:
@@ -137,12 +152,25 @@ def per_ray_check(compiled, transparent: set) -> bool:
     return bool(np.linalg.norm(centre - nearest) <= radius)
 
 
+def transparent_objects(compiled) -> int:
+    """How many of the scene's objects are transparent (kt > 0), counted once per set of transparent
+    materials (the objects of a compiled scene do not change)."""
+    scene = compiled.scene
+    transparent = tuple(sorted(name for name, m in scene.materials.items() if m.kt > 0))
+    kept = compiled.built.get("transparent objects")
+    if kept is None or kept[0] != transparent:
+        kept = (transparent, sum(obj.material in transparent for obj in scene.objects))
+        compiled.built["transparent objects"] = kept
+    return kept[1]
+
+
 def camera_media(compiled) -> tuple[tuple, bool]:
     """(the transparent objects around the perspective camera's eye, innermost first, as (object id,
     material id) pairs -- () for none or an orthographic camera; whether primary rays check their
-    own media, `per_ray_check`), for the compiled scene; ((), False) without a transparent material. The last camera's answer is kept with
-    the compiled scene: the frames of one view (a fit's, an animation's still camera) do not walk
-    again (the check's loop over the objects cost 43 ms a frame with 20k spheres)."""
+    own media, `per_ray_check`), for the compiled scene; ((), False) without a transparent material.
+    The last camera's answer is kept with the compiled scene: the frames of one view (a fit's, an
+    animation's still camera) do not walk again (the check's loop over the objects cost 43 ms a
+    frame with 20k spheres)."""
     scene = compiled.scene
     transparent = {i for i, name in enumerate(scene.material_names) if scene.materials[name].kt > 0}
     if not transparent:
@@ -158,7 +186,8 @@ def camera_media(compiled) -> tuple[tuple, bool]:
         out = wp.empty(1, dtype=MediaW, device=compiled.device)
         forward = np.asarray(camera_frame(scene.camera)[2], np.float32)
         wp.launch(eye_media_kernel, dim=1, inputs=[compiled.traceable(), compiled.materials,
-                                                    wp.vec3(*scene.camera.eye), wp.vec3(*forward), out],
+                                                    wp.vec3(*scene.camera.eye), wp.vec3(*forward),
+                                                    int(transparent_objects(compiled) >= 2), out],
                   device=compiled.device)
         found = out.numpy()[0]
         pairs = tuple((int(found["objects"][k]), int(found["materials"][k])) for k in range(int(found["count"])))

@@ -4,7 +4,7 @@ Each ray carries the transparent (kt > 0) objects it is inside, innermost first 
 MEDIA_DEPTH of them, on the walk's stack with the ray: Warp has no recursion). It travels in the
 innermost one's medium (`medium_of`), absorbing by that material's absorption, and refracts at a
 surface by eta = n_outside / n_inside (the ratio `optics.refract` and `optics.fresnel` take), the
-indices read from that list (`interface_eta`), as POV-Ray's interior stack and pbrt's medium
+indices read from that list (`crossing`), as POV-Ray's interior stack and pbrt's medium
 interfaces trace glass in water:
 
     entering an object (hitting the side its stored normal points to):  eta = n_out / ior
@@ -21,6 +21,12 @@ leaves the innermost one (a slab of two planes facing out is entered through one
 the other; an open mesh's back side counts as its inside). A ray entering an object with
 MEDIA_DEPTH objects already around it forgets the outermost: after leaving the inner ones it takes
 that one's inside for air (index 1, no absorption).
+
+Touching objects: of two coincident surfaces a ray would cross only the first it meets (the next ray
+starts an offset past it). Where the scene has two or more transparent objects (`SceneW.
+probe_coincident`), a refracting hit looks for one transparent surface of another object within
+the offset (`coincident`) and crosses it too, as one interface (`crossing`); the eye's walk
+(`medium.media_at`) does the same.
 """
 
 from __future__ import annotations
@@ -28,6 +34,8 @@ from __future__ import annotations
 from ..._warp import wp
 
 from ...lighting.warp_model import MaterialW
+from ..trace import HIT_NONE, SPAWN_GRAZING, HitW, SceneGeomW, analytic_hit, finish_hit, ray_triangle, \
+    triangle_hit
 
 wp.set_module_options({"enable_backward": False})
 
@@ -133,21 +141,60 @@ def outside(media: MediaW, obj: int, leaving: int):
 
 
 @wp.func
-def interface_eta(materials: wp.array(dtype=MaterialW), media: MediaW, obj: int, entering: int, kt: float,
-                  ior: float):
-    """eta = n_outside / n_inside at a surface of object `obj` (material index `ior`, transmission
-    `kt`) that a ray inside `media` meets, `entering` it or not (module doc)."""
-    if entering == 0 and kt > 0.0:
-        return ior / medium_ior(materials, outside(media, obj, 1))
-    return medium_ior(materials, outside(media, obj, 0)) / ior
-
-
-@wp.func
 def refracted_media(media: MediaW, obj: int, material: int, entering: int):
     """What a ray refracted through a surface of transparent object `obj` travels in."""
     if entering == 1:
         return entered(outside(media, obj, 0), obj, material)
     return outside(media, obj, 1)
+
+
+@wp.func
+def coincident(geom: SceneGeomW, obj: int, p: wp.vec3, d: wp.vec3, step: float):
+    """The first surface of an object other than `obj` that the segment from p - step d to
+    p + step d crosses, or a miss: spheres and planes as `closest_hit` finds them; triangles among
+    those whose bounds meet the segment's (`wp.mesh_query_aabb`: the BVH's nearest hit may be a face
+    of `obj` itself, coincident with the one sought)."""
+    origin = p - step * d
+    found = finish_hit(geom, analytic_hit(geom, origin, d, 0.0, 2.0 * step, obj), origin, d)
+    if geom.mesh != wp.uint64(0):
+        mesh = wp.mesh_get(geom.mesh)
+        query = wp.mesh_query_aabb(geom.mesh, wp.min(origin, p + step * d), wp.max(origin, p + step * d))
+        face = int(0)
+        while wp.mesh_query_aabb_next(query, face):
+            if geom.face_object[face] != obj:
+                a = mesh.points[mesh.indices[3 * face]]
+                b = mesh.points[mesh.indices[3 * face + 1]]
+                c = mesh.points[mesh.indices[3 * face + 2]]
+                t, b1, b2 = ray_triangle(origin, d, a, b, c)
+                if t > 0.0 and t < found.t and b1 >= 0.0 and b2 >= 0.0 and b1 + b2 <= 1.0:
+                    found = triangle_hit(geom, face, t, 1.0 - b1 - b2, b1, wp.cross(b - a, c - a), origin, d)
+    return found
+
+
+@wp.func
+def crossing(geom: SceneGeomW, materials: wp.array(dtype=MaterialW), media: MediaW, hit: HitW, entering: int,
+             d: wp.vec3, p: wp.vec3, offset: float, probe: int):
+    """(eta, beyond) at `hit` (not a miss; at point p, rays leaving it start `offset` off it) of a ray
+    along unit `d` inside `media`, `entering` it or not: eta = n_outside / n_inside (module doc) and
+    what a ray refracted there travels in. With `probe`, a transparent surface of another object
+    within the offset of p on either side (coincident with this one: touching objects) is crossed
+    with it, as one interface: beyond is what lies past both, and eta = n_from / n(beyond)."""
+    mat = materials[hit.material]
+    if mat.kt <= 0.0:
+        return medium_ior(materials, outside(media, hit.object, 0)) / mat.ior, media
+    beyond = refracted_media(media, hit.object, hit.material, entering)
+    n_from = mat.ior
+    n_to = mat.ior
+    if entering == 1:
+        n_from = medium_ior(materials, outside(media, hit.object, 0))
+    else:
+        n_to = medium_ior(materials, beyond)
+    if probe == 1:
+        other = coincident(geom, hit.object, p, d, offset / wp.max(wp.abs(wp.dot(d, hit.normal)), SPAWN_GRAZING))
+        if other.kind != HIT_NONE and materials[other.material].kt > 0.0:
+            beyond = refracted_media(beyond, other.object, other.material, int(wp.dot(d, other.normal) < 0.0))
+            n_to = medium_ior(materials, beyond)
+    return n_from / n_to, beyond
 
 
 def media_struct(pairs) -> MediaW:

@@ -5,7 +5,7 @@ Surfaces are two-sided: the geometric and shading normals are flipped to face th
 points to is *entering* (eta = n_out / ior, n_out the index of the medium around the object, 1 in
 air); from the other side it is *leaving* (eta = ior / n_out) -- where the object is transparent
 (kt > 0). An opaque one has no inside: eta = n_out / ior on both its sides, whatever its winding or
-its plane's normal sign (`SurfaceW.eta`, from the ray's media: `nesting.interface_eta`).
+its plane's normal sign (`SurfaceW.eta`, from the ray's media: `nesting.crossing`).
 New rays start the hit's own `trace.ray_offset` off the surface (a few float32 ulps of its
 coordinates, from its `trace.hit_point`), measured along the geometric normal on the side they
 travel to, stepped along the ray itself (`trace.spawn_origin`); a ray leaving a sphere outwards,
@@ -30,7 +30,7 @@ from ..texture.sampling import TexturesW, pixel_footprint, plane_uv, plane_uv_de
     ray_footprint, sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
 from ..trace import HIT_PLANE, HIT_TRIANGLE, HitW, SceneGeomW, leaving_skip, ray_offset, spawn_origin
 from .lightbuffer import LightBufferW
-from .nesting import MediaW, interface_eta
+from .nesting import MediaW, crossing
 from .optics import fresnel, reflect, refract, refracted_differential
 from .tree import PRIMARY, REFLECTED
 
@@ -57,6 +57,8 @@ class SceneW:
     materials: wp.array(dtype=MaterialW)
     textures: TexturesW
     light_buffer: LightBufferW  # candidate occluders per light direction (`use` 0: shadow rays ask the BVH)
+    probe_coincident: int  # 1: two or more objects are transparent, a refracting hit looks for a coincident
+    # transparent surface (`nesting.crossing`)
 
 
 @wp.struct
@@ -100,7 +102,8 @@ class SurfaceW:
     normal: wp.vec3  # unit shading normal, facing the incoming ray
     view: wp.vec3  # unit direction back along the incoming ray
     entering: int  # 1 where the ray hit the side the stored normal points to
-    eta: float  # n_outside / n_inside there, the ratio Snell and Fresnel take (`nesting.interface_eta`)
+    eta: float  # n_outside / n_inside there, the ratio Snell and Fresnel take (`nesting.crossing`)
+    beyond: MediaW  # what a ray refracted there travels in
     cell: int  # checker cell 0 / 1
     uv: wp.vec2  # where a textured material read its texture (`hit_texel`), else 0
     texel: wp.vec3  # the texture value a textured material took, else 0
@@ -247,7 +250,10 @@ def surface_at(scene: SceneW, cam: CameraW, hit: HitW, ray: RayW, p: wp.vec3, xy
         surf.normal = -surf.normal
     surf.view = -d
     base = scene.materials[hit.material]
-    surf.eta = interface_eta(scene.materials, ray.media, hit.object, surf.entering, base.kt, base.ior)
+    eta, beyond = crossing(scene.geom, scene.materials, ray.media, hit, surf.entering, d, p, surf.offset,
+                           scene.probe_coincident)
+    surf.eta = eta
+    surf.beyond = beyond
     surf.cell = int(0)
     if base.checker_size > 0.0:
         surf.cell = checker_cell(surf.p, surf.geo, base.checker_size)
