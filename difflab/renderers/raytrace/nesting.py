@@ -22,10 +22,10 @@ the other; an open mesh's back side counts as its inside). A ray entering an obj
 MEDIA_DEPTH objects already around it forgets the outermost: after leaving the inner ones it takes
 that one's inside for air (index 1, no absorption).
 
-Touching objects: of two coincident surfaces a ray would cross only the first it meets (the next ray
-starts an offset past it). Where the scene has two or more transparent objects (`SceneW.
-probe_coincident`), a refracting hit looks for one transparent surface of another object within
-the offset (`coincident`) and crosses it too, as one interface (`crossing`); the eye's walk
+Touching objects: of two coincident surfaces a ray would cross only the first it meets (the next
+ray starts an offset past it). Where the scene has two or more transparent objects
+(`SceneW.probe_coincident`), a refracting hit looks for one transparent surface of another object
+within the offset (`coincident`) and crosses it too, as one interface (`crossing`); the eye's walk
 (`medium.media_at`) does the same.
 """
 
