@@ -253,13 +253,18 @@ def test_bad_input_raises_fit_error(lecture, kwargs, match):
 
 
 def test_generic_kr_kt_apply_only_where_the_tree_traces_them(lecture):
-    """fit_scene's defaults fit kr / kt / absorption only where the start traces them (frame: kr = kt
-    = 0; floor: kt = 0); named, they are refused there (test_fit_requests.py)."""
+    """fit_scene's defaults -- and a generic kr over several materials -- fit kr / kt / absorption only
+    where the start traces them (frame: kr = kt = 0; floor: kt = 0); a kind no fitted material traces
+    (kt here), or one named for a material that does not, is refused (test_fit_requests.py)."""
     scene, _ = lecture
     layout = build_layout(scene, ("floor", "frame"), SCENE_PARAMS, tree=True)
     assert [p.key for p in layout if p.kind in ("kr", "kt", "absorption")] == ["floor.kr"]
-    with pytest.raises(FitError, match=r"^params: 'kr': frame\.kr is 0 at the start.*name the others alone \(floor\.kr\)$"):
-        build_layout(scene, ("floor", "frame"), ("kd", "kr", "kt", "absorption"), tree=True)
+    generic = build_layout(scene, ("floor", "frame"), ("kd", "kr"), tree=True)
+    assert [p.key for p in generic if p.kind == "kr"] == ["floor.kr"]
+    with pytest.raises(FitError, match=r"^params: 'kt': floor\.kt, frame\.kt are 0 at the start"):
+        build_layout(scene, ("floor", "frame"), ("kd", "kr", "kt"), tree=True)
+    with pytest.raises(FitError, match=r"^params: 'frame\.kr': frame\.kr is 0 at the start.*name the others alone \(floor\.kr\)$"):
+        build_layout(scene, ("floor", "frame"), ("kd", "frame.kr"), tree=True)
 
 
 def test_failure_is_a_value(lecture):

@@ -271,8 +271,9 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
     "intensity" every light's, "lights[i].intensity" one light's; "texture" the texels of each fitted
     material's texture, `texture_shapes` name -> (H_t, W_t). `tree`: the image model is the ray
     tree (kr, kt, absorption allowed). Raises FitError naming the offending parameter: a kr (kt,
-    absorption) the caller names is fitted for every material it names, or refused where the start's
-    kr (kt) is 0; only the defaults' `optional` kinds skip those materials."""
+    absorption) the recorded tree cannot see move -- the start's kr (kt) 0 -- is refused where the
+    caller names it for that material ("red.kr") or where no fitted material traces it; a generic
+    one over several materials is fitted for those that do (as the defaults' `optional` kinds)."""
     model = scene.render.specular
     optional = params.optional if isinstance(params, Defaults) else frozenset()
     params = params.for_model(model) if isinstance(params, Defaults) else name_list(params, "params")
@@ -305,7 +306,7 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
                            "which does not read it: the image does not depend on it")
         names = [name for name in ((head,) if head else materials) if _traced(scene.materials[name], kind)]
         untraced = [name for name in ((head,) if head else materials) if name not in names]
-        if untraced and p not in optional:
+        if untraced and p not in optional and (head or not names):  # (generic over several: where traced)
             raise _untraced(scene, p, kind, untraced, materials)
         wanted.update((name, kind) for name in names)
     qualify = len(materials) > 1
