@@ -137,6 +137,26 @@ def exact_fresnel(cos_i, eta):
     return 0.5 * (r_s * r_s + r_p * r_p)
 
 
+@pytest.mark.parametrize("eta", [1 / 1.5, 1 / 1.333, 1.5, 1 / 2.4])
+def test_the_reference_fresnel_is_fresnels_sine_and_tangent_laws(eta):
+    """exact_fresnel, the oracle the renders are held to, is written in the same cosine form as
+    `optics.fresnel_exact`; so it is checked against Fresnel's own laws, a different form: r_s =
+    -sin(i - t) / sin(i + t), r_p = tan(i - t) / tan(i + t) with sin t = eta sin i (Snell), at 12
+    angles below the critical one; ((1 - eta) / (1 + eta))^2 head-on; r_p = 0 at Brewster's angle
+    tan i = 1 / eta; 1 past the critical angle."""
+    for i in np.linspace(0.05, min(1.5, math.asin(min(1.0, 1 / eta)) - 1e-3), 12):
+        t = math.asin(eta * math.sin(i))
+        r_s, r_p = -math.sin(i - t) / math.sin(i + t), math.tan(i - t) / math.tan(i + t)
+        assert exact_fresnel(math.cos(i), eta) == pytest.approx(0.5 * (r_s * r_s + r_p * r_p), rel=1e-12)
+    assert exact_fresnel(1.0, eta) == pytest.approx(((1 - eta) / (1 + eta)) ** 2, rel=1e-12)
+    brewster = math.atan(1 / eta)
+    t = math.asin(eta * math.sin(brewster))
+    r_s = math.sin(brewster - t) / math.sin(brewster + t)
+    assert exact_fresnel(math.cos(brewster), eta) == pytest.approx(0.5 * r_s * r_s, rel=1e-12)  # r_p = 0
+    if eta > 1:
+        assert exact_fresnel(math.cos(math.asin(1 / eta) + 1e-3), eta) == 1.0
+
+
 def interface_scene(side, angle_deg, material, fresnel):
     """The interface y = 0 (`material`, no local light) under a white background, seen at angle
     theta from its normal, from above (entering, eta = 1 / ior) or below (leaving, eta = ior) by a
