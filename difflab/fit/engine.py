@@ -90,9 +90,10 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                                         also=partly_seen + pulled)
             chi2, mismatch, suspected = st["chi2"], st["mismatch"], st["suspected"]
             degenerate_keys = degenerate(layout, st["diag"], gram, setup.smoothness > 0)
-            unreached_keys = unreached(layout, gram, lambda index, kind: next(
-                (values[q.key] for q in layout if q.index == index and q.kind == kind),
-                getattr(list(setup.scene.materials.values())[index], kind)))
+            fitted = {(q.index, q.kind): values[q.key] for q in layout}
+            materials = list(setup.scene.materials.values())
+            unreached_keys = unreached(layout, gram, lambda index, kind: fitted.get(
+                (index, kind), getattr(materials[index], kind)))
             too_few = st["underdetermined"]
             underdetermined = too_few or bool(degenerate_keys) or bool(unreached_keys)
         else:

@@ -9,6 +9,8 @@ box filter of the sample grid down to pixels.
 
 from __future__ import annotations
 
+import functools
+
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -124,20 +126,17 @@ class Frame:
     stats: dict = field(default_factory=dict)
     ray_tree: object = None
     gbuffer_source: Callable[[], GBuffer] | None = field(default=None, repr=False, compare=False)
-    _built: GBuffer | None = field(default=None, init=False, repr=False, compare=False)
 
-    @property
+    @functools.cached_property  # (kept in the instance's __dict__: a frozen dataclass allows it)
     def gbuffer(self) -> GBuffer:
         if self.buffers is not None:
             return self.buffers
-        if self._built is None:
-            if self.gbuffer_source is None:
-                raise RenderError(f"gbuffer: this {self.stats.get('method', 'raytrace')} frame kept no G-buffer "
-                                  f"(nor a recorded ray tree to build one from); render it with render_frame "
-                                  f"(method 'raster' or 'raytrace'), which keeps it -- not render, "
-                                  f"raytrace(record_tree=False) or adaptive supersampling")
-            object.__setattr__(self, "_built", self.gbuffer_source())  # frozen: the one cached value
-        return self._built
+        if self.gbuffer_source is None:
+            raise RenderError(f"gbuffer: this {self.stats.get('method', 'raytrace')} frame kept no G-buffer "
+                              f"(nor a recorded ray tree to build one from); render it with render_frame "
+                              f"(method 'raster' or 'raytrace'), which keeps it -- not render, "
+                              f"raytrace(record_tree=False) or adaptive supersampling")
+        return self.gbuffer_source()
 
 
 def box_downsample(samples: np.ndarray, side: int) -> np.ndarray:

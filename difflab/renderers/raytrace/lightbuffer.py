@@ -16,9 +16,9 @@ column = floor((u + 1) R / 2), row = floor((v + 1) R / 2), both clamped to [0, R
 
 The lists are conservative for float32 rays: a shadow ray's line passes the light only within a few
 ulps (its offset origin, its rounded direction), its cell is looked up and its triangles tested in
-float32. So every surface is listed as if grown by DILATION x the light's `scene_scale` (2^-12:
-~2000 ulps, under 1e-3 of a cell at R = 256) on every side: a triangle (or a sphere's bounding box)
-whose grown set lies on the face's side of the light projects within its corners' cell box widened
+float32. So every surface is listed as if grown by DILATION x the light's scale (the largest
+coordinate of the light and of `objects_scale`) (2^-12: ~2000 ulps, under 1e-3 of a cell at R =
+256) on every side: a triangle (or a sphere's bounding box) whose grown set lies on the face's side of the light projects within its corners' cell box widened
 accordingly (`cell_ranges`); one that reaches the plane through the light is listed in every cell
 of that face; planes are listed everywhere; the distance bounds are lowered by sqrt(3) x the growth.
 A ray whose line passes the light farther than a quarter of that growth, less TRUST_ULPS of its
@@ -41,7 +41,7 @@ from ..trace import HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, MAX_SHADOW_CROSSINGS, S
 wp.set_module_options({"enable_backward": False})
 
 DEFAULT_RESOLUTION = 32  # cells per cube-face edge for ~10^4 triangles (see `auto_resolution`)
-DILATION = 2.0 ** -12  # candidates are listed for their surface grown by this x the light's `scene_scale` (module doc)
+DILATION = 2.0 ** -12  # candidates are listed for their surface grown by this x the light's scale (module doc)
 TRUST_ULPS = 64.0  # float32 ulps of |origin| + scale a ray's tests may be off by (`follows_cell`)
 
 
@@ -58,7 +58,7 @@ class LightBufferW:
     kind: wp.array(dtype=wp.int32)  # trace.HIT_TRIANGLE / HIT_SPHERE / HIT_PLANE
     index: wp.array(dtype=wp.int32)
     near: wp.array(dtype=float)  # lower bound of the candidate's grown surface's distance to the light
-    scale: wp.array(dtype=float)  # per light: `scene_scale`, what its lists' DILATION is a fraction of
+    scale: wp.array(dtype=float)  # per light: max(|light|, `objects_scale`), what its lists' DILATION is a fraction of
     tests: wp.array(dtype=wp.int64)  # (1,): candidates tested by every shadow ray together
 
 
@@ -273,11 +273,11 @@ def scene_primitives(compiled) -> list:
             (HIT_PLANE, None, (geom.plane_point.numpy(), geom.plane_normal.numpy()), True)]
 
 
-def scene_scale(prims: list, light: np.ndarray) -> float:
-    """The largest |coordinate| of the light and of every mesh vertex and sphere's box: what the
+def objects_scale(prims: list) -> float:
+    """The largest |coordinate| of every mesh vertex and sphere's box; with a light's own, what the
     float32 rounding of a shadow ray's origin and direction, and of its tests, is a few ulps of."""
-    boxes = [np.abs(points).max(initial=0.0) for _, points, _, everywhere in prims if not everywhere]
-    return float(max(np.abs(light).max(), *boxes))
+    return float(max([np.abs(points).max(initial=0.0) for _, points, _, everywhere in prims if not everywhere],
+                     default=0.0))
 
 
 def near_bounds(kind, points, extra, light):
@@ -312,6 +312,7 @@ def build_light_buffer(compiled, resolution: int | None = None) -> LightBuffer:
     cell0, scales, counts, per_cells, kinds, indices, nears = [], [], [], [], [], [], []
     base = 0
     prims = scene_primitives(compiled)
+    objects = objects_scale(prims)  # (the scan over every primitive, once for all the lights)
     for light in scene.lights:
         if light.type == "directional":
             cell0.append(-1)
@@ -319,7 +320,7 @@ def build_light_buffer(compiled, resolution: int | None = None) -> LightBuffer:
             counts.append(None)
             continue
         position = np.asarray(light.position, np.float32).astype(float)  # where the kernels see it
-        scale = scene_scale(prims, position)
+        scale = max(float(np.abs(position).max()), objects)
         grow = DILATION * scale
         per_kind = [(kind, points, np.maximum(near_bounds(kind, points, extra, position) - np.sqrt(3.0) * grow, 0.0),
                      everywhere) for kind, points, extra, everywhere in prims]
