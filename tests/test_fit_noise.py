@@ -14,15 +14,22 @@ from difflab.fit import noise
 from difflab.fit.noise import estimate_sigma
 
 
+def sample(values):
+    """The levels' sample of a channel's picked values, in row-major order: every s-th, s = max(M //
+    NOISE_SAMPLE, 1)."""
+    return values[::max(values.size // noise.NOISE_SAMPLE, 1)]
+
+
 def reference_levels(square, centre):
-    """(h, w, 3) each L^2 value's level: its channel's median picked value / MEDIAN_CHI2_1."""
-    median = [np.median(square[..., c][centre[..., c]]) if centre[..., c].any() else 0.0 for c in range(3)]
+    """(h, w, 3) each L^2 value's level: its channel's median sampled picked value / MEDIAN_CHI2_1."""
+    median = [np.median(sample(square[..., c][centre[..., c]])) if centre[..., c].any() else 0.0 for c in range(3)]
     return np.broadcast_to(np.asarray(median), square.shape) / noise.MEDIAN_CHI2_1
 
 
 def reference_sigma(images, used_maps, weight_maps=None, interior=True):
-    """`estimate_sigma` without a signal, plainly: full-size arrays, boolean selections."""
-    num = den = 0.0
+    """`estimate_sigma` without a signal, plainly: full-size arrays, boolean selections: (sigma, M,
+    share), share = (sum_c w v)^2 / (M sum_c w^2 v^2) over each channel's sample scaled to its M."""
+    num = den = spread = square_spread = 0.0
     count = 0
     for k, (image, used) in enumerate(zip(images, used_maps)):
         pixels = used if used.ndim == 2 else used[..., 0] | used[..., 1] | used[..., 2]
@@ -52,9 +59,17 @@ def reference_sigma(images, used_maps, weight_maps=None, interior=True):
         num += float(np.sum(capped) if weight is None else np.dot(weight, capped))
         den += float(capped.size if weight is None else np.sum(weight))
         count += capped.size
+        full = np.ones(centre.shape) if weight is None else weight_maps[k][box][1:-1, 1:-1]
+        for c in range(3):
+            weighted = sample(level[..., c][centre[..., c]] * full[..., c][centre[..., c]])
+            if weighted.size:
+                scale = np.count_nonzero(centre[..., c]) / weighted.size
+                spread += float(np.sum(weighted)) * scale
+                square_spread += float(np.sum(weighted * weighted)) * scale
     if count < noise.MIN_NOISE_PIXELS or den <= 0:
         return None
-    return math.sqrt(num / (36.0 * noise.CAP_MEAN * den)), count
+    share = spread * spread / (count * square_spread) if square_spread > 0 else 1.0
+    return math.sqrt(num / (36.0 * noise.CAP_MEAN * den)), count, share
 
 
 def residual(rng, h, w, dtype, spikes, bad):
@@ -84,7 +99,8 @@ def mask(rng, h, w, kind):
     return np.full((h, w), kind == "all")
 
 
-SIZES = [(3, 3), (4, 5), (6, 11), (9, 9), (13, 30), (23, 31), (40, 17), (64, 64), (71, 90)]
+SIZES = [(3, 3), (4, 5), (6, 11), (9, 9), (13, 30), (23, 31), (40, 17), (64, 64), (71, 90),
+         (130, 130)]  # (the last: > 2 NOISE_SAMPLE Laplacians a channel: sampled)
 KINDS = ["disc", "holes", "sparse", "channels", "all", "none"]
 
 
@@ -118,8 +134,19 @@ def test_the_estimate_matches_the_reference_implementation(seed):
             seen.add("none")
             continue
         assert got[0] == pytest.approx(want[0], rel=1e-12, abs=0.0) and got[1] == want[1]
+        assert got[2] == pytest.approx(want[2], rel=1e-12)
         seen.add("zero" if want[0] == 0.0 else "sigma")
     assert seen >= {"sigma", "none"}
+
+
+def test_a_large_channel_reads_its_levels_from_a_sample():
+    """130 x 130 of white noise: 16384 Laplacians a channel, the levels' median read from every 4th
+    (NOISE_SAMPLE 4096) -- sigma, M and share as the reference's, to 1e-12."""
+    image = np.random.default_rng(4).normal(size=(130, 130, 3))
+    used = np.ones((130, 130), bool)
+    got, want = estimate_sigma([image], [used]), reference_sigma([image], [used])
+    assert want[1] == 128 * 128 * 3 and got[1] == want[1]
+    assert got[0] == pytest.approx(want[0], rel=1e-12) and got[2] == pytest.approx(want[2], rel=1e-12)
 
 
 def test_the_cases_reach_every_branch():
