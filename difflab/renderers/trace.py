@@ -446,18 +446,18 @@ def count_shadow_crossings(geom: SceneGeomW, materials: wp.array(dtype=MaterialW
                            distance: float, ignore_object: int, crossings: wp.array3d(dtype=wp.int32), k: int,
                            q: int):
     """Walk `shadow_ray`'s transparent shadow ray again (one that was not blocked nor cut: at most
-    MAX_SHADOW_CROSSINGS crossings), adding 1 to crossings[k, q, material] for every transparent
-    surface it crosses, so that its visibility prod(kt) can be re-evaluated for new kt."""
+    MAX_SHADOW_CROSSINGS crossings), by its steps (`shadow_step`), adding 1 to crossings[k, q,
+    material] for every transparent surface it crosses, so that its visibility prod(kt) can be
+    re-evaluated for new kt."""
+    visibility = float(1.0)
     origin = p
     remaining = distance
     for crossing in range(MAX_SHADOW_CROSSINGS):
         hit = closest_hit(geom, origin, l, 0.0, remaining, ignore_object)
-        if hit.kind == HIT_NONE:
-            return
-        if materials[hit.material].kt <= 0.0:
+        verdict, visibility, origin, remaining = shadow_step(geom, materials, hit, crossing, 1, visibility, origin, l,
+                                                             remaining, ignore_object)
+        if hit.kind == HIT_NONE or verdict == SHADOW_BLOCKED:
             return
         crossings[k, q, hit.material] = crossings[k, q, hit.material] + 1
-        origin, step = past_surface(geom, hit, origin, l)
-        remaining = remaining - step
-        if remaining <= 0.0:
+        if verdict != SHADOW_GOES_ON:
             return
