@@ -107,8 +107,9 @@ def _levels(values: np.ndarray, picks: Picks) -> np.ndarray:
     if picks.binned is None:
         return np.array([np.median(values[::picks.step]) / MEDIAN_CHI2_1])
     count = picks.binned.shape[1]
-    middle = np.partition(values[picks.binned], [(count - 1) // 2, count // 2], axis=1)  # each bin's median, as np.median's
-    return (middle[:, (count - 1) // 2] + middle[:, count // 2]) / 2.0 / MEDIAN_CHI2_1
+    ordered = np.sort(values[picks.binned], axis=1)  # (each bin's median, as np.median's: a sort of the rows
+    # took 12 us a channel of 17 x 280, np.partition at the two middles 28)
+    return (ordered[:, (count - 1) // 2] + ordered[:, count // 2]) / 2.0 / MEDIAN_CHI2_1
 
 
 def _view_picks(used, weights, signal, interior: bool) -> ViewPicks | None:
@@ -159,29 +160,28 @@ def _sums(views: list, planes) -> tuple[float, float, float, float, int]:
         if view is None:
             continue
         with np.errstate(invalid="ignore", over="ignore"):  # (inf - inf: NaN; either is left out)
-            laplacian = _stencil(image[:, view.box[0], view.box[1]], -2.0)
-        for c in range(3):
-            picks, flat = view.picks[c], laplacian[c].reshape(-1)
-            values = None if picks is None else np.square(flat[picks.index], dtype=np.float64)
+            laplacian = _stencil(image[:, view.box[0], view.box[1]], -2.0).reshape(3, -1)
+        for c, picks in enumerate(view.picks):
+            values = None if picks is None else np.square(laplacian[c][picks.index], dtype=np.float64)
             if values is not None and not np.isfinite(values.max()):  # (rare: a NaN or inf) the picks without them
-                picks = _channel(np.flatnonzero(view.centre[c] & np.isfinite(laplacian[c])), view.bright,
+                picks = _channel(np.flatnonzero(view.centre[c].reshape(-1) & np.isfinite(laplacian[c])), view.bright,
                                  view.weights, c)
-                values = None if picks is None else np.square(flat[picks.index], dtype=np.float64)
+                values = None if picks is None else np.square(laplacian[c][picks.index], dtype=np.float64)
             if picks is None:
                 continue
-            v = _levels(values, picks)
-            level = (lambda at: np.interp(at, picks.x, v)) if picks.bright is not None else lambda at: v[0]  # noqa: E731
-            over = np.flatnonzero(values > CAP_Z2 * v.min())  # (only these can be above 9 times their level)
+            level = _levels(values, picks)
+            over = np.flatnonzero(values > CAP_Z2 * level.min())  # (only these can be above 9 times their level)
             if over.size:
-                high = level(picks.bright[picks.index[over]] if picks.bright is not None else None)
+                high = level[0] if picks.bright is None else np.interp(picks.bright[picks.index[over]], picks.x, level)
                 capped = values[over]
                 values[over] = np.where(capped > CAP_Z2 * high, high, capped)
             num += float(np.sum(values if picks.weight is None else values * picks.weight))  # (no BLAS dot: slow threads)
             den += picks.den
             sampled = -(-picks.index.size // picks.step)  # m
-            weighted = np.broadcast_to(level(picks.bright_sample), (sampled,))  # the share, from the sample (one
-            if picks.weight_sample is not None:                                # level: m times it)
-                weighted = weighted * picks.weight_sample
+            weighted = np.full(sampled, level[0]) if picks.bright is None else \
+                np.interp(picks.bright_sample, picks.x, level)  # the share, from the sample
+            if picks.weight_sample is not None:
+                weighted *= picks.weight_sample
             scale = picks.index.size / sampled  # M / m
             spread += float(np.sum(weighted)) * scale
             square_spread += float(np.sum(np.square(weighted))) * scale
