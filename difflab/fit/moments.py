@@ -193,11 +193,23 @@ def _columns_r(view, sums: ViewSums, mine, f, v):
     return jnp.stack(rows)
 
 
-def linearise(prepared: tuple, x, problem):
-    """(0.5 r^T r, J^T J (p, p), J^T r (p,), r) at solver coordinates x from the moments (module
-    docstring); `prepared` = `prepare(problem, ...)`. r: per view (3, U), channel-major
+def residuals(prepared: tuple, x, problem) -> tuple:
+    """The weighted residuals at solver coordinates x, per view (3, U), channel-major
     (`lm.host_residuals` puts them in the problem's order, on the host: numpy transposes them at
-    several times the speed of XLA's CPU code)."""
+    several times the speed of XLA's CPU code); `prepared` = `prepare(problem, ...)`."""
+    table = problem.materials(problem.layout.values(x))
+    out = []
+    for view, sums in zip(problem.views, prepared):
+        mat = _coefficients(view, table)
+        out.append(_residuals(view, sums, mat, lobes(view, sums, mat, ())[0]))
+    return tuple(out)
+
+
+def linearise(prepared: tuple, x, problem):
+    """(0.5 r^T r, J^T J (p, p), J^T r (p,)) at solver coordinates x from the moments (module
+    docstring); `prepared` = `prepare(problem, ...)`. r^T r is summed channel by channel as products
+    of r with itself, which keeps r formed apart (XLA's CPU code fused it into the sum of squares,
+    at twice the cost)."""
     layout = problem.layout
     values = layout.values(x)
     table = problem.materials(values)
@@ -206,13 +218,12 @@ def linearise(prepared: tuple, x, problem):
     p = layout.size
     gram = jnp.zeros((p + 1, p + 1), x.dtype)  # row / column p collects what is not fitted
     grad = jnp.zeros(p + 1, x.dtype)
-    loss, out = jnp.zeros((), x.dtype), []
+    loss = jnp.zeros((), x.dtype)
     for view, sums in zip(problem.views, prepared):
         mat = _coefficients(view, table)
         f = lobes(view, sums, mat, nonlinear)
-        r = jax.lax.optimization_barrier(_residuals(view, sums, mat, f[0]))  # (summed here and kept)
-        out.append(r)
-        loss = loss + 0.5 * jnp.sum(r * r)
+        r = _residuals(view, sums, mat, f[0])
+        loss = loss + 0.5 * sum(r[c] @ r[c] for c in range(3))
         for material, block in zip(view.model.material_ids, sums.blocks):
             mine = None if view.model.material_ids == (material,) else view.model.material == material
             full = _moments(view, sums, block, mine, f)
@@ -229,7 +240,7 @@ def linearise(prepared: tuple, x, problem):
                 columns_r = _columns_r(view, sums, mine, f, sqrt_weight * r)
             grad = grad.at[cols].add(jnp.einsum("cai,ca->ci", pick, columns_r))
     scale = jnp.where(layout.entries("log") > 0, values, 1.0)  # d value / d x
-    return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p], tuple(out)
+    return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p]
 
 
 def _pick(kind, nonlinear, ks):
