@@ -81,6 +81,24 @@ def to_device(tree):
     return tree
 
 
+def take_rows(array, rows, dtype=None) -> np.ndarray:
+    """array[rows] along its first axis for an int array `rows` of valid indices, in `dtype`
+    (default: the array's), as a numpy array whose data start on a 64-byte boundary: JAX's CPU
+    client moves such an array to the device in place, not by a copy (a 24768 x 3 float64 target:
+    0.03 ms against 0.10), so it is never written to. (numpy's `take`: several times the speed of
+    an index expression.)"""
+    dtype = np.dtype(array.dtype if dtype is None else dtype)
+    shape = (rows.size,) + array.shape[1:]
+    size = int(np.prod(shape)) * dtype.itemsize
+    raw = np.empty(size + 64, np.uint8)
+    start = -raw.ctypes.data % 64
+    out = raw[start:start + size].view(dtype).reshape(shape)
+    if dtype == array.dtype:
+        return np.take(array, rows, axis=0, out=out, mode="clip")  # (valid rows: "clip" takes them unbuffered)
+    out[...] = np.take(array, rows, axis=0)
+    return out
+
+
 def _put(index, values, base):
     return jnp.where(index >= 0, values[jnp.maximum(index, 0)], base)
 
