@@ -66,7 +66,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             sse = float(np.sum(np.square(counted)))
         loss = 0.5 * sse if rho is counted else float(0.5 * np.sum(np.square(rho)))
         planes = setup.residual_planes(r)
-        residuals = [np.moveaxis(p, 0, -1) for p in planes]  # (H, W, 3) views
+        residuals = [p.transpose(1, 2, 0) for p in planes]  # (H, W, 3) views (np.moveaxis: 2 us more each)
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and finite_gram(gram))
         silent, silent_entries = silent_pixels(setup.views, r)
         sigma, noise_values, share = (views_noise(setup.views, planes, silent, setup.sigma_given, setup.sigma_floor,

@@ -182,9 +182,10 @@ def degenerate(layout, diag: np.ndarray, gram, prior: bool) -> list[str]:
     texels alone are the prior's to fill and do not count; one that involves another parameter
     does (a texture's scale against a light's intensity)."""
     bad = np.isinf(diag) & (gram.diagonal() > 0)
-    texel = np.concatenate([np.full(p.size, p.shape is not None) for p in layout]) if len(layout) else bad
-    if prior and not (bad & ~texel).any():
-        return []
+    if prior:  # (the texel mask only then)
+        texel = np.concatenate([np.full(p.size, p.shape is not None) for p in layout]) if len(layout) else bad
+        if not (bad & ~texel).any():
+            return []
     flat, offset = [], 0
     for p in layout:
         if bad[offset:offset + p.size].any():
