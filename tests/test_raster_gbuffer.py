@@ -4,6 +4,7 @@ and the frame buffers a compiled scene reuses once no frame holds them."""
 import dataclasses
 import functools
 import threading
+import time
 import weakref
 
 import numpy as np
@@ -97,13 +98,13 @@ def test_a_zbuffer_drawn_in_two_halves_gives_the_one_thread_frame_and_leaves_bot
     monkeypatch.setattr(launch, "cpu_threads", lambda: 2)
     halves = []
     real = driver.zbuffer
-    monkeypatch.setattr(driver, "zbuffer", lambda *a, **k: halves.append(k.get("partial")) or real(*a, **k))
+    monkeypatch.setattr(driver, "zbuffer", lambda *a, **k: halves.append(k.get("halves")) or real(*a, **k))
     scene = textured_scene(tmp_path, shading, 1)
     compiled = compile_scene(scene)
     one = render_frame(scene, threads=1)
     for image in (True, False, True):
         halved = render_frame(compiled, image=image)
-        assert halves[-1] is not None and halves[-1].shape == (24 * 20,)
+        assert halves[-1] is not None and halves[-1][0].shape == (24 * 20,)
         assert_same_gbuffer(halved.gbuffer, one.gbuffer)
         for name in ("key", "partial key"):
             assert (compiled.scratch(name, 24 * 20, wp.int64).numpy() == coverage.NO_HIT).all(), name
@@ -149,6 +150,37 @@ def test_run_bands_runs_each_band_once_and_hands_a_bands_error_to_the_caller():
             raise RenderError("band 2")
     with pytest.raises(RenderError, match="^band 2$"):
         launch.run_bands(fail_on_second, [(0, 2), (2, 5), (5, 6)], threads=2)
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_run_phases_runs_each_phase_after_the_last_and_a_bands_error_stops_the_later_phases(threads):
+    """`run_phases` (the halved z-buffer, then the G-buffer's pass on the same threads): every band of
+    a phase once, each only once every band of the phase before has ended; a band's error is raised
+    to the caller and no band of a later phase starts."""
+    log, lock = [], threading.Lock()
+
+    def band(phase):
+        def run(a, b):
+            with lock:
+                log.append(("start", phase, a))
+            time.sleep(0.002 * (a % 2))  # uneven bands: a thread done early must wait, not move on
+            with lock:
+                log.append(("end", phase, a))
+        return run
+    phases = [(band(0), [(0, 2), (1, 2)]), (band(1), [(k, 3) for k in range(3)]), (band(2), [(0, 1)])]
+    launch.run_phases(phases, threads)
+    for phase, n in enumerate((2, 3, 1)):
+        assert sorted(a for event, p, a in log if event == "start" and p == phase) == list(range(n))
+        first_start = min(i for i, (event, p, a) in enumerate(log) if event == "start" and p == phase)
+        assert all(p >= phase for event, p, a in log[first_start:]), log
+
+    def fail(a, b):
+        raise RenderError(f"band {a}")
+    later = []
+    with pytest.raises(RenderError, match="^band [01]$"):
+        launch.run_phases([(fail, [(0, 2), (1, 2)]), (lambda a, b: later.append(a), [(0, 2), (1, 2)])], threads)
+    time.sleep(0.05)  # a worker that went on would have run a band by now
+    assert later == []
 
 
 def test_run_bands_keeps_one_pool_per_thread_count():

@@ -190,23 +190,26 @@ class _BandQueue:
             except BaseException as exc:  # noqa: BLE001 -- handed to the caller by `join`
                 with self.lock:
                     self.error = self.error or exc
-                    self.left -= len(self.todo)  # not started: never will be
-                    self.todo.clear()
+                self.drop()
             with self.lock:
                 self.left -= 1
                 if self.left == 0:
                     self.finished.set()
+
+    def drop(self) -> None:
+        """Leave the bands not started yet undone (they never will be)."""
+        with self.lock:
+            self.left -= len(self.todo)
+            self.todo.clear()
+            if self.left == 0:
+                self.finished.set()
 
     def join(self) -> None:
         try:
             self.work()
             self.finished.wait()
         except BaseException:  # interrupted waiting (Ctrl-C): no band starts now; those running end first
-            with self.lock:
-                self.left -= len(self.todo)
-                self.todo.clear()
-                if self.left == 0:
-                    self.finished.set()
+            self.drop()
             self.finished.wait()
             raise
         finally:
@@ -230,6 +233,34 @@ def run_bands(run_band, bands: list[tuple[int, int]], threads: int | None = None
     for _ in range(min(threads, len(bands)) - 1):
         pool.submit(queue.work)
     queue.join()
+
+
+def run_phases(phases: list[tuple], threads: int | None = None) -> None:
+    """`run_bands(run_band, bands)` for each (run_band, bands) of `phases` in turn, on the calling
+    thread and up to `threads` - 1 pool workers that go on from one phase to the next: each thread
+    takes the next phase's bands once every band of this one is done, with no hand-off through the
+    pool in between (a sleeping worker's wake-up: ~0.1 ms on the 2-core machine). A band that
+    raises stops the later phases; the error is raised here."""
+    threads = cpu_threads() if threads is None else max(1, threads)
+    queues = [_BandQueue(run_band, bands) for run_band, bands in phases]
+    for _ in range(min(threads, max(len(bands) for unused, bands in phases)) - 1):
+        _pool(threads - 1).submit(_follow_phases, queues)
+    try:
+        for queue in queues:
+            queue.join()
+    except BaseException:
+        for queue in queues:
+            queue.drop()
+        raise
+
+
+def _follow_phases(queues: list[_BandQueue]) -> None:
+    """A pool worker's part of `run_phases`: the bands it can take of each phase in turn."""
+    for queue in queues:
+        queue.work()
+        queue.finished.wait()
+        if queue.error is not None:
+            return
 
 
 def start_beside(task, device: str, threads: int | None = None) -> _BandQueue:
@@ -279,23 +310,32 @@ def dealt_row(row0: int, row_step: int, tid: int):
     return row0 + (tid // ROW_BLOCK) * row_step + tid % ROW_BLOCK
 
 
+def dealt_bands(rows: int, device: str, threads: int | None = None,
+                per_thread: int = BANDS_PER_THREAD) -> list[tuple[int, int]]:
+    """The bands (k, n) `launch_row_loops` deals rows [0, rows) to: `per_thread` per CPU thread, as
+    `band_plan` (one on CUDA), none without a block of rows."""
+    n_bands = min(len(band_plan(rows, device, threads, per_thread)), -(-rows // ROW_BLOCK))
+    return [(k, n_bands) for k in range(n_bands)]
+
+
+def launch_dealt(kernel, k: int, n: int, rows: int, inputs: list, device: str) -> None:
+    """Launch `kernel` on band k of n of rows [0, rows) dealt in blocks (`launch_row_loops`)."""
+    band_rows = sum(min(ROW_BLOCK, rows - block) for block in range(k * ROW_BLOCK, rows, n * ROW_BLOCK))
+    wp.launch(kernel, dim=band_rows, inputs=[k * ROW_BLOCK, n * ROW_BLOCK, *inputs], device=device)
+
+
 def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int | None = None,
                      per_thread: int = BANDS_PER_THREAD) -> None:
     """Launch `kernel` with one thread per row, the rows dealt to bands in blocks of ROW_BLOCK
-    (`per_thread` bands per CPU thread, as `band_plan`; one on CUDA): band k of n takes blocks k,
-    k + n, k + 2n, ..., so each band holds a share of every part of the frame and the bands' work
-    is even where the frame's content is not (the 256^2 bench sphere's top half holds 3x the covered
-    samples of its bottom half: as two contiguous bands, 1.75 ms of CPU on one core beside 0.66 ms
-    on the other; dealt, 1.25 and 1.19). The kernel's first arguments are (row0, row_step): its
-    thread wp.tid() handles row `dealt_row(row0, row_step, tid)`, looping over the columns itself.
-    On the CPU this reads the kernel's (struct) arguments once per row rather than once per pixel."""
-    n_bands = min(len(band_plan(rows, device, threads, per_thread)), -(-rows // ROW_BLOCK))  # (no band without a block)
-
-    def run_band(k: int, n: int) -> None:
-        band_rows = sum(min(ROW_BLOCK, rows - block) for block in range(k * ROW_BLOCK, rows, n * ROW_BLOCK))
-        wp.launch(kernel, dim=band_rows, inputs=[k * ROW_BLOCK, n * ROW_BLOCK, *inputs], device=device)
-
-    run_bands(run_band, [(k, n_bands) for k in range(n_bands)], threads)
+    (`dealt_bands`): band k of n takes blocks k, k + n, k + 2n, ..., so each band holds a share of
+    every part of the frame and the bands' work is even where the frame's content is not (the 256^2
+    bench sphere's top half holds 3x the covered samples of its bottom half: as two contiguous
+    bands, 1.75 ms of CPU on one core beside 0.66 ms on the other; dealt, 1.25 and 1.19). The
+    kernel's first arguments are (row0, row_step): its thread wp.tid() handles row
+    `dealt_row(row0, row_step, tid)`, looping over the columns itself. On the CPU this reads the
+    kernel's (struct) arguments once per row rather than once per pixel."""
+    run_bands(lambda k, n: launch_dealt(kernel, k, n, rows, inputs, device),
+              dealt_bands(rows, device, threads, per_thread), threads)
 
 
 def launch_chunks(kernel, n: int, inputs: list, device: str, threads: int | None = None) -> None:

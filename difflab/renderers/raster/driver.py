@@ -24,8 +24,9 @@ from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR
 from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
-from ..launch import (band_plan, halved_zbuffer, host_empty, launch_chunks, launch_parts, launch_row_loops,
-                      load_kernels, parallel_bands, part_count, pass_threads, raster_threads, run_bands, start_beside)
+from ..launch import (band_plan, dealt_bands, halved_zbuffer, host_empty, launch_chunks, launch_dealt, launch_parts,
+                      launch_row_loops, load_kernels, part_count, pass_threads, raster_threads, run_bands, run_phases,
+                      start_beside)
 from ..trace import object_kinds
 
 
@@ -140,7 +141,7 @@ def split_slots(compiled, p_clip: wp.array, threads: int | None) -> tuple[wp.arr
     return wp.array(extra_slot, dtype=wp.int32, device=device), split_faces.size
 
 
-def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, partial: wp.array | None = None):
+def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, halves: tuple | None = None):
     """Stages 1-3 on the sample grid of `cam`: clip space, near-plane clipping, and the z-buffer.
 
     Returns the clipped screen triangles (a `ScreenW`: a slot per face, and one more per face clipped
@@ -150,19 +151,26 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, par
     each band rasterizes only its list, then calls `then(tris, key, begin, end)` when given: the
     band's keys are final there, and its rows need no other band's.
 
-    `partial` (a second key array, all NO_HIT; one band of rows, no `then`): the slots are dealt in
+    `halves` (partial, pass): a second key array, all NO_HIT (one band of rows to bin into), and the
+    (threads, bands per thread) of a per-sample pass (`launch.pass_threads`). The slots are dealt in
     turn to the returned key and to `partial`, the two drawn side by side on two threads (no binning:
     a 256^2 frame's z-buffer on one thread); a sample's key is then the lesser of its two, which its
-    reader takes (`resolve.resolve_into`), the same as one z-buffer's (min is order-free)."""
+    reader takes (`resolve.resolve_into`), the same as one z-buffer's (min is order-free). Then the
+    same threads call `then(tris, key, k, n)` for the pass's bands of rows dealt in blocks (band k
+    of n, `launch.dealt_bands`) as soon as both halves are drawn (`launch.run_phases`)."""
     device, arrays = compiled.device, compiled.arrays
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     width, height = cam.width, cam.height
     scratch = compiled.scratch  # arrays kept between frames: no fresh pages to fault in
     key = cleared_key(compiled, width * height)
+    if halves:
+        partial, (pass_pool, per_thread) = halves
+        then_plan = dealt_bands(height, device, pass_pool, per_thread), pass_pool
     if not n_faces:  # nothing to draw; `then` still sees every band
         tris = empty_screen(device)
         if then is not None:
-            parallel_bands(lambda begin, end: then(tris, key, begin, end), height, device, threads)
+            run_bands(lambda a, b: then(tris, key, a, b), *(then_plan if halves else
+                                                           (band_plan(height, device, threads), threads)))
         return tris, key
     p_clip, p_screen = scratch("clip", n_vertices, wp.vec4), scratch("screen", n_vertices, wp.vec4d)
     behind = scratch("behind", 1, wp.int32)
@@ -210,11 +218,11 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, par
         if then is not None:
             then(tris, key, begin, end)
 
-    if partial is not None:  # every other slot into each of two z-buffers, side by side (one band, on the CPU)
-        halves = (key, partial)
-        run_bands(lambda part, parts: wp.launch(coverage.raster_kernel, dim=1, inputs=[
-            part, parts, 0, height, binned, n_slots, rows, tris.screen, width, height, halves[part]], device=device),
-            [(0, 2), (1, 2)], 2)
+    if halves:  # every other slot into each of two z-buffers, side by side (one band, on the CPU), then `then`
+        keys = (key, partial)
+        run_phases([(lambda part, parts: wp.launch(coverage.raster_kernel, dim=1, inputs=[
+            part, parts, 0, height, binned, n_slots, rows, tris.screen, width, height, keys[part]], device=device),
+            [(0, 2), (1, 2)]), (lambda k, n: then(tris, key, k, n), then_plan[0])], then_plan[1])
         return tris, key
 
     # the bands with most triangles first: the threads finish on the small ones (bands write disjoint rows,
@@ -338,23 +346,31 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     points_are_samples = int(shading == PHONG_SHADING)
     if points_are_samples:
         lit = empty_lit(compiled, width * height, width * height, to_zero)
-    partial = cleared_key(compiled, width * height, "partial key") if halved else compiled.scratch("no key", 0, wp.int64)
+    partial = cleared_key(compiled, width * height, "partial key") if halved else compiled.scratch("no key", 0,
+                                                                                                    wp.int64)
+    bad = compiled.scratch("nonfinite rows", height, wp.int32)
     clearing = start_beside(lambda: zero_all(to_zero), device, row_pass[0])
+
+    def sample_pass(tris, key, k: int, n: int) -> None:  # stage 4 on band k of n of the dealt rows, once cleared
+        clearing.join()
+        if points_are_samples:  # stages 4-6 in one pass: each sample resolved, then lit as its own point
+            launch_dealt(shade.phong_gbuffer_kernel, k, n, height, [
+                key, partial, tris, mesh, cam, perspective_correct, out, samples, lighting, lit, bad], device)
+        else:
+            launch_dealt(resolve.resolve_kernel, k, n, height, [
+                key, partial, tris, mesh, compiled.materials, cam, perspective_correct, shading,
+                compiled.vertices.shape[0], out, samples], device)
+
     try:
-        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads,  # stages 1-3
-                            partial=partial if halved else None)
+        tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads,  # stages 1-3 (and 4 when halved)
+                            then=sample_pass if halved else None, halves=(partial, row_pass) if halved else None)
     finally:
         clearing.join()
-    if points_are_samples:  # stages 4-6 in one pass: each sample resolved, then lit as its own point
-        points, n_points = samples, width * height
-        bad = compiled.scratch("nonfinite rows", height, wp.int32)
-        launch_row_loops(shade.phong_gbuffer_kernel, height, [
-            key, partial, tris, mesh, cam, perspective_correct, out, samples, lighting, lit, bad], device, *row_pass)
-    else:
-        launch_row_loops(resolve.resolve_kernel, height, [
-            key, partial, tris, mesh, compiled.materials, cam, perspective_correct, shading, compiled.vertices.shape[0],
-            out, samples], device, *row_pass)
-        points, n_points = mesh_points(compiled, mesh, cam, shading, threads)  # stages 5-6
+    if not halved:
+        run_bands(lambda k, n: sample_pass(tris, key, k, n), dealt_bands(height, device, *row_pass), row_pass[0])
+    points, n_points = samples, width * height
+    if not points_are_samples:  # stages 5-6
+        points, n_points = mesh_points(compiled, mesh, cam, shading, threads)
         lit = light_mesh_points(compiled, lighting, points, n_points, width * height, threads)
     mark_key_cleared(compiled, key)  # stage 4 reset every key it read
     if halved:
