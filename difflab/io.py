@@ -22,7 +22,7 @@ from .files import write_json_atomic as write_json_atomic
 from .files import write_text_atomic as write_text_atomic
 from .files import write_together as write_together
 from .limits import short_path
-from .picture import read_picture, sample_depth, why
+from .picture import read_picture, sample_depth, unreadable, why
 
 __all__ = ["load_image", "save_image", "read_image", "LoadedImage", "sample_bits", "srgb_to_linear", "linear_to_srgb",
            "code_step", "write_text_atomic", "write_json_atomic", "write_together", "uninterrupted"]
@@ -161,7 +161,7 @@ def sample_bits(path: str | os.PathLike) -> int | None:
         with Image.open(path) as im:
             return sample_depth(im)
     except Exception as exc:
-        raise DifflabError(f"{short_path(path)}: cannot read image ({why(exc)})") from None
+        raise DifflabError(f"{short_path(path)}: cannot read image: {unreadable(exc, path)}") from None
 
 
 def image_file(path, what: str = "image") -> Path:

@@ -33,6 +33,30 @@ def why(exc: Exception) -> str:
     return f"{type(exc).__name__}: {' '.join(str(exc).split())[:120]}"
 
 
+#: picture formats by file ending, as messages name them
+FORMAT_NAMES = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF", ".tiff": "TIFF", ".bmp": "BMP",
+                ".gif": "GIF", ".webp": "WebP"}
+
+
+def unreadable(exc: Exception, path: Path) -> str:
+    """Why Pillow could not read the picture file `path`, in plain words (Pillow's exception classes
+    are its own business): not a picture it knows, damaged or cut short, or too many pixels."""
+    text = " ".join(str(exc).split())[:120]
+    if isinstance(exc, Image.DecompressionBombError):
+        return f"more pixels than Pillow opens ({text})"
+    if isinstance(exc, Image.UnidentifiedImageError):  # no format's header matched (or it was cut inside one)
+        kind = FORMAT_NAMES.get(Path(path).suffix.lower())
+        if kind:
+            return f"not a {kind} file Pillow can read (its header is not a valid {kind} header), nor a picture " \
+                   f"in another format Pillow reads"
+        return "not a picture file Pillow can read (its header is no PNG, JPEG, TIFF, BMP, ... header)"
+    if isinstance(exc, PermissionError):
+        return "no permission to read the file"
+    if isinstance(exc, (OSError, SyntaxError, ValueError)):  # Pillow's decoders: "image file is truncated", ...
+        return f"the file is damaged or cut short ({text})"
+    return f"Pillow could not decode it ({text})"
+
+
 def _rawmode(tile) -> str | None:
     """A decoder tile's raw mode: its args (PNG) or their first entry (TIFF, ...)."""
     args = tile[3] if len(tile) == 4 else None
@@ -141,4 +165,4 @@ def read_picture(path: Path, alpha: bool = False) -> Picture:
     except Exception as exc:  # Pillow raises OSError, ValueError, SyntaxError, DecompressionBombError, ...
         hint = "; float images (EXR, HDR) are read from .npy: save the linear array with numpy.save" \
             if path.suffix.lower() in FLOAT_FORMATS else ""
-        raise DifflabError(f"{path}: cannot read image ({why(exc)}){hint}") from None
+        raise DifflabError(f"{path}: cannot read image: {unreadable(exc, path)}{hint}") from None

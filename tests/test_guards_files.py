@@ -85,14 +85,16 @@ def test_image_size_is_checked_from_the_header_before_decoding(tmp_path, monkeyp
     bomb = tmp_path / "bomb.png"  # 400 megapixels: Pillow refuses it as a decompression bomb
     Image.new("1", (20000, 20000)).save(bomb)
     monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "1T")
-    with pytest.raises(DifflabError, match=r"bomb\.png: cannot read image \(DecompressionBombError"):
+    with pytest.raises(DifflabError, match=r"bomb\.png: cannot read image: more pixels than Pillow opens \(Image size "
+                                           r"\(400000000 pixels\) exceeds limit"):
         load_image(bomb)
 
 
 def test_broken_or_missing_picture_files_are_named(tmp_path):
     save_image(tmp_path / "ok.png", np.random.default_rng(0).random((64, 64, 3)))
     (tmp_path / "cut.png").write_bytes((tmp_path / "ok.png").read_bytes()[:2000])
-    with pytest.raises(DifflabError, match=r"cut\.png: cannot read image \("):
+    with pytest.raises(DifflabError, match=r"cut\.png: cannot read image: the file is damaged or cut short \(image file "
+                                           r"is truncated\)$"):
         load_image(tmp_path / "cut.png")
     with pytest.raises(DifflabError, match=r"nothing\.png: image file not found"):
         load_image(tmp_path / "nothing.png")
