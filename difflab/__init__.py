@@ -10,7 +10,7 @@ The names below are the public API (`docs/api.md`). Public subpackages: `difflab
 `difflab.errors`, `difflab.io`; every other module is internal and may change. The rendering names
 (`render`, `render_frame`, `compile_scene`, `CompiledScene`, `Frame`, `GBuffer`, `ShadingPoints`,
 `RayTree`, `example_scene`) and the fitting names (`fit_material`, `fit_scene`, `identify`, `FitResult`,
-`Identifiability`) are imported on first use, so `import difflab` loads neither Warp nor JAX.
+`Identifiability`, `interior_mask`) are imported on first use, so `import difflab` loads neither Warp nor JAX.
 """
 
 from .batch import fit_many as fit_many
@@ -48,6 +48,7 @@ _LAZY = {
     "RayTree": ".renderers.raytrace.tree",
     "example_scene": ".demos.examples",
     "FitResult": ".fit", "Identifiability": ".fit", "fit_material": ".fit", "fit_scene": ".fit", "identify": ".fit",
+    "interior_mask": ".fit.edges",
 }
 
 
@@ -74,7 +75,7 @@ __all__ = [
     # images
     "load_image", "save_image",
     # fitting (lazy)
-    "fit_material", "fit_scene", "identify", "FitResult", "Identifiability", "fit_many",
+    "fit_material", "fit_scene", "identify", "FitResult", "Identifiability", "fit_many", "interior_mask",
     # errors
     "DifflabError", "SceneError", "MeshError", "TextureError", "RenderError", "FitError", "OutputError",
 ]

@@ -125,19 +125,6 @@ def case_table(size: int) -> dict:
     return cases
 
 
-def interior_mask(scene: dict) -> np.ndarray:
-    """The sphere's pixels two in from its silhouette (Mitsuba integrates a pixel's area, difflab
-    samples its centre: edge pixels differ by coverage, not shading)."""
-    from difflab import Scene, render_frame
-
-    mask = render_frame(Scene.from_dict(scene)).gbuffer.material == 0
-    for _ in range(2):
-        padded = np.pad(mask, 1)
-        mask = np.logical_and.reduce([padded[1 + i:mask.shape[0] + 1 + i, 1 + j:mask.shape[1] + 1 + j]
-                                      for i in (-1, 0, 1) for j in (-1, 0, 1)])
-    return mask
-
-
 def make_targets(name: str, case: dict, folder: Path) -> dict:
     """Render a case's targets into `folder`: format -> file ("float": a .npy read from the EXR)."""
     size = case["scene"]["camera"]["width"]
@@ -155,9 +142,11 @@ def make_targets(name: str, case: dict, folder: Path) -> dict:
         for fmt, suffix in (("png8", ".png"), ("png16", "_16.png"), ("exr", ".exr")):
             files[fmt] = write_mitsuba(mi, image, folder / f"{name}{suffix}", fmt)
         (folder / f"{name}.mitsuba.json").write_text(json.dumps(description, indent=1) + "\n")
-        from difflab import save_image
+        from difflab import interior_mask, save_image
 
-        files["mask"] = save_image(folder / f"{name}_mask.png", interior_mask(case["scene"]), srgb=False)
+        # Mitsuba integrates a pixel's area (an anti-aliased render), difflab samples its centre: edge
+        # pixels differ by coverage, not shading; the fit reads the pixels 2 in from every edge
+        files["mask"] = save_image(folder / f"{name}_mask.png", interior_mask(case["scene"], margin=2), srgb=False)
     exr = read_exr(files.pop("exr"))
     if exr is not None:
         from difflab import save_image

@@ -95,7 +95,10 @@ BASE = {"name": "a", "scene": "s.json", "targets": ["t.png"]}
     ([1, 2], "expected a JSON object, got list"),
     ({"scene": "s.json", "targets": ["t.png"]}, "name: missing (required: name, scene, targets)"),
     ({**BASE, "material": "red", "solvr": {}}, "unknown key(s) ['solvr']; known: name, scene, targets, material, "
-     "params, method, init, solver"),
+     "params, method, init, solver, edge_margin"),
+    ({**BASE, "edge_margin": True}, "edge_margin: expected an integer number of pixels >= 0, got True"),
+    ({**BASE, "edge_margin": 1.5}, "edge_margin: expected an integer number of pixels >= 0, got 1.5"),
+    ({**BASE, "edge_margin": -1}, "edge_margin: expected an integer number of pixels >= 0, got -1"),
     ({**BASE, "name": "../x"}, "name: expected letters, digits, '.', '_', '-' (at most 100, starting with a letter "
      "or digit), got '../x'"),
     ({**BASE, "targets": []}, "targets: empty list"),
@@ -255,7 +258,7 @@ def test_batch_recovers_each_fit_and_records_failures(reference):
     assert failure["error"] == f"targets[0]: {manifest.parent / 'nope.npy'}: image file not found"
     invalid = json.loads((out / "failures" / "line-3.json").read_text())  # the typo line
     assert invalid == {"line": 3, "name": "typo", "error": "unknown key(s) ['materal']; known: name, scene, targets, "
-                       "material, params, method, init, solver"}
+                       "material, params, method, init, solver, edge_margin"}
     rows = (out / "summary.csv").read_text().splitlines()
     assert rows[0] == ("line,name,status,result,model,model_mismatch,mismatch_suspected,noise_unknown,underdetermined,loss,"
                        "psnr,chi2,steps,params,error")

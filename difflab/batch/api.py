@@ -71,8 +71,8 @@ def _say(quiet: bool, text: str) -> None:
 
 
 def fit_many(manifest, outdir, *, workers: int | None = None, client=None, scheduler: str | None = None,
-             inline: bool = False, retries: int | None = None, device: str | None = None, progress: bool | None = None,
-             quiet: bool = False, force: bool = False) -> BatchSummary:
+             inline: bool = False, retries: int | None = None, device: str | None = None, edge_margin: int = 0,
+             progress: bool | None = None, quiet: bool = False, force: bool = False) -> BatchSummary:
     """Run every fit of a manifest and write each result as it finishes.
 
     The manifest is validated whole before any fit starts; each bad line is reported (on stderr,
@@ -98,6 +98,9 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
             no part of the job's identity: a rerun with another device fits nothing again); default:
             a line's own, else "cpu". Checked here for local workers (as `difflab fit --device`), by
             each job on a cluster's workers.
+        edge_margin: pixels (an integer >= 0) for every line that gives no `edge_margin` of its own:
+            its fit counts only pixels at least that far from every edge (`difflab.interior_mask`,
+            inside the line's masks; part of the job's identity); default 0: every pixel.
         progress: show a progress bar with ETA (default: when stderr is a terminal).
         quiet: do not print the bad lines and the closing lines (`BatchSummary.report`) on stderr.
         force: write into `outdir` even when it holds other files than a batch's.
@@ -111,6 +114,7 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
             outside `if __name__ == "__main__":`, which the local worker processes run again as they
             start (they import the main script), so that none could start: nothing is run.
     """
+    from ..fit.edges import check_margin
     from .runners import leave_if_importing_main
 
     leave_if_importing_main()  # a script's unguarded call, run again in a worker: the parent says so
@@ -131,7 +135,9 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
         from ..renderers.launch import resolve_device
 
         resolve_device(device)
-    jobs = [dataclasses.replace(job, spec={**job.spec, "solver": {"device": device or "cpu", **job.spec["solver"]}})
+    margin = check_margin(edge_margin, "edge_margin")
+    margin = {"edge_margin": margin} if margin else {}
+    jobs = [dataclasses.replace(job, spec={**margin, **job.spec, "solver": {"device": device or "cpu", **job.spec["solver"]}})
             for job in jobs]  # where each fit runs, in its report (not its identity: `store.same_job`)
     store = Store(outdir, force)
     for bad in invalid:

@@ -1,7 +1,7 @@
 """`difflab fit-batch`: every fit of a manifest, resumable, locally or on a Dask cluster.
 
     difflab fit-batch MANIFEST.jsonl -o OUTDIR [--workers N | --scheduler tcp://host:8786 [--inline] [--retries R]]
-                      [--device cpu|cuda]
+                      [--device cpu|cuda] [--edge-margin N]
 
 Bad manifest lines are listed (with their line numbers) before any fit starts and recorded as
 failures; the other fits run. Rerun the same command to finish an interrupted batch: finished fits
@@ -33,6 +33,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--retries", type=int, help="with --scheduler: Dask retries of a task that raised (default 2)")
     p.add_argument("--device", help="where Warp renders each fit: cpu or cuda[:N], for every line whose solver "
                                     "options name no device (default: the line's, else cpu)")
+    p.add_argument("--edge-margin", default="0", metavar="N",
+                   help="for every line without its own edge_margin: count only pixels at least N pixels from every "
+                        "silhouette, object, checker or shadow edge (as the option of difflab fit)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--force", action="store_true",
                    help="write into an output folder that holds other files (a batch's folder is resumed without it)")
@@ -43,6 +46,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args) -> int:
     from ..errors import DifflabError, OutputError
     from ..files import FORCE_ADVICE
+    from ..fit.edges import margin_text
     from .api import LOCAL_ONLY, fit_many
 
     for name, given in (("inline", args.inline), ("retries", args.retries is not None)):
@@ -51,9 +55,10 @@ def run(args) -> int:
     if args.workers is not None and args.scheduler is not None:
         raise DifflabError("--workers: applies only to local worker processes; a Dask cluster's workers are its own "
                            "(dask worker --nworkers N)")
+    margin = margin_text(args.edge_margin, "--edge-margin")
     try:
         summary = fit_many(args.manifest, args.output, workers=args.workers, scheduler=args.scheduler,
-                           inline=args.inline, retries=args.retries, device=args.device,
+                           inline=args.inline, retries=args.retries, device=args.device, edge_margin=margin,
                            progress=False if args.no_progress else None, force=args.force)
     except OutputError as exc:  # fit_many's advice (force=True) in this command's words (--force)
         raise OutputError(str(exc).replace(FORCE_ADVICE["python"], FORCE_ADVICE["cli"])) from None

@@ -14,6 +14,8 @@ Keys of a line (docs/batch.md is the reference):
     method    "raster" (G-buffer) or "raytrace" (ray tree); default: chosen from the scene.
     init      parameter name -> starting value (a number or an RGB list).
     solver    options of the fit: see `OPTIONS` (max_depth: not with method "raster").
+    edge_margin  pixels: count only those at least this far from every edge (`difflab.interior_mask`,
+              as `difflab fit --edge-margin`); default 0: every pixel (of the masks).
 Relative file paths resolve against the manifest's folder. Blank lines are skipped; line numbers
 count every line of the file from 1.
 """
@@ -30,7 +32,7 @@ from ..errors import ManifestError
 from ..vocabulary import METHODS
 
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
-KEYS = ("name", "scene", "targets", "material", "params", "method", "init", "solver")
+KEYS = ("name", "scene", "targets", "material", "params", "method", "init", "solver", "edge_margin")
 REQUIRED = ("name", "scene", "targets")
 VIEW_KEYS = ("image", "mask", "camera", "lights")
 NUMBER = (int, float)
@@ -162,6 +164,11 @@ def parse_line(data, base: Path) -> dict:
     if "params" in data:
         spec["params"] = _names(data["params"], "params")
     spec["init"] = _init(data.get("init", {}))
+    margin = data.get("edge_margin", 0)
+    if not (_typed(margin, int) and margin >= 0):
+        raise ManifestError(f"edge_margin: expected an integer number of pixels >= 0, got {margin!r}")
+    if margin:  # (0, the default, leaves the spec -- the job's identity -- as a line without the key)
+        spec["edge_margin"] = margin
     spec["solver"] = _solver(data.get("solver", {}))
     for key in RAYTRACE_ONLY:
         if key in spec["solver"] and spec.get("method") == "raster":

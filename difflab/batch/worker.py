@@ -31,11 +31,15 @@ def fit_job(spec: dict, threads: int | None = None):
     worker (`difflab.fit.cache`). `threads`: the Warp render's CPU threads (default $DIFFLAB_THREADS,
     else every core); the results do not depend on it."""
     from ..fit import fit
+    from ..fit.edges import margin_masks
 
     targets = [(view["image"], {k: view[k] for k in ("camera", "lights") if k in view}) for view in spec["targets"]]
     masks = [view.get("mask") for view in spec["targets"]]
+    masks = None if all(m is None for m in masks) else masks
+    if spec.get("edge_margin"):  # the views' interior masks, inside their own (`fit.edges`)
+        masks = margin_masks(spec["scene"], targets, masks, spec["edge_margin"], device=spec["solver"].get("device"))
     options = {**spec["solver"], "init": spec["init"] or None, "history": False, "progress": False, "threads": threads,
-               "masks": None if all(m is None for m in masks) else masks}
+               "masks": masks}
     if "params" in spec:
         options["params"] = tuple(spec["params"])
     return fit(spec["scene"], targets, spec.get("material"), method=spec.get("method"), **options)

@@ -1,7 +1,7 @@
 """`difflab fit`: fit materials to target images and write the fitted scene.
 
     difflab fit SCENE.json TARGET.png [TARGET2.png ...] --material NAME[,NAME2] [--params ka,kd,ks,n]
-                [--method raster|raytrace] [--solver lm] [--sigma S] -o fitted.json
+                [--method raster|raytrace] [--solver lm] [--sigma S] [--mask M.png] [--edge-margin N] -o fitted.json
 
 The image model is the scene's (the recorded ray tree for ray-traced scenes and mirrors / glass,
 else the G-buffer) unless --method says. Prints the fit summary -- values ± standard errors, PSNR,
@@ -81,6 +81,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--report", type=output_ending(".json"),
                    help="where to write the fit report (JSON, .json; default: OUTPUT with .fit.json)")
     p.add_argument("--mask", action="append", help="mask image per target (white: counts)")
+    p.add_argument("--edge-margin", default="0", metavar="N",
+                   help="count only pixels at least N pixels from every silhouette, object, checker or shadow edge "
+                        "(with --mask: inside both): an anti-aliased target (Mitsuba, POV-Ray +A, a camera) mixes "
+                        "the pixels an edge crosses, which difflab samples at their centres; 2 is usually enough "
+                        "(difflab.interior_mask; docs/foreign-targets.md)")
     p.add_argument("--grey", action="store_true", help="fit one grey value per coefficient, not RGB")
     p.add_argument("--bounded", action="store_true", help="keep ka, kd, ks in [0, 1]")
     p.add_argument("--loss", default="l2", choices=("l2", "huber", "cauchy"))
@@ -95,6 +100,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args) -> int:
     from ..files import refuse_overwrite, write_json, write_together
     from ..io import write_image
+    from .edges import margin_masks, margin_text
     from .engine import fit
     from .params import DEFAULT_PARAMS, name_list
     from .result import drop_texture_files, texture_files_beside
@@ -109,6 +115,9 @@ def run(args) -> int:
     masks = args.mask
     if masks is not None and len(masks) != len(args.targets):
         raise FitError(f"--mask: give one per target ({len(args.targets)}), got {len(masks)}")
+    margin = margin_text(args.edge_margin, "--edge-margin")
+    if margin:
+        masks = margin_masks(args.scene, list(args.targets), masks, margin, device=args.device)
     materials = [name for item in args.material for name in name_list(item, "--material")]
     params = DEFAULT_PARAMS if args.params is None else name_list(args.params, "--params")
     try:

@@ -49,7 +49,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from fit_common import RESULTS, SEED, perturb, rel_error, scene_dict, versions  # noqa: E402
-from foreign_targets import interior_mask  # noqa: E402
 from timing import median_seconds  # noqa: E402
 
 REFLECTANCE = [0.2, 0.5, 0.8]
@@ -238,9 +237,9 @@ def difflab_on_mitsuba_target(size: int, targets: list, repeats: int) -> dict:
     """kd, ks, n of a sphere fitted to Mitsuba's images: kd should be reflectance / pi, ks 0 (its
     bound). Each fit is of the other of `targets` (two renders of the scene) than the fit before it.
     Mitsuba's pixels integrate over their area, difflab samples centres: the fit reads the sphere's
-    interior pixels (2 pixels in from its silhouette, `foreign_targets.interior_mask`). Reported: the
+    interior pixels (2 pixels in from its silhouette, `difflab.interior_mask`). Reported: the
     fit of targets[0]."""
-    from difflab import compile_scene
+    from difflab import compile_scene, interior_mask
     from difflab.fit import fit_material
     from difflab.fit.records import STORE
     from difflab.scene import Scene
@@ -252,7 +251,7 @@ def difflab_on_mitsuba_target(size: int, targets: list, repeats: int) -> dict:
     d["objects"] = d["objects"][:1]  # the sphere alone, as in Mitsuba's scene
     d["render"]["shadows"] = False
     scene = Scene.from_dict(d)
-    mask = interior_mask(d)
+    mask = interior_mask(d, margin=2)
 
     compiled = compile_scene(scene)
 
