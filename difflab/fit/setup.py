@@ -221,10 +221,11 @@ class Setup:
         elif max_depth is not None:
             raise FitError(f"max_depth: {max_depth!r} does not apply to method='raster' (the G-buffer has no "
                            "secondary rays; use method='raytrace')")
-        try:  # checked as the scene's render block is, named by keyword (spp=True is no 1)
-            RenderSettings.parse({**self.scene.render.to_dict(), **render}, "")
-        except DifflabError as exc:
-            raise FitError(str(exc)) from None
+        if spp is not None or max_depth is not None:  # (the scene's own block and a METHODS name are valid)
+            try:  # checked as the scene's render block is, named by keyword (spp=True is no 1)
+                RenderSettings.parse({**self.scene.render.to_dict(), **render}, "")
+            except DifflabError as exc:
+                raise FitError(str(exc)) from None
         ids = sorted({p.index for p in self.layout if p.kind != "intensity"})
         all_surfaces = any(p.kind == "intensity" for p in self.layout)
         crossing = sorted({p.index for p in self.layout if p.kind == "kt"})
