@@ -318,6 +318,23 @@ def test_a_dropped_frames_buffers_are_reused_by_the_next_frame(tmp_path):
     assert view.shape == (2, 24, 3)
 
 
+def test_one_held_array_keeps_its_whole_zeroed_group_from_the_next_frame(tmp_path):
+    """The arrays that start zero share one buffer, cleared in one memset (`CompiledScene.zeroed_group`):
+    while a view holds any one of them, the next frame takes new memory for all, and the held values
+    stay as they were."""
+    compiled = compile_scene(textured_scene(tmp_path, "phong", 1))
+    frame = render_frame(compiled, image=False)
+    uv, position = frame.gbuffer.uv, frame.gbuffer.position.__array_interface__["data"][0]
+    before = uv.copy()
+    del frame
+    again = render_frame(compiled, image=False)
+    assert again.gbuffer.position.__array_interface__["data"][0] != position
+    assert np.abs(before).sum() > 0 and np.array_equal(uv, before)
+    second = again.gbuffer.position.__array_interface__["data"][0]
+    del again
+    assert render_frame(compiled, image=False).gbuffer.position.__array_interface__["data"][0] == second
+
+
 @pytest.mark.parametrize("shading", ["phong", "gouraud"])
 @pytest.mark.parametrize("beside", [False, True])
 def test_what_a_user_wrote_into_a_dropped_gbuffer_does_not_reach_the_next_frame(tmp_path, monkeypatch, shading, beside):

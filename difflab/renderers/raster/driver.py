@@ -30,25 +30,59 @@ from ..launch import (band_plan, dealt_bands, halved_zbuffer, host_empty, launch
 from ..trace import object_kinds
 
 
-def empty_points(compiled, name: str, count: int, clear: bool, to_zero: list | None = None) -> resolve.PointsW:
-    """Arrays for `count` shading points (`CompiledScene.reusable`: an earlier frame's memory when
-    free); with `clear` (the G-buffer's samples), those an empty sample leaves zero are zeroed (its
-    material is written) -- or, given `to_zero`, listed there for the caller to zero -- and the
-    samples keep no shadow-ray start (geometric normal, object skipped: `resolve.PointsW`)."""
-    points = resolve.PointsW()
-    for field, dtype, zero in [("position", wp.vec3, True), ("normal", wp.vec3, True), ("view", wp.vec3, True),
-                               ("material", wp.int32, False), ("cell", wp.int32, True), ("duv_dx", wp.vec2, True),
-                               ("duv_dy", wp.vec2, True)]:
-        setattr(points, field, compiled.reusable(f"{name}.{field}", count, dtype, clear and zero, to_zero))
-    kept = 0 if clear else count
-    points.geo_normal = compiled.reusable(f"{name}.geo_normal", kept, wp.vec3)
-    points.ignore = compiled.reusable(f"{name}.ignore", kept, wp.int32)
-    return points
+def point_fields(count: int, samples: bool) -> list[tuple]:
+    """(field, shape, dtype, zero where a sample is empty) of the arrays of `count` shading points
+    (`resolve.PointsW`); the G-buffer's `samples` keep no shadow-ray start (geometric normal, object
+    skipped), and their material is written where empty."""
+    kept = 0 if samples else count
+    return [("position", count, wp.vec3, True), ("normal", count, wp.vec3, True), ("view", count, wp.vec3, True),
+            ("material", count, wp.int32, False), ("cell", count, wp.int32, True), ("duv_dx", count, wp.vec2, True),
+            ("duv_dy", count, wp.vec2, True), ("geo_normal", kept, wp.vec3, False), ("ignore", kept, wp.int32, False)]
 
 
-def zero_all(arrays: list) -> None:
-    for array in arrays:
-        array.zero_()
+def gbuffer_fields(count: int) -> list[tuple]:
+    """`point_fields` of stage 4's other per-sample outputs (`resolve.GBufferW`): zero where empty,
+    or written everywhere."""
+    return [("face", count, wp.int32, False), ("bary", count, wp.vec3, True), ("depth", count, wp.float32, False),
+            ("uv", count, wp.vec2, True), ("object", count, wp.int32, False), ("point_index", count, wp.vec3i, False),
+            ("point_weight", count, wp.vec3, True)]
+
+
+def lit_fields(compiled, n_points: int, n_samples: int) -> list[tuple]:
+    """`point_fields` of stage 6's outputs for the G-buffer (`shade.LitW`), all zero where not
+    written (an empty point's): per point and light, direction, distance, visibility (one zero
+    column without lights); per point its colour and texture factor; per sample its texel (written
+    by stage 6 when the points are the samples, else by stage 7 on textured samples)."""
+    per_light = (n_points, max(len(compiled.scene.lights), 1))
+    return [("light_dir", per_light, wp.vec3, True), ("light_dist", per_light, wp.float32, True),
+            ("visibility", per_light, wp.float32, True), ("color", max(n_points, 1), wp.vec3, True),
+            ("factor", max(n_points, 1), wp.vec3, True), ("texel", n_samples, wp.vec3, True)]
+
+
+def filled(struct, name: str, fields: list[tuple], array):
+    """`struct` with each field's array `array(f"{name}.{field}", shape, dtype, zero)`."""
+    for field, shape, dtype, zero in fields:
+        setattr(struct, field, array(f"{name}.{field}", shape, dtype, zero))
+    return struct
+
+
+def gbuffer_arrays(compiled, n_samples: int, phong: bool):
+    """Stage 4's arrays for the G-buffer (`CompiledScene.reusable`: an earlier frame's memory when
+    free), and stage 6's when the points are the samples (`phong`): (samples, out, lit or None,
+    stale). What must start zero is carved from one buffer (`CompiledScene.zeroed_group`); `stale`
+    is that buffer when an earlier frame left it, for the caller to zero (else None: new memory)."""
+    samples, out, lit = resolve.PointsW(), resolve.GBufferW(), shade.LitW() if phong else None
+    structs = [(samples, "samples", point_fields(n_samples, True)), (out, "gbuffer", gbuffer_fields(n_samples))]
+    if phong:
+        structs.append((lit, "lit", lit_fields(compiled, n_samples, n_samples)))
+    zeroed = [(struct, field, shape, dtype) for struct, unused, fields in structs
+              for field, shape, dtype, zero in fields if zero]
+    arrays, stale = compiled.zeroed_group("gbuffer", [(shape, dtype) for *unused, shape, dtype in zeroed])
+    for (struct, field, *unused), array in zip(zeroed, arrays):
+        setattr(struct, field, array)
+    for struct, name, fields in structs:  # the rest: written everywhere
+        filled(struct, name, [spec for spec in fields if not spec[3]], compiled.reusable)
+    return samples, out, lit, stale
 
 
 def raster_mesh(compiled) -> resolve.RasterMeshW:
@@ -242,27 +276,11 @@ def mesh_points(compiled, mesh, cam, shading: int, threads: int | None = None):
     """Stage 5 under flat or Gouraud shading: the points where the model is evaluated (Phong's are
     its samples, see `rasterize`), and how many."""
     n_points = point_count(compiled, shading)
-    points = empty_points(compiled, "points", n_points, clear=False)  # every point written (`resolve.mesh_point`)
+    points = filled(resolve.PointsW(), "points", point_fields(n_points, False),  # every point written
+                    lambda name, shape, dtype, zero: compiled.reusable(name, shape, dtype))  # (`resolve.mesh_point`)
     launch_chunks(resolve.mesh_points_kernel, n_points, [mesh, compiled.materials, cam, shading, points],
                   compiled.device, threads)
     return points, n_points
-
-
-def empty_lit(compiled, n_points: int, n_samples: int, to_zero: list | None = None) -> shade.LitW:
-    """Stage 6's outputs for the G-buffer, zeroed (`CompiledScene.reusable`; an empty point's stay
-    zero; given `to_zero`, the arrays to zero are listed there for the caller): per point and light,
-    direction, distance, visibility (one zero column without lights); per point its colour and
-    texture factor; per sample its texel (written by stage 6 when the points are the samples, else
-    by stage 7 on textured samples)."""
-    n_lights = max(len(compiled.scene.lights), 1)
-    lit, array = shade.LitW(), compiled.reusable
-    lit.light_dir = array("lit.light_dir", (n_points, n_lights), wp.vec3, True, to_zero)
-    lit.light_dist = array("lit.light_dist", (n_points, n_lights), wp.float32, True, to_zero)
-    lit.visibility = array("lit.visibility", (n_points, n_lights), wp.float32, True, to_zero)
-    lit.color = array("lit.color", max(n_points, 1), wp.vec3, True, to_zero)
-    lit.factor = array("lit.factor", max(n_points, 1), wp.vec3, True, to_zero)
-    lit.texel = array("lit.texel", n_samples, wp.vec3, True, to_zero)
-    return lit
 
 
 def point_cache(compiled, n_points: int, frame: int) -> shade.PointCacheW:
@@ -280,7 +298,7 @@ def light_mesh_points(compiled, lighting, points, n_points: int, n_samples: int,
                       threads: int | None = None) -> shade.LitW:
     """Stage 6 for the G-buffer under flat or Gouraud shading: light every point, recording per
     light its direction, distance and visibility, and the texture factor."""
-    lit = empty_lit(compiled, n_points, n_samples)
+    lit = filled(shade.LitW(), "lit", lit_fields(compiled, n_points, n_samples), compiled.reusable)
     launch_chunks(shade.light_points_kernel, n_points, [points, lighting, lit], compiled.device, threads)
     return lit
 
@@ -334,22 +352,14 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
                                                                    n_points))
 
     # The per-sample G-buffer's arrays (stage 4; Phong's stage 6 too): what must start zero is
-    # cleared beside stages 1-3 when a core is free (memsets of memory other work has pushed out of
+    # cleared beside stages 1-3 when a core is free (a memset of memory other work has pushed out of
     # the cache, ~0.4-0.9 ms of a 256^2 frame).
-    to_zero = []
-    samples = empty_points(compiled, "samples", width * height, clear=True, to_zero=to_zero)
-    out = resolve.GBufferW()
-    for name, dtype, zeroed in [("face", wp.int32, False), ("bary", wp.vec3, True), ("depth", wp.float32, False),
-                                ("uv", wp.vec2, True), ("object", wp.int32, False), ("point_index", wp.vec3i, False),
-                                ("point_weight", wp.vec3, True)]:  # zero where empty, or written everywhere
-        setattr(out, name, compiled.reusable(f"gbuffer.{name}", width * height, dtype, zeroed, to_zero))
     points_are_samples = int(shading == PHONG_SHADING)
-    if points_are_samples:
-        lit = empty_lit(compiled, width * height, width * height, to_zero)
+    samples, out, lit, stale = gbuffer_arrays(compiled, width * height, points_are_samples)
     partial = cleared_key(compiled, width * height, "partial key") if halved else compiled.scratch("no key", 0,
                                                                                                     wp.int64)
     bad = compiled.scratch("nonfinite rows", height, wp.int32)
-    clearing = start_beside(lambda: zero_all(to_zero), device, row_pass[0])
+    clearing = start_beside(stale.zero_ if stale is not None else lambda: None, device, row_pass[0])
 
     def sample_pass(tris, key, k: int, n: int) -> None:  # stage 4 on band k of n of the dealt rows, once cleared
         clearing.join()
