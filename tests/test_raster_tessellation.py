@@ -86,6 +86,19 @@ def eager_soup(scene) -> dict:
     return triangle_soup(mesh_parts + parts)
 
 
+def test_a_raster_copy_is_kept_for_its_scene_and_with_scene_of_the_own_scene_is_itself(tessellations):
+    """`raster()` keeps its copy for the last scene asked for (a fit's frames ask again and again);
+    a copy under another scene is that scene's, with the same soup; `with_scene` of a compiled
+    scene's own scene is the compiled scene."""
+    compiled = compile_scene(WHITTED)
+    assert compiled.with_scene(compiled.scene) is compiled
+    soup = compiled.raster()
+    assert compiled.raster() is soup and soup.raster() is soup and soup.scene is compiled.scene
+    other = compiled.with_scene(compiled.scene.with_overrides(render={"shading": "flat"}))
+    assert other is not compiled and other.raster().scene is other.scene
+    assert other.raster().arrays is soup.arrays and len(tessellations) == 1
+
+
 def test_the_raster_soup_is_the_eager_one_built_once(tessellations):
     """The lazily built raster soup is bitwise the one soup of all the scene's triangles that
     compiling built before (`eager_soup`), and the raster image of a scene ray traced first is a

@@ -31,6 +31,7 @@ from .trace import RAY_OFFSET_ULPS, SceneGeomW
 RASTER_SOUP = "raster soup"  # the key in CompiledScene.built of the mesh and analytic triangles (`raster`)
 RASTER_ROOM = "raster room"  # ... and of the host arrays the mesh fields are the first rows of (`soup_with_room`),
 # with their device arrays where these alias them (`host_aliased`), else None
+RASTER_COPY = "raster copy"  # ... and of the last `raster()` copy
 MESH_ROWS = "mesh rows"  # ... and of the compiled mesh fields and `arrays` (`meshes`)
 
 
@@ -87,10 +88,14 @@ class CompiledScene:
         the meshes' (the first `n_mesh_faces`), then the analytic spheres' and planes' tessellation
         (`AnalyticParts`), built when first asked for (`build_once`; `with_scene` copies share it).
         Itself when the scene has no analytic objects. RenderError, when building, if the triangles
-        pass the memory budget (a ray-traced scene of many spheres compiles and renders all the same)."""
+        pass the memory budget (a ray-traced scene of many spheres compiles and renders all the same).
+        The copy for the last scene asked for is kept (a copy costs ~50 us of a fit's cold frame)."""
         if not self.analytic.objects:
             return self
-        return replace(self, **self.build_once(RASTER_SOUP, self._raster_soup))
+        kept = self.built.get(RASTER_COPY)
+        if kept is None or kept.scene is not self.scene:  # (every copy sharing `built` has the same soup)
+            kept = self.built[RASTER_COPY] = replace(self, **self.build_once(RASTER_SOUP, self._raster_soup))
+        return kept
 
     def _raster_soup(self) -> dict:
         """The triangle fields and `arrays` of `raster()`: the analytic objects' triangles
@@ -133,8 +138,9 @@ class CompiledScene:
         return part
 
     def with_scene(self, scene) -> CompiledScene:
-        """The same device data under `scene`: the compiled scene with other render settings."""
-        return replace(self, scene=scene)
+        """The same device data under `scene`: the compiled scene with other render settings (itself
+        for its own scene)."""
+        return self if scene is self.scene else replace(self, scene=scene)
 
     def scratch(self, name: str, shape, dtype, fill=None) -> wp.array:
         """A device array `name` for one frame's intermediate results, kept for this compiled scene's

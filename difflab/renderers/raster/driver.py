@@ -118,6 +118,12 @@ def lighting_struct(compiled, settings) -> shade.LightingW:
     return out
 
 
+def backdrop(scene) -> tuple:
+    """The background colour and fog as the image kernels read them (only where an image is formed:
+    a Warp struct costs ~50 us of a fit's cold frame)."""
+    return wp.vec3(*scene.background), fog_struct(scene.fog)
+
+
 def band_rows(bands: list[tuple[int, int]], height: int, device: str) -> wp.array:
     """Per sample row, the index of its band (kept for later frames of the same plan)."""
     return _band_rows(tuple(bands), height, device)
@@ -326,7 +332,6 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     cam = camera_struct(scene.camera, width, height)
     mesh, lighting = raster_mesh(compiled), lighting_struct(compiled, settings)
     black = not any(scene.background)  # a zeroed image needs no background written (`render`)
-    background, fog = wp.vec3(*scene.background), fog_struct(scene.fog)
 
     if not gbuffer:  # stages 1-3, then 4-7 fused (flat / Gouraud points lit on first use)
         n_points = 0 if shading == PHONG_SHADING else point_count(compiled, shading)
@@ -336,6 +341,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
                 mesh, cam, shading, lighting, point_cache(compiled, n_points, frame)], device, threads)
         bad = compiled.scratch("nonfinite rows", height, wp.int32)
         canvas = host_empty(width * height, wp.vec3, device, zeroed=black)  # fresh every frame
+        background, fog = backdrop(scene)
 
         def image_band(tris, key, begin: int, end: int) -> None:  # right after the band's z-buffer, its thread's cache
             wp.launch(shade.image_kernel, dim=end - begin, inputs=[
@@ -391,7 +397,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         canvas = compiled.reusable("canvas", width * height, wp.vec3)  # every sample written
         launch_row_loops(shade.compose_kernel, height, [
             width, samples, out.uv, out.depth, out.point_index, out.point_weight, lit, lighting, int(clamp_colors),
-            1 - points_are_samples, background, fog, canvas], device, *row_pass)
+            1 - points_are_samples, *backdrop(scene), canvas], device, *row_pass)
     gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors)
     # then filter to pixels (Phong without stage 7: a sample's colour is its point's, fogged, so the
     # pixels are not finite exactly where these are not: the pass counted those samples)
