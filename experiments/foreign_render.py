@@ -2,7 +2,7 @@
 rendered by `povray`, and a sphere under a point light rendered by Mitsuba 3.
 
 POV-Ray's classic finish (source/core/render/trace.cpp of POV-Ray 3.7) is, per light, with pigment
-colour C, no `fade_distance` (attenuation 1) and `brilliance` 1:
+colour C, no `fade_distance` (attenuation 1; the fade below) and `brilliance` 1:
 
     C * ambient * ambient_light  +  sum_p  s_p I_p ( diffuse * C * (N.L_p)  +  phong * (R_V.L_p)^phong_size )
                                  +  reflection * I_reflected
@@ -16,9 +16,10 @@ maps exactly onto
 
 with global `ambient_light` = the scene's ambient Ia and `max_trace_level` = max_depth, when ks is
 grey (POV's highlight is the light's colour), kd > 0 in every channel, and every light is a point
-light with attenuation (1, 0, 0) (POV-Ray's `fade_distance` / `fade_power` give
-2 / (1 + (d / fade_distance)^fade_power), which is not difflab's 1 / (kc + kl d + kq d^2) for any
-setting but "no fade"). Blinn maps onto `specular ks roughness 1 / n` (POV's `specular` uses the
+light whose attenuation has kc > 0 and not both kl and kq > 0 (`pov_fade`: POV-Ray 3.7 multiplies
+a light by 2 / (1 + (d / fade_distance)^fade_power), in Attenuate_Light, source/core/lighting/
+lightsource.cpp: fade_power 1 and 2 are difflab's (kc, kl, 0) and (kc, 0, kq) with the light's colour
+scaled by 1 / (2 kc); a pure 1 / d^2, kc = 0, has no POV-Ray 3.7 form). Blinn maps onto `specular ks roughness 1 / n` (POV's `specular` uses the
 normalised half vector, no 1 / cos factors). Where the models do NOT coincide, on purpose: an
 `area_light` (soft shadows, a highlight spread over the light's extent), `brilliance` b != 1
 (diffuse (N.L)^b), `metallic`, `fresnel`, `conserve_energy`, POV's `fog`, anti-aliasing.
@@ -65,6 +66,21 @@ def pov_finish(material: dict, specular: str, extra: str = "") -> str:
             f"reflection {{ {float(material.get('kr', 0.0)):.9g} }} {extra} }}")
 
 
+def pov_fade(attenuation) -> tuple[float, str]:
+    """(colour scale, POV-Ray fade keywords) of a difflab point light's attenuation (kc, kl, kq).
+    POV-Ray 3.7 multiplies a light's colour C by 2 / (1 + (d / fd)^p) (fade_distance fd, fade_power
+    p): with C = I / (2 kc) that is I / (kc + kc (d / fd)^p), which is I / (kc + kl d) for p = 1,
+    fd = kc / kl, and I / (kc + kq d^2) for p = 2, fd = sqrt(kc / kq); (kc, 0, 0) is the colour
+    I / kc without a fade. ValueError for kc = 0 or both kl, kq > 0."""
+    kc, kl, kq = (float(a) for a in attenuation)
+    if kl == 0 and kq == 0 and kc > 0:
+        return 1.0 / kc, ""
+    if kc > 0 and (kl == 0) != (kq == 0):
+        power, distance = (1, kc / kl) if kq == 0 else (2, math.sqrt(kc / kq))
+        return 0.5 / kc, f"fade_distance {distance:.9g} fade_power {power}"
+    raise ValueError(f"POV-Ray 3.7 has no fade for attenuation {list(attenuation)}: it needs kc > 0 and one of kl, kq")
+
+
 def pov_scene(scene: dict, *, finish_extra: dict | None = None, light_extra: str = "") -> str:
     """POV-Ray 3.7 source for a difflab scene dict (spheres, planes, point lights). finish_extra:
     material name -> finish keywords added (e.g. "brilliance 3"); light_extra: added to every
@@ -79,10 +95,11 @@ def pov_scene(scene: dict, *, finish_extra: dict | None = None, light_extra: str
              f"sky {_vec(cam.get('up', [0, 1, 0]))} right x * {aspect:.9g} up y angle {fov_x:.9g} }}",
              f"background {{ {_rgb(scene.get('background', 0.0))} }}"]
     for light in scene["lights"]:
-        if light["type"] != "point" or list(light.get("attenuation", [1, 0, 0])) != [1, 0, 0]:
-            raise ValueError(f"POV-Ray: only point lights without attenuation map exactly, got {light}")
-        lines.append(f"light_source {{ {_vec(light['position'])} color {_rgb(light.get('intensity', 1.0))} "
-                     f"{light_extra} }}")
+        if light["type"] != "point":
+            raise ValueError(f"POV-Ray: only point lights are mapped, got {light}")
+        scale, fade = pov_fade(light.get("attenuation", [1, 0, 0]))
+        colour = np.asarray(light.get("intensity", 1.0), float) * scale
+        lines.append(f"light_source {{ {_vec(light['position'])} color {_rgb(colour)} {fade} {light_extra} }}")
     specular = render.get("specular", "phong")
     finishes = {name: pov_finish(m, specular, (finish_extra or {}).get(name, ""))
                 for name, m in scene["materials"].items()}
@@ -98,15 +115,17 @@ def pov_scene(scene: dict, *, finish_extra: dict | None = None, light_extra: str
     return "\n".join(lines) + "\n"
 
 
-def render_pov(source: str, out: Path, width: int, height: int, fmt: str) -> Path:
+def render_pov(source: str, out: Path, width: int, height: int, fmt: str, options=()) -> Path:
     """Render POV-Ray source to `out` (fmt: "png8" 8-bit sRGB, "png16" 16-bit sRGB, "png16lin" 16-bit
-    linear (a gAMA chunk of 1.0), "exr" half float),
-    without anti-aliasing; raises RuntimeError with POV-Ray's message when it fails."""
+    linear (a gAMA chunk of 1.0), "exr" half float), without anti-aliasing unless `options` (more
+    command-line switches, e.g. ("+A0.1", "+R3")) say; raises RuntimeError with POV-Ray's message
+    when it fails."""
     if shutil.which("povray") is None:
         raise RuntimeError("povray is not installed (apt-get install povray)")
     pov = out.with_suffix(".pov")
     pov.write_text(source)
-    cmd = ["povray", f"+I{pov}", f"+O{out}", f"+W{width}", f"+H{height}", "-D", "-V", "+WT1", *POV_FORMATS[fmt]]
+    cmd = ["povray", f"+I{pov}", f"+O{out}", f"+W{width}", f"+H{height}", "-D", "-V", "+WT1", *POV_FORMATS[fmt],
+           *options]
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=out.parent)
     if done.returncode != 0 or not out.exists():
         raise RuntimeError(f"povray failed ({done.returncode}): {done.stderr[-500:]}")

@@ -13,7 +13,8 @@ noise, reduced chi-square, flags -- writes the fitted scene and a report of the 
     3  the solver did not converge (files written, the status in the report)
     4  converged, but MODEL MISMATCH: the residuals sit far above the noise (files written); the
        fitted values answer a different question than asked -- try --method raytrace, other params
-       or another specular model
+       or another specular model; for another renderer's anti-aliased image, --edge-margin 2
+       (docs/foreign-targets.md)
     5  converged, but not settled (`FitResult.not_judged`): NOISE UNKNOWN (too few used pixels
        have used neighbours to estimate the noise: a small, thin or scattered mask -- give --sigma),
        MISMATCH SUSPECTED (sigma estimated: chi2 above its spread but not above 2 -- give --sigma
