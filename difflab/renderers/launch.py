@@ -371,6 +371,12 @@ def part_count(n: int, device: str, threads: int | None = None) -> int:
     return len(band_plan(n, device, threads))
 
 
+def to_host(array: wp.array) -> np.ndarray:
+    """`array` as numpy: a view on the CPU (np.asarray, without the device check and stream scope of
+    Warp's `numpy()`: ~0.6 instead of ~1.5 us, and a G-buffer frame reads 28 arrays), a copy from a GPU."""
+    return np.asarray(array) if array.device.is_cpu else array.numpy()
+
+
 def host_empty(shape, dtype, device: str, zeroed: bool = False) -> wp.array:
     """An uninitialised (or, `zeroed`, zero) device array; on the CPU in numpy's memory, which asks
     the kernel for transparent huge pages on large arrays (a page fault per 2 MiB instead of per

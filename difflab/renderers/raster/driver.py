@@ -26,7 +26,7 @@ from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
 from ..launch import (band_plan, dealt_bands, halved_zbuffer, host_empty, launch_chunks, launch_dealt, launch_parts,
                       launch_row_loops, load_kernels, part_count, pass_threads, raster_threads, run_bands, run_phases,
-                      start_beside)
+                      start_beside, to_host)
 from ..trace import object_kinds
 
 
@@ -175,7 +175,7 @@ def split_slots(compiled, p_clip: wp.array, threads: int | None) -> tuple[wp.arr
     n_faces, device = compiled.faces.shape[0], compiled.device
     split = compiled.scratch("split", n_faces, wp.int32)
     launch_chunks(clip.split_kernel, n_faces, [compiled.arrays["faces"], p_clip, split], device, threads)
-    split_faces = np.flatnonzero(split.numpy())
+    split_faces = np.flatnonzero(to_host(split))
     extra_slot = np.full(n_faces, -1, np.int32)
     extra_slot[split_faces] = n_faces + np.arange(split_faces.size, dtype=np.int32)
     return wp.array(extra_slot, dtype=wp.int32, device=device), split_faces.size
@@ -219,7 +219,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
                                                           p_screen, behind], device, threads)
     extra = none = scratch("no slots", 0, wp.int32)  # only a vertex behind the near plane can split a face
     n_split = 0
-    if behind.numpy()[0]:
+    if to_host(behind)[0]:
         extra, n_split = split_slots(compiled, p_clip, threads)
     n_slots = n_faces + n_split
     tris = resolve.ScreenW()
@@ -237,12 +237,12 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     launch_parts(clip.assemble_kernel, n_faces, [
         arrays["faces"], p_clip, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
         tris.face, band_of_row, counts, tests], device, threads)
-    check_raster_work(int(tests.numpy().sum()), n_slots, "render", RenderError)
+    check_raster_work(int(to_host(tests).sum()), n_slots, "render", RenderError)
     band_index = {band: k for k, band in enumerate(bands)}
     binned = none  # one band: it draws every slot, nothing is binned
     starts = np.array([0, n_slots])
     if len(bands) > 1:
-        starts, cursor = bin_starts(counts.numpy())
+        starts, cursor = bin_starts(to_host(counts))
         binned = scratch("binned", 1 << int(starts[-1]).bit_length(), wp.int32)  # a power of two: kept between frames
         launch_parts(coverage.bin_kernel, n_faces, [
             extra, rows, width, height, band_of_row, wp.array(cursor, dtype=wp.int32, device=device), binned], device,
@@ -350,8 +350,8 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
 
         tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads, image_band)
         mark_key_cleared(compiled, key)  # image_kernel reset every key it read
-        pixels = box_downsample(canvas.numpy().reshape(height, width, 3), side)
-        nonfinite = int(bad.numpy().sum())  # non-finite samples; with spp > 1 count the pixels they reach
+        pixels = box_downsample(to_host(canvas).reshape(height, width, 3), side)
+        nonfinite = int(to_host(bad).sum())  # non-finite samples; with spp > 1 count the pixels they reach
         if nonfinite and side > 1:
             nonfinite = nonfinite_pixels(pixels)
         return Frame(image=pixels, buffers=None, stats=frame_stats(compiled, start, nonfinite, width * height,
@@ -401,9 +401,9 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors)
     # then filter to pixels (Phong without stage 7: a sample's colour is its point's, fogged, so the
     # pixels are not finite exactly where these are not: the pass counted those samples)
-    samples_rgb = (canvas.numpy() if composed else gbuffer.points.color).reshape(height, width, 3)
+    samples_rgb = (to_host(canvas) if composed else gbuffer.points.color).reshape(height, width, 3)
     pixels = box_downsample(samples_rgb, side) if image else None
-    nonfinite = nonfinite_pixels(samples_rgb if pixels is None else pixels) if composed else int(bad.numpy().sum())
+    nonfinite = nonfinite_pixels(samples_rgb if pixels is None else pixels) if composed else int(to_host(bad).sum())
     if pixels is None and nonfinite and side > 1:  # count the pixels the non-finite samples reach
         nonfinite = nonfinite_pixels(box_downsample(samples_rgb, side))
     stats = frame_stats(compiled, start, nonfinite, width * height, n_points)
@@ -421,7 +421,7 @@ def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, 
                lit, clamp_colors: bool) -> GBuffer:
     """The device buffers of stages 4-6 as a numpy `GBuffer` on the sample grid."""
     def on_grid(array, *channels):
-        return array.numpy().reshape(*grid, *channels)
+        return to_host(array).reshape(*grid, *channels)
 
     material = on_grid(samples.material)
     return GBuffer(
@@ -430,10 +430,10 @@ def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, 
         object=on_grid(out.object), face=on_grid(out.face), bary=on_grid(out.bary, 3),
         point_index=on_grid(out.point_index, 3), point_weight=on_grid(out.point_weight, 3),
         points=ShadingPoints(
-            position=points.position.numpy(), normal=points.normal.numpy(), view=points.view.numpy(),
-            material=points.material.numpy(), cell=points.cell.numpy(), light_dir=lit.light_dir.numpy(),
-            light_dist=lit.light_dist.numpy(), visibility=lit.visibility.numpy(),
-            color=lit.color.numpy()[:n_points], texture_factor=lit.factor.numpy()[:n_points]),
+            position=to_host(points.position), normal=to_host(points.normal), view=to_host(points.view),
+            material=to_host(points.material), cell=to_host(points.cell), light_dir=to_host(lit.light_dir),
+            light_dist=to_host(lit.light_dist), visibility=to_host(lit.visibility),
+            color=to_host(lit.color)[:n_points], texture_factor=to_host(lit.factor)[:n_points]),
         shading=settings.shading, specular=settings.specular, spp_side=side,
         ambient=np.asarray(scene.ambient, np.float32), background=np.asarray(scene.background, np.float32),
         clamp_vertex_colors=clamp_colors, fog=fog_params(scene.fog),
