@@ -174,3 +174,44 @@ def test_a_bad_edge_margin_exits_2_naming_the_option(tmp_path, capsys, command, 
 def test_fit_many_refuses_a_bad_edge_margin(tmp_path):
     with pytest.raises(FitError, match=r"^edge_margin: expected an integer number of pixels >= 0, got True$"):
         difflab.fit_many([{"name": "a", "scene": "s.json", "targets": ["t.npy"]}], tmp_path / "out", edge_margin=True)
+
+
+def test_cast_shadows_are_edges_and_the_terminator_is_not():
+    """A sphere resting on a floor under a light straight down, seen obliquely and ray traced. Each
+    pixel centre's region, computed here from the geometry: the sphere, the floor in its shadow
+    (x^2 + z^2 < R^2) or the floor in the light. The mask must be the pixels whose (2 margin + 1)^2
+    centres share one region: the shadow's outline is an edge, the sphere's equator -- where its
+    surface turns from the light, the part below it unlit but not shadowed -- is not."""
+    eye, target, fov, margin = np.array([0.0, 6.0, 4.0]), np.array([0.0, 0.5, 0.0]), 40.0, 1
+    d = {"camera": {"eye": eye.tolist(), "target": target.tolist(), "up": [0, 1, 0], "fov_y": fov, "width": SIZE,
+                    "height": SIZE},
+         "lights": [{"type": "directional", "direction": [0, -1, 0], "intensity": [1, 1, 1]}],
+         "materials": {"m": {"kd": [0.5, 0.5, 0.5]}, "floor": {"kd": [0.8, 0.8, 0.8]}},
+         "objects": [{"type": "sphere", "center": [0, 1, 0], "radius": 1, "material": "m"},
+                     {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "floor"}],
+         "render": {"method": "raytrace", "shadows": True}}
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, [0, 1, 0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    half = math.tan(math.radians(fov) / 2)
+    centres = (np.arange(SIZE) + 0.5) / SIZE * 2 - 1
+    rays = forward + centres[None, :, None] * half * right - centres[:, None, None] * half * up  # (row, column, 3)
+    to_centre = np.array([0.0, 1.0, 0.0]) - eye
+    along = rays @ to_centre
+    square = (rays * rays).sum(-1)
+    discriminant = along ** 2 - square * (to_centre @ to_centre - 1.0)
+    on_sphere = discriminant > 0  # the ray meets the sphere
+    hit_y = eye[1] + (along - np.sqrt(np.maximum(discriminant, 0))) / square * rays[..., 1]
+    floor = eye - (eye[1] / rays[..., 1])[..., None] * rays  # where each ray meets y = 0
+    region = np.where(on_sphere, 0, np.where(floor[..., 0] ** 2 + floor[..., 2] ** 2 < 1.0, 1, 2))
+    padded = np.pad(region, margin, mode="edge")
+    shifts = [(i, j) for i in range(2 * margin + 1) for j in range(2 * margin + 1)]
+    window = np.stack([padded[i:i + SIZE, j:j + SIZE] for i, j in shifts])
+    expected = (window.min(axis=0) == window.max(axis=0))
+    expected[[0, -1], :] = expected[:, [0, -1]] = False  # the image's border
+    shadow_edge = (window.min(axis=0) >= 1) & (window.min(axis=0) != window.max(axis=0))
+    assert np.count_nonzero(shadow_edge) > 20  # the shadow's outline is in view
+    assert np.count_nonzero(on_sphere & (hit_y < 0.9)) >= 5  # and so is the sphere below its equator (y = 1)
+    mask = interior_mask(d, margin=margin)
+    assert np.count_nonzero(mask != expected) <= 2

@@ -13,7 +13,7 @@ A region is what the scene's G-buffer records per sample: the object and materia
 Phong-shaded (and ray-traced) records also the checker cell and each light's shadow-ray
 visibility, so that silhouettes, object and material boundaries, checker edges and shadow edges
 all count, and so does the image's border (what lies beyond it is unknown). Edges seen only in
-reflections or refractions, and texture detail, do not.
+reflections or refractions, a spotlight's cone edge and texture detail do not.
 """
 
 from __future__ import annotations
@@ -45,8 +45,10 @@ def margin_text(text: str, where: str = "--edge-margin") -> int:
 def region_keys(gbuffer) -> list[np.ndarray]:
     """Per-sample arrays (on the G-buffer's sample grid) whose change between two samples marks an
     edge: object and material ids, and under Phong shading (every ray-traced record) the checker
-    cell and each light's visibility. (Flat and Gouraud records keep those per face or vertex,
-    which their shading spreads smoothly anyway.)"""
+    cell and each light's visibility. (The renderers cast shadow rays only from surfaces facing
+    the light, visibility 1 elsewhere: the terminator, where a surface turns away, is no edge.)
+    Flat and Gouraud records keep cells and visibility per face or vertex, which their shading
+    spreads smoothly anyway."""
     keys = [gbuffer.object, gbuffer.material]
     if gbuffer.shading == "phong":
         keys.append(np.asarray(gbuffer.points.cell).reshape(gbuffer.mask.shape))
