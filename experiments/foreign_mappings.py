@@ -165,6 +165,14 @@ def check_lights(folder: Path, mi) -> list:
             fade = source.split("fade_distance")[1].split("}")[0].strip()
             rows.append(report(f"pov_fade_power_{power}", f"POV fade_distance {fade} -> attenuation {list(attenuation)}",
                                fitted(scene, exr, ("ka", "kd", "ks", "n")), PHONG))
+        plain = pov_sphere(96, 96)
+        source = pov_scene(plain)
+        light = source.index("light_source")
+        zero = source[:light] + source[light:].replace("}", "fade_distance 0 fade_power 2 }", 1)
+        rows.append(pixels("pov_fade_distance_0", "POV 3.7 fade_distance 0 fade_power 2 against no fade (no 1 / d^2)",
+                           read_exr(render_pov(zero, folder / "zero.exr", 96, 96, "exr")),
+                           read_exr(render_pov(source, folder / "plain.exr", 96, 96, "exr")),
+                           np.ones((96, 96), bool)))
     return rows
 
 
@@ -190,6 +198,14 @@ def check_pixels(folder: Path, mi) -> list:
     if folder is not None:
         scene = pov_sphere(96, 96)
         source = pov_scene(scene)
+        plain = read_exr(render_pov(source, folder / "plain.exr", 96, 96, "exr"))
+        inner = difflab.interior_mask(scene, margin=2) & difflab.render_frame(scene).gbuffer.mask
+        for options in (("+A0.1", "+R3"), ("+A0.1", "+R3", "-J")):
+            smooth = read_exr(render_pov(source, folder / "aa.exr", 96, 96, "exr", options=options))
+            changed = int(np.count_nonzero((np.abs(smooth - plain).max(axis=-1) > 2e-3) & inner))
+            rows.append({"check": f"pov_aa_changes{'_nojitter' if '-J' in options else ''}",
+                         "what": f"POV {' '.join(options)}: pixels 2 or more from an edge changed by > 2e-3",
+                         "changed": changed, "of": int(np.count_nonzero(inner))})
         for fmt, options, margin, spp in (("png8", ("+A0.1", "+R3"), 2, 1), ("exr", ("+A0.1", "+R3"), 0, 1),
                                           ("exr", ("+A0.1", "+R3"), 2, 1), ("exr", ("+A0.0", "+R3", "-J"), 2, 4)):
             path = render_pov(source, folder / f"aa.{'exr' if fmt == 'exr' else 'png'}", 96, 96, fmt, options=options)
@@ -220,7 +236,9 @@ CHECKS = {"camera": check_camera, "lights": check_lights, "pixels": check_pixels
 
 def print_rows(rows: list) -> None:
     for r in rows:
-        if "max_abs_diff" in r:
+        if "changed" in r:
+            print(f"{r['check']:<22} {r['changed']} of {r['of']} pixels  {r['what']}")
+        elif "max_abs_diff" in r:
             print(f"{r['check']:<22} max |diff| {r['max_abs_diff']:.2e}  mean {r['mean_abs_diff']:.2e}  "
                   f"(peak {r['peak']:.3f})  {r['what']}")
         else:
