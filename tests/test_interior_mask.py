@@ -154,6 +154,8 @@ def test_a_batch_line_edge_margin_gives_the_fit_the_interior(tmp_path):
     assert batch.params["kd"] == pytest.approx(alone.params["kd"], abs=1e-12) and batch.ok
     np.testing.assert_allclose(batch.params["kd"], kd, atol=1e-3)
     assert margin_masks(scene, [target], None, 0) is None
+    with pytest.raises(FitError, match=r"^scene: .*nope\.json: scene file not found$"):
+        margin_masks(tmp_path / "nope.json", [target], None, 2)  # as the fit says it
 
 
 @pytest.mark.parametrize("command", ["fit", "fit-batch"])

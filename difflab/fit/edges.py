@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from ..errors import FitError
+from ..errors import DifflabError, FitError
 
 
 def check_margin(value, where: str = "margin") -> int:
@@ -119,7 +119,10 @@ def margin_masks(scene, targets, masks, margin: int, device=None) -> list[np.nda
     margin = check_margin(margin, "edge_margin")
     if margin == 0:
         return masks
-    scene = as_scene(scene)
+    try:  # (named as the fit names it)
+        scene = as_scene(scene)
+    except DifflabError as exc:
+        raise FitError(f"scene: {exc}") from None
     views = normalise_targets(targets)
     out = []
     for i, ((_, overrides), mask) in enumerate(zip(views, per_view(masks, len(views), "masks"))):
