@@ -140,6 +140,27 @@ def test_row_loops_deal_each_row_once_in_blocks_to_even_bands(rows, threads, per
     assert sizes.max() - sizes.min() <= launch.ROW_BLOCK
 
 
+@wp.kernel
+def add_at_kernel(index: int, value: int, out: wp.array(dtype=wp.int32)):
+    out[index] = out[index] + value
+
+
+def test_a_kept_launch_replays_only_the_same_inputs():
+    """`launch_kept` (the z-buffer's launches of scratch arrays): recorded once per kernel and band,
+    replayed while the inputs are the same objects and numbers, recorded anew for any other (the
+    new array or value is the one written)."""
+    kept, first, second = {}, wp.zeros(2, dtype=wp.int32, device="cpu"), wp.zeros(2, dtype=wp.int32, device="cpu")
+    launch.launch_kept(kept, add_at_kernel, 1, [0, 5, first], "cpu")
+    recorded = kept[("launch", add_at_kernel, 0)][2]
+    launch.launch_kept(kept, add_at_kernel, 1, [0, 5, first], "cpu")
+    assert first.numpy().tolist() == [10, 0] and kept[("launch", add_at_kernel, 0)][2] is recorded
+    launch.launch_kept(kept, add_at_kernel, 1, [0, 5, second], "cpu")
+    launch.launch_kept(kept, add_at_kernel, 1, [0, 7, second], "cpu")
+    launch.launch_kept(kept, add_at_kernel, 1, [1, 1, second], "cpu")  # another band: kept beside
+    launch.launch_kept(None, add_at_kernel, 1, [1, 2, second], "cpu")  # nothing kept
+    assert first.numpy().tolist() == [10, 0] and second.numpy().tolist() == [12, 3] and len(kept) == 2
+
+
 def test_run_bands_runs_each_band_once_and_hands_a_bands_error_to_the_caller():
     seen = []
     launch.run_bands(lambda a, b: seen.append((a, b)), [(0, 2), (2, 5), (5, 6), (6, 9)], threads=3)

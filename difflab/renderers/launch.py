@@ -338,19 +338,40 @@ def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int 
               dealt_bands(rows, device, threads, per_thread), threads)
 
 
-def launch_chunks(kernel, n: int, inputs: list, device: str, threads: int | None = None) -> None:
+def launch_kept(kept: dict | None, kernel, dim: int, inputs: list, device: str) -> None:
+    """`wp.launch`, or, given `kept` (a dict kept between frames by one thread), the launch recorded
+    there for `kernel` and inputs[0] (its band), replayed while the dim and inputs are the same
+    (objects by identity, ints by value): Warp packs every argument anew at each launch (~15-35 us
+    one of the z-buffer's). A recorded launch holds its inputs: only for arrays kept anyway (scratch),
+    never a frame's outputs, which `CompiledScene.reusable` must find unheld to reuse."""
+    if kept is None:
+        wp.launch(kernel, dim=dim, inputs=inputs, device=device)
+        return
+    key = ("launch", kernel, inputs[0])
+    last = kept.get(key)
+    if last is None or last[0] != dim or len(last[1]) != len(inputs) or not all(
+            a is b or (type(a) is int and type(b) is int and a == b) for a, b in zip(last[1], inputs)):
+        last = kept[key] = (dim, list(inputs), wp.launch(kernel, dim=dim, inputs=inputs, device=device,
+                                                         record_cmd=True))
+    last[2].launch()
+
+
+def launch_chunks(kernel, n: int, inputs: list, device: str, threads: int | None = None,
+                  kept: dict | None = None) -> None:
     """Launch `kernel` over items [0, n) in bands: its first arguments are (begin, end, chunk) and
     thread tid handles items begin + tid * chunk ... up to `chunk` of them (below end). On the CPU a
-    band is one chunk (one thread reads the arguments once); on CUDA a chunk is one item."""
+    band is one chunk (one thread reads the arguments once); on CUDA a chunk is one item. `kept`:
+    see `launch_kept`."""
     def run_band(begin: int, end: int) -> None:
         chunk = end - begin if device == "cpu" else 1
-        wp.launch(kernel, dim=(end - begin + chunk - 1) // chunk, inputs=[begin, end, chunk, *inputs], device=device)
+        launch_kept(kept, kernel, (end - begin + chunk - 1) // chunk, [begin, end, chunk, *inputs], device)
 
     if n:
         parallel_bands(run_band, n, device, threads)
 
 
-def launch_parts(kernel, n: int, inputs: list, device: str, threads: int | None = None) -> None:
+def launch_parts(kernel, n: int, inputs: list, device: str, threads: int | None = None,
+                 kept: dict | None = None) -> None:
     """`launch_chunks` with the band's index first: the kernel's first arguments are (part, begin,
     end, chunk), part p of `part_count(n, ...)` covering items [begin, end). A kernel may keep
     per-part results (counts, sums) there without two CPU threads sharing an element."""
@@ -359,8 +380,8 @@ def launch_parts(kernel, n: int, inputs: list, device: str, threads: int | None 
 
     def run_band(begin: int, end: int) -> None:
         chunk = end - begin if device == "cpu" else 1
-        wp.launch(kernel, dim=(end - begin + chunk - 1) // chunk,
-                  inputs=[part[(begin, end)], begin, end, chunk, *inputs], device=device)
+        launch_kept(kept, kernel, (end - begin + chunk - 1) // chunk, [part[(begin, end)], begin, end, chunk, *inputs],
+                    device)
 
     if n:
         run_bands(run_band, bands, threads)

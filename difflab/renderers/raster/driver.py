@@ -24,9 +24,9 @@ from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR
 from . import clip, coverage, resolve, shade
 from ..camera import camera_struct
 from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
-from ..launch import (band_plan, dealt_bands, halved_zbuffer, host_empty, launch_chunks, launch_dealt, launch_parts,
-                      launch_row_loops, load_kernels, part_count, pass_threads, raster_threads, run_bands, run_phases,
-                      start_beside, to_host)
+from ..launch import (band_plan, dealt_bands, halved_zbuffer, host_empty, launch_chunks, launch_dealt, launch_kept,
+                      launch_parts, launch_row_loops, load_kernels, part_count, pass_threads, raster_threads, run_bands,
+                      run_phases, start_beside, to_host)
 from ..trace import object_kinds
 
 
@@ -215,8 +215,9 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     p_clip, p_screen = scratch("clip", n_vertices, wp.vec4), scratch("screen", n_vertices, wp.vec4d)
     behind = scratch("behind", 1, wp.int32)
     behind.zero_()
+    kept = compiled.scratch_pool()  # the launches of scratch arrays, recorded (`launch_kept`)
     launch_chunks(clip.clip_vertices_kernel, n_vertices, [arrays["vertices"], cam.view_proj, width, height, p_clip,
-                                                          p_screen, behind], device, threads)
+                                                          p_screen, behind], device, threads, kept)
     extra = none = scratch("no slots", 0, wp.int32)  # only a vertex behind the near plane can split a face
     n_split = 0
     if to_host(behind)[0]:
@@ -236,7 +237,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     tests.zero_()
     launch_parts(clip.assemble_kernel, n_faces, [
         arrays["faces"], p_clip, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
-        tris.face, band_of_row, counts, tests], device, threads)
+        tris.face, band_of_row, counts, tests], device, threads, kept)
     check_raster_work(int(to_host(tests).sum()), n_slots, "render", RenderError)
     band_index = {band: k for k, band in enumerate(bands)}
     binned = none  # one band: it draws every slot, nothing is binned
@@ -260,8 +261,8 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
 
     if halves:  # every other slot into each of two z-buffers, side by side (one band, on the CPU), then `then`
         keys = (key, partial)
-        run_phases([(lambda part, parts: wp.launch(coverage.raster_kernel, dim=1, inputs=[
-            part, parts, 0, height, binned, n_slots, rows, tris.screen, width, height, keys[part]], device=device),
+        run_phases([(lambda part, parts: launch_kept(kept, coverage.raster_kernel, 1, [
+            part, parts, 0, height, binned, n_slots, rows, tris.screen, width, height, keys[part]], device),
             [(0, 2), (1, 2)]), (lambda k, n: then(tris, key, k, n), then_plan[0])], then_plan[1])
         return tris, key
 
