@@ -71,9 +71,10 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         residuals = [p.transpose(1, 2, 0) for p in planes]  # (H, W, 3) views (np.moveaxis: 2 us more each)
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and finite_gram(gram))
         silent, silent_entries = silent_pixels(setup.views, r)
-        sigma, noise_values, share = (views_noise(setup.views, planes, silent, setup.sigma_given, setup.sigma_floor,
-                                                  setup.sigma_fallback, setup.quantisation)
-                                      if finite else (float("nan"), 0, 1.0))
+        sigma, noise_values, share, sigma_range = (views_noise(setup.views, planes, silent, setup.sigma_given,
+                                                               setup.sigma_floor, setup.sigma_fallback,
+                                                               setup.quantisation)
+                                                   if finite else (float("nan"), 0, 1.0, None))
         noise_unknown = finite and sigma is None
         mean_weight = setup.weight_total / counted.size if counted.size else 1.0  # (unit weights: 1)
         sigma = float("nan") if sigma is None else sigma
@@ -82,7 +83,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                          if p.key in seen)  # texels no pixel reads: no unknowns of the data's
             st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size - unseen, silent_entries,
                                 sigma_given=setup.sigma_given is not None, skip=skip, noise_values=noise_values, noise_share=share,
-                                mean_weight=mean_weight, rcond=singular_rcond(setup.x64))
+                                mean_weight=mean_weight, rcond=singular_rcond(setup.x64), sigma_range=sigma_range)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], mean_weight * QUANTISATION_SIGMA ** 2)))
             partly_seen = [key for key, on in seen.items() if not on.all()]
@@ -112,7 +113,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                         seconds=timings.get("solve", 0.0), converged=bool(result == SUCCESSFUL and finite),
                         result=result, history=list(history), poorly_determined=flagged, sigma=float(sigma),
                         chi2=float(chi2), model_mismatch=bool(mismatch), mismatch_suspected=bool(suspected),
-                        noise_unknown=noise_unknown,
+                        noise_unknown=noise_unknown, sigma_range=sigma_range,
                         underdetermined=bool(underdetermined), too_few_values=bool(too_few), degenerate=degenerate_keys,
                         unreached=unreached_keys,
                         prior_pull=float(np.max(pull, initial=0.0)),

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..io import code_step
 from .targets import in_channels
+from .whiteness import sigma_range, whiteness
 
 MIN_NOISE_PIXELS = 48  # pixel channels
 NOISE_BINS = 32  # the most intensity bins of a channel (sqrt(m) / 4 of m values: 4 sqrt(m) values each)
@@ -264,10 +265,12 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
 
 
 def views_noise(views, residual_planes, silent, given: float | None, floor: float, fallback=None,
-                quantisation: float = 0.0) -> tuple[float | None, int, float]:
+                quantisation: float = 0.0) -> tuple[float | None, int, float, tuple | None]:
     """The pixel noise sigma of a fit's views, in the targets' units, the number of Laplacian values
-    M it was estimated from (0 when given or taken from `fallback`) and their `estimate_sigma`
-    share (1 for none): `given` -- the noise before quantisation, to which the targets'
+    M it was estimated from (0 when given or taken from `fallback`), their `estimate_sigma`
+    share (1 for none) and the range (low, high) of noise levels the residuals allow when their
+    noise is not white (`whiteness.sigma_range`; None when it reads white, is given or not
+    estimated): `given` -- the noise before quantisation, to which the targets'
     `quantisation` (the rms rounding error of their used values, 0 for float data: one sigma serves
     every view) is added in quadrature: a correct fit of an 8-bit file with its true noise 0.002
     given came out at chi2 1.2, flagged; its share is the weights' (`weight_share`) -- or estimated
@@ -279,7 +282,7 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
     pixels allow that: `fallback` when given (a refit's, the first fit's sigma), else None
     (unknown)."""
     if given is not None:
-        return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views)
+        return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views), None
     picks = []
     for view, quiet in zip(views, silent):
         left_out = quiet | at_ceiling(view.values, view.ceiling) if np.isfinite(view.ceiling) else quiet
@@ -292,8 +295,9 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
         picks.append(_view_picks(clean, view.weighting, view.image, interior=True))
     estimate = _estimate(picks, residual_planes)
     if estimate is None:
-        return fallback, 0, 1.0
-    return max(estimate[0], floor), estimate[1], estimate[2]
+        return fallback, 0, 1.0, None
+    spread = sigma_range(estimate[0], floor, whiteness(picks, residual_planes))
+    return max(estimate[0], floor), estimate[1], estimate[2], spread
 
 
 def weight_share(views) -> float:

@@ -139,6 +139,13 @@ class FitResult:
         mismatch_suspected: sigma estimated and chi2 above its spread (`fit.noise.chi2_spread`) but
         not above MISMATCH_CHI2: the residuals exceed the estimated noise, by less than an estimate
         can be off for non-white noise: the model is not judged (`ok` False; pass `sigma=` to judge it).
+        sigma_range: (low, high), the noise levels the residuals allow when their noise is not white
+        (`fit.whiteness`: read between neighbours 1 pixel apart -- sigma -- and 2 apart, they
+        disagree beyond their spread: a pixel filter or a blur makes neighbours alike, dithering
+        makes them differ), the model then judged against both: a mismatch only when chi2 is above
+        its threshold even at `high`, ok only when within it even at `low`, else mismatch_suspected;
+        None when the noise reads white, is given or is not estimated. `noise_not_white`: whether
+        it is set.
         noise_unknown: too few used pixels have used neighbours to estimate the noise (a small,
         thin or scattered mask) and no `sigma` was given: sigma and chi2 are nan, and whether the
         image model explains the targets is not judged (`ok` is False; pass `sigma=` to judge it).
@@ -190,6 +197,7 @@ class FitResult:
     model_mismatch: bool = False
     mismatch_suspected: bool = False
     noise_unknown: bool = False
+    sigma_range: tuple | None = None
     underdetermined: bool = False
     too_few_values: bool = False
     degenerate: list = field(default_factory=list)
@@ -207,6 +215,22 @@ class FitResult:
         """Converged, and the image model explains the targets (judged against a known noise
         level, without a mismatch flag)."""
         return self.converged and not (self.model_mismatch or self.not_judged)
+
+    @property
+    def noise_not_white(self) -> bool:
+        """Whether the estimated noise is not white (`sigma_range` set)."""
+        return self.sigma_range is not None
+
+    def _not_white_line(self) -> str:
+        """The table's line on noise that is not white: its two levels, which way, chi2 over them."""
+        low, high = self.sigma_range
+        alike = self.sigma <= low  # (the 1-apart level the lower: neighbours alike)
+        chi2 = [self.chi2 * (self.sigma / level) ** 2 for level in (high, low)]
+        return (f"NOISE NOT WHITE: its level reads {self.sigma:.3g} between neighbouring pixels and "
+                f"{high if alike else low:.3g} between pixels 2 apart ("
+                + ("neighbours alike: a pixel filter or a blur" if alike else "neighbours differ: dithering")
+                + f"); chi2 {chi2[0]:.3g} to {chi2[1]:.3g} over that range, and the model is judged against both "
+                "(give sigma, --sigma, to judge it against the true noise)")
 
     @property
     def not_judged(self) -> bool:
@@ -338,6 +362,8 @@ class FitResult:
             "timings": dict(self.timings), "model": self.model, "sigma": _json_number(self.sigma),
             "chi2": _json_number(self.chi2), "model_mismatch": self.model_mismatch,
             "mismatch_suspected": self.mismatch_suspected, "noise_unknown": self.noise_unknown,
+            "noise_not_white": self.noise_not_white,
+            "sigma_range": None if self.sigma_range is None else [_json_number(x) for x in self.sigma_range],
             "underdetermined": self.underdetermined, "too_few_values": self.too_few_values,
             "degenerate": list(self.degenerate), "unreached": list(self.unreached),
             "prior_pull": _json_number(self.prior_pull), "at_bound": list(self.at_bound), "censored": self.censored,
@@ -367,6 +393,8 @@ class FitResult:
                                         ("MISMATCH SUSPECTED: the residuals exceed the estimated noise beyond its "
                                          "spread; the image model is not judged (give sigma to judge it)",
                                          self.mismatch_suspected),
+                                        (self._not_white_line() if self.noise_not_white else "",
+                                         self.noise_not_white),
                                         ("NOISE UNKNOWN: too few used pixels with used neighbours to estimate it; "
                                          "the image model is not judged (give sigma)", self.noise_unknown),
                                         ("UNDERDETERMINED: no more counted target values than unknowns the data "

@@ -289,7 +289,7 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
 def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, size: int, silent: int = 0,
                    sigma_given: bool = False, skip=None, noise_values: int = 0, noise_share: float = 1.0,
                    mean_weight: float = 1.0,
-                   rcond: float = SINGULAR_RCOND) -> dict:
+                   rcond: float = SINGULAR_RCOND, sigma_range: tuple | None = None) -> dict:
     """s2 = sse / dof (sse: the sum of squares of the `entries` weighted residuals sqrt(w) r; dof =
     N - p, N entries neither censored nor `silent` (noise-free zeros), p = `size` fitted entries the
     data reach -- a texel no pixel reads is not one), chi2 = s2 / (w sigma^2) (reduced, w the
@@ -312,6 +312,12 @@ def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, 
       glass without its shadow absorption and TIR rim (chi2 1.13-1.55, kt 43-73 stderr off),
       Mitsuba's indirect light (1.18, floor kd 21-46 stderr off), an area light's soft shadows at
       2 % noise (1.68).
+    - an estimated one whose noise is not white (`sigma_range` = (low, high), the levels its two
+      scales allow: `fit.whiteness`): `mismatch` only when chi2 at `high` is above max(t,
+      MISMATCH_CHI2), and ok only when chi2 at `low` is within t; else `suspected`. (Mitsuba's
+      gaussian pixel filter, a correct model: chi2 5.2 at the 1-apart level, 1.3 at the 2-apart one,
+      suspected, not a mismatch; an ordered-dithered 8-bit file of a wrong model: chi2 1.1 at the
+      1-apart level, 6.8 at the quantisation floor, suspected, not ok.) chi2 is reported at sigma.
     With dof <= 0 (no more counted entries than unknowns: `underdetermined`) the residuals say
     nothing about the noise or the model: chi2 nan, no flag, s2 = w sigma^2 where sigma is known,
     else inf."""
@@ -324,8 +330,9 @@ def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, 
     s2 = sse / dof
     chi2 = math.nan if math.isnan(sigma) else s2 / (mean_weight * sigma * sigma) if sigma > 0 else math.inf
     threshold = 1.0 + 5.0 * chi2_spread(dof, 0 if sigma_given else noise_values, noise_share)
-    mismatch = bool(chi2 > (threshold if sigma_given else max(MISMATCH_CHI2, threshold)))
-    suspected = bool(not sigma_given and not mismatch and chi2 > threshold)
+    most, least = (chi2, chi2) if sigma_range is None else (s2 / (mean_weight * level * level) for level in sigma_range)
+    mismatch = bool(least > (threshold if sigma_given else max(MISMATCH_CHI2, threshold)))  # (chi2 at the highest level)
+    suspected = bool(not sigma_given and not mismatch and most > threshold)
     return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "suspected": suspected,
             "diag": covariance_diagonal(gram, skip, rcond), "underdetermined": False}
 

@@ -1,0 +1,149 @@
+"""Whether a fit's residual noise is white, and the noise levels it allows when it is not
+(`sigma_range`): the Laplacian noise estimate (`fit.noise.estimate_sigma`) reads the noise between
+neighbours 1 pixel apart, which is the pixels' noise only when it is white. A pixel filter or a blur
+makes neighbours alike (low-pass: the estimate reads low -- Mitsuba's default gaussian filter, 4
+spp: sigma 4x too low, a correct fit chi2 5.2, flagged a mismatch); dithering makes them differ
+(high-pass: it reads high -- an 8-bit file with Bayer ordered dither: 1.8x too high, a wrong model
+chi2 1.1, reported ok). So the noise is read at a second scale too, neighbours 2 apart, and the two
+compared.
+
+At each point p of a lattice over the picked Laplacians (every a-th row and column of the box's
+centre grid, where the 5 x 5 pixels around p are all used),
+
+    L1 = R * k1 (x) k1,  k1 = [1 -2 1]          (today's Laplacian: taps 1 apart)
+    L2 = R * k2 (x) k2,  k2 = [1 0 -2 0 1]      (the same taps 2 apart)
+
+both of variance 36 sigma^2 for white noise, and l = ln(L2^2 / L1^2), clipped to +-LOG_CLIP. For
+white noise of any distribution, level or spatial variation of level, L1 and L2 are exchangeable
+(the same weights on i.i.d. pixels, sharing the centre), so l has mean 0; for Gaussian noise of any
+correlation, its mean is exactly ln(var L2 / var L1) (E ln Z^2 is the same for both). The test:
+
+    k = exp(mean l),   z = mean l / sqrt(V(a) / m),   not white when |z| > WHITE_Z
+
+V(a) = sum over the lattice's lags d of g(r11(d)) + g(r22(d)) - 2 g(r12(d)), g(r) = 2 arcsin(r)^2
+the covariance of ln X^2 and ln Y^2 for unit normals of correlation r, r11 / r22 / r12 the
+correlations of L1 / L2 / L1 with L2 at lag d (products of the 1-D kernels' normalised
+correlations): 20.1 for a = 1, 9.02 for a >= 5 (points 5 apart share no pixel). m counts per view
+the points of its fullest channel: the channels' noise can be one (a renderer's paths are shared by
+R, G and B), so three channels count as one. For white noise z is then within N(0, 1) or narrower
+(measured: `tests/test_fit_noise_white.py`), and WHITE_Z = 5 flags white noise once in 3.5 million
+fits at most.
+
+Cost: only the lattice's points, at most WHITE_SAMPLE a channel (a = ceil(sqrt(M / WHITE_SAMPLE))
+for M picked Laplacians of a channel)."""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+WHITE_SAMPLE = 1024  # the most lattice points of a channel
+WHITE_Z = 5.0  # |z| above this: not white
+LOG_CLIP = 6.0  # ln(L2^2 / L1^2) clipped to +-6 (a ratio of 400): a model's sharp error in one of the two counts at most that
+ROUNDING_MARGIN = 2.0  # a low-pass reading counts where the noise 1 apart is above twice the rounding's (`sigma_range`)
+MIN_WHITE_POINTS = 64  # fewer lattice points (the fullest channels', summed over views): not tested
+_R11 = {0: 1.0, 1: -4.0 / 6.0, 2: 1.0 / 6.0}  # k1's correlation at lag d: [1 -4 6 -4 1] / 6
+_R22 = {0: 1.0, 2: -4.0 / 6.0, 4: 1.0 / 6.0}  # k2's: the same, 2 apart
+_R12 = {0: 4.0 / 6.0, 1: -1.0 / 6.0, 2: -2.0 / 6.0, 3: 1.0 / 6.0}  # k1 against k2: [1 -2 -1 4 -1 -2 1] / 6
+
+
+@lru_cache(maxsize=16)
+def log_ratio_variance(a: int) -> float:
+    """V(a): the variance of a mean of l over m lattice points a apart, times m, for white Gaussian
+    noise (the module's formula): the sum over lags d = (a i, a j) within the 9 x 9 the kernels
+    reach of g(r11(d)) + g(r22(d)) - 2 g(r12(d)), r the separable products of the 1-D correlations."""
+    lags = range(-4 // a * a, 5, a)
+    total = 0.0
+    for dy in lags:
+        for dx in lags:
+            r11 = _R11.get(abs(dy), 0.0) * _R11.get(abs(dx), 0.0)
+            r22 = _R22.get(abs(dy), 0.0) * _R22.get(abs(dx), 0.0)
+            r12 = _R12.get(abs(dy), 0.0) * _R12.get(abs(dx), 0.0)
+            total += 2.0 * (math.asin(r11) ** 2 + math.asin(r22) ** 2 - 2.0 * math.asin(r12) ** 2)
+    return total
+
+
+def _lattice(start: int, count: int, a: int) -> slice:
+    """The `count` indices start, start + a, ... as a slice."""
+    return slice(start, start + a * (count - 1) + 1, a)
+
+
+def _view_log_ratios(view, image) -> tuple[float, int, int, float] | None:
+    """(sum of l, n, m, n^2 V(a) / m) over one view's lattice (`ViewPicks` view, residual planes (3, H,
+    W)): n its points, m those of its fullest channel (its mean's variance is V(a) / m if its
+    channels carry one noise); None without a point. The lattice's centre-grid points
+    i = 1, 1 + a, ... (box pixel i + 1) are valid where the centre grid is set at i - 1 .. i + 1
+    (each of those has its 3 x 3 used: the 5 x 5 around the point is)."""
+    centre = view.centre
+    hc, wc = centre.shape[-2:]
+    count = max(p.index.size for p in view.picks if p is not None)
+    a = max(1, math.ceil(math.sqrt(count / WHITE_SAMPLE)))
+    rows, cols = len(range(1, hc - 1, a)), len(range(1, wc - 1, a))
+    if rows < 1 or cols < 1:
+        return None
+    ok = centre[..., _lattice(0, rows, a), :] & centre[..., _lattice(1, rows, a), :] & centre[..., _lattice(2, rows, a), :]
+    ok = ok[..., _lattice(0, cols, a)] & ok[..., _lattice(1, cols, a)] & ok[..., _lattice(2, cols, a)]
+    box = image[:, view.box[0], view.box[1]]  # the lattice's points at box rows / columns 2, 2 + a, ...
+    middle = _lattice(2, cols, a)
+
+    def across(line, s: int, centre=None) -> np.ndarray:  # k(s) along lattice rows `line` (its centre taps given)
+        return line[..., _lattice(2 - s, cols, a)] + line[..., _lattice(2 + s, cols, a)] - 2.0 * (
+            line[..., middle] if centre is None else centre)
+
+    line = box[:, _lattice(2, rows, a)]
+    centre_taps = line[..., middle]
+    l1 = across(box[:, _lattice(1, rows, a)], 1) + across(box[:, _lattice(3, rows, a)], 1) - 2.0 * across(
+        line, 1, centre_taps)
+    l2 = across(box[:, _lattice(0, rows, a)], 2) + across(box[:, _lattice(4, rows, a)], 2) - 2.0 * across(
+        line, 2, centre_taps)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log = np.log(np.abs(l2 / l1))  # ln |L2 / L1| = l / 2 (a tie of zeros, or a non-finite residual: nan)
+    log = log[:, ok] if ok.ndim == 2 else log[ok]
+    np.minimum(log, LOG_CLIP / 2.0, out=log)
+    np.maximum(log, -LOG_CLIP / 2.0, out=log)
+    finite = np.isfinite(log)  # (left out: a tie carries no sign, a non-finite residual no noise)
+    if not finite.all():
+        log = np.where(finite, log, 0.0)
+    if ok.ndim == 2:  # (3, n): every channel's points alike
+        m = int(np.count_nonzero(finite, axis=1).max())
+    else:  # channel by channel, in order
+        ends = np.cumsum(np.count_nonzero(ok.reshape(3, -1), axis=1))[:-1]
+        m = max(int(np.count_nonzero(part)) for part in np.split(finite, ends))
+    n = int(np.count_nonzero(finite))
+    return (2.0 * float(np.sum(log, dtype=np.float64)), n, m, n * n * log_ratio_variance(a) / m) if m else None
+
+
+def whiteness(views, planes) -> tuple[float, float] | None:
+    """(k, z) of the fit's residuals (module doc) from each view's `ViewPicks` (None: none) and
+    residual planes (3, H, W): k the variance the noise shows 2 pixels apart over what it shows 1
+    apart (1 for white noise), z its departure from 1 in standard deviations; None with fewer than
+    MIN_WHITE_POINTS points."""
+    total = variance = 0.0
+    count = fullest = 0
+    for view, image in zip(views, planes):
+        part = None if view is None else _view_log_ratios(view, image)
+        if part is not None:
+            total, count, fullest, variance = total + part[0], count + part[1], fullest + part[2], variance + part[3]
+    if fullest < MIN_WHITE_POINTS:
+        return None
+    mean = total / count
+    return math.exp(mean), mean / math.sqrt(variance / (count * count))
+
+
+def sigma_range(raw: float, floor: float, test) -> tuple[float, float] | None:
+    """The noise levels (low, high) a non-white noise allows, from the estimate `raw` (before the
+    floor: `fit.noise.estimate_sigma`'s, 1 pixel apart) and `whiteness`'s (k, z) `test`: raw
+    sqrt(k) is the level 2 apart, each floored at `floor` (the targets' quantisation); None when
+    the noise reads white (|z| <= WHITE_Z, or not tested) or both levels sit at the floor. An image
+    file's rounding of smooth shading is itself not white, but low-pass: a plain 8-bit POV-Ray
+    sphere reads its rounding's rms (raw 0.98 of the floor) 1 apart and 1.7x that 2 apart (k 3.0,
+    z 6.9); its rms is known (the floor), so the low-pass side is taken only where the noise at
+    1 apart is above ROUNDING_MARGIN times the floor (the rounding then at most a quarter of it:
+    its k of 3 moves k by at most 1.5)."""
+    if test is None or abs(test[1]) <= WHITE_Z or (test[0] > 1.0 and raw < ROUNDING_MARGIN * floor):
+        return None
+    other = raw * math.sqrt(test[0])
+    low, high = max(min(raw, other), floor), max(raw, other, floor)
+    return (low, high) if high > low else None
