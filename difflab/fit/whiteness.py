@@ -42,6 +42,7 @@ import numpy as np
 WHITE_SAMPLE = 1024  # the most lattice points of a channel
 WHITE_Z = 5.0  # |z| above this: not white
 LOG_CLIP = 6.0  # ln(L2^2 / L1^2) clipped to +-6 (a ratio of 400): a model's sharp error in one of the two counts at most that
+K_MAX = 9.0  # the most k noise correlated only between neighbours shows (`sigma_range`)
 ROUNDING_MARGIN = 2.0  # a low-pass reading counts where the noise 1 apart is above twice the rounding's (`sigma_range`)
 MIN_WHITE_POINTS = 64  # fewer lattice points (the fullest channels', summed over views): not tested
 _R11 = {0: 1.0, 1: -4.0 / 6.0, 2: 1.0 / 6.0}  # k1's correlation at lag d: [1 -4 6 -4 1] / 6
@@ -141,8 +142,13 @@ def sigma_range(raw: float, floor: float, test) -> tuple[float, float] | None:
     sphere reads its rounding's rms (raw 0.98 of the floor) 1 apart and 1.7x that 2 apart (k 3.0,
     z 6.9); its rms is known (the floor), so the low-pass side is taken only where the noise at
     1 apart is above ROUNDING_MARGIN times the floor (the rounding then at most a quarter of it:
-    its k of 3 moves k by at most 1.5)."""
-    if test is None or abs(test[1]) <= WHITE_Z or (test[0] > 1.0 and raw < ROUNDING_MARGIN * floor):
+    its k of 3 moves k by at most 1.5). Nor where k > K_MAX = 9: noise correlated only between
+    neighbours (C(d) = 0 beyond 1 pixel: a pixel filter of radius up to 1, Mitsuba's gaussian,
+    k 3.6-3.9) has var L2 = 36 C(0), and var L1 at least 4 C(0) (per axis, k1's 6 - 8 c(1) with
+    c(1) <= 1/2: the [1 1] / 2 filter's 2), so k <= 9; more is a model's error with sharp structure
+    (a noise-free 24 x 24 ray-traced mirror fitted without its reflection: k 9.9, 11 at 48 x 48)
+    or a blur wider than that, whose level neither scale reads: judged white."""
+    if test is None or abs(test[1]) <= WHITE_Z or (test[0] > 1.0 and (raw < ROUNDING_MARGIN * floor or test[0] > K_MAX)):
         return None
     other = raw * math.sqrt(test[0])
     low, high = max(min(raw, other), floor), max(raw, other, floor)
