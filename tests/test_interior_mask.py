@@ -147,8 +147,6 @@ def test_a_batch_line_edge_margin_gives_the_fit_the_interior(tmp_path):
     spec = parse_line({"name": "a", "scene": str(scene), "targets": [str(target)], "material": "red",
                        "params": "kd,ks,n", "edge_margin": 2}, tmp_path)
     assert spec["edge_margin"] == 2
-    assert "edge_margin" not in parse_line({"name": "a", "scene": "s.json", "targets": ["t.npy"], "edge_margin": 0},
-                                           tmp_path)
     batch = fit_job(spec)
     alone = difflab.fit_material(scene, [target], "red", ("kd", "ks", "n"), masks=[interior_mask(scene)], progress=False)
     assert batch.params["kd"] == pytest.approx(alone.params["kd"], abs=1e-12) and batch.ok
@@ -156,6 +154,24 @@ def test_a_batch_line_edge_margin_gives_the_fit_the_interior(tmp_path):
     assert margin_masks(scene, [target], None, 0) is None
     with pytest.raises(FitError, match=r"^scene: .*nope\.json: scene file not found$"):
         margin_masks(tmp_path / "nope.json", [target], None, 2)  # as the fit says it
+
+
+def test_fit_many_gives_its_edge_margin_to_the_lines_without_one(tmp_path):
+    """A batch's --edge-margin (fit_many's edge_margin) applies to a line without its own, not to one
+    that says 0, and is part of the job: the report records it, and a rerun with another margin
+    fits that line again."""
+    scene, target, kd = anti_aliased_target(tmp_path)
+    line = {"scene": str(scene), "targets": [str(target)], "material": "red", "params": "kd,ks,n"}
+    manifest = [{"name": "inherits", **line}, {"name": "own0", **line, "edge_margin": 0}]
+    out = tmp_path / "out"
+    summary = difflab.fit_many(manifest, out, workers=1, edge_margin=2, quiet=True, progress=False)
+    assert summary.mismatched == ["own0"] and summary.all_converged
+    inherits = json.loads((out / "reports" / "inherits.json").read_text())
+    assert inherits["job"]["edge_margin"] == 2 and inherits["model_mismatch"] is False
+    np.testing.assert_allclose(inherits["params"]["kd"], kd, atol=1e-3)
+    assert json.loads((out / "reports" / "own0.json").read_text())["job"]["edge_margin"] == 0
+    again = difflab.fit_many(manifest, out, workers=1, edge_margin=1, quiet=True, progress=False)
+    assert (again.ran, again.skipped) == (1, 1)  # "inherits" fitted again (margin 1), "own0" as it was
 
 
 @pytest.mark.parametrize("command", ["fit", "fit-batch"])

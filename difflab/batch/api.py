@@ -100,7 +100,8 @@ def fit_many(manifest, outdir, *, workers: int | None = None, client=None, sched
             each job on a cluster's workers.
         edge_margin: pixels (an integer >= 0) for every line that gives no `edge_margin` of its own:
             its fit counts only pixels at least that far from every edge (`difflab.interior_mask`,
-            inside the line's masks; part of the job's identity); default 0: every pixel.
+            inside the line's masks; part of the job's identity: a rerun with another margin fits
+            those lines again); default 0: every pixel (the lines' specs left as they are).
         progress: show a progress bar with ETA (default: when stderr is a terminal).
         quiet: do not print the bad lines and the closing lines (`BatchSummary.report`) on stderr.
         force: write into `outdir` even when it holds other files than a batch's.

@@ -15,7 +15,8 @@ Keys of a line (docs/batch.md is the reference):
     init      parameter name -> starting value (a number or an RGB list).
     solver    options of the fit: see `OPTIONS` (max_depth: not with method "raster").
     edge_margin  pixels: count only those at least this far from every edge (`difflab.interior_mask`,
-              as `difflab fit --edge-margin`); default 0: every pixel (of the masks).
+              as `difflab fit --edge-margin`); default: `fit_many`'s edge_margin, else 0 (every pixel
+              of the masks).
 Relative file paths resolve against the manifest's folder. Blank lines are skipped; line numbers
 count every line of the file from 1.
 """
@@ -164,10 +165,10 @@ def parse_line(data, base: Path) -> dict:
     if "params" in data:
         spec["params"] = _names(data["params"], "params")
     spec["init"] = _init(data.get("init", {}))
-    margin = data.get("edge_margin", 0)
-    if not (_typed(margin, int) and margin >= 0):
-        raise ManifestError(f"edge_margin: expected an integer number of pixels >= 0, got {margin!r}")
-    if margin:  # (0, the default, leaves the spec -- the job's identity -- as a line without the key)
+    if "edge_margin" in data:  # (0 too: a line's own margin is kept over fit_many's edge_margin)
+        margin = data["edge_margin"]
+        if not (_typed(margin, int) and margin >= 0):
+            raise ManifestError(f"edge_margin: expected an integer number of pixels >= 0, got {margin!r}")
         spec["edge_margin"] = margin
     spec["solver"] = _solver(data.get("solver", {}))
     for key in RAYTRACE_ONLY:
