@@ -14,14 +14,17 @@ noise, reduced chi-square, flags -- writes the fitted scene and a report of the 
     4  converged, but MODEL MISMATCH: the residuals sit far above the noise (files written); the
        fitted values answer a different question than asked -- try --method raytrace, other params
        or another specular model; for another renderer's anti-aliased image, --edge-margin 2
-       (docs/foreign-targets.md)
+       (docs/foreign-targets.md). (Not from noise that is not white: with a NOISE NOT WHITE line,
+       chi2 is above 2 even at the higher of its two levels.)
     5  converged, but not settled (`FitResult.not_judged`): NOISE UNKNOWN (too few used pixels
        have used neighbours to estimate the noise: a small, thin or scattered mask -- give --sigma),
        MISMATCH SUSPECTED (sigma estimated: chi2 above its spread but not above 2 -- give --sigma
-       to judge the model) or UNDERDETERMINED (no more target values than unknowns: the model is
-       not judged either; or parameters the images fix only in combination, named: their values
-       are undetermined, the model still judged where the values are enough -- with a mismatch too, the
-       exit is 4; both can hold, each printed)
+       to judge the model; with NOISE NOT WHITE -- the noise reads differently between neighbouring
+       pixels and pixels 2 apart: a pixel filter or a blur, dithering -- chi2 between the verdicts
+       at its two levels: give --sigma, the targets' true noise) or UNDERDETERMINED (no more target
+       values than unknowns: the model is not judged either; or parameters the images fix only in
+       combination, named: their values are undetermined, the model still judged where the values
+       are enough -- with a mismatch too, the exit is 4; both can hold, each printed)
 
 A fitted texture (--params texture) is written beside the scene as OUTPUT_STEM.MATERIAL.texture.npy
 (linear float32; OUTPUT_STEM.textureI.npy, I the material's index, where its name is not a plain

@@ -315,7 +315,7 @@ def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, 
     - an estimated one whose noise is not white (`sigma_range` = (low, high), the levels its two
       scales allow: `fit.whiteness`): `mismatch` only when chi2 at `high` is above max(t,
       MISMATCH_CHI2), and ok only when chi2 at `low` is within t; else `suspected`. (Mitsuba's
-      gaussian pixel filter, a correct model: chi2 5.2 at the 1-apart level, 1.3 at the 2-apart one,
+      gaussian pixel filter, a correct model: chi2 5.2 at the 1-apart level, 1.4 at the 2-apart one,
       suspected, not a mismatch; an ordered-dithered 8-bit file of a wrong model: chi2 1.1 at the
       1-apart level, 6.8 at the quantisation floor, suspected, not ok.) chi2 is reported at sigma.
     With dof <= 0 (no more counted entries than unknowns: `underdetermined`) the residuals say
