@@ -22,7 +22,7 @@ from ..guards import check_mesh_uvs, check_world_mesh, object_errors
 from ..limits import require_triangles
 from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Scene, Sphere, load_scene
-from .launch import host_empty, resolve_device
+from .launch import host_carved, host_empty, resolve_device
 from .soup import PER_FACE, SOUP_DTYPES, device_soup, host_aliased, raster_room, soup_with_room, triangle_soup
 from .tessellate import AnalyticParts, plane_uv_anchor
 from .texture.store import TextureStore, scene_textures
@@ -173,25 +173,31 @@ class CompiledScene:
             array.zero_()
         return pool[key]
 
-    def zeroed_group(self, name: str, specs: list[tuple]) -> tuple[list[wp.array], wp.array | None]:
-        """Arrays for a frame's outputs that must start zero, one per (shape, dtype) of `specs` (of
-        4-byte scalars), carved from one buffer `name`: as `reusable`, this thread's from an earlier
-        frame when none of them is held any more -- returned with that buffer, for the caller to zero
-        in one memset (a worker zeroing the 15 arrays of a 256^2 G-buffer one by one took the GIL
-        between them, and the frame's thread waited: ~0.1 ms a frame) -- else new zero memory (None)."""
-        specs = [((shape,) if isinstance(shape, int) else tuple(shape), dtype) for shape, dtype in specs]
+    def reusable_structs(self, name: str, layout: list[tuple]) -> tuple[list, wp.array | None]:
+        """Instances of Warp structs whose fields are a frame's output arrays, `layout` a list of
+        (struct type, [(field, shape, dtype, zero), ...]): this thread's from an earlier frame, as
+        they were, when none of their arrays is held any more (as `reusable` tests it, the struct's
+        own reference aside) -- with the buffer the `zero` arrays are carved from, stale, for the
+        caller to zero in one memset -- else new ones, those arrays carved from one new zero buffer
+        (and None). One memset: a pool worker zeroing the 15 arrays of a 256^2 G-buffer one by one
+        re-took the GIL between them while the frame's thread waited (~0.1 ms a frame); the structs
+        kept: filling them anew costs ~30 us warm, ~125 us of a fit's cold frame."""
+        layout = [(struct, [(field, (shape,) if isinstance(shape, int) else tuple(shape), dtype, zero)
+                            for field, shape, dtype, zero in fields]) for struct, fields in layout]
         pool = self.scratch_pool()
-        kept = pool.get(("zeroed", name))
-        if kept is not None and kept[0] == specs and all(sys.getrefcount(array) <= _UNHELD for array in kept[2]):
-            return kept[2], kept[1]
-        inner = [tuple(getattr(dtype, "_shape_", ())) for unused, dtype in specs]
-        words = [int(np.prod(shape + extra)) for (shape, unused), extra in zip(specs, inner)]
-        starts = np.concatenate([[0], np.cumsum([-(-n // 16) * 16 for n in words])])  # 64-byte aligned
-        buffer = host_empty(int(starts[-1]), wp.float32, self.device, zeroed=True)
-        arrays = [buffer[int(start):int(start) + n].reshape(shape + extra).view(dtype)  # (views keep `buffer`)
-                  for start, n, (shape, dtype), extra in zip(starts, words, specs, inner)]
-        pool[("zeroed", name)] = (specs, buffer, arrays)  # an old one stays with its frame
-        return arrays, None
+        kept = pool.get(("structs", name))
+        if kept is not None and kept[0] == layout and all(sys.getrefcount(array) <= _UNHELD + 1 for array in kept[1]):
+            return kept[2], kept[3]
+        buffer, carved = host_carved([(shape, dtype) for unused, fields in layout
+                                      for unused, shape, dtype, zero in fields if zero], self.device)
+        carved, arrays, structs = iter(carved), [], []
+        for struct, fields in layout:
+            structs.append(struct())
+            for field, shape, dtype, zero in fields:
+                arrays.append(next(carved) if zero else host_empty(shape, dtype, self.device))
+                setattr(structs[-1], field, arrays[-1])
+        pool[("structs", name)] = (layout, arrays, structs, buffer)  # old ones stay with their frame
+        return structs, None
 
     def scratch_pool(self) -> dict:
         """This thread's `scratch` arrays by name (a renderer may keep notes about them there too)."""

@@ -318,10 +318,11 @@ def dealt_bands(rows: int, device: str, threads: int | None = None,
     return [(k, n_bands) for k in range(n_bands)]
 
 
-def launch_dealt(kernel, k: int, n: int, rows: int, inputs: list, device: str) -> None:
-    """Launch `kernel` on band k of n of rows [0, rows) dealt in blocks (`launch_row_loops`)."""
+def launch_dealt(kernel, k: int, n: int, rows: int, inputs: list, device: str, kept: dict | None = None) -> None:
+    """Launch `kernel` on band k of n of rows [0, rows) dealt in blocks (`launch_row_loops`); `kept`:
+    see `launch_kept`."""
     band_rows = sum(min(ROW_BLOCK, rows - block) for block in range(k * ROW_BLOCK, rows, n * ROW_BLOCK))
-    wp.launch(kernel, dim=band_rows, inputs=[k * ROW_BLOCK, n * ROW_BLOCK, *inputs], device=device)
+    launch_kept(kept, kernel, band_rows, [k * ROW_BLOCK, n * ROW_BLOCK, *inputs], device)
 
 
 def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int | None = None,
@@ -342,8 +343,9 @@ def launch_kept(kept: dict | None, kernel, dim: int, inputs: list, device: str) 
     """`wp.launch`, or, given `kept` (a dict kept between frames by one thread), the launch recorded
     there for `kernel` and inputs[0] (its band), replayed while the dim and inputs are the same
     (objects by identity, ints by value): Warp packs every argument anew at each launch (~15-35 us
-    one of the z-buffer's). A recorded launch holds its inputs: only for arrays kept anyway (scratch),
-    never a frame's outputs, which `CompiledScene.reusable` must find unheld to reuse."""
+    one of the z-buffer's). A recorded launch holds its inputs: only arrays kept anyway (scratch) or
+    structs of a frame's outputs (`CompiledScene.reusable_structs`), never such arrays themselves,
+    which `CompiledScene.reusable` must find unheld to reuse."""
     if kept is None:
         wp.launch(kernel, dim=dim, inputs=inputs, device=device)
         return
@@ -390,6 +392,18 @@ def launch_parts(kernel, n: int, inputs: list, device: str, threads: int | None 
 def part_count(n: int, device: str, threads: int | None = None) -> int:
     """How many parts `launch_parts` splits n items into."""
     return len(band_plan(n, device, threads))
+
+
+def host_carved(specs: list[tuple], device: str) -> tuple[wp.array, list[wp.array]]:
+    """Zero arrays of the given (shape, dtype) (4-byte scalars or vectors of them), carved in order
+    from one zero buffer, each from a 64-byte boundary: (buffer, arrays); the arrays keep the buffer
+    alive, and `buffer.zero_()` zeroes them all in one memset."""
+    inner = [tuple(getattr(dtype, "_shape_", ())) for unused, dtype in specs]
+    words = [int(np.prod(shape + extra)) for (shape, unused), extra in zip(specs, inner)]
+    starts = np.concatenate([[0], np.cumsum([-(-n // 16) * 16 for n in words])]).astype(int)
+    buffer = host_empty(int(starts[-1]), wp.float32, device, zeroed=True)
+    return buffer, [buffer[start:start + n].reshape(shape + extra).view(dtype)
+                    for start, n, (shape, dtype), extra in zip(starts.tolist(), words, specs, inner)]
 
 
 def to_host(array: wp.array) -> np.ndarray:

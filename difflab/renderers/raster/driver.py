@@ -67,22 +67,15 @@ def filled(struct, name: str, fields: list[tuple], array):
 
 
 def gbuffer_arrays(compiled, n_samples: int, phong: bool):
-    """Stage 4's arrays for the G-buffer (`CompiledScene.reusable`: an earlier frame's memory when
-    free), and stage 6's when the points are the samples (`phong`): (samples, out, lit or None,
-    stale). What must start zero is carved from one buffer (`CompiledScene.zeroed_group`); `stale`
-    is that buffer when an earlier frame left it, for the caller to zero (else None: new memory)."""
-    samples, out, lit = resolve.PointsW(), resolve.GBufferW(), shade.LitW() if phong else None
-    structs = [(samples, "samples", point_fields(n_samples, True)), (out, "gbuffer", gbuffer_fields(n_samples))]
+    """Stage 4's arrays for the G-buffer, and stage 6's when the points are the samples (`phong`), in
+    their structs (`CompiledScene.reusable_structs`: an earlier frame's when free): (samples, out, lit
+    or None, stale), `stale` the buffer of those that must start zero when an earlier frame left it,
+    for the caller to zero (else None: new memory)."""
+    layout = [(resolve.PointsW, point_fields(n_samples, True)), (resolve.GBufferW, gbuffer_fields(n_samples))]
     if phong:
-        structs.append((lit, "lit", lit_fields(compiled, n_samples, n_samples)))
-    zeroed = [(struct, field, shape, dtype) for struct, unused, fields in structs
-              for field, shape, dtype, zero in fields if zero]
-    arrays, stale = compiled.zeroed_group("gbuffer", [(shape, dtype) for *unused, shape, dtype in zeroed])
-    for (struct, field, *unused), array in zip(zeroed, arrays):
-        setattr(struct, field, array)
-    for struct, name, fields in structs:  # the rest: written everywhere
-        filled(struct, name, [spec for spec in fields if not spec[3]], compiled.reusable)
-    return samples, out, lit, stale
+        layout.append((shade.LitW, lit_fields(compiled, n_samples, n_samples)))
+    structs, stale = compiled.reusable_structs("gbuffer", layout)
+    return structs[0], structs[1], structs[2] if phong else None, stale
 
 
 def raster_mesh(compiled) -> resolve.RasterMeshW:
@@ -169,6 +162,21 @@ def empty_screen(device: str) -> resolve.ScreenW:
     return tris
 
 
+def screen_slots(compiled, n_slots: int) -> resolve.ScreenW:
+    """Stage 2's `n_slots` screen triangles (scratch arrays), in a struct kept with them: the kernels'
+    launches that read it are then the same and replayed (`launch.launch_kept`)."""
+    arrays = (compiled.scratch("tris.screen", (n_slots, 3), wp.vec4d), compiled.scratch("tris.weight", (n_slots, 3),
+                                                                                       wp.vec3),
+              compiled.scratch("tris.facing", n_slots, wp.int32), compiled.scratch("tris.face", n_slots, wp.int32))
+    pool = compiled.scratch_pool()
+    kept = pool.get(("struct", "tris"))
+    if kept is None or any(a is not b for a, b in zip(kept[0], arrays)):
+        tris = resolve.ScreenW()
+        tris.screen, tris.weight, tris.facing, tris.face = arrays
+        kept = pool[("struct", "tris")] = (arrays, tris)
+    return kept[1]
+
+
 def split_slots(compiled, p_clip: wp.array, threads: int | None) -> tuple[wp.array, int]:
     """Per face, its extra slot (-1: none) for the faces with one vertex behind the near plane
     (clipped to a quad), numbered after the F faces' own slots; and how many there are."""
@@ -223,11 +231,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     if to_host(behind)[0]:
         extra, n_split = split_slots(compiled, p_clip, threads)
     n_slots = n_faces + n_split
-    tris = resolve.ScreenW()
-    tris.screen = scratch("tris.screen", (n_slots, 3), wp.vec4d)
-    tris.weight = scratch("tris.weight", (n_slots, 3), wp.vec3)
-    tris.facing = scratch("tris.facing", n_slots, wp.int32)
-    tris.face = scratch("tris.face", n_slots, wp.int32)
+    tris = screen_slots(compiled, n_slots)
     rows = scratch("rows", (n_slots, 4), wp.int32)  # each slot's box: first / last sample row and column
     bands = band_plan(height, device, threads)
     band_of_row = band_rows(bands, height, device)
@@ -368,15 +372,17 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     bad = compiled.scratch("nonfinite rows", height, wp.int32)
     clearing = start_beside(stale.zero_ if stale is not None else lambda: None, device, row_pass[0])
 
+    kept = compiled.scratch_pool()  # the pass's launches, recorded with the structs kept (`launch_kept`)
+
     def sample_pass(tris, key, k: int, n: int) -> None:  # stage 4 on band k of n of the dealt rows, once cleared
         clearing.join()
         if points_are_samples:  # stages 4-6 in one pass: each sample resolved, then lit as its own point
             launch_dealt(shade.phong_gbuffer_kernel, k, n, height, [
-                key, partial, tris, mesh, cam, perspective_correct, out, samples, lighting, lit, bad], device)
+                key, partial, tris, mesh, cam, perspective_correct, out, samples, lighting, lit, bad], device, kept)
         else:
             launch_dealt(resolve.resolve_kernel, k, n, height, [
                 key, partial, tris, mesh, compiled.materials, cam, perspective_correct, shading,
-                compiled.vertices.shape[0], out, samples], device)
+                compiled.vertices.shape[0], out, samples], device, kept)
 
     try:
         tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads,  # stages 1-3 (and 4 when halved)
