@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import FitError
 from ..io import save_image
+from .whiteness import not_white_line
 
 
 def _json_number(x):
@@ -221,17 +222,6 @@ class FitResult:
         """Whether the estimated noise is not white (`sigma_range` set)."""
         return self.sigma_range is not None
 
-    def _not_white_line(self) -> str:
-        """The table's line on noise that is not white: its two levels, which way, chi2 over them."""
-        low, high = self.sigma_range
-        alike = self.sigma <= low  # (the 1-apart level the lower: neighbours alike)
-        chi2 = [self.chi2 * (self.sigma / level) ** 2 for level in (high, low)]
-        return (f"NOISE NOT WHITE: its level reads {self.sigma:.3g} between neighbouring pixels and "
-                f"{high if alike else low:.3g} between pixels 2 apart ("
-                + ("neighbours alike: a pixel filter or a blur" if alike else "neighbours differ: dithering")
-                + f"); chi2 {chi2[0]:.3g} to {chi2[1]:.3g} over that range, and the model is judged against both "
-                "(give sigma, --sigma, to judge it against the true noise)")
-
     @property
     def not_judged(self) -> bool:
         """Whether the fit is left unsettled (the CLI's exit 5; a flag of NOT_JUDGED): the noise
@@ -393,8 +383,8 @@ class FitResult:
                                         ("MISMATCH SUSPECTED: the residuals exceed the estimated noise beyond its "
                                          "spread; the image model is not judged (give sigma to judge it)",
                                          self.mismatch_suspected),
-                                        (self._not_white_line() if self.noise_not_white else "",
-                                         self.noise_not_white),
+                                        (not_white_line(self.sigma, self.chi2, self.sigma_range)
+                                         if self.noise_not_white else "", self.noise_not_white),
                                         ("NOISE UNKNOWN: too few used pixels with used neighbours to estimate it; "
                                          "the image model is not judged (give sigma)", self.noise_unknown),
                                         ("UNDERDETERMINED: no more counted target values than unknowns the data "

@@ -154,3 +154,17 @@ def sigma_range(raw: float, floor: float, test) -> tuple[float, float] | None:
     other = raw * math.sqrt(test[0])
     low, high = max(min(raw, other), floor), max(raw, other, floor)
     return (low, high) if high > low else None
+
+
+def not_white_line(sigma: float, chi2: float, levels: tuple) -> str:
+    """The fit table's line on noise that is not white: its two levels -- `sigma`, read between
+    neighbours, and the other of `levels` (`sigma_range`) --, which way they differ, and chi2 (at
+    sigma) over the range."""
+    low, high = levels
+    alike = sigma <= low  # (the neighbours' level the lower: neighbours alike)
+    over = [chi2 * (sigma / level) ** 2 for level in (high, low)]
+    return (f"NOISE NOT WHITE: its level reads {sigma:.3g} between neighbouring pixels and "
+            f"{high if alike else low:.3g} between pixels 2 apart (each at least the targets' rounding; "
+            + ("neighbours alike: a pixel filter or a blur" if alike else "neighbours differ: dithering")
+            + f"); chi2 {over[0]:.3g} to {over[1]:.3g} over that range, and the model is judged against both "
+            "(give sigma, --sigma, to judge it against the true noise)")
