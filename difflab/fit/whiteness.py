@@ -56,7 +56,7 @@ def log_ratio_variance(a: int) -> float:
     """V(a): the variance of a mean of l over m lattice points a apart, times m, for white Gaussian
     noise (the module's formula): the sum over lags d = (a i, a j) within the 9 x 9 the kernels
     reach of g(r11(d)) + g(r22(d)) - 2 g(r12(d)), r the separable products of the 1-D correlations."""
-    lags = range(-4 // a * a, 5, a)
+    lags = [d for d in range(-4, 5) if d % a == 0]
     total = 0.0
     for dy in lags:
         for dx in lags:
