@@ -165,9 +165,9 @@ def empty_screen(device: str) -> resolve.ScreenW:
 def screen_slots(compiled, n_slots: int) -> resolve.ScreenW:
     """Stage 2's `n_slots` screen triangles (scratch arrays), in a struct kept with them: the kernels'
     launches that read it are then the same and replayed (`launch.launch_kept`)."""
-    arrays = (compiled.scratch("tris.screen", (n_slots, 3), wp.vec4d), compiled.scratch("tris.weight", (n_slots, 3),
-                                                                                       wp.vec3),
-              compiled.scratch("tris.facing", n_slots, wp.int32), compiled.scratch("tris.face", n_slots, wp.int32))
+    scratch = compiled.scratch
+    arrays = (scratch("tris.screen", (n_slots, 3), wp.vec4d), scratch("tris.weight", (n_slots, 3), wp.vec3),
+              scratch("tris.facing", n_slots, wp.int32), scratch("tris.face", n_slots, wp.int32))
     pool = compiled.scratch_pool()
     kept = pool.get(("struct", "tris"))
     if kept is None or any(a is not b for a, b in zip(kept[0], arrays)):
