@@ -13,7 +13,6 @@ import tempfile
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
-import numpy as np
 
 from .._warp import wp
 
@@ -392,35 +391,3 @@ def launch_parts(kernel, n: int, inputs: list, device: str, threads: int | None 
 def part_count(n: int, device: str, threads: int | None = None) -> int:
     """How many parts `launch_parts` splits n items into."""
     return len(band_plan(n, device, threads))
-
-
-def host_carved(specs: list[tuple], device: str) -> tuple[wp.array, list[wp.array]]:
-    """Zero arrays of the given (shape, dtype) (4-byte scalars or vectors of them), carved in order
-    from one zero buffer, each from a 64-byte boundary: (buffer, arrays); the arrays keep the buffer
-    alive, and `buffer.zero_()` zeroes them all in one memset."""
-    inner = [tuple(getattr(dtype, "_shape_", ())) for unused, dtype in specs]
-    words = [int(np.prod(shape + extra)) for (shape, unused), extra in zip(specs, inner)]
-    starts = np.concatenate([[0], np.cumsum([-(-n // 16) * 16 for n in words])]).astype(int)
-    buffer = host_empty(int(starts[-1]), wp.float32, device, zeroed=True)
-    return buffer, [buffer[start:start + n].reshape(shape + extra).view(dtype)
-                    for start, n, (shape, dtype), extra in zip(starts.tolist(), words, specs, inner)]
-
-
-def to_host(array: wp.array) -> np.ndarray:
-    """`array` as numpy: a view on the CPU (np.asarray, without the device check and stream scope of
-    Warp's `numpy()`: ~0.6 instead of ~1.5 us, and a G-buffer frame reads 28 arrays), a copy from a GPU."""
-    return np.asarray(array) if array.device.is_cpu else array.numpy()
-
-
-def host_empty(shape, dtype, device: str, zeroed: bool = False) -> wp.array:
-    """An uninitialised (or, `zeroed`, zero) device array; on the CPU in numpy's memory, which asks
-    the kernel for transparent huge pages on large arrays (a page fault per 2 MiB instead of per
-    4 KiB: ~1 ms instead of ~10 ms to first write a 1920x1080 RGB float image). Zeroed memory
-    that large comes fresh from the kernel, zero already: what is never written costs nothing."""
-    if not device.startswith("cpu"):
-        return (wp.zeros if zeroed else wp.empty)(shape, dtype=dtype, device=device)
-    shape = (shape,) if isinstance(shape, int) else tuple(shape)
-    scalar = getattr(dtype, "_wp_scalar_type_", dtype)  # a vector / matrix type's scalar, else dtype itself
-    host = (np.zeros if zeroed else np.empty)(shape + tuple(getattr(dtype, "_shape_", ())),
-                                              dtype=wp.dtype_to_numpy(scalar))
-    return wp.array(host, dtype=dtype, device=device, copy=False)

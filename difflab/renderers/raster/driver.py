@@ -19,63 +19,17 @@ from ..._warp import wp
 from ...errors import RenderError
 from ...guards import nonfinite_pixels
 from ...limits import check_raster_work
-from ...lighting.warp_model import fog_params, fog_struct
+from ...lighting.warp_model import fog_struct
 from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR_MODELS
 from . import clip, coverage, resolve, shade
+from .gbuffer import filled, gbuffer_arrays, lit_fields, point_fields, to_gbuffer
 from ..camera import camera_struct
-from ..frame import Frame, GBuffer, ShadingPoints, box_downsample
-from ..launch import (band_plan, dealt_bands, halved_zbuffer, host_empty, launch_chunks, launch_dealt, launch_kept,
-                      launch_parts, launch_row_loops, load_kernels, part_count, pass_threads, raster_threads, run_bands,
-                      run_phases, start_beside, to_host)
+from ..frame import Frame, box_downsample
+from ..host import host_empty, to_host
+from ..launch import (band_plan, dealt_bands, halved_zbuffer, launch_chunks, launch_dealt, launch_kept, launch_parts,
+                      launch_row_loops, load_kernels, part_count, pass_threads, raster_threads, run_bands, run_phases,
+                      start_beside)
 from ..trace import object_kinds
-
-
-def point_fields(count: int, samples: bool) -> list[tuple]:
-    """(field, shape, dtype, zero where a sample is empty) of the arrays of `count` shading points
-    (`resolve.PointsW`); the G-buffer's `samples` keep no shadow-ray start (geometric normal, object
-    skipped), and their material is written where empty."""
-    kept = 0 if samples else count
-    return [("position", count, wp.vec3, True), ("normal", count, wp.vec3, True), ("view", count, wp.vec3, True),
-            ("material", count, wp.int32, False), ("cell", count, wp.int32, True), ("duv_dx", count, wp.vec2, True),
-            ("duv_dy", count, wp.vec2, True), ("geo_normal", kept, wp.vec3, False), ("ignore", kept, wp.int32, False)]
-
-
-def gbuffer_fields(count: int) -> list[tuple]:
-    """`point_fields` of stage 4's other per-sample outputs (`resolve.GBufferW`): zero where empty,
-    or written everywhere."""
-    return [("face", count, wp.int32, False), ("bary", count, wp.vec3, True), ("depth", count, wp.float32, False),
-            ("uv", count, wp.vec2, True), ("object", count, wp.int32, False), ("point_index", count, wp.vec3i, False),
-            ("point_weight", count, wp.vec3, True)]
-
-
-def lit_fields(compiled, n_points: int, n_samples: int) -> list[tuple]:
-    """`point_fields` of stage 6's outputs for the G-buffer (`shade.LitW`), all zero where not
-    written (an empty point's): per point and light, direction, distance, visibility (one zero
-    column without lights); per point its colour and texture factor; per sample its texel (written
-    by stage 6 when the points are the samples, else by stage 7 on textured samples)."""
-    per_light = (n_points, max(len(compiled.scene.lights), 1))
-    return [("light_dir", per_light, wp.vec3, True), ("light_dist", per_light, wp.float32, True),
-            ("visibility", per_light, wp.float32, True), ("color", max(n_points, 1), wp.vec3, True),
-            ("factor", max(n_points, 1), wp.vec3, True), ("texel", n_samples, wp.vec3, True)]
-
-
-def filled(struct, name: str, fields: list[tuple], array):
-    """`struct` with each field's array `array(f"{name}.{field}", shape, dtype, zero)`."""
-    for field, shape, dtype, zero in fields:
-        setattr(struct, field, array(f"{name}.{field}", shape, dtype, zero))
-    return struct
-
-
-def gbuffer_arrays(compiled, n_samples: int, phong: bool):
-    """Stage 4's arrays for the G-buffer, and stage 6's when the points are the samples (`phong`), in
-    their structs (`CompiledScene.reusable_structs`: an earlier frame's when free): (samples, out, lit
-    or None, stale), `stale` the buffer of those that must start zero when an earlier frame left it,
-    for the caller to zero (else None: new memory)."""
-    layout = [(resolve.PointsW, point_fields(n_samples, True)), (resolve.GBufferW, gbuffer_fields(n_samples))]
-    if phong:
-        layout.append((shade.LitW, lit_fields(compiled, n_samples, n_samples)))
-    structs, stale = compiled.reusable_structs("gbuffer", layout)
-    return structs[0], structs[1], structs[2] if phong else None, stale
 
 
 def raster_mesh(compiled) -> resolve.RasterMeshW:
@@ -421,28 +375,3 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
 def frame_stats(compiled, start: float, nonfinite: int, n_samples: int, n_points: int) -> dict:
     return {"method": "raster", "seconds": time.perf_counter() - start, "triangles": compiled.faces.shape[0],
             "samples": n_samples, "shading_points": n_points, "nonfinite_pixels": nonfinite}
-
-
-
-def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, points, n_points: int,
-               lit, clamp_colors: bool) -> GBuffer:
-    """The device buffers of stages 4-6 as a numpy `GBuffer` on the sample grid."""
-    def on_grid(array, *channels):
-        return to_host(array).reshape(*grid, *channels)
-
-    material = on_grid(samples.material)
-    return GBuffer(
-        mask=material >= 0, depth=on_grid(out.depth), position=on_grid(samples.position, 3),
-        normal=on_grid(samples.normal, 3), uv=on_grid(out.uv, 2), material=material,
-        object=on_grid(out.object), face=on_grid(out.face), bary=on_grid(out.bary, 3),
-        point_index=on_grid(out.point_index, 3), point_weight=on_grid(out.point_weight, 3),
-        points=ShadingPoints(
-            position=to_host(points.position), normal=to_host(points.normal), view=to_host(points.view),
-            material=to_host(points.material), cell=to_host(points.cell), light_dir=to_host(lit.light_dir),
-            light_dist=to_host(lit.light_dist), visibility=to_host(lit.visibility),
-            color=to_host(lit.color)[:n_points], texture_factor=to_host(lit.factor)[:n_points]),
-        shading=settings.shading, specular=settings.specular, spp_side=side,
-        ambient=np.asarray(scene.ambient, np.float32), background=np.asarray(scene.background, np.float32),
-        clamp_vertex_colors=clamp_colors, fog=fog_params(scene.fog),
-        duv_dx=on_grid(samples.duv_dx, 2), duv_dy=on_grid(samples.duv_dy, 2), texture=on_grid(lit.texel, 3),
-    )

@@ -29,7 +29,8 @@ from ...lighting.warp_model import fog_struct
 from ...vocabulary import FRESNEL_MODES, SPECULAR_MODELS
 from ..camera import camera_struct
 from ..frame import Frame, box_downsample
-from ..launch import host_empty, launch_row_loops, load_kernels
+from ..host import host_empty
+from ..launch import launch_row_loops, load_kernels
 from .gbuffer import tree_gbuffer
 from .itembuffer import asked_bvh, item_buffer, item_struct
 from .lightbuffer import build_light_buffer, no_light_buffer
