@@ -4,7 +4,9 @@ written per job, failures recorded, resume, interruption, and the Dask backend w
 One small batch (16x16 targets of a sphere with known kd) is run once, uninterrupted, on two local
 worker processes; the other runs must leave the same files (timing/ apart)."""
 
+import csv
 import dataclasses
+import io
 import json
 import os
 import platform
@@ -260,8 +262,8 @@ def test_batch_recovers_each_fit_and_records_failures(reference):
     assert invalid == {"line": 3, "name": "typo", "error": "unknown key(s) ['materal']; known: name, scene, targets, "
                        "material, params, method, init, solver, edge_margin"}
     rows = (out / "summary.csv").read_text().splitlines()
-    assert rows[0] == ("line,name,status,result,model,model_mismatch,mismatch_suspected,noise_unknown,underdetermined,loss,"
-                       "psnr,chi2,steps,params,error")
+    assert rows[0] == ("line,name,status,result,model,model_mismatch,mismatch_suspected,noise_unknown,noise_not_white,"
+                       "underdetermined,too_few_values,unreached,loss,psnr,chi2,steps,params,error")
     assert [r.split(",")[:3] for r in rows[1:]] == (
         [["1", "fit0", "converged"], ["2", "fit1", "converged"], ["3", "typo", "invalid"]]
         + [[str(i + 2), f"fit{i}", "converged"] for i in range(2, len(KDS))]
@@ -386,6 +388,23 @@ def test_store_keeps_one_outcome_per_job(tmp_path, monkeypatch):
     assert not store.done(changed) and store.row(changed)["status"] == "not_run"  # a changed line is redone
     store.record(job, {"ok": False, "error": "boom", "seconds": 1.0})
     assert sorted(p.name for p in tmp_path.rglob("*.json")) == ["a.json", "a.json"]  # failures/ and timing/
+
+
+def test_summary_carries_the_reports_underdetermined_and_noise_flags(tmp_path):
+    """summary.csv lacked unreached, too_few_values and noise_not_white, which every report holds."""
+    jobs, _ = load_manifest([{"name": n, "scene": "s.json", "targets": "t.png"} for n in ("a", "b")])
+    store = Store(tmp_path)
+    flags = {"a": {"unreached": ["lights[1].intensity"], "too_few_values": False, "noise_not_white": True},
+             "b": {"unreached": [], "too_few_values": True, "noise_not_white": False}}
+    for job in jobs:
+        store.record(job, {"ok": True, "scene": {}, "textures": {}, "seconds": 1.0,
+                           "report": {"converged": True, "result": "successful", "underdetermined": True,
+                                      **flags[job.name]}})
+    summary = store.summarise(jobs, [])
+    assert [{k: r[k] for k in flags["a"]} for r in summary["jobs"]] == [flags["a"], flags["b"]]
+    rows = list(csv.DictReader(io.StringIO((tmp_path / "summary.csv").read_text())))
+    assert [(r["unreached"], r["too_few_values"], r["noise_not_white"], r["underdetermined"]) for r in rows] == [
+        ('["lights[1].intensity"]', "False", "True", "True"), ("[]", "True", "False", "True")]
 
 
 # -- a Dask cluster ----------------------------------------------------------------------------------

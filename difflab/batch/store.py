@@ -34,9 +34,11 @@ from .manifest import Invalid, Job
 
 FOLDERS = ("scenes", "reports", "failures", "timing")
 COLUMNS = ("line", "name", "status", "result", "model", "model_mismatch", "mismatch_suspected", "noise_unknown",
-           "underdetermined", "loss", "psnr", "chi2", "steps", "params", "error")
-REPORTED = ("result", "model", "model_mismatch", "mismatch_suspected", "noise_unknown", "underdetermined", "loss",
-            "psnr", "chi2", "steps", "params")  # columns from a report
+           "noise_not_white", "underdetermined", "too_few_values", "unreached", "loss", "psnr", "chi2", "steps", "params",
+           "error")
+REPORTED = ("result", "model", "model_mismatch", "mismatch_suspected", "noise_unknown", "noise_not_white",
+            "underdetermined", "too_few_values", "unreached", "loss", "psnr", "chi2", "steps", "params")  # from a report
+JSON_CELLS = ("unreached", "params")  # written to the CSV as JSON (a list, a dict)
 
 
 def _read_json(path: Path):
@@ -143,7 +145,7 @@ class Store:
         writer = csv.DictWriter(text, fieldnames=COLUMNS, lineterminator="\n")
         writer.writeheader()
         for r in rows:
-            writer.writerow({**r, "params": None if r["params"] is None else json.dumps(r["params"])})
+            writer.writerow({**r, **{k: None if r[k] is None else json.dumps(r[k]) for k in JSON_CELLS}})
         with uninterrupted():
             write_json_atomic(self.root / "summary.json", summary)
             write_text_atomic(self.root / "summary.csv", text.getvalue())
