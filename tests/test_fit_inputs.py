@@ -193,7 +193,7 @@ def test_no_fit_messages_name_the_target_mask_and_counts(tmp_path, capsys):
     assert main(["fit", str(path), str(tmp_path / "bad.npy"), "--material", "red", "-o", str(tmp_path / "o.json")]) == 2
     assert capsys.readouterr().err.strip() == (
         f"difflab: error: no fit made: nonfinite_target: targets[0] ({tmp_path / 'bad.npy'}) holds 4 non-finite "
-        "values (1 NaN, 3 inf) in 2 pixels")
+        "values (1 NaN, 3 inf) in 2 pixels the fit uses")
     background = render_frame(scene).gbuffer.material != scene.material_names.index("red")
     mask = np.zeros((16, 16, 3), np.float32)
     mask[background] = 1.0  # every pixel but the sphere's

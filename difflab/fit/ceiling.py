@@ -17,7 +17,23 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import FitError
+
 CENSOR_MIN_TIES = 3  # ties at the maximum on one surface (this many, under half its pixels) mark a ceiling
+ABOVE_TOLERANCE = 1e-6  # relative: a value within this of a given ceiling is at it (float32 rounds a clip by 6e-8)
+
+
+def refuse_values_above(ceiling: float, values: np.ndarray, entries: np.ndarray, target: str) -> None:
+    """FitError when a given `ceiling` lies below some of a target's used values (U, 3) -- those
+    of the entries (U, 3) bool that weigh in --, by more than ABOVE_TOLERANCE relative: a ceiling is
+    where the target saturates, so no value can exceed it; fitted under it, those values' residuals
+    are (value - ceiling) / sigma (a 1.93 under 1.0: chi2 7e5, a MODEL MISMATCH of exact values)."""
+    above = values[entries]
+    above = above[above > ceiling * (1.0 + ABOVE_TOLERANCE)]
+    if above.size:
+        raise FitError(f"ceiling: {ceiling:g} is below {above.size} used value{'s' if above.size > 1 else ''} of "
+                       f"{target} (largest {above.max():.3g}); a ceiling is the value the target saturates at -- "
+                       "give that value, or ceiling=False where the target does not clip")
 
 
 def primary_objects(record) -> np.ndarray:

@@ -1,7 +1,8 @@
 """`difflab fit`: fit materials to target images and write the fitted scene.
 
     difflab fit SCENE.json TARGET.png [TARGET2.png ...] --material NAME[,NAME2] [--params ka,kd,ks,n]
-                [--method raster|raytrace] [--solver lm] [--sigma S] [--mask M.png] [--edge-margin N] -o fitted.json
+                [--method raster|raytrace] [--solver lm] [--sigma S] [--mask M.png] [--edge-margin N]
+                [--spp N] [--max-depth D] [--init NAME=VALUE] -o fitted.json
 
 The image model is the scene's (the recorded ray tree for ray-traced scenes and mirrors / glass,
 else the G-buffer) unless --method says. Prints the fit summary -- values ± standard errors, PSNR,
@@ -54,6 +55,29 @@ def ceiling_value(text: str):
         raise argparse.ArgumentTypeError(f"{text!r}: give a number > 0, or none (the targets do not clip)") from None
 
 
+def init_value(text: str) -> tuple[str, object]:
+    """argparse type of --init: NAME=VALUE, VALUE a number or comma-separated numbers (an RGB
+    triple), as (name, float or list); the fit checks the name and the value (`params.apply_init`)."""
+    name, equals, value = text.partition("=")
+    try:
+        numbers = [float(v) for v in value.split(",")] if equals and name.strip() else None
+    except ValueError:
+        numbers = None
+    if numbers is None:
+        raise argparse.ArgumentTypeError(f"{text!r}: give NAME=VALUE, VALUE a number or an RGB triple (n=200, "
+                                         "kd=0.5,0.4,0.3)")
+    return name.strip(), numbers[0] if len(numbers) == 1 else numbers
+
+
+def in_option_words(text: str) -> str:
+    """An engine's message in this command's words: --method raytrace, not method='raytrace';
+    --ceiling none, not ceiling=False; --spp / --max-depth / --ceiling / --init for the keywords
+    a message starts with."""
+    text = re.sub(r"method='(\w+)'", r"--method \1", text).replace("ceiling=False", "--ceiling none")
+    text = re.sub(r"^init\['([^']*)'\]", r"--init \1", text)
+    return re.sub(r"^(spp|max_depth|ceiling):", lambda m: "--" + m.group(1).replace("_", "-") + ":", text)
+
+
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Add the `fit` subcommand to an argparse subparsers object."""
     from ..commands import output_ending
@@ -75,6 +99,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="where the targets clip (their values there are censored), or none: they do not (default: 1 "
                         "for PNG / TIFF; for .npy the maximum, when some surface has 3 or more values there, at "
                         "under half of its pixels: a clipped highlight)")
+    p.add_argument("--spp", type=int, default=None, metavar="N",
+                   help="samples per pixel of the recorded G-buffer / ray tree, a perfect square (default: the "
+                        "scene's render.spp); to emulate an anti-aliased target's box filter")
+    p.add_argument("--max-depth", type=int, default=None, metavar="D",
+                   help="the ray tree's depth, the primary ray counting as 1 (default: the scene's; ray tree only)")
+    p.add_argument("--init", action="append", type=init_value, default=None, metavar="NAME=VALUE",
+                   help="a start value overriding the scene's, e.g. n=200 or kd=0.5,0.4,0.3 (repeat the option for "
+                        "more): another start when a fit sits in a local minimum")
     p.add_argument("--params", default=None,
                    help="comma-separated: ka, kd, ks, n (phong, blinn), m, f0 (torrance), kr, kt, absorption, "
                         "texture, intensity, lights[i].intensity, or material.kind (default ka,kd,ks,n; ka,kd,ks,m "
@@ -124,12 +156,14 @@ def run(args) -> int:
         masks = margin_masks(args.scene, list(args.targets), masks, margin, device=args.device)
     materials = [name for item in args.material for name in name_list(item, "--material")]
     params = DEFAULT_PARAMS if args.params is None else name_list(args.params, "--params")
+    init = None if args.init is None else dict(args.init)
     try:
         result = fit(args.scene, list(args.targets), materials, params, method=args.method, solver=args.solver,
                      per_channel=not args.grey, bounded=args.bounded, loss=args.loss, masks=masks, sigma=args.sigma,
-                     ceiling=args.ceiling, max_steps=args.max_steps, x64=not args.float32, device=args.device)
-    except FitError as exc:  # the engine's advice in this command's words: --method raytrace, not method='raytrace'
-        raise FitError(re.sub(r"method='(\w+)'", r"--method \1", str(exc))) from None
+                     ceiling=args.ceiling, max_steps=args.max_steps, x64=not args.float32, device=args.device,
+                     spp=args.spp, max_depth=args.max_depth, init=init)
+    except FitError as exc:  # the engine's advice in this command's words
+        raise FitError(in_option_words(str(exc))) from None
     if result.no_fit() is not None:  # one error line (exit 2), not a table of start values +- nan
         raise FitError(f"no fit made: {result.no_fit()}")
     print(result.table())

@@ -40,7 +40,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
     layout = setup.layout
     public = lambda values: {p.key: public_value(p, values[p.key]) for p in layout}  # noqa: E731
     common = dict(steps=steps, solver=options.solver, initial=public(setup.initial), scene=setup.scene, layout=layout,
-                  model=setup.method, censored=setup.censored)
+                  model=setup.method, censored=setup.censored, nonfinite_left_out=setup.nonfinite_left_out)
     if x is None:
         nan = {p.key: np.full(p.size, np.nan) for p in layout}
         out = FitResult(params=public(setup.initial), stderr=public(nan), loss=float("nan"), psnr=float("nan"),

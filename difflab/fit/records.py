@@ -91,7 +91,7 @@ class View:
     (H, W) bool; weighting (H, W, 3) >= 0, 0 outside the mask, or None: 1 inside the mask (`weight`:
     either as an image); ceiling: where its values clip (inf: nowhere); step: its samples' step (1 /
     255 from an 8-bit file, 1 / 65535 from a 16-bit one, 0 for float data) and gamma (the file's
-    transfer, None for sRGB: `io.code_step` gives a value's quantisation, `noise.quantisation`); nonfinite: non-finite target values inside the mask; record: its G-buffer or ray tree;
+    transfer, None for sRGB: `io.code_step` gives a value's quantisation, `noise.quantisation`); nonfinite: non-finite target values at the pixels used (`left_out`: those elsewhere, which the fit does not read); record: its G-buffer or ray tree;
     scene: the scene of this view; used (H, W) bool: the pixels the fit reads (`pixels`: their flat
     indices, in order; `values` and `weights`: the target's and the weight's (U, 3) float64 rows
     there, `zeros`: values == 0 -- each computed once, on first use, or handed over by `Setup._seen`,
@@ -112,6 +112,7 @@ class View:
     used: np.ndarray
     kept: KeptView | None = None
     touched: np.ndarray | None = None
+    left_out: int = 0
 
     @cached_property
     def target(self) -> np.ndarray:
@@ -131,7 +132,7 @@ class View:
     @cached_property
     def values(self) -> np.ndarray:
         values = take_pixels(self.image, self.pixels, np.float64)
-        if self.nonfinite:  # (only inside the mask: where the pixels used are)
+        if self.nonfinite:  # (those at the pixels used)
             values[~np.isfinite(values)] = 0.0
         return values
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import FitError
 from ..io import save_image
+from .hints import minimum_hint, notes
 from .whiteness import not_white_line
 
 
@@ -173,7 +174,9 @@ class FitResult:
     censored: target pixel channels at the target's ceiling (clipped highlights), fitted as "at
         least the ceiling"; with noise, also the channels of the pixels left out because their
         model lies within 2 sigma of a bound the target is clipped at (black or the ceiling,
-        `fit.clipping`). residuals: per view (H, W, 3) float32 model - target on the pixels
+        `fit.clipping`). nonfinite_left_out: non-finite target values (NaN, inf: a masked EXR's
+        background) outside the pixels the fit uses, which it does not read (at a pixel it uses they
+        make "nonfinite_target"). residuals: per view (H, W, 3) float32 model - target on the pixels
         used (0 elsewhere). seen: parameter name of each fitted texture, as in `params` ("texture",
         or "<material>.texture" when several materials were fitted) -> (H_t, W_t) bool, the texels
         the pixels used constrain (`FitOptions.visible_threshold`).
@@ -206,6 +209,7 @@ class FitResult:
     prior_pull: float = 0.0
     at_bound: list = field(default_factory=list)
     censored: int = 0
+    nonfinite_left_out: int = 0
     residuals: list = field(default_factory=list, repr=False, compare=False)
     seen: dict = field(default_factory=dict, repr=False, compare=False)
     scene: object = field(default=None, repr=False, compare=False)
@@ -237,6 +241,12 @@ class FitResult:
             return None
         detail = getattr(self.result, "detail", "")
         return f"{self.result}: {detail}" if detail else str(self.result)
+
+    @property
+    def notes(self) -> list[str]:
+        """Notes on the inputs, one line each (`fit.hints.notes`): non-finite target values left
+        out, coefficients far above 1 (a target in code values?). Hints: `ok` does not read them."""
+        return notes(self)
 
     @property
     def n_params(self) -> int:
@@ -357,6 +367,7 @@ class FitResult:
             "underdetermined": self.underdetermined, "too_few_values": self.too_few_values,
             "degenerate": list(self.degenerate), "unreached": list(self.unreached),
             "prior_pull": _json_number(self.prior_pull), "at_bound": list(self.at_bound), "censored": self.censored,
+            "nonfinite_left_out": self.nonfinite_left_out, "notes": self.notes,
         }
 
     def table(self) -> str:
@@ -378,10 +389,11 @@ class FitResult:
             flag = "  (poorly determined)" if key in self.poorly_determined else ""
             flag += "  (at bound)" if key in self.at_bound else ""
             rows.append(f"{key:<22} {cells}{flag}")
+        hint = minimum_hint(self) if self.model_mismatch or self.mismatch_suspected else ""
         flags = [name for name, on in (("MODEL MISMATCH: the image model does not explain the targets; the standard "
-                                         "errors assume it does", self.model_mismatch),
+                                         "errors assume it does" + hint, self.model_mismatch),
                                         ("MISMATCH SUSPECTED: the residuals exceed the estimated noise beyond its "
-                                         "spread; the image model is not judged (give sigma to judge it)",
+                                         "spread; the image model is not judged (give sigma to judge it)" + hint,
                                          self.mismatch_suspected),
                                         (not_white_line(self.sigma, self.chi2, self.sigma_range)
                                          if self.noise_not_white else "", self.noise_not_white),
@@ -404,5 +416,5 @@ class FitResult:
         rows.append(f"result: {self.result}, converged: {self.converged}, steps: {self.steps}, "
                     f"loss: {self.loss:.4g}, PSNR: {self.psnr:.2f} dB, {self.seconds:.3f} s ({self.solver})")
         rows.append(f"image model: {self.model}, noise sigma: {self.sigma:.3g}, reduced chi-square: {self.chi2:.3g}")
-        rows.extend(flags)
+        rows.extend(flags + self.notes)
         return "\n".join(rows)

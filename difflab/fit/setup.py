@@ -30,7 +30,7 @@ from ..renderers.api import as_scene, render_frame
 from ..renderers.compile import CompiledScene
 from ..renderers.launch import resolve_device
 from ..scene import RenderSettings
-from .ceiling import float_ceiling, primary_objects
+from .ceiling import float_ceiling, primary_objects, refuse_values_above
 from .materials import MaterialTable
 from .noise import quantisation
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
@@ -93,7 +93,7 @@ def _check_smoothness(value, textures) -> float:
 class Setup:
     """A fit prepared (see the module docstring). Attributes: scene (start values written in),
     materials, method, layout, initial (key -> value), x0 (solver coordinates), views, used_pixels,
-    nonfinite, censored, sigma_given, quantisation (the rms rounding error of the targets' used values,
+    nonfinite (target values at the pixels used), nonfinite_left_out (elsewhere), censored, sigma_given, quantisation (the rms rounding error of the targets' used values,
     `noise.quantisation`: 0 for float data), sigma_floor, sigma_fallback (the noise when too few pixels allow an estimate, None:
     unknown; `engine.without_clipped`), x64, dtype, problem, render_seconds (the Warp
     renders' wall time), base_scene (before `init`), ceiling_given, loss, loss_scale."""
@@ -171,6 +171,7 @@ class Setup:
     def _target_statistics(self):
         """nonfinite, censored (used values at the ceiling) and the noise floor of the targets."""
         self.nonfinite = int(sum(v.nonfinite for v in self.views))
+        self.nonfinite_left_out = int(sum(v.left_out for v in self.views))
         self.censored = int(sum(np.count_nonzero(v.entries) - np.count_nonzero(v.counted)
                                 for v in self.views if np.isfinite(v.ceiling)))  # over the used pixels
         self.quantisation = quantisation(self.views)  # 0 for float data
@@ -183,7 +184,9 @@ class Setup:
         out = copy.copy(self)
         views = []
         for view, image in zip(self.views, images):
-            views.append(dataclasses.replace(view, image=image, nonfinite=nonfinite_count(image, view.mask)))
+            total = nonfinite_count(image)
+            inside = nonfinite_count(image, view.pixels) if total else 0
+            views.append(dataclasses.replace(view, image=image, nonfinite=inside, left_out=total - inside))
             views[-1].__dict__.update(pixels=view.pixels, weights=view.weights)  # cached properties: the same
         out.views = views
         out.labels = [(f"targets[{i}]", mask) for i, (_, mask) in enumerate(self.labels)]  # another image
@@ -254,6 +257,8 @@ class Setup:
             views.append(self._seen(View(image=image, mask=mask, weighting=weight, ceiling=np.inf, step=step or 0.0,
                                          gamma=gamma, nonfinite=nonfinite, record=record, scene=view_scene, used=touched,
                                          kept=kept if store is not None else None, touched=touched), weight))
+            if self.ceiling_given:  # (a number; False: none)
+                refuse_values_above(self.ceiling_given, views[-1].values, views[-1].entries, labels[0])
         return views
 
     def _seen(self, view: View, weight, keep: bool = False) -> View:
@@ -269,7 +274,11 @@ class Setup:
         if weight is not None:
             positive = weight > 0
             used &= positive[..., 0] | positive[..., 1] | positive[..., 2]
-        out = dataclasses.replace(view, weighting=weight, used=used)
+        pixels = np.flatnonzero(used)
+        total = view.nonfinite + view.left_out  # (`_record`'s view: all its non-finite values)
+        inside = nonfinite_count(view.image, pixels) if total else 0
+        out = dataclasses.replace(view, weighting=weight, used=used, nonfinite=inside, left_out=total - inside)
+        out.__dict__["pixels"] = pixels  # (View's cached property)
         values = out.values
         top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
         if top is None:  # float data (`ceiling.py`)
@@ -352,16 +361,18 @@ class Setup:
                        layout=self.layout, loss=loss, smoothness=self.smoothness)
 
     def precheck(self) -> ResultCode | None:
-        """A result code when the fit cannot be made (non-finite target values under the masks, or
+        """A result code when the fit cannot be made (non-finite target values at the pixels used, or
         no pixel that the fitted parameters affect), its `detail` naming the targets, masks and
         counts; else None."""
+        plural = "s" if len(self.materials) > 1 else ""
+        materials = f"material{plural} {', '.join(self.materials)}"
         if self.nonfinite:
-            return ResultCode("nonfinite_target", nonfinite_detail(self.labels, self.views))
+            objects = [i for i, o in enumerate(self.scene.objects) if o.material in self.materials]
+            showing = [np.isin(primary_objects(view.record), objects) for view in self.views]
+            return ResultCode("nonfinite_target", nonfinite_detail(self.labels, self.views, materials, showing))
         if self.used_pixels == 0:
             lit = any(p.kind == "intensity" for p in self.layout)
-            plural = "s" if len(self.materials) > 1 else ""
-            shown = "a surface" if lit else f"material{plural} {', '.join(self.materials)}"
-            return ResultCode("empty_mask", empty_detail(self.labels, self.views, shown))
+            return ResultCode("empty_mask", empty_detail(self.labels, self.views, "a surface" if lit else materials))
         return None
 
     def residual_planes(self, r) -> list[np.ndarray]:

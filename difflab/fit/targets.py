@@ -190,15 +190,17 @@ def in_channels(mask) -> np.ndarray:
     return np.repeat(mask.reshape(-1), 3).reshape(mask.shape + (3,))
 
 
-def nonfinite_count(image, mask) -> int:
-    """How many values of an (H, W, 3) image inside the (H, W) mask are not finite."""
-    finite = np.isfinite(image)
-    return 0 if finite.all() else int(np.count_nonzero(~finite & in_channels(mask)))
+def nonfinite_count(image, pixels=None) -> int:
+    """How many values of an (H, W, 3) image -- or of its rows at the flat indices `pixels` -- are
+    not finite."""
+    finite = np.isfinite(image if pixels is None else image.reshape(-1, 3)[pixels])
+    return 0 if finite.all() else int(np.count_nonzero(~finite))
 
 
 def prepared_targets(scene, targets, masks, weights, render: dict):
     """For each target: (its view's scene, target image (`load_target`: a copy, in its own precision),
-    sample step and gamma (`load_target`), mask, weight, count of non-finite masked values, labels: (the
+    sample step and gamma (`load_target`), mask, weight, count of its non-finite values (all: which
+    of them the fit would read is known once the pixels it uses are, `Setup._seen`), labels: (the
     target's, e.g. "targets[0] (a.png)"; the mask's, e.g. "masks[0] (m.png)", or None without one)).
     A view's scene is
     `scene` with the target's camera / lights override and the `render` settings; the target must have
@@ -225,7 +227,7 @@ def prepared_targets(scene, targets, masks, weights, render: dict):
         if weight is not None:
             weight = view_weight(weight, (height, width), f"weights[{i}]") * in_channels(mask)
         labels = (_label(where, item), None if masks[i] is None else _label(f"masks[{i}]", masks[i]))
-        yield view_scene, image, step, gamma, mask, weight, nonfinite_count(image, mask), labels
+        yield view_scene, image, step, gamma, mask, weight, nonfinite_count(image), labels
 
 
 def _label(where: str, item) -> str:
@@ -233,18 +235,24 @@ def _label(where: str, item) -> str:
     return f"{where} ({short_path(item)})" if _is_path(item) else where
 
 
-def nonfinite_detail(labels, views) -> str:
-    """Why a fit has "nonfinite_target": per view with non-finite target values inside its mask,
-    how many values (NaN, inf) and pixels, naming the target and its mask."""
+def nonfinite_detail(labels, views, shown: str, showing) -> str:
+    """Why a fit has "nonfinite_target": per view with non-finite target values at the pixels it
+    uses, how many values (NaN, inf) and pixels, naming the target and its mask; where none of
+    those pixels shows `shown` (e.g. "material red") -- per view, `showing` (H, W) bool: the pixels
+    that do -- (a surface it lights, a mirror reflecting it), that a mask can leave them out."""
     parts = []
-    for (target, mask), view in zip(labels, views):
+    for (target, mask), view, shows in zip(labels, views, showing):
         if view.nonfinite:
-            inside = view.mask[..., None]
+            inside = view.used[..., None]
             nan = int(np.count_nonzero(np.isnan(view.image) & inside))
-            pixels = int(np.count_nonzero((~np.isfinite(view.image) & inside).any(axis=-1)))
+            bad = (~np.isfinite(view.image) & inside).any(axis=-1)
+            pixels = int(np.count_nonzero(bad))
             values = f"{view.nonfinite} non-finite value{'s' if view.nonfinite > 1 else ''}"
+            hint = "" if np.any(bad & shows) else \
+                f" -- none of them shows {shown}: leave them out with a mask (masks= / --mask)"
             parts.append(f"{target} holds {values} ({nan} NaN, {view.nonfinite - nan} inf) "
-                         f"in {pixels} pixel{'s' if pixels > 1 else ''}{f' inside {mask}' if mask else ''}")
+                         f"in {pixels} pixel{'s' if pixels > 1 else ''} the fit uses"
+                         f"{f' inside {mask}' if mask else ''}{hint}")
     return "; ".join(parts)
 
 

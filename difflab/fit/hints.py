@@ -1,0 +1,68 @@
+"""What a fit's numbers suggest beyond its verdict: a likely local minimum beside a mismatch, and
+notes on its inputs (a scale that suggests code values, non-finite target values left out). Hints,
+not verdicts: none of them changes `FitResult.ok` or the exit code."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+SCALE_HINT = 10.0
+"""A fitted reflectance coefficient (ka, kd, ks, kr, kt, texels) above this is far above 1, a
+reflectance's physical limit. Light intensities scale the image (kd I), so a scene whose light is a
+few times too dim -- a pi or 4 pi between renderers' units -- legitimately gives kd up to a few; it
+rarely reaches 10. A target in code values instead of linear floats multiplies every coefficient by
+255 or 65535 (and the sRGB curve): even a dark 0.04 reflectance read as 8-bit codes is 10.2. So 10
+separates the two; it is a hint, not an error."""
+
+COEFFICIENTS = ("ka", "kd", "ks", "kr", "kt", "texture")
+LOBES = ("n", "m")  # the specular lobe's width: Phong / Blinn exponent, Torrance roughness
+
+
+def scale_note(params: dict, layout) -> str | None:
+    """"kd = 45874: coefficients far above 1 -- ..." when a fitted coefficient exceeds SCALE_HINT
+    (its largest entry named per parameter), else None."""
+    high = [(p.key, float(np.max(params[p.key]))) for p in layout if p.kind in COEFFICIENTS]
+    high = [f"{key} = {value:.5g}" for key, value in high if value > SCALE_HINT]
+    if not high:
+        return None
+    return (f"{', '.join(high)}: coefficients far above 1 -- is the target in code values (0-255 / 0-65535) rather "
+            "than linear floats in [0, 1]?")
+
+
+def local_minimum(result) -> list[str]:
+    """Names of parameters pushed to a degenerate value: a lobe width (n, m) that the images do not
+    determine (degenerate, unreached, or a non-finite stderr) or that sits on its bound, with its
+    material's ks when fitted -- the highlight gone from the model (ks -> 0, n -> 1e5 +- inf from a
+    start far off). Beside a mismatch, the fit may sit in a local minimum rather than the image
+    model be wrong."""
+    names = []
+    for p in result.layout:
+        if p.kind not in LOBES:
+            continue
+        undetermined = p.key in result.degenerate or p.key in result.unreached or \
+            not math.isfinite(float(np.max(result.stderr.get(p.key, math.inf))))
+        if undetermined or p.key in result.at_bound:
+            names += [q.key for q in result.layout if q.kind == "ks" and q.index == p.index] + [p.key]
+    return names
+
+
+def minimum_hint(result) -> str:
+    """The clause a mismatch line gains when `local_minimum` names parameters, else ""."""
+    names = local_minimum(result)
+    if not names:
+        return ""
+    return (f" -- or the fit may sit in a local minimum ({', '.join(names)} at a degenerate value: the highlight "
+            "gone, its width undetermined or at its bound): retry from another start (init= / --init)")
+
+
+def notes(result) -> list[str]:
+    """Notes on a fit's inputs: `scale_note`, and how many non-finite target values were left out."""
+    out = []
+    if result.nonfinite_left_out:
+        out.append(f"non-finite target values left out: {result.nonfinite_left_out} (none at a pixel the fit uses)")
+    scale = scale_note(result.params, result.layout)
+    if scale:
+        out.append(scale)
+    return out
