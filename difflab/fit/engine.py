@@ -208,7 +208,7 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
             estimated (see `fit.stats`).
         ceiling: the value where the targets clip (censored pixels: the model need only reach it);
             default: 1.0 for 8/16-bit targets, detected from ties at the maximum for float data;
-            False: none.
+            False: none. A ceiling given below a used target value is a FitError (`ceiling.py`).
         smoothness: weight of a first-difference prior on fitted texels (0: none); it also fills
             texels that no pixel sees.
         max_depth: the ray tree's depth (default: the scene's; a FitError with the G-buffer).
