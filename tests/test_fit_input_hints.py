@@ -12,6 +12,7 @@ import pytest
 from test_fit_helpers import TRUTH, make_scene, target_of
 
 from difflab import FitError, fit_material
+from difflab.fit import fit_batch
 from difflab.cli import main
 from difflab.fit.hints import SCALE_HINT
 from difflab.io import save_image
@@ -54,6 +55,8 @@ def test_a_given_ceiling_below_used_values_is_an_input_error(tmp_path, capsys):
     assert capsys.readouterr().err.strip() == "difflab: error: --" + message.replace(
         "targets[0]", f"targets[0] ({argv[1]})").replace("ceiling=False", "--ceiling none")
     assert not (tmp_path / "o.json").exists()
+    with pytest.raises(FitError, match=rf"^ceiling: 1 is below {above} used values of images\[1\] \(largest"):
+        fit_batch(scene, [np.minimum(target, 1.0), target], "red", ceiling=1.0)  # (a batch's ceiling is every image's)
     # a float32 clip at the ceiling given (0.8 rounds to 0.80000001) is at it: censored, not refused
     clipped = np.minimum(target, np.float32(0.8))
     fitted = fit_material(scene, [clipped], "red", ceiling=0.8)

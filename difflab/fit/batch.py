@@ -121,13 +121,17 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
 
 def _decoded(image, setup: Setup, b: int) -> np.ndarray:
     """Target b as linear float data of the view's size (decoded like the first; a private copy,
-    `load_target`'s, that `Setup.retarget` keeps)."""
+    `load_target`'s, that `Setup.retarget` keeps), under a ceiling given (`ceiling.refuse_values_above`)."""
+    from .ceiling import refuse_values_above
+    from .records import take_pixels
     from .targets import load_target
 
     array = load_target(image, f"images[{b}]")[0]
-    shape = setup.views[0].image.shape  # (not `target`'s: that would form the whole float64 image)
-    if array.shape != shape:
-        raise FitError(f"images[{b}]: shape {array.shape}, but the batch's view is {shape}")
+    view = setup.views[0]
+    if array.shape != view.image.shape:  # (not `target`'s: that would form the whole float64 image)
+        raise FitError(f"images[{b}]: shape {array.shape}, but the batch's view is {view.image.shape}")
+    if setup.ceiling_given:
+        refuse_values_above(setup.ceiling_given, take_pixels(array, view.pixels, np.float64), view.entries, f"images[{b}]")
     return array
 
 
