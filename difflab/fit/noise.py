@@ -292,7 +292,8 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
             clean.reshape(-1)[view.pixels[left_out]] = False
         if view.weighting is not None and not np.all(view.weights > 0):
             clean = in_channels(clean) & (view.weighting > 0)
-        picks.append(_view_picks(clean, view.weighting, view.image, interior=True))
+        signal = view.target if view.left_out else view.image  # (non-finite values outside the pixels used: 0)
+        picks.append(_view_picks(clean, view.weighting, signal, interior=True))
     estimate = _estimate(picks, residual_planes)
     if estimate is None:
         return fallback, 0, 1.0, None
