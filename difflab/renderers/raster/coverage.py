@@ -17,6 +17,7 @@ wp.set_module_options({"enable_backward": False})
 
 DEPTH_SCALE = wp.constant(wp.float64(0.5 * 2147483647.0))  # key depth (z_ndc + 1) x this: [-1, 1] -> [0, 2^31 - 1]
 NO_HIT = wp.constant(wp.int64(9223372036854775807))
+NARROW_BOX = wp.constant(4)  # sample columns below which `raster_slot` takes no branch on coverage
 
 
 @wp.func
@@ -79,6 +80,19 @@ def edge_threshold(owned: bool):
     return wp.int64(1)
 
 
+@wp.func(inline=True)
+def drawn_at(b0: wp.int64, b1: wp.int64, b2: wp.int64, z_ndc: wp.float64):
+    """Whether a sample with edge values b_k less their thresholds and depth z_ndc is drawn: all three
+    cover (no sign bit) and z in [-1, 1] (in float64: z = 1 keys 2^31 - 1)."""
+    return (b0 | b1 | b2) >= wp.int64(0) and z_ndc >= wp.float64(-1.0) and z_ndc <= wp.float64(1.0)
+
+
+@wp.func(inline=True)
+def sample_key(z_ndc: wp.float64, slot: int):
+    """The visibility key of a sample at depth z_ndc in [-1, 1] drawn by `slot`: depth << 32 | slot."""
+    return wp.int64((z_ndc + wp.float64(1.0)) * DEPTH_SCALE) * wp.int64(4294967296) + wp.int64(slot)
+
+
 @wp.func
 def raster_slot(slot: int, row_begin: int, row_end: int, rows: wp.array2d(dtype=wp.int32),
                 screen: wp.array2d(dtype=wp.vec4d), width: int, key: wp.array(dtype=wp.int64)):
@@ -100,23 +114,33 @@ def raster_slot(slot: int, row_begin: int, row_end: int, rows: wp.array2d(dtype=
     step = wp.int64(SUBPIXEL)
     centre = wp.int64(SAMPLE_CENTRE)
     px = wp.int64(j_lo) * step + centre
+    # A narrow box takes no branch on coverage, mispredicted for small triangles (the 256^2 bench
+    # sphere's boxes: 156k samples for ~52k covered; raster 0.45 -> 0.40 ms a half); a wide one
+    # skips its uncovered samples (taking every sample's min cost 7% at 512^2).
+    narrow = j_hi - j_lo < NARROW_BOX
     for i in range(i_lo, i_hi + 1):
         py = wp.int64(i) * step + centre
         b0 = edge(x1, y1, x2, y2, px, py) - t0  # exact integer edge functions less their thresholds, stepped
         b1 = edge(x2, y2, x0, y0, px, py) - t1  # along the row
         b2 = edge(x0, y0, x1, y1, px, py) - t2
         z_row = s0[2] + dz_dy * (wp.float64(i) + wp.float64(0.5) - s0[1])
-        for j in range(j_lo, j_hi + 1):
-            # every box sample takes the min of its key and this triangle's (NO_HIT where not drawn): no branch
-            # on coverage (the bench sphere's boxes hold 3x the samples its triangles cover: 12% off the kernel)
-            z_ndc = z_row + dz_dx * (wp.float64(j) + wp.float64(0.5) - s0[0])
-            drawn = (b0 | b1 | b2) >= wp.int64(0) and z_ndc >= wp.float64(-1.0) and z_ndc <= wp.float64(1.0)
-            # (no sign bit: all three edges cover; z in float64: z = 1 keys 2^31 - 1)
-            depth = wp.int64((wp.where(drawn, z_ndc, wp.float64(-1.0)) + wp.float64(1.0)) * DEPTH_SCALE)
-            wp.atomic_min(key, i * width + j, wp.where(drawn, depth * wp.int64(4294967296) + wp.int64(slot), NO_HIT))
-            b0 = b0 - (y2 - y1) * step
-            b1 = b1 - (y0 - y2) * step
-            b2 = b2 - (y1 - y0) * step
+        if narrow:  # every box sample takes min(key, the triangle's key or NO_HIT): no branch on coverage
+            for j in range(j_lo, j_hi + 1):
+                z_ndc = z_row + dz_dx * (wp.float64(j) + wp.float64(0.5) - s0[0])
+                drawn = drawn_at(b0, b1, b2, z_ndc)
+                wp.atomic_min(key, i * width + j, wp.where(drawn, sample_key(wp.where(drawn, z_ndc, wp.float64(-1.0)),
+                                                                              slot), NO_HIT))
+                b0 = b0 - (y2 - y1) * step
+                b1 = b1 - (y0 - y2) * step
+                b2 = b2 - (y1 - y0) * step
+        else:
+            for j in range(j_lo, j_hi + 1):
+                z_ndc = z_row + dz_dx * (wp.float64(j) + wp.float64(0.5) - s0[0])
+                if drawn_at(b0, b1, b2, z_ndc):
+                    wp.atomic_min(key, i * width + j, sample_key(z_ndc, slot))
+                b0 = b0 - (y2 - y1) * step
+                b1 = b1 - (y0 - y2) * step
+                b2 = b2 - (y1 - y0) * step
 
 
 @wp.kernel
