@@ -1,12 +1,15 @@
-"""What a fit's numbers suggest beyond its verdict: a likely local minimum beside a mismatch, and
-notes on its inputs (a scale that suggests code values, non-finite target values left out). Hints,
-not verdicts: none of them changes `FitResult.ok` or the exit code."""
+"""The lines `FitResult.table()` prints after its numbers: the flags of the verdict (`flag_lines`),
+with what the numbers suggest beyond it -- a likely local minimum beside a mismatch --, and notes on
+the inputs (a scale that suggests code values, non-finite target values left out). The hints and
+notes are not verdicts: none of them changes `FitResult.ok` or the exit code."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+
+from .whiteness import not_white_line
 
 SCALE_HINT = 10.0
 """A fitted reflectance coefficient (ka, kd, ks, kr, kt, texels) above this is far above 1, a
@@ -66,3 +69,35 @@ def notes(result) -> list[str]:
     if scale:
         out.append(scale)
     return out
+
+
+def flag_lines(result) -> list[str]:
+    """One line per flag the result carries (MODEL MISMATCH, MISMATCH SUSPECTED -- with `minimum_hint` --,
+    NOISE NOT WHITE, NOISE UNKNOWN, UNDERDETERMINED, PRIOR PULL, at bound, censored), in that order."""
+    from .stats import PRIOR_PULL_MAX  # (JAX: imported with the fit that made this result)
+
+    hint = minimum_hint(result) if result.model_mismatch or result.mismatch_suspected else ""
+    flags = [name for name, on in (("MODEL MISMATCH: the image model does not explain the targets; the standard "
+                                     "errors assume it does" + hint, result.model_mismatch),
+                                    ("MISMATCH SUSPECTED: the residuals exceed the estimated noise beyond its "
+                                     "spread; the image model is not judged (give sigma to judge it)" + hint,
+                                     result.mismatch_suspected),
+                                    (not_white_line(result.sigma, result.chi2, result.sigma_range)
+                                     if result.noise_not_white else "", result.noise_not_white),
+                                    ("NOISE UNKNOWN: too few used pixels with used neighbours to estimate it; "
+                                     "the image model is not judged (give sigma)", result.noise_unknown),
+                                    ("UNDERDETERMINED: no more counted target values than unknowns the data "
+                                     "reach; the model is not judged", result.too_few_values),
+                                    ("UNDERDETERMINED: the images fix only combinations of "
+                                     f"{', '.join(result.degenerate)} (J^T J singular; `difflab.identify` names "
+                                     "them); their values are undetermined"
+                                     + ("" if math.isnan(result.chi2) else " (the model is still judged)"),
+                                     bool(result.degenerate)),
+                                    (f"UNDERDETERMINED: {', '.join(result.unreached)} reach{'es' if len(result.unreached) == 1 else ''} no value the fit counts "
+                                     "(left at their start)", bool(result.unreached)),
+                                    (f"PRIOR PULL: the smoothness prior moves values the pixels determine by up "
+                                     f"to {result.prior_pull:.3g} standard errors; their stderr (the pixels' "
+                                     "alone) do not cover that bias", result.prior_pull > PRIOR_PULL_MAX),
+                                    (f"at bound: {', '.join(result.at_bound)}", bool(result.at_bound)),
+                                    (f"censored (clipped) target values: {result.censored}", result.censored > 0)) if on]
+    return flags

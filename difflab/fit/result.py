@@ -13,8 +13,7 @@ import numpy as np
 
 from ..errors import FitError
 from ..io import save_image
-from .hints import minimum_hint, notes
-from .whiteness import not_white_line
+from .hints import flag_lines, notes
 
 
 def _json_number(x):
@@ -371,9 +370,8 @@ class FitResult:
         }
 
     def table(self) -> str:
-        """A plain-text table: name, value +- stderr (per channel), and a flag for poorly determined."""
-        from .stats import PRIOR_PULL_MAX  # (JAX: imported with the fit that made this result)
-
+        """A plain-text table: name, value +- stderr (per channel), and a flag for poorly determined;
+        the result, the noise and chi-square; the flags (`fit.hints.flag_lines`) and notes."""
         rows = [f"{'parameter':<22} {'value ± stderr':<60}"]
         for key, value in self.params.items():
             if isinstance(value, np.ndarray):  # a texture: its size and how much of it the views see
@@ -389,32 +387,8 @@ class FitResult:
             flag = "  (poorly determined)" if key in self.poorly_determined else ""
             flag += "  (at bound)" if key in self.at_bound else ""
             rows.append(f"{key:<22} {cells}{flag}")
-        hint = minimum_hint(self) if self.model_mismatch or self.mismatch_suspected else ""
-        flags = [name for name, on in (("MODEL MISMATCH: the image model does not explain the targets; the standard "
-                                         "errors assume it does" + hint, self.model_mismatch),
-                                        ("MISMATCH SUSPECTED: the residuals exceed the estimated noise beyond its "
-                                         "spread; the image model is not judged (give sigma to judge it)" + hint,
-                                         self.mismatch_suspected),
-                                        (not_white_line(self.sigma, self.chi2, self.sigma_range)
-                                         if self.noise_not_white else "", self.noise_not_white),
-                                        ("NOISE UNKNOWN: too few used pixels with used neighbours to estimate it; "
-                                         "the image model is not judged (give sigma)", self.noise_unknown),
-                                        ("UNDERDETERMINED: no more counted target values than unknowns the data "
-                                         "reach; the model is not judged", self.too_few_values),
-                                        ("UNDERDETERMINED: the images fix only combinations of "
-                                         f"{', '.join(self.degenerate)} (J^T J singular; `difflab.identify` names "
-                                         "them); their values are undetermined"
-                                         + ("" if math.isnan(self.chi2) else " (the model is still judged)"),
-                                         bool(self.degenerate)),
-                                        (f"UNDERDETERMINED: {', '.join(self.unreached)} reach{'es' if len(self.unreached) == 1 else ''} no value the fit counts "
-                                         "(left at their start)", bool(self.unreached)),
-                                        (f"PRIOR PULL: the smoothness prior moves values the pixels determine by up "
-                                         f"to {self.prior_pull:.3g} standard errors; their stderr (the pixels' "
-                                         "alone) do not cover that bias", self.prior_pull > PRIOR_PULL_MAX),
-                                        (f"at bound: {', '.join(self.at_bound)}", bool(self.at_bound)),
-                                        (f"censored (clipped) target values: {self.censored}", self.censored > 0)) if on]
         rows.append(f"result: {self.result}, converged: {self.converged}, steps: {self.steps}, "
                     f"loss: {self.loss:.4g}, PSNR: {self.psnr:.2f} dB, {self.seconds:.3f} s ({self.solver})")
         rows.append(f"image model: {self.model}, noise sigma: {self.sigma:.3g}, reduced chi-square: {self.chi2:.3g}")
-        rows.extend(flags + self.notes)
+        rows.extend(flag_lines(self) + self.notes)
         return "\n".join(rows)
