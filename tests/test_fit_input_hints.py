@@ -122,6 +122,8 @@ def test_a_mismatch_beside_a_vanished_highlight_hints_at_a_local_minimum(tmp_pat
     np.testing.assert_allclose(good.params["n"], 200.0, rtol=1e-4)
     assert MISMATCH in dataclasses.replace(good, model_mismatch=True).table().splitlines()  # n determined: no hint
     assert HINT not in dataclasses.replace(stuck, model_mismatch=False).table()  # no mismatch: no hint
+    unformed = {key: np.full(np.shape(value), np.nan).tolist() for key, value in stuck.stderr.items()}  # a nonfinite fit
+    assert MISMATCH in dataclasses.replace(stuck, stderr=unformed, degenerate=[], at_bound=[]).table().splitlines()
     inits = [arg for key, value in {**start, "n": 1000}.items() for arg in ("--init", f"{key}={value}")]
     argv = [*files(tmp_path, truth, target), "--material", "red", "-o", str(tmp_path / "o.json")]
     assert cli(["fit", *argv, *inits]) == 4

@@ -36,16 +36,16 @@ def scale_note(params: dict, layout) -> str | None:
 
 def local_minimum(result) -> list[str]:
     """Names of parameters pushed to a degenerate value: a lobe width (n, m) that the images do not
-    determine (degenerate, unreached, or a non-finite stderr) or that sits on its bound, with its
+    determine (degenerate, unreached, or an infinite stderr) or that sits on its bound, with its
     material's ks when fitted -- the highlight gone from the model (ks -> 0, n -> 1e5 +- inf from a
     start far off). Beside a mismatch, the fit may sit in a local minimum rather than the image
-    model be wrong."""
+    model be wrong; or the target is matte (ks truly 0), and the mismatch has another cause."""
     names = []
     for p in result.layout:
         if p.kind not in LOBES:
             continue
         undetermined = p.key in result.degenerate or p.key in result.unreached or \
-            not math.isfinite(float(np.max(result.stderr.get(p.key, math.inf))))
+            math.isinf(float(np.max(result.stderr.get(p.key, np.nan))))  # (nan: no stderr formed)
         if undetermined or p.key in result.at_bound:
             names += [q.key for q in result.layout if q.kind == "ks" and q.index == p.index] + [p.key]
     return names
