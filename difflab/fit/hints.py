@@ -93,11 +93,13 @@ def flag_lines(result) -> list[str]:
                                      "them); their values are undetermined"
                                      + ("" if math.isnan(result.chi2) else " (the model is still judged)"),
                                      bool(result.degenerate)),
-                                    (f"UNDERDETERMINED: {', '.join(result.unreached)} reach{'es' if len(result.unreached) == 1 else ''} no value the fit counts "
+                                    (f"UNDERDETERMINED: {', '.join(result.unreached)} "
+                                     f"reach{'es' if len(result.unreached) == 1 else ''} no value the fit counts "
                                      "(left at their start)", bool(result.unreached)),
                                     (f"PRIOR PULL: the smoothness prior moves values the pixels determine by up "
                                      f"to {result.prior_pull:.3g} standard errors; their stderr (the pixels' "
                                      "alone) do not cover that bias", result.prior_pull > PRIOR_PULL_MAX),
                                     (f"at bound: {', '.join(result.at_bound)}", bool(result.at_bound)),
-                                    (f"censored (clipped) target values: {result.censored}", result.censored > 0)) if on]
+                                    (f"censored (clipped) target values: {result.censored}",
+                                     result.censored > 0)) if on]
     return flags
