@@ -27,6 +27,7 @@ from .matfree import check_solver
 from .solvers import SUCCESSFUL, run
 from .sparse_jacobian import sparse_normal_matrix
 from .noise import silent_pixels, views_noise
+from .sandwich import noise_middle
 from .stats import (PRIOR_PULL_MAX, QUANTISATION_SIGMA, degenerate, finite_gram, fit_statistics, normal_matrix,
                     poorly_determined, prior_pull, psnr, singular_rcond, standard_errors, unreached)
 from .texels import smoothness_residuals, texel_coverage
@@ -71,19 +72,21 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         residuals = [p.transpose(1, 2, 0) for p in planes]  # (H, W, 3) views (np.moveaxis: 2 us more each)
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and finite_gram(gram))
         silent, silent_entries = silent_pixels(setup.views, r)
-        sigma, noise_values, share, sigma_range = (views_noise(setup.views, planes, silent, setup.sigma_given,
-                                                               setup.sigma_floor, setup.sigma_fallback,
-                                                               setup.quantisation)
-                                                   if finite else (float("nan"), 0, 1.0, None))
+        sigma, noise_values, share, sigma_range, levels = (
+            views_noise(setup.views, planes, silent, setup.sigma_given, setup.sigma_floor, setup.sigma_fallback,
+                        setup.quantisation) if finite else (float("nan"), 0, 1.0, None, None))
         noise_unknown = finite and sigma is None
         mean_weight = setup.weight_total / counted.size if counted.size else 1.0  # (unit weights: 1)
         sigma = float("nan") if sigma is None else sigma
         if finite:
             unseen = sum(int(np.count_nonzero(~seen[p.key])) * (p.size // seen[p.key].size) for p in layout
                          if p.key in seen)  # texels no pixel reads: no unknowns of the data's
+            middle = None if matrix_free else noise_middle(setup, at, r, levels,  # unequal noise: the sandwich
+                                                           counted.size - setup.censored - silent_entries)
             st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size - unseen, silent_entries,
                                 sigma_given=setup.sigma_given is not None, skip=skip, noise_values=noise_values, noise_share=share,
-                                mean_weight=mean_weight, rcond=singular_rcond(setup.x64), sigma_range=sigma_range)
+                                mean_weight=mean_weight, rcond=singular_rcond(setup.x64), sigma_range=sigma_range,
+                                middle=middle)
             stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]))
             floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], mean_weight * QUANTISATION_SIGMA ** 2)))
             partly_seen = [key for key, on in seen.items() if not on.all()]

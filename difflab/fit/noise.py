@@ -123,6 +123,11 @@ def _levels(values: np.ndarray, picks: Picks) -> np.ndarray:
     return (ordered[:, (count - 1) // 2] + ordered[:, count // 2]) / 2.0 / MEDIAN_CHI2_1
 
 
+def _count_per_level(picks: Picks) -> int:
+    """How many sampled values each of a channel's levels is the median of (`_levels`)."""
+    return -(-picks.index.size // picks.step) if picks.binned is None else picks.binned.shape[1]
+
+
 def _view_picks(used, weights, signal, interior: bool) -> ViewPicks | None:
     """A view's `ViewPicks` from its used map, weights and signal (`estimate_sigma`'s), or None
     when it has no Laplacian (no used pixel, or a box under 3 x 3)."""
@@ -162,13 +167,17 @@ def _planes(image, dtype=None) -> np.ndarray:
     return np.ascontiguousarray(np.moveaxis(image, -1, 0), dtype)
 
 
-def _sums(views: list, planes) -> tuple[float, float, float, float, int]:
-    """(num, den, spread, square_spread, M) of `estimate_sigma` from each view's `ViewPicks` (None:
-    none) and its residuals as (3, H, W) planes, in their own precision (float32 residual images):
-    the Laplacians over the box, squared in float64 where picked."""
+def _sums(views: list, planes) -> tuple[float, float, float, float, int, list]:
+    """(num, den, spread, square_spread, M, levels) of `estimate_sigma` from each view's `ViewPicks`
+    (None: none) and its residuals as (3, H, W) planes, in their own precision (float32 residual
+    images): the Laplacians over the box, squared in float64 where picked. levels: per view (None:
+    none) per channel (x, v, n) of `_levels` (None: no Laplacian picked), x in units of 36 times the
+    signal (one level: x = [0]), n `_count_per_level`."""
     num = den = spread = square_spread = 0.0
     count = 0
+    levels = []
     for view, image in zip(views, planes):
+        levels.append(None if view is None else [None, None, None])
         if view is None:
             continue
         with np.errstate(invalid="ignore", over="ignore"):  # (inf - inf: NaN; either is left out)
@@ -182,6 +191,7 @@ def _sums(views: list, planes) -> tuple[float, float, float, float, int]:
             if picks is None:
                 continue
             level = _levels(values, picks)
+            levels[-1][c] = (picks.x, level, _count_per_level(picks))
             over = np.flatnonzero(values > CAP_Z2 * level.min())  # (only these can be above 9 times their level)
             if over.size:
                 high = level[0] if picks.bright is None else np.interp(picks.bright[picks.index[over]], picks.x, level)
@@ -198,7 +208,7 @@ def _sums(views: list, planes) -> tuple[float, float, float, float, int]:
             spread += float(np.sum(weighted)) * scale
             square_spread += float(np.sum(np.square(weighted))) * scale
             count += picks.index.size
-    return num, den, spread, square_spread, count
+    return num, den, spread, square_spread, count, levels
 
 
 def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True, signals=None):
@@ -228,16 +238,18 @@ def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True, signal
     bounding box: what depends on no residual, `ViewPicks`, first.)"""
     views = [_view_picks(used, None if weight_maps is None else weight_maps[k],
                          None if signals is None else signals[k], interior) for k, used in enumerate(used_maps)]
-    return _estimate(views, [np.moveaxis(np.asarray(image), -1, 0) for image in images])
+    estimate = _estimate(views, [np.moveaxis(np.asarray(image), -1, 0) for image in images])
+    return None if estimate is None else estimate[:3]
 
 
 def _estimate(views: list, planes):
-    """`estimate_sigma` from the views' `ViewPicks` and residual planes (3, H, W)."""
-    num, den, spread, square_spread, count = _sums(views, planes)
+    """`estimate_sigma` from the views' `ViewPicks` and residual planes (3, H, W), with the levels
+    of `_sums` after it."""
+    num, den, spread, square_spread, count, levels = _sums(views, planes)
     if count < MIN_NOISE_PIXELS or den <= 0:
         return None
     share = spread * spread / (count * square_spread) if square_spread > 0 else 1.0
-    return math.sqrt(num / (36.0 * CAP_MEAN * den)), count, share
+    return math.sqrt(num / (36.0 * CAP_MEAN * den)), count, share, levels
 
 
 def at_ceiling(image, ceiling) -> np.ndarray:
@@ -265,12 +277,13 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
 
 
 def views_noise(views, residual_planes, silent, given: float | None, floor: float, fallback=None,
-                quantisation: float = 0.0) -> tuple[float | None, int, float, tuple | None]:
+                quantisation: float = 0.0) -> tuple[float | None, int, float, tuple | None, list | None]:
     """The pixel noise sigma of a fit's views, in the targets' units, the number of Laplacian values
     M it was estimated from (0 when given or taken from `fallback`), their `estimate_sigma`
-    share (1 for none) and the range (low, high) of noise levels the residuals allow when their
+    share (1 for none), the range (low, high) of noise levels the residuals allow when their
     noise is not white (`whiteness.sigma_range`; None when it reads white, is given or not
-    estimated): `given` -- the noise before quantisation, to which the targets'
+    estimated) and the levels by view, channel and intensity that the estimate read (`_sums`;
+    None when it is given or not estimated: `fit.sandwich` reads them): `given` -- the noise before quantisation, to which the targets'
     `quantisation` (the rms rounding error of their used values, 0 for float data: one sigma serves
     every view) is added in quadrature: a correct fit of an 8-bit file with its true noise 0.002
     given came out at chi2 1.2, flagged; its share is the weights' (`weight_share`) -- or estimated
@@ -282,7 +295,7 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
     pixels allow that: `fallback` when given (a refit's, the first fit's sigma), else None
     (unknown)."""
     if given is not None:
-        return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views), None
+        return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views), None, None
     picks = []
     for view, quiet in zip(views, silent):
         left_out = quiet | at_ceiling(view.values, view.ceiling) if np.isfinite(view.ceiling) else quiet
@@ -296,9 +309,9 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
         picks.append(_view_picks(clean, view.weighting, signal, interior=True))
     estimate = _estimate(picks, residual_planes)
     if estimate is None:
-        return fallback, 0, 1.0, None
+        return fallback, 0, 1.0, None, None
     spread = sigma_range(estimate[0], floor, whiteness(picks, residual_planes))
-    return max(estimate[0], floor), estimate[1], estimate[2], spread
+    return max(estimate[0], floor), estimate[1], estimate[2], spread, estimate[3]
 
 
 def weight_share(views) -> float:

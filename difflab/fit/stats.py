@@ -46,7 +46,10 @@ Standard errors are those of linearised least squares, in scene units, and assum
     cov = s^2 (J^T J)^-1,   s^2 = sum_i r_i^2 / (N - p)
 
 with J the Jacobian of the plain weighted residuals with respect to the values (J^T J from the
-solver, or `normal_equations.linearise`). Directions of J^T J that are numerically singular (after scaling its
+solver, or `normal_equations.linearise`) -- for noise of one level. Where the estimate's levels by
+channel and intensity differ (gains, noise growing with the signal: the pooled form 2-3x off per
+channel), a dense fit's are the sandwich's, (J^T J)^-1 J^T diag(v) J (J^T J)^-1 with White's
+v_i = r_i^2 N / (N - p) (`fit.sandwich`); with sigma given, the noise unknown or matrix-free: pooled. Directions of J^T J that are numerically singular (after scaling its
 columns to unit norm: below 1e-12 of the largest eigenvalue formed in float64, 512 float32 eps in
 float32, `singular_rcond`) give an infinite standard error to every parameter they involve. A texture's
 smoothness prior is not in J^T J (its rows are not residuals of the images), nor in chi2: the
@@ -102,11 +105,12 @@ PRIOR_PULL_MAX = 1.0  # standard errors: a prior that moves a value further bias
 
 
 @eqx.filter_jit
-def _normal_matrix(problem, values):
-    """(J^T J, r) of the plain weighted residuals with respect to the values."""
+def _normal_matrix(problem, values, fast: bool = False):
+    """(J^T J, r) of the plain weighted residuals with respect to the values (`fast`: by parts,
+    J^T J from float32 columns, `normal_equations`)."""
     if problem.loss == "l2" and not problem.smoothness:  # residuals(x) = weighted(values(x)): by parts if it applies
         x = jnp.where(problem.layout.entries("log") > 0, jnp.log(values), values)
-        r, gram, _ = linearise(x, problem)
+        r, gram, _ = linearise(x, problem, fast)
         scale = jnp.where(problem.layout.entries("log") > 0, values, 1.0)
         return gram / (scale[:, None] * scale[None, :]), r
     r, gram, _ = dense(lambda v, p: p.weighted(v), values, problem)
@@ -272,6 +276,17 @@ def covariance_diagonal(gram, skip=None, rcond: float = SINGULAR_RCOND) -> np.nd
     return diag
 
 
+def sandwich_diagonal(gram: np.ndarray, middle: np.ndarray, rcond: float = SINGULAR_RCOND) -> np.ndarray:
+    """diag (J^T J)^-1 M (J^T J)^-1 (p,) for dense J^T J and M = `middle` (p, p) (`fit.sandwich`):
+    inf where `covariance_unscaled` has inf (a singular direction, an empty column)."""
+    inverse = covariance_unscaled(gram, rcond=rcond)
+    finite = np.isfinite(np.diagonal(inverse))
+    part = inverse[np.ix_(finite, finite)]
+    out = np.full(gram.shape[0], np.inf)
+    out[finite] = np.einsum("ij,jk,ki->i", part, middle[np.ix_(finite, finite)], part)
+    return out
+
+
 def finite_gram(gram) -> bool:
     """Whether every entry of J^T J (dense or sparse) is finite."""
     return bool(np.all(np.isfinite(gram.data if sp.issparse(gram) else gram)))
@@ -288,8 +303,8 @@ def standard_errors(diag: np.ndarray, sigma2: float) -> np.ndarray:
 
 def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, size: int, silent: int = 0,
                    sigma_given: bool = False, skip=None, noise_values: int = 0, noise_share: float = 1.0,
-                   mean_weight: float = 1.0,
-                   rcond: float = SINGULAR_RCOND, sigma_range: tuple | None = None) -> dict:
+                   mean_weight: float = 1.0, rcond: float = SINGULAR_RCOND, sigma_range: tuple | None = None,
+                   middle=None) -> dict:
     """s2 = sse / dof (sse: the sum of squares of the `entries` weighted residuals sqrt(w) r; dof =
     N - p, N entries neither censored nor `silent` (noise-free zeros), p = `size` fitted entries the
     data reach -- a texel no pixel reads is not one), chi2 = s2 / (w sigma^2) (reduced, w the
@@ -333,8 +348,9 @@ def fit_statistics(gram, sse: float, entries: int, censored: int, sigma: float, 
     most, least = (chi2, chi2) if sigma_range is None else (s2 / (mean_weight * level * level) for level in sigma_range)
     mismatch = bool(least > (threshold if sigma_given else max(MISMATCH_CHI2, threshold)))  # (chi2 at the highest level)
     suspected = bool(not sigma_given and not mismatch and most > threshold)
-    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "suspected": suspected,
-            "diag": covariance_diagonal(gram, skip, rcond), "underdetermined": False}
+    diag = covariance_diagonal(gram, skip, rcond) if middle is None else sandwich_diagonal(gram, middle, rcond)
+    return {"s2": s2, "chi2": chi2, "mismatch": mismatch, "suspected": suspected, "diag": diag,
+            "underdetermined": False}
 
 
 def prior_pull(gram, diag: np.ndarray, s2: float, gradient: np.ndarray) -> np.ndarray:
