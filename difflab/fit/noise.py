@@ -283,9 +283,9 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
     share (1 for none), the range (low, high) of noise levels the residuals allow when their
     noise is not white (`whiteness.sigma_range`; None when it reads white, is given or not
     estimated) and the levels by view, channel and intensity that the estimate read (`_sums`;
-    None when it is given or not estimated: `fit.sandwich` reads them): `given` -- the noise before quantisation, to which the targets'
-    `quantisation` (the rms rounding error of their used values, 0 for float data: one sigma serves
-    every view) is added in quadrature: a correct fit of an 8-bit file with its true noise 0.002
+    None when it is given or not estimated: `fit.sandwich` reads them): `given` -- the noise
+    before quantisation, to which the targets' `quantisation` (the rms rounding error of their
+    used values, 0 for float data: one sigma serves every view) is added in quadrature: a correct fit of an 8-bit file with its true noise 0.002
     given came out at chi2 1.2, flagged; its share is the weights' (`weight_share`) -- or estimated
     (`estimate_sigma`, each entry weighted by its view's weight) from the plain residuals at the
     solution, per view (3, H, W) planes, their levels by the targets' intensities (the data's: two
