@@ -278,22 +278,22 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
 
 def views_noise(views, residual_planes, silent, given: float | None, floor: float, fallback=None,
                 quantisation: float = 0.0) -> tuple[float | None, int, float, tuple | None, list | None]:
-    """The pixel noise sigma of a fit's views, in the targets' units, the number of Laplacian values
-    M it was estimated from (0 when given or taken from `fallback`), their `estimate_sigma`
-    share (1 for none), the range (low, high) of noise levels the residuals allow when their
-    noise is not white (`whiteness.sigma_range`; None when it reads white, is given or not
-    estimated) and the levels by view, channel and intensity that the estimate read (`_sums`;
-    None when it is given or not estimated: `fit.sandwich` reads them): `given` -- the noise
-    before quantisation, to which the targets' `quantisation` (the rms rounding error of their
-    used values, 0 for float data: one sigma serves every view) is added in quadrature: a correct fit of an 8-bit file with its true noise 0.002
-    given came out at chi2 1.2, flagged; its share is the weights' (`weight_share`) -- or estimated
-    (`estimate_sigma`, each entry weighted by its view's weight) from the plain residuals at the
-    solution, per view (3, H, W) planes, their levels by the targets' intensities (the data's: two
-    fits a hair apart bin alike), over the used pixels but the `silent` (per view (U,) bool,
-    `silent_pixels`) and the censored ones -- per channel where a weight of 0 leaves a used pixel's
-    channel out -- and at least `floor` (the quantisation's, `Setup.sigma_floor`). Where too few
-    pixels allow that: `fallback` when given (a refit's, the first fit's sigma), else None
-    (unknown)."""
+    """The pixel noise sigma of a fit's views, in the targets' units, the number of Laplacian values M
+    it was estimated from (0 when given or taken from `fallback`), their `estimate_sigma` share (1
+    for none), the range (low, high) of noise levels the residuals allow when their noise is not
+    white (`whiteness.sigma_range`; None when it reads white, is given or not estimated) and the
+    levels by view, channel and intensity that the estimate read (`_sums`; None when it is given or
+    not estimated: `fit.sandwich` reads them): `given` -- the noise before quantisation, to which
+    the targets' `quantisation` (the rms rounding error of their used values, 0 for float data: one
+    sigma serves every view) is added in quadrature: a correct fit of an 8-bit file with its true
+    noise 0.002 given came out at chi2 1.2, flagged; its share is the weights' (`weight_share`) --
+    or estimated (`estimate_sigma`, each entry weighted by its view's weight) from the plain
+    residuals at the solution, per view (3, H, W) planes, their levels by the targets' intensities
+    (the data's: two fits a hair apart bin alike), over the used pixels but the `silent` (per view
+    (U,) bool, `silent_pixels`) and the censored ones -- per channel where a weight of 0 leaves a
+    used pixel's channel out -- and at least `floor` (the quantisation's, `Setup.sigma_floor`).
+    Where too few pixels allow that: `fallback` when given (a refit's, the first fit's sigma), else
+    None (unknown)."""
     if given is not None:
         return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views), None, None
     picks = []
