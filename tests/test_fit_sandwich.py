@@ -7,7 +7,7 @@ import pytest
 from test_fit_helpers import TRUTH, make_scene, target_of
 
 import difflab
-from difflab.fit import engine, sandwich
+from difflab.fit import engine, sandwich, solve
 from difflab.fit.stats import covariance_diagonal, sandwich_diagonal
 
 SEEDS = 40
@@ -102,6 +102,18 @@ def test_a_given_sigma_keeps_the_pooled_form(sphere, monkeypatch):
     monkeypatch.setattr(engine, "noise_middle", lambda *args: None)
     for key in KINDS:
         np.testing.assert_array_equal(given.stderr[key], fit().stderr[key])
+
+
+def test_texture_fits_keep_the_pooled_form_dense_and_matrix_free_alike(tmp_path, monkeypatch):
+    """Even with the levels read as unequal, a texture fit's standard errors stay pooled: the dense
+    solve's equal the matrix-free one's (rtol 1e-8, as test_fit_texels has them)."""
+    from test_fit_texels import assert_same_stderr, noisy_texel_setup
+
+    monkeypatch.setattr(sandwich, "unequal", lambda levels: True)
+    setup, _ = noisy_texel_setup(tmp_path, (8, 8), "nearest", ("texture", "ks"))
+    dense, free = solve(setup, linear_solver="dense"), solve(setup, linear_solver="cg")
+    assert dense.converged and free.converged
+    assert_same_stderr(dense, free, rtol=1e-8)
 
 
 def test_sandwich_diagonal_is_the_pooled_one_for_one_level_and_keeps_singular_directions():

@@ -24,8 +24,10 @@ It is formed only where the noise levels that the estimate of sigma read (per vi
 half of the intensity range) differ beyond their spread (`unequal`): one more linearisation at the
 solution (`_scaled_gram`: the problem's sqrt(weights) times |r|; 0.6-1 ms on the 74k entries of a
 256 x 256 sphere); elsewhere s^2 (J^T J)^-1 is within ~15 % of it (`unequal`). Not with sigma given
-(one number: the noise is declared equal), nor where it is unknown, nor for a matrix-free fit
-(texels: the sparse path of `stats.covariance_diagonal` keeps the pooled form).
+(one number: the noise is declared equal), nor where it is unknown, nor for a texture fit, dense
+or matrix-free (the sparse path of `stats.covariance_diagonal` keeps the pooled form, and so does a
+dense one to stay its equal; a texel resting on a few pixels would have a sandwich variance of
+spread sqrt(2 / K) from them).
 """
 
 from __future__ import annotations
@@ -74,8 +76,9 @@ def noise_middle(setup, at, r: np.ndarray, levels, counted: int) -> np.ndarray |
     """M = J^T diag(r^2) J N / sum r^2 (p, p) float64 (module docstring) for a fit's `Setup` at the
     flat values `at` with weighted residuals r (N,) there, from the noise `levels` of
     `noise.views_noise` (None: given or unknown) and N = `counted` entries (neither censored nor
-    silent); None where one level serves (`unequal`): s^2 (J^T J)^-1 holds."""
-    if levels is None or not unequal(levels):
+    silent); None where one level serves (`unequal`) -- s^2 (J^T J)^-1 holds -- and for a texture
+    fit (`texels`: the pooled form, dense or matrix-free alike)."""
+    if levels is None or any(p.shape is not None for p in setup.layout) or not unequal(levels):
         return None
     scales, offset, total = [], 0, 0.0
     for view in setup.problem.views:

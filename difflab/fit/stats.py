@@ -48,17 +48,18 @@ Standard errors are those of linearised least squares, in scene units, and assum
 with J the Jacobian of the plain weighted residuals with respect to the values (J^T J from the
 solver, or `normal_equations.linearise`) -- for noise of one level. Where the estimate's levels by
 channel and intensity differ (gains, noise growing with the signal: the pooled form 2-3x off per
-channel), a dense fit's are the sandwich's, (J^T J)^-1 J^T diag(v) J (J^T J)^-1 with White's
-v_i = r_i^2 N / (N - p) (`fit.sandwich`); with sigma given, the noise unknown or matrix-free: pooled. Directions of J^T J that are numerically singular (after scaling its
-columns to unit norm: below 1e-12 of the largest eigenvalue formed in float64, 512 float32 eps in
-float32, `singular_rcond`) give an infinite standard error to every parameter they involve. A texture's
-smoothness prior is not in J^T J (its rows are not residuals of the images), nor in chi2: the
-standard errors are what the pixels alone determine, linearised at the regularised solution -- a
-texel only the prior fills is inf. They are not the posterior's (J^T J plus the prior's curvature):
-those are smaller, and the prior's pull is a bias neither covers. Its size is reported instead:
-`prior_pull`, the move from the data-only solution in standard errors; above PRIOR_PULL_MAX the
-texture is poorly determined and `FitResult.prior_pull` says by how much (a reviewer's 8x8 POV-Ray
-texture at noise 0.01, smoothness 1: seen texels up to 31 standard errors off, reported ok).
+channel), a fit's are the sandwich's, (J^T J)^-1 J^T diag(v) J (J^T J)^-1 with White's
+v_i = r_i^2 N / (N - p) (`fit.sandwich`); with sigma given, the noise unknown or texels: pooled.
+Directions of J^T J that are numerically singular (after scaling its columns to unit norm: below
+1e-12 of the largest eigenvalue formed in float64, 512 float32 eps in float32, `singular_rcond`)
+give an infinite standard error to every parameter they involve. A texture's smoothness prior is not in J^T J (its
+rows are not residuals of the images), nor in chi2: the standard errors are what the pixels alone
+determine, linearised at the regularised solution -- a texel only the prior fills is inf. They are
+not the posterior's (J^T J plus the prior's curvature): those are smaller, and the prior's pull is a
+bias neither covers. Its size is reported instead: `prior_pull`, the move from the data-only
+solution in standard errors; above PRIOR_PULL_MAX the texture is poorly determined and
+`FitResult.prior_pull` says by how much (a reviewer's 8x8 POV-Ray texture at noise 0.01, smoothness
+1: seen texels up to 31 standard errors off, reported ok).
 
 A matrix-free fit (more than `FitOptions` DENSE_MAX entries: texels) forms J sparse by column
 compression (`sparse_jacobian`) and `covariance_diagonal` inverts J^T J per connected block
