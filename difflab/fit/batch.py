@@ -91,12 +91,12 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
                             for i in range(len(setup.views)))
             out = lm.solve_box_batch(setup.problem, x0, targets, lower, upper, options.max_steps, rtol, atol)
             x, codes, steps, history, gram = (np.asarray(a) for a in (*out[:4], out[5]))
-            r = lm.host_residuals(out[4])
+            r = setup.problem.view_residuals(out[4])  # per view (B, 3, U)
             for i, b in enumerate(todo):
                 hist = history[i, :steps[i]].tolist() if options.history else []
                 name = lm.CODES[int(codes[i])]
                 solved[b] = Solved(x[i].astype(np.float64), name, int(steps[i]), hist,
-                                   None if name == "nonfinite" else (r[i], gram[i]))
+                                   None if name == "nonfinite" else (tuple(part[i] for part in r), gram[i]))
         else:
             quiet = FitOptions.make(options, progress=False)
             bar = _bar(len(todo), options)

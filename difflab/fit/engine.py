@@ -59,15 +59,15 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                 gram, r, skip = sparse_normal_matrix(setup.problem, at)
             else:
                 (gram, r), skip = normal_matrix(setup.problem, at, solved), None
-            rho = r if setup.problem.loss == "l2" else \
-                np.asarray(robust(setup.problem.loss, jnp.asarray(r), setup.problem.loss_scale), np.float64)
+            rho = r if setup.problem.loss == "l2" else tuple(  # (r: per view (3, U), `Problem.view_residuals`)
+                np.asarray(robust(setup.problem.loss, jnp.asarray(part), setup.problem.loss_scale), np.float64)
+                for part in r)
             seen = {k: c > options.visible_threshold for k, c in texel_coverage(setup.problem, at, used).items()}
-        counted = r if setup.unit_weights else r[used]  # the entries that count (unit weights: every one)
-        # sums of squares by einsum: one pass, no BLAS threads (the first fit's 74k entries: 53 us, np.sum(np.square())
-        # 128, np.dot 410 waking its threads)
-        with np.errstate(over="ignore", invalid="ignore"):
-            sse = float(np.einsum("i,i->", counted, counted))
-        loss = 0.5 * sse if rho is counted else float(0.5 * np.einsum("i,i->", rho, rho))
+        counted = r if setup.unit_weights else tuple(  # the entries that count (unit weights: every one)
+            part[view.entries.T] for part, view in zip(r, setup.views))
+        count = sum(part.size for part in counted)
+        sse = sum_of_squares(counted)
+        loss = 0.5 * sse if rho is counted else 0.5 * sum_of_squares(rho)
         planes = setup.residual_planes(r)
         residuals = [p.transpose(1, 2, 0) for p in planes]  # (H, W, 3) views (np.moveaxis: 2 us more each)
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and finite_gram(gram))
@@ -76,14 +76,14 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             views_noise(setup.views, planes, silent, setup.sigma_given, setup.sigma_floor, setup.sigma_fallback,
                         setup.quantisation) if finite else (float("nan"), 0, 1.0, None, None))
         noise_unknown = finite and sigma is None
-        mean_weight = setup.weight_total / counted.size if counted.size else 1.0  # (unit weights: 1)
+        mean_weight = setup.weight_total / count if count else 1.0  # (unit weights: 1)
         sigma = float("nan") if sigma is None else sigma
         if finite:
             unseen = sum(int(np.count_nonzero(~seen[p.key])) * (p.size // seen[p.key].size) for p in layout
                          if p.key in seen)  # texels no pixel reads: no unknowns of the data's
             middle = None if matrix_free else noise_middle(setup, at, r, levels,  # unequal noise: the sandwich
-                                                           counted.size - setup.censored - silent_entries)
-            st = fit_statistics(gram, sse, counted.size, setup.censored, sigma, layout.size - unseen, silent_entries,
+                                                           count - setup.censored - silent_entries)
+            st = fit_statistics(gram, sse, count, setup.censored, sigma, layout.size - unseen, silent_entries,
                                 sigma_given=setup.sigma_given is not None, skip=skip, noise_values=noise_values, noise_share=share,
                                 mean_weight=mean_weight, rcond=singular_rcond(setup.x64), sigma_range=sigma_range,
                                 middle=middle)
@@ -125,6 +125,13 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
     if options.throw and not out.converged:
         raise FitError(f"fit did not converge: {out.result} after {out.steps} steps (loss {out.loss:.4g})")
     return out
+
+
+def sum_of_squares(parts) -> float:
+    """sum r^2 over arrays of residuals, by einsum: one pass, no BLAS threads (the first fit's 74k
+    entries: 53 us, np.sum(np.square()) 128, np.dot 410 waking its threads)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return sum(float(np.einsum("i,i->", flat, flat)) for flat in (part.reshape(-1) for part in parts))
 
 
 def pulled_by_prior(setup: Setup, flat, gram, st: dict) -> np.ndarray:

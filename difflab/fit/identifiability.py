@@ -149,7 +149,7 @@ def identifiability(setup: Setup, values: dict | None = None, *, sigma=None, rel
     flagged = poorly_determined(layout, values, stderr, rel_tol, abs_tol)
     return Identifiability(keys=tuple(p.key for p in layout), columns=names, values=values, stderr=stderr,
                            sigma=sigma, rank=rank, n_columns=n, condition=condition, eigenvalues=eigval,
-                           weakest=weakest, undetermined=flagged, residuals=int(r.shape[0]),
+                           weakest=weakest, undetermined=flagged, residuals=sum(part.size for part in r),
                            views=len(setup.views))
 
 

@@ -168,24 +168,9 @@ def _residuals(x, problem):
     return problem.residuals(x)
 
 
-def host_residuals(r) -> np.ndarray:
-    """r as `solve_problem` returns it, as a numpy (..., N) array in the problem's order (a tuple
-    of the views' channel-major (..., 3, U) residuals from the moments' solves, interleaved here)."""
-    if not isinstance(r, tuple):
-        return np.asarray(r)
-    parts = []
-    for view in r:
-        view = np.asarray(view)
-        part = np.empty(view.shape[:-2] + view.shape[:-3:-1], view.dtype)  # (..., U, 3)
-        for c in range(view.shape[-2]):  # a channel at a time: ~2x the speed of a transposed copy
-            part[..., c] = view[..., c, :]
-        parts.append(part.reshape(*view.shape[:-2], -1))
-    return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=-1)
-
-
 def solve_problem(problem, x0, lower, upper, *, max_steps: int, rtol, atol, progress=None):
     """`box_lm` on a `Problem`'s residuals: the steps from the moments where they apply (r at the
-    solution then per view (3, U), channel-major: `host_residuals`), else on `linearise`'s fast form
+    solution then per view (3, U), channel-major: `Problem.view_residuals`), else on `linearise`'s fast form
     (r and J^T J at the solution on its exact one); the closed-form normal equations from
     LAMBDA0_BY_PARTS."""
     options = dict(max_steps=max_steps, rtol=rtol, atol=atol, progress=progress,

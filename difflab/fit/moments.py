@@ -201,9 +201,9 @@ def _columns_r(view, sums: ViewSums, mine, f, v):
 
 
 def residuals(prepared: tuple, x, problem) -> tuple:
-    """The weighted residuals at solver coordinates x, per view (3, U), channel-major
-    (`lm.host_residuals` puts them in the problem's order, on the host: numpy transposes them at
-    several times the speed of XLA's CPU code); `prepared` = `prepare(problem, ...)`."""
+    """The weighted residuals at solver coordinates x, per view (3, U), channel-major: the layout
+    the report reads them in (`Problem.view_residuals`; XLA's CPU code would transpose them at a
+    fraction of numpy's speed); `prepared` = `prepare(problem, ...)`."""
     table = problem.materials(problem.layout.values(x))
     out = []
     for view, sums in zip(problem.views, prepared):

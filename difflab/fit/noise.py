@@ -262,14 +262,16 @@ def at_ceiling(image, ceiling) -> np.ndarray:
 def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
     """The used pixels of a fit's views (`records.View`) that carry no noise: target and model both
     exactly 0 in every channel (an unlit side; a renderer's noise scales with its signal), from the
-    flat weighted residuals r over every used entry. Returns per view (U,) bool over its used
-    pixels, and how many of their entries have weight > 0 (left out of the chi-square's dof)."""
-    out, count, offset = [], 0, 0
-    for view in views:
-        part = r[offset:offset + 3 * view.pixels.size].reshape(-1, 3)
-        offset += 3 * view.pixels.size
-        zero = view.zeros & (part == 0)  # black in the target, and the model 0 there too
-        rows = zero[:, 0] & zero[:, 1] & zero[:, 2]
+    weighted residuals r, per view (3, U) (`Problem.view_residuals`). Returns per view (U,) bool
+    over its used pixels, and how many of their entries have weight > 0 (left out of the
+    chi-square's dof)."""
+    out, count = [], 0
+    for view, part in zip(views, r):
+        zero = view.zeros  # black in the target, and the model 0 there too (in place: one array)
+        rows = zero[:, 0] & zero[:, 1]
+        rows &= zero[:, 2]
+        for c in range(3):
+            rows &= part[c] == 0
         count += 3 * int(np.count_nonzero(rows)) if view.weighting is None else \
             int(np.count_nonzero(np.take(view.entries, np.flatnonzero(rows), axis=0)))
         out.append(rows)

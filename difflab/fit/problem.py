@@ -184,18 +184,29 @@ class Problem(eqx.Module):
                       for view in self.views)
         return eqx.tree_at(lambda p: p.views, self, views)
 
+    def view_residuals(self, r) -> tuple:
+        """Weighted residuals as numpy arrays per view (..., 3, U), channel-major -- the one layout
+        the report reads them in (`moments.residuals` forms them so) -- from a solve's r: such a
+        tuple already, or flat (..., N) in the problem's order (`weighted`: each view's (U, 3)
+        entries pixel by pixel), given as transposed views of it, not copies."""
+        if isinstance(r, tuple):
+            return tuple(np.asarray(part) for part in r)
+        r, out, offset = np.asarray(r), [], 0
+        for view in self.views:
+            size = view.target.size
+            out.append(np.swapaxes(r[..., offset:offset + size].reshape(*r.shape[:-1], -1, 3), -1, -2))
+            offset += size
+        return tuple(out)
+
     def below_ceilings(self, r) -> bool:
         """Whether the model is below every view's ceiling at each entry that counts (weight > 0),
-        given the flat weighted residuals r (N,) of the problem without its ceilings: the model
-        there is target + r / sqrt(w)."""
-        offset = 0
-        for view in self.views:
-            target = np.asarray(view.target)
-            part = np.asarray(r[offset:offset + target.size]).reshape(target.shape)
-            offset += target.size
+        given the weighted residuals r (flat, or per view: `view_residuals`) of the problem without
+        its ceilings: the model there is target + r / sqrt(w)."""
+        for view, part in zip(self.views, self.view_residuals(r)):
             if view.ceiling is None:
                 continue
-            sqrt_weight = np.broadcast_to(np.asarray(view.sqrt_weight), target.shape)
+            target = np.asarray(view.target).T  # (3, U), as the residuals
+            sqrt_weight = np.broadcast_to(np.asarray(view.sqrt_weight), view.target.shape).T
             counts = sqrt_weight > 0
             model = target[counts] + part[counts] / sqrt_weight[counts]
             if not np.all(model < np.asarray(view.ceiling)):

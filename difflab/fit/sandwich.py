@@ -65,25 +65,24 @@ def unequal(levels) -> bool:
 
 @eqx.filter_jit
 def _scaled_gram(problem, values, scales):
-    """J^T diag(s^2) J for the views' scales s (U, 3): the normal matrix of the residuals with each
-    view's sqrt(weight) times s (`stats._normal_matrix`, fast)."""
-    views = tuple(eqx.tree_at(lambda v: v.sqrt_weight, view, view.sqrt_weight * s)
+    """J^T diag(s^2) J for the views' scales s (3, U), channel-major as the residuals: the normal
+    matrix of the residuals with each view's sqrt(weight) times s (`stats._normal_matrix`, fast)."""
+    views = tuple(eqx.tree_at(lambda v: v.sqrt_weight, view, view.sqrt_weight * s.T)
                   for view, s in zip(problem.views, scales))
     return _normal_matrix(eqx.tree_at(lambda p: p.views, problem, views), values, True)[0]
 
 
-def noise_middle(setup, at, r: np.ndarray, levels, counted: int) -> np.ndarray | None:
+def noise_middle(setup, at, r: tuple, levels, counted: int) -> np.ndarray | None:
     """M = J^T diag(r^2) J N / sum r^2 (p, p) float64 (module docstring) for a fit's `Setup` at the
-    flat values `at` with weighted residuals r (N,) there, from the noise `levels` of
-    `noise.views_noise` (None: given or unknown) and N = `counted` entries (neither censored nor
-    silent); None where one level serves (`unequal`) -- s^2 (J^T J)^-1 holds -- and for a texture
-    fit (`texels`: the pooled form, dense or matrix-free alike)."""
+    flat values `at` with weighted residuals r there (per view (3, U): `Problem.view_residuals`),
+    from the noise `levels` of `noise.views_noise` (None: given or unknown) and N = `counted`
+    entries (neither censored nor silent); None where one level serves (`unequal`) -- s^2 (J^T J)^-1
+    holds -- and for a texture fit (`texels`: the pooled form, dense or matrix-free alike)."""
     if levels is None or any(p.shape is not None for p in setup.layout) or not unequal(levels):
         return None
-    scales, offset, total = [], 0, 0.0
-    for view in setup.problem.views:
-        part = np.abs(r[offset:offset + view.target.size]).reshape(view.target.shape)
-        offset += view.target.size
+    scales, total = [], 0.0
+    for view, part in zip(setup.problem.views, r):
+        part = np.abs(part)
         scales.append(part.astype(view.target.dtype, copy=False))
         total += float(np.einsum("ij,ij->", part, part))
     if not total > 0:

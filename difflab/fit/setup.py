@@ -377,19 +377,17 @@ class Setup:
 
     def residual_planes(self, r) -> list[np.ndarray]:
         """Per view (3, H, W) float32 plain residuals min(model, ceiling) - target, channel-major,
-        from the flat weighted residuals r (0 outside the pixels used and where the weight is 0)."""
-        out, offset = [], 0
-        for view in self.views:
-            pixels = view.pixels
-            part = np.asarray(r[offset:offset + 3 * pixels.size], np.float64).reshape(-1, 3)
-            offset += 3 * pixels.size
+        from the weighted residuals r, per view (3, U) (`Problem.view_residuals`; 0 outside the
+        pixels used and where the weight is 0)."""
+        out = []
+        for view, part in zip(self.views, r):
             if not self.unit_weights:
-                sqrt_w = np.sqrt(view.weights)
+                sqrt_w = np.sqrt(view.weights).T
                 part = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w, 1.0), 0.0)
             planes = np.zeros((3, view.used.size), np.float32)
-            part = part.astype(np.float32)
+            used = view.used.reshape(-1)  # (its pixels: `View.pixels`)
             for c in range(3):
-                planes[c, pixels] = part[:, c]
+                planes[c][used] = part[c]  # (a boolean mask: ~3x the speed of the pixels' indices)
             out.append(planes.reshape(3, *view.used.shape))
         return out
 

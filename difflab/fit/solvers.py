@@ -32,8 +32,8 @@ SUCCESSFUL = "successful"
 
 class Solved(NamedTuple):
     """A solve's outcome: x (p,) solver coordinates, result code name, steps, loss history, and
-    linearised = (r, J^T J) at x (residuals and their normal matrix in solver coordinates) when the
-    solver has them ("lm"), else None."""
+    linearised = (r, J^T J) at x (the residuals per view (3, U), `Problem.view_residuals`, and their
+    normal matrix in solver coordinates) when the solver has them ("lm"), else None."""
 
     x: np.ndarray
     result: str
@@ -177,7 +177,8 @@ def _optimistix(solver, z0, problem, max_steps):
 
 
 def _box_lm(problem, x0, lower, upper, options: FitOptions, progress) -> Solved:
-    """`lm.solve_box` from x0, a `Solved` (its r and J^T J at the solution on the host)."""
+    """`lm.solve_box` from x0, a `Solved` (its r -- per view (3, U), `Problem.view_residuals` -- and
+    J^T J at the solution on the host)."""
     rtol, atol = options.tolerances()
     dtype = problem.ambient.dtype
     x, code, steps, history, r, gram = lm.solve_box(problem, np.asarray(x0, dtype), lower, upper, options.max_steps,
@@ -186,7 +187,7 @@ def _box_lm(problem, x0, lower, upper, options: FitOptions, progress) -> Solved:
     history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
     name = lm.CODES[int(code)]  # a non-finite start leaves r, J unset
     return Solved(np.asarray(x, np.float64), name, steps, history,
-                  None if name == "nonfinite" else (lm.host_residuals(r), gram))
+                  None if name == "nonfinite" else (problem.view_residuals(r), gram))
 
 
 def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):

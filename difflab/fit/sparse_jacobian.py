@@ -172,8 +172,9 @@ def sparse_jacobian(problem, values, limit: int | None = None) -> tuple[sp.csc_m
     return sp.csc_matrix((data / scale[cols], (rows, cols)), shape=(n, layout.size)), r, skipped
 
 
-def sparse_normal_matrix(problem, values) -> tuple[sp.csc_matrix, np.ndarray, np.ndarray]:
-    """(J^T J (p, p) float64 sparse, r (N,), skipped (p,) bool): `stats.normal_matrix`'s pair from
-    the sparse J, without the entries of predicted blocks over `stats.SPARSE_STATS_MAX` (skipped)."""
+def sparse_normal_matrix(problem, values) -> tuple[sp.csc_matrix, tuple, np.ndarray]:
+    """(J^T J (p, p) float64 sparse, r per view (3, U), skipped (p,) bool): `stats.normal_matrix`'s
+    pair from the sparse J, without the entries of predicted blocks over `stats.SPARSE_STATS_MAX`
+    (skipped)."""
     jac, r, skipped = sparse_jacobian(problem, values, stats.SPARSE_STATS_MAX)
-    return (jac.T @ jac).tocsc(), r, skipped
+    return (jac.T @ jac).tocsc(), problem.view_residuals(r), skipped

@@ -118,18 +118,20 @@ def _normal_matrix(problem, values, fast: bool = False):
     return gram, r
 
 
-def normal_matrix(problem, values, solved=None) -> tuple[np.ndarray, np.ndarray]:
-    """(J^T J (p, p) float64, r (N,)) of the plain weighted residuals r, J their Jacobian with
-    respect to the flat values, over all residual entries: from `solved` = (r, J^T J with respect
-    to the solver coordinates x) when the solver returned them for the l2 loss without a texture
-    prior (d value / d x = value for log coordinates), else computed (one compiled call)."""
+def normal_matrix(problem, values, solved=None) -> tuple[np.ndarray, tuple]:
+    """(J^T J (p, p) float64, r) of the plain weighted residuals r -- float64, per view (3, U)
+    (`Problem.view_residuals`) --, J their Jacobian with respect to the flat values, over all
+    residual entries: from `solved` = (r, J^T J with respect to the solver coordinates x) when the
+    solver returned them for the l2 loss without a texture prior (d value / d x = value for log
+    coordinates), else computed (one compiled call)."""
     if solved is not None and problem.loss == "l2" and not problem.smoothness:  # no prior rows in the solver's
-        r, gram_x = (np.asarray(a, np.float64) for a in solved)
+        r, gram_x = solved
         log = problem.layout.entries("log") > 0
         scale = np.where(log, np.asarray(values, np.float64), 1.0)
-        return gram_x / (scale[:, None] * scale), r  # (np.outer: the same product, slower)
+        return np.asarray(gram_x, np.float64) / (scale[:, None] * scale), tuple(  # (np.outer: the same, slower)
+            np.asarray(part, np.float64) for part in r)
     gram, r = _normal_matrix(problem, values)
-    return np.asarray(gram, np.float64), np.asarray(r, np.float64)
+    return np.asarray(gram, np.float64), problem.view_residuals(np.asarray(r, np.float64))
 
 
 def singular_rcond(x64: bool) -> float:
