@@ -11,6 +11,11 @@ from difflab.io import save_image
 from difflab.scene import Scene
 
 RTOL = 1e-6
+#: Standard errors under unequal noise (an 8-bit file's rounding grows with the value: `fit.sandwich`)
+#: weigh J^T J by the squared residuals, which -- unlike their sum at the minimum -- move to first order
+#: with the solution: the 8-bit sphere's lm and varpro solutions 1e-7 to 8e-7 apart gave standard errors
+#: 3e-6 (kd) to 3.6e-5 (ks, resting on the highlight's few pixels) apart.
+STDERR_RTOL = 1e-4
 
 
 def start(params) -> dict:
@@ -22,7 +27,7 @@ def assert_same_fit(vp, lm, keys):
     assert vp.converged and lm.converged, (vp.result, lm.result)
     for key in keys:
         np.testing.assert_allclose(vp.params[key], lm.params[key], rtol=RTOL, atol=1e-12)
-        np.testing.assert_allclose(vp.stderr[key], lm.stderr[key], rtol=RTOL)
+        np.testing.assert_allclose(vp.stderr[key], lm.stderr[key], rtol=STDERR_RTOL)
     assert vp.loss == pytest.approx(lm.loss, rel=RTOL)
     # chi2 divides by the estimated sigma, whose Laplacians are capped at a local level: a step function of
     # the residuals, so solutions equal to 1e-12 can estimate sigma ~1e-6 apart (measured: 7e-7)
