@@ -57,7 +57,10 @@ class GBuffer:
     (the mesh triangles alone): a face id >= n_mesh_faces is a tessellated sphere's or plane's;
     point_index (.., 3) int32 and point_weight (.., 3): which shading points make the sample's colour.
     duv_dx, duv_dy (.., 2): the exact screen-space derivatives of the interpolated uv per sample step
-    (the Jacobian columns texture filtering uses); texture (.., 3): the filtered texel at each sample
+    (the Jacobian columns texture filtering uses). Under Phong shading a sample on an analytic
+    sphere is the sphere's own point on its eye ray, with normal (p - c) / r, uv the sphere's there
+    and its derivatives over the sample's footprint, as the ray tracer has them (`bary` and `face`
+    still name the triangle that covered it); texture (.., 3): the filtered texel at each sample
     of a textured material (0 elsewhere).
 
     A sample of a textured material (texture replacing its `texture_target` coefficient) is

@@ -1,8 +1,11 @@
 """The rasterizer's triangles of the analytic spheres and planes (rays see the exact ones).
 
 A sphere is tessellated finely enough that its silhouette is within half a sample of the true one
-(with the analytic normals at the vertices); a plane is a grid of quads reaching the far plane in
-every direction, clipped to the view by the pipeline.
+(with the analytic normals and uv at the vertices): the triangles decide which samples it covers
+and in what depth order; under Phong shading a covered sample then takes the exact point of the
+sphere its eye ray meets (`raster.resolve.sphere_sample`), flat and Gouraud shading the triangles'
+own points. A plane is a grid of quads reaching the far plane in every direction, clipped to the
+view by the pipeline (its triangles lie on the plane: their points are the plane's).
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from ..scene import Plane, Sphere
 from .camera import camera_frame, pixel_size_at
 
 MAX_SPHERE_SEGMENTS = 1024
-MIN_SPHERE_SEGMENTS = 128  # keeps interpolated normals within ~1e-3 of the sphere's inside the silhouette
+MIN_SPHERE_SEGMENTS = 128  # keeps Gouraud's interpolated normals within ~1e-3 of the sphere's inside the silhouette
 PLANE_RINGS = 12  # grid lines each side of the eye's foot on a rasterized plane, spaced geometrically
 
 

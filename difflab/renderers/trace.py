@@ -257,24 +257,32 @@ def max_abs(v: wp.vec3):
 
 
 @wp.func
+def sphere_point(center: wp.vec3, radius: float, origin: wp.vec3, direction: wp.vec3, far: int):
+    """Where the unit ray meets the sphere, at its near root h - s (`far` 0) or far root h + s
+    (`far` 1), h = d.(c - o): c - f -+ s d, f = c - (the ray's point nearest c), s = half the chord
+    (Ray Tracing Gems ch. 7: no large t in it), moved radially onto the sphere (pbrt-v4: a reflected
+    direction several bounces deep is unit only to a few ulps, which s d carried). A ray that
+    misses by rounding (|f| > r, s clamped to 0) gives the sphere's point nearest it (tangent)."""
+    oc = center - origin
+    h = wp.dot(direction, oc)
+    f = oc - h * direction
+    s = wp.sqrt(wp.max(radius * radius - wp.dot(f, f), 0.0))
+    q = -f - s * direction
+    if far == 1:
+        q = -f + s * direction
+    return center + (radius / wp.length(q)) * q  # |q| = r, or |f| > r: never 0
+
+
+@wp.func
 def hit_point(geom: SceneGeomW, hit: HitW, origin: wp.vec3, direction: wp.vec3):
     """Where `hit` (not a miss) of the unit ray lies, computed from its surface (module doc): on a
-    sphere c - f -+ s d, f = c - (the ray's point nearest c), s = half the chord (Ray Tracing Gems
-    ch. 7: no large t in it), moved radially onto the sphere (pbrt-v4: a reflected direction
-    several bounces deep is unit only to a few ulps, which s d carried); on a plane origin + t d
+    sphere `sphere_point` at the root the hit found; on a plane origin + t d
     moved onto the plane along its normal; on a triangle the blend of its corners by the hit's
     barycentrics (pbrt-v4)."""
     if hit.kind == HIT_SPHERE:
         center = geom.sphere_center[hit.index]
-        radius = geom.sphere_radius[hit.index]
-        oc = center - origin
-        h = wp.dot(direction, oc)
-        f = oc - h * direction
-        s = wp.sqrt(wp.max(radius * radius - wp.dot(f, f), 0.0))
-        q = -f - s * direction
-        if hit.t > h:  # the far root, h + s
-            q = -f + s * direction
-        return center + (radius / wp.length(q)) * q  # onto the sphere: |d| may be off 1 by ulps
+        return sphere_point(center, geom.sphere_radius[hit.index], origin, direction,
+                            int(hit.t > wp.dot(direction, center - origin)))  # beyond h: the far root, h + s
     if hit.kind == HIT_PLANE:
         normal = geom.plane_normal[hit.index]
         point = geom.plane_point[hit.index]

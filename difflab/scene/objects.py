@@ -82,7 +82,9 @@ MATERIAL_NAME = Spec("string", "name of a material defined in `materials`")
 
 @dataclass(frozen=True)
 class Sphere(Record):
-    """An analytic sphere (ray-traced exactly; tessellated finely enough by the rasterizer)."""
+    """An analytic sphere (ray-traced exactly; the rasterizer's triangles place its silhouette within
+    half a sample, and under Phong shading each sample they cover takes the sphere's exact point on
+    its eye ray, so raster and ray-traced Phong spheres agree to float32 rounding)."""
 
     center: Vec3 = spec_field(Spec("point3", "centre", "scene units"))
     radius: float = spec_field(Spec("coordinate", "radius", "scene units", bounds(gt=0)))

@@ -16,7 +16,9 @@ Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
                            atomic.
 4. `resolve_kernel`        per sample: barycentrics of the winning triangle, perspective-correct
                            (b_k / w_k renormalised) or affine, the original triangle's weights, and the
-                           surface there (position, normal, uv, material, depth) — the G-buffer.
+                           surface there (position, normal, uv, material, depth) — the G-buffer. Under
+                           Phong shading an analytic sphere's sample takes the sphere's exact point on
+                           its eye ray, normal (p - c) / r and uv (`resolve.sphere_sample`).
 5. shading points          phong: every covered sample; flat: every face (lit at its centroid with the
                            face normal); gouraud: every vertex, twice (front and back normal, OpenGL's
                            two-sided lighting).

@@ -19,6 +19,7 @@ from ..._warp import wp
 from ...errors import RenderError
 from ...guards import nonfinite_pixels
 from ...limits import check_raster_work
+from ...scene import Sphere
 from ...lighting.warp_model import fog_struct
 from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR_MODELS
 from . import clip, coverage, resolve, shade
@@ -42,7 +43,12 @@ def raster_mesh(compiled) -> resolve.RasterMeshW:
     for name in ("faces", "vertices", "normals", "uvs", "face_normal", "face_material", "face_object",
                  "vertex_material", "vertex_object"):
         setattr(mesh, name, compiled.arrays[name])
-    mesh.object_kind = wp.array(object_kinds(compiled.scene.objects), dtype=wp.int32, device=compiled.device)
+    objects, device = compiled.scene.objects, compiled.device
+    mesh.object_kind = wp.array(object_kinds(objects), dtype=wp.int32, device=device)
+    spheres = [(obj.center, obj.radius) if isinstance(obj, Sphere) else ((0.0, 0.0, 0.0), 0.0) for obj in objects]
+    mesh.sphere_center = wp.array(np.array([c for c, _ in spheres], np.float32).reshape(-1, 3), dtype=wp.vec3,
+                                  device=device)
+    mesh.sphere_radius = wp.array(np.array([r for _, r in spheres], np.float32), dtype=float, device=device)
     compiled.built["raster mesh"] = (compiled.arrays, mesh)
     return mesh
 

@@ -2,7 +2,9 @@
 
 Stage 4 (`resolve_kernel`), per sample: barycentrics of the winning triangle, perspective-correct
 (b_k / w_k renormalised) or affine, the original triangle's weights, and the surface there
-(position, normal, uv and its exact screen derivatives, material, depth). Stage 5, the points where
+(position, normal, uv and its exact screen derivatives, material, depth; under Phong shading, on an
+analytic sphere, the sphere's own point on the sample's eye ray, its normal and uv there, as the ray
+tracer finds them: `sphere_sample`). Stage 5, the points where
 the illumination model is evaluated: phong, every covered sample; flat, every face (lit at its
 centroid with the face normal); gouraud, every vertex twice (front and back normal, OpenGL's
 two-sided lighting). Each sample records which three points make its colour and their weights.
@@ -14,9 +16,10 @@ from ..._warp import wp
 
 from ...lighting.warp_model import MaterialW, checker_cell
 from ...vocabulary import FLAT, PHONG_SHADING
-from ..camera import CameraW, view_direction
+from ..camera import CameraW, line_point, primary_ray, view_direction
 from ..launch import dealt_row
-from ..trace import leaving_skip
+from ..texture.sampling import pixel_footprint, sphere_uv, sphere_uv_derivatives
+from ..trace import HIT_SPHERE, leaving_skip, sphere_point
 from .coverage import NO_HIT, edge_weights, float_barycentrics
 
 wp.set_module_options({"enable_backward": False})
@@ -36,6 +39,8 @@ class RasterMeshW:
     vertex_material: wp.array(dtype=wp.int32)  # of a face using the vertex (Gouraud's vertex points)
     vertex_object: wp.array(dtype=wp.int32)
     object_kind: wp.array(dtype=wp.int32)  # per scene object: trace.HIT_SPHERE / HIT_PLANE / HIT_TRIANGLE (mesh)
+    sphere_center: wp.array(dtype=wp.vec3)  # per scene object: an analytic sphere's centre and radius (else 0),
+    sphere_radius: wp.array(dtype=float)  # float32 as the ray tracer's (`compile.ray_geometry`)
 
 
 @wp.struct
@@ -85,6 +90,7 @@ class SampleW:
     weights: wp.vec3  # over the face's vertices: perspective-correct or affine
     side: float  # +1 the face's front is seen, -1 its back
     point: PointW
+    sphere: int  # 1: the point is on the analytic sphere the face tessellates (`sphere_sample`), else 0
     area: wp.float64  # the slot's edge values' sum there (`edge_weights`)
     perspective: wp.vec3d  # perspective-correct: c_k / total, c_k = e_k / w_k of its edge values e_k
     total: wp.float64  # sum c_k
@@ -222,13 +228,41 @@ def sample_position(sample: SampleW, mesh: RasterMeshW):
         + wb[2] * mesh.vertices[mesh.faces[f, 2]]
 
 
+@wp.func
+def sphere_sample(mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), cam: CameraW, mat: int, obj: int,
+                  side: float, i: int, j: int):
+    """The point of analytic sphere `obj` that sample (i, j) sees under Phong shading: where the
+    sample's eye ray (`camera.primary_ray` through its centre, from `camera.line_point`) meets the
+    sphere (`trace.sphere_point`, the ray tracer's formula) -- its near root where the face's front
+    is seen (side +1), its far root where its back is (from inside) -- with the normal (p - c) / r,
+    turned toward the ray as the ray tracer turns it, and the view -d. The facets are inscribed, so
+    the ray through a covered sample meets the sphere (a miss by rounding: the tangent point)."""
+    x = float(j) + 0.5
+    y = float(i) + 0.5
+    unused, direction = primary_ray(cam, x, y)
+    center = mesh.sphere_center[obj]
+    p = sphere_point(center, mesh.sphere_radius[obj], line_point(cam, x, y), direction, int(side < 0.0))
+    outward = wp.normalize(p - center)
+    normal = outward
+    if wp.dot(direction, outward) > 0.0:
+        normal = -outward
+    return make_point(p, normal, normal, -direction, mat, materials, mesh, obj, outward)
+
+
 @wp.func(inline=True)
 def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: wp.array(dtype=MaterialW),
                    cam: CameraW, perspective_correct: int, shading: int, i: int, j: int):
-    """`sample_weights` and the surface point there (shading normal: the face's under flat shading,
-    else the interpolated vertex normals; both facing the viewer side the face shows)."""
+    """`sample_weights` and the surface point there: under Phong shading on an analytic sphere the
+    sphere's own (`sphere_sample`: the facets decide only coverage and depth order); else the face's
+    interpolated position with the face's normal (flat) or the interpolated vertex normals, both
+    facing the viewer side the face shows."""
     sample = sample_weights(key, tris, perspective_correct, i, j)
     f = sample.face
+    obj = mesh.face_object[f]
+    if shading == PHONG_SHADING and mesh.object_kind[obj] == HIT_SPHERE:
+        sample.sphere = 1
+        sample.point = sphere_sample(mesh, materials, cam, mesh.face_material[f], obj, sample.side, i, j)
+        return sample
     wb = sample.weights
     side = sample.side
     p = sample_position(sample, mesh)
@@ -237,14 +271,24 @@ def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: w
     if shading != FLAT:
         normal = side * wp.normalize(wb[0] * mesh.normals[mesh.faces[f, 0]] + wb[1] * mesh.normals[mesh.faces[f, 1]]
                                      + wb[2] * mesh.normals[mesh.faces[f, 2]])
-    sample.point = make_point(p, normal, geo, view_direction(cam, p), mesh.face_material[f], materials, mesh,
-                              mesh.face_object[f], mesh.face_normal[f])
+    sample.point = make_point(p, normal, geo, view_direction(cam, p), mesh.face_material[f], materials, mesh, obj,
+                              mesh.face_normal[f])
     return sample
 
 
 @wp.func
-def sample_uv(sample: SampleW, tris: ScreenW, mesh: RasterMeshW, perspective_correct: int):
-    """uv at a covered sample and its exact screen derivatives d(uv)/dx, d(uv)/dy."""
+def sample_uv(sample: SampleW, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, perspective_correct: int, i: int,
+              j: int):
+    """uv at covered sample (i, j) and its screen derivatives d(uv)/dx, d(uv)/dy: on a sphere's own
+    point (`sphere_sample`) the sphere's uv there (`sphere_uv`) and its derivatives over the
+    sample's footprint on the tangent plane (`pixel_footprint`, one sample wide), as the ray tracer
+    forms them; else the face's interpolated uv and the exact derivatives of that interpolation."""
+    if sample.sphere == 1:
+        center = mesh.sphere_center[mesh.face_object[sample.face]]
+        p = sample.point.p
+        dpdx, dpdy = pixel_footprint(cam, float(j) + 0.5, float(i) + 0.5, 1.0, p, sample.point.geo)
+        duv_dx, duv_dy = sphere_uv_derivatives(p, center, dpdx, dpdy)
+        return sphere_uv(p, center), duv_dx, duv_dy
     f = sample.face
     wb = sample.weights
     uv0 = mesh.uvs[mesh.faces[f, 0]]
@@ -309,7 +353,7 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
     key[s] = NO_HIT  # the next frame's z-buffer starts cleared
     sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j)
     store_point(samples, s, sample.point)
-    uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, perspective_correct)
+    uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, cam, perspective_correct, i, j)
     samples.duv_dx[s] = duv_dx
     samples.duv_dy[s] = duv_dy
     out.face[s] = sample.face

@@ -284,7 +284,7 @@ def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, 
     texel = wp.vec3(0.0)
     textured = int(lighting.materials[mat_id].texture >= 0)
     if textured == 1:
-        uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, perspective_correct)
+        uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, cam, perspective_correct, i, j)
         texel = texel_at(lighting, mat_id, uv, duv_dx, duv_dy)
     out = wp.vec3(0.0)
     if shading == PHONG_SHADING:
