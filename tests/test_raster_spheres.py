@@ -14,9 +14,11 @@ import pytest
 from conftest import scene_dict
 from test_image_files import write_png
 from difflab import Scene, compile_scene, fit_material, load_scene, render_frame
+from difflab._warp import wp
 from difflab.geometry import uv_sphere
 from difflab.io import save_image
 from difflab.renderers.tessellate import sphere_segments
+from difflab.renderers.texture.sampling import sphere_uv_jacobian
 
 FOREIGN = Path(__file__).parent / "data" / "foreign"
 SPHERE = {"type": "sphere", "center": [0, 1, 0], "radius": 1, "material": "red"}
@@ -128,3 +130,39 @@ def test_povrays_16_bit_phong_sphere_fits_through_the_raster_model(image):
     assert result.model == "raster" and result.ok and result.chi2 < 1.0, result.chi2
     for name, value in truth.items():
         np.testing.assert_allclose(result.params[name], value, rtol=1e-3, err_msg=name)
+
+
+@wp.kernel
+def _jacobian_kernel(p: wp.array(dtype=wp.vec3), center: wp.vec3, radius: float, dpdx: wp.array(dtype=wp.vec3),
+                     dpdy: wp.array(dtype=wp.vec3), out: wp.array2d(dtype=wp.vec2)):
+    k = wp.tid()
+    dx, dy = sphere_uv_jacobian(p[k], center, radius, dpdx[k], dpdy[k])
+    out[k, 0] = dx
+    out[k, 1] = dy
+
+
+def test_the_sphere_uv_jacobian_is_the_derivative_of_its_uv():
+    """`sphere_uv_jacobian` (both renderers' d(uv)/dx, d(uv)/dy on a sphere) against central
+    differences in float64 of uv = (atan2(-d_z, d_x) / 2 pi mod 1, acos(-d_y) / pi) along tangent
+    steps, at 200 random points away from the poles (|d_y| < 0.95) and the seam: within float32
+    rounding (1e-4 relative)."""
+    rng = np.random.default_rng(3)
+    center, radius = np.array([0.3, -1.0, 2.0]), 1.7
+    d = rng.normal(size=(400, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d = d[(np.abs(d[:, 1]) < 0.95) & (np.abs(np.arctan2(-d[:, 2], d[:, 0])) > 0.1)][:200]
+    steps = [np.cross(d, rng.normal(size=d.shape)) * 0.3 for _ in range(2)]  # tangent: perpendicular to d
+
+    def uv(q):
+        e = (q - center) / np.linalg.norm(q - center, axis=1, keepdims=True)
+        return np.stack([np.mod(np.arctan2(-e[:, 2], e[:, 0]), 2 * np.pi) / (2 * np.pi), np.arccos(-e[:, 1]) / np.pi], 1)
+
+    p = center + radius * d
+    h = 1e-5
+    arrays = [wp.array(a.astype(np.float32), dtype=wp.vec3) for a in (p, *steps)]
+    out = wp.zeros((len(p), 2), dtype=wp.vec2)
+    wp.launch(_jacobian_kernel, dim=len(p), inputs=[arrays[0], wp.vec3(*center), radius, arrays[1], arrays[2], out])
+    got = out.numpy()
+    for k, step in enumerate(steps):
+        want = (uv(p + h * step) - uv(p - h * step)) / (2 * h)
+        np.testing.assert_allclose(got[:, k], want, rtol=1e-4, atol=1e-6)

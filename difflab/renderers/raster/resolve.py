@@ -18,7 +18,7 @@ from ...lighting.warp_model import MaterialW, checker_cell
 from ...vocabulary import FLAT, PHONG_SHADING
 from ..camera import CameraW, line_point, primary_ray, view_direction
 from ..launch import dealt_row
-from ..texture.sampling import pixel_footprint, sphere_uv, sphere_uv_derivatives
+from ..texture.sampling import pixel_footprint, sphere_uv, sphere_uv_jacobian
 from ..trace import HIT_SPHERE, leaving_skip, sphere_point
 from .coverage import NO_HIT, edge_weights, float_barycentrics
 
@@ -280,14 +280,16 @@ def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: w
 def sample_uv(sample: SampleW, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, perspective_correct: int, i: int,
               j: int):
     """uv at covered sample (i, j) and its screen derivatives d(uv)/dx, d(uv)/dy: on a sphere's own
-    point (`sphere_sample`) the sphere's uv there (`sphere_uv`) and its derivatives over the
-    sample's footprint on the tangent plane (`pixel_footprint`, one sample wide), as the ray tracer
-    forms them; else the face's interpolated uv and the exact derivatives of that interpolation."""
+    point (`sphere_sample`) the sphere's uv there (`sphere_uv`) and its Jacobian over the sample's
+    footprint on the tangent plane (`pixel_footprint`, one sample wide; `sphere_uv_jacobian`), as
+    the ray tracer forms them; else the face's interpolated uv and the exact derivatives of that
+    interpolation."""
     if sample.sphere == 1:
-        center = mesh.sphere_center[mesh.face_object[sample.face]]
+        obj = mesh.face_object[sample.face]
+        center = mesh.sphere_center[obj]
         p = sample.point.p
         dpdx, dpdy = pixel_footprint(cam, float(j) + 0.5, float(i) + 0.5, 1.0, p, sample.point.geo)
-        duv_dx, duv_dy = sphere_uv_derivatives(p, center, dpdx, dpdy)
+        duv_dx, duv_dy = sphere_uv_jacobian(p, center, mesh.sphere_radius[obj], dpdx, dpdy)
         return sphere_uv(p, center), duv_dx, duv_dy
     f = sample.face
     wb = sample.weights

@@ -27,7 +27,7 @@ from ...lighting.warp_model import LightW, MaterialW, checker_cell, surface_mate
 from ...vocabulary import FRESNEL_NONE
 from ..camera import CameraW, near_distance, primary_ray
 from ..texture.sampling import TexturesW, pixel_footprint, plane_uv, plane_uv_derivatives, primary_differentials, \
-    ray_footprint, sample_texture, sphere_uv, sphere_uv_derivatives, triangle_uv_derivatives
+    ray_footprint, sample_texture, sphere_uv, sphere_uv_jacobian, triangle_uv_derivatives
 from ..trace import HIT_PLANE, HIT_TRIANGLE, HitW, SceneGeomW, leaving_skip, ray_offset, spawn_origin
 from .lightbuffer import LightBufferW
 from .nesting import MediaW, crossing
@@ -228,7 +228,7 @@ def hit_texel(scene: SceneW, mat: MaterialW, hit: HitW, p: wp.vec3, dpdx: wp.vec
     else:
         center = scene.geom.sphere_center[hit.index]
         uv = sphere_uv(p, center)
-        duv_dx, duv_dy = sphere_uv_derivatives(p, center, dpdx, dpdy)
+        duv_dx, duv_dy = sphere_uv_jacobian(p, center, scene.geom.sphere_radius[hit.index], dpdx, dpdy)
     return uv, sample_texture(scene.textures, mat.texture, uv, duv_dx, duv_dy, mat.texture_filter, mat.texture_wrap)
 
 

@@ -34,15 +34,17 @@ Filters (`sample_texture`, `filter` in the scene's TEXTURE_FILTERS order):
   (2 EWA_MAX_RADIUS + 1)^2 taps per level (the ellipse itself, by construction, has a major
   semi-axis of at most 2 EWA_MAX_ANISOTROPY + 1 texels at the finer level).
 
-Pixel footprint for ray hits (the ray tracer's rule; the rasterizer computes the same Jacobian
-analytically from its perspective-correct interpolation on its sample grid): `pixel_footprint`
+Pixel footprint for ray hits (the ray tracer's rule, and the rasterizer's on an analytic sphere's
+Phong samples; on triangles the rasterizer computes the same Jacobian analytically from its
+perspective-correct interpolation on its sample grid): `pixel_footprint`
 intersects the rays through the raster points (x +- w/2, y) and (x, y +- w/2) with the tangent
 plane at the hit and returns dp/dx, dp/dy (central differences over one sample, w pixels wide: 1 /
 side under side x side supersampling); a secondary ray carries its sample's ray differentials
 (`primary_differentials`, reflected and refracted at each surface by `raytrace.optics`) and
-`ray_footprint` moves them onto the surface it meets; and the
-`*_uv_derivatives` functions turn dp/dx, dp/dy into d(uv)/dx, d(uv)/dy for triangles, planes and
-spheres with the uv conventions of `scene.Plane.uv_frame` and `geometry.uv_sphere`.
+`ray_footprint` moves them onto the surface it meets; and `triangle_uv_derivatives`,
+`plane_uv_derivatives` and `sphere_uv_jacobian` turn dp/dx, dp/dy into d(uv)/dx, d(uv)/dy for
+triangles, planes and spheres with the uv conventions of `scene.Plane.uv_frame` and
+`geometry.uv_sphere`.
 """
 
 from __future__ import annotations
@@ -378,14 +380,20 @@ def sphere_uv(p: wp.vec3, center: wp.vec3):
 
 
 @wp.func
-def sphere_uv_derivatives(p: wp.vec3, center: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3):
-    """d(uv)/dx, d(uv)/dy on a sphere by central differences of `sphere_uv` at p +- dp/2 (u's jump
-    across the seam removed)."""
-    uv_x = sphere_uv(p + 0.5 * dpdx, center) - sphere_uv(p - 0.5 * dpdx, center)
-    uv_y = sphere_uv(p + 0.5 * dpdy, center) - sphere_uv(p - 0.5 * dpdy, center)
-    uv_x = wp.vec2(uv_x[0] - wp.round(uv_x[0]), uv_x[1])
-    uv_y = wp.vec2(uv_y[0] - wp.round(uv_y[0]), uv_y[1])
-    return uv_x, uv_y
+def sphere_uv_jacobian(p: wp.vec3, center: wp.vec3, radius: float, dpdx: wp.vec3, dpdy: wp.vec3):
+    """d(uv)/dx, d(uv)/dy of `sphere_uv` at p on the sphere (centre c, radius r) for the tangent
+    steps dp/dx, dp/dy of a sample's footprint: its Jacobian there (the chain rule; no seam, no
+    transcendental -- central differences of `sphere_uv`, as taken before, cost four atan2 / acos
+    pairs, and differ from it by the second order of the step, most near the poles). With
+    d = (p - c) / r and rho^2 = d_x^2 + d_z^2: du = (d_z dd_x - d_x dd_z) / (2 pi rho^2),
+    dv = dd_y / (pi rho), dd = dp / r. At a pole (rho^2 under 1e-12) rho^2 is held at 1e-12: u
+    spans all longitudes there, the filter's widest footprint."""
+    d = (p - center) / radius
+    rho2 = wp.max(d[0] * d[0] + d[2] * d[2], 1.0e-12)
+    su = 1.0 / (2.0 * wp.pi * radius * rho2)
+    sv = 1.0 / (wp.pi * radius * wp.sqrt(rho2))
+    return wp.vec2(su * (d[2] * dpdx[0] - d[0] * dpdx[2]), sv * dpdx[1]), \
+        wp.vec2(su * (d[2] * dpdy[0] - d[0] * dpdy[2]), sv * dpdy[1])
 
 
 @wp.kernel
