@@ -50,9 +50,13 @@ def init() -> None:
 
 
 def load_kernels(device: str, *kernels) -> None:
-    """Load the Warp modules of `kernels` on `device` before their first launch in this process.
-    Loading is compiling the first time (tens of seconds, then cached): when it takes longer than
-    COMPILE_NOTICE_SECONDS a one-line notice goes to stderr, once per process."""
+    """Load the Warp modules of `kernels` on `device` before their first launch in this process, on
+    the calling thread: the band launchers below call it before handing bands to the pool, since
+    two threads making a module's first launch at once load it twice, and a launch through the
+    loser's unloaded code crashed the process (a segfault in ~1 of 60 fresh processes ray tracing
+    with the item buffer, whose z-buffer was the first raster launch). Loading is compiling the
+    first time (tens of seconds, then cached): when it takes longer than COMPILE_NOTICE_SECONDS a
+    one-line notice goes to stderr, once per process."""
     modules = {kernel.module.name: kernel.module for kernel in kernels if (kernel.module.name, device) not in _loaded}
     if not modules:
         return
@@ -293,6 +297,7 @@ def launch_rows(kernel, shape: tuple[int, int], inputs: list, device: str, threa
     def run_band(begin: int, end: int) -> None:
         wp.launch(kernel, dim=(end - begin, cols), inputs=[begin, *inputs], device=device)
 
+    load_kernels(device, kernel)
     parallel_bands(run_band, rows, device, threads)
 
 
@@ -334,6 +339,7 @@ def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int 
     kernel's first arguments are (row0, row_step): its thread wp.tid() handles row
     `dealt_row(row0, row_step, tid)`, looping over the columns itself. On the CPU this reads the
     kernel's (struct) arguments once per row rather than once per pixel."""
+    load_kernels(device, kernel)
     run_bands(lambda k, n: launch_dealt(kernel, k, n, rows, inputs, device),
               dealt_bands(rows, device, threads, per_thread), threads)
 
@@ -368,6 +374,7 @@ def launch_chunks(kernel, n: int, inputs: list, device: str, threads: int | None
         launch_kept(kept, kernel, (end - begin + chunk - 1) // chunk, [begin, end, chunk, *inputs], device)
 
     if n:
+        load_kernels(device, kernel)
         parallel_bands(run_band, n, device, threads)
 
 
@@ -385,6 +392,7 @@ def launch_parts(kernel, n: int, inputs: list, device: str, threads: int | None 
                     device)
 
     if n:
+        load_kernels(device, kernel)
         run_bands(run_band, bands, threads)
 
 

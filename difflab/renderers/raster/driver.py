@@ -167,6 +167,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     same threads call `then(tris, key, k, n)` for the pass's bands of rows dealt in blocks (band k
     of n, `launch.dealt_bands`) as soon as both halves are drawn (`launch.run_phases`)."""
     device, arrays = compiled.device, compiled.arrays
+    load_kernels(device, clip.assemble_kernel, coverage.raster_kernel)  # before two threads launch them
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
     width, height = cam.width, cam.height
     scratch = compiled.scratch  # arrays kept between frames: no fresh pages to fault in
@@ -292,7 +293,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     shading = SHADING_MODELS[settings.shading]
     clamp_colors = bool(settings.clamp_vertex_colors and shading == GOURAUD)
     perspective_correct = int(settings.interpolation == "perspective")
-    load_kernels(device, clip.assemble_kernel, coverage.raster_kernel, resolve.resolve_kernel, shade.image_kernel)
+    load_kernels(device, resolve.resolve_kernel, shade.image_kernel)  # (stages 1-3's in `zbuffer`)
     start = time.perf_counter()
     cam = camera_struct(scene.camera, width, height)
     mesh, lighting = raster_mesh(compiled), lighting_struct(compiled, settings)
