@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import DifflabError, FitError
 from ..lighting.jax_model import lights_to_jax
-from ..renderers.api import as_scene, render_frame
+from ..renderers.api import as_scene, fit_frame
 from ..renderers.compile import CompiledScene
 from ..renderers.launch import resolve_device
 from ..scene import RenderSettings
@@ -243,8 +243,8 @@ class Setup:
             kept = store.get(key) if store is not None else None
             if kept is None:
                 start = time.perf_counter()
-                frame = render_frame(self._compiled_for(view_scene, device) or view_scene, device=device,
-                                     threads=threads, image=False)
+                frame = fit_frame(self._compiled_for(view_scene, device) or view_scene, device=device,
+                                  threads=threads)
                 self.render_seconds += time.perf_counter() - start
                 kept = KeptView(frame.ray_tree if self.method == "raytrace" else frame.gbuffer)
                 if store is not None:

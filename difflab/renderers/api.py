@@ -101,10 +101,21 @@ def render(scene, *, method=None, shading=None, specular=None, max_depth=None, s
                 speedups=(item_buffer, light_buffer)).image
 
 
+def fit_frame(scene, *, device=None, threads=None) -> Frame:
+    """`render_frame(scene, image=False, device=..., threads=...)` as a fit reads it (`fit.setup`;
+    the frame stays inside the fit): a rasterized Phong G-buffer records its points' light
+    directions, distances and visibilities but lights none of them, and forms uv derivatives only
+    where a texture is sampled -- its `points.color`, `duv_dx` and `duv_dy` are None (the fit shades
+    the geometry in JAX and reads none of them), and no overflow is checked (no colour is formed).
+    Other frames are render_frame's."""
+    return draw(scene, {}, device, None, None, threads, keep=True, image=False, geometry_only=True)
+
+
 def draw(scene, overrides: dict, device, width, height, threads, keep: bool, speedups=(False, False),
-         image: bool = True) -> Frame:
+         image: bool = True, geometry_only: bool = False) -> Frame:
     """The frame of `scene` under `overrides`; `keep`: also its G-buffer or recorded ray tree;
-    `speedups`: (item buffer, light buffer) for the ray tracer; `image`: False to return none."""
+    `speedups`: (item buffer, light buffer) for the ray tracer; `image`: False to return none;
+    `geometry_only`: a fit's G-buffer (`fit_frame`)."""
     threads = check_threads(threads)
     if isinstance(scene, CompiledScene):
         compiled = scene
@@ -127,7 +138,7 @@ def draw(scene, overrides: dict, device, width, height, threads, keep: bool, spe
             raise RenderError("item_buffer / light_buffer: speed-ups of the ray tracer; use method='raytrace'")
         from .raster.driver import rasterize
 
-        frame = rasterize(compiled, settings, threads, gbuffer=keep, image=image)
+        frame = rasterize(compiled, settings, threads, gbuffer=keep, image=image, geometry_only=geometry_only)
     else:
         from .raytrace.driver import raytrace
 

@@ -275,14 +275,18 @@ def light_mesh_points(compiled, lighting, points, n_points: int, n_samples: int,
     return lit
 
 
-def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool = True, image: bool = True) -> Frame:
+def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool = True, image: bool = True,
+              geometry_only: bool = False) -> Frame:
     """Render a compiled scene with the rasterizer under `settings` (a scene RenderSettings); keep
     the G-buffer in the Frame when `gbuffer` (see the module doc). With `image` False (G-buffer
     only) the frame's image is None and, under Phong shading, stage 7 is not run: a sample's colour
     is its point's, so the non-finite count comes from the points' colours. Flat / Gouraud frames
-    still compose (that pass also samples their textures into the G-buffer). `threads`: as given
-    to `render_frame` (None: the default of `launch.raster_threads`, and `launch.pass_threads` for
-    the G-buffer's per-sample passes)."""
+    still compose (that pass also samples their textures into the G-buffer). `geometry_only` (with
+    `image` False; a fit's record, `api.fit_frame`): under Phong shading the points are not lit,
+    only their light geometry recorded, and uv derivatives are formed only where a texture is
+    sampled, so the G-buffer's `points.color`, `duv_dx` and `duv_dy` are None and no overflow is
+    counted. `threads`: as given to `render_frame` (None: the default of `launch.raster_threads`,
+    and `launch.pass_threads` for the G-buffer's per-sample passes)."""
     compiled = compiled.raster()  # the meshes' and the analytic objects' triangles (tessellated on first use)
     scene, device = compiled.scene, compiled.device
     side = settings.spp_side  # the scene validated spp and the sample budget
@@ -327,6 +331,8 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     # cleared beside stages 1-3 when a core is free (a memset of memory other work has pushed out of
     # the cache, ~0.4-0.9 ms of a 256^2 frame).
     points_are_samples = int(shading == PHONG_SHADING)
+    geometry_only = bool(geometry_only and points_are_samples and not image)
+    record = shade.GEOMETRY_ONLY if geometry_only else 1
     samples, out, lit, stale = gbuffer_arrays(compiled, width * height, points_are_samples)
     partial = cleared_key(compiled, width * height, "partial key") if halved else compiled.scratch("no key", 0,
                                                                                                     wp.int64)
@@ -339,7 +345,8 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         clearing.join()
         if points_are_samples:  # stages 4-6 in one pass: each sample resolved, then lit as its own point
             launch_dealt(shade.phong_gbuffer_kernel, k, n, height, [
-                key, partial, tris, mesh, cam, perspective_correct, out, samples, lighting, lit, bad], device, kept)
+                key, partial, tris, mesh, cam, perspective_correct, out, samples, lighting, lit, record, bad], device,
+                kept)
         else:
             launch_dealt(resolve.resolve_kernel, k, n, height, [
                 key, partial, tris, mesh, compiled.materials, cam, perspective_correct, shading,
@@ -366,14 +373,17 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         launch_row_loops(shade.compose_kernel, height, [
             width, samples, out.uv, out.depth, out.point_index, out.point_weight, lit, lighting, int(clamp_colors),
             1 - points_are_samples, *backdrop(scene), canvas], device, *row_pass)
-    gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors)
+    gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors,
+                         geometry_only)
     # then filter to pixels (Phong without stage 7: a sample's colour is its point's, fogged, so the
     # pixels are not finite exactly where these are not: the pass counted those samples)
-    samples_rgb = (to_host(canvas) if composed else gbuffer.points.color).reshape(height, width, 3)
-    pixels = box_downsample(samples_rgb, side) if image else None
-    nonfinite = nonfinite_pixels(samples_rgb if pixels is None else pixels) if composed else int(to_host(bad).sum())
-    if pixels is None and nonfinite and side > 1:  # count the pixels the non-finite samples reach
-        nonfinite = nonfinite_pixels(box_downsample(samples_rgb, side))
+    pixels, nonfinite = None, 0  # (geometry only: no colours)
+    if not geometry_only:
+        samples_rgb = (to_host(canvas) if composed else gbuffer.points.color).reshape(height, width, 3)
+        pixels = box_downsample(samples_rgb, side) if image else None
+        nonfinite = nonfinite_pixels(samples_rgb if pixels is None else pixels) if composed else int(to_host(bad).sum())
+        if pixels is None and nonfinite and side > 1:  # count the pixels the non-finite samples reach
+            nonfinite = nonfinite_pixels(box_downsample(samples_rgb, side))
     stats = frame_stats(compiled, start, nonfinite, width * height, n_points)
     stats["covered_samples"] = int(np.count_nonzero(gbuffer.mask))
     return Frame(image=pixels, buffers=gbuffer, stats=stats)

@@ -62,8 +62,10 @@ def gbuffer_arrays(compiled, n_samples: int, phong: bool):
 
 
 def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, points, n_points: int,
-               lit, clamp_colors: bool) -> GBuffer:
-    """The device buffers of stages 4-6 as a numpy `GBuffer` on the sample grid."""
+               lit, clamp_colors: bool, geometry_only: bool = False) -> GBuffer:
+    """The device buffers of stages 4-6 as a numpy `GBuffer` on the sample grid; `geometry_only`
+    (a fit's record: `driver.rasterize`): the points' colours and the uv derivatives, not formed,
+    are None."""
     def on_grid(array, *channels):
         return to_host(array).reshape(*grid, *channels)
 
@@ -77,9 +79,11 @@ def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, 
             position=to_host(points.position), normal=to_host(points.normal), view=to_host(points.view),
             material=to_host(points.material), cell=to_host(points.cell), light_dir=to_host(lit.light_dir),
             light_dist=to_host(lit.light_dist), visibility=to_host(lit.visibility),
-            color=to_host(lit.color)[:n_points], texture_factor=to_host(lit.factor)[:n_points]),
+            color=None if geometry_only else to_host(lit.color)[:n_points],
+            texture_factor=to_host(lit.factor)[:n_points]),
         shading=settings.shading, specular=settings.specular, spp_side=side,
         ambient=np.asarray(scene.ambient, np.float32), background=np.asarray(scene.background, np.float32),
         clamp_vertex_colors=clamp_colors, fog=fog_params(scene.fog),
-        duv_dx=on_grid(samples.duv_dx, 2), duv_dy=on_grid(samples.duv_dy, 2), texture=on_grid(lit.texel, 3),
+        duv_dx=None if geometry_only else on_grid(samples.duv_dx, 2),
+        duv_dy=None if geometry_only else on_grid(samples.duv_dy, 2), texture=on_grid(lit.texel, 3),
     )

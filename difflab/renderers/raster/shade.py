@@ -32,6 +32,8 @@ from .resolve import (GBufferW, PointsW, PointW, RasterMeshW, SampleW, ScreenW, 
 
 wp.set_module_options({"enable_backward": False})
 
+GEOMETRY_ONLY = wp.constant(2)  # `light_point`'s record mode of a fit's G-buffer: light geometry, no colours
+
 
 @wp.struct
 class LightingW:
@@ -62,7 +64,9 @@ class LitW:
 
 @wp.func(inline=True)
 def light_point(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3, lit: LitW, k: int, record: int):
-    """ka Ia + sum_p s_p light_term_p at a point (recording L_p, d_p, s_p as point k when asked).
+    """ka Ia + sum_p s_p light_term_p at a point. `record`: 0 the colour alone; 1 the colour, and
+    L_p, d_p, s_p recorded as point k; 2 (`GEOMETRY_ONLY`, a fit's record) only those recorded, the
+    colour and factor left 0 (the fit shades the recorded geometry itself).
 
     Textured materials: `textured` = 1 where the texel is known at the point (a sample): it modulates
     its target coefficient. Otherwise (flat, Gouraud points) the colour is lit with the target
@@ -89,17 +93,19 @@ def light_point(point: PointW, lighting: LightingW, textured: int, texel: wp.vec
             offset = point_offset(geom, point.p)  # along geo, not the ray: Gouraud's geo is a vertex normal
             s = light_visibility(geom, materials, point.p + offset * point.geo, l, d - offset, point.ignore,
                                  lighting.transparent)
-        if record == 1:
+        if record >= 1:
             lit.light_dir[k, q] = l
             lit.light_dist[k, q] = d
             lit.visibility[k, q] = s
-        if s > 0.0:
+        if s > 0.0 and record < GEOMETRY_ONLY:
             total = total + s * light_term(lighting.lights[q], mat, lighting.specular, point.normal, point.view, l, d)
             if split:
                 unit_total = unit_total + s * light_term(lighting.lights[q], unit, lighting.specular, point.normal,
                                                          point.view, l, d)
-    if not split:
+    if not split or record == GEOMETRY_ONLY:
         unit_total = wp.vec3(0.0)
+    if record == GEOMETRY_ONLY:
+        total = wp.vec3(0.0)
     return total, unit_total
 
 
@@ -120,11 +126,11 @@ def finite3(c: wp.vec3):
 
 
 @wp.func
-def light_into(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3, lit: LitW, k: int):
-    """Stage 6 at point k: its colour and texture factor (`light_point`), and per light its
-    direction, distance and visibility (the G-buffer's). `lit` is zero when the kernel starts:
-    nothing is written for an empty point. Returns the colour."""
-    color, factor = light_point(point, lighting, textured, texel, lit, k, 1)
+def light_into(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3, lit: LitW, k: int, record: int):
+    """Stage 6 at point k: its colour and texture factor (`light_point`; `record` GEOMETRY_ONLY: 0),
+    and per light its direction, distance and visibility (the G-buffer's). `lit` is zero when the
+    kernel starts: nothing is written for an empty point. Returns the colour."""
+    color, factor = light_point(point, lighting, textured, texel, lit, k, record)
     lit.color[k] = color
     if textured == 0:  # (else zero, as cleared)
         lit.factor[k] = factor
@@ -137,28 +143,31 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
     first = begin + wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, end)):
         if points.material[k] >= 0:
-            unused = light_into(load_point(points, k), lighting, 0, wp.vec3(0.0), lit, k)
+            unused = light_into(load_point(points, k), lighting, 0, wp.vec3(0.0), lit, k, 1)
 
 
 @wp.kernel
 def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64),
                          tris: ScreenW, mesh: RasterMeshW, cam: CameraW, perspective_correct: int, out: GBufferW,
-                         samples: PointsW, lighting: LightingW, lit: LitW, nonfinite: wp.array(dtype=wp.int32)):
+                         samples: PointsW, lighting: LightingW, lit: LitW, record: int,
+                         nonfinite: wp.array(dtype=wp.int32)):
     """Stages 4 and 6 under Phong shading, one row of samples per thread: each sample resolved (its
     G-buffer entries, `resolve_into`), then lit as its own shading point, its texel sampled there
-    (`light_into`); nonfinite[i] counts row i's samples whose colour has a NaN or infinite channel."""
+    (`light_into`); nonfinite[i] counts row i's samples whose colour has a NaN or infinite channel.
+    `record` GEOMETRY_ONLY (a fit's G-buffer): no colours (none counted), and uv derivatives only
+    where a texture is sampled; else 1."""
     i = dealt_row(row0, row_step, wp.tid())
     bad = int(0)
     for j in range(cam.width):
         covered, point, uv, duv_dx, duv_dy = resolve_into(key, partial, tris, mesh, lighting.materials, cam,
                                                           perspective_correct, PHONG_SHADING, mesh.vertices.shape[0],
-                                                          out, samples, i, j)
+                                                          int(record != GEOMETRY_ONLY), out, samples, i, j)
         if covered:
             s = i * cam.width + j
             texel = texel_at(lighting, point.material, uv, duv_dx, duv_dy)
             if lighting.materials[point.material].texture >= 0:  # (else zero, as cleared)
                 lit.texel[s] = texel
-            if not finite3(light_into(point, lighting, 1, texel, lit, s)):
+            if not finite3(light_into(point, lighting, 1, texel, lit, s, record)):
                 bad += 1
     nonfinite[i] = bad
 
@@ -284,7 +293,7 @@ def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, 
     texel = wp.vec3(0.0)
     textured = int(lighting.materials[mat_id].texture >= 0)
     if textured == 1:
-        uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, cam, perspective_correct, i, j)
+        uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, cam, perspective_correct, i, j, 1)
         texel = texel_at(lighting, mat_id, uv, duv_dx, duv_dy)
     out = wp.vec3(0.0)
     if shading == PHONG_SHADING:
