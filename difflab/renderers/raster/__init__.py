@@ -1,7 +1,7 @@
 """The rasterizer: vertices -> clip space -> near-plane clipping -> z-buffer -> shading points -> image.
 
 `driver.rasterize(compiled, settings)` takes the frame's arrays and launches the stages, kernels in
-`clip` (1-2), `coverage` (3), `resolve` (4-5) and `shade` (6-7).
+`clip` (1-2), `coverage` (3), `resolve` (4-5; flat / Gouraud points: `flat_gouraud`) and `shade` (6-7).
 
 Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
 1. `clip_vertices_kernel`  world -> clip space.

@@ -22,7 +22,7 @@ from ...limits import check_raster_work
 from ...scene import Sphere
 from ...lighting.warp_model import fog_struct
 from ...vocabulary import FLAT, GOURAUD, PHONG_SHADING, SHADING_MODELS, SPECULAR_MODELS
-from . import clip, coverage, resolve, shade
+from . import clip, coverage, flat_gouraud, resolve, shade
 from .gbuffer import filled, gbuffer_arrays, lit_fields, point_fields, to_gbuffer
 from ..camera import camera_struct
 from ..frame import Frame, box_downsample
@@ -249,8 +249,8 @@ def mesh_points(compiled, mesh, cam, shading: int, threads: int | None = None):
     its samples, see `rasterize`), and how many."""
     n_points = point_count(compiled, shading)
     points = filled(resolve.PointsW(), "points", point_fields(n_points, False),  # every point written
-                    lambda name, shape, dtype, zero: compiled.reusable(name, shape, dtype))  # (`resolve.mesh_point`)
-    launch_chunks(resolve.mesh_points_kernel, n_points, [mesh, compiled.materials, cam, shading, points],
+                    lambda name, shape, dtype, zero: compiled.reusable(name, shape, dtype))  # (`flat_gouraud.mesh_point`)
+    launch_chunks(flat_gouraud.mesh_points_kernel, n_points, [mesh, compiled.materials, cam, shading, points],
                   compiled.device, threads)
     return points, n_points
 

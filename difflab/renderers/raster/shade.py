@@ -26,9 +26,9 @@ from ..launch import dealt_row
 from ..texture.sampling import TexturesW, sample_texture
 from ..trace import SceneGeomW, light_visibility, point_offset
 from .coverage import NO_HIT
-from .resolve import (GBufferW, PointsW, PointW, RasterMeshW, SampleW, ScreenW, load_point, mesh_point, resolve_into,
-                      resolve_sample,
-                      sample_points, sample_position, sample_uv, sample_weights)
+from .flat_gouraud import mesh_point
+from .resolve import (GBufferW, PointsW, PointW, RasterMeshW, SampleW, ScreenW, load_point, resolve_into,
+                      resolve_sample, sample_points, sample_position, sample_uv, sample_weights)
 
 wp.set_module_options({"enable_backward": False})
 
