@@ -85,8 +85,9 @@ def test_a_phong_raster_sphere_is_the_ray_traced_sphere(tmp_path, camera, textur
 def test_the_same_triangles_as_a_mesh_keep_the_facet_model():
     """The control: the raster sphere's own triangles given as a mesh are shaded at their facets
     (interpolated positions and renormalised vertex normals), over 1e-3 off the exact sphere (9e-3
-    here, 3e-3 in the foreign review's highlight) -- what the analytic sphere gave before; flat and Gouraud shading of the analytic
-    sphere keep their per-face / per-vertex points, identical to the mesh's."""
+    here, 3e-3 in the foreign review's highlight) -- what the analytic sphere gave before; flat and
+    Gouraud shading of the analytic sphere keep their per-face / per-vertex points, identical to
+    the mesh's."""
     d = sphere_scene("outside")
     n_lon = int(sphere_segments([SPHERE["center"]], [1.0], Scene.from_dict(d).camera, 48)[0])
     mesh = uv_sphere(1.0, SPHERE["center"], n_lon // 2, n_lon)
@@ -155,7 +156,8 @@ def test_the_sphere_uv_jacobian_is_the_derivative_of_its_uv():
 
     def uv(q):
         e = (q - center) / np.linalg.norm(q - center, axis=1, keepdims=True)
-        return np.stack([np.mod(np.arctan2(-e[:, 2], e[:, 0]), 2 * np.pi) / (2 * np.pi), np.arccos(-e[:, 1]) / np.pi], 1)
+        u = np.mod(np.arctan2(-e[:, 2], e[:, 0]), 2 * np.pi) / (2 * np.pi)
+        return np.stack([u, np.arccos(-e[:, 1]) / np.pi], 1)
 
     p = center + radius * d
     h = 1e-5

@@ -249,7 +249,7 @@ def mesh_points(compiled, mesh, cam, shading: int, threads: int | None = None):
     its samples, see `rasterize`), and how many."""
     n_points = point_count(compiled, shading)
     points = filled(resolve.PointsW(), "points", point_fields(n_points, False),  # every point written
-                    lambda name, shape, dtype, zero: compiled.reusable(name, shape, dtype))  # (`flat_gouraud.mesh_point`)
+                    lambda name, shape, dtype, zero: compiled.reusable(name, shape, dtype))  # (`flat_gouraud`)
     launch_chunks(flat_gouraud.mesh_points_kernel, n_points, [mesh, compiled.materials, cam, shading, points],
                   compiled.device, threads)
     return points, n_points
