@@ -30,7 +30,8 @@ Stages (each a kernel; per-pixel ones are launched in row bands on all cores):
 With the G-buffer under Phong shading (whose points are its samples), stages 4 and 6 run as one
 pass (`shade.phong_gbuffer_kernel`: each sample resolved, then lit); `render_frame(...,
 image=False)` skips stage 7 there, and a fit's frame (`api.fit_frame`) the lighting too: only the
-light geometry is recorded (`shade.GEOMETRY_ONLY`), uv derivatives only where a texture is sampled.
+light geometry is recorded (`shade.GEOMETRY_ONLY`), uv and its derivatives only where a texture is
+sampled.
 The G-buffer's arrays, in their structs, come from `CompiledScene.reusable_structs` (the last
 frame's when nothing holds them any more); those an empty sample leaves zero share one buffer,
 cleared in one memset beside stages 1-3 (on a pool worker); the kernels write the rest. From

@@ -278,9 +278,8 @@ def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: w
 
 @wp.func
 def sample_uv(sample: SampleW, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, perspective_correct: int, i: int,
-              j: int, derivatives: int):
-    """uv at covered sample (i, j) and its screen derivatives d(uv)/dx, d(uv)/dy (0 unless
-    `derivatives` is 1): on a sphere's own
+              j: int):
+    """uv at covered sample (i, j) and its screen derivatives d(uv)/dx, d(uv)/dy: on a sphere's own
     point (`sphere_sample`) the sphere's uv there (`sphere_uv`) and its Jacobian over the sample's
     footprint on the tangent plane (`pixel_footprint`, one sample wide; `sphere_uv_jacobian`), as
     the ray tracer forms them; else the face's interpolated uv and the exact derivatives of that
@@ -289,8 +288,6 @@ def sample_uv(sample: SampleW, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, p
         obj = mesh.face_object[sample.face]
         center = mesh.sphere_center[obj]
         p = sample.point.p
-        if derivatives == 0:
-            return sphere_uv(p, center), wp.vec2(0.0), wp.vec2(0.0)
         dpdx, dpdy = pixel_footprint(cam, float(j) + 0.5, float(i) + 0.5, 1.0, p, sample.point.geo)
         duv_dx, duv_dy = sphere_uv_jacobian(p, center, mesh.sphere_radius[obj], dpdx, dpdy)
         return sphere_uv(p, center), duv_dx, duv_dy
@@ -299,12 +296,9 @@ def sample_uv(sample: SampleW, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, p
     uv0 = mesh.uvs[mesh.faces[f, 0]]
     uv1 = mesh.uvs[mesh.faces[f, 1]]
     uv2 = mesh.uvs[mesh.faces[f, 2]]
-    uv = wb[0] * uv0 + wb[1] * uv1 + wb[2] * uv2
-    if derivatives == 0:
-        return uv, wp.vec2(0.0), wp.vec2(0.0)
     duv_dx, duv_dy = uv_derivatives(tris.screen, tris.weight, sample.slot, sample.area, perspective_correct,
                                     sample.perspective, sample.total, uv0, uv1, uv2)
-    return uv, duv_dx, duv_dy
+    return wb[0] * uv0 + wb[1] * uv1 + wb[2] * uv2, duv_dx, duv_dy
 
 
 @wp.func(inline=True)
@@ -338,13 +332,14 @@ class GBufferW:
 @wp.func
 def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
                  materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
-                 n_vertices: int, derivatives: int, out: GBufferW, samples: PointsW, i: int, j: int):
+                 n_vertices: int, uvs: int, out: GBufferW, samples: PointsW, i: int, j: int):
     """Stage 4 at sample (i, j): its G-buffer entries (empty ones where nothing covers it: the
     non-zero ones only, as `samples` and `out` are zero when the kernel starts). Its key is the
     lesser of `key` and `partial` (a z-buffer drawn in two; `partial` empty otherwise), both reset.
     Returns whether it is covered, and its point, uv and uv derivatives as stored (what a Phong
-    pass lights next, without reading them back); `derivatives` 0: those only where its material
-    has a texture (a fit's G-buffer, which reads no others), left 0 elsewhere."""
+    pass lights next, without reading them back). `uvs` 1: uv and its derivatives at every covered
+    sample; 0 (a fit's G-buffer, which reads no others): only where its material has a texture,
+    0 elsewhere (as the ray tracer's G-buffer has them)."""
     s = i * cam.width + j
     k = key[s]
     if partial.shape[0] > 0:
@@ -362,14 +357,17 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
     key[s] = NO_HIT  # the next frame's z-buffer starts cleared
     sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j)
     store_point(samples, s, sample.point)
-    uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, cam, perspective_correct, i, j,
-                                   int(derivatives == 1 or materials[sample.point.material].texture >= 0))
-    samples.duv_dx[s] = duv_dx
-    samples.duv_dy[s] = duv_dy
+    uv = wp.vec2(0.0)
+    duv_dx = wp.vec2(0.0)
+    duv_dy = wp.vec2(0.0)
+    if uvs == 1 or materials[sample.point.material].texture >= 0:  # (else zero, as cleared)
+        uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, cam, perspective_correct, i, j)
+        samples.duv_dx[s] = duv_dx
+        samples.duv_dy[s] = duv_dy
+        out.uv[s] = uv
     out.face[s] = sample.face
     out.bary[s] = sample.weights
     out.depth[s] = wp.dot(sample.point.p - cam.eye, cam.forward)
-    out.uv[s] = uv
     out.object[s] = mesh.face_object[sample.face]
     index, weight = sample_points(sample, mesh, shading, s, n_vertices)
     out.point_index[s] = index

@@ -154,8 +154,8 @@ def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64)
     """Stages 4 and 6 under Phong shading, one row of samples per thread: each sample resolved (its
     G-buffer entries, `resolve_into`), then lit as its own shading point, its texel sampled there
     (`light_into`); nonfinite[i] counts row i's samples whose colour has a NaN or infinite channel.
-    `record` GEOMETRY_ONLY (a fit's G-buffer): no colours (none counted), and uv derivatives only
-    where a texture is sampled; else 1."""
+    `record` GEOMETRY_ONLY (a fit's G-buffer): no colours (none counted), and uv and its
+    derivatives only where a texture is sampled; else 1."""
     i = dealt_row(row0, row_step, wp.tid())
     bad = int(0)
     for j in range(cam.width):
@@ -293,7 +293,7 @@ def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, 
     texel = wp.vec3(0.0)
     textured = int(lighting.materials[mat_id].texture >= 0)
     if textured == 1:
-        uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, cam, perspective_correct, i, j, 1)
+        uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, cam, perspective_correct, i, j)
         texel = texel_at(lighting, mat_id, uv, duv_dx, duv_dy)
     out = wp.vec3(0.0)
     if shading == PHONG_SHADING:
