@@ -285,8 +285,9 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     `image` False; a fit's record, `api.fit_frame`): under Phong shading the points are not lit,
     only their light geometry recorded, and uv and its derivatives are formed only where a texture
     is sampled (uv 0 elsewhere, as in a ray-traced G-buffer), so the G-buffer's `points.color`,
-    `duv_dx` and `duv_dy` are None and no overflow is counted. `threads`: as given to `render_frame` (None: the default of `launch.raster_threads`,
-    and `launch.pass_threads` for the G-buffer's per-sample passes)."""
+    `duv_dx` and `duv_dy` are None and no overflow is counted. `threads`: as given to
+    `render_frame` (None: the default of `launch.raster_threads`, and `launch.pass_threads` for the
+    G-buffer's per-sample passes)."""
     compiled = compiled.raster()  # the meshes' and the analytic objects' triangles (tessellated on first use)
     scene, device = compiled.scene, compiled.device
     side = settings.spp_side  # the scene validated spp and the sample budget
