@@ -192,6 +192,40 @@ def test_a_correct_model_under_a_pixel_filter_is_suspected_not_a_mismatch(sphere
     assert white.to_dict()["sigma_range"] is None
 
 
+def test_a_view_without_a_full_3x3_interior_adds_nothing_to_the_test():
+    """A view whose used pixels hold no full 3 x 3 (a 2-px-wide strip) has no Laplacian: beside a
+    40 x 40 view the test reads the big view's (k, z) exactly; alone it is not tested (None), as
+    when the noise is unknown."""
+    rng = np.random.default_rng(3)
+    used = np.ones((40, 40), bool)
+    strip = np.zeros((40, 40), bool)
+    strip[10:12, 5:30] = True
+    big, thin = rng.normal(0.0, 0.01, (2, 3, 40, 40))
+    views = [_view_picks(used, None, None, True), _view_picks(strip, None, None, True)]
+    alone = whiteness(views[:1], [big])
+    assert alone is not None and abs(alone[1]) < WHITE_Z
+    assert whiteness(views, [big, thin]) == alone
+    assert whiteness(views[1:], [thin]) is None
+
+
+def test_a_two_view_fit_with_a_strip_view_reports_the_big_views_verdict(sphere):
+    """The pixel-filtered sphere fit (above) with a second view masked to a 2-px strip across the
+    sphere: it runs and reports what the big view alone does -- not white, suspected, not a
+    mismatch, its sigma_range within 1 % of the one view's."""
+    scene, clean = sphere
+    rng = np.random.default_rng(0)
+    noisy = [clean + convolve1d(convolve1d(rng.normal(0.0, 0.04, clean.shape), PIXEL_FILTER, axis=0),
+                                PIXEL_FILTER, axis=1) for _ in range(2)]
+    strip = np.zeros(clean.shape[:2], bool)
+    strip[31:33, 12:52] = True
+    one = fit_material(scene, noisy[:1], "red", init=START)
+    two = fit_material(scene, noisy, "red", init=START, masks=[None, strip])
+    for result in (one, two):
+        assert result.converged and result.noise_not_white and result.mismatch_suspected
+        assert not result.model_mismatch and not result.ok
+    assert two.sigma_range == pytest.approx(one.sigma_range, rel=0.01)
+
+
 def write_codes(path, linear, dither: bool):
     """An 8-bit sRGB PNG of a linear image, rounded, or with the Bayer 4 x 4 ordered dither."""
     codes = linear_to_srgb(np.clip(linear, 0.0, 1.0)) * 255.0

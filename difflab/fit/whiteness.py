@@ -78,9 +78,11 @@ def _view_log_ratios(view, image) -> tuple[float, int, int, float] | None:
     channels carry one noise); None without a point. The lattice's centre-grid points
     i = 1, 1 + a, ... (box pixel i + 1) are valid where the centre grid is set at i - 1 .. i + 1
     (each of those has its 3 x 3 used: the 5 x 5 around the point is)."""
+    count = max((p.index.size for p in view.picks if p is not None), default=0)
+    if not count:  # (used pixels but no 3 x 3 interior: a thin strip, a scattered mask)
+        return None
     centre = view.centre
     hc, wc = centre.shape[-2:]
-    count = max(p.index.size for p in view.picks if p is not None)
     a = max(1, math.isqrt(count // WHITE_SAMPLE))
     rows, cols = len(range(1, hc - 1, a)), len(range(1, wc - 1, a))
     if rows < 1 or cols < 1:
