@@ -1,9 +1,10 @@
 """Noise that is not white (`fit.whiteness`): the residuals read at two scales, Laplacians of taps 1
 and 2 pixels apart. White noise -- Gaussian, per-channel levels, levels that follow the signal,
 uniform (rounding-like), one noise in all three channels -- is not flagged (|z| <= WHITE_Z = 5; z's
-spread is at most 1, so at most 5.7e-7 of white-noise fits are); filtered noise (a pixel filter, a
-box blur) and ordered-dithered 8-bit rounding are, with k the ratio of their two levels' variances
-as the filters' kernels give it. The verdict then spans the levels both scales allow: a correct
+spread is at most 1 for Gaussian noise, so at most 5.7e-7 of such fits are; heavy tails and a level
+that changes sharply widen and shift it, as the docs state); filtered noise (a pixel filter, a box
+blur) and ordered-dithered 8-bit rounding are, with k the ratio of their two levels' variances as
+the filters' kernels give it. The verdict then spans the levels both scales allow: a correct
 model under a Mitsuba-like pixel filter is suspected, not a mismatch; a wrong model (the image
 through a power 1.03, like POV-Ray's brilliance) in a Bayer-dithered 8-bit file is not ok."""
 
@@ -98,6 +99,24 @@ def test_white_noise_is_not_flagged(kind):
         zs.append(z)
         assert sigma_range(0.01, 1e-5, (k, z)) is None
     assert np.max(np.abs(zs)) < 4.0
+
+
+def test_heavy_tails_and_a_level_step_widen_and_shift_z_as_documented():
+    """The limits the docs state (96 x 96, one noise in three channels): Gaussian 0.05 plus
+    exponential fireflies of mean 2 on 5 % of the pixels leave z centred but spread 1.5 (1.3-1.8
+    over 400 seeds), not 1; a level 10x higher on one half shifts z by ~1 (0.6-1.4 over 100)."""
+    used = np.ones((96, 96), bool)
+    fireflies, step = [], []
+    for seed in range(400):
+        rng = np.random.default_rng(seed)
+        noise = rng.normal(0.0, 0.05, (96, 96)) + (rng.random((96, 96)) < 0.05) * rng.exponential(2.0, (96, 96))
+        fireflies.append(read_whiteness(np.repeat(noise[..., None], 3, axis=2), used)[1])
+        if seed < 100:
+            level = np.where(np.arange(96) < 48, 0.01, 0.1)[None, :]
+            step.append(read_whiteness(np.repeat((rng.normal(0.0, 1.0, (96, 96)) * level)[..., None], 3, axis=2),
+                                       used)[1])
+    assert abs(np.mean(fireflies)) < 0.25 and 1.3 < np.std(fireflies) < 1.8
+    assert 0.6 < np.mean(step) < 1.4 and 0.8 < np.std(step) < 1.1
 
 
 @pytest.mark.parametrize("name, taps", [("pixel filter", PIXEL_FILTER), ("box 3 x 3", np.ones(3) / 3.0),
