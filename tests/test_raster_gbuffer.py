@@ -3,6 +3,7 @@ and the frame buffers a compiled scene reuses once no frame holds them."""
 
 import dataclasses
 import functools
+import gc
 import threading
 import time
 import weakref
@@ -11,10 +12,12 @@ import numpy as np
 import pytest
 
 from conftest import scene_dict
+from test_raster_spheres import sphere_scene
 from difflab import RenderError, compile_scene, render_frame, save_image
 from difflab._warp import wp
 from difflab.renderers import launch
-from difflab.renderers.raster import coverage, driver
+from difflab.renderers.api import fit_frame
+from difflab.renderers.raster import coverage, driver, shade
 from difflab.renderers.camera import camera_struct
 from difflab.scene import Scene
 
@@ -146,19 +149,68 @@ def add_at_kernel(index: int, value: int, out: wp.array(dtype=wp.int32)):
 
 
 def test_a_kept_launch_replays_only_the_same_inputs():
-    """`launch_kept` (the z-buffer's launches of scratch arrays): recorded once per kernel and band,
-    replayed while the inputs are the same objects and numbers, recorded anew for any other (the
-    new array or value is the one written)."""
+    """`launch_kept` (the z-buffer's launches of scratch arrays): recorded once per kernel, plan and
+    band, replayed while the inputs are the same objects and numbers, recorded anew for any other
+    (the new array or value is the one written); another plan's records replace the kernel's."""
     kept, first, second = {}, wp.zeros(2, dtype=wp.int32, device="cpu"), wp.zeros(2, dtype=wp.int32, device="cpu")
-    launch.launch_kept(kept, add_at_kernel, 1, [0, 5, first], "cpu")
-    recorded = kept[("launch", add_at_kernel, 0)][2]
-    launch.launch_kept(kept, add_at_kernel, 1, [0, 5, first], "cpu")
-    assert first.numpy().tolist() == [10, 0] and kept[("launch", add_at_kernel, 0)][2] is recorded
-    launch.launch_kept(kept, add_at_kernel, 1, [0, 5, second], "cpu")
-    launch.launch_kept(kept, add_at_kernel, 1, [0, 7, second], "cpu")
-    launch.launch_kept(kept, add_at_kernel, 1, [1, 1, second], "cpu")  # another band: kept beside
-    launch.launch_kept(None, add_at_kernel, 1, [1, 2, second], "cpu")  # nothing kept
-    assert first.numpy().tolist() == [10, 0] and second.numpy().tolist() == [12, 3] and len(kept) == 2
+    launch.launch_kept(kept, add_at_kernel, "ab", 1, [0, 5, first], "cpu")
+    recorded = kept[("launch", add_at_kernel)][1][0][2]
+    launch.launch_kept(kept, add_at_kernel, "ab", 1, [0, 5, first], "cpu")
+    assert first.numpy().tolist() == [10, 0] and kept[("launch", add_at_kernel)][1][0][2] is recorded
+    launch.launch_kept(kept, add_at_kernel, "ab", 1, [0, 5, second], "cpu")
+    launch.launch_kept(kept, add_at_kernel, "ab", 1, [0, 7, second], "cpu")
+    launch.launch_kept(kept, add_at_kernel, "ab", 1, [1, 1, second], "cpu")  # another band: kept beside
+    launch.launch_kept(None, add_at_kernel, "ab", 1, [1, 2, second], "cpu")  # nothing kept
+    assert first.numpy().tolist() == [10, 0] and second.numpy().tolist() == [12, 3]
+    assert kept[("launch", add_at_kernel)][0] == "ab" and sorted(kept[("launch", add_at_kernel)][1]) == [0, 1]
+    launch.launch_kept(kept, add_at_kernel, "a", 1, [0, 1, second], "cpu")  # another plan: band 1's record gone
+    assert second.numpy().tolist() == [13, 3] and list(kept) == [("launch", add_at_kernel)]
+    assert kept[("launch", add_at_kernel)][0] == "a" and list(kept[("launch", add_at_kernel)][1]) == [0]
+
+
+def test_threads_recording_bands_of_a_new_plan_at_once_keep_every_band():
+    """Pool workers record the bands of one new plan in the caller's dict at once (`launch_kept`):
+    one entry for the plan holds every band's record, and each band's launch ran once."""
+    kept, out, n = {}, wp.zeros(8, dtype=wp.int32, device="cpu"), 8
+    launch.launch_kept(kept, add_at_kernel, "old", 1, [0, 100, out], "cpu")
+    start = threading.Barrier(n)
+
+    def band(k):
+        start.wait()
+        launch.launch_kept(kept, add_at_kernel, ("new", n), 1, [k, k + 1, out], "cpu")
+    threads = [threading.Thread(target=band, args=(k,)) for k in range(n)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert out.numpy().tolist() == [101, 2, 3, 4, 5, 6, 7, 8]
+    assert kept[("launch", add_at_kernel)][0] == ("new", n) and sorted(kept[("launch", add_at_kernel)][1]) == list(
+        range(n))
+
+
+def test_a_smaller_frame_frees_the_launches_kept_for_a_larger_one():
+    """A thread keeps only each kernel's last band plan's launches (`launch.kept_records`): after a
+    64^2 fit frame (8 bands of dealt rows on two threads) and a 16^2 one (2 bands) on one compiled
+    scene, every array of the 64^2 G-buffer is freed once its frame is (the records of bands 2-7
+    held them through their structs), and a repeated 16^2 frame replays the pass's records."""
+    compiled = compile_scene(Scene.from_dict(sphere_scene("outside", size=64)))
+    big = fit_frame(compiled, threads=2)
+    pool = compiled.scratch_pool()
+    arrays = [weakref.ref(array) for array in pool[("structs", "gbuffer")][1]]
+    assert len(arrays) > 10 and all(array() is not None for array in arrays)
+    small_view = compiled.with_scene(Scene.from_dict(sphere_scene("outside", size=16)))
+    small = fit_frame(small_view, threads=2)
+    del big
+    gc.collect()
+    assert [array() for array in arrays] == [None] * len(arrays)
+    plan, records = pool[("launch", shade.phong_gbuffer_kernel)]
+    assert plan == (2, 16) and sorted(records) == [0, launch.ROW_BLOCK]
+    first = {band: record[2] for band, record in records.items()}
+    depth = small.gbuffer.depth.copy()
+    del small  # its structs are reused unheld, so the next frame's launches are the same
+    again = fit_frame(small_view, threads=2)
+    assert {band: record[2] for band, record in pool[("launch", shade.phong_gbuffer_kernel)][1].items()} == first
+    assert np.array_equal(again.gbuffer.depth, depth)
 
 
 def test_run_bands_runs_each_band_once_and_hands_a_bands_error_to_the_caller():

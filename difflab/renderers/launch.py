@@ -326,7 +326,7 @@ def launch_dealt(kernel, k: int, n: int, rows: int, inputs: list, device: str, k
     """Launch `kernel` on band k of n of rows [0, rows) dealt in blocks (`launch_row_loops`); `kept`:
     see `launch_kept`."""
     band_rows = sum(min(ROW_BLOCK, rows - block) for block in range(k * ROW_BLOCK, rows, n * ROW_BLOCK))
-    launch_kept(kept, kernel, band_rows, [k * ROW_BLOCK, n * ROW_BLOCK, *inputs], device)
+    launch_kept(kept, kernel, (n, rows), band_rows, [k * ROW_BLOCK, n * ROW_BLOCK, *inputs], device)
 
 
 def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int | None = None,
@@ -344,23 +344,44 @@ def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int 
               dealt_bands(rows, device, threads, per_thread), threads)
 
 
-def launch_kept(kept: dict | None, kernel, dim: int, inputs: list, device: str) -> None:
-    """`wp.launch`, or, given `kept` (a dict kept between frames by one thread), the launch recorded
-    there for `kernel` and inputs[0] (its band), replayed while the dim and inputs are the same
-    (objects by identity, ints by value): Warp packs every argument anew at each launch (~15-35 us
-    one of the z-buffer's). A recorded launch holds its inputs: only arrays kept anyway (scratch) or
-    structs of a frame's outputs (`CompiledScene.reusable_structs`), never such arrays themselves,
-    which `CompiledScene.reusable` must find unheld to reuse."""
+def launch_kept(kept: dict | None, kernel, plan, dim: int, inputs: list, device: str) -> None:
+    """`wp.launch`, or, given `kept` (a thread's dict kept between its frames), the launch recorded
+    there for `kernel` and inputs[0] (its band) under the band plan `plan` (`kept_records`), replayed
+    while the dim and inputs are the same (objects by identity, ints by value): Warp packs every
+    argument anew at each launch (~15-35 us one of the z-buffer's). A recorded launch holds its
+    inputs: only arrays kept anyway (scratch) or structs of a frame's outputs
+    (`CompiledScene.reusable_structs`), never such arrays themselves, which `CompiledScene.reusable`
+    must find unheld to reuse. The pool workers that run the owning thread's bands call this on its
+    dict at once: each reads and sets only its own band's record (one dict operation each, atomic
+    under the GIL), and the bands of one launch share its plan."""
     if kept is None:
         wp.launch(kernel, dim=dim, inputs=inputs, device=device)
         return
-    key = ("launch", kernel, inputs[0])
-    last = kept.get(key)
+    records, band = kept_records(kept, kernel, plan), inputs[0]
+    last = records.get(band)
     if last is None or last[0] != dim or len(last[1]) != len(inputs) or not all(
             a is b or (type(a) is int and type(b) is int and a == b) for a, b in zip(last[1], inputs)):
-        last = kept[key] = (dim, list(inputs), wp.launch(kernel, dim=dim, inputs=inputs, device=device,
-                                                         record_cmd=True))
+        last = records[band] = (dim, list(inputs), wp.launch(kernel, dim=dim, inputs=inputs, device=device,
+                                                             record_cmd=True))
     last[2].launch()
+
+
+_plans_lock = threading.Lock()
+
+
+def kept_records(kept: dict, kernel, plan) -> dict:
+    """`kernel`'s recorded launches in `kept` by band, those of band plan `plan` (any value equal for
+    equal band lists): one entry per kernel, replaced whole by an empty one when the plan changes,
+    so only the last plan's records (and the inputs they hold) stay -- not a larger frame's bands
+    that a smaller one no longer makes. The replacement is made under a lock (two of the plan's
+    bands may find the old plan at once: one new dict, not two)."""
+    entry = kept.get(("launch", kernel))
+    if entry is None or entry[0] != plan:
+        with _plans_lock:
+            entry = kept.get(("launch", kernel))
+            if entry is None or entry[0] != plan:
+                entry = kept[("launch", kernel)] = (plan, {})
+    return entry[1]
 
 
 def launch_chunks(kernel, n: int, inputs: list, device: str, threads: int | None = None,
@@ -369,13 +390,15 @@ def launch_chunks(kernel, n: int, inputs: list, device: str, threads: int | None
     thread tid handles items begin + tid * chunk ... up to `chunk` of them (below end). On the CPU a
     band is one chunk (one thread reads the arguments once); on CUDA a chunk is one item. `kept`:
     see `launch_kept`."""
+    bands = band_plan(n, device, threads)
+
     def run_band(begin: int, end: int) -> None:
         chunk = end - begin if device == "cpu" else 1
-        launch_kept(kept, kernel, (end - begin + chunk - 1) // chunk, [begin, end, chunk, *inputs], device)
+        launch_kept(kept, kernel, bands, (end - begin + chunk - 1) // chunk, [begin, end, chunk, *inputs], device)
 
     if n:
         load_kernels(device, kernel)
-        parallel_bands(run_band, n, device, threads)
+        run_bands(run_band, bands, threads)
 
 
 def launch_parts(kernel, n: int, inputs: list, device: str, threads: int | None = None,
@@ -388,8 +411,8 @@ def launch_parts(kernel, n: int, inputs: list, device: str, threads: int | None 
 
     def run_band(begin: int, end: int) -> None:
         chunk = end - begin if device == "cpu" else 1
-        launch_kept(kept, kernel, (end - begin + chunk - 1) // chunk, [part[(begin, end)], begin, end, chunk, *inputs],
-                    device)
+        launch_kept(kept, kernel, bands, (end - begin + chunk - 1) // chunk,
+                    [part[(begin, end)], begin, end, chunk, *inputs], device)
 
     if n:
         load_kernels(device, kernel)

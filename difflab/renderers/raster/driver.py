@@ -226,7 +226,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
 
     if halves:  # every other slot into each of two z-buffers, side by side (one band, on the CPU), then `then`
         keys = (key, partial)
-        run_phases([(lambda part, parts: launch_kept(kept, coverage.raster_kernel, 1, [
+        run_phases([(lambda part, parts: launch_kept(kept, coverage.raster_kernel, parts, 1, [
             part, parts, 0, height, binned, n_slots, rows, tris.screen, width, height, keys[part]], device),
             [(0, 2), (1, 2)]), (lambda k, n: then(tris, key, k, n), then_plan[0])], then_plan[1])
         return tris, key
