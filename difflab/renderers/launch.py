@@ -370,11 +370,10 @@ _plans_lock = threading.Lock()
 
 
 def kept_records(kept: dict, kernel, plan) -> dict:
-    """`kernel`'s recorded launches in `kept` by band, those of band plan `plan` (any value equal for
-    equal band lists): one entry per kernel, replaced whole by an empty one when the plan changes,
-    so only the last plan's records (and the inputs they hold) stay -- not a larger frame's bands
-    that a smaller one no longer makes. The replacement is made under a lock (two of the plan's
-    bands may find the old plan at once: one new dict, not two)."""
+    """`kernel`'s recorded launches in `kept` by band under band plan `plan` (equal for equal band
+    lists): one entry per kernel, replaced whole when the plan changes, so a smaller frame frees a
+    larger one's records and what they held. Replaced under a lock: two bands finding the old plan
+    at once make one new dict, not two."""
     entry = kept.get(("launch", kernel))
     if entry is None or entry[0] != plan:
         with _plans_lock:
