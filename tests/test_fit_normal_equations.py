@@ -85,9 +85,14 @@ def test_solver_by_parts_takes_the_dense_solvers_steps(truth, clipped):
     """Recovery from a 30 % perturbed start, and a matte target (ks truly 0): the box LM on the
     closed-form normal equations takes the same steps to the same point as on forward-mode ones;
     `solve_box` -- from the moments, or with a ceiling (`clipped`) on the closed form's fast steps
-    (float32 columns) -- a near Gauss-Newton first step: no more steps, the same values to the
-    tolerance where the target determines them (n of a matte target it does not) and the exact
-    J^T J at its end."""
+    (float32 columns) -- a near Gauss-Newton first step: the same values to the tolerance where the
+    target determines them and the exact J^T J at its end; no more steps where the target determines
+    every entry. A matte target determines ks only to its float32 rounding: ks lands on its bound 0
+    or, where the rounding's projection on the specular columns is positive, at ~1e-8, where n
+    (otherwise undetermined) fits the rounding through ks and lowers the loss ~1e-4 of itself over
+    a few steps more; `solve_box`, from lambda 1e-6, follows that further than the box LM from
+    1e-3 does (12 steps against 5 here; the box LM from 1e-6 takes the same 12), so there it
+    guarantees a loss no higher, not fewer steps."""
     scene = make_scene(size=24, red=truth)
     start = perturbed({**truth, "ks": [0.5, 0.4, 0.3]})
     target = target_of(scene)
@@ -107,11 +112,16 @@ def test_solver_by_parts_takes_the_dense_solvers_steps(truth, clipped):
     np.testing.assert_allclose(x, np.asarray(slow[0]), rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(np.asarray(exact[5]), np.asarray(slow[5]), rtol=1e-9, atol=1e-12)  # J^T J at x
     matte = max(truth["ks"]) == 0.0
-    assert lm.CODES[int(fast[1])] == "successful" and int(fast[2]) <= int(steps)
+    assert lm.CODES[int(fast[1])] == "successful"
+    if matte:
+        assert np.nanmin(np.asarray(fast[3])) <= np.nanmin(np.asarray(exact[3])) * (1 + 1e-6)
+    else:
+        assert int(fast[2]) <= int(steps)
     for found in (setup.values(x), setup.values(np.asarray(fast[0]))):
         for key in ("ka", "kd") + (("ks",) if matte else ("ks", "n")):  # a matte target says nothing of n
-            np.testing.assert_allclose(found[key], truth[key], rtol=1e-4, atol=0 if matte and key == "ks" else 1e-7)
-    determined = np.concatenate([np.full(p.size, not (matte and p.kind == "n")) for p in setup.layout])
+            atol = np.finfo(np.float32).eps if matte and key == "ks" else 1e-7  # (ks: 0 to the target's rounding)
+            np.testing.assert_allclose(found[key], truth[key], rtol=1e-4, atol=atol)
+    determined = np.concatenate([np.full(p.size, not (matte and p.kind in ("ks", "n"))) for p in setup.layout])
     np.testing.assert_allclose(np.asarray(fast[0])[determined], x[determined], rtol=1e-7, atol=1e-10)
     np.testing.assert_allclose(np.asarray(fast[5]), np.asarray(dense_at_fast[1]), rtol=1e-9, atol=1e-12)
 
