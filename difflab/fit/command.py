@@ -71,11 +71,12 @@ def init_value(text: str) -> tuple[str, object]:
 
 def in_option_words(text: str) -> str:
     """An engine's message in this command's words: --method raytrace, not method='raytrace';
-    --ceiling none, not ceiling=False; --spp / --max-depth / --ceiling / --init for the keywords
-    a message starts with."""
+    --ceiling none, not ceiling=False; --spp / --max-depth / --ceiling / --edge-margin / --init for
+    the keywords a message starts with, --mask[i] for masks[i]."""
     text = re.sub(r"method='(\w+)'", r"--method \1", text).replace("ceiling=False", "--ceiling none")
     text = re.sub(r"^init\['([^']*)'\]", r"--init \1", text)
-    return re.sub(r"^(spp|max_depth|ceiling):", lambda m: "--" + m.group(1).replace("_", "-") + ":", text)
+    text = re.sub(r"^masks\[", "--mask[", text)
+    return re.sub(r"^(spp|max_depth|ceiling|edge_margin):", lambda m: "--" + m.group(1).replace("_", "-") + ":", text)
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -152,12 +153,13 @@ def run(args) -> int:
     if masks is not None and len(masks) != len(args.targets):
         raise FitError(f"--mask: give one per target ({len(args.targets)}), got {len(masks)}")
     margin = margin_text(args.edge_margin, "--edge-margin")
-    if margin:
-        masks = margin_masks(args.scene, list(args.targets), masks, margin, device=args.device)
     materials = [name for item in args.material for name in name_list(item, "--material")]
     params = DEFAULT_PARAMS if args.params is None else name_list(args.params, "--params")
     init = None if args.init is None else dict(args.init)
     try:
+        if margin:  # the interior of the record the fit makes
+            masks = margin_masks(args.scene, list(args.targets), masks, margin, device=args.device, method=args.method,
+                                 spp=args.spp)
         result = fit(args.scene, list(args.targets), materials, params, method=args.method, solver=args.solver,
                      per_channel=not args.grey, bounded=args.bounded, loss=args.loss, masks=masks, sigma=args.sigma,
                      ceiling=args.ceiling, max_steps=args.max_steps, x64=not args.float32, device=args.device,

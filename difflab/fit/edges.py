@@ -24,22 +24,21 @@ from numpy.lib.stride_tricks import sliding_window_view
 from ..errors import DifflabError, FitError
 
 
-def check_margin(value, where: str = "margin") -> int:
-    """`value` as a margin in pixels, an integer >= 0 (a bool is not one), else FitError naming `where`."""
+def check_margin(value, where: str = "margin", given=None) -> int:
+    """`value` as a margin in pixels, an integer >= 0 (a bool is not one), else FitError naming `where`
+    and what was given (`given`, else `value`)."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
-        raise FitError(f"{where}: expected an integer number of pixels >= 0, got {value!r}")
+        raise FitError(f"{where}: expected an integer number of pixels >= 0, got {value if given is None else given!r}")
     return int(value)
 
 
 def margin_text(text: str, where: str = "--edge-margin") -> int:
-    """A margin read from the command line ("2"): an integer >= 0, else FitError naming `where` and the text."""
+    """A margin read from the command line ("2"): `check_margin` of its integer, naming the text."""
     try:
         value = int(text.strip())
     except ValueError:
-        value = -1
-    if value < 0:
-        raise FitError(f"{where}: expected an integer number of pixels >= 0, got {text!r}")
-    return value
+        value = None
+    return check_margin(value, where, text)
 
 
 def region_keys(gbuffer) -> list[np.ndarray]:
@@ -66,7 +65,7 @@ def _window(values: np.ndarray, margin: int, reduce) -> np.ndarray:
     return out
 
 
-def interior_mask(source, *, margin: int = 2, device=None) -> np.ndarray:
+def interior_mask(source, *, margin: int = 2, device=None, method=None, spp=None) -> np.ndarray:
     """(H, W) bool: True at the pixels at least `margin` pixels (in rows and columns) from every edge,
     i.e. every sample of the pixel and of its neighbours up to `margin` away shows one region (see
     the module doc), and at least `margin` from the image's border, which counts as an edge (a
@@ -83,6 +82,8 @@ def interior_mask(source, *, margin: int = 2, device=None) -> np.ndarray:
             (Mitsuba's default gaussian: radius 2) and a silhouette that difflab's tessellated
             sphere places up to half a pixel off.
         device: where a scene is rendered ("cpu" default; a CompiledScene renders on its own).
+        method, spp: a scene's record as a fit given them makes it ("raster" / "raytrace", samples
+            per pixel; None: the scene's own), as `render_frame` takes them.
     Raises FitError for a margin that is not an integer >= 0 (naming `margin`); RenderError for a
     scene that cannot be rendered, or a Frame that kept no G-buffer.
     """
@@ -93,7 +94,8 @@ def interior_mask(source, *, margin: int = 2, device=None) -> np.ndarray:
     if isinstance(source, Frame):
         frame = source
     else:
-        frame = render_frame(source, image=False, **({} if device is None else {"device": device}))
+        frame = render_frame(source, image=False, method=method, spp=spp,
+                             **({} if device is None else {"device": device}))
     gbuffer = frame.gbuffer
     side = gbuffer.spp_side
     height, width = gbuffer.mask.shape[0] // side, gbuffer.mask.shape[1] // side
@@ -108,12 +110,14 @@ def interior_mask(source, *, margin: int = 2, device=None) -> np.ndarray:
     return keep
 
 
-def margin_masks(scene, targets, masks, margin: int, device=None) -> list[np.ndarray] | None:
+def margin_masks(scene, targets, masks, margin: int, device=None, method=None, spp=None) -> list[np.ndarray] | None:
     """Per view of `targets` (`fit`'s forms: images, paths, (image, overrides) pairs), its mask
     (`masks`: None, one for all or one per view; arrays or files) intersected with the
-    `interior_mask` of the view's scene (`scene` under the view's camera / lights); `masks` as given
-    when margin is 0. What `difflab fit --edge-margin` and a batch line's edge_margin give the fit."""
+    `interior_mask` of the view's scene (`scene` under the view's camera / lights, recorded with the
+    fit's `method` and `spp`: None, the scene's); `masks` as given when margin is 0. What `difflab fit
+    --edge-margin` and a batch line's edge_margin give the fit."""
     from ..renderers.compile import as_scene
+    from ..scene import RenderSettings
     from .targets import normalise_targets, per_view, view_mask
 
     margin = check_margin(margin, "edge_margin")
@@ -123,11 +127,16 @@ def margin_masks(scene, targets, masks, margin: int, device=None) -> list[np.nda
         scene = as_scene(scene)
     except DifflabError as exc:
         raise FitError(f"scene: {exc}") from None
+    try:  # the fit's method and spp, checked as the fit checks them
+        RenderSettings.parse({**scene.render.to_dict(), **({} if method is None else {"method": method}),
+                              **({} if spp is None else {"spp": spp})}, "")
+    except DifflabError as exc:
+        raise FitError(str(exc)) from None
     views = normalise_targets(targets)
     out = []
     for i, ((_, overrides), mask) in enumerate(zip(views, per_view(masks, len(views), "masks"))):
         view = scene.with_overrides(camera=overrides.get("camera"), lights=overrides.get("lights")) \
             if overrides else scene
-        interior = interior_mask(view, margin=margin, device=device)
+        interior = interior_mask(view, margin=margin, device=device, method=method, spp=spp)
         out.append(interior if mask is None else interior & view_mask(mask, interior.shape, f"masks[{i}]"))
     return out
