@@ -75,8 +75,9 @@ def interior_mask(source, *, margin: int = 2, device=None, method=None, spp=None
     every pixel.
 
     Arguments:
-        source: a Scene, scene dict or scene file (rendered with its own render settings, as a fit
-            records it), a `CompiledScene`, or a `Frame` from `render_frame` (its G-buffer read).
+        source: a Scene, scene dict or scene file (rendered with its own render settings, or the
+            `method` / `spp` given), a `CompiledScene`, or a `Frame` from `render_frame` (its
+            G-buffer read).
         margin: pixels, an integer >= 0. 1 leaves out the pixels next to an edge, what a box
             filter of one pixel mixes; 2 (default) also covers a filter up to ~2 pixels wide
             (Mitsuba's default gaussian: radius 2) and a silhouette that difflab's tessellated
