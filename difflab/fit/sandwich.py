@@ -21,7 +21,9 @@ levels' binned means kept +-10-18 %), and leverage makes it ~1 / K low (HC3's co
 negligible from ~20 entries up).
 
 It is formed only where the noise levels that the estimate of sigma read (per view, channel and
-half of the intensity range) differ beyond their spread (`unequal`): one more linearisation at the
+half of the intensity range: the targets' noise, so `weights=` are taken to be inverse variances --
+other weights leave the weighted residuals' noise unequal under the pooled form) differ beyond their
+spread (`unequal`): one more linearisation at the
 solution (`_scaled_gram`: the problem's sqrt(weights) times |r|; 0.6-1 ms on the 74k entries of a
 256 x 256 sphere); elsewhere s^2 (J^T J)^-1 is within ~15 % of it (`unequal`). Not with sigma given
 (one number: the noise is declared equal), nor where it is unknown, nor for a texture fit, dense
