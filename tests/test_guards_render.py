@@ -11,8 +11,9 @@ from conftest import scene_dict
 from difflab import MeshError, RenderError, Scene, TextureError, compile_scene, limits, render, render_frame
 from difflab.geometry import load_mesh
 from difflab.guards import check_image, check_render, likely_causes, nonfinite_pixels, tree_shape
-from difflab.renderers.launch import (BANDS_PER_THREAD, PASS_POOL_MIN_SAMPLES, RASTER_POOL_MIN_SAMPLES, cpu_threads,
-                                     pass_threads, raster_threads)
+from difflab.renderers.bandpool import cpu_threads
+from difflab.renderers.launch import (BANDS_PER_THREAD, PASS_POOL_MIN_SAMPLES, RASTER_POOL_MIN_SAMPLES, pass_threads,
+                                     raster_threads)
 from difflab.renderers.raytrace.record import sized_tree
 from difflab.renderers.texture.store import TextureStore
 

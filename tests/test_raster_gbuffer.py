@@ -15,7 +15,7 @@ from conftest import scene_dict
 from test_raster_spheres import sphere_scene
 from difflab import RenderError, compile_scene, render_frame, save_image
 from difflab._warp import wp
-from difflab.renderers import launch
+from difflab.renderers import bandpool, launch
 from difflab.renderers.api import fit_frame
 from difflab.renderers.raster import coverage, driver, shade
 from difflab.renderers.camera import camera_struct
@@ -80,6 +80,7 @@ def test_per_sample_passes_split_over_threads_give_the_one_thread_frame(tmp_path
     monkeypatch.delenv("DIFFLAB_THREADS", raising=False)
     monkeypatch.setattr(launch, "PASS_POOL_MIN_SAMPLES", 1)
     monkeypatch.setattr(launch, "cpu_threads", lambda: 3)  # 3 bands (the 20 rows dealt in blocks), whatever the machine
+    monkeypatch.setattr(bandpool, "cpu_threads", lambda: 3)  # (and 3 threads to run them)
     launched, real_row_bands = [], launch.row_bands
     monkeypatch.setattr(launch, "row_bands", lambda n, k: launched.append(k) or real_row_bands(n, k))
     compiled = compile_scene(textured_scene(tmp_path, shading, 1))
@@ -99,6 +100,7 @@ def test_a_zbuffer_drawn_in_two_halves_gives_the_one_thread_frame_and_leaves_bot
     monkeypatch.delenv("DIFFLAB_THREADS", raising=False)
     monkeypatch.setattr(launch, "PASS_POOL_MIN_SAMPLES", 1)
     monkeypatch.setattr(launch, "cpu_threads", lambda: 2)
+    monkeypatch.setattr(bandpool, "cpu_threads", lambda: 2)
     halves = []
     real = driver.zbuffer
     monkeypatch.setattr(driver, "zbuffer", lambda *a, **k: halves.append(k.get("halves")) or real(*a, **k))
@@ -215,14 +217,14 @@ def test_a_smaller_frame_frees_the_launches_kept_for_a_larger_one():
 
 def test_run_bands_runs_each_band_once_and_hands_a_bands_error_to_the_caller():
     seen = []
-    launch.run_bands(lambda a, b: seen.append((a, b)), [(0, 2), (2, 5), (5, 6), (6, 9)], threads=3)
+    bandpool.run_bands(lambda a, b: seen.append((a, b)), [(0, 2), (2, 5), (5, 6), (6, 9)], threads=3)
     assert sorted(seen) == [(0, 2), (2, 5), (5, 6), (6, 9)]
 
     def fail_on_second(a, b):
         if a == 2:
             raise RenderError("band 2")
     with pytest.raises(RenderError, match="^band 2$"):
-        launch.run_bands(fail_on_second, [(0, 2), (2, 5), (5, 6)], threads=2)
+        bandpool.run_bands(fail_on_second, [(0, 2), (2, 5), (5, 6)], threads=2)
 
 
 @pytest.mark.parametrize("threads", [1, 2, 3])
@@ -241,7 +243,7 @@ def test_run_phases_runs_each_phase_after_the_last_and_a_bands_error_stops_the_l
                 log.append(("end", phase, a))
         return run
     phases = [(band(0), [(0, 2), (1, 2)]), (band(1), [(k, 3) for k in range(3)]), (band(2), [(0, 1)])]
-    launch.run_phases(phases, threads)
+    bandpool.run_phases(phases, threads)
     for phase, n in enumerate((2, 3, 1)):
         assert sorted(a for event, p, a in log if event == "start" and p == phase) == list(range(n))
         first_start = min(i for i, (event, p, a) in enumerate(log) if event == "start" and p == phase)
@@ -251,7 +253,7 @@ def test_run_phases_runs_each_phase_after_the_last_and_a_bands_error_stops_the_l
         raise RenderError(f"band {a}")
     later = []
     with pytest.raises(RenderError, match="^band [01]$"):
-        launch.run_phases([(fail, [(0, 2), (1, 2)]), (lambda a, b: later.append(a), [(0, 2), (1, 2)])], threads)
+        bandpool.run_phases([(fail, [(0, 2), (1, 2)]), (lambda a, b: later.append(a), [(0, 2), (1, 2)])], threads)
     time.sleep(0.05)  # a worker that went on would have run a band by now
     assert later == []
 
@@ -259,10 +261,10 @@ def test_run_phases_runs_each_phase_after_the_last_and_a_bands_error_stops_the_l
 def test_run_bands_keeps_one_pool_per_thread_count():
     """However many bands a call has, its workers come from the pool of its thread count (a pool per
     band count once left a new set of threads behind for every short launch)."""
-    before = set(launch._pools)
+    before = set(bandpool._pools)
     for count in range(2, 10):
-        launch.run_bands(lambda a, b: None, [(i, i + 1) for i in range(count)], threads=7)
-    assert set(launch._pools) - before <= {6} and 6 in launch._pools
+        bandpool.run_bands(lambda a, b: None, [(i, i + 1) for i in range(count)], threads=7)
+    assert set(bandpool._pools) - before <= {6} and 6 in bandpool._pools
 
 
 class _FirstWaitInterrupted:
@@ -293,9 +295,9 @@ def test_an_interrupt_while_waiting_stops_bands_from_starting_and_lets_running_o
             release.wait(60)
             started.append("end")
 
-    queue = launch._BandQueue(band, [(0, 1), (1, 2), (2, 3)])
+    queue = bandpool._BandQueue(band, [(0, 1), (1, 2), (2, 3)])
     queue.finished = _FirstWaitInterrupted(queue.finished)
-    launch._pool(1).submit(queue.work)
+    bandpool._pool(1).submit(queue.work)
     assert running.wait(60)
     queue.work = lambda: None  # the caller is interrupted before it took a band
     threading.Timer(0.2, release.set).start()
@@ -308,7 +310,8 @@ def test_run_bands_over_no_band_returns():
     """No band: nothing is run and nothing waited for (the band queue once waited for ever for a
     band to finish; a daemon thread keeps a hang from stopping the test run)."""
     returned = threading.Event()
-    threading.Thread(target=lambda: (launch.run_bands(pytest.fail, [], threads=3), returned.set()), daemon=True).start()
+    threading.Thread(target=lambda: (bandpool.run_bands(pytest.fail, [], threads=3), returned.set()),
+                     daemon=True).start()
     assert returned.wait(60), "run_bands([]) did not return"
 
 
@@ -317,13 +320,13 @@ def test_a_task_started_beside_runs_once_and_join_hands_back_its_error(threads):
     """`start_beside` (the G-buffer's clearing beside the z-buffer): done exactly once by `join`,
     on a worker or on the caller, and a task's error raised there."""
     done = []
-    launch.start_beside(lambda: done.append(1), "cpu", threads).join()
+    bandpool.start_beside(lambda: done.append(1), "cpu", threads).join()
     assert done == [1]
 
     def fail():
         raise RenderError("cleared nothing")
     with pytest.raises(RenderError, match="^cleared nothing$"):
-        launch.start_beside(fail, "cpu", threads).join()
+        bandpool.start_beside(fail, "cpu", threads).join()
 
 
 @pytest.mark.parametrize("threads", [1, 2])
@@ -333,7 +336,7 @@ def test_a_joined_task_lets_go_of_what_it_captured(threads):
     handle kept them alive: a 128^2+ frame's G-buffer was reused only now and then.)"""
     held = np.zeros(4)
     ref = weakref.ref(held)
-    handle = launch.start_beside(functools.partial(held.fill, 1.0), "cpu", threads)
+    handle = bandpool.start_beside(functools.partial(held.fill, 1.0), "cpu", threads)
     handle.join()
     del held
     assert ref() is None

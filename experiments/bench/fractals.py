@@ -26,7 +26,7 @@ import warp as wp
 
 from difflab.fractals import mandelbrot
 from difflab.io import write_json_atomic
-from difflab.renderers.launch import cpu_threads
+from difflab.renderers.bandpool import cpu_threads
 
 RESULTS = Path(__file__).resolve().parents[1] / "results" / "bench_fractals.json"
 

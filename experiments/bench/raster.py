@@ -36,7 +36,7 @@ import difflab
 from difflab.geometry import TriMesh, save_mesh
 from difflab.io import write_json_atomic
 from difflab.renderers.compile import object_mesh
-from difflab.renderers.launch import cpu_threads
+from difflab.renderers.bandpool import cpu_threads
 
 sys.path.insert(0, str(Path(__file__).parent))
 import mesa  # noqa: E402

@@ -40,7 +40,7 @@ import warp
 import difflab
 from difflab.io import write_json_atomic
 from difflab.renderers.camera import camera_frame
-from difflab.renderers.launch import cpu_threads
+from difflab.renderers.bandpool import cpu_threads
 from difflab.geometry import solid_pieces
 from difflab.renderers.raytrace.itembuffer import forget_item_buffer
 from difflab.renderers.raytrace.selfcross import passes_through_itself

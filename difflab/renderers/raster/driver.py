@@ -27,9 +27,9 @@ from .gbuffer import filled, gbuffer_arrays, lit_fields, point_fields, to_gbuffe
 from ..camera import camera_struct
 from ..frame import Frame, box_downsample
 from ..host import host_empty, to_host
+from ..bandpool import run_bands, run_phases, start_beside
 from ..launch import (band_plan, dealt_bands, halved_zbuffer, launch_chunks, launch_dealt, launch_kept, launch_parts,
-                      launch_row_loops, load_kernels, part_count, pass_threads, raster_threads, run_bands, run_phases,
-                      start_beside)
+                      launch_row_loops, load_kernels, part_count, pass_threads, raster_threads)
 from ..trace import object_kinds
 
 
@@ -165,7 +165,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     a 256^2 frame's z-buffer on one thread); a sample's key is then the lesser of its two, which its
     reader takes (`resolve.resolve_into`), the same as one z-buffer's (min is order-free). Then the
     same threads call `then(tris, key, k, n)` for the pass's bands of rows dealt in blocks (band k
-    of n, `launch.dealt_bands`) as soon as both halves are drawn (`launch.run_phases`)."""
+    of n, `launch.dealt_bands`) as soon as both halves are drawn (`bandpool.run_phases`)."""
     device, arrays = compiled.device, compiled.arrays
     load_kernels(device, clip.assemble_kernel, coverage.raster_kernel)  # before two threads launch them
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
