@@ -199,7 +199,7 @@ def test_texel_gradients_match_warp_finite_differences(tmp_path):
 
 
 def test_choose_method_sends_texels_with_the_scene_s_image_model(tmp_path):
-    from difflab.fit.setup import choose_method
+    from difflab.fit.arguments import choose_method
     from test_texture_fit import quad_scene
 
     traced = textured_scene(tmp_path, random_texels(1))

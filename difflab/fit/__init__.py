@@ -20,7 +20,7 @@ _EXPORTS = {
     "FitOptions": "options", "SOLVERS": "options", "FitResult": "result", "fit": "engine", "fit_material": "engine",
     "fit_scene": "engine", "solve": "engine", "fit_batch": "batch", "Identifiability": "identifiability", "identify": "identifiability",
     "MaterialTable": "materials", "KINDS": "params", "DEFAULT_PARAMS": "params", "Param": "params", "evaluate_tree": "raytree",
-    "tree_to_jax": "raytree", "METHODS": "setup", "SceneSetup": "setup", "Setup": "setup",
+    "tree_to_jax": "raytree", "METHODS": "arguments", "SceneSetup": "setup", "Setup": "setup",
     "shade_gbuffer": "shading", "fit_texture": "texture_fit", "texture_view": "texture_fit",
 }
 __all__ = sorted(_EXPORTS)

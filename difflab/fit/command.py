@@ -45,8 +45,8 @@ from ..errors import EXIT_MODEL_MISMATCH, EXIT_NOT_CONVERGED, EXIT_NOT_JUDGED, E
 
 def ceiling_value(text: str):
     """argparse type of --ceiling: a number > 0, or "none" (also "inf"): no ceiling -- the API's
-    rule (`setup.check_ceiling`), read from text."""
-    from .setup import check_ceiling
+    rule (`arguments.check_ceiling`), read from text."""
+    from .arguments import check_ceiling
 
     word = text.strip().lower()
     try:

@@ -178,7 +178,7 @@ def fit(scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None, o
 
     where model re-forms the image in JAX from what Warp recorded once per view: the G-buffer
     ("raster") or the ray tree ("raytrace"; reflections, refractions, Beer absorption), chosen from
-    the scene unless `method` says (see `setup.py`). Geometry, light positions, shadows, the index of
+    the scene unless `method` says (see `arguments.py`). Geometry, light positions, shadows, the index of
     refraction and the tree's shape stay fixed.
 
     Arguments:

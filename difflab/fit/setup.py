@@ -2,21 +2,13 @@
 the parameter layout and the device problem. Every front end (`fit_material`, `fit_scene`,
 `fit_batch`, `identify`) builds one `Setup`; only the solve differs.
 
-The image model: "raytrace" re-forms the Whitted ray tracer's image from each view's recorded ray
-tree (`raytree.py`), "raster" the rasterizer's from its G-buffer (`shading.py`). Unless told, the
-scene decides: the ray tree when the scene is ray-traced, when any material it uses has kr or kt > 0
-(reflections or transparent shadows can carry a fitted material's colour to other pixels), or when a
-fitted material has an image texture whose texels are not fitted; else the G-buffer. Fitted texels
-go with that image model (`texels.py`: the G-buffer's samples and the ray tree's nodes both carry
-the uv their texture was read at).
+The image model is chosen, and the arguments checked, in `arguments.py`.
 """
 
 from __future__ import annotations
 
 import copy
 import dataclasses
-import math
-import numbers
 import time
 
 import equinox as eqx
@@ -30,6 +22,7 @@ from ..renderers.api import as_scene, fit_frame
 from ..renderers.compile import CompiledScene
 from ..renderers.launch import resolve_device
 from ..scene import RenderSettings
+from .arguments import check_ceiling, check_number, check_smoothness, choose_method
 from .ceiling import float_ceiling, primary_objects, refuse_values_above
 from .materials import MaterialTable
 from .noise import quantisation
@@ -42,52 +35,6 @@ from .stats import FLOAT_SIGMA
 from .result import ResultCode
 from .targets import empty_detail, nonfinite_count, nonfinite_detail, prepared_targets
 from .texels import TexelSource, texture_starts, wants_texels
-
-METHODS = ("raster", "raytrace")
-
-
-def choose_method(scene, materials, method, texels=False) -> str:
-    """The image model: `method` when given, else from the scene (see the module docstring);
-    `texels`: a texture is fitted (the G-buffer, unless the scene needs the ray tree)."""
-    if method is not None:
-        if method not in METHODS:
-            raise FitError(f"method: expected one of {', '.join(METHODS)} (or None: from the scene), got {method!r}")
-        return method
-    used = {obj.material for obj in scene.objects}
-    if scene.render.method == "raytrace" or any(scene.materials[m].kr > 0 or scene.materials[m].kt > 0 for m in used):
-        return "raytrace"
-    if texels:
-        return "raster"
-    if any(scene.materials[m].texture is not None for m in materials):
-        return "raytrace"
-    return "raster"
-
-
-def check_ceiling(value):
-    """None (detect), False (none: also inf), or a finite number > 0 as a float; FitError otherwise."""
-    if value is None or value is False:
-        return value
-    if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) and value == math.inf:
-        return False
-    return _check_number(value, "ceiling")
-
-
-def _check_number(value, name, *, allow_none=False):
-    """A finite number > 0 as a float (None when allowed), or FitError naming the argument."""
-    if value is None and allow_none:
-        return None
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or not np.isfinite(value) or value <= 0:
-        raise FitError(f"{name}: must be a finite number > 0, got {value!r}")  # (numpy scalars are numbers.Real)
-    return float(value)
-
-
-def _check_smoothness(value, textures) -> float:
-    """The texture prior's weight: a finite number >= 0, and 0 unless a texture is fitted."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
-        raise FitError(f"smoothness: must be a finite number >= 0, got {value!r}")
-    if value > 0 and not textures:
-        raise FitError("smoothness: a prior on texels, but no 'texture' is among the params")
-    return float(value)
 
 
 class Setup:
@@ -104,8 +51,8 @@ class Setup:
                  threads=None):
         if loss not in LOSSES:
             raise FitError(f"loss: unknown loss {loss!r}; known: {', '.join(LOSSES)}")
-        loss_scale = _check_number(loss_scale, "loss_scale")
-        self.sigma_given = _check_number(sigma, "sigma", allow_none=True)
+        loss_scale = check_number(loss_scale, "loss_scale")
+        self.sigma_given = check_number(sigma, "sigma", allow_none=True)
         self.sigma_fallback = None
         ceiling = check_ceiling(ceiling)
         for name, flag in (("per_channel", per_channel), ("bounded", bounded), ("x64", x64)):
@@ -126,7 +73,7 @@ class Setup:
                                            per_channel=per_channel, bounded=bounded,
                                            texture_shapes={k: v.shape[:2] for k, v in self.textures.items()})
         self._check_init_keys(init)
-        self.smoothness = _check_smoothness(smoothness, self.textures)
+        self.smoothness = check_smoothness(smoothness, self.textures)
         self.texel_source = TexelSource.from_layout(self.layout, scene)
         if self.method == "raster":
             fitted = {scene.material_names[p.index] for p in self.layout if p.shape is not None}
