@@ -253,3 +253,24 @@ def test_cast_shadows_are_edges_and_the_terminator_is_not():
     assert np.count_nonzero(on_sphere & (hit_y < 0.9)) >= 5  # and so is the sphere below its equator (y = 1)
     mask = interior_mask(d, margin=margin)
     assert np.count_nonzero(mask != expected) <= 2
+
+
+def test_the_edge_margin_mask_is_of_the_image_model_the_fit_chooses():
+    """A Gouraud-rasterized checker floor with kr > 0: the fit re-forms it from the ray tree
+    (`arguments.choose_method`), whose Phong record keeps the checker cells, so without --method the
+    edge-margin mask is the ray tree's interior (cell edges left out) and not the raster record's
+    (no cell edges: every pixel but the border ring)."""
+    d = {"camera": {"eye": [0, 4, 0], "target": [0, 0, 0], "up": [0, 0, -1], "fov_y": 60, "width": SIZE, "height": SIZE},
+         "lights": [{"type": "directional", "direction": [0, -1, 0], "intensity": [1, 1, 1]}],
+         "materials": {"floor": {"kd": [0.8, 0.8, 0.8], "kr": 0.2, "checker": {"size": 1.0, "kd2": [0.1, 0.1, 0.1]}}},
+         "objects": [{"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "floor"}],
+         "render": {"method": "raster", "shading": "gouraud"}}
+    target = np.zeros((SIZE, SIZE, 3))
+    traced, rastered = (interior_mask(d, margin=1, method=m) for m in ("raytrace", "raster"))
+    assert np.count_nonzero(rastered) == (SIZE - 2) ** 2  # the border ring only
+    assert np.count_nonzero(traced) < 0.8 * (SIZE - 2) ** 2  # 7 cell lines each way, 3 pixels wide
+    for materials in (None, ["floor"]):
+        assert np.array_equal(margin_masks(d, [target], None, 1, materials=materials)[0], traced)
+    assert np.array_equal(margin_masks(d, [target], None, 1, method="raster")[0], rastered)  # as told
+    d["materials"]["floor"]["kr"] = 0.0  # now the fit keeps the G-buffer
+    assert np.array_equal(margin_masks(d, [target], None, 1)[0], rastered)

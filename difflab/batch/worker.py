@@ -38,7 +38,8 @@ def fit_job(spec: dict, threads: int | None = None):
     masks = None if all(m is None for m in masks) else masks
     if spec.get("edge_margin"):  # the views' interior masks, inside their own (`fit.edges`)
         masks = margin_masks(spec["scene"], targets, masks, spec["edge_margin"], device=spec["solver"].get("device"),
-                             method=spec.get("method"), spp=spec["solver"].get("spp"))
+                             method=spec.get("method"), spp=spec["solver"].get("spp"), materials=spec.get("material"),
+                             params=spec.get("params"))
     options = {**spec["solver"], "init": spec["init"] or None, "history": False, "progress": False, "threads": threads,
                "masks": masks}
     if "params" in spec:

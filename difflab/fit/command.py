@@ -159,7 +159,7 @@ def run(args) -> int:
     try:
         if margin:  # the interior of the record the fit makes
             masks = margin_masks(args.scene, list(args.targets), masks, margin, device=args.device, method=args.method,
-                                 spp=args.spp)
+                                 spp=args.spp, materials=materials, params=params)
         result = fit(args.scene, list(args.targets), materials, params, method=args.method, solver=args.solver,
                      per_channel=not args.grey, bounded=args.bounded, loss=args.loss, masks=masks, sigma=args.sigma,
                      ceiling=args.ceiling, max_steps=args.max_steps, x64=not args.float32, device=args.device,

@@ -111,15 +111,21 @@ def interior_mask(source, *, margin: int = 2, device=None, method=None, spp=None
     return keep
 
 
-def margin_masks(scene, targets, masks, margin: int, device=None, method=None, spp=None) -> list[np.ndarray] | None:
+def margin_masks(scene, targets, masks, margin: int, device=None, method=None, spp=None, materials=None,
+                 params=None) -> list[np.ndarray] | None:
     """Per view of `targets` (`fit`'s forms: images, paths, (image, overrides) pairs), its mask
     (`masks`: None, one for all or one per view; arrays or files) intersected with the
-    `interior_mask` of the view's scene (`scene` under the view's camera / lights, recorded with the
-    fit's `method` and `spp`: None, the scene's); `masks` as given when margin is 0. What `difflab fit
-    --edge-margin` and a batch line's edge_margin give the fit."""
+    `interior_mask` of the view's scene (`scene` under the view's camera / lights, recorded as the
+    fit of `materials` / `params` (None: `fit`'s defaults) records it: with its `spp` (None: the
+    scene's) and its image model, `method` or the one the fit chooses, `arguments.choose_method`);
+    `masks` as given when margin is 0. What `difflab fit --edge-margin` and a batch line's
+    edge_margin give the fit."""
     from ..renderers.compile import as_scene
     from ..scene import RenderSettings
+    from .arguments import choose_method
+    from .params import DEFAULT_PARAMS, fitted_materials
     from .targets import normalise_targets, per_view, view_mask
+    from .texels import wants_texels
 
     margin = check_margin(margin, "edge_margin")
     if margin == 0:
@@ -128,6 +134,8 @@ def margin_masks(scene, targets, masks, margin: int, device=None, method=None, s
         scene = as_scene(scene)
     except DifflabError as exc:
         raise FitError(f"scene: {exc}") from None
+    method = choose_method(scene, fitted_materials(scene, materials), method,
+                           wants_texels(DEFAULT_PARAMS if params is None else params))
     try:  # the fit's method and spp, checked as the fit checks them
         RenderSettings.parse({**scene.render.to_dict(), **({} if method is None else {"method": method}),
                               **({} if spp is None else {"spp": spp})}, "")
