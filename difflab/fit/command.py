@@ -94,7 +94,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--material", action="append", required=True,
                    help="material(s) to fit: a name, or several comma-separated (or the option repeated)")
     p.add_argument("--method", choices=("raster", "raytrace"), default=None,
-                   help="image model: the G-buffer (raster) or the recorded ray tree (default: the scene's)")
+                   help="image model: the G-buffer (raster) or the recorded ray tree (default: the ray tree for "
+                        "a ray-traced scene, a mirror or glass (kr or kt > 0) or a textured material; else the G-buffer)")
     p.add_argument("--sigma", type=float, default=None, help="the targets' pixel noise (default: estimated)")
     p.add_argument("--ceiling", type=ceiling_value, default=None, metavar="VALUE|none",
                    help="where the targets clip (their values there are censored), or none: they do not (default: 1 "
