@@ -24,7 +24,7 @@ It is formed only where the noise levels that the estimate of sigma read (per vi
 half of the intensity range: the targets' noise, so `weights=` are taken to be inverse variances --
 other weights leave the weighted residuals' noise unequal under the pooled form) differ beyond their
 spread (`unequal`): one more linearisation at the
-solution (`_scaled_gram`: the problem's sqrt(weights) times |r|; 0.6-1 ms on the 74k entries of a
+solution (`_scaled_gram`: the problem's sqrt(weights) times r; 0.6-1 ms on the 74k entries of a
 256 x 256 sphere); elsewhere s^2 (J^T J)^-1 is within ~15 % of it (`unequal`). Not with sigma given
 (one number: the noise is declared equal), nor where it is unknown, nor for a texture fit, dense
 or matrix-free (the sparse path of `stats.covariance_diagonal` keeps the pooled form, and so does a
@@ -83,8 +83,7 @@ def noise_middle(setup, at, r: tuple, levels, counted: int) -> np.ndarray | None
     if levels is None or any(p.shape is not None for p in setup.layout) or not unequal(levels):
         return None
     scales, total = [], 0.0
-    for view, part in zip(setup.problem.views, r):
-        part = np.abs(part)
+    for view, part in zip(setup.problem.views, r):  # (r itself: its rows enter J^T diag(r^2) J squared)
         scales.append(part.astype(view.target.dtype, copy=False))
         total += float(np.einsum("ij,ij->", part, part))
     if not total > 0:
