@@ -15,7 +15,7 @@ from difflab.renderers.raytrace.adaptive import raytrace_adaptive
 from difflab.renderers.raytrace.optics import fresnel, refract
 from difflab.vocabulary import FRESNEL_EXACT, FRESNEL_SCHLICK
 from difflab.fit import evaluate_tree
-from difflab.renderers.trace import ray_plane, ray_sphere
+from difflab.renderers.intersect import ray_plane, ray_sphere
 
 wp.set_module_options({"enable_backward": False})
 ORTHO = {"eye": [0, 0, 5], "target": [0, 0, 0], "projection": "orthographic", "ortho_height": 2.4,

@@ -23,11 +23,12 @@ from ..limits import require_triangles
 from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Scene, Sphere, load_scene
 from .host import host_carved, host_empty
+from .intersect import SceneGeomW
 from .launch import resolve_device
 from .soup import PER_FACE, SOUP_DTYPES, device_soup, host_aliased, raster_room, soup_with_room, triangle_soup
 from .tessellate import AnalyticParts, plane_uv_anchor
 from .texture.store import TextureStore, scene_textures
-from .trace import RAY_OFFSET_ULPS, SceneGeomW
+from .trace import RAY_OFFSET_ULPS
 
 RASTER_SOUP = "raster soup"  # the key in CompiledScene.built of the mesh and analytic triangles (`raster`)
 RASTER_ROOM = "raster room"  # ... and of the host arrays the mesh fields are the first rows of (`soup_with_room`),

@@ -4,7 +4,7 @@ primary visibility of the mesh triangles from the rasterizer's z-buffer instead 
 The rasterizer's stages 1-3 (clip, assemble, z-buffer) run over the mesh triangles only, on the
 sample grid, and leave per sample the nearest triangle (its *hint*). A primary ray then finds
 
-- the nearest sphere or plane exactly, as every ray does (`trace.analytic_hit`);
+- the nearest sphere or plane exactly, as every ray does (`intersect.analytic_hit`);
 - the nearest mesh triangle before it from its hint A, intersected with the BVH's own watertight
   test (Woop, Benthin and Wald 2013: the same t, u, v bits as `mesh_query_ray`), *provided the hint
   is unambiguous*: A is hit with every barycentric at least BARY_MARGIN (so no triangle sharing
@@ -29,7 +29,7 @@ enters, a front face, and the back faces change no hint -- except, as without cu
 thinner than the fixed-point snapping (whose snapped winding may flip). Otherwise every triangle
 is drawn.
 
-An ambiguous sample asks the BVH (`trace.mesh_hit`), so the hit is the BVH's own everywhere --
+An ambiguous sample asks the BVH (`intersect.mesh_hit`), so the hit is the BVH's own everywhere --
 except where a triangle no sample of the 3 x 3 neighbourhood sees (thinner than a sample) crosses
 the sample within the rasterizer's fixed-point snapping, where a crack hides a surface less than
 PLANE_GAP in front of the one it shows, or where two surfaces coincide (z-fighting, which the BVH
@@ -46,10 +46,10 @@ import numpy as np
 from ..._warp import wp
 from ...geometry import solid_pieces
 from ..camera import camera_frame, camera_struct
+from ..intersect import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triangle_hit, woop_triangle
 from ..launch import load_kernels
 from ..raster.coverage import NO_HIT
 from ..raster.driver import mark_key_cleared, zbuffer
-from ..trace import HitW, SceneGeomW, analytic_hit, finish_hit, mesh_hit, triangle_hit, woop_triangle
 from .selfcross import passes_through_itself
 
 wp.set_module_options({"enable_backward": False})

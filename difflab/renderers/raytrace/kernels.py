@@ -39,9 +39,9 @@ from ..._warp import wp
 from ...lighting.warp_model import FogW, LightW, MaterialW, ambient_term, fog_blend, light_term, light_vector
 from ...vocabulary import MAX_DEPTH_LIMIT
 from ..camera import CameraW, line_point
+from ..intersect import HIT_NONE, HitW, SceneGeomW, closest_hit
 from ..launch import dealt_row
-from ..trace import HIT_NONE, HitW, SceneGeomW, closest_hit, count_shadow_crossings, hit_from, hit_point, normal_at, \
-    shadow_ray, spawn_origin
+from ..trace import count_shadow_crossings, hit_from, hit_point, normal_at, shadow_ray, spawn_origin
 from .itembuffer import ItemBufferW, item_hit
 from .lightbuffer import LightBufferW, buffered_visibility
 from .medium import primary_medium

@@ -35,8 +35,9 @@ import numpy as np
 from ..._warp import wp
 
 from ...lighting.warp_model import MaterialW
-from ..trace import HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, MAX_SHADOW_CROSSINGS, SHADOW_CUT, SHADOW_GOES_ON, SceneGeomW, \
-    closest_hit, finish_hit, max_abs, no_hit, ray_plane, ray_sphere, shadow_step, triangle_hit, woop_triangle
+from ..intersect import HIT_PLANE, HIT_SPHERE, HIT_TRIANGLE, SceneGeomW, closest_hit, finish_hit, no_hit, ray_plane, \
+    ray_sphere, triangle_hit, woop_triangle
+from ..trace import MAX_SHADOW_CROSSINGS, SHADOW_CUT, SHADOW_GOES_ON, max_abs, shadow_step
 
 wp.set_module_options({"enable_backward": False})
 
@@ -55,7 +56,7 @@ class LightBufferW:
     opaque: int  # 1: no surface of the scene has kt > 0 (a shadow ray stops at its first blocker)
     light_cell0: wp.array(dtype=wp.int32)
     cell_start: wp.array(dtype=wp.int32)
-    kind: wp.array(dtype=wp.int32)  # trace.HIT_TRIANGLE / HIT_SPHERE / HIT_PLANE
+    kind: wp.array(dtype=wp.int32)  # intersect.HIT_TRIANGLE / HIT_SPHERE / HIT_PLANE
     index: wp.array(dtype=wp.int32)
     near: wp.array(dtype=float)  # lower bound of the candidate's grown surface's distance to the light
     scale: wp.array(dtype=float)  # per light: max(|light|, `objects_scale`), what its lists' DILATION is a fraction of
@@ -106,7 +107,7 @@ def follows_cell(lb: LightBufferW, q: int, light_p: wp.vec3, origin: wp.vec3, l:
 def buffered_hit(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(dtype=wp.vec3),
                  faces: wp.array2d(dtype=wp.int32), q: int, light_p: wp.vec3, origin: wp.vec3, l: wp.vec3, t_max: float,
                  ignore_object: int, first: int):
-    """`trace.closest_hit(geom, origin, l, 0, t_max, ignore_object)` among the candidates of origin's
+    """`intersect.closest_hit(geom, origin, l, 0, t_max, ignore_object)` among the candidates of origin's
     cell of light q: the same tests (`ray_sphere`, `ray_plane`, the BVH's `woop_triangle` with its
     0 <= t < t_max), the same choice (the nearest sphere or plane, a sphere before a plane and the
     lower index at equal t; a triangle only when strictly nearer) -- the same hit, as long as

@@ -41,8 +41,9 @@ from ..._warp import wp
 from ...lighting.warp_model import MaterialW
 from ...scene import Plane, Sphere
 from ..camera import camera_frame, half_height
+from ..intersect import HIT_NONE, HitW, SceneGeomW, closest_hit
 from ..launch import load_kernels
-from ..trace import HIT_NONE, SPAWN_GRAZING, HitW, SceneGeomW, closest_hit, hit_point, ray_offset, spawn_origin
+from ..trace import SPAWN_GRAZING, hit_point, ray_offset, spawn_origin
 from .nesting import MEDIA_DEPTH, MediaW, coincident, no_media, outward
 
 wp.set_module_options({"enable_backward": False})

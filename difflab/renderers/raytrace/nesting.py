@@ -34,8 +34,8 @@ from __future__ import annotations
 from ..._warp import wp
 
 from ...lighting.warp_model import MaterialW
-from ..trace import HIT_NONE, SPAWN_GRAZING, HitW, SceneGeomW, analytic_hit, finish_hit, ray_triangle, \
-    triangle_hit
+from ..intersect import HIT_NONE, HitW, SceneGeomW, analytic_hit, finish_hit, ray_triangle, triangle_hit
+from ..trace import SPAWN_GRAZING
 
 wp.set_module_options({"enable_backward": False})
 

@@ -15,7 +15,7 @@ from ..._warp import wp
 
 from ...guards import check_tree
 from ...lighting.warp_model import fog_params
-from ..trace import HIT_TRIANGLE, HitW
+from ..intersect import HIT_TRIANGLE, HitW
 from .nesting import medium_of
 from .surface import RayW, SplitW, SurfaceW
 from .tree import RayTree

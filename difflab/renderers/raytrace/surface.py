@@ -26,9 +26,10 @@ from ..._warp import wp
 from ...lighting.warp_model import LightW, MaterialW, checker_cell, surface_material, textured_material
 from ...vocabulary import FRESNEL_NONE
 from ..camera import CameraW, near_distance, primary_ray
+from ..intersect import HIT_PLANE, HIT_TRIANGLE, HitW, SceneGeomW
 from ..texture.sampling import TexturesW, pixel_footprint, plane_uv, plane_uv_derivatives, primary_differentials, \
     ray_footprint, sample_texture, sphere_uv, sphere_uv_jacobian, triangle_uv_derivatives
-from ..trace import HIT_PLANE, HIT_TRIANGLE, HitW, SceneGeomW, leaving_skip, ray_offset, spawn_origin
+from ..trace import leaving_skip, ray_offset, spawn_origin
 from .lightbuffer import LightBufferW
 from .nesting import MediaW, crossing
 from .optics import fresnel, reflect, refract, refracted_differential
