@@ -18,7 +18,7 @@ from difflab._warp import wp
 from difflab.geometry import uv_sphere
 from difflab.io import save_image
 from difflab.renderers.tessellate import sphere_segments
-from difflab.renderers.texture.sampling import sphere_uv_jacobian
+from difflab.renderers.texture.footprint import sphere_uv_jacobian
 
 FOREIGN = Path(__file__).parent / "data" / "foreign"
 SPHERE = {"type": "sphere", "center": [0, 1, 0], "radius": 1, "material": "red"}

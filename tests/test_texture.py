@@ -10,10 +10,10 @@ from conftest import scene_dict
 from difflab import DifflabError, RenderError, TextureError, load_image, render, render_frame
 from difflab._warp import wp
 from difflab.io import save_image
-from difflab.renderers.camera import camera_struct, projection_matrix, view_matrix
+from difflab.renderers.camera import CameraW, camera_struct, projection_matrix, view_matrix
 from difflab.renderers.api import as_scene
 from difflab.lighting.warp_model import MaterialW, target_only, textured_material
-from difflab.renderers.texture.sampling import CameraW, pixel_footprint, plane_uv_derivatives
+from difflab.renderers.texture.footprint import pixel_footprint, plane_uv_derivatives
 from difflab.demos.textures import checker_texture, compare_filters
 from difflab.renderers.texture.store import TextureStore, load_texture, mip_pyramid, sample
 

@@ -21,7 +21,8 @@ from ..renderers.api import as_scene, render, render_frame
 from ..renderers.camera import CameraW, camera_struct, primary_ray
 from ..renderers.launch import launch_rows
 from ..renderers.tessellate import plane_uv_anchor
-from ..renderers.texture.sampling import WRAPS, TexturesW, plane_uv, sample_bilinear
+from ..renderers.texture.footprint import plane_uv
+from ..renderers.texture.sampling import WRAPS, TexturesW, sample_bilinear
 from ..renderers.texture.store import TextureStore
 from .figures import image_grid
 

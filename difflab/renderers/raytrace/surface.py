@@ -27,8 +27,9 @@ from ...lighting.warp_model import LightW, MaterialW, checker_cell, surface_mate
 from ...vocabulary import FRESNEL_NONE
 from ..camera import CameraW, near_distance, primary_ray
 from ..intersect import HIT_PLANE, HIT_TRIANGLE, HitW, SceneGeomW
-from ..texture.sampling import TexturesW, pixel_footprint, plane_uv, plane_uv_derivatives, primary_differentials, \
-    ray_footprint, sample_texture, sphere_uv, sphere_uv_jacobian, triangle_uv_derivatives
+from ..texture.footprint import pixel_footprint, plane_uv, plane_uv_derivatives, primary_differentials, ray_footprint, \
+    sphere_uv, sphere_uv_jacobian, triangle_uv_derivatives
+from ..texture.sampling import TexturesW, sample_texture
 from ..trace import leaving_skip, ray_offset, spawn_origin
 from .lightbuffer import LightBufferW
 from .nesting import MediaW, crossing
@@ -66,7 +67,7 @@ class SceneW:
 class DifferentialsW:
     """A ray's differentials over one sample (Igehy 1999): how its origin and its unit direction
     change from the ray through one side of the sample to the other's, across x and across y
-    (`texture.sampling.primary_differentials`); reflection and refraction carry them on
+    (`texture.footprint.primary_differentials`); reflection and refraction carry them on
     (`child_differentials`), ignoring the surfaces' curvature."""
 
     dpdx: wp.vec3
