@@ -32,7 +32,7 @@ from .resolve import (GBufferW, PointsW, PointW, RasterMeshW, SampleW, ScreenW, 
 
 wp.set_module_options({"enable_backward": False})
 
-GEOMETRY_ONLY = wp.constant(2)  # `light_point`'s record mode of a fit's G-buffer: light geometry, no colours
+GEOMETRY_ONLY = wp.constant(2)  # `phong_gbuffer_kernel`'s record mode of a fit's G-buffer: light geometry, no colours
 
 
 @wp.struct
@@ -63,10 +63,34 @@ class LitW:
 
 
 @wp.func(inline=True)
+def light_sample(point: PointW, lighting: LightingW, q: int):
+    """Light q seen from a point: the unit direction L to it, its distance d and the shadow ray's
+    visibility s (1 without shadows, or where geo . L <= 0: no shadow ray is cast)."""
+    l, d = light_vector(lighting.lights[q], point.p)
+    s = float(1.0)
+    if lighting.shadows == 1 and wp.dot(point.geo, l) > 0.0:
+        geom = lighting.geom
+        offset = point_offset(geom, point.p)  # along geo, not the ray: Gouraud's geo is a vertex normal
+        s = light_visibility(geom, lighting.materials, point.p + offset * point.geo, l, d - offset, point.ignore,
+                             lighting.transparent)
+    return l, d, s
+
+
+@wp.func(inline=True)
+def record_geometry(point: PointW, lighting: LightingW, lit: LitW, k: int):
+    """Per light, L_p, d_p and s_p (`light_sample`) recorded as point k, and nothing else: a fit's
+    G-buffer (`GEOMETRY_ONLY`), whose image model shades the recorded geometry itself."""
+    for q in range(lighting.lights.shape[0]):
+        l, d, s = light_sample(point, lighting, q)
+        lit.light_dir[k, q] = l
+        lit.light_dist[k, q] = d
+        lit.visibility[k, q] = s
+
+
+@wp.func(inline=True)
 def light_point(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3, lit: LitW, k: int, record: int):
     """ka Ia + sum_p s_p light_term_p at a point. `record`: 0 the colour alone; 1 the colour, and
-    L_p, d_p, s_p recorded as point k; 2 (`GEOMETRY_ONLY`, a fit's record) only those recorded, the
-    colour and factor left 0 (the fit shades the recorded geometry itself).
+    L_p, d_p, s_p recorded as point k (`record_geometry` records them alone).
 
     Textured materials: `textured` = 1 where the texel is known at the point (a sample): it modulates
     its target coefficient. Otherwise (flat, Gouraud points) the colour is lit with the target
@@ -85,27 +109,19 @@ def light_point(point: PointW, lighting: LightingW, textured: int, texel: wp.vec
             mat = textured_material(mat, mat.texture_target, wp.vec3(0.0))
     total = ambient_term(mat, lighting.ambient)
     unit_total = ambient_term(unit, lighting.ambient)
-    geom = lighting.geom
     for q in range(lighting.lights.shape[0]):
-        l, d = light_vector(lighting.lights[q], point.p)
-        s = float(1.0)
-        if lighting.shadows == 1 and wp.dot(point.geo, l) > 0.0:
-            offset = point_offset(geom, point.p)  # along geo, not the ray: Gouraud's geo is a vertex normal
-            s = light_visibility(geom, materials, point.p + offset * point.geo, l, d - offset, point.ignore,
-                                 lighting.transparent)
-        if record >= 1:
+        l, d, s = light_sample(point, lighting, q)
+        if record == 1:
             lit.light_dir[k, q] = l
             lit.light_dist[k, q] = d
             lit.visibility[k, q] = s
-        if s > 0.0 and record < GEOMETRY_ONLY:
+        if s > 0.0:
             total = total + s * light_term(lighting.lights[q], mat, lighting.specular, point.normal, point.view, l, d)
             if split:
                 unit_total = unit_total + s * light_term(lighting.lights[q], unit, lighting.specular, point.normal,
                                                          point.view, l, d)
-    if not split or record == GEOMETRY_ONLY:
+    if not split:
         unit_total = wp.vec3(0.0)
-    if record == GEOMETRY_ONLY:
-        total = wp.vec3(0.0)
     return total, unit_total
 
 
@@ -126,11 +142,11 @@ def finite3(c: wp.vec3):
 
 
 @wp.func
-def light_into(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3, lit: LitW, k: int, record: int):
-    """Stage 6 at point k: its colour and texture factor (`light_point`; `record` GEOMETRY_ONLY: 0),
-    and per light its direction, distance and visibility (the G-buffer's). `lit` is zero when the
-    kernel starts: nothing is written for an empty point. Returns the colour."""
-    color, factor = light_point(point, lighting, textured, texel, lit, k, record)
+def light_into(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3, lit: LitW, k: int):
+    """Stage 6 at point k: its colour and texture factor (`light_point`), and per light its
+    direction, distance and visibility (the G-buffer's). `lit` is zero when the kernel starts:
+    nothing is written for an empty point. Returns the colour."""
+    color, factor = light_point(point, lighting, textured, texel, lit, k, 1)
     lit.color[k] = color
     if textured == 0:  # (else zero, as cleared)
         lit.factor[k] = factor
@@ -143,7 +159,7 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
     first = begin + wp.tid() * chunk
     for k in range(first, wp.min(first + chunk, end)):
         if points.material[k] >= 0:
-            unused = light_into(load_point(points, k), lighting, 0, wp.vec3(0.0), lit, k, 1)
+            unused = light_into(load_point(points, k), lighting, 0, wp.vec3(0.0), lit, k)
 
 
 @wp.kernel
@@ -154,8 +170,9 @@ def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64)
     """Stages 4 and 6 under Phong shading, one row of samples per thread: each sample resolved (its
     G-buffer entries, `resolve_into`), then lit as its own shading point, its texel sampled there
     (`light_into`); nonfinite[i] counts row i's samples whose colour has a NaN or infinite channel.
-    `record` GEOMETRY_ONLY (a fit's G-buffer): no colours (none counted), and uv and its
-    derivatives only where a texture is sampled; else 1."""
+    `record` GEOMETRY_ONLY (a fit's G-buffer): no colours (none counted; only the light geometry
+    is recorded, `record_geometry`), and uv and its derivatives only where a texture is sampled;
+    else 1."""
     i = dealt_row(row0, row_step, wp.tid())
     bad = int(0)
     for j in range(cam.width):
@@ -164,10 +181,13 @@ def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64)
                                                           int(record != GEOMETRY_ONLY), out, samples, i, j)
         if covered:
             s = i * cam.width + j
-            texel = texel_at(lighting, point.material, uv, duv_dx, duv_dy)
+            texel = wp.vec3(0.0)
             if lighting.materials[point.material].texture >= 0:  # (else zero, as cleared)
+                texel = texel_at(lighting, point.material, uv, duv_dx, duv_dy)
                 lit.texel[s] = texel
-            if not finite3(light_into(point, lighting, 1, texel, lit, s, record)):
+            if record == GEOMETRY_ONLY:
+                record_geometry(point, lighting, lit, s)
+            elif not finite3(light_into(point, lighting, 1, texel, lit, s)):
                 bad += 1
     nonfinite[i] = bad
 
