@@ -4,14 +4,14 @@ that makes of the texture coordinates (d(uv)/dx, d(uv)/dy), which drive the mip-
 
 For ray hits (the ray tracer's rule, and the rasterizer's on an analytic sphere's Phong samples; on
 triangles the rasterizer computes the same Jacobian analytically from its perspective-correct
-interpolation on its sample grid): `pixel_footprint` intersects the rays through the raster points (x +- w/2, y) and (x, y +- w/2) with the tangent
-plane at the hit and returns dp/dx, dp/dy (central differences over one sample, w pixels wide: 1 /
-side under side x side supersampling); a secondary ray carries its sample's ray differentials
-(`primary_differentials`, reflected and refracted at each surface by `raytrace.optics`) and
-`ray_footprint` moves them onto the surface it meets; and `triangle_uv_derivatives`,
-`plane_uv_derivatives` and `sphere_uv_jacobian` turn dp/dx, dp/dy into d(uv)/dx, d(uv)/dy for
-triangles, planes and spheres with the uv conventions of `scene.Plane.uv_frame` and
-`geometry.uv_sphere`.
+interpolation on its sample grid): `pixel_footprint` intersects the rays through the raster points
+(x +- w/2, y) and (x, y +- w/2) with the tangent plane at the hit and returns dp/dx, dp/dy (central
+differences over one sample, w pixels wide: 1 / side under side x side supersampling); a secondary
+ray carries its sample's ray differentials (`primary_differentials`, reflected and refracted at each
+surface by `raytrace.optics`) and `ray_footprint` moves them onto the surface it meets; and
+`triangle_uv_derivatives`, `plane_uv_derivatives` and `sphere_uv_jacobian` turn dp/dx, dp/dy into
+d(uv)/dx, d(uv)/dy for triangles, planes and spheres with the uv conventions of
+`scene.Plane.uv_frame` and `geometry.uv_sphere`.
 """
 
 from __future__ import annotations
