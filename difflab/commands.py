@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import sys
 import time
 from pathlib import Path
 
@@ -105,10 +107,25 @@ def run_fractal(args) -> int:
     refuse_unused(args, unused, f"the {args.kind} fractal (it reads {reads})")
     refuse_overwrite(args.output, force=args.force)
     options = {name: getattr(args, name) for name in used if getattr(args, name) is not None}
-    caption = fractal_figure(args.kind, Path(args.output), args.width, args.height, titled=False, order_name="--order",
-                             **options)
+    with progress_bar(args.kind, "step" if args.kind == "terrain" else "row") as progress:
+        caption = fractal_figure(args.kind, Path(args.output), args.width, args.height, titled=False,
+                                 order_name="--order", progress=progress, **options)
     print(f"wrote {args.output}: {caption}")
     return 0
+
+
+@contextlib.contextmanager
+def progress_bar(label: str, unit: str):
+    """A callback progress(done, total) that draws a tqdm bar on stderr where stderr is a terminal
+    (quiet otherwise, as `fit`'s and `fit-batch`'s bars), cleared when the block ends."""
+    from tqdm import tqdm
+
+    with tqdm(desc=label, unit=unit, leave=False, disable=None, file=sys.stderr, dynamic_ncols=True, delay=0.5) as bar:
+        def progress(done: int, total: int) -> None:
+            bar.total = total
+            bar.update(done - bar.n)
+
+        yield progress
 
 
 def add_fractal(sub) -> None:

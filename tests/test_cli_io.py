@@ -164,10 +164,11 @@ def test_bad_option_exits_2(tmp_path, capsys):
 
 @pytest.mark.parametrize("kind, flags", [("koch", ["--order", "3"]), ("cantor", ["--order", "3"]),
                                          ("mandelbrot", ["--max-iter", "64"]), ("terrain", ["--order", "3", "--seed", "2"])])
-def test_fractal_command(tmp_path, kind, flags):
+def test_fractal_command(tmp_path, kind, flags, capsys):
     out = tmp_path / f"{kind}.png"
     assert main(["fractal", kind, "-o", str(out), "--width", "64", "--height", "48", *flags]) == 0
     assert out.stat().st_size > 100
+    assert capsys.readouterr().err == ""  # no progress bar where stderr is not a terminal
 
 
 def test_demo_writes_every_figure(tmp_path):

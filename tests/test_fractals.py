@@ -286,6 +286,55 @@ def test_escape_time_is_identical_on_one_thread_and_many():
     np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_a_long_escape_run_reports_every_row_and_keeps_its_image(threads):
+    # A view far outside the set (every point escapes within two iterations) at max_iter 10^6: a row's
+    # 64 x (10^6 + 1) iterations at most exceed launch.BAND_WORK (2^25), so each row is a band of its
+    # own and is reported as it finishes, in order whichever thread ran it.
+    calls = []
+    view = {"center": (3.0, 3.0), "scale": 0.5, "max_iter": 1_000_000}
+    nu = fr.escape_time(64, 6, **view, threads=threads, progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(k, 6) for k in range(1, 7)]
+    np.testing.assert_array_equal(nu, fr.escape_time(64, 6, **view, threads=threads))
+    assert np.all((nu > 0) & (nu < 3))
+
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_an_interrupt_between_bands_starts_no_further_band(threads):
+    # Ctrl-C lands between the bands the calling thread launches (Python runs its handler there): here
+    # the second report raises it. No band starts after it; one already running on another thread ends.
+    calls = []
+
+    def interrupt_at_the_second(done, total):
+        calls.append(done)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        fr.escape_time(64, 6, center=(3.0, 3.0), scale=0.5, max_iter=1_000_000, threads=threads,
+                       progress=interrupt_at_the_second)
+    assert 2 <= len(calls) <= 1 + threads and calls[-1] < 6
+
+@pytest.mark.parametrize("render", [lambda progress: fr.mandelbrot(48, 32, max_iter=128, threads=2, progress=progress),
+                                    lambda progress: fr.julia(48, 32, max_iter=128, threads=2, progress=progress),
+                                    lambda progress: fr.mandelbulb(48, 32, threads=2, progress=progress)])
+def test_progress_counts_rows_up_to_the_height(render):
+    calls = []
+    render(lambda done, total: calls.append((done, total)))
+    done = [d for d, total in calls]
+    assert {total for d, total in calls} == {32} and done[-1] == 32
+    assert all(a < b for a, b in zip(done, done[1:])) and len(done) == 8  # the short run's bands: 4 a thread
+
+
+def test_terrain_progress_counts_its_three_steps():
+    from difflab.demos.fractals import render_set
+
+    calls = []
+    image = render_set("terrain", 32, 24, order=3, progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(1, 3), (2, 3), (3, 3)] and image.shape == (24, 32, 3)
+
+
 # 6. The Mandelbulb ---------------------------------------------------------------------------------
 
 def test_mandelbulb_renders_a_lit_shadowed_bulb():

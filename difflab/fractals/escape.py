@@ -112,12 +112,12 @@ def _view(width, height, center, scale, max_iter, device):
     return width, height, corner, step, max_iter, device
 
 
-def _escape(kind, width, height, center, scale, max_iter, c, device, threads) -> wp.array:
+def _escape(kind, width, height, center, scale, max_iter, c, device, threads, progress) -> wp.array:
     width, height, corner, step, max_iter, device = _view(width, height, center, scale, max_iter, device)
     c = check_vec("c", c, 2)
     nu = wp.empty((height, width), dtype=float, device=device)
-    launch_rows(escape_kernel, (height, width),
-                [kind, corner, wp.float64(step), wp.vec2d(*c), max_iter, nu], device, threads)
+    launch_rows(escape_kernel, (height, width), [kind, corner, wp.float64(step), wp.vec2d(*c), max_iter, nu], device,
+                threads, row_work=width * (max_iter + 1), progress=progress)  # (a row's iterations at most)
     return nu
 
 
@@ -129,7 +129,7 @@ def _colour(nu: wp.array, device: str, threads) -> np.ndarray:
 
 
 def escape_time(width: int, height: int, center=(-0.5, 0.0), scale: float = 3.0, max_iter: int = 256,
-                c=None, device: str = "cpu", threads: int | None = None) -> np.ndarray:
+                c=None, device: str = "cpu", threads: int | None = None, progress=None) -> np.ndarray:
     """Smooth escape times nu over a view of the Mandelbrot set, or of the Julia set of `c`.
 
     Arguments:
@@ -141,6 +141,8 @@ def escape_time(width: int, height: int, center=(-0.5, 0.0), scale: float = 3.0,
         max_iter: iterations before a point counts as inside (1..10^6).
         c: None for the Mandelbrot set, or (re, im) of a Julia set.
         device: "cpu" or "cuda[:N]"; threads: CPU worker threads (default all cores).
+        progress: None, or called as progress(rows_done, height) while the rows are computed, rows_done
+            increasing to height (`launch.launch_rows`: a long run in bands of ~0.1 s).
 
     Returns:
         (height, width) float32: nu > 0 for escaping points, nu = n + 1 - log2(log|z_n|) where that
@@ -148,24 +150,24 @@ def escape_time(width: int, height: int, center=(-0.5, 0.0), scale: float = 3.0,
         bounded after max_iter iterations.
     """
     kind, c = (MANDELBROT, (0.0, 0.0)) if c is None else (JULIA, c)
-    return _escape(kind, width, height, center, scale, max_iter, c, device, threads).numpy()
+    return _escape(kind, width, height, center, scale, max_iter, c, device, threads, progress).numpy()
 
 
 def mandelbrot(width: int, height: int, center=(-0.5, 0.0), scale: float = 3.0, max_iter: int = 256,
-               device: str = "cpu", threads: int | None = None) -> np.ndarray:
+               device: str = "cpu", threads: int | None = None, progress=None) -> np.ndarray:
     """The Mandelbrot set, smoothly coloured: (height, width, 3) float32 linear RGB, interior black.
 
     Arguments as for `escape_time` (center default -0.5 + 0i, a view 3 wide).
     """
-    nu = _escape(MANDELBROT, width, height, center, scale, max_iter, (0.0, 0.0), device, threads)
+    nu = _escape(MANDELBROT, width, height, center, scale, max_iter, (0.0, 0.0), device, threads, progress)
     return _colour(nu, device, threads)
 
 
 def julia(width: int, height: int, c=(-0.8, 0.156), center=(0.0, 0.0), scale: float = 3.2,
-          max_iter: int = 256, device: str = "cpu", threads: int | None = None) -> np.ndarray:
+          max_iter: int = 256, device: str = "cpu", threads: int | None = None, progress=None) -> np.ndarray:
     """The filled Julia set of z^2 + c, smoothly coloured: (height, width, 3) float32 linear RGB.
 
     Arguments as for `escape_time`; c: (re, im), default -0.8 + 0.156i (a connected "dendrite").
     """
-    nu = _escape(JULIA, width, height, center, scale, max_iter, c, device, threads)
+    nu = _escape(JULIA, width, height, center, scale, max_iter, c, device, threads, progress)
     return _colour(nu, device, threads)

@@ -155,7 +155,7 @@ def mandelbulb(width: int = 320, height: int = 240, eye=(2.0, 1.6, 2.4), target=
                fov_y: float = 40.0, lights=None, material=None, *, ambient=(0.15, 0.15, 0.18),
                background=(0.0, 0.0, 0.0), specular: str = "phong", power: float = 8.0,
                iterations: int = 10, max_steps: int = 256, shadows: bool = True, softness: float = 16.0,
-               device: str = "cpu", threads: int | None = None) -> np.ndarray:
+               device: str = "cpu", threads: int | None = None, progress=None) -> np.ndarray:
     """Render the Mandelbulb, lit by the illumination model with (soft) shadows.
 
     Arguments:
@@ -169,6 +169,8 @@ def mandelbulb(width: int = 320, height: int = 240, eye=(2.0, 1.6, 2.4), target=
         max_steps: march steps per ray (1..10^4). shadows: trace shadow rays; softness: soft-shadow
             k (> 0; penumbra narrows as k grows) or 0 for hard shadows.
         device: "cpu" or "cuda[:N]"; threads: CPU worker threads (default all cores).
+        progress: None, or called as progress(rows_done, height) while the rows are rendered, rows_done
+            increasing to height (`launch.launch_rows`: a long render in bands of ~0.1 s).
 
     Returns:
         (height, width, 3) float32 linear RGB, unclamped.
@@ -201,5 +203,6 @@ def mandelbulb(width: int = 320, height: int = 240, eye=(2.0, 1.6, 2.4), target=
     inputs = [camera_struct(camera, width, height), bulb, lights_to_warp(lights, device),
               materials_to_warp([material], device), SPECULAR_MODELS[specular], wp.vec3(*ambient),
               wp.vec3(*background), image]
-    launch_rows(mandelbulb_kernel, (height, width), inputs, device, threads)
+    launch_rows(mandelbulb_kernel, (height, width), inputs, device, threads,
+                row_work=width * bulb.iterations * bulb.max_steps, progress=progress)  # (a row's primary march at most)
     return image.numpy()

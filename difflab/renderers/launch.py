@@ -152,29 +152,49 @@ def band_plan(n_rows: int, device: str, threads: int | None = None,
     return row_bands(n_rows, per_thread * threads)
 
 
-def parallel_bands(run_band, n_rows: int, device: str, threads: int | None = None,
-                   per_thread: int = BANDS_PER_THREAD) -> None:
-    """Call `run_band(begin, end)` over row bands: all cores on the CPU, a single band on CUDA.
-
-    `run_band` must launch Warp kernels that touch only rows [begin, end) of their outputs, so that
-    bands never write the same element and the result is bitwise identical to one launch.
-    """
-    run_bands(run_band, band_plan(n_rows, device, threads, per_thread), threads)
+# Work of one band of `launch_rows` given its `row_work`: 2^25 inner-loop iterations, ~0.1 s of one
+# core for the escape-time kernel (3e8 iterations/s where no point escapes) and for the Mandelbulb's
+# (its rows' primary march bound, 640 x 10 x 256 a row at the defaults: 20 rows, 4.6 ms each; 2-core machine).
+BAND_WORK = 2**25
 
 
-def launch_rows(kernel, shape: tuple[int, int], inputs: list, device: str, threads: int | None = None) -> None:
+def launch_rows(kernel, shape: tuple[int, int], inputs: list, device: str, threads: int | None = None, *,
+                row_work: int | None = None, progress=None) -> None:
     """Launch a per-pixel `kernel` over `shape` = (rows, cols), in row bands.
 
     The kernel's first argument is `row0: int`; it runs with dim (band rows, cols) and reads its
-    pixel as (row0 + i, j).
+    pixel as (row0 + i, j). It must write only its own pixels: bands never write the same element,
+    so the result is bitwise identical to one launch, however the rows are banded.
+
+    Arguments:
+        row_work: at most how many inner-loop iterations the kernel runs over one row (the escape
+            time's cols x (max_iter + 1)): on the CPU a band then holds at most BAND_WORK of them
+            (one row at least; bands also on one thread), so that a long launch reports `progress`
+            often and a Ctrl-C is taken within a band or two (Python runs its handler between the
+            bands the calling thread launches). Default, and where that is coarser: `band_plan`.
+        progress: None, or called as progress(rows_done, rows) as bands finish (rows_done
+            increasing, the last call rows), on the thread that ran the band; on CUDA once, after
+            the launch has completed.
     """
     rows, cols = shape
+    done, lock = 0, threading.Lock()
 
     def run_band(begin: int, end: int) -> None:
+        nonlocal done
         wp.launch(kernel, dim=(end - begin, cols), inputs=[begin, *inputs], device=device)
+        if progress is not None:
+            if not device.startswith("cpu"):
+                wp.synchronize_device(device)
+            with lock:  # (counts reported in order whichever thread finishes first)
+                done += end - begin
+                progress(done, rows)
 
+    bands = band_plan(rows, device, threads)
+    if row_work is not None and device.startswith("cpu"):
+        most = max(1, BAND_WORK // max(1, row_work))  # rows a band may hold
+        bands = row_bands(rows, max(len(bands), -(-rows // most)))  # (the plan itself where its bands are no larger)
     load_kernels(device, kernel)
-    parallel_bands(run_band, rows, device, threads)
+    run_bands(run_band, bands, threads)
 
 
 # Rows a band of `launch_row_loops` takes at a time: the 256^2 bench sphere's Phong G-buffer pass
