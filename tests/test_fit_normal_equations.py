@@ -160,3 +160,26 @@ def test_box_lm_with_a_nonfinite_normal_matrix(where):
     else:
         assert lm.CODES[int(code)] == "successful" and np.all(np.asarray(x) <= 0.95)
         np.testing.assert_allclose(np.asarray(x), 0.95, atol=1e-6)
+
+
+@pytest.mark.parametrize("shrink", [0.1, 0.5])
+def test_a_rejected_step_is_cut_to_the_quadratics_fraction(shrink):
+    """`lm.shrinking_damping`: the damped step (A + lambda' D) dx = -g, D = diag(A), is `shrink` times
+    as long as lambda's in |D^(1/2) dx| -- on an ill-conditioned A (one direction 1e-6 of the
+    others, where lambda = 1e-7 barely damps), with an entry held at its bound left out."""
+    rng = np.random.default_rng(3)
+    q = np.linalg.qr(rng.normal(size=(4, 4)))[0]
+    a = q @ np.diag([1e-6, 0.5, 2.0, 3.0]) @ q.T
+    g = rng.normal(size=4)
+    g[3] = abs(g[3])  # entry 3 on its lower bound, pushed outward: held
+    x, lower, upper = np.array([0.3, 0.2, 0.1, 0.0]), np.full(4, 0.0), np.full(4, 1.0)
+    free = np.arange(4) < 3
+
+    def length(lam):
+        m = a[np.ix_(free, free)] + lam * np.diag(np.diag(a)[free])
+        return np.linalg.norm(np.sqrt(np.diag(a)[free]) * np.linalg.solve(m, -g[free]))
+
+    with jax.enable_x64(True):
+        lam = float(lm.shrinking_damping(*map(jnp.asarray, (a, g, x, lower, upper)), 1e-7, shrink))
+    assert lam > 1e-7
+    np.testing.assert_allclose(length(lam), shrink * length(1e-7), rtol=1e-6)
