@@ -31,7 +31,7 @@ from ..lighting.jax_model import (LightGeometry, LightsJ, fog_factor, light_geom
                                   sum_axis, textured_surface)
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS
 from .materials import MaterialTable
-from .problem import take_rows
+from .problem import take_rows_of
 from .texels import pixel_texels, point_texels
 
 
@@ -131,7 +131,7 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
             fog_start=np.asarray(start, real), fog_end=np.asarray(end, real), fog_density=np.asarray(density, real))
     if point_ids.size:
         rows = point_ids.astype(np.intp, copy=False)  # once, not per take
-        points = PointsJ(*(take_rows(getattr(pts, k), rows) for k in PointsJ._fields))  # (moved in place)
+        points = PointsJ(*take_rows_of([getattr(pts, k) for k in PointsJ._fields], rows))  # (moved in place)
         if not np.isfinite(points.light_dist).all():
             points = points._replace(light_dist=np.where(np.isfinite(points.light_dist), points.light_dist, np.inf))
     else:  # nothing hit: one dummy point with no material (colour 0), never used
@@ -241,7 +241,7 @@ def distinct_ids(ids: np.ndarray) -> tuple:
 
 def influence(gbuffer, material_ids, any_surface: bool) -> np.ndarray:
     """(H, W) bool: pixels whose colour depends on the fitted materials (or on any surface when
-    light intensities are fitted)."""
+    light intensities are fitted); read only (at spp 1 the latter is the G-buffer's own mask)."""
     if any_surface:
         touched = gbuffer.mask
     else:
@@ -253,6 +253,8 @@ def influence(gbuffer, material_ids, any_surface: bool) -> np.ndarray:
                 from_points = is_one_of(point_material[index], material_ids) & (gbuffer.point_weight != 0)
                 touched = touched | (gbuffer.mask & from_points.any(axis=-1))
     side = gbuffer.spp_side
+    if side == 1:  # a sample is a pixel
+        return touched
     h, w = touched.shape[0] // side, touched.shape[1] // side
     return touched.reshape(h, side, w, side).any(axis=(1, 3))
 
