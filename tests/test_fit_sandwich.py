@@ -7,7 +7,7 @@ import pytest
 from test_fit_helpers import TRUTH, make_scene, target_of
 
 import difflab
-from difflab.fit import engine, sandwich, solve
+from difflab.fit import engine, noise, sandwich, solve
 from difflab.fit.stats import covariance_diagonal, sandwich_diagonal
 
 SEEDS = 40
@@ -102,6 +102,47 @@ def test_a_given_sigma_keeps_the_pooled_form(sphere, monkeypatch):
     monkeypatch.setattr(engine, "noise_middle", lambda *args: None)
     for key in KINDS:
         np.testing.assert_array_equal(given.stderr[key], fit().stderr[key])
+
+
+def test_the_middle_starts_once_the_levels_are_read_and_gives_what_it_gives_waited_for(sphere, monkeypatch):
+    """Unequal noise: the report starts the sandwich's middle (`noise_middle`) with the levels the
+    noise estimate returns as soon as it has read them -- before its sums and its whiteness test, which
+    run while JAX forms the middle -- and the standard errors are those of a middle waited for at
+    once (nothing run beside it), bit for bit."""
+    compiled, exact = sphere
+    target = (exact + per_channel(np.random.default_rng(3), exact)).astype(np.float32)
+    events, levels = [], []
+    real_middle, real_sums, real_whiteness, real_noise = (sandwich.noise_middle, noise._sums, noise.whiteness,
+                                                          noise.views_noise)
+
+    def middle(setup, at, r, read, counted):
+        events.append("middle")
+        levels.append(read)
+        return real_middle(setup, at, r, read, counted)
+
+    def views_noise(*args):
+        out = real_noise(*args)
+        levels.append(out[4])
+        return out
+
+    monkeypatch.setattr(engine, "noise_middle", middle)
+    monkeypatch.setattr(engine, "views_noise", views_noise)
+    monkeypatch.setattr(noise, "_sums", lambda channels: events.append("sums") or real_sums(channels))
+    monkeypatch.setattr(noise, "whiteness", lambda *args: events.append("whiteness") or real_whiteness(*args))
+    fit = lambda: difflab.fit_material(compiled, [target], "red", ("ka", "kd", "ks", "n"), ceiling=False,  # noqa: E731
+                                       progress=False)
+    started = fit()
+    assert events == ["middle", "sums", "whiteness"] and levels[0] is levels[1]
+    monkeypatch.setattr(engine, "views_noise", real_noise)
+
+    def waited_for(*args):
+        matrix = real_middle(*args)()
+        return lambda: matrix
+
+    monkeypatch.setattr(engine, "noise_middle", waited_for)
+    waited = fit()
+    for key in KINDS + ("n",):
+        np.testing.assert_array_equal(started.stderr[key], waited.stderr[key])
 
 
 def test_texture_fits_keep_the_pooled_form_dense_and_matrix_free_alike(tmp_path, monkeypatch):

@@ -167,17 +167,14 @@ def _planes(image, dtype=None) -> np.ndarray:
     return np.ascontiguousarray(np.moveaxis(image, -1, 0), dtype)
 
 
-def _sums(views: list, planes) -> tuple[float, float, float, float, int, list]:
-    """(num, den, spread, square_spread, M, levels) of `estimate_sigma` from each view's `ViewPicks`
-    (None: none) and its residuals as (3, H, W) planes, in their own precision (float32 residual
-    images): the Laplacians over the box, squared in float64 where picked. levels: per view (None:
-    none) per channel (x, v, n) of `_levels` (None: no Laplacian picked), x in units of 36 times the
-    signal (one level: x = [0]), n `_count_per_level`."""
-    num = den = spread = square_spread = 0.0
-    count = 0
-    levels = []
+def _read(views: list, planes) -> list:
+    """Per view (None: none) per channel (None: no Laplacian picked) what `estimate_sigma` reads of
+    its residuals, as (picks, values, level): the channel's `Picks` (without a non-finite value), its
+    squared Laplacians there in float64 -- from the view's residuals as (3, H, W) planes, in their
+    own precision (float32 residual images), over the box -- and their levels (`_levels`)."""
+    read = []
     for view, image in zip(views, planes):
-        levels.append(None if view is None else [None, None, None])
+        read.append(None if view is None else [None, None, None])
         if view is None:
             continue
         with np.errstate(invalid="ignore", over="ignore"):  # (inf - inf: NaN; either is left out)
@@ -188,27 +185,31 @@ def _sums(views: list, planes) -> tuple[float, float, float, float, int, list]:
                 centre = (view.centre if view.centre.ndim == 2 else view.centre[c]).reshape(-1)
                 picks = _channel(np.flatnonzero(centre & np.isfinite(laplacian[c])), view.bright, view.weights, c)
                 values = None if picks is None else np.square(laplacian[c][picks.index], dtype=np.float64)
-            if picks is None:
-                continue
-            level = _levels(values, picks)
-            levels[-1][c] = (picks.x, level, _count_per_level(picks))
-            over = np.flatnonzero(values > CAP_Z2 * level.min())  # (only these can be above 9 times their level)
-            if over.size:
-                high = level[0] if picks.bright is None else np.interp(picks.bright[picks.index[over]], picks.x, level)
-                capped = values[over]
-                values[over] = np.where(capped > CAP_Z2 * high, high, capped)
-            num += float(np.sum(values if picks.weight is None else values * picks.weight))  # (no BLAS dot: slow threads)
-            den += picks.den
-            sampled = -(-picks.index.size // picks.step)  # m
-            weighted = np.full(sampled, level[0]) if picks.bright is None else \
-                np.interp(picks.bright_sample, picks.x, level)  # the share, from the sample
-            if picks.weight_sample is not None:
-                weighted *= picks.weight_sample
-            scale = picks.index.size / sampled  # M / m
-            spread += float(np.sum(weighted)) * scale
-            square_spread += float(np.sum(np.square(weighted))) * scale
-            count += picks.index.size
-    return num, den, spread, square_spread, count, levels
+            if picks is not None:
+                read[-1][c] = (picks, values, _levels(values, picks))
+    return read
+
+
+def _sums(channels: list) -> tuple[float, float, float]:
+    """(num, spread, square_spread) of `estimate_sigma` from what it read of its channels (`_read`'s
+    (picks, values, level); the values capped in place)."""
+    num = spread = square_spread = 0.0
+    for picks, values, level in channels:
+        over = np.flatnonzero(values > CAP_Z2 * level.min())  # (only these can be above 9 times their level)
+        if over.size:
+            high = level[0] if picks.bright is None else np.interp(picks.bright[picks.index[over]], picks.x, level)
+            capped = values[over]
+            values[over] = np.where(capped > CAP_Z2 * high, high, capped)
+        num += float(np.sum(values if picks.weight is None else values * picks.weight))  # (no BLAS dot: slow threads)
+        sampled = -(-picks.index.size // picks.step)  # m
+        weighted = np.full(sampled, level[0]) if picks.bright is None else \
+            np.interp(picks.bright_sample, picks.x, level)  # the share, from the sample
+        if picks.weight_sample is not None:
+            weighted *= picks.weight_sample
+        scale = picks.index.size / sampled  # M / m
+        spread += float(np.sum(weighted)) * scale
+        square_spread += float(np.sum(np.square(weighted))) * scale
+    return num, spread, square_spread
 
 
 def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True, signals=None):
@@ -242,12 +243,24 @@ def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True, signal
     return None if estimate is None else estimate[:3]
 
 
-def _estimate(views: list, planes):
-    """`estimate_sigma` from the views' `ViewPicks` and residual planes (3, H, W), with the levels
-    of `_sums` after it."""
-    num, den, spread, square_spread, count, levels = _sums(views, planes)
+def _estimate(views: list, planes, on_levels=None):
+    """`estimate_sigma` from the views' `ViewPicks` and residual planes (3, H, W), with the levels it
+    read after it: per view (None: none) per channel (None: none) (x, v, n), v the levels at
+    intensities x (in units of 36 times the signal; one level: x = [0]) and n `_count_per_level`.
+    `on_levels(levels)` is called as soon as they are read, before the sums, when there is an
+    estimate (what depends on them can start: `engine.report` dispatches the sandwich's middle)."""
+    read = _read(views, planes)
+    channels = [channel for view in read if view is not None for channel in view if channel]
+    count, den = 0, 0.0
+    for picks, _, _ in channels:
+        count, den = count + picks.index.size, den + picks.den
     if count < MIN_NOISE_PIXELS or den <= 0:
         return None
+    levels = [None if view is None else [None if channel is None else (
+        channel[0].x, channel[2], _count_per_level(channel[0])) for channel in view] for view in read]
+    if on_levels is not None:
+        on_levels(levels)
+    num, spread, square_spread = _sums(channels)
     share = spread * spread / (count * square_spread) if square_spread > 0 else 1.0
     return math.sqrt(num / (36.0 * CAP_MEAN * den)), count, share, levels
 
@@ -279,12 +292,12 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
 
 
 def views_noise(views, residual_planes, silent, given: float | None, floor: float, fallback=None,
-                quantisation: float = 0.0) -> tuple[float | None, int, float, tuple | None, list | None]:
+                quantisation: float = 0.0, on_levels=None) -> tuple[float | None, int, float, tuple | None, list | None]:
     """The pixel noise sigma of a fit's views, in the targets' units, the number of Laplacian values M
     it was estimated from (0 when given or taken from `fallback`), their `estimate_sigma` share (1
     for none), the range (low, high) of noise levels the residuals allow when their noise is not
     white (`whiteness.sigma_range`; None when it reads white, is given or not estimated) and the
-    levels by view, channel and intensity that the estimate read (`_sums`; None when it is given or
+    levels by view, channel and intensity that the estimate read (`_estimate`; None when it is given or
     not estimated: `fit.sandwich` reads them): `given` -- the noise before quantisation, to which
     the targets' `quantisation` (the rms rounding error of their used values, 0 for float data: one
     sigma serves every view) is added in quadrature: a correct fit of an 8-bit file with its true
@@ -295,7 +308,8 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
     (U,) bool, `silent_pixels`) and the censored ones -- per channel where a weight of 0 leaves a
     used pixel's channel out -- and at least `floor` (the quantisation's, `Setup.sigma_floor`).
     Where too few pixels allow that: `fallback` when given (a refit's, the first fit's sigma), else
-    None (unknown)."""
+    None (unknown). `on_levels(levels)`: called with the levels as soon as they are read, when they
+    are returned (`_estimate`)."""
     if given is not None:
         return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views), None, None
     picks = []
@@ -309,7 +323,7 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
             clean = in_channels(clean) & (view.weighting > 0)
         signal = view.target if view.left_out else view.image  # (non-finite values outside the pixels used: 0)
         picks.append(_view_picks(clean, view.weighting, signal, interior=True))
-    estimate = _estimate(picks, residual_planes)
+    estimate = _estimate(picks, residual_planes, on_levels)
     if estimate is None:
         return fallback, 0, 1.0, None, None
     spread = sigma_range(estimate[0], floor, whiteness(picks, residual_planes))

@@ -54,7 +54,8 @@ def unequal(levels) -> bool:
     without levels aside). Otherwise one level serves: groups within ~30 % of their mean (at the
     noise sample's cap, 4096 values a channel; more on small images) leave s^2 (J^T J)^-1 within
     ~15 % of the sandwich's value."""
-    groups = [(float(half.sum()) / half.size, n * half.size) for per_channel in filter(None, levels)  # (np.mean: slower)
+    groups = [(float(half.sum()) / half.size, n * half.size)  # (np.mean: the same, slower)
+              for per_channel in filter(None, levels)
               for _, level, n in filter(None, per_channel)
               for half in (level[:(level.size + 1) // 2], level[(level.size + 1) // 2:]) if half.size]
     if not groups:
@@ -75,12 +76,14 @@ def _scaled_gram(problem, values, scales):
     return _normal_matrix(eqx.tree_at(lambda p: p.views, problem, views), values, True)[0]
 
 
-def noise_middle(setup, at, r: tuple, levels, counted: int) -> np.ndarray | None:
+def noise_middle(setup, at, r: tuple, levels, counted: int):
     """M = J^T diag(r^2) J N / sum r^2 (p, p) float64 (module docstring) for a fit's `Setup` at the
     flat values `at` with weighted residuals r there (per view (3, U): `Problem.view_residuals`),
     from the noise `levels` of `noise.views_noise` (None: given or unknown) and N = `counted`
     entries (neither censored nor silent); None where one level serves (`unequal`) -- s^2 (J^T J)^-1
-    holds -- and for a texture fit (`texels`: the pooled form, dense or matrix-free alike)."""
+    holds -- and for a texture fit (`texels`: the pooled form, dense or matrix-free alike). Else
+    returns a function that gives it: JAX computes J^T diag(r^2) J from the call on, beside what the
+    caller does until it asks (`engine.report`: the rest of the noise estimate)."""
     if levels is None or any(p.shape is not None for p in setup.layout) or not unequal(levels):
         return None
     scales, total = [], 0.0
@@ -90,5 +93,5 @@ def noise_middle(setup, at, r: tuple, levels, counted: int) -> np.ndarray | None
     if not total > 0:
         return None
     with jax.enable_x64(setup.x64):
-        middle = _scaled_gram(setup.problem, at, scales)
-    return np.asarray(middle, np.float64) * (counted / total)
+        middle = _scaled_gram(setup.problem, at, scales)  # (dispatched: it runs while the caller goes on)
+    return lambda: np.asarray(middle, np.float64) * (counted / total)
