@@ -4,8 +4,10 @@
    of bench/fit.py's first fit -- a size x size Lambertian sphere under a point light, kd, ks, n
    fitted on its interior (`interior_mask`) on a compiled scene whose kept views are dropped before
    each call -- against a difflab render whose noise is 1 % of each value (unequal by channel and
-   intensity, as a Monte Carlo render's: the sandwich is formed), with the sandwich and with it
-   switched off (the pooled form: `engine.noise_middle` returning None), interleaved, medians.
+   intensity, as a Monte Carlo render's: the sandwich is formed), with the sandwich, with its middle
+   waited for as soon as it is started (JAX's J^T diag(r^2) J not run beside the rest of the noise
+   estimate), and with it switched off (the pooled form: `engine.noise_middle` returning None),
+   interleaved, medians.
 2. Coverage: over `seeds` targets of tests/test_fit_sandwich.py's 48 x 48 Phong sphere (ka, kd,
    ks, n fitted), the share of |fitted - truth| <= 2 stderr of ka, kd, ks per channel and their rms
    z-score, sandwich and pooled, for per-channel noise (0.003, 0.003, 0.012) and noise of 5 % of
@@ -36,15 +38,21 @@ NOISES = {"per-channel": lambda rng, exact: rng.standard_normal(exact.shape) * n
           "5 % of value": lambda rng, exact: rng.standard_normal(exact.shape) * 0.05 * exact}
 
 
-def switched(on: bool):
-    """Set the sandwich on, or off (the pooled form)."""
+def switched(mode: str):
+    """Set the sandwich on ("sandwich"), on with its middle waited for at once ("waited"), or off
+    ("pooled")."""
     from difflab.fit import engine, sandwich
 
-    engine.noise_middle = sandwich.noise_middle if on else (lambda *args: None)
+    def waited(*args):
+        started = sandwich.noise_middle(*args)
+        matrix = None if started is None else started()
+        return None if matrix is None else lambda: matrix
+
+    engine.noise_middle = {"sandwich": sandwich.noise_middle, "waited": waited, "pooled": lambda *args: None}[mode]
 
 
 def cost(size: int, repeats: int) -> dict:
-    """Median stats phase and warm wall time (ms) of the first fit, sandwich on and off, interleaved."""
+    """Median stats phase and warm wall time (ms) of the first fit per `switched` mode, interleaved."""
     import difflab
     from difflab.fit.records import STORE
     from fit_common import scene_dict
@@ -66,21 +74,21 @@ def cost(size: int, repeats: int) -> dict:
                                  progress=False)
         return time.perf_counter() - start, r
 
-    out = {}
-    for on in (True, False):
-        switched(on)
+    out, modes = {}, ("sandwich", "waited", "pooled")
+    for mode in modes:
+        switched(mode)
         run()  # (compilation)
-    samples = {True: [], False: []}
+    samples = {mode: [] for mode in modes}
     for _ in range(repeats):
-        for on in (True, False):
-            switched(on)
+        for mode in modes:
+            switched(mode)
             wall, r = run()
-            samples[on].append((wall, r.timings["stats"]))
-            out["stderr_" + ("sandwich" if on else "pooled")] = {k: np.asarray(v).tolist() for k, v in r.stderr.items()}
-    switched(True)
-    for on, name in ((True, "sandwich"), (False, "pooled")):
-        out[name] = {"wall_ms": 1e3 * statistics.median(s[0] for s in samples[on]),
-                     "stats_ms": 1e3 * statistics.median(s[1] for s in samples[on])}
+            samples[mode].append((wall, r.timings["stats"]))
+            out["stderr_" + mode] = {k: np.asarray(v).tolist() for k, v in r.stderr.items()}
+    switched("sandwich")
+    for mode in modes:
+        out[mode] = {"wall_ms": 1e3 * statistics.median(s[0] for s in samples[mode]),
+                     "stats_ms": 1e3 * statistics.median(s[1] for s in samples[mode])}
     return out
 
 
@@ -94,8 +102,8 @@ def coverage(seeds: int) -> dict:
     truth = np.array([TRUTH[k] for k in ("ka", "kd", "ks")])
     out = {}
     for name, noise in NOISES.items():
-        for on, form in ((True, "sandwich"), (False, "pooled")):
-            switched(on)
+        for form in ("sandwich", "pooled"):
+            switched(form)
             rng, z = np.random.default_rng(0), []
             for _ in range(seeds):
                 target = (exact + noise(rng, exact)).astype(np.float32)
@@ -106,7 +114,7 @@ def coverage(seeds: int) -> dict:
             z = np.array(z)
             out[f"{name}, {form}"] = {"coverage": (np.abs(z) <= 2).mean(axis=(0, 1)).tolist(),
                                       "rms_z": np.sqrt(np.mean(np.square(z), axis=(0, 1))).tolist()}
-    switched(True)
+    switched("sandwich")
     return out
 
 
@@ -118,10 +126,11 @@ def main() -> None:
     size, repeats, seeds = (96, 10, 20) if args.small else (256, 30, 40)
     report = {"load": os.getloadavg(), "size": size, "repeats": repeats, "seeds": seeds}
     report["cost"] = cost(size, repeats)
-    on, off = report["cost"]["sandwich"], report["cost"]["pooled"]
+    on, waited, off = (report["cost"][mode] for mode in ("sandwich", "waited", "pooled"))
     print(f"load {report['load'][0]:.1f}; first fit, {size}^2 sphere, 1 % noise of each value, medians of {repeats}:")
-    print(f"  stats {on['stats_ms']:.2f} ms with the sandwich, {off['stats_ms']:.2f} pooled "
-          f"(+{on['stats_ms'] - off['stats_ms']:.2f}); wall {on['wall_ms']:.2f} / {off['wall_ms']:.2f} ms")
+    print(f"  stats {on['stats_ms']:.2f} ms with the sandwich, {waited['stats_ms']:.2f} with its middle waited for at "
+          f"once, {off['stats_ms']:.2f} pooled (+{on['stats_ms'] - off['stats_ms']:.2f}); wall {on['wall_ms']:.2f} / "
+          f"{waited['wall_ms']:.2f} / {off['wall_ms']:.2f} ms")
     report["coverage"] = coverage(seeds)
     print(f"coverage of |fitted - truth| <= 2 stderr per channel (R, G, B) and rms z, 48^2 sphere, {seeds} seeds:")
     for name, row in report["coverage"].items():
