@@ -1,9 +1,22 @@
 """Shared fixtures: small scenes built as dicts in the file format."""
 
+import sys
+
 import numpy as np
 import pytest
 
 from difflab.io import save_image
+
+
+@pytest.fixture(autouse=True, scope="module")
+def release_compiled_programs():
+    """Let go of JAX's compiled programs after each test module: each holds ~15 memory maps of
+    machine code, and the fit tests compile thousands -- in one process the suite reached the
+    kernel's 65530 maps (vm.max_map_count) and XLA crashed loading the next program (a null
+    pointer from a failed mmap). Later modules read what they share from the persistent cache."""
+    yield
+    if "jax" in sys.modules:
+        sys.modules["jax"].clear_caches()
 
 
 def scene_dict(objects, materials, *, camera=None, lights=None, ambient=(0.0, 0.0, 0.0), render=None, **extra):
