@@ -18,7 +18,7 @@ from ...lighting.warp_model import MaterialW, checker_cell
 from ...vocabulary import FLAT, PHONG_SHADING
 from ..camera import CameraW, line_point, primary_ray, view_direction
 from ..launch import dealt_row
-from ..texture.sampling import pixel_footprint, sphere_uv, sphere_uv_jacobian
+from ..texture.footprint import pixel_footprint, sphere_uv, sphere_uv_jacobian
 from ..trace import HIT_SPHERE, leaving_skip, sphere_point
 from .coverage import NO_HIT, edge_weights, float_barycentrics
 

@@ -40,8 +40,6 @@ from __future__ import annotations
 from ..._warp import wp
 
 from ...vocabulary import TEXTURE_FILTER_IDS, TEXTURE_WRAP_IDS
-# raster/resolve.py imports these from here (texture/footprint.py since the split; its helper owns raster/):
-from .footprint import pixel_footprint, sphere_uv, sphere_uv_jacobian  # noqa: F401
 
 wp.set_module_options({"enable_backward": False})
 
