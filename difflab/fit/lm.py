@@ -14,25 +14,19 @@ least to the value whose step is t times as long as the one rejected, t in [0.1,
 the quadratic through the loss at x, its slope along the step and the loss at its end (MINPACK's
 trust-region cut, `shrinking_damping`): where lambda is far below the curvature of the direction that
 failed (n along a faint lobe), nu alone rejected 5 steps in a row (the Mitsuba diffuse sphere of
-`bench/fit.py`: 11 steps -> 8; 41 fits of random plastics -- clean, noisy and clipped -- matte
-targets from glossy starts and that sphere: 253 steps -> 235, the worst 22 -> 18).
+`bench/fit.py`: 11 steps -> 8; 16 varied fits of `experiments/bench`-style targets: 253 -> 235).
 So a coefficient whose best value is 0 lands on 0 in one projected step and stays there, instead of
 crawling along a softplus.
 
 Stops with "successful" when the next step would change every entry by at most atol + rtol |x|
 (tested before the step is taken: a solve that has landed on its minimum is not linearised once more
 at a point it would not move from), or when an accepted step lowered the loss -- and the linear model
-predicted it would lower it -- by at most rtol of itself (MINPACK's xtol / ftol tests), or, on a
-smooth problem (no clipped target, l2), before a step when the last one went as the linear model
-predicted (to 10 %) and a Gauss-Newton step would lower the loss by at most rtol of itself (the
-Newton decrement's test), the step then taken unchecked -- no linearisation at its end, which
-MINPACK's test spends on seeing the decrease is small (noisy targets: 4 -> 3 steps on 12 of 12);
+predicted it would lower it -- by at most rtol of itself (MINPACK's xtol / ftol tests);
 "nonlinear_max_steps_reached" after max_steps; "nonfinite" when the loss, J^T J or J^T r at the
 start is not finite. A trial step where one is not is rejected like any step that does not lower
 the loss, so the point returned always has finite ones (a fit with an infinite loss is never
 successful, and a NaN in J^T J never stalls the solve on steps it cannot solve for). Each
-step costs one linearisation, one p x p Cholesky solve, as a plain Gauss-Newton step does, and the
-scaled p x p matrix's eigenvalues (`spectrum`, for the cut and the decrement); the
+step costs one linearisation and one p x p Cholesky solve, as a plain Gauss-Newton step does; the
 residual vector is not carried from step to step (only its loss), but formed once at the solution
 (with the exact J^T J there, where the steps used `normal_equations`' fast form; the moments' r
 too, though their steps form it: kept with each accepted point it cost a select over every entry a
@@ -71,9 +65,6 @@ class State(NamedTuple):
     history: jnp.ndarray
     d: jnp.ndarray
     predicted: jnp.ndarray
-    w: jnp.ndarray
-    c2: jnp.ndarray
-    settled: jnp.ndarray
 
 
 def projected_step(x, a, g, lam, lower, upper):
@@ -95,32 +86,19 @@ def projected_step(x, a, g, lam, lower, upper):
     return d, jnp.where(solved, -(g @ d + 0.5 * d @ (a @ d)), jnp.nan)
 
 
-def spectrum(a, g, x, lower, upper):
-    """The scaled normal equations' spectrum at x: D^(-1/2) A D^(-1/2) = V diag(w) V^T over the free
-    entries (`projected_step`'s D and held entries; w floored at 0) and c^2 = (V^T D^(-1/2) g)^2, so
-    the damped step has |D^(1/2) dx(lambda)|^2 = sum c_i^2 / (w_i + lambda)^2 and the Gauss-Newton
-    step (lambda = 0) lowers the linear model's 0.5 |r|^2 by sum c_i^2 / (2 w_i)."""
+def shrinking_damping(a, g, x, lower, upper, lam, shrink):
+    """The damping lambda' >= lam whose step from x (`projected_step`'s, before the projection) is
+    `shrink` times as long as lam's, in the scaled norm |D^(1/2) dx| -- a trust region cut by that
+    factor (Mor\u00e9's lmpar). With D^(-1/2) A D^(-1/2) = V diag(w) V^T over the free entries and
+    c = V^T D^(-1/2) g, |D^(1/2) dx(lambda)|^2 = sum c_i^2 / (w_i + lambda)^2; Newton's iteration on
+    1 / |D^(1/2) dx| - 1 / target, nearly linear in lambda, rises monotonically to the root from lam."""
     held = ((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0))
     diag = jnp.diagonal(a)
     scale = jnp.sqrt(jnp.maximum(diag, 1e-9 * jnp.max(diag) + 1e-20))
     free = ~held
     w, v = jnp.linalg.eigh(jnp.where(free[:, None] & free[None, :], a / jnp.outer(scale, scale), 0.0))
-    return jnp.maximum(w, 0.0), jnp.square(v.T @ jnp.where(free, g / scale, 0.0))
-
-
-def gauss_newton_decrease(w, c2):
-    """The decrease of 0.5 |r|^2 the undamped step predicts, sum c_i^2 / (2 w_i) (`spectrum`), over
-    the directions J sees (w above 1e-12 of the largest; +inf where g has a part along one it
-    does not: no minimum of the model there)."""
-    seen = w > 1e-12 * jnp.max(w)
-    return jnp.sum(jnp.where(seen, c2 / (2.0 * jnp.where(seen, w, 1.0)), jnp.where(c2 > 0, jnp.inf, 0.0)))
-
-
-def shrinking_damping(w, c2, lam, shrink):
-    """The damping lambda' >= lam whose step is `shrink` times as long as lam's in |D^(1/2) dx|
-    (`spectrum` w, c2 of the point it steps from) -- a trust region cut by that factor (More's
-    lmpar): Newton's iteration on 1 / |D^(1/2) dx| - 1 / target, nearly linear in lambda, rises
-    monotonically to the root from lam."""
+    c2 = jnp.square(v.T @ jnp.where(free, g / scale, 0.0))
+    w = jnp.maximum(w, 0.0)
     norm2 = lambda lam_: jnp.sum(c2 / jnp.square(w + lam_))  # noqa: E731
     target = shrink * jnp.sqrt(norm2(lam))
 
@@ -143,7 +121,7 @@ def squared(linearise):
 
 
 def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=None, residuals=None,
-           exact=None, lambda0=LAMBDA0, foresee=False):
+           exact=None, lambda0=LAMBDA0):
     """Minimise 0.5 |r(x)|^2 over lower <= x <= upper.
 
     Arguments:
@@ -162,10 +140,6 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
             Tingleff's choice for a start close to the solution in the model's terms: the image is
             affine in ka, kd and ks) -- one step fewer on 3 of 11 recoveries, more on none
             (`experiments/fit_recovery.py`, the Mitsuba diffuse sphere of `bench/fit.py`).
-        foresee: also stop before a step whose Gauss-Newton decrease (`gauss_newton_decrease`) is at
-            most rtol of the loss, after a step the linear model predicted to 10 % -- for smooth
-            problems only: where a clipped target's kinks hold J^T r near 0 away from the minimum
-            (a 1.5x over-exposed target stopped at loss 2e-3, its minimum 1e-12), False.
     Returns:
         (x, code index into CODES, steps, history (max_steps,) the loss after each step (NaN beyond),
         r (N,) (or None) and J^T J (p, p) at x).
@@ -180,8 +154,7 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
     # once at the end.
     state = State(x0, jnp.zeros((p, p), dtype), jnp.zeros(p, dtype), jnp.asarray(jnp.inf, dtype),
                   jnp.asarray(lambda0, dtype), jnp.asarray(2.0, dtype), jnp.asarray(-1), jnp.asarray(RUNNING),
-                  jnp.full(max_steps, jnp.nan, dtype), jnp.zeros(p, dtype), jnp.asarray(0.0, dtype),
-                  jnp.zeros(p, dtype), jnp.zeros(p, dtype), jnp.asarray(False))
+                  jnp.full(max_steps, jnp.nan, dtype), jnp.zeros(p, dtype), jnp.asarray(0.0, dtype))
 
     def body(s: State) -> State:
         first = s.step < 0
@@ -198,7 +171,7 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
         slope = s.g @ d
         t = jnp.clip(-0.5 * slope / (loss_new - s.loss - slope), 0.1, 0.5)
         t = jnp.where(finite & jnp.isfinite(t), t, 0.1)
-        rejected_lam = jnp.maximum(s.lam * s.nu, shrinking_damping(s.w, s.c2, s.lam, t))
+        rejected_lam = jnp.maximum(s.lam * s.nu, shrinking_damping(s.a, s.g, s.x, lower, upper, s.lam, t))
         lam = jnp.where(first, s.lam, jnp.where(accept, s.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3),
                                                  rejected_lam))
         nu = jnp.where(accept, 2.0, 2.0 * s.nu)
@@ -215,30 +188,19 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
             jax.debug.callback(progress, step, loss)
         history = jnp.where(first, s.history, s.history.at[jnp.maximum(s.step, 0)].set(loss))
         x, a, g = keep(x_new, s.x), keep(a_new, s.a), keep(g_new, s.g)
-        w, c2 = spectrum(a, g, x, lower, upper)
-        settled = ~first & accept & (jnp.abs(rho - 1.0) <= 0.1) if foresee else jnp.asarray(False)
-        return State(x, a, g, loss, lam, nu, step, code, history, *projected_step(x, a, g, lam, lower, upper), w, c2,
-                     settled)
-
-    def foreseen(s: State) -> bool:
-        # Gauss-Newton's decrement: after a step the linear model predicted to 10 %, a step to the
-        # model's minimum would lower the loss by at most rtol of itself
-        return s.settled & (gauss_newton_decrease(s.w, s.c2) <= rtol * s.loss + atol * atol)
+        return State(x, a, g, loss, lam, nu, step, code, history, *projected_step(x, a, g, lam, lower, upper))
 
     def running(s: State) -> bool:
         # MINPACK's xtol test on the next step: when it would change no entry by more than the
         # tolerance, the solve ends here instead of linearising at a point it would not move from.
-        return (s.code == RUNNING) & ((s.step < 0) | ~small(s.d, s.x) | jnp.isnan(s.predicted)) & ~foreseen(s)
+        return (s.code == RUNNING) & ((s.step < 0) | ~small(s.d, s.x) | jnp.isnan(s.predicted))
 
     out = jax.lax.while_loop(running, body, state)
     code = jnp.where(out.code == RUNNING, SUCCESSFUL, out.code)
-    # a foreseen end takes that last step unchecked: as close to the minimum as the step MINPACK's
-    # test would take to see it, without linearising there (J^T J is the step's start's)
-    x = jnp.where((out.code == RUNNING) & foreseen(out), out.x + out.d, out.x)
     if exact is None:  # the loop's J^T J at the solution
-        return x, code, out.step, out.history, None if residuals is None else residuals(x, args), out.a
-    r, a = exact(x, args)[:2]
-    return x, code, out.step, out.history, r, a
+        return out.x, code, out.step, out.history, None if residuals is None else residuals(out.x, args), out.a
+    r, a = exact(out.x, args)[:2]
+    return out.x, code, out.step, out.history, r, a
 
 
 def _residuals(x, problem):
@@ -250,8 +212,7 @@ def solve_problem(problem, x0, lower, upper, *, max_steps: int, rtol, atol, prog
     solution then per view (3, U), channel-major: `Problem.view_residuals`), else on `linearise`'s fast form
     (r and J^T J at the solution on its exact one); the closed-form normal equations from
     LAMBDA0_BY_PARTS."""
-    smooth = problem.loss == "l2" and all(view.ceiling is None for view in problem.views)
-    options = dict(max_steps=max_steps, rtol=rtol, atol=atol, progress=progress, foresee=smooth,
+    options = dict(max_steps=max_steps, rtol=rtol, atol=atol, progress=progress,
                    lambda0=LAMBDA0_BY_PARTS if by_parts_applies(problem) else LAMBDA0)
     if moments.applies(problem):
         prepared = moments.prepare(problem, x0)
