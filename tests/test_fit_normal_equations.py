@@ -183,3 +183,17 @@ def test_a_rejected_step_is_cut_to_the_quadratics_fraction(shrink):
         lam = float(lm.shrinking_damping(*map(jnp.asarray, (a, g, x, lower, upper)), 1e-7, shrink))
     assert lam > 1e-7
     np.testing.assert_allclose(length(lam), shrink * length(1e-7), rtol=1e-6)
+
+
+def test_a_step_onto_a_bound_lands_on_it_exactly():
+    """x + (clip(x + dx, lower, upper) - x) passes the bound by an ulp for 13 % of float32 starts;
+    the accepted point is clipped: r = x - 100 from x0 = -11.016636 (one of them) with upper 11.7
+    ends on 11.7 itself, held there."""
+    def linearise(x, args):
+        r = x - 100.0
+        return r, jnp.eye(1, dtype=x.dtype), r
+
+    x = jax.jit(partial(lm.box_lm, lm.squared(linearise), max_steps=20, rtol=1e-5, atol=1e-7))(
+        jnp.asarray([-11.016636], jnp.float32), jnp.asarray([-12.0], jnp.float32), jnp.asarray([11.7], jnp.float32),
+        None)[0]
+    assert np.asarray(x)[0] == np.float32(11.7)

@@ -161,7 +161,7 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
     def body(s: State) -> State:
         first = s.step < 0
         d, predicted = s.d, s.predicted
-        x_new = s.x + d
+        x_new = jnp.clip(s.x + d, lower, upper)  # (x + (clip(x + dx) - x) can pass a bound by an ulp)
         loss_new, a_new, g_new = linearise(x_new, args)
         finite = jnp.isfinite(loss_new) & jnp.all(jnp.isfinite(g_new)) & jnp.all(jnp.isfinite(a_new))
         accept = finite & ((loss_new < s.loss) | first)
