@@ -69,6 +69,15 @@ class State(NamedTuple):
     predicted: jnp.ndarray
 
 
+def free_diagonal(a, g, x, lower, upper):
+    """The entries a step may move (not on a bound with the gradient pushing outward) and the
+    damping's D = diag(J^T J), floored at 1e-9 of its largest entry (+1e-20): a parameter no pixel
+    sees still gets a (huge) damping."""
+    held = ((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0))
+    diag = jnp.diagonal(a)
+    return ~held, jnp.maximum(diag, 1e-9 * jnp.max(diag) + 1e-20)
+
+
 def projected_step(x, a, g, lam, lower, upper):
     """The damped Gauss-Newton step from x, projected onto the box: d = clip(x + dx) - x with
     (A + lam D) dx = -g over the free entries (an entry on its bound with the gradient pushing
@@ -76,11 +85,8 @@ def projected_step(x, a, g, lam, lower, upper):
     -(g.d + 0.5 d.A d). Where the damped matrix is not positive definite to its rounding (the
     Cholesky factor is not finite), d = 0 and the decrease predicted is NaN: the step is made and
     rejected, so lambda grows (it is no sign of convergence)."""
-    held = ((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0))
-    diag = jnp.diagonal(a)
-    floor = 1e-9 * jnp.max(diag) + 1e-20  # a parameter no pixel sees still gets a (huge) damping
-    free = ~held
-    damping = jnp.where(free, lam * jnp.maximum(diag, floor), 1.0)
+    free, diag = free_diagonal(a, g, x, lower, upper)
+    damping = jnp.where(free, lam * diag, 1.0)
     m = jnp.where(free[:, None] & free[None, :], a, 0.0) + jnp.diag(damping)
     dx = jsl.cho_solve(jsl.cho_factor(m), jnp.where(free, -g, 0.0))
     solved = jnp.all(jnp.isfinite(dx))
@@ -91,13 +97,11 @@ def projected_step(x, a, g, lam, lower, upper):
 def shrinking_damping(a, g, x, lower, upper, lam, shrink):
     """The damping lambda' >= lam whose step from x (`projected_step`'s, before the projection) is
     `shrink` times as long as lam's, in the scaled norm |D^(1/2) dx| -- a trust region cut by that
-    factor (Mor\u00e9's lmpar). With D^(-1/2) A D^(-1/2) = V diag(w) V^T over the free entries and
+    factor (More's lmpar in MINPACK). With D^(-1/2) A D^(-1/2) = V diag(w) V^T over the free entries and
     c = V^T D^(-1/2) g, |D^(1/2) dx(lambda)|^2 = sum c_i^2 / (w_i + lambda)^2; Newton's iteration on
     1 / |D^(1/2) dx| - 1 / target, nearly linear in lambda, rises monotonically to the root from lam."""
-    held = ((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0))
-    diag = jnp.diagonal(a)
-    scale = jnp.sqrt(jnp.maximum(diag, 1e-9 * jnp.max(diag) + 1e-20))
-    free = ~held
+    free, diag = free_diagonal(a, g, x, lower, upper)
+    scale = jnp.sqrt(diag)
     w, v = jnp.linalg.eigh(jnp.where(free[:, None] & free[None, :], a / jnp.outer(scale, scale), 0.0))
     c2 = jnp.square(v.T @ jnp.where(free, g / scale, 0.0))
     w = jnp.maximum(w, 0.0)
