@@ -287,9 +287,9 @@ def test_one_tied_value_on_a_second_surface_is_no_clip():
     ball = np.tile([0.5, 0.2, 0.1], (50, 1))
     surfaces = np.r_[np.zeros(100, int), np.ones(50, int)]
     ball[0, 0] = 0.8
-    assert float_ceiling(np.r_[floor, ball], surfaces) == np.inf  # (it censored 96 values, 95 the floor's)
+    assert float_ceiling(np.r_[floor, ball], lambda: surfaces) == np.inf  # (it censored 96 values, 95 the floor's)
     ball[:CENSOR_MIN_TIES, 0] = 0.8
-    assert float_ceiling(np.r_[floor, ball], surfaces) == pytest.approx(0.8)
+    assert float_ceiling(np.r_[floor, ball], lambda: surfaces) == pytest.approx(0.8)
 
 
 # ---- grey targets: refused, not fitted as equal R, G, B

@@ -14,6 +14,7 @@ Levenberg-Marquardt solver is small against it from the first step.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 
@@ -73,6 +74,17 @@ def value_index(layout, n_materials: int, n_lights: int) -> dict:
     for array in index.values():
         array.setflags(write=False)
     return index
+
+
+def assembled(cls, **fields):
+    """`cls(**fields)` for an `eqx.Module` with the dataclass constructor (default values filled
+    in), made as JAX's `tree_unflatten` makes one: without `eqx.Module`'s checks of every leaf given
+    (a `Problem` of one view, its `ViewJ` and `GBufferModel`: ~65 us hot, ~0.25 ms of a first fit's
+    setup, against ~6 us)."""
+    out = object.__new__(cls)
+    for field in dataclasses.fields(cls):
+        object.__setattr__(out, field.name, fields[field.name] if field.name in fields else field.default)
+    return out
 
 
 @jax.jit

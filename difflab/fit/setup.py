@@ -27,7 +27,7 @@ from .ceiling import float_ceiling, primary_objects, refuse_values_above
 from .materials import MaterialTable
 from .noise import quantisation
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
-from .problem import LOSSES, Problem, ViewJ, to_device, value_index
+from .problem import LOSSES, Problem, ViewJ, assembled, to_device, value_index
 from .raytree import TreeModel, tree_influence
 from .records import DEVICE_COPIES, KeptView, View, take_pixels, view_key, view_store
 from .shading import GBufferModel, influence
@@ -229,7 +229,7 @@ class Setup:
         values = out.values
         top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
         if top is None:  # float data (`ceiling.py`)
-            top = float_ceiling(values, primary_objects(view.record).reshape(-1)[out.pixels])
+            top = float_ceiling(values, lambda: primary_objects(view.record).reshape(-1)[out.pixels])
         seen = dataclasses.replace(out, ceiling=np.inf if top is False else float(top))
         seen.__dict__.update(pixels=out.pixels, values=values)  # View's cached properties, taken already
         return seen
@@ -280,8 +280,8 @@ class Setup:
     def _view(arrays, model) -> ViewJ:
         """A view from its `_view_arrays` on the device and its image model."""
         lights, target, sqrt_weight, ceiling, intensity_index = arrays
-        return ViewJ(model=model, lights=lights, target=target, sqrt_weight=sqrt_weight, ceiling=ceiling,
-                     intensity_index=intensity_index)
+        return assembled(ViewJ, model=model, lights=lights, target=target, sqrt_weight=sqrt_weight, ceiling=ceiling,
+                         intensity_index=intensity_index)
 
     def _problem(self, loss, loss_scale) -> Problem:
         entries, total, self.unit_weights = [], 0.0, True  # unit weights: the weighted residuals are the plain ones
@@ -304,8 +304,8 @@ class Setup:
             np.asarray(self.scene.ambient, real), {k: v for k, v in index.items() if k != "intensity"},
             np.asarray(loss_scale, real)))
         views = tuple(self._view(a, model) for a, model in zip(arrays, models))
-        return Problem(views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
-                       layout=self.layout, loss=loss, smoothness=self.smoothness)
+        return assembled(Problem, views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
+                         layout=self.layout, loss=loss, smoothness=self.smoothness)
 
     def precheck(self) -> ResultCode | None:
         """A result code when the fit cannot be made (non-finite target values at the pixels used, or

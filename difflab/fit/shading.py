@@ -31,7 +31,7 @@ from ..lighting.jax_model import (LightGeometry, LightsJ, fog_factor, light_geom
                                   sum_axis, textured_surface)
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS
 from .materials import MaterialTable
-from .problem import take_rows_of
+from .problem import assembled, take_rows_of
 from .texels import pixel_texels, point_texels
 
 
@@ -298,9 +298,9 @@ class GBufferModel(eqx.Module):
         texel = None
         if fixed_texels and gbuffer.shading == "phong" and gbuffer.texture is not None and point_ids.size:
             texel = jnp.asarray(np.take(gbuffer.texture.reshape(-1, 3), point_ids, axis=0), dtype)
-        return cls(material=material, cell=cell, geometry=geometry, comp=comp, formation=formation,
-                   taps=taps, tap_weight=tap_weight, targets=None if texels is None else texels.targets,
-                   material_ids=distinct_ids(points.material), texel=texel)  # (the dummy point's id: -1)
+        return assembled(cls, material=material, cell=cell, geometry=geometry, comp=comp, formation=formation,
+                         taps=taps, tap_weight=tap_weight, targets=None if texels is None else texels.targets,
+                         material_ids=distinct_ids(points.material), texel=texel)  # (the dummy point's id: -1)
 
     def point_texels(self, texels):
         """(R, 3) each point's texture value from the stacked `texels` (its filter taps)."""
