@@ -15,6 +15,7 @@ from test_raytrace_texture import textured_scene
 from difflab import Scene
 from difflab.errors import FitError
 from difflab.fit import Setup, shade_gbuffer
+from difflab.fit.problem import assembled
 from difflab.fit.shading import distinct_ids, own_points, pixel_arrays
 from difflab.renderers.api import render_frame
 
@@ -182,3 +183,16 @@ def test_own_points_refuses_mixed_weights():
                                           ([], ()), ([0, 1], (0, 1))])
 def test_distinct_ids(ids, expected):
     assert distinct_ids(np.asarray(ids, np.int32)) == expected
+
+
+def test_assembled_modules_are_the_constructors():
+    """`problem.assembled` makes the problem's modules as their constructors do (every field, the
+    defaults filled in): the same pytree structure and leaves."""
+    problem = _setup(("kd", "ks", "n"), size=8).problem
+    for module in (problem, problem.views[0], problem.views[0].model):
+        fields = {f.name: getattr(module, f.name) for f in dataclasses.fields(module) if f.name != "smoothness"}
+        built, made = type(module)(**fields), assembled(type(module), **fields)
+        structure = jax.tree_util.tree_structure
+        assert structure(made) == structure(built) == structure(module)
+        assert all(a is b for a, b in zip(jax.tree_util.tree_leaves(made), jax.tree_util.tree_leaves(built)))
+        assert all(getattr(made, f.name) is getattr(built, f.name) for f in dataclasses.fields(module))
