@@ -15,7 +15,7 @@ from test_raytrace_texture import textured_scene
 from difflab import Scene
 from difflab.errors import FitError
 from difflab.fit import Setup, shade_gbuffer
-from difflab.fit.problem import assembled
+from difflab.fit.problem import ViewJ, assembled
 from difflab.fit.shading import distinct_ids, own_points, pixel_arrays
 from difflab.renderers.api import render_frame
 
@@ -187,7 +187,7 @@ def test_distinct_ids(ids, expected):
 
 def test_assembled_modules_are_the_constructors():
     """`problem.assembled` makes the problem's modules as their constructors do (every field, the
-    defaults filled in): the same pytree structure and leaves."""
+    defaults filled in): the same pytree structure and leaves; a missing or unknown field is a TypeError."""
     problem = _setup(("kd", "ks", "n"), size=8).problem
     for module in (problem, problem.views[0], problem.views[0].model):
         fields = {f.name: getattr(module, f.name) for f in dataclasses.fields(module) if f.name != "smoothness"}
@@ -196,3 +196,7 @@ def test_assembled_modules_are_the_constructors():
         assert structure(made) == structure(built) == structure(module)
         assert all(a is b for a, b in zip(jax.tree_util.tree_leaves(made), jax.tree_util.tree_leaves(built)))
         assert all(getattr(made, f.name) is getattr(built, f.name) for f in dataclasses.fields(module))
+    with pytest.raises(TypeError, match="no model given"):
+        assembled(ViewJ, **{f.name: None for f in dataclasses.fields(ViewJ) if f.name != "model"})
+    with pytest.raises(TypeError, match="has no field size"):
+        assembled(ViewJ, **{f.name: None for f in dataclasses.fields(ViewJ)}, size=1)
