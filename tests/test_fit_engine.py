@@ -1,6 +1,8 @@
 """The one fitting engine: the image model chosen from the scene, honest results (noise, chi-square,
 model mismatch), censored (clipped) targets, non-finite losses, and the parameter table's maps."""
 
+import time
+
 import jax
 import numpy as np
 import pytest
@@ -317,6 +319,69 @@ def test_an_unlit_side_at_zero_is_not_clipped_noise():
     for key in params:
         np.testing.assert_allclose(lit_only.params[key], result.params[key], rtol=1e-9)
     np.testing.assert_allclose(result.params["kd"], TRUTH["kd"], rtol=0.02)
+
+
+def test_the_noise_picks_formed_beside_the_solve_are_the_reports(monkeypatch):
+    """The noise estimate's picks -- what it reads of the targets alone -- are formed beside the solve
+    for silent pixels all black ones (`engine.noise_ahead`) and taken by the report where those are
+    the silent ones, else formed there again: a noisy sphere (no black pixel), the clean one (its
+    unlit side black and silent) and the clean one with a black patch on its lit side (black, not
+    silent) report the same numbers bit for bit as with the picks formed in the report."""
+    import dataclasses
+
+    from difflab.fit import engine, noise
+
+    d = scene_dict(size=32, red={"ka": [0.0] * 3})
+    d["ambient"], d["background"], d["objects"] = [0.0] * 3, [0.0] * 3, d["objects"][:1]
+    d["render"]["shadows"] = False
+    scene = Scene.from_dict(d)
+    clean = target_of(scene)
+    patched = clean.copy()
+    patched[12:16, 12:16] = 0.0
+    noisy = clean + np.random.default_rng(4).normal(0.0, 0.02, clean.shape)
+    assert np.all(clean[12:16, 12:16] > 0)
+    formed, real_picks, real_ahead = [], noise.noise_picks, engine.noise_ahead
+    monkeypatch.setattr(noise, "noise_picks", lambda *args: formed.append("report") or real_picks(*args))
+    fit = lambda target: fit_material(scene, [target], "red", ("kd", "ks", "n"), progress=False)  # noqa: E731
+    for target, again in ((noisy, False), (clean, False), (patched, True)):
+        formed.clear()
+        ahead = fit(target)
+        assert bool(formed) == again and ahead.sigma > 0
+        monkeypatch.setattr(engine, "noise_ahead", lambda setup: None)
+        here = fit(target)
+        monkeypatch.setattr(engine, "noise_ahead", real_ahead)
+        for field in dataclasses.fields(ahead):
+            if field.name not in ("timings", "seconds"):
+                a, b = getattr(ahead, field.name), getattr(here, field.name)
+                if field.name in ("params", "stderr", "initial"):
+                    for key in a:
+                        np.testing.assert_array_equal(a[key], b[key])
+                elif field.name == "residuals":
+                    for x, y in zip(a, b):
+                        np.testing.assert_array_equal(x, y)
+                else:
+                    assert a == b or (a != a and b != b), field.name
+
+
+def test_a_failing_solve_leaves_no_noise_picks_running(monkeypatch):
+    """A solve that raises: the noise picks started beside it are done before the error is passed on."""
+    from difflab.fit import engine
+
+    done = []
+
+    def picks(views, silent):
+        time.sleep(0.05)
+        done.append(len(views))
+
+    def fails(*args):
+        raise RuntimeError("solver failed")
+
+    monkeypatch.setattr(engine, "noise_picks", picks)
+    monkeypatch.setattr(engine, "run", fails)
+    scene = make_scene(size=16)
+    with pytest.raises(RuntimeError, match="solver failed"):
+        fit_material(scene, [target_of(scene)], "red", ("kd",), progress=False)
+    assert done == [1]
 
 
 def test_a_float64_fit_after_a_float32_fit_of_the_same_layout():

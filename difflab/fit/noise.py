@@ -280,11 +280,10 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
     chi-square's dof)."""
     out, count = [], 0
     for view, part in zip(views, r):
-        zero = view.zeros  # black in the target, and the model 0 there too (in place: one array)
-        rows = zero[:, 0] & zero[:, 1]
-        rows &= zero[:, 2]
-        for c in range(3):
-            rows &= part[c] == 0
+        rows = view.black.copy()  # black in the target, and the model 0 there too (in place: one array)
+        if rows.any():  # (none black, as in noisy targets: nothing to compare)
+            for c in range(3):
+                rows &= part[c] == 0
         count += 3 * int(np.count_nonzero(rows)) if view.weighting is None else \
             int(np.count_nonzero(np.take(view.entries, np.flatnonzero(rows), axis=0)))
         out.append(rows)
@@ -292,7 +291,8 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
 
 
 def views_noise(views, residual_planes, silent, given: float | None, floor: float, fallback=None,
-                quantisation: float = 0.0, on_levels=None) -> tuple[float | None, int, float, tuple | None, list | None]:
+                quantisation: float = 0.0, on_levels=None,
+                picks=None) -> tuple[float | None, int, float, tuple | None, list | None]:
     """The pixel noise sigma of a fit's views, in the targets' units, the number of Laplacian values M
     it was estimated from (0 when given or taken from `fallback`), their `estimate_sigma` share (1
     for none), the range (low, high) of noise levels the residuals allow when their noise is not
@@ -309,9 +309,24 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
     used pixel's channel out -- and at least `floor` (the quantisation's, `Setup.sigma_floor`).
     Where too few pixels allow that: `fallback` when given (a refit's, the first fit's sigma), else
     None (unknown). `on_levels(levels)`: called with the levels as soon as they are read, when they
-    are returned (`_estimate`)."""
+    are returned (`_estimate`). `picks`: `noise_picks(views, [view.black ...])` when formed already
+    (`engine.run_fit`: beside the solve), taken where the silent pixels are the black ones."""
     if given is not None:
         return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views), None, None
+    if picks is None or not all(np.array_equal(quiet, view.black) for view, quiet in zip(views, silent)):
+        picks = noise_picks(views, silent)
+    estimate = _estimate(picks, residual_planes, on_levels)
+    if estimate is None:
+        return fallback, 0, 1.0, None, None
+    spread = sigma_range(estimate[0], floor, whiteness(picks, residual_planes))
+    return max(estimate[0], floor), estimate[1], estimate[2], spread, estimate[3]
+
+
+def noise_picks(views, silent) -> list:
+    """Per view (`records.View`) the `ViewPicks` of `views_noise`'s estimate, over its used pixels but
+    the `silent` (per view (U,) bool) and the censored ones -- per channel where a weight of 0 leaves
+    a used pixel's channel out --, binned by the targets' intensities: what it reads of the targets
+    alone (formed beside the solve, for silent pixels all black ones: `engine.run_fit`)."""
     picks = []
     for view, quiet in zip(views, silent):
         left_out = quiet | at_ceiling(view.values, view.ceiling) if np.isfinite(view.ceiling) else quiet
@@ -323,11 +338,7 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
             clean = in_channels(clean) & (view.weighting > 0)
         signal = view.target if view.left_out else view.image  # (non-finite values outside the pixels used: 0)
         picks.append(_view_picks(clean, view.weighting, signal, interior=True))
-    estimate = _estimate(picks, residual_planes, on_levels)
-    if estimate is None:
-        return fallback, 0, 1.0, None, None
-    spread = sigma_range(estimate[0], floor, whiteness(picks, residual_planes))
-    return max(estimate[0], floor), estimate[1], estimate[2], spread, estimate[3]
+    return picks
 
 
 def weight_share(views) -> float:
@@ -365,8 +376,7 @@ def quantisation(views) -> float:
         return 0.0
     num = den = 0.0
     for view in views:
-        black = view.zeros[:, 0] & view.zeros[:, 1] & view.zeros[:, 2]
-        keep = view.counted & ~black[:, None]
+        keep = view.counted & ~view.black[:, None]
         weight = None if view.weighting is None else view.weights[keep]
         den += float(np.count_nonzero(keep) if weight is None else np.sum(weight))
         if view.step:

@@ -94,7 +94,8 @@ class View:
     transfer, None for sRGB: `io.code_step` gives a value's quantisation, `noise.quantisation`); nonfinite: non-finite target values at the pixels used (`left_out`: those elsewhere, which the fit does not read); record: its G-buffer or ray tree;
     scene: the scene of this view; used (H, W) bool: the pixels the fit reads (`pixels`: their flat
     indices, in order; `values` and `weights`: the target's and the weight's (U, 3) float64 rows
-    there, `zeros`: values == 0 -- each computed once, on first use, or handed over by `Setup._seen`,
+    there, `zeros`: values == 0, `black` (U,): 0 in every channel -- each computed once, on first
+    use, or handed over by `Setup._seen`,
     which took them already); kept: the `KeptView` of the record when it is kept with the compiled
     scene, else None; touched (H, W) bool: the pixels the fitted parameters influence. The
     whole-image `target` and `weight` are formed only when asked for: a fit reads the used pixels'
@@ -139,6 +140,11 @@ class View:
     @cached_property
     def zeros(self) -> np.ndarray:
         return self.values == 0.0
+
+    @cached_property
+    def black(self) -> np.ndarray:
+        zeros = self.zeros
+        return zeros[:, 0] & zeros[:, 1] & zeros[:, 2]
 
     @cached_property
     def weights(self) -> np.ndarray:
