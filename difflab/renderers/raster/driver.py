@@ -189,8 +189,10 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
                                                           p_screen, behind], device, threads, kept)
     extra = none = scratch("no slots", 0, wp.int32)  # only a vertex behind the near plane can split a face
     n_split = 0
+    near = scratch("no vertices", 0, wp.vec4)  # (`clip.assemble_face`: no face is clipped)
     if to_host(behind)[0]:
         extra, n_split = split_slots(compiled, p_clip, threads)
+        near = p_clip
     n_slots = n_faces + n_split
     tris = screen_slots(compiled, n_slots)
     rows = scratch("rows", (n_slots, 4), wp.int32)  # each slot's box: first / last sample row and column
@@ -201,7 +203,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     counts.zero_()
     tests.zero_()
     launch_parts(clip.assemble_kernel, n_faces, [
-        arrays["faces"], p_clip, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
+        arrays["faces"], near, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
         tris.face, band_of_row, counts, tests], device, threads, kept)
     check_raster_work(int(to_host(tests).sum()), n_slots, "render", RenderError)
     band_index = {band: k for k, band in enumerate(bands)}
