@@ -52,8 +52,7 @@ def filled(struct, name: str, fields: list[tuple], array):
 # The fields a fit's G-buffer (`driver.rasterize(geometry_only=True)`) does not form, as nothing of
 # the fit reads them: their arrays are empty (nothing to clear or write; the kernels skip an empty
 # field) and the GBuffer's are None -- the points' colours and texture factors (no point is lit),
-# the uv derivatives, and each sample's face and barycentrics (the 256^2 bench sphere's samples
-# then need no face weights: ~0.1 ms of its Phong pass, and 30 % of the memory to clear).
+# the uv derivatives, and each sample's face and barycentrics (a third of the memory to clear).
 FIT_SKIPS = frozenset({"color", "factor", "duv_dx", "duv_dy", "face", "bary"})
 
 

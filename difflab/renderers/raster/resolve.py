@@ -203,9 +203,11 @@ def covering(key: wp.int64, tris: ScreenW):
 
 
 @wp.func(inline=True)
-def weighted(sample: SampleW, tris: ScreenW, perspective_correct: int, i: int, j: int):
-    """`sample` (`covering`) with its weights at sample (i, j): barycentrics of its slot,
-    perspective-correct (b_k / w_k renormalised) or affine, carried to the original face."""
+def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: int, j: int):
+    """Which face covered sample (i, j) sees (its visibility key is `key`, `covering`) and with what
+    weights: barycentrics of the winning slot, perspective-correct (b_k / w_k renormalised) or
+    affine, carried to the original face. Only `point.material` of the returned sample is filled in."""
+    sample = covering(key, tris)
     slot = sample.slot
     screen = tris.screen
     weight = tris.weight
@@ -224,13 +226,6 @@ def weighted(sample: SampleW, tris: ScreenW, perspective_correct: int, i: int, j
     b = wp.vec3(float(bd[0]), float(bd[1]), float(bd[2]))
     sample.weights = b[0] * weight[slot, 0] + b[1] * weight[slot, 1] + b[2] * weight[slot, 2]
     return sample
-
-
-@wp.func(inline=True)
-def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: int, j: int):
-    """Which face covered sample (i, j) sees (its visibility key is `key`) and with what weights
-    (`covering`, `weighted`). Only `point.material` of the returned sample is filled in."""
-    return weighted(covering(key, tris), tris, perspective_correct, i, j)
 
 
 @wp.func(inline=True)
@@ -278,8 +273,15 @@ def sphere_rays(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64)
     back by `resolve_sample`. A loop of its own: each sample's chain of square roots and divisions
     is independent of the next one's, and the CPU overlaps several where the loop is this short,
     not inside the whole per-sample pass (the 256^2 bench sphere's Phong G-buffer pass ~0.95 ->
-    ~0.76 ms of CPU a half, interleaved medians of 150 at load 2.5). Keys as `resolve_into` reads
-    them; none is reset here."""
+    ~0.76 ms of CPU a half, interleaved medians of 150 at load 2.5; the scan costs a frame of
+    background ~1 ns a sample: a tiny sphere's 0.13 -> 0.17 ms). Keys as `resolve_into` reads them;
+    none is reset here. Nothing to find in a scene without analytic spheres."""
+    spheres = int(0)
+    for obj in range(mesh.object_kind.shape[0]):
+        if mesh.object_kind[obj] == HIT_SPHERE:
+            spheres = 1
+    if spheres == 0:
+        return
     for j in range(cam.width):
         s = i * cam.width + j
         k = key[s]
@@ -296,20 +298,18 @@ def sphere_rays(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64)
 
 @wp.func(inline=True)
 def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: wp.array(dtype=MaterialW),
-                   cam: CameraW, perspective_correct: int, shading: int, i: int, j: int, found: PointsW,
-                   weights: int):
+                   cam: CameraW, perspective_correct: int, shading: int, i: int, j: int, found: PointsW):
     """`sample_weights` and the surface point there: under Phong shading on an analytic sphere the
     sphere's own (`sphere_sample`: the facets decide only coverage and depth order) at its eye ray's
-    hit, which `sphere_rays` found (`found`; an empty PointsW(): found here), its weights only when
-    `weights` is 1 (nothing else reads them there); else the face's interpolated position with the
-    face's normal (flat) or the interpolated vertex normals, both facing the viewer side the face
-    shows."""
-    sample = covering(key, tris)
+    hit, which `sphere_rays` found (`found`; an empty PointsW(): found here); else the face's
+    interpolated position with the face's normal (flat) or the interpolated vertex normals, both
+    facing the viewer side the face shows. (Forming the weights only where they are read -- not on
+    a fit's sphere samples, which keep no `bary` -- saved ~0.05 ms of the 256^2 bench sphere's
+    Phong pass a half but cost a mesh's ~0.1 ms: measured, not kept.)"""
+    sample = sample_weights(key, tris, perspective_correct, i, j)
     f = sample.face
     obj = mesh.face_object[f]
     if shading == PHONG_SHADING and mesh.object_kind[obj] == HIT_SPHERE:
-        if weights == 1:
-            sample = weighted(sample, tris, perspective_correct, i, j)
         sample.sphere = 1
         p = wp.vec3()
         direction = wp.vec3()
@@ -320,7 +320,6 @@ def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: w
             p, direction = sphere_ray(mesh, cam, obj, sample.side, i, j)
         sample.point = sphere_sample(mesh, materials, mesh.face_material[f], obj, p, direction)
         return sample
-    sample = weighted(sample, tris, perspective_correct, i, j)
     wb = sample.weights
     side = sample.side
     p = sample_position(sample, mesh)
@@ -415,8 +414,7 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
         out.point_index[s] = wp.vec3i(s, s, s)
         return False, PointW(), wp.vec2(0.0), wp.vec2(0.0), wp.vec2(0.0)
     key[s] = NO_HIT  # the next frame's z-buffer starts cleared
-    sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j, found,
-                            int(out.bary.shape[0] > 0))
+    sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j, found)
     store_point(samples, s, sample.point)
     uv = wp.vec2(0.0)
     duv_dx = wp.vec2(0.0)

@@ -304,8 +304,7 @@ def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, 
     sample = SampleW()
     p = wp.vec3(0.0)
     if shading == PHONG_SHADING:  # the whole surface point, lit here
-        sample = resolve_sample(key, tris, mesh, lighting.materials, cam, perspective_correct, shading, i, j, PointsW(),
-                                0)
+        sample = resolve_sample(key, tris, mesh, lighting.materials, cam, perspective_correct, shading, i, j, PointsW())
         p = sample.point.p
     else:  # the weights of the face's points, and the point only where fog needs its depth
         sample = sample_weights(key, tris, perspective_correct, i, j)
