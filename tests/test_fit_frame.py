@@ -1,8 +1,9 @@
 """The frame a fit renders (`renderers.api.fit_frame`): render_frame(..., image=False) without what
 the fit never reads -- under Phong shading no point is lit (the fit shades the recorded light
-geometry itself) and uv and its derivatives are formed only where a texture is sampled. Every field
-it keeps is render_frame's; the colours and derivatives it skips are None, not zeros passed off as
-values, and uv is 0 where no texture is sampled, as in a ray-traced G-buffer."""
+geometry itself), uv is formed only where a texture is sampled, and neither uv derivatives nor
+faces and barycentrics are formed. Every field it keeps is render_frame's; the fields it skips are
+None, not zeros passed off as values, and uv is 0 where no texture is sampled, as in a ray-traced
+G-buffer."""
 
 import dataclasses
 
@@ -13,7 +14,7 @@ from test_raster_spheres import RED, sphere_scene, textured
 from difflab import render_frame
 from difflab.renderers.api import fit_frame
 
-SKIPPED = {"duv_dx", "duv_dy", "color"}
+SKIPPED = {"duv_dx", "duv_dy", "color", "texture_factor", "face", "bary"}  # (`raster.gbuffer.FIT_SKIPS`)
 
 
 def arrays(gbuffer) -> dict:
@@ -27,8 +28,9 @@ def arrays(gbuffer) -> dict:
 @pytest.mark.parametrize("texture", [False, True])
 def test_a_fits_frame_is_render_frames_less_what_the_fit_does_not_read(tmp_path, shading, method, texture):
     """A sphere (and a mesh quad beside it) with shadows: under rasterized Phong shading the fit's
-    G-buffer equals render_frame's in every field but the points' colours and the uv derivatives,
-    which are None, and uv, there only on a textured material -- the texels it samples (textured)
+    G-buffer equals render_frame's in every field but the points' colours and texture factors, the
+    uv derivatives, the faces and barycentrics, which are None, and uv, there only on a textured
+    material -- the texels it samples (textured)
     included, as they need uv and its derivatives; Gouraud frames and ray-traced ones are
     render_frame's in full."""
     quad = {"type": "mesh", "builtin": "quad", "material": "red",

@@ -104,10 +104,11 @@ def render(scene, *, method=None, shading=None, specular=None, max_depth=None, s
 def fit_frame(scene, *, device=None, threads=None) -> Frame:
     """`render_frame(scene, image=False, device=..., threads=...)` as a fit reads it (`fit.setup`;
     the frame stays inside the fit): a rasterized Phong G-buffer records its points' light
-    directions, distances and visibilities but lights none of them, and forms uv and its
-    derivatives only where a texture is sampled -- its `points.color`, `duv_dx` and `duv_dy` are
-    None, `uv` 0 elsewhere as in a ray-traced G-buffer (the fit shades the geometry in JAX and reads
-    none of them), and no overflow is checked (no colour is formed).
+    directions, distances and visibilities but lights none of them, forms uv only where a texture
+    is sampled (`uv` 0 elsewhere, as in a ray-traced G-buffer), and forms nothing else the fit does
+    not read (it shades the geometry in JAX) -- its `points.color`, `points.texture_factor`,
+    `duv_dx`, `duv_dy`, `face` and `bary` are None (`raster.gbuffer.FIT_SKIPS`) -- and no overflow
+    is checked (no colour is formed).
     Other frames are render_frame's."""
     return draw(scene, {}, device, None, None, threads, keep=True, image=False, geometry_only=True)
 

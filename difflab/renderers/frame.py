@@ -31,7 +31,9 @@ class ShadingPoints:
     Textures under flat and Gouraud shading: a textured material's point `color` is lit with the
     texture's target coefficient set to 0, and `texture_factor` (N, 3) is what a texel multiplies
     (the point lit with only that coefficient, the others 0); each sample then adds its own
-    texel times the interpolated factor (see `GBuffer`). Zero elsewhere (and always under Phong)."""
+    texel times the interpolated factor (see `GBuffer`). Zero elsewhere (and always under Phong).
+    A fit's own rasterized frame (`renderers.api.fit_frame`) forms neither: `color` and
+    `texture_factor` are None there."""
 
     position: np.ndarray
     normal: np.ndarray
@@ -41,7 +43,7 @@ class ShadingPoints:
     light_dir: np.ndarray
     light_dist: np.ndarray
     visibility: np.ndarray
-    color: np.ndarray
+    color: np.ndarray | None
     texture_factor: np.ndarray | None = None
 
 
@@ -61,7 +63,8 @@ class GBuffer:
     sphere is the sphere's own point on its eye ray, with normal (p - c) / r, uv the sphere's there
     and its derivatives over the sample's footprint, as the ray tracer has them (`bary` and `face`
     still name the triangle that covered it); texture (.., 3): the filtered texel at each sample
-    of a textured material (0 elsewhere).
+    of a textured material (0 elsewhere). A fit's own rasterized frame (`renderers.api.fit_frame`)
+    forms neither `face` and `bary` nor the uv derivatives: None there.
 
     A sample of a textured material (texture replacing its `texture_target` coefficient) is
     - Phong: shaded with the coefficient replaced by `texture` at that sample (its own point);
@@ -77,8 +80,8 @@ class GBuffer:
     uv: np.ndarray
     material: np.ndarray
     object: np.ndarray
-    face: np.ndarray
-    bary: np.ndarray
+    face: np.ndarray | None
+    bary: np.ndarray | None
     point_index: np.ndarray
     point_weight: np.ndarray
     points: ShadingPoints

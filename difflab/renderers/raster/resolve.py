@@ -191,14 +191,26 @@ def uv_derivatives(screen: wp.array2d(dtype=wp.vec4d), weight: wp.array2d(dtype=
 
 
 @wp.func(inline=True)
-def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: int, j: int):
-    """Which face covered sample (i, j) sees (its visibility key is `key`) and with what weights:
-    barycentrics of the winning slot, perspective-correct (b_k / w_k renormalised) or affine, carried
-    to the original face. Only `point.material` of the returned sample is filled in."""
+def covering(key: wp.int64, tris: ScreenW):
+    """The slot whose triangle a covered sample sees (its visibility key is `key`), that slot's face
+    and the side seen, in a SampleW holding nothing else."""
     slot = int(key % wp.int64(4294967296))
+    sample = SampleW()
+    sample.face = tris.face[slot]
+    sample.slot = slot
+    sample.side = float(tris.facing[slot])
+    return sample
+
+
+@wp.func(inline=True)
+def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: int, j: int):
+    """Which face covered sample (i, j) sees (its visibility key is `key`, `covering`) and with what
+    weights: barycentrics of the winning slot, perspective-correct (b_k / w_k renormalised) or
+    affine, carried to the original face. Only `point.material` of the returned sample is filled in."""
+    sample = covering(key, tris)
+    slot = sample.slot
     screen = tris.screen
     weight = tris.weight
-    sample = SampleW()
     bd = wp.vec3d()
     if perspective_correct == 1:  # b_k / w_k renormalised: c_k = e_k / w_k, as b_k = e_k / area and area cancels
         e, area = edge_weights(screen[slot, 0], screen[slot, 1], screen[slot, 2], i, j)
@@ -212,10 +224,7 @@ def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: in
         bd = b_screen
         sample.area = area
     b = wp.vec3(float(bd[0]), float(bd[1]), float(bd[2]))
-    sample.face = tris.face[slot]
-    sample.slot = slot
     sample.weights = b[0] * weight[slot, 0] + b[1] * weight[slot, 1] + b[2] * weight[slot, 2]
-    sample.side = float(tris.facing[slot])
     return sample
 
 
@@ -229,39 +238,87 @@ def sample_position(sample: SampleW, mesh: RasterMeshW):
 
 
 @wp.func
-def sphere_sample(mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), cam: CameraW, mat: int, obj: int,
-                  side: float, i: int, j: int):
-    """The point of analytic sphere `obj` that sample (i, j) sees under Phong shading: where the
-    sample's eye ray (`camera.primary_ray` through its centre, from `camera.line_point`) meets the
-    sphere (`trace.sphere_point`, the ray tracer's formula) -- its near root where the face's front
-    is seen (side +1), its far root where its back is (from inside) -- with the normal (p - c) / r,
-    turned toward the ray as the ray tracer turns it, and the view -d. The facets are inscribed, so
-    the ray through a covered sample meets the sphere (a miss by rounding: the tangent point)."""
+def sphere_ray(mesh: RasterMeshW, cam: CameraW, obj: int, side: float, i: int, j: int):
+    """Where sample (i, j)'s eye ray (`camera.primary_ray` through its centre, from
+    `camera.line_point`) meets analytic sphere `obj` (`trace.sphere_point`, the ray tracer's
+    formula) -- its near root where the face's front is seen (side +1), its far root where its back
+    is (from inside) -- and the ray's unit direction d. The facets are inscribed, so the ray through
+    a covered sample meets the sphere (a miss by rounding: the tangent point)."""
     x = float(j) + 0.5
     y = float(i) + 0.5
     unused, direction = primary_ray(cam, x, y)
-    center = mesh.sphere_center[obj]
-    p = sphere_point(center, mesh.sphere_radius[obj], line_point(cam, x, y), direction, int(side < 0.0))
-    outward = wp.normalize(p - center)
+    p = sphere_point(mesh.sphere_center[obj], mesh.sphere_radius[obj], line_point(cam, x, y), direction,
+                     int(side < 0.0))
+    return p, direction
+
+
+@wp.func
+def sphere_sample(mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), mat: int, obj: int, p: wp.vec3,
+                  direction: wp.vec3):
+    """The point of analytic sphere `obj` that a sample sees under Phong shading, p where its eye ray
+    of direction d meets it (`sphere_ray`): the normal (p - c) / r, turned toward the ray as the ray
+    tracer turns it, and the view -d."""
+    outward = wp.normalize(p - mesh.sphere_center[obj])
     normal = outward
     if wp.dot(direction, outward) > 0.0:
         normal = -outward
     return make_point(p, normal, normal, -direction, mat, materials, mesh, obj, outward)
 
 
+@wp.func
+def sphere_rays(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
+                cam: CameraW, found: PointsW, i: int):
+    """`sphere_ray` at row i's samples on analytic spheres, ahead of `resolve_into` over the row
+    (Phong shading, `shade.phong_gbuffer_kernel`): p as found.position, -d as found.view, read
+    back by `resolve_sample`. A loop of its own: each sample's chain of square roots and divisions
+    is independent of the next one's, and the CPU overlaps several where the loop is this short,
+    not inside the whole per-sample pass (the 256^2 bench sphere's Phong G-buffer pass ~0.95 ->
+    ~0.76 ms of CPU a half, interleaved medians of 150 at load 2.5; the scan costs a frame of
+    background ~1 ns a sample: a tiny sphere's 0.13 -> 0.17 ms). Keys as `resolve_into` reads them;
+    none is reset here. Nothing to find in a scene without analytic spheres."""
+    spheres = int(0)
+    for obj in range(mesh.object_kind.shape[0]):
+        if mesh.object_kind[obj] == HIT_SPHERE:
+            spheres = 1
+    if spheres == 0:
+        return
+    for j in range(cam.width):
+        s = i * cam.width + j
+        k = key[s]
+        if partial.shape[0] > 0:
+            k = wp.min(k, partial[s])
+        if k != NO_HIT:
+            sample = covering(k, tris)
+            obj = mesh.face_object[sample.face]
+            if mesh.object_kind[obj] == HIT_SPHERE:
+                p, direction = sphere_ray(mesh, cam, obj, sample.side, i, j)
+                found.position[s] = p
+                found.view[s] = -direction
+
+
 @wp.func(inline=True)
 def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: wp.array(dtype=MaterialW),
-                   cam: CameraW, perspective_correct: int, shading: int, i: int, j: int):
+                   cam: CameraW, perspective_correct: int, shading: int, i: int, j: int, found: PointsW):
     """`sample_weights` and the surface point there: under Phong shading on an analytic sphere the
-    sphere's own (`sphere_sample`: the facets decide only coverage and depth order); else the face's
+    sphere's own (`sphere_sample`: the facets decide only coverage and depth order) at its eye ray's
+    hit, which `sphere_rays` found (`found`; an empty PointsW(): found here); else the face's
     interpolated position with the face's normal (flat) or the interpolated vertex normals, both
-    facing the viewer side the face shows."""
+    facing the viewer side the face shows. (Forming the weights only where they are read -- not on
+    a fit's sphere samples, which keep no `bary` -- saved ~0.05 ms of the 256^2 bench sphere's
+    Phong pass a half but cost a mesh's ~0.1 ms: measured, not kept.)"""
     sample = sample_weights(key, tris, perspective_correct, i, j)
     f = sample.face
     obj = mesh.face_object[f]
     if shading == PHONG_SHADING and mesh.object_kind[obj] == HIT_SPHERE:
         sample.sphere = 1
-        sample.point = sphere_sample(mesh, materials, cam, mesh.face_material[f], obj, sample.side, i, j)
+        p = wp.vec3()
+        direction = wp.vec3()
+        if found.position.shape[0] > 0:
+            p = found.position[i * cam.width + j]
+            direction = -found.view[i * cam.width + j]
+        else:
+            p, direction = sphere_ray(mesh, cam, obj, sample.side, i, j)
+        sample.point = sphere_sample(mesh, materials, mesh.face_material[f], obj, p, direction)
         return sample
     wb = sample.weights
     side = sample.side
@@ -332,14 +389,15 @@ class GBufferW:
 @wp.func
 def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
                  materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
-                 n_vertices: int, uvs: int, out: GBufferW, samples: PointsW, i: int, j: int):
+                 n_vertices: int, out: GBufferW, samples: PointsW, found: PointsW, i: int, j: int):
     """Stage 4 at sample (i, j): its G-buffer entries (empty ones where nothing covers it: the
     non-zero ones only, as `samples` and `out` are zero when the kernel starts). Its key is the
     lesser of `key` and `partial` (a z-buffer drawn in two; `partial` empty otherwise), both reset.
-    Returns whether it is covered, and its point, uv and uv derivatives as stored (what a Phong
-    pass lights next, without reading them back). `uvs` 1: uv and its derivatives at every covered
-    sample; 0 (a fit's G-buffer, which reads no others): only where its material has a texture,
-    0 elsewhere (as the ray tracer's G-buffer has them)."""
+    `found`: see `resolve_sample`. Returns whether it is covered, and its point, uv and uv
+    derivatives as stored (what a Phong pass lights next, without reading them back).
+    An empty array of `out` or `samples` is a field the G-buffer does not keep (a fit's,
+    `gbuffer.FIT_SKIPS`): not written, and without `duv_dx` uv and its derivatives are formed only
+    where the sample's material has a texture (uv 0 elsewhere, as the ray tracer's G-buffer has it)."""
     s = i * cam.width + j
     k = key[s]
     if partial.shape[0] > 0:
@@ -349,24 +407,28 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
             k = wp.min(k, other)
     if k == NO_HIT:  # its other entries stay as cleared: zero
         samples.material[s] = -1
-        out.face[s] = -1
+        if out.face.shape[0] > 0:
+            out.face[s] = -1
         out.object[s] = -1
         out.depth[s] = wp.inf
         out.point_index[s] = wp.vec3i(s, s, s)
         return False, PointW(), wp.vec2(0.0), wp.vec2(0.0), wp.vec2(0.0)
     key[s] = NO_HIT  # the next frame's z-buffer starts cleared
-    sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j)
+    sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j, found)
     store_point(samples, s, sample.point)
     uv = wp.vec2(0.0)
     duv_dx = wp.vec2(0.0)
     duv_dy = wp.vec2(0.0)
-    if uvs == 1 or materials[sample.point.material].texture >= 0:  # (else zero, as cleared)
+    derivatives = samples.duv_dx.shape[0] > 0
+    if derivatives or materials[sample.point.material].texture >= 0:  # (else zero, as cleared)
         uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, cam, perspective_correct, i, j)
-        samples.duv_dx[s] = duv_dx
-        samples.duv_dy[s] = duv_dy
+        if derivatives:
+            samples.duv_dx[s] = duv_dx
+            samples.duv_dy[s] = duv_dy
         out.uv[s] = uv
-    out.face[s] = sample.face
-    out.bary[s] = sample.weights
+    if out.face.shape[0] > 0:
+        out.face[s] = sample.face
+        out.bary[s] = sample.weights
     out.depth[s] = wp.dot(sample.point.p - cam.eye, cam.forward)
     out.object[s] = mesh.face_object[sample.face]
     index, weight = sample_points(sample, mesh, shading, s, n_vertices)
@@ -382,5 +444,5 @@ def resolve_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), part
     """Stage 4, one row of samples per thread."""
     i = dealt_row(row0, row_step, wp.tid())
     for j in range(cam.width):
-        resolve_into(key, partial, tris, mesh, materials, cam, perspective_correct, shading, n_vertices, 1, out,
-                     samples, i, j)
+        resolve_into(key, partial, tris, mesh, materials, cam, perspective_correct, shading, n_vertices, out, samples,
+                     PointsW(), i, j)

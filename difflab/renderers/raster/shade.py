@@ -28,7 +28,7 @@ from ..trace import SceneGeomW, light_visibility, point_offset
 from .coverage import NO_HIT
 from .flat_gouraud import mesh_point
 from .resolve import (GBufferW, PointsW, PointW, RasterMeshW, SampleW, ScreenW, load_point, resolve_into,
-                      resolve_sample, sample_points, sample_position, sample_uv, sample_weights)
+                      resolve_sample, sample_points, sample_position, sample_uv, sample_weights, sphere_rays)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -170,15 +170,16 @@ def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64)
     """Stages 4 and 6 under Phong shading, one row of samples per thread: each sample resolved (its
     G-buffer entries, `resolve_into`), then lit as its own shading point, its texel sampled there
     (`light_into`); nonfinite[i] counts row i's samples whose colour has a NaN or infinite channel.
-    `record` GEOMETRY_ONLY (a fit's G-buffer): no colours (none counted; only the light geometry
-    is recorded, `record_geometry`), and uv and its derivatives only where a texture is sampled;
-    else 1."""
+    `record` GEOMETRY_ONLY (a fit's G-buffer, whose skipped fields' arrays are empty: `resolve_into`):
+    no colours (none counted; only the light geometry is recorded, `record_geometry`); else 1. The
+    row's points on analytic spheres are found first (`sphere_rays`, into `samples`)."""
     i = dealt_row(row0, row_step, wp.tid())
     bad = int(0)
+    sphere_rays(key, partial, tris, mesh, cam, samples, i)
     for j in range(cam.width):
         covered, point, uv, duv_dx, duv_dy = resolve_into(key, partial, tris, mesh, lighting.materials, cam,
                                                           perspective_correct, PHONG_SHADING, mesh.vertices.shape[0],
-                                                          int(record != GEOMETRY_ONLY), out, samples, i, j)
+                                                          out, samples, samples, i, j)
         if covered:
             s = i * cam.width + j
             texel = wp.vec3(0.0)
@@ -303,7 +304,7 @@ def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, 
     sample = SampleW()
     p = wp.vec3(0.0)
     if shading == PHONG_SHADING:  # the whole surface point, lit here
-        sample = resolve_sample(key, tris, mesh, lighting.materials, cam, perspective_correct, shading, i, j)
+        sample = resolve_sample(key, tris, mesh, lighting.materials, cam, perspective_correct, shading, i, j, PointsW())
         p = sample.point.p
     else:  # the weights of the face's points, and the point only where fog needs its depth
         sample = sample_weights(key, tris, perspective_correct, i, j)
