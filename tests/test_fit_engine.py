@@ -363,25 +363,30 @@ def test_the_noise_picks_formed_beside_the_solve_are_the_reports(monkeypatch):
                     assert a == b or (a != a and b != b), field.name
 
 
-def test_a_failing_solve_leaves_no_noise_picks_running(monkeypatch):
-    """A solve that raises: the noise picks started beside it are done before the error is passed on."""
+@pytest.mark.parametrize("failing", ["run", "normal_matrix"])
+def test_a_failing_fit_leaves_no_noise_picks_running(monkeypatch, failing):
+    """A solve, or the report before it takes the picks, that raises: the noise picks started beside
+    the solve are left undone or waited for before the error is passed on -- none runs on after."""
     from difflab.fit import engine
 
-    done = []
+    events = []
 
     def picks(views, silent):
+        events.append("start")
         time.sleep(0.05)
-        done.append(len(views))
+        events.append("end")
 
-    def fails(*args):
-        raise RuntimeError("solver failed")
+    def fails(*args, **kwargs):
+        raise RuntimeError("failed here")
 
     monkeypatch.setattr(engine, "noise_picks", picks)
-    monkeypatch.setattr(engine, "run", fails)
+    monkeypatch.setattr(engine, failing, fails)
     scene = make_scene(size=16)
-    with pytest.raises(RuntimeError, match="solver failed"):
+    with pytest.raises(RuntimeError, match="failed here"):
         fit_material(scene, [target_of(scene)], "red", ("kd",), progress=False)
-    assert done == [1]
+    seen = list(events)
+    time.sleep(0.1)
+    assert events == seen and seen in ([], ["start", "end"])
 
 
 def test_a_float64_fit_after_a_float32_fit_of_the_same_layout():

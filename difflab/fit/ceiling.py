@@ -15,6 +15,8 @@ hide a highlight clipped beside it: the red ball's ks came out 0.045 for 0.5, ch
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from ..errors import FitError
@@ -47,7 +49,7 @@ def primary_objects(record) -> np.ndarray:
     return objects[::side, ::side]
 
 
-def float_ceiling(values: np.ndarray, surfaces) -> float:
+def float_ceiling(values: np.ndarray, surfaces: Callable[[], np.ndarray]) -> float:
     """The ceiling of float target values (U, 3) whose pixels show `surfaces()` (U,) (object ids,
     asked for only when the maximum is tied: ~0.03 ms of a first fit's setup to gather): their
     maximum when it marks a clip (see the module docstring), else inf."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -159,33 +160,43 @@ def run_fit(setup: Setup, options: FitOptions, timings: dict) -> FitResult:
     if code is not None:
         return report(setup, None, code, 0, [], options, timings)
     ahead = noise_ahead(setup)
-    start = time.perf_counter()
     try:
+        start = time.perf_counter()
         with jax.enable_x64(setup.x64):
             out = run(setup.problem, setup.x0, options)
-    except BaseException:
-        if ahead is not None:
-            ahead()  # (done before the error is passed on: nothing runs on past the call)
-        raise
-    timings["solve"] = time.perf_counter() - start
-    return report(setup, out.x, out.result, out.steps, out.history, options, timings, out.linearised, ahead)
+        timings["solve"] = time.perf_counter() - start
+        return report(setup, out.x, out.result, out.steps, out.history, options, timings, out.linearised,
+                      ahead.take if ahead is not None else None)
+    finally:
+        if ahead is not None:  # (after an error: undone, or waited for -- nothing runs on past the call)
+            ahead.queue.cancel()
 
 
-def noise_ahead(setup: Setup):
+class NoiseAhead(NamedTuple):
+    """The noise estimate's picks under way beside the solve: `take()` gives them once done."""
+
+    queue: object  # `bandpool.start_beside`'s handle
+    picks: list
+
+    def take(self):
+        self.queue.join()
+        return self.picks[0]
+
+
+def noise_ahead(setup: Setup) -> NoiseAhead | None:
     """Start the noise estimate's `noise_picks` -- the targets' alone, for silent pixels all black ones
     (`View.black`) -- on a pool worker beside the solve (`bandpool.start_beside`: XLA runs its loop
-    without the GIL); returns a function that gives them once done (on the caller, if no worker took
-    them). None with sigma given (no estimate). first.py's 256 x 256 sphere, bursts of interleaved
-    fits: with the machine otherwise idle, first fit 9.13 -> 8.89 ms, fitted again 5.35 -> 5.10 (stats
+    without the GIL; none with threads=1 or DIFFLAB_THREADS=1: on the caller when the report asks).
+    None with sigma given (no estimate). first.py's 256 x 256 sphere, bursts of interleaved fits:
+    with the machine otherwise idle, first fit 9.13 -> 8.89 ms, fitted again 5.35 -> 5.10 (stats
     -0.40 / -0.28 ms, solve +0.10 / +0.04); with another process on one of the 2 cores, 11.07 ->
     11.11 and 5.29 -> 5.53 (solve +0.25 / +0.40): XLA's two Eigen threads run the solve on both
     cores, and the worker takes its turns from them."""
     if setup.sigma_given is not None:
         return None
     picks = []
-    started = start_beside(lambda: picks.append(noise_picks(setup.views, [view.black for view in setup.views])),
-                           "cpu")
-    return lambda: started.join() or picks[0]
+    return NoiseAhead(start_beside(lambda: picks.append(noise_picks(setup.views, [view.black for view in setup.views])),
+                                   "cpu", setup.threads), picks)
 
 
 def solve(setup: Setup, options=None, **option_fields) -> FitResult:

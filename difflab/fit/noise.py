@@ -280,7 +280,7 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
     chi-square's dof)."""
     out, count = [], 0
     for view, part in zip(views, r):
-        rows = view.black.copy()  # black in the target, and the model 0 there too (in place: one array)
+        rows = view.black.copy()  # black in the target, and the model 0 there too (a copy, and in place after)
         if rows.any():  # (none black, as in noisy targets: nothing to compare)
             for c in range(3):
                 rows &= part[c] == 0

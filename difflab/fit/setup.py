@@ -43,7 +43,8 @@ class Setup:
     nonfinite (target values at the pixels used), nonfinite_left_out (elsewhere), censored, sigma_given, quantisation (the rms rounding error of the targets' used values,
     `noise.quantisation`: 0 for float data), sigma_floor, sigma_fallback (the noise when too few pixels allow an estimate, None:
     unknown; `engine.without_clipped`), x64, dtype, problem, render_seconds (the Warp
-    renders' wall time), base_scene (before `init`), ceiling_given, loss, loss_scale."""
+    renders' wall time), base_scene (before `init`), ceiling_given, loss, loss_scale, threads (CPU threads
+    for the render, as given)."""
 
     def __init__(self, scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None,
                  per_channel=True, bounded=False, loss="l2", loss_scale=0.05, masks=None, weights=None, init=None,
@@ -84,6 +85,7 @@ class Setup:
                                "'texture' to params")
         self.initial = {p.key: scene_value(scene, p, self.textures) for p in self.layout}
         self.x0 = self.layout.x_of(self.layout.flatten(self.initial))
+        self.threads = threads  # (the render's; `engine.noise_ahead` takes a worker only where it may)
         self.views = self._record(targets, masks, weights, max_depth, spp, device, threads)
         self.used_pixels = sum(v.pixels.size for v in self.views)
         self._target_statistics()

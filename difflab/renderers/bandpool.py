@@ -69,6 +69,13 @@ class _BandQueue:
             if self.left == 0:
                 self.finished.set()
 
+    def cancel(self) -> None:
+        """Leave the bands not started undone and wait for those running, their errors dropped (for a
+        caller that is passing on an error of its own); after `join`, nothing."""
+        self.drop()
+        self.finished.wait()
+        self.run_band = None
+
     def join(self) -> None:
         try:
             self.work()
@@ -131,7 +138,8 @@ def _follow_phases(queues: list[_BandQueue]) -> None:
 def start_beside(task, device: str, threads: int | None = None) -> _BandQueue:
     """Start `task()` on a pool worker, beside what the caller does next, when the CPU has a thread
     to spare (`threads`); `join()` the returned handle to have it done -- on the caller, if no worker
-    has taken it yet (and on CUDA, or with one thread, it runs there)."""
+    has taken it yet (and on CUDA, or with one thread, it runs there); `cancel()` it to leave it
+    undone."""
     queue = _BandQueue(lambda begin, end: task(), [(0, 0)])
     if device.startswith("cpu") and (cpu_threads() if threads is None else threads) > 1:
         _pool(1).submit(queue.work)

@@ -32,8 +32,8 @@ class ShadingPoints:
     texture's target coefficient set to 0, and `texture_factor` (N, 3) is what a texel multiplies
     (the point lit with only that coefficient, the others 0); each sample then adds its own
     texel times the interpolated factor (see `GBuffer`). Zero elsewhere (and always under Phong).
-    A fit's own rasterized frame (`renderers.api.fit_frame`) forms neither: `color` and
-    `texture_factor` are None there."""
+    A fit's own rasterized frame under Phong shading (`renderers.api.fit_frame`) forms neither:
+    `color` and `texture_factor` are None there."""
 
     position: np.ndarray
     normal: np.ndarray
@@ -63,8 +63,8 @@ class GBuffer:
     sphere is the sphere's own point on its eye ray, with normal (p - c) / r, uv the sphere's there
     and its derivatives over the sample's footprint, as the ray tracer has them (`bary` and `face`
     still name the triangle that covered it); texture (.., 3): the filtered texel at each sample
-    of a textured material (0 elsewhere). A fit's own rasterized frame (`renderers.api.fit_frame`)
-    forms neither `face` and `bary` nor the uv derivatives: None there.
+    of a textured material (0 elsewhere). A fit's own rasterized frame under Phong shading
+    (`renderers.api.fit_frame`) forms neither `face` and `bary` nor the uv derivatives: None there.
 
     A sample of a textured material (texture replacing its `texture_target` coefficient) is
     - Phong: shaded with the coefficient replaced by `texture` at that sample (its own point);

@@ -53,6 +53,8 @@ def filled(struct, name: str, fields: list[tuple], array):
 # the fit reads them: their arrays are empty (nothing to clear or write; the kernels skip an empty
 # field) and the GBuffer's are None -- the points' colours and texture factors (no point is lit),
 # the uv derivatives, and each sample's face and barycentrics (a third of the memory to clear).
+# The names hold in every struct of the layout (PointsW, GBufferW, LitW); face and bary go together
+# (`resolve_into` writes bary where face is formed).
 FIT_SKIPS = frozenset({"color", "factor", "duv_dx", "duv_dy", "face", "bary"})
 
 

@@ -303,9 +303,7 @@ def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: w
     sphere's own (`sphere_sample`: the facets decide only coverage and depth order) at its eye ray's
     hit, which `sphere_rays` found (`found`; an empty PointsW(): found here); else the face's
     interpolated position with the face's normal (flat) or the interpolated vertex normals, both
-    facing the viewer side the face shows. (Forming the weights only where they are read -- not on
-    a fit's sphere samples, which keep no `bary` -- saved ~0.05 ms of the 256^2 bench sphere's
-    Phong pass a half but cost a mesh's ~0.1 ms: measured, not kept.)"""
+    facing the viewer side the face shows."""
     sample = sample_weights(key, tris, perspective_correct, i, j)
     f = sample.face
     obj = mesh.face_object[f]
