@@ -178,16 +178,17 @@ def _optimistix(solver, z0, problem, max_steps):
 
 def _box_lm(problem, x0, lower, upper, options: FitOptions, progress) -> Solved:
     """`lm.solve_box` from x0, a `Solved` (its r -- per view (3, U), `Problem.view_residuals` -- and
-    J^T J at the solution on the host)."""
+    J^T J at the solution on the host). (Read with np.asarray: int() of a jax scalar costs 16 us, and
+    through the class: the bound method of an eqx.Module is one more Module, 24 us.)"""
     rtol, atol = options.tolerances()
     dtype = problem.ambient.dtype
     x, code, steps, history, r, gram = lm.solve_box(problem, np.asarray(x0, dtype), lower, upper, options.max_steps,
                                                    rtol, atol, progress)
-    steps = int(steps)
+    steps = int(np.asarray(steps))
     history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
-    name = lm.CODES[int(code)]  # a non-finite start leaves r, J unset
+    name = lm.CODES[int(np.asarray(code))]  # a non-finite start leaves r, J unset
     return Solved(np.asarray(x, np.float64), name, steps, history,
-                  None if name == "nonfinite" else (problem.view_residuals(r), gram))
+                  None if name == "nonfinite" else (type(problem).view_residuals(problem, r), gram))
 
 
 def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
@@ -205,8 +206,9 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
         if options.solver == "lm" and matrix_free:
             x, code, steps, history = solve_box_cg(problem, np.asarray(x0, dtype), lower, upper, options.max_steps,
                                                    rtol, atol, options.cg_steps, progress)
-            history = np.asarray(history, np.float64)[:int(steps)].tolist() if options.history else []
-            return Solved(np.asarray(x, np.float64), lm.CODES[int(code)], int(steps), history)
+            steps = int(np.asarray(steps))  # (as `_box_lm` reads them)
+            history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
+            return Solved(np.asarray(x, np.float64), lm.CODES[int(np.asarray(code))], steps, history)
         if options.solver == "lm":
             # targets with a ceiling no value reaches: solved unclipped, which holds where the model
             # ends below the ceilings (`Problem.without_ceilings`), else solved again clipped
