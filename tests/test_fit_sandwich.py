@@ -115,10 +115,10 @@ def test_the_middle_starts_once_the_levels_are_read_and_gives_what_it_gives_wait
     real_middle, real_sums, real_whiteness, real_noise = (sandwich.noise_middle, noise._sums, noise.whiteness,
                                                           noise.views_noise)
 
-    def middle(setup, at, r, read, counted):
+    def middle(setup, at, r, read, *rest):
         events.append("middle")
         levels.append(read)
-        return real_middle(setup, at, r, read, counted)
+        return real_middle(setup, at, r, read, *rest)
 
     def views_noise(*args):
         out = real_noise(*args)

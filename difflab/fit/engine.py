@@ -77,8 +77,9 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         picks = ahead() if ahead is not None else None  # (first: the worker is done with the views)
         silent, silent_entries = silent_pixels(setup.views, r)
         middle = []  # unequal noise: the sandwich's middle (`noise_middle`), started once the noise levels are read
+        same_sum = counted is r and all(part.flags.c_contiguous for part in r)  # (sse summed as noise_middle sums)
         on_levels = None if matrix_free else lambda levels: middle.append(noise_middle(
-            setup, at, r, levels, count - setup.censored - silent_entries))
+            setup, at, r, levels, count - setup.censored - silent_entries, sse if same_sum else None))
         sigma, noise_values, share, sigma_range, _ = (
             views_noise(setup.views, planes, silent, setup.sigma_given, setup.sigma_floor, setup.sigma_fallback,
                         setup.quantisation, on_levels, picks) if finite else (float("nan"), 0, 1.0, None, None))

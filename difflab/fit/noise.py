@@ -180,11 +180,11 @@ def _read(views: list, planes) -> list:
         with np.errstate(invalid="ignore", over="ignore"):  # (inf - inf: NaN; either is left out)
             laplacian = _stencil(image[:, view.box[0], view.box[1]], -2.0).reshape(3, -1)
         for c, picks in enumerate(view.picks):
-            values = None if picks is None else np.square(laplacian[c][picks.index], dtype=np.float64)
+            values = None if picks is None else np.square(np.take(laplacian[c], picks.index), dtype=np.float64)
             if values is not None and not np.isfinite(values.max()):  # (rare: a NaN or inf) the picks without them
                 centre = (view.centre if view.centre.ndim == 2 else view.centre[c]).reshape(-1)
                 picks = _channel(np.flatnonzero(centre & np.isfinite(laplacian[c])), view.bright, view.weights, c)
-                values = None if picks is None else np.square(laplacian[c][picks.index], dtype=np.float64)
+                values = None if picks is None else np.square(np.take(laplacian[c], picks.index), dtype=np.float64)
             if picks is not None:
                 read[-1][c] = (picks, values, _levels(values, picks))
     return read

@@ -76,20 +76,22 @@ def _scaled_gram(problem, values, scales):
     return _normal_matrix(eqx.tree_at(lambda p: p.views, problem, views), values, True)[0]
 
 
-def noise_middle(setup, at, r: tuple, levels, counted: int):
+def noise_middle(setup, at, r: tuple, levels, counted: int, total: float | None = None):
     """M = J^T diag(r^2) J N / sum r^2 (p, p) float64 (module docstring) for a fit's `Setup` at the
     flat values `at` with weighted residuals r there (per view (3, U): `Problem.view_residuals`),
     from the noise `levels` of `noise.views_noise` (None: given or unknown) and N = `counted`
-    entries (neither censored nor silent); None where one level serves (`unequal`) -- s^2 (J^T J)^-1
-    holds -- and for a texture fit (`texels`: the pooled form, dense or matrix-free alike). Else
-    returns a function that gives it: JAX computes J^T diag(r^2) J from the call on, beside what the
-    caller does until it asks (`engine.report`: the rest of the noise estimate)."""
+    entries (neither censored nor silent); `total`: sum r^2 when the caller has it (`engine.report`'s
+    sum of squares: with unit weights and C-order parts the same bits, a pass over r less). None where
+    one level serves (`unequal`) -- s^2 (J^T J)^-1 holds -- and for a texture fit (`texels`: the
+    pooled form, dense or matrix-free alike). Else returns a function that gives it: JAX computes
+    J^T diag(r^2) J from the call on, beside what the caller does until it asks (`engine.report`:
+    the rest of the noise estimate)."""
     if levels is None or any(p.shape is not None for p in setup.layout) or not unequal(levels):
         return None
-    scales, total = [], 0.0
-    for view, part in zip(setup.problem.views, r):  # (r itself: its rows enter J^T diag(r^2) J squared)
-        scales.append(part.astype(view.target.dtype, copy=False))
-        total += float(np.einsum("ij,ij->", part, part))
+    scales = [part.astype(view.target.dtype, copy=False)  # (r itself: its rows enter J^T diag(r^2) J squared)
+              for view, part in zip(setup.problem.views, r)]
+    if total is None:
+        total = sum(float(np.einsum("ij,ij->", part, part)) for part in r)
     if not total > 0:
         return None
     with jax.enable_x64(setup.x64):

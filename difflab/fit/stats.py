@@ -284,6 +284,8 @@ def sandwich_diagonal(gram: np.ndarray, middle: np.ndarray, rcond: float = SINGU
     inf where `covariance_unscaled` has inf (a singular direction, an empty column)."""
     inverse = covariance_unscaled(gram, rcond=rcond)
     finite = np.isfinite(np.diagonal(inverse))
+    if finite.all():  # (as a rule: no np.ix_ copies)
+        return np.einsum("ij,jk,ki->i", inverse, middle, inverse)
     part = inverse[np.ix_(finite, finite)]
     out = np.full(gram.shape[0], np.inf)
     out[finite] = np.einsum("ij,jk,ki->i", part, middle[np.ix_(finite, finite)], part)
