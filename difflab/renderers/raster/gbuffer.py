@@ -62,14 +62,16 @@ def gbuffer_arrays(compiled, n_samples: int, phong: bool, geometry_only: bool = 
     """Stage 4's arrays for the G-buffer, and stage 6's when the points are the samples (`phong`), in
     their structs (`CompiledScene.reusable_structs`: an earlier frame's when free): (samples, out, lit
     or None, stale), `stale` the buffer of those that must start zero when an earlier frame left it,
-    for the caller to zero (else None: new memory); `geometry_only`: a fit's, FIT_SKIPS empty."""
+    for the caller to zero (else None: new memory); `geometry_only`: a fit's, FIT_SKIPS empty, kept
+    apart from a full G-buffer's (fits and G-buffer renders of one compiled scene in turn each find
+    their own free)."""
     layout = [(resolve.PointsW, point_fields(n_samples, True)), (resolve.GBufferW, gbuffer_fields(n_samples))]
     if phong:
         layout.append((shade.LitW, lit_fields(compiled, n_samples, n_samples)))
     if geometry_only:
         layout = [(struct, [(field, 0 if field in FIT_SKIPS else shape, dtype, zero) for field, shape, dtype, zero in
                             fields]) for struct, fields in layout]
-    structs, stale = compiled.reusable_structs("gbuffer", layout)
+    structs, stale = compiled.reusable_structs("fit gbuffer" if geometry_only else "gbuffer", layout)
     return structs[0], structs[1], structs[2] if phong else None, stale
 
 
