@@ -198,7 +198,7 @@ def test_a_smaller_frame_frees_the_launches_kept_for_a_larger_one():
     compiled = compile_scene(Scene.from_dict(sphere_scene("outside", size=64)))
     big = fit_frame(compiled, threads=2)
     pool = compiled.scratch_pool()
-    arrays = [weakref.ref(array) for array in pool[("structs", "gbuffer")][1]]
+    arrays = [weakref.ref(array) for array in pool[("structs", "fit gbuffer")][1]]
     assert len(arrays) > 10 and all(array() is not None for array in arrays)
     small_view = compiled.with_scene(Scene.from_dict(sphere_scene("outside", size=16)))
     small = fit_frame(small_view, threads=2)
