@@ -52,8 +52,8 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                         timings=timings, **common)
     else:
         start = time.perf_counter()
-        values = setup.values(x)
-        flat = layout.flatten(values)
+        flat = layout.values(np.asarray(x, np.float64))  # (setup.values, flattened back: the same bits)
+        values = layout.unflatten(flat)
         used = setup.weighted_entries
         matrix_free = options.matrix_free(layout.size)
         with jax.enable_x64(setup.x64):
@@ -93,12 +93,15 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                                 sigma_given=setup.sigma_given is not None, skip=skip, noise_values=noise_values, noise_share=share,
                                 mean_weight=mean_weight, rcond=singular_rcond(setup.x64), sigma_range=sigma_range,
                                 middle=middle[0]() if middle and middle[0] else None)
-            stderr = layout.unflatten(standard_errors(st["diag"], st["s2"]))
-            floor = layout.unflatten(standard_errors(st["diag"], max(st["s2"], mean_weight * QUANTISATION_SIGMA ** 2)))
+            errors = standard_errors(st["diag"], st["s2"])
+            stderr = layout.unflatten(errors)
+            quantised = mean_weight * QUANTISATION_SIGMA ** 2  # (as a rule s2 is above it: the floor's are stderr's)
+            floor = standard_errors(st["diag"], quantised) if quantised > st["s2"] else errors  # (max(s2, quantised))
             partly_seen = [key for key, on in seen.items() if not on.all()]
             pull = np.abs(pulled_by_prior(setup, flat, gram, st))
-            pulled = [key for key, z in layout.unflatten(pull).items() if np.max(z, initial=0.0) > PRIOR_PULL_MAX]
-            flagged = poorly_determined(layout, values, floor, options.rel_tol, options.abs_tol,
+            pulled = [key for key, z in layout.unflatten(pull).items()
+                      if np.max(z, initial=0.0) > PRIOR_PULL_MAX] if pull.any() else []  # (zeros: no prior)
+            flagged = poorly_determined(layout, flat, floor, options.rel_tol, options.abs_tol,
                                         also=partly_seen + pulled)
             chi2, mismatch, suspected = st["chi2"], st["mismatch"], st["suspected"]
             degenerate_keys = degenerate(layout, st["diag"], gram, setup.smoothness > 0)
@@ -116,7 +119,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
             if result == SUCCESSFUL:
                 result = "nonfinite"
         lo, hi = layout.bounds()
-        on_bound = layout.unflatten((x <= lo) | (x >= hi))
+        on_bound = (x <= lo) | (x >= hi)
         weight_total = setup.weight_total
         out = FitResult(params=public(values), stderr=public(stderr), loss=loss, psnr=psnr(sse, weight_total),
                         seconds=timings.get("solve", 0.0), converged=bool(result == SUCCESSFUL and finite),
@@ -126,7 +129,8 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
                         underdetermined=bool(underdetermined), too_few_values=bool(too_few), degenerate=degenerate_keys,
                         unreached=unreached_keys,
                         prior_pull=float(np.max(pull, initial=0.0)),
-                        at_bound=[p.key for p in layout if np.any(on_bound[p.key])], residuals=residuals, seen=seen,
+                        at_bound=[key for key, on in layout.unflatten(on_bound).items() if on.any()] if on_bound.any()
+                        else [], residuals=residuals, seen=seen,
                         timings={**timings, "stats": time.perf_counter() - start}, **common)
     if options.throw and not out.converged:
         raise FitError(f"fit did not converge: {out.result} after {out.steps} steps (loss {out.loss:.4g})")

@@ -146,7 +146,7 @@ def identifiability(setup: Setup, values: dict | None = None, *, sigma=None, rel
         order = np.argsort(-np.abs(vec))
         parts = [(names[j], float(vec[j])) for j in order[:4] if abs(vec[j]) > 0.05]
         weakest.append((float(eigval[i]), parts))
-    flagged = poorly_determined(layout, values, stderr, rel_tol, abs_tol)
+    flagged = poorly_determined(layout, layout.flatten(values), layout.flatten(stderr), rel_tol, abs_tol)
     return Identifiability(keys=tuple(p.key for p in layout), columns=names, values=values, stderr=stderr,
                            sigma=sigma, rank=rank, n_columns=n, condition=condition, eigenvalues=eigval,
                            weakest=weakest, undetermined=flagged, residuals=sum(part.size for part in r),

@@ -189,6 +189,8 @@ def degenerate(layout, diag: np.ndarray, gram, prior: bool) -> list[str]:
     texels alone are the prior's to fill and do not count; one that involves another parameter
     does (a texture's scale against a light's intensity)."""
     bad = np.isinf(diag) & (gram.diagonal() > 0)
+    if not bad.any():  # (as a rule)
+        return []
     if prior:  # (the texel mask only then)
         texel = np.concatenate([np.full(p.size, p.shape is not None) for p in layout]) if len(layout) else bad
         if not (bad & ~texel).any():
@@ -214,6 +216,8 @@ def unreached(layout, gram, coefficient) -> list[str]:
     their material's SWITCHED_BY coefficient, 0 in every channel at the solution, switches off:
     `coefficient(material index, kind)` gives its value (ks = 0 at its bound: n's column is 0)."""
     zero = np.asarray(gram.diagonal()) <= 0
+    if not zero.any():  # (as a rule)
+        return []
     flat, offset = [], 0
     for p in layout:
         switch = SWITCHED_BY.get(p.kind)
@@ -377,11 +381,11 @@ def prior_pull(gram, diag: np.ndarray, s2: float, gradient: np.ndarray) -> np.nd
     return out
 
 
-def poorly_determined(layout, values: dict, stderr_floor: dict, rel_tol=0.1, abs_tol=1e-3, also=()) -> list[str]:
-    """Keys of parameters whose noise-floor standard error exceeds rel_tol |value| + abs_tol (inf:
-    undetermined; nan, not formed, flags nothing), with ks and n (or m) of one material flagged
-    together, and the keys `also` (the textures with texels no pixel sees)."""
-    value, err = (layout.flatten(d) for d in (values, stderr_floor))  # every entry at once
+def poorly_determined(layout, value: np.ndarray, err: np.ndarray, rel_tol=0.1, abs_tol=1e-3, also=()) -> list[str]:
+    """Keys of parameters whose noise-floor standard error (`err`, flat in layout order as the values
+    `value`) exceeds rel_tol |value| + abs_tol (inf: undetermined; nan, not formed, flags nothing),
+    with ks and n (or m) of one material flagged together, and the keys `also` (the textures with
+    texels no pixel sees)."""
     over = np.isinf(err) | (err > rel_tol * np.abs(value) + abs_tol)
     flagged, offset = set(also), 0
     for p in layout:
