@@ -39,8 +39,8 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
            solved=None, ahead=None) -> FitResult:
     """The FitResult of a solve at solver coordinates x (None: no fit was made): values in scene
     units, standard errors, noise, chi-square, flags; raises FitError for a failure when
-    `options.throw`. `solved`: the solver's (r, J^T J) at x, when it has them; `ahead`: `noise_ahead`'s
-    function, when it started one."""
+    `options.throw`. `solved`: the solver's (r, J^T J) at x, when it has them; `ahead`: the `take` of the
+    `NoiseAhead` that `run_fit` started beside the solve (None: the picks are formed here)."""
     layout = setup.layout
     public = lambda values: {p.key: public_value(p, values[p.key]) for p in layout}  # noqa: E731
     common = dict(steps=steps, solver=options.solver, initial=public(setup.initial), scene=setup.scene, layout=layout,
@@ -158,7 +158,8 @@ def pulled_by_prior(setup: Setup, flat, gram, st: dict) -> np.ndarray:
 def run_fit(setup: Setup, options: FitOptions, timings: dict) -> FitResult:
     """Solve a prepared fit and report it (the precheck's result code, without solving, when the
     fit cannot be made); `timings`: the preparation's seconds ("setup", "render"), the solve's and
-    the report's are added."""
+    the report's are added. The noise estimate's picks are formed beside the solve (`noise_ahead`),
+    and left undone or waited for when the solve or the report raises."""
     timings = dict(timings)
     check_solver(options, setup.layout)
     code = setup.precheck()
