@@ -78,7 +78,8 @@ def _ctrl_c_held():
     (before any code of theirs runs) prints no traceback of theirs: the parent stops them. This
     thread's own Ctrl-C is held meanwhile (blocked: Linux keeps a blocked signal pending though
     ignored) and raised after the block; one landing in the microseconds between ignoring and
-    blocking, or taken by another thread of the process that does not block it, is lost. Elsewhere
+    blocking, or taken by another thread of the process that does not block it (threads started
+    before this block; those started inside it inherit the block), is lost. Elsewhere
     than in the main thread, where signals are not handled, the block runs as it is."""
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -116,11 +117,23 @@ def cluster_render_threads(client) -> int:
 
 
 def local_jobs(jobs, workers: int):
-    """Run `jobs` in `workers` spawned processes (a process pool). Each process keeps its compiled
-    solves across the jobs it runs, and its Warp renders use `render_threads(cores, workers)`
-    threads. A worker process that dies fails the jobs it had not finished (the pool breaks: the
-    remaining jobs fail too, and a rerun retries them). Interrupted (Ctrl-C) or closed early at any
-    point, even while the workers start, it kills them (`_kill`) before it lets the interruption on."""
+    """Run `jobs` in `workers` spawned processes (a process pool): the (job, outcome) pairs as they
+    finish. Each process keeps its compiled solves across the jobs it runs, and its Warp renders use
+    `render_threads(cores, workers)` threads. A worker process that dies fails the jobs it had not
+    finished (the pool breaks: the remaining jobs fail too, and a rerun retries them). Interrupted
+    (Ctrl-C) or closed early at any point, even while the workers start, it kills them (`_kill`)
+    before it lets the interruption on. The workers are started here, at the call, not at the first
+    outcome asked for: before the caller's progress bar starts tqdm's monitor thread, which does not
+    block SIGINT and so took a Ctrl-C landing while they started, and lost it (`_ctrl_c_held`):
+    fit-batch then waited on endless jobs (3 runs in 40 of tests/test_batch_processes.py's
+    Ctrl-C test at load ~2)."""
+    outcomes = _local_outcomes(jobs, workers)
+    next(outcomes)  # (its first yield: the workers started)
+    return outcomes
+
+
+def _local_outcomes(jobs, workers: int):
+    """`local_jobs`' generator: yields once when the workers are started, then the outcomes."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
@@ -130,6 +143,7 @@ def local_jobs(jobs, workers: int):
         with _ctrl_c_held():  # each submit starts a worker until there are `workers`
             futures = {pool.submit(run_job, job.spec, None, threads): job for job in jobs}
         processes = list(pool._processes.values())
+        yield
         for future in _completed(futures):
             try:
                 outcome = future.result()
@@ -158,15 +172,19 @@ def _completed(futures, poll: float = 0.1):
 
 def _kill(pool) -> None:
     """Kill a process pool's workers (SIGKILL: a worker holds no output to clean up, the parent
-    writes every file) and reap them, then shut the pool down without waiting for their jobs. (The
-    pool's shutdown forgets its processes: terminating them after it, as this did, reached none, and
-    Ctrl-C waited for the running jobs -- seconds while the workers imported JAX.)"""
+    writes every file) and reap them, then shut the pool down, its jobs cancelled. (The pool's
+    shutdown forgets its processes: terminating them after it, as this did, reached none, and
+    Ctrl-C waited for the running jobs -- seconds while the workers imported JAX.) The shutdown
+    waits for the pool's manager thread, which ends at once with its workers dead: left running,
+    it closed its wake-up pipe while the interpreter's exit was writing to it ("Exception ignored
+    ... Bad file descriptor" after "difflab: interrupted", 2 runs in 40 of
+    tests/test_batch_processes.py's Ctrl-C test at load ~2)."""
     processes = list((pool._processes or {}).values())  # Python 3.14 has pool.kill_workers(); 3.11 only this
     for process in processes:
         process.kill()
     for process in processes:
         process.join()
-    pool.shutdown(wait=False, cancel_futures=True)
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def cluster_slots(client) -> int:
