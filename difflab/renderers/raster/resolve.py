@@ -203,12 +203,18 @@ def covering(key: wp.int64, tris: ScreenW):
 
 
 @wp.func(inline=True)
-def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: int, j: int):
+def sample_weights(key: wp.int64, tris: ScreenW, perspective_correct: int, i: int, j: int, mesh: RasterMeshW,
+                   sphere_weights: int):
     """Which face covered sample (i, j) sees (its visibility key is `key`, `covering`) and with what
     weights: barycentrics of the winning slot, perspective-correct (b_k / w_k renormalised) or
-    affine, carried to the original face. Only `point.material` of the returned sample is filled in."""
+    affine, carried to the original face. Only `point.material` of the returned sample is filled in.
+    `sphere_weights` 0: a sample on an analytic sphere is left without weights (zero), for a Phong
+    pass that reads none there (`shade.phong_gbuffer_kernel`)."""
     sample = covering(key, tris)
     slot = sample.slot
+    if sphere_weights == 0:  # (returned here: a branch around the weights below slowed a Phong mesh's pass 6-13 %)
+        if mesh.object_kind[mesh.face_object[sample.face]] == HIT_SPHERE:
+            return sample
     screen = tris.screen
     weight = tris.weight
     bd = wp.vec3d()
@@ -275,13 +281,14 @@ def sphere_rays(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64)
     not inside the whole per-sample pass (the 256^2 bench sphere's Phong G-buffer pass ~0.95 ->
     ~0.76 ms of CPU a half, interleaved medians of 150 at load 2.5; the scan costs a frame of
     background ~1 ns a sample: a tiny sphere's 0.13 -> 0.17 ms). Keys as `resolve_into` reads them;
-    none is reset here. Nothing to find in a scene without analytic spheres."""
+    none is reset here. Nothing to find in a scene without analytic spheres. Returns whether the
+    scene has any."""
     spheres = int(0)
     for obj in range(mesh.object_kind.shape[0]):
         if mesh.object_kind[obj] == HIT_SPHERE:
             spheres = 1
     if spheres == 0:
-        return
+        return 0
     for j in range(cam.width):
         s = i * cam.width + j
         k = key[s]
@@ -294,17 +301,19 @@ def sphere_rays(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64)
                 p, direction = sphere_ray(mesh, cam, obj, sample.side, i, j)
                 found.position[s] = p
                 found.view[s] = -direction
+    return 1
 
 
 @wp.func(inline=True)
 def resolve_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, materials: wp.array(dtype=MaterialW),
-                   cam: CameraW, perspective_correct: int, shading: int, i: int, j: int, found: PointsW):
-    """`sample_weights` and the surface point there: under Phong shading on an analytic sphere the
-    sphere's own (`sphere_sample`: the facets decide only coverage and depth order) at its eye ray's
-    hit, which `sphere_rays` found (`found`; an empty PointsW(): found here); else the face's
-    interpolated position with the face's normal (flat) or the interpolated vertex normals, both
-    facing the viewer side the face shows."""
-    sample = sample_weights(key, tris, perspective_correct, i, j)
+                   cam: CameraW, perspective_correct: int, shading: int, i: int, j: int, found: PointsW,
+                   sphere_weights: int):
+    """`sample_weights` (`sphere_weights`: its) and the surface point there: under Phong shading on
+    an analytic sphere the sphere's own (`sphere_sample`: the facets decide only coverage and depth
+    order) at its eye ray's hit, which `sphere_rays` found (`found`; an empty PointsW(): found here);
+    else the face's interpolated position with the face's normal (flat) or the interpolated vertex
+    normals, both facing the viewer side the face shows."""
+    sample = sample_weights(key, tris, perspective_correct, i, j, mesh, sphere_weights)
     f = sample.face
     obj = mesh.face_object[f]
     if shading == PHONG_SHADING and mesh.object_kind[obj] == HIT_SPHERE:
@@ -387,12 +396,13 @@ class GBufferW:
 @wp.func
 def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
                  materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
-                 n_vertices: int, out: GBufferW, samples: PointsW, found: PointsW, i: int, j: int):
+                 n_vertices: int, out: GBufferW, samples: PointsW, found: PointsW, sphere_weights: int, i: int,
+                 j: int):
     """Stage 4 at sample (i, j): its G-buffer entries (empty ones where nothing covers it: the
     non-zero ones only, as `samples` and `out` are zero when the kernel starts). Its key is the
     lesser of `key` and `partial` (a z-buffer drawn in two; `partial` empty otherwise), both reset.
-    `found`: see `resolve_sample`. Returns whether it is covered, and its point, uv and uv
-    derivatives as stored (what a Phong pass lights next, without reading them back).
+    `found`, `sphere_weights`: see `resolve_sample`. Returns whether it is covered, and its point, uv
+    and uv derivatives as stored (what a Phong pass lights next, without reading them back).
     An empty array of `out` or `samples` is a field the G-buffer does not keep (a fit's,
     `gbuffer.FIT_SKIPS`): not written, and without `duv_dx` uv and its derivatives are formed only
     where the sample's material has a texture (uv 0 elsewhere, as the ray tracer's G-buffer has it)."""
@@ -412,7 +422,7 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
         out.point_index[s] = wp.vec3i(s, s, s)
         return False, PointW(), wp.vec2(0.0), wp.vec2(0.0), wp.vec2(0.0)
     key[s] = NO_HIT  # the next frame's z-buffer starts cleared
-    sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j, found)
+    sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j, found, sphere_weights)
     store_point(samples, s, sample.point)
     uv = wp.vec2(0.0)
     duv_dx = wp.vec2(0.0)
@@ -443,4 +453,4 @@ def resolve_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), part
     i = dealt_row(row0, row_step, wp.tid())
     for j in range(cam.width):
         resolve_into(key, partial, tris, mesh, materials, cam, perspective_correct, shading, n_vertices, out, samples,
-                     PointsW(), i, j)
+                     PointsW(), 1, i, j)
