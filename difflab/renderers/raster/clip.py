@@ -275,12 +275,15 @@ def drawn_rows(slot: int, rows: wp.array2d(dtype=wp.int32), width: int, height: 
 def count_slot(slot: int, rows: wp.array2d(dtype=wp.int32), width: int, height: int,
                band_of_row: wp.array(dtype=wp.int32), part: int, counts: wp.array2d(dtype=wp.int32),
                tests: wp.array(dtype=wp.int64)):
-    """Count `slot` in every row band its box meets (counts[part, band]) and add its sample tests."""
+    """Count `slot` in every row band its box meets (counts[part, band]; `counts` empty: a single
+    band, nothing to bin, none counted -- the 256^2 bench sphere's assembly ~292 -> ~274 us) and add
+    its sample tests."""
     first, last, n_tests = drawn_rows(slot, rows, width, height)
     if first <= last:
         wp.atomic_add(tests, part, n_tests)
-        for band in range(band_of_row[first], band_of_row[last] + 1):
-            wp.atomic_add(counts, part, band, 1)
+        if counts.shape[0] > 0:
+            for band in range(band_of_row[first], band_of_row[last] + 1):
+                wp.atomic_add(counts, part, band, 1)
 
 
 @wp.kernel

@@ -198,8 +198,9 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     rows = scratch("rows", (n_slots, 4), wp.int32)  # each slot's box: first / last sample row and column
     bands = band_plan(height, device, threads)
     band_of_row = band_rows(bands, height, device)
-    counts = scratch("bin counts", (part_count(n_faces, device, threads), len(bands)), wp.int32)
-    tests = scratch("bin tests", counts.shape[0], wp.int64)
+    parts = part_count(n_faces, device, threads)
+    counts = scratch("bin counts", (parts, len(bands)) if len(bands) > 1 else (0, 1), wp.int32)  # (1 band: no bins)
+    tests = scratch("bin tests", parts, wp.int64)
     counts.zero_()
     tests.zero_()
     launch_parts(clip.assemble_kernel, n_faces, [
