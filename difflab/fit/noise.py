@@ -179,8 +179,11 @@ def _read(views: list, planes) -> list:
             continue
         with np.errstate(invalid="ignore", over="ignore"):  # (inf - inf: NaN; either is left out)
             laplacian = _stencil(image[:, view.box[0], view.box[1]], -2.0).reshape(3, -1)
+        shared = view.centre.ndim == 2 and view.picks[0] is not None  # (every channel's at one index: one take)
+        squared = np.square(np.take(laplacian, view.picks[0].index, axis=1), dtype=np.float64) if shared else None
         for c, picks in enumerate(view.picks):
-            values = None if picks is None else np.square(np.take(laplacian[c], picks.index), dtype=np.float64)
+            values = None if picks is None else squared[c] if shared else \
+                np.square(np.take(laplacian[c], picks.index), dtype=np.float64)
             if values is not None and not np.isfinite(values.max()):  # (rare: a NaN or inf) the picks without them
                 centre = (view.centre if view.centre.ndim == 2 else view.centre[c]).reshape(-1)
                 picks = _channel(np.flatnonzero(centre & np.isfinite(laplacian[c])), view.bright, view.weights, c)
@@ -276,15 +279,20 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
     """The used pixels of a fit's views (`records.View`) that carry no noise: target and model both
     exactly 0 in every channel (an unlit side; a renderer's noise scales with its signal), from the
     weighted residuals r, per view (3, U) (`Problem.view_residuals`). Returns per view (U,) bool
-    over its used pixels, and how many of their entries have weight > 0 (left out of the
+    over its used pixels -- `View.black` itself where every black pixel is silent (`views_noise` knows
+    it so, no compare) --, and how many of their entries have weight > 0 (left out of the
     chi-square's dof)."""
     out, count = [], 0
     for view, part in zip(views, r):
-        rows = view.black.copy()  # black in the target, and the model 0 there too (a copy, and in place after)
-        if rows.any():  # (none black, as in noisy targets: nothing to compare)
-            for c in range(3):
-                rows &= part[c] == 0
-        count += 3 * int(np.count_nonzero(rows)) if view.weighting is None else \
+        rows = view.black  # black in the target, and the model 0 there too
+        black = silent = int(np.count_nonzero(rows))
+        if black:  # (none black, as in noisy targets: nothing to compare)
+            quiet = rows & (part[0] == 0)
+            quiet &= part[1] == 0
+            quiet &= part[2] == 0
+            silent = int(np.count_nonzero(quiet))
+            rows = rows if silent == black else quiet
+        count += 3 * silent if view.weighting is None else \
             int(np.count_nonzero(np.take(view.entries, np.flatnonzero(rows), axis=0)))
         out.append(rows)
     return out, count
@@ -313,7 +321,8 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
     (`engine.run_fit`: beside the solve), taken where the silent pixels are the black ones."""
     if given is not None:
         return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views), None, None
-    if picks is None or not all(np.array_equal(quiet, view.black) for view, quiet in zip(views, silent)):
+    if picks is None or not all(quiet is view.black or np.array_equal(quiet, view.black)
+                                for view, quiet in zip(views, silent)):
         picks = noise_picks(views, silent)
     estimate = _estimate(picks, residual_planes, on_levels)
     if estimate is None:

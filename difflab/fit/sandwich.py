@@ -34,6 +34,8 @@ would have a sandwich variance of spread sqrt(2 / K) from them).
 
 from __future__ import annotations
 
+import math
+
 import equinox as eqx
 import jax
 import numpy as np
@@ -61,9 +63,10 @@ def unequal(levels) -> bool:
     if not groups:
         return False
     level, count = np.array(groups).T
-    mean = float(np.dot(level, count) / np.sum(count))
-    return bool(mean > 0 and np.any(np.abs(level / mean - 1.0) > UNEQUAL_SPREADS * LEVEL_SPREAD / np.sqrt(count)
-                                    + UNEQUAL_SHARE))
+    mean = float(np.dot(level, count)) / sum(n for _, n in groups)  # (a few groups: Python's floats, the same
+    # IEEE operations as numpy's on arrays of them: 15 -> 10 us)
+    return mean > 0 and any(abs(v / mean - 1.0) > UNEQUAL_SPREADS * LEVEL_SPREAD / math.sqrt(n) + UNEQUAL_SHARE
+                            for v, n in groups)
 
 
 @jax.jit
