@@ -13,6 +13,7 @@ import pytest
 from test_raster_spheres import RED, sphere_scene, textured
 from difflab import render_frame
 from difflab.renderers.api import fit_frame
+from difflab.renderers.frame import POINT_ROWS
 
 SKIPPED = {"duv_dx", "duv_dy", "color", "texture_factor", "face", "bary"}  # (`raster.gbuffer.FIT_SKIPS`)
 
@@ -49,6 +50,9 @@ def test_a_fits_frame_is_render_frames_less_what_the_fit_does_not_read(tmp_path,
     for name, value in want.items():
         if name in skipped:
             assert got[name] is None and value is not None, name
+        elif name == "rows" and skipped:  # the fit's points side by side (`ShadingPoints.rows`)
+            side_by_side = [want[k].reshape(len(want[k]), -1).view(np.float32) for k in POINT_ROWS]
+            np.testing.assert_array_equal(got[name].view(np.int32), np.concatenate(side_by_side, 1).view(np.int32))
         elif value is None:
             assert got[name] is None, name
         else:

@@ -115,7 +115,7 @@ def test_gradient_in_n_is_finite_everywhere(specular, n):
     """Points with N.L <= 0 and with R.V <= 0 are in view; the gradient in n stays finite."""
     side = [{"type": "point", "position": [-3, 1, 4], "intensity": [1, 1, 1], "attenuation": [1, 0, 0]}]
     setup = _setup(("ks", "n"), size=16, specular=specular, lights=side)
-    points, _, _, _ = pixel_arrays(setup.views[0].record, np.flatnonzero(setup.views[0].used))
+    points = pixel_arrays(setup.views[0].record, np.flatnonzero(setup.views[0].used))[0].points()
     normal, l_dir = np.asarray(points.normal), np.asarray(points.light_dir)[:, 0]
     v_dir = np.asarray(points.view)
     n_dot_l = np.sum(normal * l_dir, axis=-1)

@@ -30,6 +30,7 @@ from ..errors import FitError
 from ..lighting.jax_model import (LightGeometry, LightsJ, fog_factor, light_geometry, lights_to_jax, shade_geometry,
                                   sum_axis, textured_surface)
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS
+from ..renderers.frame import POINT_ROWS
 from .materials import MaterialTable
 from .problem import assembled, take_rows_of
 from .texels import pixel_texels, point_texels
@@ -50,6 +51,39 @@ class PointsJ(NamedTuple):
     def take(self, index) -> PointsJ:
         """The points at `index` (a 1-D integer array)."""
         return PointsJ(*(field[index] for field in self))
+
+
+class PointRows(NamedTuple):
+    """Shading points as two arrays (`pixel_arrays`): rows (R, K) float32, the fields POINT_ROWS side
+    by side (`ShadingPoints.rows`; cell as int32 bits, K = 7 + 5 P), and material (R,) int32: what the
+    device model is built from -- two arguments to move (`_device_model`)."""
+
+    rows: np.ndarray
+    material: np.ndarray
+
+    def points(self) -> PointsJ:
+        """The `PointsJ` of these points: numpy views of the rows, or in a jitted function their slices."""
+        n_lights = (self.rows.shape[1] - 7) // 5
+        widths = (3, 3, 1, 3 * n_lights, n_lights, n_lights)  # POINT_ROWS'
+        field = {k: self.rows[:, end - width:end] for k, end, width in zip(POINT_ROWS, np.cumsum(widths), widths)}
+        cell = field["cell"][:, 0]
+        cell = cell.view(np.int32) if isinstance(cell, np.ndarray) else jax.lax.bitcast_convert_type(cell, jnp.int32)
+        return PointsJ(normal=field["normal"], view=field["view"], material=self.material, cell=cell,
+                       light_dir=field["light_dir"].reshape(-1, n_lights, 3), light_dist=field["light_dist"],
+                       visibility=field["visibility"])
+
+
+def point_rows(pts, rows: np.ndarray) -> PointRows:
+    """The `PointRows` of a G-buffer's points `pts` (`ShadingPoints`) at `rows`: one take of its
+    `rows` block where it has one, else of each field, side by side."""
+    if pts.rows is not None:
+        block, material = take_rows_of([pts.rows, pts.material], rows)  # (one buffer)
+    else:
+        columns = [np.take(getattr(pts, k).reshape(pts.material.shape[0], -1), rows, axis=0) for k in POINT_ROWS]
+        block = np.concatenate([c.astype(np.int32, copy=False).view(np.float32) if k == "cell" else
+                                c.astype(np.float32, copy=False) for k, c in zip(POINT_ROWS, columns)], 1)
+        material = np.take(pts.material, rows)
+    return PointRows(rows=block, material=np.asarray(material, np.int32))
 
 
 class ComposeJ(NamedTuple):
@@ -80,7 +114,7 @@ class Formation(NamedTuple):
     direct: bool = False
 
 
-def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, ComposeJ | None, Formation, np.ndarray]:
+def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointRows, ComposeJ | None, Formation, np.ndarray]:
     """The G-buffer cut down to what `pixels` need, as numpy arrays (`GBufferModel.build` moves them to
     the device in one call).
 
@@ -89,10 +123,10 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
         pixels: (U,) flat pixel indices (row * width + column); default: every pixel, in order.
     Returns:
         (points, composition, formation, point_ids): only the R shading points the pixels' samples
-        use (point_ids (R,) are their indices in `gbuffer.points`; real fields in the G-buffer's own
-        precision, float32: a jitted user casts them exactly), and the composition of the U
-        pixels with point indices renumbered into them (None when `formation.direct`: pixel i is
-        point i).
+        use, as `PointRows` (point_ids (R,) are their indices in `gbuffer.points`; real fields in
+        the G-buffer's own precision, float32: a jitted user casts them exactly), and the composition
+        of the U pixels with point indices renumbered into them (None when `formation.direct`: pixel
+        i is point i).
     """
     side = int(gbuffer.spp_side)
     height, width = gbuffer.mask.shape[0] // side, gbuffer.mask.shape[1] // side
@@ -130,16 +164,12 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointsJ, Comp
             background=np.asarray(gbuffer.background, real), fog_color=np.asarray(color, real),
             fog_start=np.asarray(start, real), fog_end=np.asarray(end, real), fog_density=np.asarray(density, real))
     if point_ids.size:
-        rows = point_ids.astype(np.intp, copy=False)  # once, not per take
-        points = PointsJ(*take_rows_of([getattr(pts, k) for k in PointsJ._fields], rows))  # (moved in place)
-        if not np.isfinite(points.light_dist).all():
-            points = points._replace(light_dist=np.where(np.isfinite(points.light_dist), points.light_dist, np.inf))
+        points = point_rows(pts, point_ids.astype(np.intp, copy=False))
     else:  # nothing hit: one dummy point with no material (colour 0), never used
         n_lights = pts.light_dir.shape[1] if pts.light_dir.ndim == 3 else 0
-        points = PointsJ(normal=np.zeros((1, 3)), view=np.zeros((1, 3)), material=np.full(1, -1),
-                         cell=np.zeros(1), light_dir=np.zeros((1, n_lights, 3)), light_dist=np.ones((1, n_lights)),
-                         visibility=np.zeros((1, n_lights)))
-    points = points._replace(material=np.asarray(points.material, np.int32), cell=np.asarray(points.cell, np.int32))
+        rows = np.zeros((1, 7 + 5 * n_lights), np.float32)
+        rows[:, 7 + 3 * n_lights:7 + 4 * n_lights] = 1.0  # (light_dist)
+        points = PointRows(rows=rows, material=np.full(1, -1, np.int32))
     return points, comp, formation, point_ids
 
 
@@ -287,7 +317,7 @@ class GBufferModel(eqx.Module):
         points' texels from `GBuffer.texture` (`texel`), where the G-buffer has them under Phong shading."""
         points, comp, formation, point_ids = pixel_arrays(gbuffer, pixels, dtype)
         kinds = tuple(sorted(set(np.asarray(lights.kind).tolist())))  # the terms the geometry needs
-        flat = points._replace(**{k: getattr(points, k).reshape(-1) for k in VECTORS})  # (see `_device_model`)
+        flat = points._replace(rows=points.rows.reshape(-1))  # (see `_device_model`)
         material, cell, geometry, comp = _device_model(flat, comp, lights, formation.specular, kinds)
         taps = tap_weight = None
         if texels is not None:
@@ -326,21 +356,18 @@ class GBufferModel(eqx.Module):
         return colors if self.formation.direct else compose(colors, self.comp, self.formation)
 
 
-VECTORS = ("normal", "view", "light_dir")  # the `PointsJ` fields of 3-vectors
-
-
 @partial(jax.jit, static_argnums=(3, 4))
-def _device_model(points: PointsJ, comp: ComposeJ | None, lights: LightsJ, specular: int, kinds: tuple):
+def _device_model(points: PointRows, comp: ComposeJ | None, lights: LightsJ, specular: int, kinds: tuple):
     """(material ids, cells, `LightGeometry`, composition) on the device from `pixel_arrays`' numpy
-    arrays, the VECTORS flattened (shaped back here: XLA's CPU code converts and reads an (N, 3)
+    arrays, the rows flattened (shaped back here: XLA's CPU code converts and reads an (N, 3)
     argument at a fraction of a flat one's speed -- 0.47 against 0.65 ms for 24768 points): one call
-    moves them all. `kinds`: the lights' LIGHT_TYPES ids (`light_falloff`)."""
+    moves them all; a light distance that is not finite is infinite (a directional light's).
+    `kinds`: the lights' LIGHT_TYPES ids (`light_falloff`)."""
     real = lambda field: field.astype(lights.intensity.dtype)  # noqa: E731 (float32 G-buffer values, exactly)
-    count = points.material.shape[0]
-    points = points._replace(**{k: real(getattr(points, k)) for k in ("light_dist", "visibility")},
-                             **{k: real(getattr(points, k)).reshape(count, -1, 3) for k in VECTORS})
-    geometry = light_geometry(specular, points.normal[:, 0], points.view[:, 0], lights, points.light_dir,
-                              points.light_dist, points.visibility, kinds)
+    points = points._replace(rows=points.rows.reshape(points.material.shape[0], -1)).points()
+    distance = real(points.light_dist)
+    geometry = light_geometry(specular, real(points.normal), real(points.view), lights, real(points.light_dir),
+                              jnp.where(jnp.isfinite(distance), distance, jnp.inf), real(points.visibility), kinds)
     return points.material, points.cell, geometry, comp
 
 

@@ -22,7 +22,7 @@ from ..guards import check_mesh_uvs, check_world_mesh, object_errors
 from ..limits import require_triangles
 from ..lighting.warp_model import lights_to_warp, materials_to_warp
 from ..scene import Mesh, Plane, Scene, Sphere, load_scene
-from .host import host_carved, host_empty
+from .host import ROWS, host_carved, host_empty
 from .intersect import SceneGeomW
 from .launch import resolve_device
 from .soup import PER_FACE, SOUP_DTYPES, device_soup, host_aliased, raster_room, soup_with_room, triangle_soup
@@ -191,14 +191,15 @@ class CompiledScene:
         caller to zero in one memset -- else new ones, those arrays carved from one new zero buffer
         (and None). One memset: a pool worker zeroing the 15 arrays of a 256^2 G-buffer one by one
         re-took the GIL between them while the frame's thread waited (~0.1 ms a frame); the structs
-        kept: filling them anew costs ~30 us warm, ~125 us of a fit's cold frame."""
+        kept: filling them anew costs ~30 us warm, ~125 us of a fit's cold frame. A `zero` of ROWS: zero,
+        and a column of the one rows block (`host_carved`)."""
         layout = [(struct, [(field, (shape,) if isinstance(shape, int) else tuple(shape), dtype, zero)
                             for field, shape, dtype, zero in fields]) for struct, fields in layout]
         pool = self.scratch_pool()
         kept = pool.get(("structs", name))
         if kept is not None and kept[0] == layout and all(sys.getrefcount(array) <= _UNHELD + 1 for array in kept[1]):
             return kept[2], kept[3]
-        buffer, carved = host_carved([(shape, dtype) for unused, fields in layout
+        buffer, carved = host_carved([(shape, dtype, zero == ROWS) for unused, fields in layout
                                       for unused, shape, dtype, zero in fields if zero], self.device)
         carved, arrays, structs = iter(carved), [], []
         for struct, fields in layout:

@@ -7,17 +7,38 @@ import numpy as np
 
 from .._warp import wp
 
+ROWS = "rows"  # a field's `zero` in `CompiledScene.reusable_structs`: zero, and a column of the rows block
+
 
 def host_carved(specs: list[tuple], device: str) -> tuple[wp.array, list[wp.array]]:
-    """Zero arrays of the given (shape, dtype) (4-byte scalars or vectors of them), carved in order
-    from one zero buffer, each from a 64-byte boundary: (buffer, arrays); the arrays keep the buffer
-    alive, and `buffer.zero_()` zeroes them all in one memset."""
-    inner = [tuple(getattr(dtype, "_shape_", ())) for unused, dtype in specs]
-    words = [int(np.prod(shape + extra)) for (shape, unused), extra in zip(specs, inner)]
-    starts = np.concatenate([[0], np.cumsum([-(-n // 16) * 16 for n in words])]).astype(int)
-    buffer = host_empty(int(starts[-1]), wp.float32, device, zeroed=True)
-    return buffer, [buffer[start:start + n].reshape(shape + extra).view(dtype)
-                    for start, n, (shape, dtype), extra in zip(starts.tolist(), words, specs, inner)]
+    """Zero arrays of the given (shape, dtype, rows) (4-byte scalars or vectors of them), carved in
+    order from one zero buffer, each from a 64-byte boundary: (buffer, arrays); the arrays keep the
+    buffer alive, and `buffer.zero_()` zeroes them all in one memset. On the CPU those with `rows`
+    (of one count N) are instead the columns, in order, of one (N, K) float32 block carved in the
+    first one's place: strided views, whose rows a gather takes at once (a fit's G-buffer,
+    `ShadingPoints.rows`)."""
+    inner = [tuple(getattr(dtype, "_shape_", ())) for unused, dtype, unused in specs]
+    words = [int(np.prod(shape + extra)) for (shape, unused, unused), extra in zip(specs, inner)]
+    together = [i for i, spec in enumerate(specs) if spec[2]] if device.startswith("cpu") else []
+    sizes = [0 if i in together else n for i, n in enumerate(words)]
+    if together:
+        sizes[together[0]] = sum(words[i] for i in together)
+    starts = np.concatenate([[0], np.cumsum([-(-n // 16) * 16 for n in sizes])]).astype(int).tolist()
+    buffer = host_empty(starts[-1], wp.float32, device, zeroed=True)
+    arrays = [None if i in together else buffer[start:start + n].reshape(shape + extra).view(dtype)
+              for i, (start, n, (shape, dtype, unused), extra) in enumerate(zip(starts, words, specs, inner))]
+    if together:
+        count = specs[together[0]][0][0]
+        block = to_host(buffer)[starts[together[0]]:starts[together[0]] + sizes[together[0]]].reshape(count, -1)
+        column = 0
+        for i in together:
+            shape, dtype, unused = specs[i]
+            width = int(np.prod(shape[1:] + inner[i]))
+            scalar = wp.dtype_to_numpy(getattr(dtype, "_wp_scalar_type_", dtype))
+            part = block[:, column:column + width].view(scalar).reshape(shape + inner[i])
+            arrays[i] = wp.array(part, dtype=dtype, device=device, copy=False)
+            column += width
+    return buffer, arrays
 
 
 def to_host(array: wp.array) -> np.ndarray:
