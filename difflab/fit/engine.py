@@ -192,7 +192,9 @@ class NoiseAhead(NamedTuple):
 def noise_ahead(setup: Setup) -> NoiseAhead | None:
     """Start the noise estimate's `noise_picks` -- the targets' alone, for silent pixels all black ones
     (`View.black`) -- on a pool worker beside the solve (`bandpool.start_beside`: XLA runs its loop
-    without the GIL; none with threads=1 or DIFFLAB_THREADS=1: on the caller when the report asks).
+    without the GIL; none with threads=1 or DIFFLAB_THREADS=1: on the caller when the report asks),
+    and each view's `View.floor`, which `clipping.clipped_band` reads after the fit (there, on a target
+    no longer in cache, ~0.1 ms of first.py's first fit).
     None with sigma given (no estimate). first.py's 256 x 256 sphere, bursts of interleaved fits:
     with the machine otherwise idle, first fit 9.13 -> 8.89 ms, fitted again 5.35 -> 5.10 (stats
     -0.40 / -0.28 ms, solve +0.10 / +0.04); with another process on one of the 2 cores, 11.07 ->
@@ -201,8 +203,12 @@ def noise_ahead(setup: Setup) -> NoiseAhead | None:
     if setup.sigma_given is not None:
         return None
     picks = []
-    return NoiseAhead(start_beside(lambda: picks.append(noise_picks(setup.views, [view.black for view in setup.views])),
-                                   "cpu", setup.threads), picks)
+
+    def targets_alone():
+        picks.append(noise_picks(setup.views, [view.black for view in setup.views]))
+        for view in setup.views:
+            view.floor  # noqa: B018 (a cached property, formed here)
+    return NoiseAhead(start_beside(targets_alone, "cpu", setup.threads), picks)
 
 
 def solve(setup: Setup, options=None, **option_fields) -> FitResult:
