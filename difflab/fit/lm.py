@@ -113,6 +113,8 @@ def shrinking_damping(a, g, x, lower, upper, lam, shrink):
         slope = jnp.sum(c2 / (w + lam_) ** 3) / n2 ** 1.5
         return jnp.maximum(lam_ + (1.0 / target - 1.0 / jnp.sqrt(n2)) / slope, lam_)
 
+    # a loop, not unrolled: XLA's CPU code runs a loop this small as one call (its small-while
+    # hoisting); unrolled, its 16 reductions are 16 thunks on the step's path (+0.02-0.1 ms a solve)
     out = jax.lax.fori_loop(0, 8, newton, lam)
     return jnp.where(jnp.isfinite(out), out, lam)
 

@@ -80,7 +80,11 @@ class ViewSums(NamedTuple):
 def _products(sums: ViewSums, square, rows, vector):
     """sum_u w rows vector per channel (3, R) for rows (R, U) -- sums.e or the view's weighted rows
     are read as e -- and vector (U,); `square`: the weight when it is the same everywhere. (As
-    matrix-vector products: XLA's CPU reductions of products run at a fraction of their speed.)"""
+    matrix-vector products: XLA's CPU reductions of products run at a fraction of their speed; and
+    one per vector, not one (R, U) x (U, C) product for all: XLA's CPU code hands float64 matrix
+    products to YNNPACK, 39 us for (5, U) x (U, 2) against 14 us for each (5, U) x (U,) of 24768
+    pixels -- +0.5 ms a solve. A matrix-vector product's rows are summed alike whatever rows
+    stand with them, bit for bit.)"""
     if sums.sqrt_weight is None:
         return jnp.broadcast_to(square * (rows @ vector), (3, rows.shape[0]))
     if rows is sums.e:
@@ -216,7 +220,8 @@ def linearise(prepared: tuple, x, problem):
     """(0.5 r^T r, J^T J (p, p), J^T r (p,)) at solver coordinates x from the moments (module
     docstring); `prepared` = `prepare(problem, ...)`. r^T r is summed channel by channel as products
     of r with itself, which keeps r formed apart (XLA's CPU code fused it into the sum of squares,
-    at twice the cost)."""
+    at twice the cost; as jnp.sum(r * r, 1) or an einsum over the channels, into one YNNPACK
+    reduction, +0.4-0.7 ms a solve of 24768 pixels)."""
     layout = problem.layout
     values = layout.values(x)
     table = problem.materials(values)
