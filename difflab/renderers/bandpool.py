@@ -39,10 +39,14 @@ class _BandQueue:
     thread until none is left, then returns once every band is done (or, after a band raised, once
     those started are), however many helpers never started."""
 
+    beside = False  # whether `start` hands the queue to a pool worker (`start_beside`)
+
     def __init__(self, run_band, bands: list[tuple[int, int]]):
         self.run_band, self.todo = run_band, list(reversed(bands))  # popped from the end: first band first
         self.lock, self.finished = threading.Lock(), threading.Event()
         self.left, self.error = len(bands), None
+        if not bands:
+            self.finished.set()
 
     def work(self) -> None:
         while True:
@@ -75,6 +79,12 @@ class _BandQueue:
         self.drop()
         self.finished.wait()
         self.run_band = None
+
+    def start(self) -> None:
+        """Hand the queue to a pool worker, once, where `start_beside` found a thread to spare."""
+        if self.beside:
+            self.beside = False
+            _pool(1).submit(self.work)
 
     def join(self) -> None:
         try:
@@ -138,12 +148,17 @@ def _follow_phases(queues: list[_BandQueue]) -> None:
     queues[-1].work()
 
 
-def start_beside(task, device: str, threads: int | None = None) -> _BandQueue:
+def start_beside(task, device: str, threads: int | None = None, start: bool = True) -> _BandQueue:
     """Start `task()` on a pool worker, beside what the caller does next, when the CPU has a thread
     to spare (`threads`); `join()` the returned handle to have it done -- on the caller, if no worker
     has taken it yet (and on CUDA, or with one thread, it runs there); `cancel()` it to leave it
-    undone."""
-    queue = _BandQueue(lambda begin, end: task(), [(0, 0)])
-    if device.startswith("cpu") and (cpu_threads() if threads is None else threads) > 1:
-        _pool(1).submit(queue.work)
+    undone. A `task` of None: nothing to do, no worker woken. `start` False: the handle's `start()`
+    hands it to the worker later, when the caller is about to let go of the GIL for long (a kernel
+    launch): the worker, woken, takes the GIL to start, and a caller that wants it back first waits
+    (a G-buffer's clearing started at the frame's start held the 256^2 bench sphere's frame ~90 us
+    in its next short call that lets the GIL go: a 50 us launch took 141 us of wall)."""
+    queue = _BandQueue(lambda begin, end: task(), [(0, 0)] if task is not None else [])
+    queue.beside = task is not None and device.startswith("cpu") and (cpu_threads() if threads is None else threads) > 1
+    if start:
+        queue.start()
     return queue

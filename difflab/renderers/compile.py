@@ -183,9 +183,9 @@ class CompiledScene:
             array.zero_()
         return pool[key]
 
-    def reusable_structs(self, name: str, layout: list[tuple]) -> tuple[list, wp.array | None]:
-        """Instances of Warp structs whose fields are a frame's output arrays, `layout` a list of
-        (struct type, [(field, shape, dtype, zero), ...]): this thread's from an earlier frame, as
+    def reusable_structs(self, name: str, layout: tuple) -> tuple[list, wp.array | None]:
+        """Instances of Warp structs whose fields are a frame's output arrays, `layout` a tuple of
+        (struct type, ((field, shape tuple, dtype, zero), ...)): this thread's from an earlier frame, as
         they were, when none of their arrays is held any more (as `reusable` tests it, the struct's
         own reference aside) -- with the buffer the `zero` arrays are carved from, stale, for the
         caller to zero in one memset -- else new ones, those arrays carved from one new zero buffer
@@ -193,8 +193,6 @@ class CompiledScene:
         re-took the GIL between them while the frame's thread waited (~0.1 ms a frame); the structs
         kept: filling them anew costs ~30 us warm, ~125 us of a fit's cold frame. A `zero` of ROWS: zero,
         and a column of the one rows block (`host_carved`)."""
-        layout = [(struct, [(field, (shape,) if isinstance(shape, int) else tuple(shape), dtype, zero)
-                            for field, shape, dtype, zero in fields]) for struct, fields in layout]
         pool = self.scratch_pool()
         kept = pool.get(("structs", name))
         if kept is not None and kept[0] == layout and all(sys.getrefcount(array) <= _UNHELD + 1 for array in kept[1]):

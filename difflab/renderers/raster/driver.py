@@ -149,7 +149,8 @@ def split_slots(compiled, p_clip: wp.array, threads: int | None) -> tuple[wp.arr
     return wp.array(extra_slot, dtype=wp.int32, device=device), split_faces.size
 
 
-def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, halves: tuple | None = None):
+def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, halves: tuple | None = None,
+            beside=None):
     """Stages 1-3 on the sample grid of `cam`: clip space, near-plane clipping, and the z-buffer.
 
     Returns the clipped screen triangles (a `ScreenW`: a slot per face, and one more per face clipped
@@ -165,7 +166,10 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     a 256^2 frame's z-buffer on one thread); a sample's key is then the lesser of its two, which its
     reader takes (`resolve.resolve_into`), the same as one z-buffer's (min is order-free). Then the
     same threads call `then(tris, key, k, n)` for the pass's bands of rows dealt in blocks (band k
-    of n, `launch.dealt_bands`) as soon as both halves are drawn (`bandpool.run_phases`)."""
+    of n, `launch.dealt_bands`) as soon as both halves are drawn (`bandpool.run_phases`).
+
+    `beside`: called right before the assembly's launch, the longest on this thread before the
+    z-buffer (it starts the G-buffer's clearing on a pool worker: `bandpool.start_beside`)."""
     device, arrays = compiled.device, compiled.arrays
     load_kernels(device, clip.assemble_kernel, coverage.raster_kernel)  # before two threads launch them
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
@@ -203,6 +207,8 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     tests = scratch("bin tests", parts, wp.int64)
     counts.zero_()
     tests.zero_()
+    if beside is not None:
+        beside()
     launch_parts(clip.assemble_kernel, n_faces, [
         arrays["faces"], near, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
         tris.face, band_of_row, counts, tests], device, threads, kept)
@@ -273,7 +279,7 @@ def light_mesh_points(compiled, lighting, points, n_points: int, n_samples: int,
                       threads: int | None = None) -> shade.LitW:
     """Stage 6 for the G-buffer under flat or Gouraud shading: light every point, recording per
     light its direction, distance and visibility, and the texture factor."""
-    lit = filled(shade.LitW(), "lit", lit_fields(compiled, n_points, n_samples), compiled.reusable)
+    lit = filled(shade.LitW(), "lit", lit_fields(len(compiled.scene.lights), n_points, n_samples), compiled.reusable)
     launch_chunks(shade.light_points_kernel, n_points, [points, lighting, lit], compiled.device, threads)
     return lit
 
@@ -342,7 +348,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     partial = cleared_key(compiled, width * height, "partial key") if halved else compiled.scratch("no key", 0,
                                                                                                     wp.int64)
     bad = compiled.scratch("nonfinite rows", height, wp.int32)
-    clearing = start_beside(stale.zero_ if stale is not None else lambda: None, device, row_pass[0])
+    clearing = start_beside(stale.zero_ if stale is not None else None, device, row_pass[0], start=False)
 
     kept = compiled.scratch_pool()  # the pass's launches, recorded with the structs kept (`launch_kept`)
 
@@ -359,7 +365,8 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
 
     try:
         tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads,  # stages 1-3 (and 4 when halved)
-                            then=sample_pass if halved else None, halves=(partial, row_pass) if halved else None)
+                            then=sample_pass if halved else None, halves=(partial, row_pass) if halved else None,
+                            beside=clearing.start)
     finally:
         clearing.join()
     if not halved:

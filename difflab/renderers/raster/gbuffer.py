@@ -3,6 +3,8 @@ between frames: `CompiledScene.reusable_structs`), and the numpy `GBuffer` a fra
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..._warp import wp
@@ -31,12 +33,12 @@ def gbuffer_fields(count: int) -> list[tuple]:
             ("point_weight", count, wp.vec3, True)]
 
 
-def lit_fields(compiled, n_points: int, n_samples: int) -> list[tuple]:
+def lit_fields(n_lights: int, n_points: int, n_samples: int) -> list[tuple]:
     """`point_fields` of stage 6's outputs for the G-buffer (`shade.LitW`), all zero where not
     written (an empty point's): per point and light, direction, distance, visibility (one zero
     column without lights); per point its colour and texture factor; per sample its texel (written
     by stage 6 when the points are the samples, else by stage 7 on textured samples)."""
-    per_light = (n_points, max(len(compiled.scene.lights), 1))
+    per_light = (n_points, max(n_lights, 1))
     return [("light_dir", per_light, wp.vec3, True), ("light_dist", per_light, wp.float32, True),
             ("visibility", per_light, wp.float32, True), ("color", max(n_points, 1), wp.vec3, True),
             ("factor", max(n_points, 1), wp.vec3, True), ("texel", n_samples, wp.vec3, True)]
@@ -66,15 +68,25 @@ def gbuffer_arrays(compiled, n_samples: int, phong: bool, geometry_only: bool = 
     apart from a full G-buffer's (fits and G-buffer renders of one compiled scene in turn each find
     their own free), its POINT_ROWS the columns of one block under Phong shading (`ShadingPoints.rows`;
     the material apart: the mask and the influence map read it whole, ~7x as fast as a column)."""
+    layout = gbuffer_layout(n_samples, phong, geometry_only, len(compiled.scene.lights))
+    structs, stale = compiled.reusable_structs("fit gbuffer" if geometry_only else "gbuffer", layout)
+    return structs[0], structs[1], structs[2] if phong else None, stale
+
+
+@functools.lru_cache(maxsize=32)
+def gbuffer_layout(n_samples: int, phong: bool, geometry_only: bool, n_lights: int) -> tuple:
+    """The structs and fields of `gbuffer_arrays`, as `CompiledScene.reusable_structs` takes them
+    (shapes as tuples), made once per frame size and kept: gbuffer_arrays in a fit's frame ~17 -> 4 us
+    (the kept structs' layout then equal item by item by identity)."""
     layout = [(resolve.PointsW, point_fields(n_samples, True)), (resolve.GBufferW, gbuffer_fields(n_samples))]
     if phong:
-        layout.append((shade.LitW, lit_fields(compiled, n_samples, n_samples)))
+        layout.append((shade.LitW, lit_fields(n_lights, n_samples, n_samples)))
     if geometry_only:
         layout = [(struct, [(field, 0 if field in FIT_SKIPS else shape, dtype,
                              ROWS if phong and field in POINT_ROWS else zero) for field, shape, dtype, zero in
                             fields]) for struct, fields in layout]
-    structs, stale = compiled.reusable_structs("fit gbuffer" if geometry_only else "gbuffer", layout)
-    return structs[0], structs[1], structs[2] if phong else None, stale
+    return tuple((struct, tuple((field, (shape,) if isinstance(shape, int) else tuple(shape), dtype, zero)
+                                for field, shape, dtype, zero in fields)) for struct, fields in layout)
 
 
 def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, points, n_points: int,
