@@ -327,7 +327,9 @@ def test_a_task_started_beside_runs_once_and_join_hands_back_its_error(threads):
         raise RenderError("cleared nothing")
     with pytest.raises(RenderError, match="^cleared nothing$"):
         bandpool.start_beside(fail, "cpu", threads).join()
-    bandpool.start_beside(None, "cpu", threads).join()  # nothing to do: done at once
+    nothing = bandpool.start_beside(None, "cpu", threads)
+    assert nothing.finished.is_set()  # nothing to do: done at once, no worker woken
+    nothing.join()
 
 
 @pytest.mark.parametrize("threads", [1, 2])

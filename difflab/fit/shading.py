@@ -30,7 +30,7 @@ from ..errors import FitError
 from ..lighting.jax_model import (LightGeometry, LightsJ, fog_factor, light_geometry, lights_to_jax, shade_geometry,
                                   sum_axis, textured_surface)
 from ..lighting.warp_model import FOG_NONE, SPECULAR_MODELS
-from ..renderers.frame import POINT_ROWS
+from ..renderers.frame import POINT_ROWS, point_row_columns
 from .materials import MaterialTable
 from .problem import assembled, take_rows_of
 from .texels import pixel_texels, point_texels
@@ -63,13 +63,11 @@ class PointRows(NamedTuple):
 
     def points(self) -> PointsJ:
         """The `PointsJ` of these points: numpy views of the rows, or in a jitted function their slices."""
-        n_lights = (self.rows.shape[1] - 7) // 5
-        widths = (3, 3, 1, 3 * n_lights, n_lights, n_lights)  # POINT_ROWS'
-        field = {k: self.rows[:, end - width:end] for k, end, width in zip(POINT_ROWS, np.cumsum(widths), widths)}
+        field = {k: self.rows[:, columns] for k, columns in point_row_columns(self.rows.shape[1]).items()}
         cell = field["cell"][:, 0]
         cell = cell.view(np.int32) if isinstance(cell, np.ndarray) else jax.lax.bitcast_convert_type(cell, jnp.int32)
         return PointsJ(normal=field["normal"], view=field["view"], material=self.material, cell=cell,
-                       light_dir=field["light_dir"].reshape(-1, n_lights, 3), light_dist=field["light_dist"],
+                       light_dir=field["light_dir"].reshape(self.rows.shape[0], -1, 3), light_dist=field["light_dist"],
                        visibility=field["visibility"])
 
 
@@ -168,7 +166,7 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointRows, Co
     else:  # nothing hit: one dummy point with no material (colour 0), never used
         n_lights = pts.light_dir.shape[1] if pts.light_dir.ndim == 3 else 0
         rows = np.zeros((1, 7 + 5 * n_lights), np.float32)
-        rows[:, 7 + 3 * n_lights:7 + 4 * n_lights] = 1.0  # (light_dist)
+        rows[:, point_row_columns(rows.shape[1])["light_dist"]] = 1.0
         points = PointRows(rows=rows, material=np.full(1, -1, np.int32))
     return points, comp, formation, point_ids
 

@@ -56,6 +56,15 @@ class ShadingPoints:
 POINT_ROWS = ("normal", "view", "cell", "light_dir", "light_dist", "visibility")  # `ShadingPoints.rows`' fields
 
 
+def point_row_columns(width: int) -> dict[str, slice]:
+    """Each POINT_ROWS field's columns in a `ShadingPoints.rows` of `width` = 7 + 5 P columns (P
+    light columns: the lights, or one zero column without any)."""
+    n_lights = (width - 7) // 5
+    widths = (3, 3, 1, 3 * n_lights, n_lights, n_lights)
+    starts = np.cumsum((0,) + widths).tolist()
+    return {k: slice(a, b) for k, a, b in zip(POINT_ROWS, starts, starts[1:])}
+
+
 @dataclass(frozen=True)
 class GBuffer:
     """Per-sample buffers on the sample grid (height*spp_side, width*spp_side), row 0 at the top.
