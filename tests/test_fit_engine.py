@@ -363,6 +363,25 @@ def test_the_noise_picks_formed_beside_the_solve_are_the_reports(monkeypatch):
                     assert a == b or (a != a and b != b), field.name
 
 
+def test_the_noise_picks_start_once_the_solve_is_dispatched(monkeypatch):
+    """The worker forming the noise picks starts after the solve's dispatch, not before it (there it
+    took the GIL the dispatch let go and held the solve back until its picks were done)."""
+    from difflab.fit import engine, lm
+
+    events, real_solve, real_picks = [], lm.solve_box, engine.noise_picks
+
+    def solve_box(*args):
+        out = real_solve(*args)
+        events.append("dispatched")
+        return out
+
+    monkeypatch.setattr(lm, "solve_box", solve_box)
+    monkeypatch.setattr(engine, "noise_picks", lambda *args: events.append("picks") or real_picks(*args))
+    scene = make_scene(size=16)
+    fit_material(scene, [target_of(scene)], "red", ("kd",), progress=False)
+    assert events == ["dispatched", "picks"]
+
+
 @pytest.mark.parametrize("failing", ["run", "normal_matrix"])
 def test_a_failing_fit_leaves_no_noise_picks_running(monkeypatch, failing):
     """A solve, or the report before it takes the picks, that raises: the noise picks started beside

@@ -169,7 +169,7 @@ def run_fit(setup: Setup, options: FitOptions, timings: dict) -> FitResult:
     try:
         start = time.perf_counter()
         with jax.enable_x64(setup.x64):
-            out = run(setup.problem, setup.x0, options)
+            out = run(setup.problem, setup.x0, options, beside=ahead.queue.start if ahead is not None else None)
         timings["solve"] = time.perf_counter() - start
         return report(setup, out.x, out.result, out.steps, out.history, options, timings, out.linearised,
                       ahead.take if ahead is not None else None)
@@ -191,15 +191,19 @@ class NoiseAhead(NamedTuple):
 
 def noise_ahead(setup: Setup) -> NoiseAhead | None:
     """Start the noise estimate's `noise_picks` -- the targets' alone, for silent pixels all black ones
-    (`View.black`) -- on a pool worker beside the solve (`bandpool.start_beside`: XLA runs its loop
-    without the GIL; none with threads=1 or DIFFLAB_THREADS=1: on the caller when the report asks),
-    and each view's `View.floor`, which `clipping.clipped_band` reads after the fit (there, on a target
-    no longer in cache, ~0.1 ms of first.py's first fit).
+    (`View.black`) -- and each view's `View.floor`, which `clipping.clipped_band` reads after the fit
+    (there, on a target no longer in cache, ~0.1 ms of first.py's first fit), on a pool worker beside
+    the solve (`bandpool.start_beside`: XLA runs its loop without the GIL; none with threads=1 or
+    DIFFLAB_THREADS=1: on the caller when the report asks). The worker is handed them once the solve
+    is dispatched (`solvers.run`'s `beside`): woken before, it took the GIL where the dispatch moves
+    x0 and lets it go, and held the solve back until its own ~0.6 ms of Python were done.
     None with sigma given (no estimate). first.py's 256 x 256 sphere, bursts of interleaved fits:
     with the machine otherwise idle, first fit 9.13 -> 8.89 ms, fitted again 5.35 -> 5.10 (stats
     -0.40 / -0.28 ms, solve +0.10 / +0.04); with another process on one of the 2 cores, 11.07 ->
     11.11 and 5.29 -> 5.53 (solve +0.25 / +0.40): XLA's two Eigen threads run the solve on both
-    cores, and the worker takes its turns from them."""
+    cores, and the worker takes its turns from them. Handed over after the dispatch, not before
+    (the Mitsuba sphere of bench/fit.py, 5 runs of 100 interleaved fits at load 2.8-3.8): first
+    fit -0.03 to -0.23 ms (9.75 -> 9.72 ... 11.16 -> 10.95), fitted again -0.10 to -0.35 ms."""
     if setup.sigma_given is not None:
         return None
     picks = []
@@ -208,7 +212,7 @@ def noise_ahead(setup: Setup) -> NoiseAhead | None:
         picks.append(noise_picks(setup.views, [view.black for view in setup.views]))
         for view in setup.views:
             view.floor  # noqa: B018 (a cached property, formed here)
-    return NoiseAhead(start_beside(targets_alone, "cpu", setup.threads), picks)
+    return NoiseAhead(start_beside(targets_alone, "cpu", setup.threads, start=False), picks)
 
 
 def solve(setup: Setup, options=None, **option_fields) -> FitResult:

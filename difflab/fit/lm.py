@@ -235,8 +235,12 @@ def solve_problem(problem, x0, lower, upper, *, max_steps: int, rtol, atol, prog
 @partial(jax.jit, static_argnames=("max_steps", "progress"))
 def solve_box(problem, x0, lower, upper, max_steps, rtol, atol, progress=None):
     """`solve_problem` compiled once per problem structure and max_steps. (A plain jit: a `Problem`
-    is a pytree of arrays with its static fields in the tree's structure, and jax.jit's dispatch
-    costs 0.21 ms a call against eqx.filter_jit's 0.36.)"""
+    is a pytree of arrays with its static fields in the tree's structure. A call to a jit of this
+    signature that returns x0 costs 18 us on the bench's 256^2 sphere (39 leaves), eqx.filter_jit's
+    48 us; the problem's leaves passed flat, 14 us: not worth a cache of them. What a solve costs
+    beyond its steps -- 1 step 0.76 ms, each further one ~0.14 -- is its program's (XLA's profile):
+    the moments' `prepare` ~0.18 ms, the start's linearisation ~0.14, the residuals at the solution
+    ~0.08; in a fit, ~50 us more at each hand-over between XLA's threads, woken from sleep.)"""
     return solve_problem(problem, x0, lower, upper, max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)
 
 

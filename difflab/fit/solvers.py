@@ -176,14 +176,16 @@ def _optimistix(solver, z0, problem, max_steps):
     return problem.layout.x_from_free(sol.value), sol.result, sol.stats["num_steps"]
 
 
-def _box_lm(problem, x0, lower, upper, options: FitOptions, progress) -> Solved:
+def _box_lm(problem, x0, lower, upper, options: FitOptions, progress, beside=lambda: None) -> Solved:
     """`lm.solve_box` from x0, a `Solved` (its r -- per view (3, U), `Problem.view_residuals` -- and
-    J^T J at the solution on the host). (Read with np.asarray: int() of a jax scalar costs 16 us, and
-    through the class: the bound method of an eqx.Module is one more Module, 24 us.)"""
+    J^T J at the solution on the host); `beside()` is called once the solve is dispatched (`run`).
+    (Read with np.asarray: int() of a jax scalar costs 16 us, and through the class: the bound method
+    of an eqx.Module is one more Module, 24 us.)"""
     rtol, atol = options.tolerances()
     dtype = problem.ambient.dtype
     x, code, steps, history, r, gram = lm.solve_box(problem, np.asarray(x0, dtype), lower, upper, options.max_steps,
                                                    rtol, atol, progress)
+    beside()
     steps = int(np.asarray(steps))
     history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
     name = lm.CODES[int(np.asarray(code))]  # a non-finite start leaves r, J unset
@@ -191,8 +193,11 @@ def _box_lm(problem, x0, lower, upper, options: FitOptions, progress) -> Solved:
                   None if name == "nonfinite" else (type(problem).view_residuals(problem, r), gram))
 
 
-def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
-    """One solve from solver coordinates x0, a `Solved`."""
+def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit", beside=None):
+    """One solve from solver coordinates x0, a `Solved`. `beside`: None, or a callable that starts
+    what the caller has to do beside the solve on a worker (`engine.noise_ahead`'s), called once
+    "lm"'s compiled solve is dispatched -- not before: see there -- and before any other solver."""
+    beside = beside or (lambda: None)
     rtol, atol = options.tolerances()
     dtype = problem.ambient.dtype
     lower, upper = (np.asarray(b, dtype) for b in problem.layout.bounds())  # numpy: moved with the call
@@ -206,6 +211,7 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
         if options.solver == "lm" and matrix_free:
             x, code, steps, history = solve_box_cg(problem, np.asarray(x0, dtype), lower, upper, options.max_steps,
                                                    rtol, atol, options.cg_steps, progress)
+            beside()
             steps = int(np.asarray(steps))  # (as `_box_lm` reads them)
             history = np.asarray(history, np.float64)[:steps].tolist() if options.history else []
             return Solved(np.asarray(x, np.float64), lm.CODES[int(np.asarray(code))], steps, history)
@@ -215,10 +221,11 @@ def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit"):
             clipped = any(view.ceiling is not None for view in problem.views)  # (else no bound method: 28 us)
             unclipped = problem.without_ceilings() if clipped else None
             if unclipped is not None:
-                solved = _box_lm(unclipped, x0, lower, upper, options, progress)
+                solved = _box_lm(unclipped, x0, lower, upper, options, progress, beside)
                 if solved.linearised is not None and problem.below_ceilings(solved.linearised[0]):
                     return solved
-            return _box_lm(problem, x0, lower, upper, options, progress)
+            return _box_lm(problem, x0, lower, upper, options, progress, beside)
+        beside()
         if options.solver == "varpro":
             from .varpro import run_varpro
 
