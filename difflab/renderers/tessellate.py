@@ -10,7 +10,7 @@ that hold the polygon's sagitta r (1 - cos(pi / N)) under SAGITTA samples, at le
   interpolated normals): the 256^2 bench sphere 128 longitudes, 16,128 triangles.
 - Phong: an eighth of a sample, at least 16 (PHONG_SPHERE_SEGMENTS): the bench sphere (the rule's
   radius at its nearest depth 124 sample rows) 69 longitudes, 4,554 triangles; its fit's G-buffer
-  frame (`fit_frame`) 3.19 -> 2.59 ms, a first fit's render 4.9 -> 3.6 ms (load ~4).
+  frame (`fit_frame`) 3.43 -> 2.97 ms, a first fit's render 3.5 -> 3.0 ms (A/B, load 2.7).
 The silhouette is off by as much as the facets lie inside the sphere, twice the polygon's sagitta
 (a quad's corners are further from its middle than an edge's ends from the edge's: 1.94x at 16
 longitudes, 1.99x from 42), where a view's silhouette crosses the facets' middles: Phong's within a
