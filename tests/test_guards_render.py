@@ -230,8 +230,9 @@ def test_a_small_rasterized_frame_runs_on_one_thread_unless_told(monkeypatch):
 
 def test_the_triangles_of_a_whole_scene_are_priced_as_they_are_built(monkeypatch):
     """Each of 40 spheres is small (16 128 triangles each, as a mesh or as the rasterizer's
-    tessellation); together they pass a 64 MiB budget at the 8th. Meshes are priced when compiled,
-    the analytic spheres' tessellation when first rasterized: ray tracing them needs none."""
+    tessellation for flat and Gouraud shading); together they pass a 64 MiB budget at the 8th.
+    Meshes are priced when compiled, the analytic spheres' tessellation when first rasterized: ray
+    tracing them needs none, and Phong shading's (18,400 triangles in all) passes."""
     monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "64M")
     over = r" \(129024 triangles\): needs about 66\.4 MiB, over the memory budget of 64\.0 MiB"
     meshes = [{"type": "mesh", "builtin": "sphere", "resolution": 64, "material": "m",
@@ -243,7 +244,8 @@ def test_the_triangles_of_a_whole_scene_are_priced_as_they_are_built(monkeypatch
     assert compiled.faces.shape[0] == 0 and traced[16, 16].max() > 0.1 and traced[0, 0].max() == 0
     for _ in range(2):  # refused again: nothing half built is kept
         with pytest.raises(RenderError, match=r"^objects\[0\.\.7\]: raster triangles of the scene" + over):
-            render(compiled, method="raster")
+            render(compiled, method="raster", shading="gouraud")
+    assert render(compiled, method="raster", shading="phong")[16, 16].max() > 0.1
 
 
 def test_mesh_files_are_priced_by_their_size_before_reading(tmp_path, monkeypatch):

@@ -1,9 +1,10 @@
 """Scene -> device arrays, once: the mesh objects' triangle soup, and the ray-traceable geometry
 (analytic spheres and planes, plus a BVH over the mesh triangles) for shadow and other rays.
 
-The rasterizer draws the analytic objects as triangles (`tessellate.py`) appended to the meshes'
-soup when it first draws the compiled scene (`CompiledScene.raster`); ray tracing never builds
-them: rays see the exact spheres and planes.
+The rasterizer draws the analytic objects as triangles (`tessellate.py`: Phong shading's spheres
+coarser than flat and Gouraud's) appended to the meshes' soup when it first draws the compiled
+scene with that shading (`CompiledScene.raster`); ray tracing never builds them: rays see the
+exact spheres and planes.
 """
 
 from __future__ import annotations
@@ -30,10 +31,10 @@ from .tessellate import AnalyticParts, plane_uv_anchor
 from .texture.store import TextureStore, scene_textures
 from .trace import RAY_OFFSET_ULPS
 
-RASTER_SOUP = "raster soup"  # the key in CompiledScene.built of the mesh and analytic triangles (`raster`)
-RASTER_ROOM = "raster room"  # ... and of the host arrays the mesh fields are the first rows of (`soup_with_room`),
-# with their device arrays where these alias them (`host_aliased`), else None
-RASTER_COPY = "raster copy"  # ... and of the last `raster()` copy
+RASTER_SOUP = "raster soup"  # keys in CompiledScene.built, with `phong` (`raster`): of a tessellation and the meshes,
+RASTER_COPY = "raster copy"  # ... and of its last `raster()` copy
+RASTER_ROOM = "raster room"  # the key of the host arrays the mesh fields are the first rows of (`soup_with_room`),
+# with their device arrays where these alias them (`host_aliased`), else None; till the first tessellation takes them
 MESH_ROWS = "mesh rows"  # ... and of the compiled mesh fields and `arrays` (`meshes`)
 
 
@@ -54,14 +55,15 @@ class CompiledScene:
     `render` / `render_frame` (with render-setting overrides: nothing is rebuilt). The mesh objects'
     triangles (those the BVH holds): world-space `vertices`, per-vertex `normals` (unit) and `uvs`,
     `faces`, and per face its material id, object id and geometric (winding) normal; numpy copies are
-    kept beside the device arrays for the G-buffer's users. The rasterizer draws `raster()`: the same
-    fields with the analytic spheres' and planes' tessellation appended after the first
-    `n_mesh_faces` faces (and `n_mesh_vertices` vertices), built when something first rasterizes the
-    scene; ray tracing never builds it (and reads `meshes()`, even of a `raster()` copy). On the
-    host the mesh fields are the first rows of `raster()`'s arrays (one copy of the mesh triangles:
-    the rows after them are left unwritten until then, untouched pages hold no memory); so are
-    the device arrays on the CPU, which alias them; on a GPU compiling uploads the mesh rows
-    alone, and `raster()` the whole soup."""
+    kept beside the device arrays for the G-buffer's users. The rasterizer draws `raster(shading)`:
+    the same fields with the analytic spheres' and planes' tessellation for that shading appended
+    after the first `n_mesh_faces` faces (and `n_mesh_vertices` vertices), built when something
+    first rasterizes the scene with it; ray tracing never builds it (and reads `meshes()`, even of a
+    `raster()` copy). On the host the mesh fields are the first rows of the first-built `raster()`'s
+    arrays (one copy of the mesh triangles: the rows after them are left unwritten until then,
+    untouched pages hold no memory; a scene drawn with the other tessellation too copies them once
+    more); so are the device arrays on the CPU, which alias them; on a GPU compiling uploads the
+    mesh rows alone, and `raster()` the whole soup."""
 
     scene: object
     device: str
@@ -85,39 +87,49 @@ class CompiledScene:
     analytic: AnalyticParts = field(default_factory=AnalyticParts)  # what `raster` tessellates
     built: dict = field(default_factory=dict, compare=False, repr=False)  # parts built on first use, shared by copies
 
-    def raster(self) -> CompiledScene:
-        """This compiled scene with the rasterizer's triangles in `vertices`, `faces`, ... and `arrays`:
-        the meshes' (the first `n_mesh_faces`), then the analytic spheres' and planes' tessellation
-        (`AnalyticParts`), built when first asked for (`build_once`; `with_scene` copies share it).
-        Itself when the scene has no analytic objects. RenderError, when building, if the triangles
-        pass the memory budget (a ray-traced scene of many spheres compiles and renders all the same).
-        The copy for the last scene asked for is kept (a copy costs ~50 us of a fit's cold frame)."""
+    def raster(self, shading: str | None = None) -> CompiledScene:
+        """This compiled scene with the rasterizer's triangles for `shading` ("flat", "gouraud",
+        "phong"; None: its scene's `render.shading`) in `vertices`, `faces`, ... and `arrays`: the
+        meshes' (the first `n_mesh_faces`), then the analytic spheres' and planes' tessellation
+        (`AnalyticParts`; Phong's spheres coarser: `tessellate.sphere_segments`), each of the two
+        built when first asked for (`build_once`; `with_scene` copies share them). Itself when the
+        scene has no analytic objects. RenderError, when building, if the triangles pass the memory
+        budget (a ray-traced scene of many spheres compiles and renders all the same). The copy for
+        the last scene asked for is kept per tessellation (a copy costs ~50 us of a fit's cold frame)."""
         if not self.analytic.objects:
             return self
-        kept = self.built.get(RASTER_COPY)
-        if kept is None or kept.scene is not self.scene:  # (every copy sharing `built` has the same soup)
-            kept = self.built[RASTER_COPY] = self.copy_with(**self.build_once(RASTER_SOUP, self._raster_soup))
+        phong = (shading or self.scene.render.shading) == "phong"
+        kept = self.built.get((RASTER_COPY, phong))
+        if kept is None or kept.scene is not self.scene:  # (every copy sharing `built` has the same soups)
+            soup = self.build_once((RASTER_SOUP, phong), lambda: self._raster_soup(phong))
+            kept = self.built[(RASTER_COPY, phong)] = self.copy_with(**soup)
         return kept
 
-    def _raster_soup(self) -> dict:
+    def _raster_soup(self, phong: bool) -> dict:
         """The triangle fields and `arrays` of `raster()`: the analytic objects' triangles
         (`triangle_soup` of `AnalyticParts.tessellate`) written into the rows after the meshes' in
-        the arrays compiling left room in (`RASTER_ROOM`) -- the values `triangle_soup` gives all of
-        them at once. Where no room was left (the tessellation passed the memory budget when
-        compiled, not now) the mesh rows are copied into new arrays with room. On the CPU the device
-        arrays are the host's (written with them); elsewhere (a GPU) the whole soup is uploaded
-        here, the first time: compiling uploaded the mesh rows alone."""
-        added = triangle_soup(self.analytic.tessellate(self.n_mesh_faces))
+        the arrays compiling left room in (`RASTER_ROOM`, sized for the larger tessellation) -- the
+        values `triangle_soup` gives all of them at once -- by the first tessellation built (the
+        other one built later, or where no room was left: the tessellation passed the memory budget
+        when compiled, not now, copies the mesh rows into new arrays with room). On the CPU the
+        device arrays are the host's (written with them); elsewhere (a GPU) the soup is uploaded
+        here: compiling uploaded the mesh rows alone."""
+        added = triangle_soup(self.analytic.tessellate(self.n_mesh_faces, phong))
         added["faces"] += np.int32(self.n_mesh_vertices)
         n_vertices, n_faces = self.n_mesh_vertices + len(added["vertices"]), self.n_mesh_faces + len(added["faces"])
-        host, device = self.built[RASTER_ROOM]
-        if len(host["faces"]) != n_faces or len(host["vertices"]) != n_vertices:
-            host = soup_with_room({name: getattr(self, name) for name in SOUP_DTYPES}, n_vertices, n_faces)
+        host, device = self.built.pop(RASTER_ROOM, (None, None))  # (pop: one taker, whichever lock it holds)
+        if host is None or len(host["faces"]) < n_faces or len(host["vertices"]) < n_vertices:
+            host = soup_with_room({name: self.built[MESH_ROWS][name] for name in SOUP_DTYPES}, n_vertices, n_faces)
             device = None
+        soup = {}
         for name in SOUP_DTYPES:
             first = self.n_mesh_faces if name in PER_FACE else self.n_mesh_vertices
-            host[name][first:] = added[name]
-        return dict(host, arrays=device if device is not None else device_soup(host, self.device))
+            soup[name] = host[name][:first + len(added[name])]  # the first rows of the room
+            soup[name][first:] = added[name]
+        arrays = device_soup(soup, self.device) if device is None else {
+            name: values if values.shape[0] == len(soup[name]) else values[:len(soup[name])]
+            for name, values in device.items()}
+        return dict(soup, arrays=arrays)
 
     def meshes(self) -> CompiledScene:
         """This compiled scene with the mesh objects' triangles alone in `vertices`, `faces`, ... and
@@ -344,8 +356,9 @@ def compile_scene(scene, device: str = "cpu") -> CompiledScene:
     """Build the device arrays, BVH and textures of `scene` (a Scene, dict or path) once.
 
     The mesh objects' triangles are built here; the rasterizer's tessellation of the analytic
-    spheres (finely enough for the scene's camera and spp: silhouette within half a sample) and
-    planes (grids around the camera's eye) when something first rasterizes it (`CompiledScene.raster`).
+    spheres (finely enough for the scene's camera and spp, one for Phong shading and one for flat
+    and Gouraud's: `tessellate.sphere_segments`) and planes (grids around the camera's eye) when
+    something first rasterizes it with that shading (`CompiledScene.raster`).
     """
     scene = as_scene(scene)
     device = resolve_device(device)

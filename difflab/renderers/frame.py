@@ -72,9 +72,10 @@ class GBuffer:
     mask: bool, a surface is there; depth: eye-space distance along the view axis (inf where empty);
     position, normal: (.., 3) world-space surface point and shading normal; uv: (.., 2);
     material, object, face: int32 ids (-1 where empty); bary: (.., 3) weights of the face's vertices.
-    `face` indexes the triangles the rasterizer drew, `compiled.raster().faces` (the mesh objects'
-    `n_mesh_faces` first, then the analytic spheres' and planes' tessellation), not `compiled.faces`
-    (the mesh triangles alone): a face id >= n_mesh_faces is a tessellated sphere's or plane's;
+    `face` indexes the triangles the rasterizer drew, `compiled.raster(shading).faces` for the
+    frame's shading (the mesh objects' `n_mesh_faces` first, then the analytic spheres' and planes'
+    tessellation, Phong's spheres coarser), not `compiled.faces` (the mesh triangles alone): a face
+    id >= n_mesh_faces is a tessellated sphere's or plane's;
     point_index (.., 3) int32 and point_weight (.., 3): which shading points make the sample's colour.
     duv_dx, duv_dy (.., 2): the exact screen-space derivatives of the interpolated uv per sample step
     (the Jacobian columns texture filtering uses). Under Phong shading a sample on an analytic

@@ -1,6 +1,6 @@
 """The triangle soup: the mesh objects' (and the rasterizer's analytic) triangles in one set of
 float32 / int32 arrays, on the host and on the device, with room left after the meshes' rows for
-the tessellation `CompiledScene.raster` writes there."""
+the tessellation `CompiledScene.raster` writes there first."""
 
 from __future__ import annotations
 
@@ -80,10 +80,11 @@ def soup_with_room(soup: dict, n_vertices: int, n_faces: int) -> dict:
 
 
 def raster_room(analytic: AnalyticParts, n_faces: int) -> tuple[int, int]:
-    """(vertices, faces) of the analytic objects' tessellation (`AnalyticParts.size`), to leave room
-    for after the `n_faces` mesh triangles; (0, 0) where they pass the memory budget together (then
-    rasterizing the scene is refused, as `tessellate` prices them again)."""
-    n_vertices, n_added = analytic.size()
+    """(vertices, faces) of the larger of the analytic objects' two tessellations (`AnalyticParts.size`),
+    to leave room for after the `n_faces` mesh triangles: the first one drawn is written there;
+    (0, 0) where they pass the memory budget together (then rasterizing the scene is refused, as
+    `tessellate` prices them again)."""
+    n_vertices, n_added = np.max([analytic.size(phong) for phong in (False, True)], axis=0).tolist()
     try:
         require_triangles(n_faces + n_added, "raster triangles of the scene", RenderError)
     except RenderError:

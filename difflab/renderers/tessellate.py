@@ -1,16 +1,27 @@
 """The rasterizer's triangles of the analytic spheres and planes (rays see the exact ones).
 
-A sphere is tessellated finely enough that its silhouette is within half a sample of the true one
-(with the analytic normals and uv at the vertices): the triangles decide which samples it covers
-and in what depth order; under Phong shading a covered sample then takes the exact point of the
-sphere its eye ray meets (`raster.resolve.sphere_sample`), flat and Gouraud shading the triangles'
-own points. A plane is a grid of quads reaching the far plane in every direction, clipped to the
-view by the pipeline (its triangles lie on the plane: their points are the plane's).
+A sphere's triangles decide which samples it covers and in what depth order. Under Phong shading
+that is all they decide: a covered sample takes the exact point of the sphere its eye ray meets
+(`raster.resolve.sphere_sample`); flat and Gouraud shading take the triangles' own points, normals
+and uv. So a compiled scene has two tessellations, each built when first drawn
+(`CompiledScene.raster`), their spheres' longitudes from one rule (`sphere_segments`): the fewest
+that hold the polygon's sagitta r (1 - cos(pi / N)) under SAGITTA samples, at least a floor.
+- Flat and Gouraud: half a sample, at least 128 longitudes (MIN_SPHERE_SEGMENTS, for the
+  interpolated normals): the 256^2 bench sphere 128 longitudes, 16,128 triangles.
+- Phong: an eighth of a sample, at least 16 (PHONG_SPHERE_SEGMENTS): the bench sphere (the rule's
+  radius at its nearest depth 124 sample rows) 69 longitudes, 4,554 triangles; its fit's G-buffer
+  frame (`fit_frame`) 3.43 -> 2.97 ms, a first fit's render 3.5 -> 3.0 ms (A/B, load 2.7).
+The silhouette is off by as much as the facets lie inside the sphere, twice the polygon's sagitta
+(a quad's corners are further from its middle than an edge's ends from the edge's: 1.94x at 16
+longitudes, 1.99x from 42), where a view's silhouette crosses the facets' middles: Phong's within a
+quarter sample (0.225 measured), flat and Gouraud's within one (the 128 floor much closer below
+~1,660 samples of radius). Inscribed, the facets never cover a sample outside the exact sphere.
+A plane is a grid of quads reaching the far plane in every direction, clipped to the view by the
+pipeline (its triangles lie on the plane: their points are the plane's), the same for both.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
@@ -25,24 +36,32 @@ from .camera import camera_frame, pixel_size_at
 
 MAX_SPHERE_SEGMENTS = 1024
 MIN_SPHERE_SEGMENTS = 128  # keeps Gouraud's interpolated normals within ~1e-3 of the sphere's inside the silhouette
+#: Phong's floor, 8 bands of 16 (224 triangles, nothing to save): the rule asks for fewer under 6.5
+#: samples of radius, where its radius at the nearest depth can miss a wide-angle view's stretch
+#: off the axis (~1 / cos of the angle off it); 16 keep a 3-sample sphere's facets 0.11 deep.
+PHONG_SPHERE_SEGMENTS = 16
+#: The polygon's largest sagitta in samples, by `phong`: the facets twice as deep, see the module doc.
+SAGITTA = {False: 0.5, True: 0.125}
 PLANE_RINGS = 12  # grid lines each side of the eye's foot on a rasterized plane, spaced geometrically
 
 
-def sphere_segments(centers, radii, camera, height: int) -> np.ndarray:
+def sphere_segments(centers, radii, camera, height: int, phong: bool = False) -> np.ndarray:
     """Longitude segments of each sphere (`centers` (n, 3), `radii` (n,), world units) so that the
-    polygon's sagitta r (1 - cos(pi / N)) is under half a sample: N = ceil(2 pi / (2 acos(1 - 0.5 / r_px)))
-    with r_px the radius in sample rows at the sphere's nearest depth, clamped to
-    [MIN_SPHERE_SEGMENTS (smooth shading), MAX_SPHERE_SEGMENTS]. MAX where a perspective sphere reaches
-    the near plane, or where the step underflows (r_px > ~4.5e15: 1 - 0.5 / r_px rounds to 1)."""
+    polygon's sagitta r (1 - cos(pi / N)) is under s = SAGITTA[phong] samples:
+    N = ceil(2 pi / (2 acos(1 - s / r_px))) with r_px the radius in sample rows at the sphere's
+    nearest depth, clamped to [the floor (MIN_SPHERE_SEGMENTS, Phong's PHONG_SPHERE_SEGMENTS),
+    MAX_SPHERE_SEGMENTS]; the floor under half a sample. MAX where a perspective sphere reaches the
+    near plane, or where the step underflows (r_px > ~4.5e15: 1 - s / r_px rounds to 1)."""
+    sagitta, least = SAGITTA[phong], PHONG_SPHERE_SEGMENTS if phong else MIN_SPHERE_SEGMENTS
     _, _, forward = camera_frame(camera)
     offset = np.asarray(centers, np.float64).reshape(-1, 3) - np.asarray(camera.eye, np.float64)
     radii = np.asarray(radii, np.float64).reshape(-1)
     distance = offset[:, 0] * forward[0] + offset[:, 1] * forward[1] + offset[:, 2] * forward[2] - radii
     radius_px = radii / pixel_size_at(camera, np.maximum(distance, camera.near), height)
-    step = 2.0 * np.arccos(1.0 - 0.5 / np.maximum(radius_px, 0.5))
+    step = 2.0 * np.arccos(1.0 - sagitta / np.maximum(radius_px, sagitta))
     turns = np.divide(2.0 * math.pi, step, out=np.full_like(step, np.inf), where=step > 0)  # inf: underflow, NaN
-    segments = np.clip(np.ceil(turns), MIN_SPHERE_SEGMENTS, MAX_SPHERE_SEGMENTS)
-    segments = np.where(radius_px <= 0.5, MIN_SPHERE_SEGMENTS, segments)
+    segments = np.clip(np.ceil(turns), least, MAX_SPHERE_SEGMENTS)
+    segments = np.where(radius_px <= 0.5, least, segments)
     if camera.projection == "perspective":
         segments = np.where(distance <= camera.near, MAX_SPHERE_SEGMENTS, segments)
     return segments.astype(np.int64)
@@ -107,38 +126,40 @@ class AnalyticParts:
     when it is compiled (so its copies under other render settings tessellate alike): the objects as
     (Sphere | Plane, material id, object index) in scene order, the camera, and the sample rows
     (image height x spp side) a sphere's silhouette is made fine enough for (`sphere_segments`),
-    and per object its material's `uv_period` (a plane's uv is reduced by whole periods of it)."""
+    and per object its material's `uv_period` (a plane's uv is reduced by whole periods of it).
+    `phong` below: the spheres' triangles for Phong shading, else for flat and Gouraud's."""
 
     objects: tuple = ()
     camera: object = None
     sample_height: int = 0
     uv_periods: tuple = ()
 
-    @functools.cached_property
-    def sphere_grids(self) -> np.ndarray:
+    def sphere_grids(self, phong: bool) -> np.ndarray:
         """(n_lat, n_lon) per object of its uv sphere, (0, 0) for a plane: `sphere_segments`
         longitudes (all the spheres' at once), half as many bands."""
         is_sphere = np.array([isinstance(obj, Sphere) for obj, _, _ in self.objects], bool)
         spheres = [obj for obj, _, _ in self.objects if isinstance(obj, Sphere)]
         n_lon = sphere_segments(np.reshape([s.center for s in spheres], (-1, 3)), [s.radius for s in spheres],
-                                self.camera, self.sample_height)
+                                self.camera, self.sample_height, phong)
         grids = np.zeros((len(self.objects), 2), np.int64)
         grids[is_sphere] = np.stack([np.maximum(2, n_lon // 2), n_lon], 1)
         return grids
 
-    def size(self) -> tuple[int, int]:
+    def size(self, phong: bool) -> tuple[int, int]:
         """(vertices, faces) that `tessellate` builds, counted without building them."""
-        n_lat, n_lon = self.sphere_grids[self.sphere_grids[:, 1] > 0].T
+        grids = self.sphere_grids(phong)
+        n_lat, n_lon = grids[grids[:, 1] > 0].T
         vertices, faces = geometry.uv_sphere_size(n_lat, n_lon)
-        planes = int((self.sphere_grids[:, 1] == 0).sum())
+        planes = int((grids[:, 1] == 0).sum())
         plane_vertices, plane_faces = plane_grid_size()
         return int(vertices.sum()) + planes * plane_vertices, int(faces.sum()) + planes * plane_faces
 
-    def tessellate(self, n_before: int) -> list:
+    def tessellate(self, n_before: int, phong: bool) -> list:
         """Per object its raster triangles as (TriMesh, material id, object index). RenderError once
         the scene's triangles -- `n_before` (the meshes') and these so far -- pass the memory budget."""
         parts, triangles = [], n_before
-        for (obj, material, index), (n_lat, n_lon), period in zip(self.objects, self.sphere_grids, self.uv_periods):
+        for (obj, material, index), (n_lat, n_lon), period in zip(self.objects, self.sphere_grids(phong),
+                                                                   self.uv_periods):
             if isinstance(obj, Sphere):
                 with object_errors(index, obj):
                     mesh = geometry.uv_sphere(obj.radius, obj.center, int(n_lat), int(n_lon))

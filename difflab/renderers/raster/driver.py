@@ -298,7 +298,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     None (`gbuffer.FIT_SKIPS`), and no overflow is counted. `threads`: as given to
     `render_frame` (None: the default of `launch.raster_threads`, and `launch.pass_threads` for the
     G-buffer's per-sample passes)."""
-    compiled = compiled.raster()  # the meshes' and the analytic objects' triangles (tessellated on first use)
+    compiled = compiled.raster(settings.shading)  # the meshes' and the analytic objects' triangles (built on first use)
     scene, device = compiled.scene, compiled.device
     side = settings.spp_side  # the scene validated spp and the sample budget
     width, height = scene.camera.width * side, scene.camera.height * side

@@ -48,7 +48,7 @@ def tree_gbuffer(tree, scene, vertices: np.ndarray, faces: np.ndarray) -> GBuffe
       material, object  ids, -1 where empty.
       face      index of the mesh triangle hit in `compiled.faces` (the mesh triangles alone), -1 on
                 an analytic sphere or plane and where empty. The rasterizer's `face` indexes
-                `compiled.raster().faces`, whose first `n_mesh_faces` rows are these same triangles:
+                `compiled.raster(shading).faces`, whose first `n_mesh_faces` rows are these same triangles:
                 on mesh hits the two agree, on spheres and planes the rasterizer gives a tessellation
                 triangle (>= n_mesh_faces) where this gives -1.
       bary      (w0, w1, w2) of the hit on triangle `face` (p = sum_k w_k vertices[faces[face, k]],
