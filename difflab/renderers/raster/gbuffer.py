@@ -65,8 +65,8 @@ def fit_skips(compiled) -> frozenset:
     one; a view's scene does not change them). The names hold in every struct of the layout
     (PointsW, GBufferW, LitW); face and bary go together (`resolve_into` writes bary where face is
     formed). The 256^2 bench sphere's fit frame (one light): its arrays 7.7 -> 3.7 MB,
-    6.0 -> 3.2 MB of them cleared (and 0.6 MB of sphere hits written to the scratch); its Phong pass
-    716 -> 648 us a half, the clear 159 -> 105 us (interleaved medians of 150 at load 3.7)."""
+    6.0 -> 3.2 MB of them cleared (and 0.6 MB of sphere hits written to the scratch): see
+    `api.fit_frame` for the times."""
     skips = {"color", "factor", "texel", "duv_dx", "duv_dy", "face", "bary", "position", "point_index", "point_weight"}
     if compiled.scene.fog is None:
         skips.add("depth")
@@ -97,9 +97,9 @@ def gbuffer_layout(n_samples: int, phong: bool, skips: frozenset | None, n_light
     (shapes as tuples), made once per frame size and kept: gbuffer_arrays in a fit's frame ~17 -> 4 us
     (the kept structs' layout then equal item by item by identity). `skips`: a fit's (`fit_skips`),
     with a last PointsW of scratch for the sphere hits (position and view per sample, never cleared:
-    written and read back by the row's own thread; the position kept in the G-buffer instead
-    measured the same on the bench sphere, 0.04-0.08 ms slower on a mesh, and a scratch of one row
-    per band 0.1-0.2 ms slower), or None."""
+    written and read back by the row's own thread; the position kept in the G-buffer instead, or a
+    scratch of one row per band, measured no faster on the bench sphere and a teapot, interleaved
+    at loads 1-4), or None."""
     layout = [(resolve.PointsW, point_fields(n_samples, True)), (resolve.GBufferW, gbuffer_fields(n_samples))]
     if phong:
         layout.append((shade.LitW, lit_fields(n_lights, n_samples, n_samples)))
