@@ -86,7 +86,8 @@ def point_rows(pts, rows: np.ndarray) -> PointRows:
 
 class ComposeJ(NamedTuple):
     """How U pixels are composed from S = spp_side^2 samples each: mask (U, S) bool (a surface was
-    hit); depth (U, S) (0 where empty); point_index (U, S, 3) int32 into the points given with it;
+    hit); depth (U, S) (0 where empty, and everywhere from a fit's G-buffer without fog, which has
+    none: read only by fog); point_index (U, S, 3) int32 into the points given with it;
     point_weight (U, S, 3) (0 where empty); background, fog_color (3,); fog_start, fog_end,
     fog_density scalars."""
 
@@ -148,8 +149,12 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointRows, Co
             samples = (row[:, None] * side + di) * (width * side) + col[:, None] * side + dj
         take = lambda array, *channels: np.take(array.reshape(-1, *channels), samples, axis=0)  # noqa: E731 (numpy's
         mask = take(np.asarray(gbuffer.mask, bool))  # fast gather: several times an index expression's speed)
-        index = take(gbuffer.point_index, 3)
-        weight = take(gbuffer.point_weight, 3)
+        if gbuffer.point_index is None:  # a fit's Phong frame (`fit_frame`): each sample its own point, weight 1
+            index = np.repeat(samples.astype(np.int32)[..., None], 3, axis=-1)
+            weight = mask[..., None] * np.array([1, 0, 0], np.float32)
+        else:
+            index = take(gbuffer.point_index, 3)
+            weight = take(gbuffer.point_weight, 3)
         if not mask.all():  # an empty sample's points are not read
             index, weight = np.where(mask[..., None], index, 0), np.where(mask[..., None], weight, 0.0)
         point_ids = np.unique(index[mask]) if mask.any() else np.zeros(0, np.int64)
@@ -157,7 +162,8 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32) -> tuple[PointRows, Co
         local = np.searchsorted(point_ids, index).clip(0, max(point_ids.size - 1, 0))
         real = np.dtype(dtype)
         comp = ComposeJ(
-            mask=mask, depth=np.where(mask, take(gbuffer.depth), 0.0).astype(real),
+            mask=mask, depth=np.zeros(mask.shape, real) if gbuffer.depth is None else  # (no fog: not read)
+            np.where(mask, take(gbuffer.depth), 0.0).astype(real),
             point_index=np.asarray(local, np.int32), point_weight=weight.astype(real),
             background=np.asarray(gbuffer.background, real), fog_color=np.asarray(color, real),
             fog_start=np.asarray(start, real), fog_end=np.asarray(end, real), fog_density=np.asarray(density, real))

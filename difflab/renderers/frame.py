@@ -32,15 +32,15 @@ class ShadingPoints:
     texture's target coefficient set to 0, and `texture_factor` (N, 3) is what a texel multiplies
     (the point lit with only that coefficient, the others 0); each sample then adds its own
     texel times the interpolated factor (see `GBuffer`). Zero elsewhere (and always under Phong).
-    A fit's own rasterized frame under Phong shading (`renderers.api.fit_frame`) forms neither:
-    `color` and `texture_factor` are None there.
+    A fit's own rasterized frame under Phong shading (`renderers.api.fit_frame`) forms neither, nor
+    `position`: None there.
 
     rows: None, or (N, K) float32 whose columns hold the POINT_ROWS fields side by side, in that
     order (cell as int32 bits; K = 7 + 5 P), each field a view of its columns: a fit's rasterized
     frame on the CPU, whose points a fit gathers in one take of rows (`fit.shading.pixel_arrays`;
     ~50 us for 24768 of 65536 points, ~200 us field by field)."""
 
-    position: np.ndarray
+    position: np.ndarray | None
     normal: np.ndarray
     view: np.ndarray
     material: np.ndarray
@@ -83,7 +83,10 @@ class GBuffer:
     and its derivatives over the sample's footprint, as the ray tracer has them (`bary` and `face`
     still name the triangle that covered it); texture (.., 3): the filtered texel at each sample
     of a textured material (0 elsewhere). A fit's own rasterized frame under Phong shading
-    (`renderers.api.fit_frame`) forms neither `face` and `bary` nor the uv derivatives: None there.
+    (`renderers.api.fit_frame`) forms only what the fit reads: `face`, `bary`, `position`,
+    `point_index`, `point_weight` (each sample its own point), the uv derivatives and `texture`
+    are None there, `depth` too without fog, and `uv` in a scene without a texture
+    (`renderers.raster.gbuffer.fit_skips`).
 
     A sample of a textured material (texture replacing its `texture_target` coefficient) is
     - Phong: shaded with the coefficient replaced by `texture` at that sample (its own point);
@@ -93,16 +96,16 @@ class GBuffer:
     """
 
     mask: np.ndarray
-    depth: np.ndarray
-    position: np.ndarray
+    depth: np.ndarray | None
+    position: np.ndarray | None
     normal: np.ndarray
-    uv: np.ndarray
+    uv: np.ndarray | None
     material: np.ndarray
     object: np.ndarray
     face: np.ndarray | None
     bary: np.ndarray | None
-    point_index: np.ndarray
-    point_weight: np.ndarray
+    point_index: np.ndarray | None
+    point_weight: np.ndarray | None
     points: ShadingPoints
     shading: str
     specular: str

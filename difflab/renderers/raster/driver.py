@@ -293,11 +293,10 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     still compose (that pass also samples their textures into the G-buffer). `geometry_only` (with
     `image` False; a fit's record, `api.fit_frame`): under Phong shading the points are not lit,
     only their light geometry recorded, uv is formed only where a texture is sampled (uv 0
-    elsewhere, as in a ray-traced G-buffer), and what the fit never reads is not formed: the
-    G-buffer's `points.color`, `points.texture_factor`, `duv_dx`, `duv_dy`, `face` and `bary` are
-    None (`gbuffer.FIT_SKIPS`), and no overflow is counted. `threads`: as given to
-    `render_frame` (None: the default of `launch.raster_threads`, and `launch.pass_threads` for the
-    G-buffer's per-sample passes)."""
+    elsewhere, as in a ray-traced G-buffer), and what the fit never reads is not formed: those
+    fields of the G-buffer are None (`gbuffer.fit_skips`), and no overflow is counted. `threads`:
+    as given to `render_frame` (None: the default of `launch.raster_threads`, and
+    `launch.pass_threads` for the G-buffer's per-sample passes)."""
     compiled = compiled.raster(settings.shading)  # the meshes' and the analytic objects' triangles (built on first use)
     scene, device = compiled.scene, compiled.device
     side = settings.spp_side  # the scene validated spp and the sample budget
@@ -344,7 +343,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     points_are_samples = int(shading == PHONG_SHADING)
     geometry_only = bool(geometry_only and points_are_samples and not image)
     record = shade.GEOMETRY_ONLY if geometry_only else 1
-    samples, out, lit, stale = gbuffer_arrays(compiled, width * height, points_are_samples, geometry_only)
+    samples, out, lit, found, stale = gbuffer_arrays(compiled, width * height, points_are_samples, geometry_only)
     partial = cleared_key(compiled, width * height, "partial key") if halved else compiled.scratch("no key", 0,
                                                                                                     wp.int64)
     bad = compiled.scratch("nonfinite rows", height, wp.int32)
@@ -356,8 +355,8 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         clearing.join()
         if points_are_samples:  # stages 4-6 in one pass: each sample resolved, then lit as its own point
             launch_dealt(shade.phong_gbuffer_kernel, k, n, height, [
-                key, partial, tris, mesh, cam, perspective_correct, out, samples, lighting, lit, record, bad], device,
-                kept)
+                key, partial, tris, mesh, cam, perspective_correct, out, samples, found, lighting, lit, record, bad],
+                device, kept)
         else:
             launch_dealt(resolve.resolve_kernel, k, n, height, [
                 key, partial, tris, mesh, compiled.materials, cam, perspective_correct, shading,

@@ -51,40 +51,64 @@ def filled(struct, name: str, fields: list[tuple], array):
     return struct
 
 
-# The fields a fit's G-buffer (`driver.rasterize(geometry_only=True)`) does not form, as nothing of
-# the fit reads them: their arrays are empty (nothing to clear or write; the kernels skip an empty
-# field) and the GBuffer's are None -- the points' colours and texture factors (no point is lit),
-# the uv derivatives, and each sample's face and barycentrics (a third of the memory to clear).
-# The names hold in every struct of the layout (PointsW, GBufferW, LitW); face and bary go together
-# (`resolve_into` writes bary where face is formed).
-FIT_SKIPS = frozenset({"color", "factor", "duv_dx", "duv_dy", "face", "bary"})
+def fit_skips(compiled) -> frozenset:
+    """The fields a fit's G-buffer (`driver.rasterize(geometry_only=True)`, Phong shading) does not
+    form, as nothing of the fit reads them (`fit.shading`, `fit.texels`, `fit.ceiling`, `fit.edges`
+    read the mask and material, object, the points' normal, view, cell and light geometry, and uv
+    for fitted texels): their arrays are empty (nothing to clear or write; the kernels skip an empty
+    field) and the GBuffer's are None. Always the points' colours and texture factors (no point is
+    lit), the texels (a fit samples its own), the uv derivatives, each sample's face and barycentrics,
+    its position (a sphere's hit is kept in `gbuffer_layout`'s scratch instead) and its point index
+    and weight (each Phong sample is its own point, weight (1, 0, 0): `fit.shading.pixel_arrays`
+    forms them from the mask where it composes); the depth without fog (only fog reads it); uv in a
+    compiled scene without a texture (it is formed only where one of its device materials samples
+    one; a view's scene does not change them). The names hold in every struct of the layout
+    (PointsW, GBufferW, LitW); face and bary go together (`resolve_into` writes bary where face is
+    formed). The 256^2 bench sphere's fit frame (one light): its arrays 7.7 -> 3.7 MB,
+    6.0 -> 3.2 MB of them cleared (and 0.6 MB of sphere hits written to the scratch): see
+    `api.fit_frame` for the times."""
+    skips = {"color", "factor", "texel", "duv_dx", "duv_dy", "face", "bary", "position", "point_index", "point_weight"}
+    if compiled.scene.fog is None:
+        skips.add("depth")
+    if not compiled.textures.pyramids:
+        skips.add("uv")
+    return frozenset(skips)
 
 
 def gbuffer_arrays(compiled, n_samples: int, phong: bool, geometry_only: bool = False):
     """Stage 4's arrays for the G-buffer, and stage 6's when the points are the samples (`phong`), in
     their structs (`CompiledScene.reusable_structs`: an earlier frame's when free): (samples, out, lit
-    or None, stale), `stale` the buffer of those that must start zero when an earlier frame left it,
-    for the caller to zero (else None: new memory); `geometry_only`: a fit's, FIT_SKIPS empty, kept
-    apart from a full G-buffer's (fits and G-buffer renders of one compiled scene in turn each find
-    their own free), its POINT_ROWS the columns of one block under Phong shading (`ShadingPoints.rows`;
-    the material apart: the mask and the influence map read it whole, ~7x as fast as a column)."""
-    layout = gbuffer_layout(n_samples, phong, geometry_only, len(compiled.scene.lights))
+    or None, found, stale), `found` the PointsW where `resolve.sphere_rays` keeps each sample's sphere
+    hit (samples itself, or a fit's scratch), `stale` the buffer of those that must start zero when an
+    earlier frame left it, for the caller to zero (else None: new memory); `geometry_only`: a fit's
+    (its `fit_skips` fields empty), kept apart from a full G-buffer's (fits and G-buffer renders of one compiled
+    scene in turn each find their own free), its POINT_ROWS the columns of one block under Phong
+    shading (`ShadingPoints.rows`; the material apart: the mask and the influence map read it whole,
+    ~7x as fast as a column)."""
+    skips = fit_skips(compiled) if geometry_only else None
+    layout = gbuffer_layout(n_samples, phong, skips, len(compiled.scene.lights))
     structs, stale = compiled.reusable_structs("fit gbuffer" if geometry_only else "gbuffer", layout)
-    return structs[0], structs[1], structs[2] if phong else None, stale
+    return structs[0], structs[1], structs[2] if phong else None, structs[-1] if geometry_only else structs[0], stale
 
 
 @functools.lru_cache(maxsize=32)
-def gbuffer_layout(n_samples: int, phong: bool, geometry_only: bool, n_lights: int) -> tuple:
+def gbuffer_layout(n_samples: int, phong: bool, skips: frozenset | None, n_lights: int) -> tuple:
     """The structs and fields of `gbuffer_arrays`, as `CompiledScene.reusable_structs` takes them
     (shapes as tuples), made once per frame size and kept: gbuffer_arrays in a fit's frame ~17 -> 4 us
-    (the kept structs' layout then equal item by item by identity)."""
+    (the kept structs' layout then equal item by item by identity). `skips`: a fit's (`fit_skips`),
+    with a last PointsW of scratch for the sphere hits (position and view per sample, never cleared:
+    written and read back by the row's own thread; the position kept in the G-buffer instead, or a
+    scratch of one row per band, measured no faster on the bench sphere and a teapot, interleaved
+    at loads 1-4), or None."""
     layout = [(resolve.PointsW, point_fields(n_samples, True)), (resolve.GBufferW, gbuffer_fields(n_samples))]
     if phong:
         layout.append((shade.LitW, lit_fields(n_lights, n_samples, n_samples)))
-    if geometry_only:
-        layout = [(struct, [(field, 0 if field in FIT_SKIPS else shape, dtype,
-                             ROWS if phong and field in POINT_ROWS else zero) for field, shape, dtype, zero in
-                            fields]) for struct, fields in layout]
+    if skips is not None:
+        layout = [(struct, [(field, 0, dtype, False) if field in skips else
+                            (field, shape, dtype, ROWS if phong and field in POINT_ROWS else zero)
+                            for field, shape, dtype, zero in fields]) for struct, fields in layout]
+        layout.append((resolve.PointsW, [(field, n_samples if field in ("position", "view") else 0, dtype, False)
+                                         for field, unused, dtype, unused in point_fields(n_samples, True)]))
     return tuple((struct, tuple((field, (shape,) if isinstance(shape, int) else tuple(shape), dtype, zero)
                                 for field, shape, dtype, zero in fields)) for struct, fields in layout)
 
@@ -92,12 +116,12 @@ def gbuffer_layout(n_samples: int, phong: bool, geometry_only: bool, n_lights: i
 def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, points, n_points: int,
                lit, clamp_colors: bool, geometry_only: bool = False) -> GBuffer:
     """The device buffers of stages 4-6 as a numpy `GBuffer` on the sample grid; `geometry_only`
-    (a fit's record: `driver.rasterize`): the fields it does not form (FIT_SKIPS) are None."""
+    (a fit's record: `driver.rasterize`): the fields it does not form (`fit_skips`) are None."""
     def on_grid(array, *channels):
         return None if geometry_only and array.shape[0] == 0 else to_host(array).reshape(*grid, *channels)
 
-    def per_point(array):
-        return None if geometry_only and array.shape[0] == 0 else to_host(array)[:n_points]
+    def per_point(array, count=None):
+        return None if geometry_only and array.shape[0] == 0 else to_host(array)[:count]
 
     material, normal, rows = on_grid(samples.material), to_host(points.normal), None
     if normal.strides[0] != normal.shape[1] * normal.itemsize:  # POINT_ROWS: one block's columns, normals first
@@ -109,10 +133,10 @@ def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, 
         object=on_grid(out.object), face=on_grid(out.face), bary=on_grid(out.bary, 3),
         point_index=on_grid(out.point_index, 3), point_weight=on_grid(out.point_weight, 3),
         points=ShadingPoints(
-            position=to_host(points.position), normal=normal, view=to_host(points.view),
+            position=per_point(points.position), normal=normal, view=to_host(points.view),
             material=to_host(points.material), cell=to_host(points.cell), light_dir=to_host(lit.light_dir),
             light_dist=to_host(lit.light_dist), visibility=to_host(lit.visibility),
-            color=per_point(lit.color), texture_factor=per_point(lit.factor), rows=rows),
+            color=per_point(lit.color, n_points), texture_factor=per_point(lit.factor, n_points), rows=rows),
         shading=settings.shading, specular=settings.specular, spp_side=side,
         ambient=np.asarray(scene.ambient, np.float32), background=np.asarray(scene.background, np.float32),
         clamp_vertex_colors=clamp_colors, fog=fog_params(scene.fog),

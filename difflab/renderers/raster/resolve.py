@@ -121,8 +121,10 @@ def make_point(p: wp.vec3, normal: wp.vec3, geo: wp.vec3, view: wp.vec3, mat: in
 @wp.func
 def store_point(points: PointsW, k: int, point: PointW):
     """Point k into `points`; its shadow rays' start (geometric normal, object skipped) only where
-    `points` keeps them (flat / Gouraud points, lit in a pass of their own)."""
-    points.position[k] = point.p
+    `points` keeps them (flat / Gouraud points, lit in a pass of their own), its position only
+    where kept (not in a fit's G-buffer)."""
+    if points.position.shape[0] > 0:
+        points.position[k] = point.p
     points.normal[k] = point.normal
     points.view[k] = point.view
     points.material[k] = point.material
@@ -276,13 +278,14 @@ def sphere_rays(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64)
                 cam: CameraW, found: PointsW, i: int):
     """`sphere_ray` at row i's samples on analytic spheres, ahead of `resolve_into` over the row
     (Phong shading, `shade.phong_gbuffer_kernel`): p as found.position, -d as found.view, read
-    back by `resolve_sample`. A loop of its own: each sample's chain of square roots and divisions
-    is independent of the next one's, and the CPU overlaps several where the loop is this short,
-    not inside the whole per-sample pass (the 256^2 bench sphere's Phong G-buffer pass ~0.95 ->
-    ~0.76 ms of CPU a half, interleaved medians of 150 at load 2.5; the scan costs a frame of
-    background ~1 ns a sample: a tiny sphere's 0.13 -> 0.17 ms). Keys as `resolve_into` reads them;
-    none is reset here. Nothing to find in a scene without analytic spheres. Returns whether the
-    scene has any."""
+    back by `resolve_sample` (`found`: the G-buffer's samples, or a fit's scratch where its
+    G-buffer keeps no position: `gbuffer.gbuffer_layout`). A loop of its own: each sample's chain
+    of square roots and divisions is independent of the next one's, and the CPU overlaps several
+    where the loop is this short, not inside the whole per-sample pass (the 256^2 bench sphere's
+    Phong G-buffer pass ~0.95 -> ~0.76 ms of CPU a half, interleaved medians of 150 at load 2.5;
+    the scan costs a frame of background ~1 ns a sample: a tiny sphere's 0.13 -> 0.17 ms). Keys as
+    `resolve_into` reads them; none is reset here. Nothing to find in a scene without analytic
+    spheres. Returns whether the scene has any."""
     spheres = int(0)
     for obj in range(mesh.object_kind.shape[0]):
         if mesh.object_kind[obj] == HIT_SPHERE:
@@ -404,8 +407,9 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
     `found`, `sphere_weights`: see `resolve_sample`. Returns whether it is covered, and its point, uv
     and uv derivatives as stored (what a Phong pass lights next, without reading them back).
     An empty array of `out` or `samples` is a field the G-buffer does not keep (a fit's,
-    `gbuffer.FIT_SKIPS`): not written, and without `duv_dx` uv and its derivatives are formed only
-    where the sample's material has a texture (uv 0 elsewhere, as the ray tracer's G-buffer has it)."""
+    `gbuffer.fit_skips`): not written (nor are the point indices and weights formed without
+    `point_index`), and without `duv_dx` uv and its derivatives are formed only where the sample's
+    material has a texture (uv 0 elsewhere, as the ray tracer's G-buffer has it)."""
     s = i * cam.width + j
     k = key[s]
     if partial.shape[0] > 0:
@@ -418,8 +422,10 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
         if out.face.shape[0] > 0:
             out.face[s] = -1
         out.object[s] = -1
-        out.depth[s] = wp.inf
-        out.point_index[s] = wp.vec3i(s, s, s)
+        if out.depth.shape[0] > 0:
+            out.depth[s] = wp.inf
+        if out.point_index.shape[0] > 0:
+            out.point_index[s] = wp.vec3i(s, s, s)
         return False, PointW(), wp.vec2(0.0), wp.vec2(0.0), wp.vec2(0.0)
     key[s] = NO_HIT  # the next frame's z-buffer starts cleared
     sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j, found, sphere_weights)
@@ -428,7 +434,7 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
     duv_dx = wp.vec2(0.0)
     duv_dy = wp.vec2(0.0)
     derivatives = samples.duv_dx.shape[0] > 0
-    if derivatives or materials[sample.point.material].texture >= 0:  # (else zero, as cleared)
+    if derivatives or (out.uv.shape[0] > 0 and materials[sample.point.material].texture >= 0):  # (else 0, as cleared)
         uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, cam, perspective_correct, i, j)
         if derivatives:
             samples.duv_dx[s] = duv_dx
@@ -437,11 +443,13 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
     if out.face.shape[0] > 0:
         out.face[s] = sample.face
         out.bary[s] = sample.weights
-    out.depth[s] = wp.dot(sample.point.p - cam.eye, cam.forward)
+    if out.depth.shape[0] > 0:
+        out.depth[s] = wp.dot(sample.point.p - cam.eye, cam.forward)
     out.object[s] = mesh.face_object[sample.face]
-    index, weight = sample_points(sample, mesh, shading, s, n_vertices)
-    out.point_index[s] = index
-    out.point_weight[s] = weight
+    if out.point_index.shape[0] > 0:
+        index, weight = sample_points(sample, mesh, shading, s, n_vertices)
+        out.point_index[s] = index
+        out.point_weight[s] = weight
     return True, sample.point, uv, duv_dx, duv_dy
 
 

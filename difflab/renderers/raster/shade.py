@@ -165,28 +165,29 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
 @wp.kernel
 def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64),
                          tris: ScreenW, mesh: RasterMeshW, cam: CameraW, perspective_correct: int, out: GBufferW,
-                         samples: PointsW, lighting: LightingW, lit: LitW, record: int,
+                         samples: PointsW, found: PointsW, lighting: LightingW, lit: LitW, record: int,
                          nonfinite: wp.array(dtype=wp.int32)):
     """Stages 4 and 6 under Phong shading, one row of samples per thread: each sample resolved (its
     G-buffer entries, `resolve_into`), then lit as its own shading point, its texel sampled there
     (`light_into`); nonfinite[i] counts row i's samples whose colour has a NaN or infinite channel.
     `record` GEOMETRY_ONLY (a fit's G-buffer, whose skipped fields' arrays are empty: `resolve_into`):
-    no colours (none counted; only the light geometry is recorded, `record_geometry`); else 1. The
-    row's points on analytic spheres are found first (`sphere_rays`, into `samples`); where the
+    no colours (none counted; only the light geometry is recorded, `record_geometry`), and no texel
+    sampled where the G-buffer keeps none; else 1. The row's points on analytic spheres are found
+    first (`sphere_rays`, into `found`: `samples`, or a fit's scratch); where the
     G-buffer keeps no barycentrics (a fit's) their samples' face weights are not formed, as nothing
     reads them (`sample_weights`: the 256^2 bench sphere's pass 753 -> 694 us of CPU a half; in a
     scene without analytic spheres every sample's are, as before: a Phong mesh's pass kept its speed)."""
     i = dealt_row(row0, row_step, wp.tid())
     bad = int(0)
-    weights = int(sphere_rays(key, partial, tris, mesh, cam, samples, i) == 0 or out.bary.shape[0] > 0)
+    weights = int(sphere_rays(key, partial, tris, mesh, cam, found, i) == 0 or out.bary.shape[0] > 0)
     for j in range(cam.width):
         covered, point, uv, duv_dx, duv_dy = resolve_into(key, partial, tris, mesh, lighting.materials, cam,
                                                           perspective_correct, PHONG_SHADING, mesh.vertices.shape[0],
-                                                          out, samples, samples, weights, i, j)
+                                                          out, samples, found, weights, i, j)
         if covered:
             s = i * cam.width + j
             texel = wp.vec3(0.0)
-            if lighting.materials[point.material].texture >= 0:  # (else zero, as cleared)
+            if lit.texel.shape[0] > 0 and lighting.materials[point.material].texture >= 0:  # (else zero, as cleared)
                 texel = texel_at(lighting, point.material, uv, duv_dx, duv_dy)
                 lit.texel[s] = texel
             if record == GEOMETRY_ONLY:
