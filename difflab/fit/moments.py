@@ -217,11 +217,20 @@ def residuals(prepared: tuple, x, problem) -> tuple:
 
 
 def linearise(prepared: tuple, x, problem):
-    """(0.5 r^T r, J^T J (p, p), J^T r (p,)) at solver coordinates x from the moments (module
-    docstring); `prepared` = `prepare(problem, ...)`. r^T r is summed channel by channel as products
-    of r with itself, which keeps r formed apart (XLA's CPU code fused it into the sum of squares,
-    at twice the cost; as jnp.sum(r * r, 1) or an einsum over the channels, into one YNNPACK
-    reduction, +0.4-0.7 ms a solve of 24768 pixels)."""
+    """(0.5 r^T r, J^T J (p, p), J^T r (p,)) at solver coordinates x from the moments (module docstring);
+    `prepared` = `prepare(problem, ...)`. r^T r is a reduction whose combiner is a - (-b), the same sum
+    as a + b: XLA's CPU code hands a sum of 4096 entries or more that combines by add -- and a product
+    of two vectors, which it rewrites as one -- to YNNPACK, whose completion resumes on XLA's thread
+    pool (in a fit, where its threads have gone to sleep, ~50 us a hand-over), and forms the sum's
+    operand in the fusion that feeds it: as r[c] @ r[c] per channel, each channel's r in one of its own
+    (3 fusions of ~60 us a step; JAX's profiler, solves 10 ms apart). This one stays XLA's: r * r in one
+    fusion (~50 us), summed by a tree of reduce-windows (2 x ~14 us); were XLA to fold the combiner into
+    an add, the sum would be YNNPACK's again (slower, equal to rounding). The bench's 256^2 sphere
+    (24743 pixels, 8 steps), against r[c] @ r[c], in one process alternating: whole fits 0.9-1.0 ms
+    faster first, 1.0-1.5 fitted again or in a row (solve 4.0-4.5 -> 3.0-3.2 ms); a hot loop of solves
+    2.1-3.3 -> 1.6-2.1 ms. One product over the flat r (1 YNNPACK sum, parts of r formed in it) gained
+    half of that; three r @ r[c] (matrix-vector products) lost 0.5 ms; jnp.sum(r * r) or an einsum is
+    YNNPACK's, with r fused into it (+0.4-0.7 ms)."""
     layout = problem.layout
     values = layout.values(x)
     table = problem.materials(values)
@@ -235,7 +244,7 @@ def linearise(prepared: tuple, x, problem):
         mat = _coefficients(view, table)
         f = lobes(view, sums, mat, nonlinear)
         r = _residuals(view, sums, mat, f[0])
-        loss = loss + 0.5 * sum(r[c] @ r[c] for c in range(3))
+        loss = loss + 0.5 * jax.lax.reduce(r * r, jnp.zeros((), r.dtype), lambda a, b: a - -b, (0, 1))
         for material, block in zip(view.model.material_ids, sums.blocks):
             mine = None if view.model.material_ids == (material,) else view.model.material == material
             full = _moments(view, sums, block, mine, f)
