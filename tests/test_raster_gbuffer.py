@@ -117,28 +117,38 @@ def test_a_zbuffer_drawn_in_two_halves_gives_the_one_thread_frame_and_leaves_bot
 
 
 @wp.kernel
-def mark_rows_kernel(row0: int, row_step: int, touched: wp.array(dtype=wp.int32), band: wp.array(dtype=wp.int32)):
-    i = launch.dealt_row(row0, row_step, wp.tid())
-    touched[i] = touched[i] + 1
+def mark_rows_kernel(row0: int, row_step: int, span: int, touched: wp.array2d(dtype=wp.int32),
+                     band: wp.array(dtype=wp.int32), slots: wp.array(dtype=wp.int32)):
+    i, j0, j1, slot = launch.dealt_span(row0, row_step, span, touched.shape[1], wp.tid())
+    for j in range(j0, j1):
+        touched[i, j] = touched[i, j] + 1
     band[i] = row0 // launch.ROW_BLOCK
+    slots[slot] = slots[slot] + 1
 
 
+@pytest.mark.parametrize("per_sample", [False, True])
 @pytest.mark.parametrize("rows", [1, 7, 8, 9, 61, 256])
 @pytest.mark.parametrize("threads, per_thread", [(1, 4), (2, 1), (3, 4)])
-def test_row_loops_deal_each_row_once_in_blocks_to_even_bands(rows, threads, per_thread, monkeypatch):
+def test_row_loops_deal_each_row_once_in_blocks_to_even_bands(rows, threads, per_thread, per_sample, monkeypatch):
     """`launch_row_loops` deals blocks of ROW_BLOCK rows to its bands in turn (block b to band
     b mod n): every row once, no band more than a block longer than another (where the frame's
-    content sits in part of it, contiguous bands left a core idle), and no band without a block."""
-    touched = wp.zeros(rows, dtype=wp.int32, device="cpu")
+    content sits in part of it, contiguous bands left a core idle), and no band without a block.
+    Each sample is covered by one thread -- the whole row's (the CPU's mapping) or its own (CUDA's,
+    forced by PER_SAMPLE) -- and each slot of a per-thread count (`row_spans` a row) by one."""
+    monkeypatch.setattr(launch, "PER_SAMPLE", per_sample)
+    cols = 5
+    touched = wp.zeros((rows, cols), dtype=wp.int32, device="cpu")
     band = wp.full(rows, -1, dtype=wp.int32, device="cpu")
+    slots = wp.zeros(rows * launch.row_spans(cols, "cpu"), dtype=wp.int32, device="cpu")
+    assert launch.row_spans(cols, "cpu") == (cols if per_sample else 1)
     launched, real = [], launch.run_bands
     monkeypatch.setattr(launch, "run_bands", lambda run, bands, threads=None: launched.append(len(bands)) or
                         real(run, bands, threads))
-    launch.launch_row_loops(mark_rows_kernel, rows, [touched, band], "cpu", threads, per_thread)
+    launch.launch_row_loops(mark_rows_kernel, (rows, cols), [touched, band, slots], "cpu", threads, per_thread)
     n_bands = len(launch.band_plan(rows, "cpu", threads, per_thread))
     assert n_bands == (1 if threads == 1 else min(threads * per_thread, rows))
     assert launched == [min(n_bands, -(-rows // launch.ROW_BLOCK))]
-    assert touched.numpy().tolist() == [1] * rows
+    assert (touched.numpy() == 1).all() and (slots.numpy() == 1).all()
     expected = (np.arange(rows) // launch.ROW_BLOCK) % n_bands
     assert np.array_equal(band.numpy(), expected)
     sizes = np.bincount(expected)

@@ -4,7 +4,9 @@ launches a thread replays between frames (`launch_kept`).
 
 Warp runs one CPU launch serially on one thread but releases the GIL while it runs, so a launch
 split into bands of rows, launched from a thread pool (`bandpool`), uses every core. On CUDA a
-launch is already parallel and is issued whole.
+launch is already parallel and is issued whole, with a thread per item: the row loops
+(`launch_row_loops`), which on the CPU take a row per thread, take a sample per thread there
+(`row_span`), as `launch_chunks` takes an item.
 """
 
 from __future__ import annotations
@@ -202,12 +204,45 @@ def launch_rows(kernel, shape: tuple[int, int], inputs: list, device: str, threa
 # machine, thread CPU time, medians of 200).
 ROW_BLOCK = 8
 
+# Whether a row-loop launch (`launch_row_loops`, `launch_dealt`) runs a thread per sample: None,
+# by the device (CUDA yes, the CPU no); True / False force it (the tests run CUDA's mapping on the CPU).
+PER_SAMPLE: bool | None = None
+
+
+def row_span(cols: int, device: str) -> int:
+    """The columns one thread of a row-loop launch over rows of `cols` samples covers: the whole row
+    on the CPU (Warp runs a CPU launch serially: a thread per row reads the kernel's struct
+    arguments once per row), one sample on CUDA (a thread per row gave a 512^2 frame 512 GPU
+    threads: the Whitted tracer's sphere and floor took 15.2 ms there beside the 16-core CPU's
+    10.2, the teapot demo 61.8 beside 10.4; the CUDA time per sample is for the coordinator to
+    measure on the H200)."""
+    per_sample = not device.startswith("cpu") if PER_SAMPLE is None else PER_SAMPLE
+    return 1 if per_sample else max(cols, 1)
+
+
+def row_spans(cols: int, device: str) -> int:
+    """How many threads share a row of `cols` samples (`row_span`): the entries per row of a per-thread
+    count (a row-loop kernel's non-finite samples: `dealt_span`'s slot)."""
+    return -(-cols // row_span(cols, device))
+
 
 @wp.func
-def dealt_row(row0: int, row_step: int, tid: int):
-    """The row thread `tid` of a `launch_row_loops` band handles: blocks of ROW_BLOCK rows, the
-    first from row0, then one every row_step rows."""
-    return row0 + (tid // ROW_BLOCK) * row_step + tid % ROW_BLOCK
+def dealt_row(row0: int, row_step: int, r: int):
+    """The r-th row of a `launch_row_loops` band: blocks of ROW_BLOCK rows, the first from row0,
+    then one every row_step rows."""
+    return row0 + (r // ROW_BLOCK) * row_step + r % ROW_BLOCK
+
+
+@wp.func
+def dealt_span(row0: int, row_step: int, span: int, cols: int, tid: int):
+    """What thread `tid` of a `launch_row_loops` band covers: (i, j0, j1, slot), row i's columns
+    [j0, j1) -- `span` of them (`row_span`: the whole row, or one sample) -- and its slot in
+    per-thread arrays of `row_spans` entries per row (i itself where a thread takes a whole row)."""
+    spans = (cols + span - 1) // span
+    r = tid // spans
+    c = tid - r * spans
+    i = dealt_row(row0, row_step, r)
+    return i, c * span, wp.min(c * span + span, cols), i * spans + c
 
 
 def dealt_bands(rows: int, device: str, threads: int | None = None,
@@ -218,26 +253,44 @@ def dealt_bands(rows: int, device: str, threads: int | None = None,
     return [(k, n_bands) for k in range(n_bands)]
 
 
-def launch_dealt(kernel, k: int, n: int, rows: int, inputs: list, device: str, kept: dict | None = None) -> None:
-    """Launch `kernel` on band k of n of rows [0, rows) dealt in blocks (`launch_row_loops`); `kept`:
-    see `launch_kept`."""
+def launch_dealt(kernel, k: int, n: int, shape: tuple[int, int], inputs: list, device: str,
+                 kept: dict | None = None) -> None:
+    """Launch `kernel` on band k of n of the rows of `shape` = (rows, cols) dealt in blocks
+    (`launch_row_loops`); `kept`: see `launch_kept`."""
+    rows, cols = shape
+    span = row_span(cols, device)
     band_rows = sum(min(ROW_BLOCK, rows - block) for block in range(k * ROW_BLOCK, rows, n * ROW_BLOCK))
-    launch_kept(kept, kernel, (n, rows), band_rows, [k * ROW_BLOCK, n * ROW_BLOCK, *inputs], device)
+    launch_kept(kept, kernel, (n, rows), band_rows * row_spans(cols, device),
+                [k * ROW_BLOCK, n * ROW_BLOCK, span, *inputs], device)
 
 
-def launch_row_loops(kernel, rows: int, inputs: list, device: str, threads: int | None = None,
+def launch_row_loops(kernel, shape: tuple[int, int], inputs: list, device: str, threads: int | None = None,
                      per_thread: int = BANDS_PER_THREAD) -> None:
-    """Launch `kernel` with one thread per row, the rows dealt to bands in blocks of ROW_BLOCK
+    """Launch `kernel` over `shape` = (rows, cols), the rows dealt to bands in blocks of ROW_BLOCK
     (`dealt_bands`): band k of n takes blocks k, k + n, k + 2n, ..., so each band holds a share of
     every part of the frame and the bands' work is even where the frame's content is not (the 256^2
     bench sphere's top half holds 3x the covered samples of its bottom half: as two contiguous
-    bands, 1.75 ms of CPU on one core beside 0.66 ms on the other; dealt, 1.25 and 1.19). The
-    kernel's first arguments are (row0, row_step): its thread wp.tid() handles row
-    `dealt_row(row0, row_step, tid)`, looping over the columns itself. On the CPU this reads the
-    kernel's (struct) arguments once per row rather than once per pixel."""
+    bands, 1.75 ms of CPU on one core beside 0.66 ms on the other; dealt, 1.25 and 1.19).
+
+    The kernel's first arguments are (row0, row_step, span); its thread wp.tid() covers
+    `dealt_span(row0, row_step, span, cols, tid)`: a row's columns [j0, j1), looping over them
+    itself. `span` is `row_span`: on the CPU a whole row per thread (the kernel's struct arguments
+    are read once per row), on CUDA one sample per thread. Each thread writes only its own samples
+    (and its own slot of a per-thread count), so the results are bitwise the same under either
+    mapping; a kernel keeping row state (a scan ahead of the per-sample loop) keeps it for its
+    columns [j0, j1) only."""
+    rows, cols = shape
     load_kernels(device, kernel)
-    run_bands(lambda k, n: launch_dealt(kernel, k, n, rows, inputs, device),
+    run_bands(lambda k, n: launch_dealt(kernel, k, n, shape, inputs, device),
               dealt_bands(rows, device, threads, per_thread), threads)
+
+
+def launch_band(kernel, begin: int, end: int, cols: int, inputs: list, device: str) -> None:
+    """Launch row-loop `kernel` (`launch_row_loops`) on the contiguous rows [begin, end) of rows of
+    `cols` samples (a band of the z-buffer's `band_plan`): they are the dealt rows of a band whose
+    row0 is `begin` and row_step ROW_BLOCK."""
+    wp.launch(kernel, dim=(end - begin) * row_spans(cols, device),
+              inputs=[begin, ROW_BLOCK, row_span(cols, device), *inputs], device=device)
 
 
 def launch_kept(kept: dict | None, kernel, plan, dim: int, inputs: list, device: str) -> None:

@@ -37,8 +37,9 @@ frame's when nothing holds them any more); those an empty sample leaves zero sha
 cleared in one memset beside stages 1-3 (on a pool worker); the kernels write the rest. From
 128^2 samples the per-sample passes run a band per core even where the z-buffer runs on one
 thread (`launch.pass_threads`), each band dealt blocks of rows across the whole frame
-(`launch.launch_row_loops`); up to 256^2 the z-buffer is drawn as two halves of the triangles on
-two threads, which then go on to their bands of the pass (`bandpool.run_phases`).
+(`launch.launch_row_loops`; on CUDA a thread per sample); up to 256^2 the z-buffer is drawn as
+two halves of the triangles on two threads, which then go on to their bands of the pass
+(`bandpool.run_phases`).
 
 `render` (no G-buffer) runs stages 1-3, then `image_kernel` fuses 4-7 per sample: Phong's points are
 its samples; a flat / Gouraud point is lit when a sample first reads it, into a cache of the CPU

@@ -28,8 +28,8 @@ from ..camera import camera_struct
 from ..frame import Frame, box_downsample
 from ..host import host_empty, to_host
 from ..bandpool import run_bands, run_phases, start_beside
-from ..launch import (band_plan, dealt_bands, halved_zbuffer, launch_chunks, launch_dealt, launch_kept, launch_parts,
-                      launch_row_loops, load_kernels, part_count, pass_threads, raster_threads)
+from ..launch import (band_plan, dealt_bands, halved_zbuffer, launch_band, launch_chunks, launch_dealt, launch_kept,
+                      launch_parts, launch_row_loops, load_kernels, part_count, pass_threads, raster_threads, row_spans)
 from ..trace import object_kinds
 
 
@@ -319,14 +319,14 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         if device != "cpu":  # one cache for the GPU's threads: lit before any is read
             launch_chunks(shade.light_mesh_points_kernel, n_points, [
                 mesh, cam, shading, lighting, point_cache(compiled, n_points, frame)], device, threads)
-        bad = compiled.scratch("nonfinite rows", height, wp.int32)
+        bad = compiled.scratch("nonfinite rows", height * row_spans(width, device), wp.int32)  # (`launch.dealt_span`)
         canvas = host_empty(width * height, wp.vec3, device, zeroed=black)  # fresh every frame
         background, fog = backdrop(scene)
 
         def image_band(tris, key, begin: int, end: int) -> None:  # right after the band's z-buffer, its thread's cache
-            wp.launch(shade.image_kernel, dim=end - begin, inputs=[
-                begin, key, tris, mesh, cam, lighting, point_cache(compiled, n_points, frame), perspective_correct,
-                shading, int(clamp_colors), int(not black), background, fog, canvas, bad], device=device)
+            launch_band(shade.image_kernel, begin, end, width, [
+                key, tris, mesh, cam, lighting, point_cache(compiled, n_points, frame), perspective_correct, shading,
+                int(clamp_colors), int(not black), background, fog, canvas, bad], device)
 
         tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads, image_band)
         mark_key_cleared(compiled, key)  # image_kernel reset every key it read
@@ -346,7 +346,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     samples, out, lit, found, stale = gbuffer_arrays(compiled, width * height, points_are_samples, geometry_only)
     partial = cleared_key(compiled, width * height, "partial key") if halved else compiled.scratch("no key", 0,
                                                                                                     wp.int64)
-    bad = compiled.scratch("nonfinite rows", height, wp.int32)
+    bad = compiled.scratch("nonfinite rows", height * row_spans(width, device), wp.int32)  # (`launch.dealt_span`)
     clearing = start_beside(stale.zero_ if stale is not None else None, device, row_pass[0], start=False)
 
     kept = compiled.scratch_pool()  # the pass's launches, recorded with the structs kept (`launch_kept`)
@@ -354,11 +354,11 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     def sample_pass(tris, key, k: int, n: int) -> None:  # stage 4 on band k of n of the dealt rows, once cleared
         clearing.join()
         if points_are_samples:  # stages 4-6 in one pass: each sample resolved, then lit as its own point
-            launch_dealt(shade.phong_gbuffer_kernel, k, n, height, [
+            launch_dealt(shade.phong_gbuffer_kernel, k, n, (height, width), [
                 key, partial, tris, mesh, cam, perspective_correct, out, samples, found, lighting, lit, record, bad],
                 device, kept)
         else:
-            launch_dealt(resolve.resolve_kernel, k, n, height, [
+            launch_dealt(resolve.resolve_kernel, k, n, (height, width), [
                 key, partial, tris, mesh, compiled.materials, cam, perspective_correct, shading,
                 compiled.vertices.shape[0], out, samples], device, kept)
 
@@ -381,7 +381,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     composed = image or not points_are_samples
     if composed:  # Stage 7: compose samples (on the CUDA device before the G-buffer is copied out)
         canvas = compiled.reusable("canvas", width * height, wp.vec3)  # every sample written
-        launch_row_loops(shade.compose_kernel, height, [
+        launch_row_loops(shade.compose_kernel, (height, width), [
             width, samples, out.uv, out.depth, out.point_index, out.point_weight, lit, lighting, int(clamp_colors),
             1 - points_are_samples, *backdrop(scene), canvas], device, *row_pass)
     gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors,

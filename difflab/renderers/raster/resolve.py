@@ -17,7 +17,7 @@ from ..._warp import wp
 from ...lighting.warp_model import MaterialW, checker_cell
 from ...vocabulary import FLAT, PHONG_SHADING
 from ..camera import CameraW, line_point, primary_ray, view_direction
-from ..launch import dealt_row
+from ..launch import dealt_span
 from ..texture.footprint import pixel_footprint, sphere_uv, sphere_uv_jacobian
 from ..trace import HIT_SPHERE, leaving_skip, sphere_point
 from .coverage import NO_HIT, edge_weights, float_barycentrics
@@ -275,9 +275,9 @@ def sphere_sample(mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), mat: 
 
 @wp.func
 def sphere_rays(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
-                cam: CameraW, found: PointsW, i: int):
-    """`sphere_ray` at row i's samples on analytic spheres, ahead of `resolve_into` over the row
-    (Phong shading, `shade.phong_gbuffer_kernel`): p as found.position, -d as found.view, read
+                cam: CameraW, found: PointsW, i: int, j0: int, j1: int):
+    """`sphere_ray` at samples (i, j), j in [j0, j1), on analytic spheres, ahead of `resolve_into`
+    over them (Phong shading, `shade.phong_gbuffer_kernel`): p as found.position, -d as found.view, read
     back by `resolve_sample` (`found`: the G-buffer's samples, or a fit's scratch where its
     G-buffer keeps no position: `gbuffer.gbuffer_layout`). A loop of its own: each sample's chain
     of square roots and divisions is independent of the next one's, and the CPU overlaps several
@@ -292,7 +292,7 @@ def sphere_rays(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64)
             spheres = 1
     if spheres == 0:
         return 0
-    for j in range(cam.width):
+    for j in range(j0, j1):
         s = i * cam.width + j
         k = key[s]
         if partial.shape[0] > 0:
@@ -454,11 +454,12 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
 
 
 @wp.kernel
-def resolve_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64),
-                   tris: ScreenW, mesh: RasterMeshW, materials: wp.array(dtype=MaterialW), cam: CameraW,
-                   perspective_correct: int, shading: int, n_vertices: int, out: GBufferW, samples: PointsW):
-    """Stage 4, one row of samples per thread."""
-    i = dealt_row(row0, row_step, wp.tid())
-    for j in range(cam.width):
+def resolve_kernel(row0: int, row_step: int, span: int, key: wp.array(dtype=wp.int64),
+                   partial: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
+                   materials: wp.array(dtype=MaterialW), cam: CameraW, perspective_correct: int, shading: int,
+                   n_vertices: int, out: GBufferW, samples: PointsW):
+    """Stage 4, `span` samples of a row per thread (`launch.launch_row_loops`)."""
+    i, j0, j1, unused = dealt_span(row0, row_step, span, cam.width, wp.tid())
+    for j in range(j0, j1):
         resolve_into(key, partial, tris, mesh, materials, cam, perspective_correct, shading, n_vertices, out, samples,
                      PointsW(), 1, i, j)

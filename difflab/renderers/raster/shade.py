@@ -22,7 +22,7 @@ from ...lighting.warp_model import (FogW, LightW, MaterialW, ambient_term, fog_b
                                    surface_material, target_only, textured_material)
 from ...vocabulary import FOG_NONE, PHONG_SHADING
 from ..camera import CameraW
-from ..launch import dealt_row
+from ..launch import dealt_span
 from ..texture.sampling import TexturesW, sample_texture
 from ..trace import SceneGeomW, light_visibility, point_offset
 from .coverage import NO_HIT
@@ -163,24 +163,25 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
 
 
 @wp.kernel
-def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64),
-                         tris: ScreenW, mesh: RasterMeshW, cam: CameraW, perspective_correct: int, out: GBufferW,
-                         samples: PointsW, found: PointsW, lighting: LightingW, lit: LitW, record: int,
-                         nonfinite: wp.array(dtype=wp.int32)):
-    """Stages 4 and 6 under Phong shading, one row of samples per thread: each sample resolved (its
-    G-buffer entries, `resolve_into`), then lit as its own shading point, its texel sampled there
-    (`light_into`); nonfinite[i] counts row i's samples whose colour has a NaN or infinite channel.
+def phong_gbuffer_kernel(row0: int, row_step: int, span: int, key: wp.array(dtype=wp.int64),
+                         partial: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW, cam: CameraW,
+                         perspective_correct: int, out: GBufferW, samples: PointsW, found: PointsW,
+                         lighting: LightingW, lit: LitW, record: int, nonfinite: wp.array(dtype=wp.int32)):
+    """Stages 4 and 6 under Phong shading, `span` samples of a row per thread (`launch.launch_row_loops`):
+    each sample resolved (its G-buffer entries, `resolve_into`), then lit as its own shading point, its
+    texel sampled there (`light_into`); nonfinite[slot] counts the thread's samples whose colour has a
+    NaN or infinite channel (`launch.dealt_span`).
     `record` GEOMETRY_ONLY (a fit's G-buffer, whose skipped fields' arrays are empty: `resolve_into`):
     no colours (none counted; only the light geometry is recorded, `record_geometry`), and no texel
-    sampled where the G-buffer keeps none; else 1. The row's points on analytic spheres are found
+    sampled where the G-buffer keeps none; else 1. The thread's points on analytic spheres are found
     first (`sphere_rays`, into `found`: `samples`, or a fit's scratch); where the
     G-buffer keeps no barycentrics (a fit's) their samples' face weights are not formed, as nothing
     reads them (`sample_weights`: the 256^2 bench sphere's pass 753 -> 694 us of CPU a half; in a
     scene without analytic spheres every sample's are, as before: a Phong mesh's pass kept its speed)."""
-    i = dealt_row(row0, row_step, wp.tid())
+    i, j0, j1, slot = dealt_span(row0, row_step, span, cam.width, wp.tid())
     bad = int(0)
-    weights = int(sphere_rays(key, partial, tris, mesh, cam, found, i) == 0 or out.bary.shape[0] > 0)
-    for j in range(cam.width):
+    weights = int(sphere_rays(key, partial, tris, mesh, cam, found, i, j0, j1) == 0 or out.bary.shape[0] > 0)
+    for j in range(j0, j1):
         covered, point, uv, duv_dx, duv_dy = resolve_into(key, partial, tris, mesh, lighting.materials, cam,
                                                           perspective_correct, PHONG_SHADING, mesh.vertices.shape[0],
                                                           out, samples, found, weights, i, j)
@@ -194,7 +195,7 @@ def phong_gbuffer_kernel(row0: int, row_step: int, key: wp.array(dtype=wp.int64)
                 record_geometry(point, lighting, lit, s)
             elif not finite3(light_into(point, lighting, 1, texel, lit, s)):
                 bad += 1
-    nonfinite[i] = bad
+    nonfinite[slot] = bad
 
 
 @wp.struct
@@ -288,13 +289,13 @@ def compose_into(samples: PointsW, uv: wp.array(dtype=wp.vec2), depth: wp.array(
 
 
 @wp.kernel
-def compose_kernel(row0: int, row_step: int, width: int, samples: PointsW, uv: wp.array(dtype=wp.vec2),
+def compose_kernel(row0: int, row_step: int, span: int, width: int, samples: PointsW, uv: wp.array(dtype=wp.vec2),
                    depth: wp.array(dtype=float), point_index: wp.array(dtype=wp.vec3i),
                    point_weight: wp.array(dtype=wp.vec3), lit: LitW, lighting: LightingW, clamp_colors: int,
                    per_fragment: int, background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3)):
-    """Stage 7, one row of samples per thread."""
-    i = dealt_row(row0, row_step, wp.tid())
-    for j in range(width):
+    """Stage 7, `span` samples of a row per thread (`launch.launch_row_loops`)."""
+    i, j0, j1, unused = dealt_span(row0, row_step, span, width, wp.tid())
+    for j in range(j0, j1):
         compose_into(samples, uv, depth, point_index, point_weight, lit, lighting, clamp_colors, per_fragment,
                      background, fog, image, i * width + j)
 
@@ -333,18 +334,19 @@ def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, 
 
 
 @wp.kernel
-def image_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW, cam: CameraW,
-                 lighting: LightingW, cache: PointCacheW, perspective_correct: int, shading: int, clamp_colors: int,
+def image_kernel(row0: int, row_step: int, span: int, key: wp.array(dtype=wp.int64), tris: ScreenW,
+                 mesh: RasterMeshW, cam: CameraW, lighting: LightingW, cache: PointCacheW, perspective_correct: int, shading: int, clamp_colors: int,
                  paint_background: int, background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3),
                  nonfinite: wp.array(dtype=wp.int32)):
-    """Stages 4, 6 (Phong; flat / Gouraud points on first use) and 7 fused, one row of samples per
-    thread (the kernel's arguments are read once per row): the image `compose_kernel` gives from
-    the G-buffer, without storing it; uncovered samples get `background` unless `paint_background`
-    is 0 (a zeroed image, black background). Each key read is reset to NO_HIT (the next frame's
-    z-buffer starts cleared); nonfinite[i] counts row i's samples with a NaN or infinite channel."""
-    i = row0 + wp.tid()
+    """Stages 4, 6 (Phong; flat / Gouraud points on first use) and 7 fused, `span` samples of a row
+    per thread (`launch.launch_band`: on the CPU a row, the kernel's arguments read once per row):
+    the image `compose_kernel` gives from the G-buffer, without storing it; uncovered samples get
+    `background` unless `paint_background` is 0 (a zeroed image, black background). Each key read
+    is reset to NO_HIT (the next frame's z-buffer starts cleared); nonfinite[slot] counts the
+    thread's samples with a NaN or infinite channel (`launch.dealt_span`)."""
+    i, j0, j1, slot = dealt_span(row0, row_step, span, cam.width, wp.tid())
     bad = int(0)
-    for j in range(cam.width):
+    for j in range(j0, j1):
         s = i * cam.width + j
         k = key[s]
         if k == NO_HIT:
@@ -357,4 +359,4 @@ def image_kernel(row0: int, key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: 
             image[s] = c
             if not finite3(c):
                 bad += 1
-    nonfinite[i] = bad
+    nonfinite[slot] = bad

@@ -10,8 +10,9 @@ STRATIFIED_SEED (the same pattern on every render). The pixel is the mean of its
 
 The trace runs in two passes when the ray tree is recorded: the first renders the image and counts
 every sample's nodes, the second (sized exactly from those counts) walks the same trees again and
-writes them. Per-pixel launches are split into row bands on all cores (`launch.launch_rows`); every
-output element is written by one thread, so renders are bitwise deterministic.
+writes them. The walk is a row loop (`launch.launch_row_loops`: rows dealt to bands on all cores, a
+row per thread there, a sample per thread on CUDA); every output element is written by one thread
+(the ray counts are integer sums), so renders are bitwise deterministic.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from ...vocabulary import FRESNEL_MODES, SPECULAR_MODELS
 from ..camera import camera_struct
 from ..frame import Frame, box_downsample
 from ..host import host_empty
-from ..launch import launch_row_loops, load_kernels
+from ..launch import launch_row_loops, load_kernels, row_spans
 from .gbuffer import tree_gbuffer
 from .itembuffer import asked_bvh, item_buffer, item_struct
 from .lightbuffer import build_light_buffer, no_light_buffer
@@ -164,8 +165,8 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         out.node_count = compiled.scratch("trace.node_count", shape, wp.int32)
         out.rays = wp.zeros((rows, 5), dtype=wp.int32, device=device)
         out.depth_hist = wp.zeros((rows, settings.max_depth), dtype=wp.int32, device=device)
-        out.nonfinite = wp.empty(rows, dtype=wp.int32, device=device)
-        launch_row_loops(kernel, rows, [wp_points, cam, scene_w, params, item, tree, out], device, threads)
+        out.nonfinite = wp.empty(rows * row_spans(cols, device), dtype=wp.int32, device=device)
+        launch_row_loops(kernel, shape, [wp_points, cam, scene_w, params, item, tree, out], device, threads)
         return out
 
     unrecorded = read_only(compiled, "unrecorded tree", lambda: empty_tree((1, 1), 0, 0, device))  # not read

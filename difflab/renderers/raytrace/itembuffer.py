@@ -169,7 +169,7 @@ def item_hit(geom: SceneGeomW, item: ItemBufferW, i: int, j: int, origin: wp.vec
     found = analytic_hit(geom, origin, direction, 0.0, t_max, -1)
     face, tuv, normal = resolve_hint(item, i, j, origin, direction, found)
     if face == ASK_BVH:
-        item.asked[i] = item.asked[i] + 1
+        wp.atomic_add(item.asked, i, 1)  # (on CUDA a row's samples are traced by threads of their own)
         return mesh_hit(geom, origin, direction, 0.0, found, -1)
     if face == NO_TRIANGLE:
         return finish_hit(geom, found, origin, direction)

@@ -1,5 +1,6 @@
-"""The Whitted ray tracer's kernel: one thread per row of samples walks each sample's ray tree
-depth first (a row per call: on the CPU a call copies its struct arguments).
+"""The Whitted ray tracer's kernel: a thread walks each of its samples' ray trees depth first -- a
+row of samples per thread on the CPU (a call copies its struct arguments, once a row this way), a
+sample per thread on CUDA (`launch.launch_row_loops`).
 
 Warp has no recursion, so the tree is walked with an explicit stack of pending rays (`RayW`).
 Depth-first order keeps the stack within `max_depth` entries: at most one pending sibling per
@@ -40,7 +41,7 @@ from ...lighting.warp_model import FogW, LightW, MaterialW, ambient_term, fog_bl
 from ...vocabulary import MAX_DEPTH_LIMIT
 from ..camera import CameraW, line_point
 from ..intersect import HIT_NONE, HitW, SceneGeomW, closest_hit
-from ..launch import dealt_row
+from ..launch import dealt_span
 from ..trace import count_shadow_crossings, hit_from, hit_point, normal_at, shadow_ray, spawn_origin
 from .itembuffer import ItemBufferW, item_hit
 from .lightbuffer import LightBufferW, buffered_visibility
@@ -90,13 +91,13 @@ class TraceOutW:
     node_count: wp.array2d(dtype=wp.int32)
     rays: wp.array2d(dtype=wp.int32)  # (rows, 5): rays traced per COUNT_* kind, and COUNT_SHADOW_CUT
     depth_hist: wp.array2d(dtype=wp.int32)  # (rows, max_depth): rays traced per depth
-    nonfinite: wp.array(dtype=wp.int32)  # per row: samples whose colour is not finite
+    nonfinite: wp.array(dtype=wp.int32)  # per thread (`launch.dealt_span`'s slot): samples whose colour is not finite
 
 
 @wp.func(inline=True)
 def trace_ray(geom: SceneGeomW, item: ItemBufferW, out: TraceOutW, ray: RayW, i: int, j: int, t_far: float):
     """The nearest hit of a popped ray (the primary one up to the far plane, through the item buffer
-    when it is on), counted in the statistics of row i (a primary ray by `trace_row`, once a row)."""
+    when it is on), counted in the statistics of row i (a primary ray by `trace_spans`, once a row)."""
     if ray.kind == PRIMARY:
         if item.use == 1:
             return item_hit(geom, item, i, j, ray.origin, ray.direction, t_far)
@@ -167,19 +168,20 @@ def worth_tracing(weight: wp.vec3, threshold: float):
 
 
 def make_whitted_kernel(stack_size: int):
-    """The walk (`trace_row`) and its kernel for trees whose stack never holds more than `stack_size`
+    """The walk (`trace_spans`) and its kernel for trees whose stack never holds more than `stack_size`
     rays: a depth-first walk to depth D holds at most D (at most one pending sibling per level,
     plus the two children just pushed), and the stack is allocated and cleared per sample, so a
     shallow render should not pay for MAX_DEPTH_LIMIT entries."""
 
     @wp.func
-    def trace_row(points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW, params: TraceParamsW,
-                  item: ItemBufferW, tree: TreeW, out: TraceOutW, i: int):
-        """Walk the ray tree of every sample (i, j) of row i: its colour, fog blend and node count into
-        `out`. (One call per row: a CPU call copies its struct arguments, once per row this way.)"""
+    def trace_spans(points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW, params: TraceParamsW,
+                    item: ItemBufferW, tree: TreeW, out: TraceOutW, i: int, j0: int, j1: int, slot: int):
+        """Walk the ray tree of every sample (i, j), j in [j0, j1): its colour, fog blend and node
+        count into `out`, the non-finite ones counted at out.nonfinite[slot]; the row's primary rays
+        by the span starting it. (One call per row on the CPU: a call copies its struct arguments.)"""
         rec = light_arrays(tree)
         nonfinite = int(0)
-        for j in range(out.color.shape[1]):
+        for j in range(j0, j1):
             xy, start, direction, near, t_far = primary_sample(points, params.side, cam, params.far, i, j)
             base = int(0)
             if params.record == 1:
@@ -255,15 +257,17 @@ def make_whitted_kernel(stack_size: int):
             out.node_count[i, j] = count
             if not wp.isfinite(color):
                 nonfinite = nonfinite + 1
-        out.nonfinite[i] = nonfinite
-        out.rays[i, COUNT_PRIMARY] = out.color.shape[1]  # a primary ray per sample, all at depth 1
-        out.depth_hist[i, 0] = out.color.shape[1]
+        out.nonfinite[slot] = nonfinite
+        if j0 == 0:
+            out.rays[i, COUNT_PRIMARY] = out.color.shape[1]  # a primary ray per sample, all at depth 1
+            out.depth_hist[i, 0] = out.color.shape[1]
 
     @wp.kernel(module="unique", enable_backward=False)
-    def whitted_kernel(row0: int, row_step: int, points: wp.array2d(dtype=wp.vec2), cam: CameraW, scene: SceneW,
-                       params: TraceParamsW, item: ItemBufferW, tree: TreeW, out: TraceOutW):
-        """One row of samples per thread."""
-        trace_row(points, cam, scene, params, item, tree, out, dealt_row(row0, row_step, wp.tid()))
+    def whitted_kernel(row0: int, row_step: int, span: int, points: wp.array2d(dtype=wp.vec2), cam: CameraW,
+                       scene: SceneW, params: TraceParamsW, item: ItemBufferW, tree: TreeW, out: TraceOutW):
+        """`span` samples of a row per thread (`launch.launch_row_loops`)."""
+        i, j0, j1, slot = dealt_span(row0, row_step, span, out.color.shape[1], wp.tid())
+        trace_spans(points, cam, scene, params, item, tree, out, i, j0, j1, slot)
 
     return whitted_kernel
 
