@@ -238,9 +238,11 @@ def solve_box(problem, x0, lower, upper, max_steps, rtol, atol, progress=None):
     is a pytree of arrays with its static fields in the tree's structure. A call to a jit of this
     signature that returns x0 costs 18 us on the bench's 256^2 sphere (39 leaves), eqx.filter_jit's
     48 us; the problem's leaves passed flat, 14 us: not worth a cache of them. What a solve costs
-    beyond its steps -- 1 step 0.76 ms, each further one ~0.14 -- is its program's (XLA's profile):
-    the moments' `prepare` ~0.18 ms, the start's linearisation ~0.14, the residuals at the solution
-    ~0.08; in a fit, ~50 us more at each hand-over between XLA's threads, woken from sleep.)"""
+    beyond its steps -- 1 step 0.64-0.70 ms, each further one ~0.14-0.16 (8 steps 1.68-1.78 ms,
+    solve_box alone in a loop, medians of 60 at load 1) -- is its program's (XLA's profile): the moments'
+    `prepare` ~0.18 ms, the start's linearisation ~0.14, the residuals at the solution ~0.08; in a
+    fit, ~50 us more at each hand-over between XLA's threads, woken from sleep, which
+    `moments.linearise` keeps out of the steps' sums of squares.)"""
     return solve_problem(problem, x0, lower, upper, max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)
 
 
