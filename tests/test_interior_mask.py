@@ -192,8 +192,9 @@ def test_a_bad_edge_margin_exits_2_naming_the_option(tmp_path, capsys, command, 
 def test_the_edge_margin_mask_is_of_the_fits_record_and_its_errors_name_the_options(tmp_path, capsys):
     """`margin_masks` reads the interior of the record the fit makes (its spp and method, as
     `--spp` / `--method` give them): at spp 4 the 48 x 48 sphere's interior is 1412 pixels, not spp
-    1's 1468 (ray traced 1472: the raster Phong sphere's silhouette is up to a quarter sample inside). `difflab fit --edge-margin` names what the user gave: --mask[0] for a mask of the
-    wrong shape, --spp for an spp that is no square (exit 2, no file written)."""
+    1's 1468 (ray traced 1472: the raster Phong sphere's silhouette is up to a quarter sample
+    inside). `difflab fit --edge-margin` names what the user gave: --mask[0] for a mask of the wrong
+    shape, --spp for an spp that is no square (exit 2, no file written)."""
     scene, target, _ = anti_aliased_target(tmp_path)
     for spp, count in ((None, 1468), (4, 1412)):
         mask = margin_masks(scene, [target], None, 2, spp=spp)[0]

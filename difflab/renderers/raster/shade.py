@@ -335,8 +335,8 @@ def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, 
 
 @wp.kernel
 def image_kernel(row0: int, row_step: int, span: int, key: wp.array(dtype=wp.int64), tris: ScreenW,
-                 mesh: RasterMeshW, cam: CameraW, lighting: LightingW, cache: PointCacheW, perspective_correct: int, shading: int, clamp_colors: int,
-                 paint_background: int, background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3),
+                 mesh: RasterMeshW, cam: CameraW, lighting: LightingW, cache: PointCacheW, perspective_correct: int,
+                 shading: int, clamp_colors: int, paint_background: int, background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3),
                  nonfinite: wp.array(dtype=wp.int32)):
     """Stages 4, 6 (Phong; flat / Gouraud points on first use) and 7 fused, `span` samples of a row
     per thread (`launch.launch_band`: on the CPU a row, the kernel's arguments read once per row):
