@@ -1,6 +1,9 @@
 """The one fitting engine: the image model chosen from the scene, honest results (noise, chi-square,
 model mismatch), censored (clipped) targets, non-finite losses, and the parameter table's maps."""
 
+import os
+import subprocess
+import sys
 import time
 
 import jax
@@ -8,7 +11,7 @@ import numpy as np
 import pytest
 from test_fit_helpers import TRUTH, make_scene, mirror_scene, perturbed, scene_dict, target_of
 
-from difflab import Scene, render, render_frame
+from difflab import DifflabError, Scene, render, render_frame
 from difflab.fit import FitOptions, fit_material
 from difflab.fit.params import KINDS, Layout, Param
 from difflab.fit.stats import MISMATCH_CHI2
@@ -277,6 +280,40 @@ def test_compilation_cache_folder_follows_the_environment(monkeypatch, tmp_path)
     monkeypatch.delenv("DIFFLAB_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     assert cache_dir() == tmp_path / "difflab" / "jax"
+
+
+THREADS_PROBE = """
+import os, sys
+sys.path.insert(0, {tests!r})
+from test_fit_helpers import make_scene, target_of
+from difflab.fit import fit_material
+scene = make_scene(size=8)
+assert fit_material(scene, [target_of(scene)], "red").converged
+names = [open(f"/proc/self/task/{{t}}/comm").read().strip() for t in os.listdir("/proc/self/task")]
+print(names.count("tf_XLAEigen"), os.environ.get("NPROC"))
+"""
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads in Linux's /proc")
+def test_xla_cpu_threads_follow_the_environment(monkeypatch):
+    """$DIFFLAB_JAX_THREADS sets XLA's intra-op (Eigen) threads of a fitting process: 1 by default,
+    one per core with `all`; NPROC, through which it is set, is left as it was (here 5, which XLA
+    would otherwise have taken); an invalid value is a DifflabError naming the variable."""
+    from difflab.fit.cache import limit_xla_threads
+
+    def threads(value, **nproc):
+        env = {k: v for k, v in os.environ.items() if k != "NPROC"} | {"DIFFLAB_JAX_THREADS": value, **nproc}
+        code = THREADS_PROBE.format(tests=os.path.dirname(__file__))
+        done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.split()
+
+    assert threads("", NPROC="5") == ["1", "5"]
+    assert threads("all") == [str(len(os.sched_getaffinity(0))), "None"]
+    for value in ("many", "-1", "1.5"):
+        monkeypatch.setenv("DIFFLAB_JAX_THREADS", value)
+        with pytest.raises(DifflabError, match="DIFFLAB_JAX_THREADS"):
+            limit_xla_threads()
 
 
 def test_a_target_no_material_can_reach_puts_every_coefficient_on_its_bound():

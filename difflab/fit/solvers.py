@@ -23,11 +23,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import lm
-from .cache import enable_compilation_cache
 from .matfree import normal_cg, solve_box_cg
 from .options import SOLVERS, FitOptions  # noqa: F401  (SOLVERS: re-exported)
 
-enable_compilation_cache()
 SUCCESSFUL = "successful"
 
 class Solved(NamedTuple):
