@@ -64,6 +64,7 @@ class KeptView:
         self.record = record
         self._lock = threading.Lock()
         self._touched: dict = {}
+        self._pixels = None  # (used, its flat indices) of the pixel set found last, read-only
         self._models: list = []  # [(key, used, model)], the latest first
 
     def touched(self, key, find) -> np.ndarray:
@@ -76,12 +77,27 @@ class KeptView:
                 self._touched[key] = found
         return found
 
+    def pixels(self, used: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(used, np.flatnonzero(used)) for the pixels `used` (H, W) bool: the kept pair, read-only,
+        when the pixel set found last is the same (a fit of the view again with its mask: a compare,
+        ~1/4 of flatnonzero's time, and `model` then finds its model by identity)."""
+        with self._lock:
+            kept = self._pixels
+        if kept is not None and np.array_equal(kept[0], used):
+            return kept
+        found = (used, np.flatnonzero(used))
+        for array in found:
+            array.setflags(write=False)
+        with self._lock:
+            self._pixels = found
+        return found
+
     def model(self, key, used: np.ndarray, build):
         """The image model for the pixels `used` (H, W) bool and `key` (precision), cut by `build()`
         on first use."""
         with self._lock:
             for kept_key, kept_used, model in self._models:
-                if kept_key == key and np.array_equal(kept_used, used):
+                if kept_key == key and (kept_used is used or np.array_equal(kept_used, used)):
                     return model
         model = build()
         with self._lock:

@@ -223,7 +223,7 @@ class Setup:
         if weight is not None:
             positive = weight > 0
             used &= positive[..., 0] | positive[..., 1] | positive[..., 2]
-        pixels = np.flatnonzero(used)
+        used, pixels = view.kept.pixels(used) if view.kept is not None else (used, np.flatnonzero(used))
         total = view.nonfinite + view.left_out  # (`_record`'s view: all its non-finite values)
         inside = nonfinite_count(view.image, pixels) if total else 0
         out = dataclasses.replace(view, weighting=weight, used=used, nonfinite=inside, left_out=total - inside)
