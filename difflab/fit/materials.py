@@ -11,6 +11,11 @@ import numpy as np
 from ..lighting.warp_model import TEXTURE_TARGET_IDS
 
 
+def _second(mat, name: str):
+    """The checker's second-cell ka2 / kd2, or the material's own ka / kd without a checker."""
+    return getattr(mat.checker, name) if mat.checker is not None else getattr(mat, name[:2])
+
+
 class MaterialTable(NamedTuple):
     """M materials stacked by material id (a Scene's `materials.values()` order).
 
@@ -40,22 +45,11 @@ class MaterialTable(NamedTuple):
         """From scene `Material`s in material-id order, moved to the device in one transfer (`host`:
         numpy arrays, for a caller that moves them with others)."""
         materials = list(materials)
-        real = np.dtype(dtype)
-
-        def stack(get, shape):
-            values = np.asarray([get(mat) for mat in materials], np.float64).reshape((len(materials),) + shape)
-            return values.astype(real)
-
-        def field(name, shape):
-            return stack(lambda mat: getattr(mat, name), shape)
-
-        def second(name):
-            return stack(lambda mat: getattr(mat.checker, name) if mat.checker is not None else getattr(mat, name[:2]),
-                         (3,))
-
+        rows = np.array([[*mat.ka, *mat.kd, *mat.ks, mat.n, mat.m, mat.f0, *_second(mat, "ka2"), *_second(mat, "kd2"),
+                          mat.kr, mat.kt, *mat.absorption] for mat in materials], np.float64)  # (one array, its
+        rows = rows.reshape(len(materials), 23).astype(np.dtype(dtype))  # columns the fields: 3x one array each)
         targets = [TEXTURE_TARGET_IDS[m.texture_target] if m.texture is not None else -1 for m in materials]
-        table = cls(
-            ka=field("ka", (3,)), kd=field("kd", (3,)), ks=field("ks", (3,)), n=field("n", ()), m=field("m", ()),
-            f0=field("f0", ()), ka2=second("ka2"), kd2=second("kd2"), kr=field("kr", ()), kt=field("kt", ()),
-            absorption=field("absorption", (3,)), texture_target=np.asarray(targets, np.int32).reshape(-1))
+        table = cls(ka=rows[:, 0:3], kd=rows[:, 3:6], ks=rows[:, 6:9], n=rows[:, 9], m=rows[:, 10], f0=rows[:, 11],
+                    ka2=rows[:, 12:15], kd2=rows[:, 15:18], kr=rows[:, 18], kt=rows[:, 19], absorption=rows[:, 20:23],
+                    texture_target=np.asarray(targets, np.int32).reshape(-1))
         return table if host else jax.device_put(table)

@@ -150,12 +150,12 @@ class Layout:
         return _entries(self, attribute)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lower, upper) of the solver coordinate x per entry, new arrays each call (cached read-only
-        ones, used by a float32 fit's compiled solve and then handed to a float64 one, reached it as
-        float32 buffers: test_fit_engine.test_a_float64_fit_after_a_float32_fit_of_the_same_layout)."""
-        log = self.entries("log") > 0
-        lo, hi = self.entries("lower"), self.entries("upper")
-        return np.where(log, np.log(np.where(log, lo, 1.0)), lo), np.where(log, np.log(np.where(log, hi, 1.0)), hi)
+        """(lower, upper) of the solver coordinate x per entry, new arrays each call: copies of
+        `_box`'s (the cached read-only ones themselves, used by a float32 fit's compiled solve and then
+        handed to a float64 one, reached it as float32 buffers:
+        test_fit_engine.test_a_float64_fit_after_a_float32_fit_of_the_same_layout)."""
+        lo, hi = _box(self)
+        return lo.copy(), hi.copy()
 
     def values(self, x):
         """Solver coordinates x -> values in scene units (numpy for a numpy x, else JAX)."""
@@ -165,7 +165,7 @@ class Layout:
 
     def x_of(self, values) -> np.ndarray:
         """Values (flat, scene units) -> x inside the bounds (numpy)."""
-        lo, hi = self.bounds()
+        lo, hi = _box(self)
         values = np.asarray(values, np.float64)
         x = np.where(self.entries("log") > 0, np.log(np.maximum(values, 1e-300)), values)
         return np.clip(x, lo, hi)
@@ -214,6 +214,17 @@ def _entries(layout: Layout, attribute: str) -> np.ndarray:
     out = np.concatenate([np.full(p.size, float(getattr(p, attribute))) for p in layout.params])
     out.setflags(write=False)
     return out
+
+
+@functools.lru_cache(maxsize=64)
+def _box(layout: Layout) -> tuple[np.ndarray, np.ndarray]:
+    """`Layout.bounds`, formed once per layout: read-only arrays."""
+    log = layout.entries("log") > 0
+    lo, hi = layout.entries("lower"), layout.entries("upper")
+    box = np.where(log, np.log(np.where(log, lo, 1.0)), lo), np.where(log, np.log(np.where(log, hi, 1.0)), hi)
+    for array in box:
+        array.setflags(write=False)
+    return box
 
 
 def name_list(value, argument: str) -> tuple[str, ...]:

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass, fields
-from functools import cached_property
+from functools import cache, cached_property
 
 import jax
 import numpy as np
@@ -37,17 +37,23 @@ KEPT_MODELS = 2  # per view
 KEPT_ARRAYS = 4  # device copies of small arrays, by contents
 SMALL = 1024  # entries: an array this small is looked up by its contents, not moved again
 EVALUATED = frozenset(("ka", "kd", "ks", "n", "m", "f0"))  # what the image models evaluate afresh
+UNPLACED = frozenset(("intensity",))  # a light's fields that the record does not depend on
 STORE = "fit views"  # the key in CompiledScene.built
 
 
 def view_key(view_scene, device: str) -> tuple:
     """What a view's record depends on, as a tuple compared with == (see the module docstring)."""
-    materials = tuple((name, tuple(getattr(mat, f.name) for f in fields(mat) if f.name not in EVALUATED))
+    materials = tuple((name, tuple(getattr(mat, f) for f in _names(type(mat), EVALUATED)))
                       for name, mat in view_scene.materials.items())
-    lights = tuple(tuple(getattr(light, f.name) for f in fields(light) if f.name != "intensity")
-                   for light in view_scene.lights)
+    lights = tuple(tuple(getattr(light, f) for f in _names(type(light), UNPLACED)) for light in view_scene.lights)
     return (device, view_scene.camera, view_scene.render, tuple(view_scene.objects), view_scene.ambient,
             view_scene.background, view_scene.fog, materials, lights)
+
+
+@cache
+def _names(record: type, left_out: frozenset) -> tuple:
+    """The names of a dataclass's fields but `left_out`, in order (`dataclasses.fields`: ~1 us a call)."""
+    return tuple(f.name for f in fields(record) if f.name not in left_out)
 
 
 class KeptView:
@@ -58,6 +64,7 @@ class KeptView:
         self.record = record
         self._lock = threading.Lock()
         self._touched: dict = {}
+        self._pixels = None  # (used, its flat indices) of the pixel set found last, read-only
         self._models: list = []  # [(key, used, model)], the latest first
 
     def touched(self, key, find) -> np.ndarray:
@@ -70,12 +77,27 @@ class KeptView:
                 self._touched[key] = found
         return found
 
+    def pixels(self, used: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(used, np.flatnonzero(used)) for the pixels `used` (H, W) bool: the kept pair, read-only,
+        when the pixel set found last is the same (a fit of the view again with its mask: a compare,
+        ~1/4 of flatnonzero's time, and `model` then finds its model by identity)."""
+        with self._lock:
+            kept = self._pixels
+        if kept is not None and np.array_equal(kept[0], used):
+            return kept
+        found = (used, np.flatnonzero(used))
+        for array in found:
+            array.setflags(write=False)
+        with self._lock:
+            self._pixels = found
+        return found
+
     def model(self, key, used: np.ndarray, build):
         """The image model for the pixels `used` (H, W) bool and `key` (precision), cut by `build()`
         on first use."""
         with self._lock:
             for kept_key, kept_used, model in self._models:
-                if kept_key == key and np.array_equal(kept_used, used):
+                if kept_key == key and (kept_used is used or np.array_equal(kept_used, used)):
                     return model
         model = build()
         with self._lock:
@@ -219,24 +241,22 @@ class DeviceCopies:
         precision, default device, dtypes, shapes and bytes (device arrays are immutable; one jitted dispatch costs
         some 8 us a leaf); the large ones (targets) are moved each time."""
         leaves, structure = jax.tree_util.tree_flatten(tree)
-        small = [i for i, leaf in enumerate(leaves) if leaf.size <= SMALL]
+        small = [leaf.size <= SMALL for leaf in leaves]
         key = (structure, jax.config.jax_enable_x64, jax.config.jax_default_device,
-               tuple((leaves[i].dtype.str, leaves[i].shape, leaves[i].tobytes()) for i in small))
-        with self._lock:
-            kept = next((copies for kept_key, copies in self._arrays if kept_key == key), None)
-            if kept is not None:  # used now: the last to be let go
-                self._arrays = [(key, kept)] + [(k, c) for k, c in self._arrays if k != key]
-        if kept is None:
+               tuple((leaf.dtype, leaf.shape, leaf.tobytes()) for leaf, is_small in zip(leaves, small) if is_small))
+        with self._lock:  # (each kept key compared once: ~30 small leaves a fit)
+            found = next((i for i, (kept_key, _) in enumerate(self._arrays) if kept_key == key), None)
+            if found is not None:  # used now: the last to be let go
+                self._arrays.insert(0, self._arrays.pop(found))
+                kept = self._arrays[0][1]
+        if found is None:
             moved = to_device(leaves)
             with self._lock:
-                self._arrays = [(key, [moved[i] for i in small])] + self._arrays[:KEPT_ARRAYS - 1]
+                self._arrays = [(key, [leaf for leaf, is_small in zip(moved, small) if is_small])] + \
+                    self._arrays[:KEPT_ARRAYS - 1]
         else:
-            large = [i for i, leaf in enumerate(leaves) if leaf.size > SMALL]
-            moved = [None] * len(leaves)
-            for i, leaf in zip(large, to_device([leaves[i] for i in large])):
-                moved[i] = leaf
-            for i, leaf in zip(small, kept):
-                moved[i] = leaf
+            kept, large = iter(kept), iter(to_device([leaf for leaf, is_small in zip(leaves, small) if not is_small]))
+            moved = [next(kept) if is_small else next(large) for is_small in small]
         return jax.tree_util.tree_unflatten(structure, moved)
 
 

@@ -223,7 +223,7 @@ class Setup:
         if weight is not None:
             positive = weight > 0
             used &= positive[..., 0] | positive[..., 1] | positive[..., 2]
-        pixels = np.flatnonzero(used)
+        used, pixels = view.kept.pixels(used) if view.kept is not None else (used, np.flatnonzero(used))
         total = view.nonfinite + view.left_out  # (`_record`'s view: all its non-finite values)
         inside = nonfinite_count(view.image, pixels) if total else 0
         out = dataclasses.replace(view, weighting=weight, used=used, nonfinite=inside, left_out=total - inside)
@@ -272,7 +272,8 @@ class Setup:
 
     def _view_model(self, view: View, pixels, lights):
         """The image model of a view's `pixels` (kept with the record when they are the pixels used),
-        for its lights (`_view_arrays`' numpy ones: nothing waits for a device copy)."""
+        for its lights on the device (`DEVICE_COPIES`' kept ones, say: a jitted call takes a numpy
+        argument at ~4x a device array's cost -- 2 against 0.5 us a leaf)."""
         if view.kept is not None and pixels is view.pixels and self.texel_source is None:
             key = (self.method, np.dtype(self.dtype))
             return view.kept.model(key, view.used, lambda: self._model(view, pixels, lights))
@@ -299,13 +300,11 @@ class Setup:
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
         host = [self._view_arrays(v, v.pixels, index["intensity"]) for v in self.views]
-        models = [self._view_model(v, v.pixels, arrays[0]) for v, arrays in zip(self.views, host)]  # first: a
-        # model cut afresh is computed (asynchronously) while the rest is moved
         arrays, table, ambient, index, loss_scale = DEVICE_COPIES.on_device((
             host, MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
             np.asarray(self.scene.ambient, real), {k: v for k, v in index.items() if k != "intensity"},
             np.asarray(loss_scale, real)))
-        views = tuple(self._view(a, model) for a, model in zip(arrays, models))
+        views = tuple(self._view(a, self._view_model(v, v.pixels, a[0])) for v, a in zip(self.views, arrays))
         return assembled(Problem, views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
                          layout=self.layout, loss=loss, smoothness=self.smoothness)
 
@@ -353,9 +352,9 @@ class Setup:
             index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
             for view in self.views:
                 every = np.arange(view.used.size)
-                arrays = self._view_arrays(view, every, index["intensity"])
+                arrays = to_device(self._view_arrays(view, every, index["intensity"]))
                 model = self._view_model(view, every, arrays[0])
-                full = eqx.tree_at(lambda p: p.views, self.problem, (self._view(to_device(arrays), model),))
+                full = eqx.tree_at(lambda p: p.views, self.problem, (self._view(arrays, model),))
                 image = images_jit(full, jnp.asarray(flat, self.dtype))[0]
                 out.append(np.asarray(image, np.float32).reshape(view.image.shape))
         return out

@@ -258,6 +258,8 @@ def is_one_of(ids: np.ndarray, chosen) -> np.ndarray:
     chosen = [int(m) for m in chosen]
     if len(chosen) > 8:
         return np.isin(ids, chosen)
+    if len(chosen) == 1:  # (one pass)
+        return ids == chosen[0]
     out = np.zeros(ids.shape, bool)
     for m in chosen:
         out |= ids == m

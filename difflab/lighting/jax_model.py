@@ -314,20 +314,12 @@ def shade(mat: MaterialJ, model: int, normal, v, lights: LightsJ, l, d, visibili
 def lights_to_jax(lights, dtype=jnp.float32, *, host: bool = False) -> LightsJ:
     """Scene lights as a `LightsJ` of arrays (P may be 0), moved to the device in one transfer
     (`host`: numpy arrays, for a caller that moves them with others)."""
-    real = np.dtype(dtype)
-
-    def column(values, shape):
-        return np.asarray(values, dtype=np.float64).reshape(shape).astype(real)
-
     count = len(lights)
-    arrays = LightsJ(
-        kind=np.asarray([LIGHT_TYPES[light.type] for light in lights], dtype=np.int32).reshape(count),
-        position=column([light.position or (0.0, 0.0, 0.0) for light in lights], (count, 3)),
-        direction=column([light.direction or (0.0, -1.0, 0.0) for light in lights], (count, 3)),
-        intensity=column([light.intensity for light in lights], (count, 3)),
-        attenuation=column([light.attenuation for light in lights], (count, 3)),
-        cos_cutoff=column([math.cos(math.radians(light.cutoff_deg)) if light.type == "spot" else -2.0
-                           for light in lights], (count,)),
-        exponent=column([light.exponent for light in lights], (count,)),
-    )
+    rows = np.array([[*(light.position or (0.0, 0.0, 0.0)), *(light.direction or (0.0, -1.0, 0.0)), *light.intensity,
+                      *light.attenuation, math.cos(math.radians(light.cutoff_deg)) if light.type == "spot" else -2.0,
+                      light.exponent] for light in lights], np.float64)  # (one array, its columns the fields)
+    rows = rows.reshape(count, 14).astype(np.dtype(dtype))
+    arrays = LightsJ(kind=np.asarray([LIGHT_TYPES[light.type] for light in lights], dtype=np.int32).reshape(count),
+                     position=rows[:, 0:3], direction=rows[:, 3:6], intensity=rows[:, 6:9], attenuation=rows[:, 9:12],
+                     cos_cutoff=rows[:, 12], exponent=rows[:, 13])
     return arrays if host else jax.device_put(arrays)
