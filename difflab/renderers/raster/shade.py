@@ -141,11 +141,12 @@ def finite3(c: wp.vec3):
     return c[0] * 0.0 + c[1] * 0.0 + c[2] * 0.0 == 0.0
 
 
-@wp.func
+@wp.func(inline=True)
 def light_into(point: PointW, lighting: LightingW, textured: int, texel: wp.vec3, lit: LitW, k: int):
     """Stage 6 at point k: its colour and texture factor (`light_point`), and per light its
     direction, distance and visibility (the G-buffer's). `lit` is zero when the kernel starts:
-    nothing is written for an empty point. Returns the colour."""
+    nothing is written for an empty point. Returns the colour. Inlined: with the shadow rays inlined
+    (`trace.light_visibility`) the CPU compiler made it a call, which copies `lighting` per point."""
     color, factor = light_point(point, lighting, textured, texel, lit, k, 1)
     lit.color[k] = color
     if textured == 0:  # (else zero, as cleared)
@@ -160,6 +161,30 @@ def light_points_kernel(begin: int, end: int, chunk: int, points: PointsW, light
     for k in range(first, wp.min(first + chunk, end)):
         if points.material[k] >= 0:
             unused = light_into(load_point(points, k), lighting, 0, wp.vec3(0.0), lit, k)
+
+
+@wp.func(inline=True)
+def gbuffer_row(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW,
+                cam: CameraW, perspective_correct: int, out: GBufferW, samples: PointsW, found: PointsW,
+                lighting: LightingW, lit: LitW, record: int, weights: int, i: int, j0: int, j1: int):
+    """`phong_gbuffer_kernel`'s samples (i, j), j in [j0, j1): each resolved and lit; returns how many
+    have a colour with a NaN or infinite channel."""
+    bad = int(0)
+    for j in range(j0, j1):
+        covered, point, uv, duv_dx, duv_dy = resolve_into(key, partial, tris, mesh, lighting.materials, cam,
+                                                          perspective_correct, PHONG_SHADING, mesh.vertices.shape[0],
+                                                          out, samples, found, weights, i, j)
+        if covered:
+            s = i * cam.width + j
+            texel = wp.vec3(0.0)
+            if lit.texel.shape[0] > 0 and lighting.materials[point.material].texture >= 0:  # (else zero, as cleared)
+                texel = texel_at(lighting, point.material, uv, duv_dx, duv_dy)
+                lit.texel[s] = texel
+            if record == GEOMETRY_ONLY:
+                record_geometry(point, lighting, lit, s)
+            elif not finite3(light_into(point, lighting, 1, texel, lit, s)):
+                bad += 1
+    return bad
 
 
 @wp.kernel
@@ -177,25 +202,19 @@ def phong_gbuffer_kernel(row0: int, row_step: int, span: int, key: wp.array(dtyp
     first (`sphere_rays`, into `found`: `samples`, or a fit's scratch); where the
     G-buffer keeps no barycentrics (a fit's) their samples' face weights are not formed, as nothing
     reads them (`sample_weights`: the 256^2 bench sphere's pass 753 -> 694 us of CPU a half; in a
-    scene without analytic spheres every sample's are, as before: a Phong mesh's pass kept its speed)."""
+    scene without analytic spheres every sample's are, as before: a Phong mesh's pass kept its speed).
+    The row loop (`gbuffer_row`) is written twice, with shadows and without: the compiler then drops
+    the inlined shadow rays (`trace.light_visibility`) from the loop of a scene without them, which
+    they slowed ~3 % (the bench sphere's fit frame alone, interleaved at load ~3: 592 -> 612 us of
+    CPU a band with them in it, 587 without)."""
     i, j0, j1, slot = dealt_span(row0, row_step, span, cam.width, wp.tid())
-    bad = int(0)
     weights = int(sphere_rays(key, partial, tris, mesh, cam, found, i, j0, j1) == 0 or out.bary.shape[0] > 0)
-    for j in range(j0, j1):
-        covered, point, uv, duv_dx, duv_dy = resolve_into(key, partial, tris, mesh, lighting.materials, cam,
-                                                          perspective_correct, PHONG_SHADING, mesh.vertices.shape[0],
-                                                          out, samples, found, weights, i, j)
-        if covered:
-            s = i * cam.width + j
-            texel = wp.vec3(0.0)
-            if lit.texel.shape[0] > 0 and lighting.materials[point.material].texture >= 0:  # (else zero, as cleared)
-                texel = texel_at(lighting, point.material, uv, duv_dx, duv_dy)
-                lit.texel[s] = texel
-            if record == GEOMETRY_ONLY:
-                record_geometry(point, lighting, lit, s)
-            elif not finite3(light_into(point, lighting, 1, texel, lit, s)):
-                bad += 1
-    nonfinite[slot] = bad
+    if lighting.shadows == 1:
+        nonfinite[slot] = gbuffer_row(key, partial, tris, mesh, cam, perspective_correct, out, samples, found,
+                                      lighting, lit, record, weights, i, j0, j1)
+    else:
+        nonfinite[slot] = gbuffer_row(key, partial, tris, mesh, cam, perspective_correct, out, samples, found,
+                                      lighting, lit, record, weights, i, j0, j1)
 
 
 @wp.struct
@@ -333,18 +352,11 @@ def image_sample(key: wp.int64, tris: ScreenW, mesh: RasterMeshW, cam: CameraW, 
     return fogged(fog, out, wp.dot(p - cam.eye, cam.forward))
 
 
-@wp.kernel
-def image_kernel(row0: int, row_step: int, span: int, key: wp.array(dtype=wp.int64), tris: ScreenW,
-                 mesh: RasterMeshW, cam: CameraW, lighting: LightingW, cache: PointCacheW, perspective_correct: int,
-                 shading: int, clamp_colors: int, paint_background: int, background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3),
-                 nonfinite: wp.array(dtype=wp.int32)):
-    """Stages 4, 6 (Phong; flat / Gouraud points on first use) and 7 fused, `span` samples of a row
-    per thread (`launch.launch_band`: on the CPU a row, the kernel's arguments read once per row):
-    the image `compose_kernel` gives from the G-buffer, without storing it; uncovered samples get
-    `background` unless `paint_background` is 0 (a zeroed image, black background). Each key read
-    is reset to NO_HIT (the next frame's z-buffer starts cleared); nonfinite[slot] counts the
-    thread's samples with a NaN or infinite channel (`launch.dealt_span`)."""
-    i, j0, j1, slot = dealt_span(row0, row_step, span, cam.width, wp.tid())
+@wp.func(inline=True)
+def image_row(key: wp.array(dtype=wp.int64), tris: ScreenW, mesh: RasterMeshW, cam: CameraW, lighting: LightingW,
+              cache: PointCacheW, perspective_correct: int, shading: int, clamp_colors: int, paint_background: int,
+              background: wp.vec3, fog: FogW, image: wp.array(dtype=wp.vec3), i: int, j0: int, j1: int):
+    """`image_kernel`'s samples (i, j), j in [j0, j1); returns how many have a NaN or infinite channel."""
     bad = int(0)
     for j in range(j0, j1):
         s = i * cam.width + j
@@ -359,4 +371,27 @@ def image_kernel(row0: int, row_step: int, span: int, key: wp.array(dtype=wp.int
             image[s] = c
             if not finite3(c):
                 bad += 1
-    nonfinite[slot] = bad
+    return bad
+
+
+@wp.kernel
+def image_kernel(row0: int, row_step: int, span: int, key: wp.array(dtype=wp.int64), tris: ScreenW,
+                 mesh: RasterMeshW, cam: CameraW, lighting: LightingW, cache: PointCacheW, perspective_correct: int,
+                 shading: int, clamp_colors: int, paint_background: int, background: wp.vec3, fog: FogW,
+                 image: wp.array(dtype=wp.vec3), nonfinite: wp.array(dtype=wp.int32)):
+    """Stages 4, 6 (Phong; flat / Gouraud points on first use) and 7 fused, `span` samples of a row
+    per thread (`launch.launch_band`: on the CPU a row, the kernel's arguments read once per row):
+    the image `compose_kernel` gives from the G-buffer, without storing it; uncovered samples get
+    `background` unless `paint_background` is 0 (a zeroed image, black background). Each key read
+    is reset to NO_HIT (the next frame's z-buffer starts cleared); nonfinite[slot] counts the
+    thread's samples with a NaN or infinite channel (`launch.dealt_span`). The row loop
+    (`image_row`) is written twice, with shadows and without, as `phong_gbuffer_kernel`'s (the bench
+    sphere's render alone, interleaved at loads 3-4: its kernels' CPU +2 % with the inlined shadow
+    rays in its one loop, -3 % with the loop written twice)."""
+    i, j0, j1, slot = dealt_span(row0, row_step, span, cam.width, wp.tid())
+    if lighting.shadows == 1:
+        nonfinite[slot] = image_row(key, tris, mesh, cam, lighting, cache, perspective_correct, shading, clamp_colors,
+                                    paint_background, background, fog, image, i, j0, j1)
+    else:
+        nonfinite[slot] = image_row(key, tris, mesh, cam, lighting, cache, perspective_correct, shading, clamp_colors,
+                                    paint_background, background, fog, image, i, j0, j1)
