@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 
@@ -79,16 +80,29 @@ def _lattice(start: int, count: int, a: int) -> slice:
     return slice(start, start + a * (count - 1) + 1, a)
 
 
-def _view_log_ratios(view, image) -> tuple[float, int, int, float] | None:
-    """(sum of l, n, m, n^2 V(a) / m) over one view's lattice (`ViewPicks` view, residual planes (3, H,
-    W)): n its points, m those of its fullest channel (its mean's variance is V(a) / m if its
-    channels carry one noise); None without a point. The lattice's centre-grid points
-    i = 1, 1 + a, ... (box pixel i + 1) are valid where the centre grid is set at i - 1 .. i + 1
-    (each of those has its 3 x 3 used: the 5 x 5 around the point is)."""
-    count = max((p.index.size for p in view.picks if p is not None), default=0)
+class Lattice(NamedTuple):
+    """A view's lattice (module doc), from its picked Laplacians alone (`lattice`): its step a, its
+    rows x cols points at the centre grid's i = 1, 1 + a, ... (box pixel i + 1), the flat positions
+    of the valid ones in that grid -- (rows, cols), every channel's, or (3, rows, cols) per channel,
+    in order --, and per channel where each one's valid points end among them (None: every channel's)."""
+
+    a: int
+    rows: int
+    cols: int
+    valid: np.ndarray
+    ends: np.ndarray | None
+
+
+def lattice(centre: np.ndarray, picks: list) -> Lattice | None:
+    """The `Lattice` of a view's centre grid (`noise.ViewPicks`' centre: (h - 2, w - 2) bool, or (3,
+    h - 2, w - 2) per channel) and its channels' `Picks` (None: none); None without a point. A point
+    is valid where the centre grid is set at i - 1 .. i + 1 (each of those has its 3 x 3 used: the
+    5 x 5 around the point is). Formed with the picks, beside the solve (`noise.noise_picks`): the
+    bench's Mitsuba sphere, first fits interleaved with the test's lattice formed in the report (one
+    process, medians of 100, load 3): the report's whiteness test 149-153 -> 123-124 us of CPU."""
+    count = max((p.index.size for p in picks if p is not None), default=0)
     if not count:  # (used pixels but no 3 x 3 interior: a thin strip, a scattered mask)
         return None
-    centre = view.centre
     hc, wc = centre.shape[-2:]
     a = max(1, math.isqrt(count // WHITE_SAMPLE))
     rows, cols = len(range(1, hc - 1, a)), len(range(1, wc - 1, a))
@@ -96,6 +110,18 @@ def _view_log_ratios(view, image) -> tuple[float, int, int, float] | None:
         return None
     ok = centre[..., _lattice(0, rows, a), :] & centre[..., _lattice(1, rows, a), :] & centre[..., _lattice(2, rows, a), :]
     ok = ok[..., _lattice(0, cols, a)] & ok[..., _lattice(1, cols, a)] & ok[..., _lattice(2, cols, a)]
+    ends = None if ok.ndim == 2 else np.cumsum(np.count_nonzero(ok.reshape(3, -1), axis=1))[:-1]
+    return Lattice(a, rows, cols, np.flatnonzero(ok), ends)
+
+
+def _view_log_ratios(view, image) -> tuple[float, int, int, float] | None:
+    """(sum of l, n, m, n^2 V(a) / m) over one view's lattice (`ViewPicks` view, with its `Lattice`;
+    residual planes (3, H, W)): n its valid points, m those of its fullest channel (its mean's
+    variance is V(a) / m if its channels carry one noise); None without a point."""
+    grid = view.lattice
+    if grid is None:
+        return None
+    a, rows, cols = grid.a, grid.rows, grid.cols
     box = image[:, view.box[0], view.box[1]]  # the lattice's points at box rows / columns 2, 2 + a, ...
     middle = _lattice(2, cols, a)
 
@@ -111,18 +137,18 @@ def _view_log_ratios(view, image) -> tuple[float, int, int, float] | None:
         line, 2, centre_taps)
     with np.errstate(divide="ignore", invalid="ignore"):
         log = np.log(np.abs(l2 / l1))  # ln |L2 / L1| = l / 2 (a tie of zeros, or a non-finite residual: nan)
-    log = log[:, ok] if ok.ndim == 2 else log[ok]
+    shared = grid.ends is None
+    log = np.take(log.reshape(3, -1) if shared else log.reshape(-1), grid.valid, axis=-1)  # (log[ok], no mask)
     np.minimum(log, LOG_CLIP / 2.0, out=log)
     np.maximum(log, -LOG_CLIP / 2.0, out=log)
     finite = np.isfinite(log)  # (left out: a tie carries no sign, a non-finite residual no noise)
     every = bool(finite.all())  # (as a rule: n and m then the lattice's, no counts: ~25 us in a fit)
     if not every:
         log = np.where(finite, log, 0.0)
-    if ok.ndim == 2:  # (3, n): every channel's points alike
+    if shared:  # (3, n): every channel's points alike
         m = log.shape[1] if every else int(np.count_nonzero(finite, axis=1).max())
     else:  # channel by channel, in order
-        ends = np.cumsum(np.count_nonzero(ok.reshape(3, -1), axis=1))[:-1]
-        m = max(int(np.count_nonzero(part)) for part in np.split(finite, ends))
+        m = max(int(np.count_nonzero(part)) for part in np.split(finite, grid.ends))
     n = log.size if every else int(np.count_nonzero(finite))
     return (2.0 * float(np.sum(log, dtype=np.float64)), n, m, n * n * log_ratio_variance(a) / m) if m else None
 
