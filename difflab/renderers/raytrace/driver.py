@@ -36,8 +36,8 @@ from .gbuffer import tree_gbuffer
 from .itembuffer import asked_bvh, item_buffer, item_struct
 from .lightbuffer import build_light_buffer, no_light_buffer
 from .medium import camera_media, transparent_objects
-from .kernels import COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, COUNT_SHADOW_CUT, TraceOutW, \
-    TraceParamsW, whitted_kernel
+from .kernels import COUNT_COLUMNS, COUNT_PRIMARY, COUNT_REFLECTED, COUNT_REFRACTED, COUNT_SHADOW, COUNT_SHADOW_CUT, \
+    COUNT_SHADOW_TESTS, TraceOutW, TraceParamsW, whitted_kernel
 from .nesting import media_struct
 from .record import empty_tree, has_textures, sized_tree, tree_to_numpy
 from .surface import MeshDataW, SceneW
@@ -163,7 +163,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         out.color = host_empty(shape, wp.vec3, device)  # every element written by the kernel
         out.fog = compiled.scratch("trace.fog", shape, wp.float32)  # read before this render returns
         out.node_count = compiled.scratch("trace.node_count", shape, wp.int32)
-        out.rays = wp.zeros((rows, 5), dtype=wp.int32, device=device)
+        out.rays = wp.zeros((rows, COUNT_COLUMNS), dtype=wp.int32, device=device)
         out.depth_hist = wp.zeros((rows, settings.max_depth), dtype=wp.int32, device=device)
         out.nonfinite = wp.empty(rows * row_spans(cols, device), dtype=wp.int32, device=device)
         launch_row_loops(kernel, shape, [wp_points, cam, scene_w, params, item, tree, out], device, threads)
@@ -171,7 +171,6 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
 
     unrecorded = read_only(compiled, "unrecorded tree", lambda: empty_tree((1, 1), 0, 0, device))  # not read
     out = launch(trace_params(scene, settings, False, footprint, side, media), unrecorded)
-    shadow_tests = int(light_buffer.warp.tests.numpy()[0]) if light_buffer is not None else 0
     asked = asked_bvh(item)  # read before the recording pass adds its own
     counts = out.node_count.numpy()
     ray_counts = out.rays.numpy().astype(np.int64).sum(axis=0)
@@ -187,7 +186,7 @@ def trace_points(compiled, settings, points: np.ndarray | None, threads: int | N
         launch(trace_params(scene, settings, True, footprint, side, media), wp_tree)
         tree = tree_to_numpy(wp_tree, offsets, n_lights, fog, scene, settings, shape, crossings)
     return Traced(color=out.color.numpy(), fog=fog, node_count=counts, rays=stats_rays,
-                  depth_histogram=histogram, tree=tree, shadow_tests=shadow_tests,
+                  depth_histogram=histogram, tree=tree, shadow_tests=int(ray_counts[COUNT_SHADOW_TESTS]),
                   asked_bvh=asked, nonfinite_samples=int(out.nonfinite.numpy().sum()),
                   shadow_rays_cut=int(ray_counts[COUNT_SHADOW_CUT]))
 

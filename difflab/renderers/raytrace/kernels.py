@@ -58,6 +58,8 @@ wp.set_module_options({"enable_backward": False})
 
 COUNT_PRIMARY, COUNT_SHADOW, COUNT_REFLECTED, COUNT_REFRACTED = 0, 1, 2, 3  # columns of TraceOutW.rays
 COUNT_SHADOW_CUT = 4  # column of the shadow rays cut past trace.MAX_SHADOW_CROSSINGS (among COUNT_SHADOW's)
+COUNT_SHADOW_TESTS = 5  # column of the candidates the light buffer's shadow rays tested (`buffered_visibility`)
+COUNT_COLUMNS = 6
 
 
 @wp.struct
@@ -89,7 +91,7 @@ class TraceOutW:
     color: wp.array2d(dtype=wp.vec3)
     fog: wp.array2d(dtype=float)  # the fog blend of the primary hit (1: none)
     node_count: wp.array2d(dtype=wp.int32)
-    rays: wp.array2d(dtype=wp.int32)  # (rows, 5): rays traced per COUNT_* kind, and COUNT_SHADOW_CUT
+    rays: wp.array2d(dtype=wp.int32)  # (rows, COUNT_COLUMNS): rays traced per COUNT_* kind, COUNT_SHADOW_CUT/_TESTS
     depth_hist: wp.array2d(dtype=wp.int32)  # (rows, max_depth): rays traced per depth
     nonfinite: wp.array(dtype=wp.int32)  # per thread (`launch.dealt_span`'s slot): samples whose colour is not finite
 
@@ -129,8 +131,9 @@ def shade_hit(geom: SceneGeomW, lights: wp.array(dtype=LightW), materials: wp.ar
             skip = skip_object(geom, hit, l)
             cut = int(0)
             if buffer.use == 1 and buffer.light_cell0[q] >= 0:
-                s, cut = buffered_visibility(geom, buffer, vertices, faces, materials, q, lights[q].position, origin,
-                                             l, reach, skip, params.transparent)
+                s, cut, tested = buffered_visibility(geom, buffer, vertices, faces, materials, q, lights[q].position,
+                                                     origin, l, reach, skip, params.transparent)
+                wp.atomic_add(rays, i, COUNT_SHADOW_TESTS, tested)
             else:
                 s, cut = shadow_ray(geom, materials, origin, l, reach, skip, params.transparent)
             if cut == 1:

@@ -60,7 +60,6 @@ class LightBufferW:
     index: wp.array(dtype=wp.int32)
     near: wp.array(dtype=float)  # lower bound of the candidate's grown surface's distance to the light
     scale: wp.array(dtype=float)  # per light: max(|light|, `objects_scale`), what its lists' DILATION is a fraction of
-    tests: wp.array(dtype=wp.int64)  # (1,): candidates tested by every shadow ray together
 
 
 @wp.func
@@ -111,11 +110,11 @@ def buffered_hit(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(dtype=wp
     cell of light q: the same tests (`ray_sphere`, `ray_plane`, the BVH's `woop_triangle` with its
     0 <= t < t_max), the same choice (the nearest sphere or plane, a sphere before a plane and the
     lower index at equal t; a triangle only when strictly nearer) -- the same hit, as long as
-    `follows_cell`. Stops at the first candidate lying beyond origin (z-order); with `first` set, at
-    the first candidate hit (a shadow ray that no surface lets through -- transparent shadows off, or
-    no kt > 0 in the scene -- needs only to know that something is: a hit that is not the nearest,
-    but a hit whenever the BVH finds one; `trace.leaving_skip` never skips a mesh, so no triangle is
-    skipped)."""
+    `follows_cell` -- and how many candidates it tested. Stops at the first candidate lying beyond
+    origin (z-order); with `first` set, at the first candidate hit (a shadow ray that no surface lets
+    through -- transparent shadows off, or no kt > 0 in the scene -- needs only to know that
+    something is: a hit that is not the nearest, but a hit whenever the BVH finds one;
+    `trace.leaving_skip` never skips a mesh, so no triangle is skipped)."""
     cell = lb.light_cell0[q] + cube_cell(origin - light_p, lb.resolution)
     reach = wp.length(origin - light_p)
     hit = no_hit(t_max)
@@ -156,12 +155,11 @@ def buffered_hit(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(dtype=wp
                 hit.index = k
                 if first == 1:
                     break
-    wp.atomic_add(lb.tests, 0, wp.int64(tested))
     if face >= 0 and found[0] < hit.t and geom.face_object[face] != ignore_object:
         a = vertices[faces[face, 0]]
         normal = wp.cross(vertices[faces[face, 1]] - a, vertices[faces[face, 2]] - a)  # as mesh_query_ray's
-        return triangle_hit(geom, face, found[0], found[1], found[2], wp.normalize(normal), origin, l)
-    return finish_hit(geom, hit, origin, l)
+        return triangle_hit(geom, face, found[0], found[1], found[2], wp.normalize(normal), origin, l), tested
+    return finish_hit(geom, hit, origin, l), tested
 
 
 @wp.func
@@ -169,26 +167,28 @@ def buffered_visibility(geom: SceneGeomW, lb: LightBufferW, vertices: wp.array(d
                         faces: wp.array2d(dtype=wp.int32), materials: wp.array(dtype=MaterialW), q: int,
                         light_p: wp.vec3, p: wp.vec3, l: wp.vec3, distance: float, ignore_object: int,
                         transparent: int):
-    """`trace.shadow_ray` with light q's buffer, (visibility, cut): the same walk (`shadow_step`), each
-    surface found among its cell's candidates (`buffered_hit`) while the ray `follows_cell`, else
-    through the BVH -- the same surfaces, hence the same visibility, bit for bit."""
+    """`trace.shadow_ray` with light q's buffer, (visibility, cut, candidates tested): the same walk
+    (`shadow_step`), each surface found among its cell's candidates (`buffered_hit`) while the ray
+    `follows_cell`, else through the BVH -- the same surfaces, hence the same visibility, bit for bit."""
     first = int(0)  # no surface lets light through: the first blocker found will do
     if transparent == 0 or lb.opaque == 1:
         first = 1
     visibility = float(1.0)
     origin = p
     remaining = distance
+    tested = int(0)
     for crossing in range(MAX_SHADOW_CROSSINGS + 1):
         hit = no_hit(remaining)
         if follows_cell(lb, q, light_p, origin, l):
-            hit = buffered_hit(geom, lb, vertices, faces, q, light_p, origin, l, remaining, ignore_object, first)
+            hit, n = buffered_hit(geom, lb, vertices, faces, q, light_p, origin, l, remaining, ignore_object, first)
+            tested = tested + n
         else:
             hit = closest_hit(geom, origin, l, 0.0, remaining, ignore_object)
         verdict, visibility, origin, remaining = shadow_step(geom, materials, hit, crossing, transparent, visibility,
                                                              origin, l, remaining, ignore_object)
         if verdict != SHADOW_GOES_ON:
-            return visibility, int(verdict == SHADOW_CUT)
-    return 0.0, 1  # (not reached: the last pass returns)
+            return visibility, int(verdict == SHADOW_CUT), tested
+    return 0.0, 1, tested  # (not reached: the last pass returns)
 
 
 # ----------------------------------------------------------------------------- building (numpy)
@@ -351,7 +351,6 @@ def build_light_buffer(compiled, resolution: int | None = None) -> LightBuffer:
     out.near = wp.array(cat(nears, np.float32), dtype=float, device=device)
     out.scale = wp.array(np.asarray(scales, np.float32).reshape(-1) if scales else np.zeros(1, np.float32),
                          dtype=float, device=device)
-    out.tests = wp.zeros(1, dtype=wp.int64, device=device)
     return LightBuffer(warp=out, counts=counts, entries=int(sum(len(k) for k in kinds)))
 
 
@@ -368,5 +367,4 @@ def no_light_buffer(compiled) -> LightBufferW:
     out.index = wp.zeros(1, dtype=wp.int32, device=device)
     out.near = wp.zeros(1, dtype=float, device=device)
     out.scale = wp.zeros(1, dtype=float, device=device)
-    out.tests = wp.zeros(1, dtype=wp.int64, device=device)
     return out
