@@ -296,9 +296,10 @@ print(names.count("tf_XLAEigen"), os.environ.get("NPROC"))
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads in Linux's /proc")
 def test_xla_cpu_threads_follow_the_environment(monkeypatch):
-    """$DIFFLAB_JAX_THREADS sets XLA's intra-op (Eigen) threads of a fitting process: 1 by default,
-    one per core with `all`; NPROC, through which it is set, is left as it was (here 5, which XLA
-    would otherwise have taken); an invalid value is a DifflabError naming the variable."""
+    """$DIFFLAB_JAX_THREADS sets XLA's intra-op (Eigen) threads of a fitting process: 1 with 1 --
+    NPROC, through which it is set, is left as it was (here 5, which XLA would otherwise have
+    taken) --, one per core unset or with `all`; an invalid value is a DifflabError naming the
+    variable."""
     from difflab.fit.cache import limit_xla_threads
 
     def threads(value, **nproc):
@@ -308,8 +309,9 @@ def test_xla_cpu_threads_follow_the_environment(monkeypatch):
         assert done.returncode == 0, done.stderr
         return done.stdout.split()
 
-    assert threads("", NPROC="5") == ["1", "5"]
-    assert threads("all") == [str(len(os.sched_getaffinity(0))), "None"]
+    assert threads("1", NPROC="5") == ["1", "5"]
+    cores = str(len(os.sched_getaffinity(0)))
+    assert threads("") == threads("all") == [cores, "None"]
     for value in ("many", "-1", "1.5"):
         monkeypatch.setenv("DIFFLAB_JAX_THREADS", value)
         with pytest.raises(DifflabError, match="DIFFLAB_JAX_THREADS"):

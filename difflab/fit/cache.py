@@ -51,21 +51,22 @@ def enable_compilation_cache() -> Path | None:
 
 
 def limit_xla_threads() -> int | None:
-    """Give XLA's CPU client $DIFFLAB_JAX_THREADS threads (default 1; `all` or 0: XLA's own default,
-    one per core) by creating JAX's backends now with NPROC set to that count -- XLA sizes its
-    intra-op (Eigen) pool and its client's pool from it -- and NPROC put back at once. The count
-    set, or None where nothing is done: `all`, or JAX's backends made already (left as they are).
+    """Give XLA's CPU client $DIFFLAB_JAX_THREADS threads (a count; unset, `all` or 0: XLA's own
+    default, one per core) by creating JAX's backends now with NPROC set to that count -- XLA sizes
+    its intra-op (Eigen) pool and its client's pool from it -- and NPROC put back at once. The count
+    set, or None where nothing is done: XLA's default, or JAX's backends made already (left as they
+    are). NPROC, not a narrowed CPU affinity, so that no thread is left pinned.
 
-    Why: a solve's operations (~25k pixels at 256^2) are too small to gain from a second thread,
-    and each one handed to the pool wakes a sleeping thread (~22 wake-ups a solve on 2 cores, 1 with
-    one thread), tens of microseconds each on a shared virtual machine. NPROC, not a narrowed CPU affinity, so
-    that no thread is left pinned. Measured (2 cores, load 2.4-3.9, 53 pairs of processes
-    alternating 1 / all, medians): the Mitsuba sphere's solve 3.66 -> 2.75 ms in a first fit of the
-    view, 3.17 -> 2.70 fitted again, 3.16 -> 2.79 in a row; the whole fit 11.04 -> 10.33, 6.37 ->
-    5.95, 6.42 -> 6.26 ms. Batches, 512^2, ray-tree and texel fits and tests/test_fit_engine.py
-    lost nothing measurable (docs/api.md).
+    Why one thread can pay: a small solve's operations (~25k pixels at 256^2, the moments' steps)
+    gain nothing from a second thread, and each one handed to the pool wakes a sleeping thread (~22
+    wake-ups a solve on 2 cores, 1 with one thread), tens of microseconds each on a shared virtual
+    machine: the Mitsuba sphere's kd, ks, n fit, 53 pairs of processes alternating 1 / all (2 cores,
+    load 2.4-3.9), solve 3.66 -> 2.75 ms in a first fit of the view, whole fit 11.04 -> 10.33 ms.
+    Why it is not the default: fits that take their Jacobian by forward mode lose 1.5-1.8x (256^2,
+    alternating processes at load ~0.7: with the lights' intensities fitted 51-56 -> 81-83 ms, at
+    4 samples a pixel 123 -> 225 ms; a plain JAX step 10.5 -> 18 ms; docs/api.md).
     """
-    value = os.environ.get(THREADS_ENV, "").strip().lower() or "1"
+    value = os.environ.get(THREADS_ENV, "").strip().lower() or "all"
     if value != "all" and not value.isdecimal():
         raise DifflabError(f"{THREADS_ENV}: expected a positive integer, 0 or 'all', got {shorten(value)}")
     if value == "all" or int(value) == 0 or xla_bridge.backends_are_initialized():
