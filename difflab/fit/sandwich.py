@@ -24,12 +24,15 @@ It is formed only where the noise levels that the estimate of sigma read (per vi
 half of the intensity range: the targets' noise, so `weights=` are taken to be inverse variances --
 other weights leave the weighted residuals' noise unequal under the pooled form) differ beyond their
 spread (`unequal`): one more linearisation at the solution (`_scaled_gram`: the problem's
-sqrt(weights) times r; ~0.45 ms of JAX's on the 74k entries of a 256 x 256 sphere, run beside the
-rest of the noise estimate: `noise_middle`); elsewhere s^2 (J^T J)^-1 is within ~15 % of it
-(`unequal`). Not with sigma given (one number: the noise is declared equal), nor where it is
-unknown, nor for a texture fit, dense or matrix-free (the sparse path of `stats.covariance_diagonal`
-keeps the pooled form, and so does a dense one to stay its equal; a texel resting on a few pixels
-would have a sandwich variance of spread sqrt(2 / K) from them).
+sqrt(weights) times r; ~0.45 ms of JAX's on the 74k entries of a 256 x 256 sphere, dispatched before
+the rest of the noise estimate to run beside it, `noise_middle` -- on an idle machine; on 2 busy
+cores the dispatch's own ~0.2 ms of main-thread work and XLA's thread waking beside it left it done
+when the dispatch returned in 55-85 % of first fits, run in series in effect); elsewhere s^2
+(J^T J)^-1 is within ~15 % of it (`unequal`). Not with sigma given (one number: the noise is
+declared equal), nor where it is unknown, nor for a texture fit, dense or matrix-free (the sparse
+path of `stats.covariance_diagonal` keeps the pooled form, and so does a dense one to stay its
+equal; a texel resting on a few pixels would have a sandwich variance of spread sqrt(2 / K) from
+them).
 """
 
 from __future__ import annotations
