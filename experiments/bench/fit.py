@@ -230,7 +230,8 @@ def mitsuba_comparison(size: int, iterations: int, repeats: int) -> dict:
     mitsuba = {"iterations": iterations, "seconds": trace[-1][0], "final_max_rel_error": trace[-1][1],
                "time_to_1pct_s": time_to(1e-2), "time_to_0.1pct_s": time_to(1e-3)}
     difflab = difflab_on_mitsuba_target(size, targets, repeats)
-    return {"mitsuba": mitsuba, "difflab": difflab, "load_1min": os.getloadavg()[0]}
+    return {"mitsuba": mitsuba, "difflab": difflab, "load_1min": os.getloadavg()[0],
+            "xla_threads": os.environ.get("DIFFLAB_JAX_THREADS", "").strip() or "all"}
 
 
 def difflab_on_mitsuba_target(size: int, targets: list, repeats: int) -> dict:
@@ -384,7 +385,7 @@ def print_report(report: dict) -> None:
                   f"of which the Warp render {w['render_s'] * 1e3:.1f} ms, solve {w['solve_s'] * 1e3:.1f} ms, "
                   f"statistics {w['stats_s'] * 1e3:.1f} ms)")
         print(f"(goal: 1/50 or less; medians, first / again interleaved, then the fits in a row; load average "
-              f"{mitsuba['load_1min']:.1f} after the run)")
+              f"{mitsuba['load_1min']:.1f} after the run; DIFFLAB_JAX_THREADS={mitsuba['xla_threads']})")
     elif mitsuba is not None:
         print(f"Mitsuba: {mitsuba}")
 
