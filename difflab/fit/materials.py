@@ -8,12 +8,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..lighting.jax_model import stack_fields
 from ..lighting.warp_model import TEXTURE_TARGET_IDS
 
 
-def _second(mat, name: str):
-    """The checker's second-cell ka2 / kd2, or the material's own ka / kd without a checker."""
-    return getattr(mat.checker, name) if mat.checker is not None else getattr(mat, name[:2])
+FIELDS = {"ka": 3, "kd": 3, "ks": 3, "n": 0, "m": 0, "f0": 0, "ka2": 3, "kd2": 3, "kr": 0, "kt": 0, "absorption": 3}
+
+
+def _field(mat, name: str):
+    """A material's value of a `MaterialTable` field: ka2 / kd2 the checker's second cell, or the
+    material's own ka / kd without a checker."""
+    if name in ("ka2", "kd2"):
+        return getattr(mat.checker, name) if mat.checker is not None else getattr(mat, name[:2])
+    return getattr(mat, name)
 
 
 class MaterialTable(NamedTuple):
@@ -45,11 +52,7 @@ class MaterialTable(NamedTuple):
         """From scene `Material`s in material-id order, moved to the device in one transfer (`host`:
         numpy arrays, for a caller that moves them with others)."""
         materials = list(materials)
-        rows = np.array([[*mat.ka, *mat.kd, *mat.ks, mat.n, mat.m, mat.f0, *_second(mat, "ka2"), *_second(mat, "kd2"),
-                          mat.kr, mat.kt, *mat.absorption] for mat in materials], np.float64)  # (one array, its
-        rows = rows.reshape(len(materials), 23).astype(np.dtype(dtype))  # columns the fields: 3x one array each)
+        fields = stack_fields([[_field(mat, name) for name in FIELDS] for mat in materials], FIELDS, dtype)
         targets = [TEXTURE_TARGET_IDS[m.texture_target] if m.texture is not None else -1 for m in materials]
-        table = cls(ka=rows[:, 0:3], kd=rows[:, 3:6], ks=rows[:, 6:9], n=rows[:, 9], m=rows[:, 10], f0=rows[:, 11],
-                    ka2=rows[:, 12:15], kd2=rows[:, 15:18], kr=rows[:, 18], kt=rows[:, 19], absorption=rows[:, 20:23],
-                    texture_target=np.asarray(targets, np.int32).reshape(-1))
+        table = cls(**fields, texture_target=np.asarray(targets, np.int32).reshape(-1))
         return table if host else jax.device_put(table)

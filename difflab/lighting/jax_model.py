@@ -311,15 +311,37 @@ def shade(mat: MaterialJ, model: int, normal, v, lights: LightsJ, l, d, visibili
                           ambient)
 
 
+def stack_fields(records: list, widths: dict, dtype) -> dict:
+    """The fields of N records as column views of one (N, K) array (one numpy build, not one per
+    field: a fit's lights and materials ~18 small arrays -> 1): `records[k]` holds record k's values
+    in the order of `widths` (name -> 0 for a scalar, else its length), each field (N,) or (N, width)."""
+    vector = [width > 0 for width in widths.values()]
+    flat = []
+    for record in records:
+        for value, is_vector in zip(record, vector):
+            if is_vector:
+                flat.extend(value)
+            else:
+                flat.append(value)
+    columns = sum(max(width, 1) for width in widths.values())
+    rows = np.array(flat, np.float64).reshape(len(records), columns).astype(np.dtype(dtype))
+    out, start = {}, 0
+    for name, width in widths.items():
+        out[name] = rows[:, start] if width == 0 else rows[:, start:start + width]
+        start += max(width, 1)
+    return out
+
+
+LIGHT_FIELDS = {"position": 3, "direction": 3, "intensity": 3, "attenuation": 3, "cos_cutoff": 0, "exponent": 0}
+
+
 def lights_to_jax(lights, dtype=jnp.float32, *, host: bool = False) -> LightsJ:
     """Scene lights as a `LightsJ` of arrays (P may be 0), moved to the device in one transfer
     (`host`: numpy arrays, for a caller that moves them with others)."""
-    count = len(lights)
-    rows = np.array([[*(light.position or (0.0, 0.0, 0.0)), *(light.direction or (0.0, -1.0, 0.0)), *light.intensity,
-                      *light.attenuation, math.cos(math.radians(light.cutoff_deg)) if light.type == "spot" else -2.0,
-                      light.exponent] for light in lights], np.float64)  # (one array, its columns the fields)
-    rows = rows.reshape(count, 14).astype(np.dtype(dtype))
-    arrays = LightsJ(kind=np.asarray([LIGHT_TYPES[light.type] for light in lights], dtype=np.int32).reshape(count),
-                     position=rows[:, 0:3], direction=rows[:, 3:6], intensity=rows[:, 6:9], attenuation=rows[:, 9:12],
-                     cos_cutoff=rows[:, 12], exponent=rows[:, 13])
+    fields = stack_fields([(light.position or (0.0, 0.0, 0.0), light.direction or (0.0, -1.0, 0.0), light.intensity,
+                            light.attenuation,
+                            math.cos(math.radians(light.cutoff_deg)) if light.type == "spot" else -2.0, light.exponent)
+                           for light in lights], LIGHT_FIELDS, dtype)
+    kind = np.asarray([LIGHT_TYPES[light.type] for light in lights], dtype=np.int32).reshape(len(lights))
+    arrays = LightsJ(kind=kind, **fields)
     return arrays if host else jax.device_put(arrays)
