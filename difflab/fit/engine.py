@@ -169,7 +169,8 @@ def run_fit(setup: Setup, options: FitOptions, timings: dict) -> FitResult:
     try:
         start = time.perf_counter()
         with jax.enable_x64(setup.x64):
-            out = run(setup.problem, setup.x0, options, beside=ahead.queue.start if ahead is not None else None)
+            out = run(setup.problem, setup.x0, options, beside=None if ahead is None else ahead.queue.join
+                      if options.solver == "lm" else ahead.queue.start)  # (`noise_ahead`: where they are formed)
         timings["solve"] = time.perf_counter() - start
         return report(setup, out.x, out.result, out.steps, out.history, options, timings, out.linearised,
                       ahead.take if ahead is not None else None)
@@ -190,20 +191,22 @@ class NoiseAhead(NamedTuple):
 
 
 def noise_ahead(setup: Setup) -> NoiseAhead | None:
-    """Start the noise estimate's `noise_picks` -- the targets' alone, for silent pixels all black ones
+    """The noise estimate's `noise_picks` -- the targets' alone, for silent pixels all black ones
     (`View.black`) -- and each view's `View.floor`, which `clipping.clipped_band` reads after the fit
-    (there, on a target no longer in cache, ~0.1 ms of first.py's first fit), on a pool worker beside
-    the solve (`bandpool.start_beside`: XLA runs its loop without the GIL; none with threads=1 or
-    DIFFLAB_THREADS=1: on the caller when the report asks). The worker is handed them once the solve
-    is dispatched (`solvers.run`'s `beside`): woken before, it took the GIL where the dispatch moves
-    x0 and lets it go, and held the solve back until its own ~0.6 ms of Python were done.
-    None with sigma given (no estimate). first.py's 256 x 256 sphere, bursts of interleaved fits:
-    with the machine otherwise idle, first fit 9.13 -> 8.89 ms, fitted again 5.35 -> 5.10 (stats
-    -0.40 / -0.28 ms, solve +0.10 / +0.04); with another process on one of the 2 cores, 11.07 ->
-    11.11 and 5.29 -> 5.53 (solve +0.25 / +0.40): XLA's two Eigen threads run the solve on both
-    cores, and the worker takes its turns from them. Handed over after the dispatch, not before
-    (the Mitsuba sphere of bench/fit.py, 5 runs of 100 interleaved fits at load 2.8-3.8): first
-    fit -0.03 to -0.23 ms (9.75 -> 9.72 ... 11.16 -> 10.95), fitted again -0.10 to -0.35 ms."""
+    (there, on a target no longer in cache, ~0.1 ms of first.py's first fit), to be formed beside the
+    solve: `run_fit` hands the solve (`solvers.run`'s `beside`, called once "lm"'s compiled solve is
+    dispatched, before any other solver) the queue's `join` for "lm" -- formed on the calling thread,
+    which only waits for the solve meanwhile (XLA runs its loop without the GIL) -- and its `start`
+    for the others, a pool worker (`bandpool.start_beside`; none with threads=1 or DIFFLAB_THREADS=1:
+    on the caller when the report asks). None with sigma given (no estimate). On the caller rather
+    than a worker (the bench's Mitsuba sphere, fits alternating with the worker's in one process,
+    medians of 80-100, load 1.5-2.8, 6 runs): first fit 9.38 -> 8.70, 11.83 -> 11.11, 9.32 -> 8.98,
+    9.66 -> 9.00, 10.15 -> 10.38, 9.43 -> 8.63 ms; fitted again 5.65 -> 5.56, 7.12 -> 6.77, 5.56 ->
+    5.30, 5.39 -> 4.96, 6.07 -> 5.87, 5.75 -> 5.58; the process's CPU time 0.07-0.37 ms less a fit
+    (no worker woken, no GIL handed over); the sphere with Gaussian noise 0.01: 12.78 -> 12.21 and
+    12.99 -> 12.44, again 7.06 -> 6.93 and 7.35 -> 7.32. (On a worker handed them before the
+    dispatch, it took the GIL where the dispatch lets it go and held the solve back until its ~0.6
+    ms of Python were done.)"""
     if setup.sigma_given is not None:
         return None
     picks = []

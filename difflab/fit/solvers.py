@@ -192,8 +192,8 @@ def _box_lm(problem, x0, lower, upper, options: FitOptions, progress, beside=lam
 
 
 def run(problem, x0: np.ndarray, options: FitOptions, label: str = "fit", beside=None):
-    """One solve from solver coordinates x0, a `Solved`. `beside`: None, or a callable that starts
-    what the caller has to do beside the solve on a worker (`engine.noise_ahead`'s), called once
+    """One solve from solver coordinates x0, a `Solved`. `beside`: None, or a callable that does or
+    starts what the caller has to do beside the solve (`engine.noise_ahead`'s), called once
     "lm"'s compiled solve is dispatched -- not before: see there -- and before any other solver."""
     beside = beside or (lambda: None)
     rtol, atol = options.tolerances()
