@@ -403,8 +403,9 @@ def test_the_noise_picks_formed_beside_the_solve_are_the_reports(monkeypatch):
 
 
 def test_the_noise_picks_start_once_the_solve_is_dispatched(monkeypatch):
-    """The worker forming the noise picks starts after the solve's dispatch, not before it (there it
-    took the GIL the dispatch let go and held the solve back until its picks were done)."""
+    """The noise picks start after the solve's dispatch, not before it (a worker started there took
+    the GIL the dispatch let go and held the solve back until its picks were done; an lm fit forms
+    them on the calling thread, which could not dispatch the solve until they were done)."""
     from difflab.fit import engine, lm
 
     events, real_solve, real_picks = [], lm.solve_box, engine.noise_picks

@@ -74,7 +74,7 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         planes = setup.residual_planes(r)
         residuals = [p.transpose(1, 2, 0) for p in planes]  # (H, W, 3) views (np.moveaxis: 2 us more each)
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and finite_gram(gram))
-        picks = ahead() if ahead is not None else None  # (first: the worker is done with the views)
+        picks = ahead() if ahead is not None else None  # (first: the picks are done with the views)
         silent, silent_entries = silent_pixels(setup.views, r)
         middle = []  # unequal noise: the sandwich's middle (`noise_middle`), started once the noise levels are read
         same_sum = counted is r and all(part.flags.c_contiguous for part in r)  # (sse summed as noise_middle sums)
