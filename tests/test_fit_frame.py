@@ -15,10 +15,11 @@ import pytest
 from test_fit_helpers import TRUTH, make_scene, perturbed, target_of
 from test_raster_spheres import RED, sphere_scene, textured
 from test_texture_fit import quad_scene
-from difflab import render_frame
+from difflab import compile_scene, render_frame
 from difflab.fit import Setup, fit_material
 from difflab.renderers.api import fit_frame
 from difflab.renderers.frame import POINT_ROWS
+from difflab.scene import Scene
 
 # what every fit frame under rasterized Phong shading skips (`raster.gbuffer.fit_skips`); "position" is
 # both the samples' and the points'
@@ -75,6 +76,30 @@ def test_a_fits_frame_is_render_frames_less_what_the_fit_does_not_read(tmp_path,
     if texture:
         assert np.abs(want["texture"]).max() > 0.1
     assert np.abs(want["visibility"]).min() == 0.0 and want["visibility"].max() == 1.0  # the sphere's shadow
+
+
+@pytest.mark.parametrize("threads", [None, 1])
+def test_a_fits_frame_in_the_buffer_another_view_left_is_one_in_new_memory(tmp_path, threads):
+    """A fit's G-buffer is not cleared (`gbuffer.gbuffer_arrays`): its pass zeroes what the last
+    frame left where this one has no point. Each view's frame, rendered in the buffer the other
+    view's frame left (one compiled scene, other cameras; a textured sphere and a plain quad under
+    two lights with shadows), is bitwise the frame rendered in new memory."""
+    quad = {"type": "mesh", "builtin": "quad", "material": "plain",
+            "transform": {"rotate_deg": [-90, 0, 0], "translate": [0, -0.01, 0], "scale": 3}}
+    d = sphere_scene("outside", size=24, material=textured(tmp_path),
+                     objects=[{"type": "sphere", "center": [0, 1, 0], "radius": 1, "material": "red"}, quad])
+    d["materials"]["plain"] = RED
+    d["lights"].append({"type": "directional", "direction": [-1, -1, -0.5], "intensity": [0.3, 0.2, 0.5]})
+    compiled = compile_scene(Scene.from_dict(d))
+    last = None
+    for eye in ([0, 1.2, 4], [2.5, 3, 1.5], [-1, 0.4, 2.5], [0, 1.2, 4]):
+        view = compiled.with_scene(Scene.from_dict(dict(d, camera=dict(d["camera"], eye=eye))))
+        got = fit_frame(view, threads=threads).gbuffer  # in the last view's buffer
+        fresh = fit_frame(view, threads=threads).gbuffer  # in new memory (that buffer is held)
+        assert last in (None, got.points.rows.ctypes.data) and fresh.points.rows.ctypes.data != last
+        last = fresh.points.rows.ctypes.data
+        assert_bitwise(arrays(got), arrays(fresh))
+        del fresh, got  # (their memory free for the next frame)
 
 
 def full_frame(scene, *, device=None, threads=None):

@@ -110,10 +110,11 @@ def fit_frame(scene, *, device=None, threads=None) -> Frame:
     every other field is None (`raster.gbuffer.fit_skips`: colours, texture factors, texels, uv
     derivatives, faces, barycentrics, positions, and the point indices and weights, which each
     Phong sample's own point makes plain) -- and no overflow is checked (no colour is formed). The
-    256^2 bench sphere's frame (one light): 3.7 MB of arrays instead of 7.7, 3.2 MB cleared instead
-    of 6.0; 1.63 -> 1.58 ms (1.70 -> 1.65 after a 32 MB sweep), its Phong pass 628 -> 586 us a half
-    (731 -> 667), the clear beside the z-buffer 71 -> 36 us (151 -> 116): interleaved medians of
-    150-200 at load 1.1.
+    256^2 bench sphere's frame (one light): 3.7 MB of arrays instead of 7.7, none cleared instead of
+    6.0 MB (`raster.gbuffer.gbuffer_arrays`); 1.63 -> 1.58 ms (1.70 -> 1.65 after a 32 MB sweep), its
+    Phong pass 628 -> 586 us a half (731 -> 667): interleaved medians of 150-200 at load 1.1. Its
+    arrays are for reading: the compiled scene's next fit frame reuses their memory once dropped,
+    uncleared (a value written there by hand could reach it).
     Other frames are render_frame's."""
     return draw(scene, {}, device, None, None, threads, keep=True, image=False, geometry_only=True)
 

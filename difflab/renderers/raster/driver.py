@@ -339,7 +339,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
 
     # The per-sample G-buffer's arrays (stage 4; Phong's stage 6 too): what must start zero is
     # cleared beside stages 1-3 when a core is free (a memset of memory other work has pushed out of
-    # the cache, ~0.4-0.9 ms of a 256^2 frame).
+    # the cache, ~0.4-0.9 ms of a 256^2 frame); nothing of a fit's (`gbuffer.gbuffer_arrays`).
     points_are_samples = int(shading == PHONG_SHADING)
     geometry_only = bool(geometry_only and points_are_samples and not image)
     record = shade.GEOMETRY_ONLY if geometry_only else 1

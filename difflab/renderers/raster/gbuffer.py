@@ -84,11 +84,16 @@ def gbuffer_arrays(compiled, n_samples: int, phong: bool, geometry_only: bool = 
     (its `fit_skips` fields empty), kept apart from a full G-buffer's (fits and G-buffer renders of one compiled
     scene in turn each find their own free), its POINT_ROWS the columns of one block under Phong
     shading (`ShadingPoints.rows`; the material apart: the mask and the influence map read it whole,
-    ~7x as fast as a column)."""
+    ~7x as fast as a column), and never stale: its pass writes every entry of a covered sample and
+    zeroes those of an uncovered one that held a point in the buffer's last frame
+    (`shade.gbuffer_row`), so nothing is cleared (the 256^2 bench sphere's 3.2 MB: a pool worker's
+    memset beside the assembly, 60-150 us, which woke it there and held back its half of the
+    z-buffer)."""
     skips = fit_skips(compiled) if geometry_only else None
     layout = gbuffer_layout(n_samples, phong, skips, len(compiled.scene.lights))
     structs, stale = compiled.reusable_structs("fit gbuffer" if geometry_only else "gbuffer", layout)
-    return structs[0], structs[1], structs[2] if phong else None, structs[-1] if geometry_only else structs[0], stale
+    return (structs[0], structs[1], structs[2] if phong else None, structs[-1] if geometry_only else structs[0],
+            None if geometry_only else stale)
 
 
 @functools.lru_cache(maxsize=32)

@@ -405,7 +405,9 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
     non-zero ones only, as `samples` and `out` are zero when the kernel starts). Its key is the
     lesser of `key` and `partial` (a z-buffer drawn in two; `partial` empty otherwise), both reset.
     `found`, `sphere_weights`: see `resolve_sample`. Returns whether it is covered, and its point, uv
-    and uv derivatives as stored (what a Phong pass lights next, without reading them back).
+    and uv derivatives as stored (what a Phong pass lights next, without reading them back); an
+    uncovered sample's point is empty but for its material: the one the sample held before (a fit's
+    G-buffer, not cleared, zeroes the sample's entries where that is a point's: `shade.gbuffer_row`).
     An empty array of `out` or `samples` is a field the G-buffer does not keep (a fit's,
     `gbuffer.fit_skips`): not written (nor are the point indices and weights formed without
     `point_index`), and without `duv_dx` uv and its derivatives are formed only where the sample's
@@ -418,6 +420,8 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
             partial[s] = NO_HIT  # the next frame's z-buffer starts cleared
             k = wp.min(k, other)
     if k == NO_HIT:  # its other entries stay as cleared: zero
+        missed = PointW()
+        missed.material = samples.material[s]
         samples.material[s] = -1
         if out.face.shape[0] > 0:
             out.face[s] = -1
@@ -426,7 +430,7 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
             out.depth[s] = wp.inf
         if out.point_index.shape[0] > 0:
             out.point_index[s] = wp.vec3i(s, s, s)
-        return False, PointW(), wp.vec2(0.0), wp.vec2(0.0), wp.vec2(0.0)
+        return False, missed, wp.vec2(0.0), wp.vec2(0.0), wp.vec2(0.0)
     key[s] = NO_HIT  # the next frame's z-buffer starts cleared
     sample = resolve_sample(k, tris, mesh, materials, cam, perspective_correct, shading, i, j, found, sphere_weights)
     store_point(samples, s, sample.point)
@@ -434,11 +438,12 @@ def resolve_into(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64
     duv_dx = wp.vec2(0.0)
     duv_dy = wp.vec2(0.0)
     derivatives = samples.duv_dx.shape[0] > 0
-    if derivatives or (out.uv.shape[0] > 0 and materials[sample.point.material].texture >= 0):  # (else 0, as cleared)
+    if derivatives or (out.uv.shape[0] > 0 and materials[sample.point.material].texture >= 0):  # (else 0)
         uv, duv_dx, duv_dy = sample_uv(sample, tris, mesh, cam, perspective_correct, i, j)
         if derivatives:
             samples.duv_dx[s] = duv_dx
             samples.duv_dy[s] = duv_dy
+    if out.uv.shape[0] > 0:  # (0 where untextured: a fit's G-buffer is not cleared)
         out.uv[s] = uv
     if out.face.shape[0] > 0:
         out.face[s] = sample.face

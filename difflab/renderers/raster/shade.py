@@ -168,7 +168,12 @@ def gbuffer_row(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64)
                 cam: CameraW, perspective_correct: int, out: GBufferW, samples: PointsW, found: PointsW,
                 lighting: LightingW, lit: LitW, record: int, weights: int, i: int, j0: int, j1: int):
     """`phong_gbuffer_kernel`'s samples (i, j), j in [j0, j1): each resolved and lit; returns how many
-    have a colour with a NaN or infinite channel."""
+    have a colour with a NaN or infinite channel. A fit's G-buffer (`GEOMETRY_ONLY`) is not cleared
+    (`gbuffer.gbuffer_arrays`): a covered sample's entries are all written, and an uncovered one's
+    that held a point in the buffer's last frame (material >= 0 before, `resolve_into`) are zeroed
+    here; the others are zero already (new memory is, and every frame leaves them so). In a fit's
+    frames of one view that is none: the bench sphere's pass ~3 us of CPU a half slower (a load of
+    each uncovered sample's material), against the 3.2 MB memset it had before."""
     bad = int(0)
     for j in range(j0, j1):
         covered, point, uv, duv_dx, duv_dy = resolve_into(key, partial, tris, mesh, lighting.materials, cam,
@@ -184,6 +189,17 @@ def gbuffer_row(key: wp.array(dtype=wp.int64), partial: wp.array(dtype=wp.int64)
                 record_geometry(point, lighting, lit, s)
             elif not finite3(light_into(point, lighting, 1, texel, lit, s)):
                 bad += 1
+        elif record == GEOMETRY_ONLY and point.material >= 0:  # a point here in the last frame
+            s = i * cam.width + j
+            samples.normal[s] = wp.vec3(0.0)
+            samples.view[s] = wp.vec3(0.0)
+            samples.cell[s] = 0
+            if out.uv.shape[0] > 0:
+                out.uv[s] = wp.vec2(0.0)
+            for q in range(lit.light_dir.shape[1]):
+                lit.light_dir[s, q] = wp.vec3(0.0)
+                lit.light_dist[s, q] = 0.0
+                lit.visibility[s, q] = 0.0
     return bad
 
 
