@@ -99,6 +99,8 @@ def test_a_fits_frame_in_the_buffer_another_view_left_is_one_in_new_memory(tmp_p
         assert last in (None, got.points.rows.ctypes.data) and fresh.points.rows.ctypes.data != last
         last = fresh.points.rows.ctypes.data
         assert_bitwise(arrays(got), arrays(fresh))
+        with pytest.raises(ValueError, match="read-only"):  # (what is written there would reach the next frame)
+            got.points.normal[0] = 1.0
         del fresh, got  # (their memory free for the next frame)
 
 

@@ -113,8 +113,8 @@ def fit_frame(scene, *, device=None, threads=None) -> Frame:
     256^2 bench sphere's frame (one light): 3.7 MB of arrays instead of 7.7, none cleared instead of
     6.0 MB (`raster.gbuffer.gbuffer_arrays`); 1.63 -> 1.58 ms (1.70 -> 1.65 after a 32 MB sweep), its
     Phong pass 628 -> 586 us a half (731 -> 667): interleaved medians of 150-200 at load 1.1. Its
-    arrays are for reading: the compiled scene's next fit frame reuses their memory once dropped,
-    uncleared (a value written there by hand could reach it).
+    arrays are read-only: the compiled scene's next fit frame reuses their memory once dropped,
+    uncleared.
     Other frames are render_frame's."""
     return draw(scene, {}, device, None, None, threads, keep=True, image=False, geometry_only=True)
 

@@ -121,14 +121,22 @@ def gbuffer_layout(n_samples: int, phong: bool, skips: frozenset | None, n_light
 def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, points, n_points: int,
                lit, clamp_colors: bool, geometry_only: bool = False) -> GBuffer:
     """The device buffers of stages 4-6 as a numpy `GBuffer` on the sample grid; `geometry_only`
-    (a fit's record: `driver.rasterize`): the fields it does not form (`fit_skips`) are None."""
+    (a fit's record: `driver.rasterize`): the fields it does not form (`fit_skips`) are None, and the
+    others read-only (the compiled scene's next fit frame reuses their memory uncleared:
+    `gbuffer_arrays`)."""
+    def host(array):
+        out = to_host(array)
+        if geometry_only:
+            out.flags.writeable = False
+        return out
+
     def on_grid(array, *channels):
-        return None if geometry_only and array.shape[0] == 0 else to_host(array).reshape(*grid, *channels)
+        return None if geometry_only and array.shape[0] == 0 else host(array).reshape(*grid, *channels)
 
     def per_point(array, count=None):
-        return None if geometry_only and array.shape[0] == 0 else to_host(array)[:count]
+        return None if geometry_only and array.shape[0] == 0 else host(array)[:count]
 
-    material, normal, rows = on_grid(samples.material), to_host(points.normal), None
+    material, normal, rows = on_grid(samples.material), host(points.normal), None
     if normal.strides[0] != normal.shape[1] * normal.itemsize:  # POINT_ROWS: one block's columns, normals first
         rows = np.lib.stride_tricks.as_strided(normal, (normal.shape[0], normal.strides[0] // normal.itemsize),
                                                normal.strides, writeable=False)
@@ -138,9 +146,9 @@ def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, 
         object=on_grid(out.object), face=on_grid(out.face), bary=on_grid(out.bary, 3),
         point_index=on_grid(out.point_index, 3), point_weight=on_grid(out.point_weight, 3),
         points=ShadingPoints(
-            position=per_point(points.position), normal=normal, view=to_host(points.view),
-            material=to_host(points.material), cell=to_host(points.cell), light_dir=to_host(lit.light_dir),
-            light_dist=to_host(lit.light_dist), visibility=to_host(lit.visibility),
+            position=per_point(points.position), normal=normal, view=host(points.view),
+            material=host(points.material), cell=host(points.cell), light_dir=host(lit.light_dir),
+            light_dist=host(lit.light_dist), visibility=host(lit.visibility),
             color=per_point(lit.color, n_points), texture_factor=per_point(lit.factor, n_points), rows=rows),
         shading=settings.shading, specular=settings.specular, spp_side=side,
         ambient=np.asarray(scene.ambient, np.float32), background=np.asarray(scene.background, np.float32),
