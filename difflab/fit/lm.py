@@ -51,7 +51,7 @@ CODES = ("successful", "nonlinear_max_steps_reached", "nonfinite")
 SUCCESSFUL, MAX_STEPS, NONFINITE = 0, 1, 2
 LAMBDA0 = 1e-3
 LAMBDA0_BY_PARTS = 1e-6  # the by-parts model is affine in ka, kd, ks: a first step near Gauss-Newton's
-SPECTRUM_MAX = 64  # entries up to which a rejection's cut is formed (its eigh: 0.36 ms at 64, 1.2 at 128, every step)
+SPECTRUM_MAX = 64  # entries up to which a rejection's cut is formed (its eigh: 0.36 ms at 64, 1.2 at 128)
 RUNNING = -1
 
 
@@ -180,8 +180,12 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
         t = jnp.clip(-0.5 * slope / (loss_new - s.loss - slope), 0.1, 0.5)
         t = jnp.where(finite & jnp.isfinite(t), t, 0.1)
         rejected_lam = s.lam * s.nu
-        if p <= SPECTRUM_MAX:  # (formed every step: jnp.where takes both sides; larger fits keep Nielsen's)
-            rejected_lam = jnp.maximum(rejected_lam, shrinking_damping(s.a, s.g, s.x, lower, upper, s.lam, t))
+        if p <= SPECTRUM_MAX:  # (larger fits keep Nielsen's)
+            # formed on a rejection only (a cond; jnp.where took both sides): its eigh and the thunks
+            # around it, 10-40 us a step (the bench's sphere, 1 rejection in 8 steps: XLA's CPU time a
+            # solve 2.57 -> 2.45 ms, solves 10 ms apart)
+            rejected_lam = jax.lax.cond(accept | first, lambda: rejected_lam, lambda: jnp.maximum(
+                rejected_lam, shrinking_damping(s.a, s.g, s.x, lower, upper, s.lam, t)))
         lam = jnp.where(first, s.lam, jnp.where(accept, s.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3),
                                                  rejected_lam))
         nu = jnp.where(accept, 2.0, 2.0 * s.nu)
