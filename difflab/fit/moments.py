@@ -169,9 +169,25 @@ def _residuals(view, sums: ViewSums, mat: MaterialJ, f):
     return (view.sqrt_weight if sums.sqrt_weight is None else sums.sqrt_weight) * r
 
 
-def _moments(view, sums: ViewSums, block, mine, f):
-    """M (3 channels, 4 + k, 4 + k) of one material from its constant block and the lobes f
-    (`lobes`) on its rows (`mine`: (U,) bool, or None: every row)."""
+def scratch(prepared: tuple, problem) -> tuple:
+    """`linearise`'s first carry: per view, material of the view and light, a (1 + k, U) buffer (k:
+    the fitted ones of n, m, f0) that each step writes the light's lobes into (`_moments`)."""
+    slots, _ = slot_columns(problem.layout, problem.table.ka.shape[0])
+    k = sum(kind in NONLINEAR for kind in slots)
+    return tuple(tuple(tuple(jnp.zeros((1 + k, sums.e.shape[1]), sums.e.dtype) for _ in range(sums.weight.shape[0]))
+                       for _ in view.model.material_ids) for view, sums in zip(problem.views, prepared))
+
+
+def _moments(view, sums: ViewSums, block, mine, f, rows):
+    """(M (3 channels, 4 + k, 4 + k) of one material from its constant block and the lobes f
+    (`lobes`) on its rows (`mine`: (U,) bool, or None: every row), rows): `rows` per light the
+    (1 + k, U) buffer that f of the light is written into, row by row, in place (`scratch`, carried by
+    the solve's loop) -- the matrix of the products of f and f. Stacked anew each step, that matrix
+    was a fusion that XLA's CPU code splits between two threads (a hand-over each step, where the
+    second has gone to sleep); updated in place, it never is. The bench's 256^2 sphere (8 steps), old
+    and new alternating in one process (load 2-4): solve_box alone 10 ms apart, CPU time of XLA's
+    threads 2.23 -> 2.10 ms, wall 2.80 -> 2.64; whole fits, solve 3.22 / 2.86 -> 3.06 / 2.63 ms first,
+    2.91 / 2.67 -> 2.72 / 2.48 fitted again."""
     intensity = view.lights.intensity
     lights = range(intensity.shape[0])
     square = jnp.square(view.sqrt_weight)
@@ -181,16 +197,19 @@ def _moments(view, sums: ViewSums, block, mine, f):
     zb = jnp.stack([jnp.einsum("cae,ce->ca", sums.t, sum(intensity[p][:, None] * _products(sums, square, sums.e,
                                                                                             f[i][p]) for p in lights))
                     for i in range(k)], axis=1)  # (3, k, 3)
-    rows = [_of_light(f, p) for p in lights]
+    rows = tuple(_written(buffer, [g[p] for g in f]) for p, buffer in zip(lights, rows))
     zz = jnp.stack([sum(intensity[p][:, None] * intensity[q][:, None] * _products(sums, square, rows[p], f[j][q])
                         for p in lights for q in lights) for j in range(k)], axis=2)  # (3, k, k)
     top = jnp.concatenate([block, jnp.swapaxes(zb, 1, 2)], axis=2)
-    return jnp.concatenate([top, jnp.concatenate([zb, zz], axis=2)], axis=1)
+    return jnp.concatenate([top, jnp.concatenate([zb, zz], axis=2)], axis=1), rows
 
 
-def _of_light(f, p):
-    """`lobes`' f of light p, (1 + k, U)."""
-    return jnp.stack([g[p] for g in f])
+def _written(buffer, rows):
+    """`buffer` with `rows` in its rows, one by one (a single update of all of them would be the
+    stack itself: XLA drops an update of the whole buffer)."""
+    for i, row in enumerate(rows):
+        buffer = buffer.at[i].set(row)
+    return buffer
 
 
 def _columns_r(view, sums: ViewSums, mine, f, v):
@@ -220,9 +239,10 @@ def residuals(prepared: tuple, x, problem) -> tuple:
     return tuple(out)
 
 
-def linearise(prepared: tuple, x, problem):
-    """(0.5 r^T r, J^T J (p, p), J^T r (p,)) at solver coordinates x from the moments (module docstring);
-    `prepared` = `prepare(problem, ...)`. r^T r is a reduction whose combiner is a - (-b), the same sum
+def linearise(prepared: tuple, x, problem, carry=None):
+    """(0.5 r^T r, J^T J (p, p), J^T r (p,), carry) at solver coordinates x from the moments (module
+    docstring); `prepared` = `prepare(problem, ...)`, `carry`: the buffers of `scratch` (None: new
+    ones), returned written. r^T r is a reduction whose combiner is a - (-b), the same sum
     as a + b: XLA's CPU code hands a sum of 4096 entries or more that combines by add -- and a product
     of two vectors, which it rewrites as one -- to YNNPACK, whose completion resumes on XLA's thread
     pool (in a fit, where its threads have gone to sleep, ~50 us a hand-over), and forms the sum's
@@ -244,14 +264,18 @@ def linearise(prepared: tuple, x, problem):
     gram = jnp.zeros((p + 1, p + 1), x.dtype)  # row / column p collects what is not fitted
     grad = jnp.zeros(p + 1, x.dtype)
     loss = jnp.zeros((), x.dtype)
-    for view, sums in zip(problem.views, prepared):
+    carry = scratch(prepared, problem) if carry is None else carry
+    written = []
+    for view, sums, buffers in zip(problem.views, prepared, carry):
         mat = _coefficients(view, table)
         f = lobes(view, sums, mat, nonlinear)
         r = _residuals(view, sums, mat, f[0])
         loss = loss + 0.5 * jax.lax.reduce(r * r, jnp.zeros((), r.dtype), lambda a, b: a - -b, (0, 1))
-        for material, block in zip(view.model.material_ids, sums.blocks):
+        written.append([])
+        for material, block, rows in zip(view.model.material_ids, sums.blocks, buffers):
             mine = None if view.model.material_ids == (material,) else view.model.material == material
-            full = _moments(view, sums, block, mine, f)
+            full, rows = _moments(view, sums, block, mine, f, rows)
+            written[-1].append(rows)
             ka, kd, ks = (getattr(table, name)[material] for name in LINEAR)  # (3,) each
             zero = jnp.zeros_like(ka)
             beta = jnp.stack([ka, kd, jnp.ones_like(ka), ks] + [zero] * len(nonlinear), axis=1)
@@ -265,7 +289,7 @@ def linearise(prepared: tuple, x, problem):
                 columns_r = _columns_r(view, sums, mine, f, sqrt_weight * r)
             grad = grad.at[cols].add(jnp.einsum("cai,ca->ci", pick, columns_r))
     scale = jnp.where(layout.entries("log") > 0, values, 1.0)  # d value / d x
-    return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p]
+    return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p], tuple(map(tuple, written))
 
 
 def _pick(kind, nonlinear, ks):
