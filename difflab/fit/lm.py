@@ -51,7 +51,7 @@ CODES = ("successful", "nonlinear_max_steps_reached", "nonfinite")
 SUCCESSFUL, MAX_STEPS, NONFINITE = 0, 1, 2
 LAMBDA0 = 1e-3
 LAMBDA0_BY_PARTS = 1e-6  # the by-parts model is affine in ka, kd, ks: a first step near Gauss-Newton's
-SPECTRUM_MAX = 64  # entries up to which a rejection's cut is formed (its eigh: 0.36 ms at 64, 1.2 at 128, every step)
+SPECTRUM_MAX = 64  # entries up to which a rejection's cut is formed (its eigh: 0.36 ms at 64, 1.2 at 128)
 RUNNING = -1
 
 
@@ -67,6 +67,7 @@ class State(NamedTuple):
     history: jnp.ndarray
     d: jnp.ndarray
     predicted: jnp.ndarray
+    carry: tuple
 
 
 def free_diagonal(a, g, x, lower, upper):
@@ -120,22 +121,23 @@ def shrinking_damping(a, g, x, lower, upper, lam, shrink):
 
 
 def squared(linearise):
-    """A linearisation (x, args) -> (r, J^T J, J^T r) as `box_lm` takes it: (0.5 |r|^2, J^T J, J^T r)."""
-    def out(x, args):
+    """A linearisation (x, args) -> (r, J^T J, J^T r) as `box_lm` takes it: (0.5 |r|^2, J^T J, J^T r),
+    its carry passed on."""
+    def out(x, args, carry):
         r, a, g = linearise(x, args)
-        return 0.5 * jnp.sum(r * r), a, g
+        return 0.5 * jnp.sum(r * r), a, g, carry
 
     return out
 
 
 def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, progress=None, residuals=None,
-           exact=None, lambda0=LAMBDA0):
+           exact=None, lambda0=LAMBDA0, carry=()):
     """Minimise 0.5 |r(x)|^2 over lower <= x <= upper.
 
     Arguments:
-        linearise: (x (p,), args) -> (0.5 |r|^2, J^T J (p, p), J^T r (p,)) at x (`squared` of
-            `normal_equations.linearise` or `normal_equations.dense` of any residual function, or
-            `moments.linearise`).
+        linearise: (x (p,), args, carry) -> (0.5 |r|^2, J^T J (p, p), J^T r (p,), carry) at x
+            (`squared` of `normal_equations.linearise` or `normal_equations.dense` of any residual
+            function, or `moments.linearise`); the carry it returns is the next step's.
         x0: (p,) start (clipped into the box); lower, upper: (p,) bounds (+-inf allowed).
         max_steps: the most steps (static); rtol, atol: the stopping tolerances above.
         progress: None, or a host callable (step, loss) called after each step.
@@ -148,6 +150,8 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
             Tingleff's choice for a start close to the solution in the model's terms: the image is
             affine in ka, kd and ks) -- one step fewer on 3 of 11 recoveries, more on none
             (`experiments/fit_recovery.py`, the Mitsuba diffuse sphere of `bench/fit.py`).
+        carry: the first step's carry: buffers the linearisation writes in place, the loop carrying
+            them from step to step (`moments.scratch`); () for none.
     Returns:
         (x, code index into CODES, steps, history (max_steps,) the loss after each step (NaN beyond),
         r (N,) (or None) and J^T J (p, p) at x).
@@ -162,13 +166,13 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
     # once at the end.
     state = State(x0, jnp.zeros((p, p), dtype), jnp.zeros(p, dtype), jnp.asarray(jnp.inf, dtype),
                   jnp.asarray(lambda0, dtype), jnp.asarray(2.0, dtype), jnp.asarray(-1), jnp.asarray(RUNNING),
-                  jnp.full(max_steps, jnp.nan, dtype), jnp.zeros(p, dtype), jnp.asarray(0.0, dtype))
+                  jnp.full(max_steps, jnp.nan, dtype), jnp.zeros(p, dtype), jnp.asarray(0.0, dtype), carry)
 
     def body(s: State) -> State:
         first = s.step < 0
         d, predicted = s.d, s.predicted
         x_new = jnp.clip(s.x + d, lower, upper)  # (x + (clip(x + dx) - x) can pass a bound by an ulp)
-        loss_new, a_new, g_new = linearise(x_new, args)
+        loss_new, a_new, g_new, carry_new = linearise(x_new, args, s.carry)
         finite = jnp.isfinite(loss_new) & jnp.all(jnp.isfinite(g_new)) & jnp.all(jnp.isfinite(a_new))
         accept = finite & ((loss_new < s.loss) | first)
         rho = (s.loss - loss_new) / jnp.where(predicted > 0, predicted, 1.0)
@@ -180,8 +184,12 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
         t = jnp.clip(-0.5 * slope / (loss_new - s.loss - slope), 0.1, 0.5)
         t = jnp.where(finite & jnp.isfinite(t), t, 0.1)
         rejected_lam = s.lam * s.nu
-        if p <= SPECTRUM_MAX:  # (formed every step: jnp.where takes both sides; larger fits keep Nielsen's)
-            rejected_lam = jnp.maximum(rejected_lam, shrinking_damping(s.a, s.g, s.x, lower, upper, s.lam, t))
+        if p <= SPECTRUM_MAX:  # (larger fits keep Nielsen's)
+            # formed on a rejection only (a cond; jnp.where took both sides): its eigh and the thunks
+            # around it, 10-40 us a step (the bench's sphere, 1 rejection in 8 steps: XLA's CPU time a
+            # solve 2.57 -> 2.45 ms, solves 10 ms apart)
+            rejected_lam = jax.lax.cond(accept | first, lambda: rejected_lam, lambda: jnp.maximum(
+                rejected_lam, shrinking_damping(s.a, s.g, s.x, lower, upper, s.lam, t)))
         lam = jnp.where(first, s.lam, jnp.where(accept, s.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3),
                                                  rejected_lam))
         nu = jnp.where(accept, 2.0, 2.0 * s.nu)
@@ -198,7 +206,8 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
             jax.debug.callback(progress, step, loss)
         history = jnp.where(first, s.history, s.history.at[jnp.maximum(s.step, 0)].set(loss))
         x, a, g = keep(x_new, s.x), keep(a_new, s.a), keep(g_new, s.g)
-        return State(x, a, g, loss, lam, nu, step, code, history, *projected_step(x, a, g, lam, lower, upper))
+        return State(x, a, g, loss, lam, nu, step, code, history, *projected_step(x, a, g, lam, lower, upper),
+                     carry_new)
 
     def running(s: State) -> bool:
         # MINPACK's xtol test on the next step: when it would change no entry by more than the
@@ -227,7 +236,8 @@ def solve_problem(problem, x0, lower, upper, *, max_steps: int, rtol, atol, prog
     if moments.applies(problem):
         prepared = moments.prepare(problem, x0)
         return box_lm(partial(moments.linearise, prepared), x0, lower, upper, problem,
-                      residuals=partial(moments.residuals, prepared), **options)
+                      residuals=partial(moments.residuals, prepared), carry=moments.scratch(prepared, problem),
+                      **options)
     return box_lm(squared(partial(linearise, fast=True)), x0, lower, upper, problem, residuals=_residuals,
                   exact=linearise if has_fast_form(problem, x0) else None, **options)
 
@@ -241,8 +251,10 @@ def solve_box(problem, x0, lower, upper, max_steps, rtol, atol, progress=None):
     beyond its steps -- 1 step 0.64-0.70 ms, each further one ~0.14-0.16 (8 steps 1.68-1.78 ms,
     solve_box alone in a loop, medians of 60 at load 1) -- is its program's (XLA's profile): the moments'
     `prepare` ~0.18 ms, the start's linearisation ~0.14, the residuals at the solution ~0.08; in a
-    fit, ~50 us more at each hand-over between XLA's threads, woken from sleep, which
-    `moments.linearise` keeps out of the steps' sums of squares.)"""
+    fit, ~15-50 us more at each hand-over between XLA's threads, woken from sleep, which
+    `moments.linearise` keeps out of the steps' sums of squares and, writing them in place, out of
+    the lobes' products (`moments._in_place`): 2 a step remain, r * r and its sum's first
+    reduce-window; a solve started 10 ms after the last takes 2.5-2.7 ms, back to back 1.7-1.9.)"""
     return solve_problem(problem, x0, lower, upper, max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)
 
 

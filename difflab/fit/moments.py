@@ -157,9 +157,9 @@ def lobes(view, sums: ViewSums, mat: MaterialJ, kinds):
 
 
 def _residuals(view, sums: ViewSums, mat: MaterialJ, f):
-    """The view's weighted residuals (3, U) from its rows and `lobes`' first entry f (P, U) (sums
-    over the lights as products with their intensities: XLA's CPU product of a (3, P) and a (P, U)
-    matrix costs several times as much)."""
+    """The view's weighted residuals (3, U) from its rows and `lobes`' first entry f, (U,) a light
+    (sums over the lights as products with their intensities: XLA's CPU product of a (3, P) and a
+    (P, U) matrix costs several times as much)."""
     intensity = view.lights.intensity
     lights = range(intensity.shape[0])
     e = sums.e
@@ -169,28 +169,56 @@ def _residuals(view, sums: ViewSums, mat: MaterialJ, f):
     return (view.sqrt_weight if sums.sqrt_weight is None else sums.sqrt_weight) * r
 
 
-def _moments(view, sums: ViewSums, block, mine, f):
-    """M (3 channels, 4 + k, 4 + k) of one material from its constant block and the lobes f
-    (`lobes`) on its rows (`mine`: (U,) bool, or None: every row)."""
+def scratch(prepared: tuple, problem) -> tuple:
+    """`linearise`'s first carry, the buffers each step writes its lobes into (`_in_place`), per view:
+    the lobes (`lobes`' 1 + k, k the fitted ones of n, m, f0) of each light, (U,) each -- the vectors
+    of the products -- and per material of the view and light the (1 + k, U) matrix of that light's
+    lobes (`_moments`)."""
+    slots, _ = slot_columns(problem.layout, problem.table.ka.shape[0])
+    k = sum(kind in NONLINEAR for kind in slots)
+    zeros = lambda *shape: jnp.zeros(shape, problem.ambient.dtype)  # noqa: E731
+    return tuple((tuple(tuple(zeros(sums.e.shape[1]) for _ in range(sums.weight.shape[0])) for _ in range(1 + k)),
+                  tuple(tuple(zeros(1 + k, sums.e.shape[1]) for _ in range(sums.weight.shape[0]))
+                        for _ in view.model.material_ids)) for view, sums in zip(problem.views, prepared))
+
+
+def _in_place(buffer, value):
+    """`buffer` (carried by the solve's loop: `scratch`) holding `value`, written in place: a matrix
+    row by row, a vector in two halves (XLA drops an update of a whole buffer: it would be `value`
+    formed anew). XLA's CPU code splits a fusion that moves more than 512 KB between two threads, a
+    hand-over where the second one has gone to sleep (as in a fit), but never an update in place. The
+    bench's 256^2 sphere (8 steps: 5 such fusions a step, now 2), old and new alternating in one
+    process (load 1.5-4), the matrix of `_moments` in place: solve_box alone 10 ms apart, CPU time of
+    XLA's threads 2.23 -> 2.10 ms, wall 2.80 -> 2.64; whole fits, solve 3.22 / 2.86 -> 3.06 / 2.63 ms
+    first, 2.91 / 2.67 -> 2.72 / 2.48 fitted again; and the lobes' vectors too: CPU 2.36 / 2.26 ->
+    2.13 / 1.78 ms, wall 2.81 / 2.73 -> 2.66 / 2.46 (back to back 1.82 -> 1.87: the second thread's
+    share lost); whole fits 2.53 / 2.80 -> 2.30 / 2.80 first, 2.58 / 2.84 -> 2.32 / 2.68 again."""
+    if value.ndim == 1:
+        half = value.shape[0] // 2
+        return buffer.at[:half].set(value[:half]).at[half:].set(value[half:])
+    for i in range(value.shape[0]):
+        buffer = buffer.at[i].set(value[i])
+    return buffer
+
+
+def _moments(view, sums: ViewSums, block, mine, f, rows):
+    """(M (3 channels, 4 + k, 4 + k) of one material from its constant block and the lobes f
+    (`lobes`' per light, (U,) vectors) on its rows (`mine`: (U,) bool, or None: every row), rows):
+    `rows` per light the (1 + k, U) matrix of the products of f and f, written (`_in_place`)."""
     intensity = view.lights.intensity
     lights = range(intensity.shape[0])
     square = jnp.square(view.sqrt_weight)
     if mine is not None:
-        f = tuple(jnp.where(mine, g, 0.0) for g in f)
+        f = tuple(tuple(jnp.where(mine, v, 0.0) for v in g) for g in f)
     k = len(f)
     zb = jnp.stack([jnp.einsum("cae,ce->ca", sums.t, sum(intensity[p][:, None] * _products(sums, square, sums.e,
                                                                                             f[i][p]) for p in lights))
                     for i in range(k)], axis=1)  # (3, k, 3)
-    rows = [_of_light(f, p) for p in lights]
+    rows = tuple(_in_place(buffer, jnp.stack([g[p] for g in f])) for p, buffer in zip(lights, rows))
     zz = jnp.stack([sum(intensity[p][:, None] * intensity[q][:, None] * _products(sums, square, rows[p], f[j][q])
                         for p in lights for q in lights) for j in range(k)], axis=2)  # (3, k, k)
     top = jnp.concatenate([block, jnp.swapaxes(zb, 1, 2)], axis=2)
-    return jnp.concatenate([top, jnp.concatenate([zb, zz], axis=2)], axis=1)
-
-
-def _of_light(f, p):
-    """`lobes`' f of light p, (1 + k, U)."""
-    return jnp.stack([g[p] for g in f])
+    return jnp.concatenate([top, jnp.concatenate([zb, zz], axis=2)], axis=1), rows
 
 
 def _columns_r(view, sums: ViewSums, mine, f, v):
@@ -220,9 +248,10 @@ def residuals(prepared: tuple, x, problem) -> tuple:
     return tuple(out)
 
 
-def linearise(prepared: tuple, x, problem):
-    """(0.5 r^T r, J^T J (p, p), J^T r (p,)) at solver coordinates x from the moments (module docstring);
-    `prepared` = `prepare(problem, ...)`. r^T r is a reduction whose combiner is a - (-b), the same sum
+def linearise(prepared: tuple, x, problem, carry=None):
+    """(0.5 r^T r, J^T J (p, p), J^T r (p,), carry) at solver coordinates x from the moments (module
+    docstring); `prepared` = `prepare(problem, ...)`, `carry`: the buffers of `scratch` (None: new
+    ones), returned written. r^T r is a reduction whose combiner is a - (-b), the same sum
     as a + b: XLA's CPU code hands a sum of 4096 entries or more that combines by add -- and a product
     of two vectors, which it rewrites as one -- to YNNPACK, whose completion resumes on XLA's thread
     pool (in a fit, where its threads have gone to sleep, ~50 us a hand-over), and forms the sum's
@@ -244,14 +273,19 @@ def linearise(prepared: tuple, x, problem):
     gram = jnp.zeros((p + 1, p + 1), x.dtype)  # row / column p collects what is not fitted
     grad = jnp.zeros(p + 1, x.dtype)
     loss = jnp.zeros((), x.dtype)
-    for view, sums in zip(problem.views, prepared):
+    carry = scratch(prepared, problem) if carry is None else carry
+    written = []
+    for view, sums, (vectors, buffers) in zip(problem.views, prepared, carry):
         mat = _coefficients(view, table)
-        f = lobes(view, sums, mat, nonlinear)
+        f = tuple(tuple(_in_place(into, g[p]) for p, into in enumerate(buffers_of))
+                  for buffers_of, g in zip(vectors, lobes(view, sums, mat, nonlinear)))  # per lobe and light (U,)
         r = _residuals(view, sums, mat, f[0])
         loss = loss + 0.5 * jax.lax.reduce(r * r, jnp.zeros((), r.dtype), lambda a, b: a - -b, (0, 1))
-        for material, block in zip(view.model.material_ids, sums.blocks):
+        written.append((f, []))
+        for material, block, rows in zip(view.model.material_ids, sums.blocks, buffers):
             mine = None if view.model.material_ids == (material,) else view.model.material == material
-            full = _moments(view, sums, block, mine, f)
+            full, rows = _moments(view, sums, block, mine, f, rows)
+            written[-1][1].append(rows)
             ka, kd, ks = (getattr(table, name)[material] for name in LINEAR)  # (3,) each
             zero = jnp.zeros_like(ka)
             beta = jnp.stack([ka, kd, jnp.ones_like(ka), ks] + [zero] * len(nonlinear), axis=1)
@@ -265,7 +299,8 @@ def linearise(prepared: tuple, x, problem):
                 columns_r = _columns_r(view, sums, mine, f, sqrt_weight * r)
             grad = grad.at[cols].add(jnp.einsum("cai,ca->ci", pick, columns_r))
     scale = jnp.where(layout.entries("log") > 0, values, 1.0)  # d value / d x
-    return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p]
+    carry = tuple((f, tuple(rows)) for f, rows in written)
+    return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p], carry
 
 
 def _pick(kind, nonlinear, ks):
