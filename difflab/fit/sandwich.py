@@ -24,15 +24,17 @@ It is formed only where the noise levels that the estimate of sigma read (per vi
 half of the intensity range: the targets' noise, so `weights=` are taken to be inverse variances --
 other weights leave the weighted residuals' noise unequal under the pooled form) differ beyond their
 spread (`unequal`): one more linearisation at the solution (`_scaled_gram`: the problem's
-sqrt(weights) times r; ~0.45 ms of JAX's on the 74k entries of a 256 x 256 sphere, dispatched before
-the rest of the noise estimate to run beside it, `noise_middle` -- on an idle machine; on 2 busy
-cores the dispatch's own ~0.2 ms of main-thread work and XLA's thread waking beside it left it done
-when the dispatch returned in 55-85 % of first fits, run in series in effect); elsewhere s^2
-(J^T J)^-1 is within ~15 % of it (`unequal`). Not with sigma given (one number: the noise is
-declared equal), nor where it is unknown, nor for a texture fit, dense or matrix-free (the sparse
-path of `stats.covariance_diagonal` keeps the pooled form, and so does a dense one to stay its
-equal; a texel resting on a few pixels would have a sandwich variance of spread sqrt(2 / K) from
-them).
+sqrt(weights) times r; ~0.25 ms of XLA's after its dispatch on the 74k entries of a 256 x 256
+sphere, dispatched before the rest of the noise estimate to run beside it, `noise_middle`). What it
+adds to a first fit's report (the bench's Mitsuba sphere, fits with and without it alternating in
+one process, medians of 60): 0.30 ms at load 0.4-0.9 -- `unequal` 0.05, the cold dispatch 0.15-0.17
+(0.04 hot), the sums beside XLA's run 0.035 slower, the middle done when asked -- and 0.70 ms at
+load 1.8 (the dispatch 0.43: XLA's threads take the caller's core); waited for at once, 0.25 ms
+more at load 0.5. Elsewhere s^2 (J^T J)^-1 is within ~15 % of it (`unequal`). Not with sigma given
+(one number: the noise is declared equal), nor where it is unknown, nor for a texture fit, dense or
+matrix-free (the sparse path of `stats.covariance_diagonal` keeps the pooled form, and so does a
+dense one to stay its equal; a texel resting on a few pixels would have a sandwich variance of
+spread sqrt(2 / K) from them).
 """
 
 from __future__ import annotations
