@@ -386,7 +386,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
             width, samples, out.uv, out.depth, out.point_index, out.point_weight, lit, lighting, int(clamp_colors),
             1 - points_are_samples, *backdrop(scene), canvas], device, *row_pass)
     gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors,
-                         views if geometry_only else None)
+                         geometry_only, views if geometry_only and device.startswith("cpu") else None)
     # then filter to pixels (Phong without stage 7: a sample's colour is its point's, fogged, so the
     # pixels are not finite exactly where these are not: the pass counted those samples)
     pixels, nonfinite = None, 0  # (geometry only: no colours)

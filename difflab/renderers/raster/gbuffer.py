@@ -119,15 +119,16 @@ def gbuffer_layout(n_samples: int, phong: bool, skips: frozenset | None, n_light
 
 
 def to_gbuffer(scene, settings, side: int, grid: tuple[int, int], samples, out, points, n_points: int,
-               lit, clamp_colors: bool, kept=None) -> GBuffer:
-    """The device buffers of stages 4-6 as a numpy `GBuffer` on the sample grid. `kept`: a fit's
-    record (`driver.rasterize(geometry_only=True)`), the `HostViews` of its structs: the fields it
-    does not form (`fit_skips`) are None, the others read-only views (the compiled scene's next fit
-    frame reuses their memory uncleared: `gbuffer_arrays`) made once per struct set and scene
-    settings and kept with the structs -- a frame's GBuffer is then those views and its own mask
-    (a fit's first frame: to_gbuffer 139 -> 30 us, medians of 40 at load ~1)."""
+               lit, clamp_colors: bool, geometry_only: bool = False, kept=None) -> GBuffer:
+    """The device buffers of stages 4-6 as a numpy `GBuffer` on the sample grid; `geometry_only`
+    (a fit's record: `driver.rasterize`): the fields it does not form (`fit_skips`) are None, and the
+    others read-only (the compiled scene's next fit frame reuses their memory uncleared:
+    `gbuffer_arrays`). `kept` (with `geometry_only`, on the CPU, where the GBuffer's arrays are views
+    of the device arrays): the `HostViews` of its structs, where that GBuffer is kept, made once per
+    struct set and scene settings -- a frame's GBuffer is then a copy of it with its own mask (a
+    fit's first frame: to_gbuffer 139 -> 30 us, medians of 40 at load ~1)."""
     if kept is None:
-        return _gbuffer(scene, settings, side, grid, samples, out, points, n_points, lit, clamp_colors, False)
+        return _gbuffer(scene, settings, side, grid, samples, out, points, n_points, lit, clamp_colors, geometry_only)
     key = (grid, side, settings.shading, settings.specular, clamp_colors, scene.ambient, scene.background, scene.fog)
     if kept.kept is None or kept.kept[0] != key:
         kept.keep((key, _gbuffer(scene, settings, side, grid, samples, out, points, n_points, lit, clamp_colors,
@@ -156,7 +157,7 @@ def _copy(record, **fields):
 
 
 def _gbuffer(scene, settings, side, grid, samples, out, points, n_points, lit, clamp_colors, geometry_only):
-    """`to_gbuffer`'s GBuffer, made afresh (`geometry_only`: a fit's, its mask None, every array read-only)."""
+    """`to_gbuffer`'s GBuffer, made afresh (`geometry_only`: a fit's, every array read-only)."""
     def host(array):
         return fixed(to_host(array))
 
@@ -177,7 +178,7 @@ def _gbuffer(scene, settings, side, grid, samples, out, points, n_points, lit, c
                                                normal.strides, writeable=False)
     fog = fog_params(scene.fog)
     return GBuffer(
-        mask=None if geometry_only else material >= 0, depth=on_grid(out.depth), position=on_grid(samples.position, 3),
+        mask=material >= 0, depth=on_grid(out.depth), position=on_grid(samples.position, 3),
         normal=on_grid(samples.normal, 3), uv=on_grid(out.uv, 2), material=material,
         object=on_grid(out.object), face=on_grid(out.face), bary=on_grid(out.bary, 3),
         point_index=on_grid(out.point_index, 3), point_weight=on_grid(out.point_weight, 3),
