@@ -104,6 +104,25 @@ def test_a_fits_frame_in_the_buffer_another_view_left_is_one_in_new_memory(tmp_p
         del fresh, got  # (their memory free for the next frame)
 
 
+@pytest.mark.parametrize("hold", ["normal rows", "points", "rows", "material"])
+def test_a_fits_frame_held_through_any_array_of_it_keeps_its_memory(hold):
+    """A fit frame's GBuffer is views kept with its structs (`gbuffer.to_gbuffer`, `compile.HostViews`):
+    while anything derived from it is held (a slice, its points, a reshape), the next frame takes
+    other memory; once let go, the next frame takes its memory again."""
+    compiled = compile_scene(Scene.from_dict(sphere_scene("outside", size=16)))
+    take = {"normal rows": lambda g: g.normal[:3], "points": lambda g: g.points, "rows": lambda g: g.points.rows[1:],
+            "material": lambda g: g.material.reshape(-1)}[hold]
+    address = lambda frame: frame.gbuffer.points.rows.ctypes.data  # noqa: E731
+    first = fit_frame(compiled, threads=1)
+    where, held = address(first), take(first.gbuffer)
+    del first
+    second = fit_frame(compiled, threads=1)
+    assert address(second) != where
+    where = address(second)
+    del second, held
+    assert address(fit_frame(compiled, threads=1)) == where
+
+
 def full_frame(scene, *, device=None, threads=None):
     """render_frame's whole G-buffer, where a fit renders `fit_frame`."""
     return render_frame(scene, image=False, device=device, threads=threads)

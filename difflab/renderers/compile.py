@@ -49,6 +49,33 @@ def _unheld_refs() -> int:
 _UNHELD = _unheld_refs()
 
 
+class HostViews:
+    """What `CompiledScene.reusable_structs` tests before it hands a frame's structs out again: their
+    arrays, each referred to by the structs and the pool alone, and what a caller keeps with them
+    (`keep`: numpy views of the arrays, which then refer to them too), each referred to no more than
+    when kept -- every array a frame hands out is one of those views or a view of one."""
+
+    def __init__(self, arrays: list):
+        self.arrays, self.watched, self.limits, self.kept = arrays, arrays, [_UNHELD + 1] * len(arrays), None
+
+    def unheld(self) -> bool:
+        return all(count <= limit for count, limit in zip(_refs(self.watched), self.limits))
+
+    def keep(self, kept, views) -> None:
+        """Keep `kept` (what the caller made of the arrays: a `GBuffer` of views of them, say) with
+        the structs; `views(kept)`: the numpy arrays in it that a frame hands out and every array
+        they view (a view of any of them refers to one), which nothing may refer to now but `kept`:
+        their counts now are the limits."""
+        self.kept = kept
+        self.watched = self.arrays + views(kept)
+        self.limits = _refs(self.watched)
+
+
+def _refs(items: list) -> list[int]:
+    """sys.getrefcount of each item (each once more than its holders': as `_UNHELD` counts)."""
+    return [sys.getrefcount(item) for item in items]
+
+
 @dataclass(frozen=True)
 class CompiledScene:
     """A scene on a device, built once by `compile_scene` and rendered any number of times by
@@ -195,20 +222,21 @@ class CompiledScene:
             array.zero_()
         return pool[key]
 
-    def reusable_structs(self, name: str, layout: tuple) -> tuple[list, wp.array | None]:
+    def reusable_structs(self, name: str, layout: tuple) -> tuple[list, wp.array | None, HostViews]:
         """Instances of Warp structs whose fields are a frame's output arrays, `layout` a tuple of
         (struct type, ((field, shape tuple, dtype, zero), ...)): this thread's from an earlier frame, as
         they were, when none of their arrays is held any more (as `reusable` tests it, the struct's
-        own reference aside) -- with the buffer the `zero` arrays are carved from, stale, for the
-        caller to zero in one memset -- else new ones, those arrays carved from one new zero buffer
-        (and None). One memset: a pool worker zeroing the 15 arrays of a 256^2 G-buffer one by one
-        re-took the GIL between them while the frame's thread waited (~0.1 ms a frame); the structs
-        kept: filling them anew costs ~30 us warm, ~125 us of a fit's cold frame. A `zero` of ROWS: zero,
-        and a column of the one rows block (`host_carved`)."""
+        own reference aside; nor any numpy view kept with them: `HostViews`) -- with the buffer the
+        `zero` arrays are carved from, stale, for the caller to zero in one memset -- else new ones,
+        those arrays carved from one new zero buffer (and None); and their `HostViews`. One memset: a
+        pool worker zeroing the 15 arrays of a 256^2 G-buffer one by one re-took the GIL between them
+        while the frame's thread waited (~0.1 ms a frame); the structs kept: filling them anew costs
+        ~30 us warm, ~125 us of a fit's cold frame. A `zero` of ROWS: zero, and a column of the one
+        rows block (`host_carved`)."""
         pool = self.scratch_pool()
         kept = pool.get(("structs", name))
-        if kept is not None and kept[0] == layout and all(sys.getrefcount(array) <= _UNHELD + 1 for array in kept[1]):
-            return kept[2], kept[3]
+        if kept is not None and kept[0] == layout and kept[4].unheld():
+            return kept[2], kept[3], kept[4]
         buffer, carved = host_carved([(shape, dtype, zero == ROWS) for unused, fields in layout
                                       for unused, shape, dtype, zero in fields if zero], self.device)
         carved, arrays, structs = iter(carved), [], []
@@ -217,8 +245,9 @@ class CompiledScene:
             for field, shape, dtype, zero in fields:
                 arrays.append(next(carved) if zero else host_empty(shape, dtype, self.device))
                 setattr(structs[-1], field, arrays[-1])
-        pool[("structs", name)] = (layout, arrays, structs, buffer)  # old ones stay with their frame
-        return structs, None
+        views = HostViews(arrays)
+        pool[("structs", name)] = (layout, arrays, structs, buffer, views)  # old ones stay with their frame
+        return structs, None, views
 
     def scratch_pool(self) -> dict:
         """This thread's `scratch` arrays by name (a renderer may keep notes about them there too)."""

@@ -343,7 +343,8 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     points_are_samples = int(shading == PHONG_SHADING)
     geometry_only = bool(geometry_only and points_are_samples and not image)
     record = shade.GEOMETRY_ONLY if geometry_only else 1
-    samples, out, lit, found, stale = gbuffer_arrays(compiled, width * height, points_are_samples, geometry_only)
+    samples, out, lit, found, stale, views = gbuffer_arrays(compiled, width * height, points_are_samples,
+                                                           geometry_only)
     partial = cleared_key(compiled, width * height, "partial key") if halved else compiled.scratch("no key", 0,
                                                                                                     wp.int64)
     bad = compiled.scratch("nonfinite rows", height * row_spans(width, device), wp.int32)  # (`launch.dealt_span`)
@@ -385,7 +386,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
             width, samples, out.uv, out.depth, out.point_index, out.point_weight, lit, lighting, int(clamp_colors),
             1 - points_are_samples, *backdrop(scene), canvas], device, *row_pass)
     gbuffer = to_gbuffer(scene, settings, side, (height, width), samples, out, points, n_points, lit, clamp_colors,
-                         geometry_only)
+                         geometry_only, views if geometry_only and device.startswith("cpu") else None)
     # then filter to pixels (Phong without stage 7: a sample's colour is its point's, fogged, so the
     # pixels are not finite exactly where these are not: the pass counted those samples)
     pixels, nonfinite = None, 0  # (geometry only: no colours)
