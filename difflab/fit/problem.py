@@ -113,20 +113,33 @@ def take_rows_of(arrays, rows, dtype=None) -> list[np.ndarray]:
     """`take_rows` of several arrays at the same `rows`, their results carved from one buffer (each
     from a 64-byte boundary; one allocation, not one each)."""
     dtypes = [np.dtype(array.dtype if dtype is None else dtype) for array in arrays]
-    shapes = [(rows.size,) + array.shape[1:] for array in arrays]
-    sizes = [math.prod(shape) * kind.itemsize for shape, kind in zip(shapes, dtypes)]
-    starts = np.cumsum([0] + [-(-size // 64) * 64 for size in sizes]).tolist()
-    raw = np.empty(starts[-1] + 64, np.uint8)
-    base = -raw.ctypes.data % 64
-    out = []
-    for array, kind, shape, start, size in zip(arrays, dtypes, shapes, starts, sizes):
-        part = raw[base + start:base + start + size].view(kind).reshape(shape)
-        if kind == array.dtype:
+    out = carved([(rows.size,) + array.shape[1:] for array in arrays], dtypes)
+    for array, part in zip(arrays, out):
+        if part.dtype == array.dtype:
             np.take(array, rows, axis=0, out=part, mode="clip")  # (valid rows: "clip" takes them unbuffered)
         else:
             part[...] = np.take(array, rows, axis=0)
-        out.append(part)
     return out
+
+
+def on_boundary(array: np.ndarray) -> np.ndarray:
+    """`array`, or a copy of it whose data start on a 64-byte boundary where its own do not (or it
+    is not contiguous): a jitted call takes such a numpy array in place (`take_rows`)."""
+    if array.flags.c_contiguous and array.ctypes.data % 64 == 0:
+        return array
+    out = carved([array.shape], [array.dtype])[0]
+    out[...] = array
+    return out
+
+
+def carved(shapes, dtypes) -> list[np.ndarray]:
+    """Empty arrays of these shapes and dtypes carved from one buffer, each from a 64-byte boundary."""
+    sizes = [math.prod(shape) * np.dtype(kind).itemsize for shape, kind in zip(shapes, dtypes)]
+    starts = np.cumsum([0] + [-(-size // 64) * 64 for size in sizes]).tolist()
+    raw = np.empty(starts[-1] + 64, np.uint8)
+    base = -raw.ctypes.data % 64
+    return [raw[base + start:base + start + size].view(kind).reshape(shape)
+            for shape, kind, start, size in zip(shapes, dtypes, starts, sizes)]
 
 
 def _put(index, values, base):

@@ -272,8 +272,7 @@ class Setup:
 
     def _view_model(self, view: View, pixels, lights):
         """The image model of a view's `pixels` (kept with the record when they are the pixels used),
-        for its lights on the device (`DEVICE_COPIES`' kept ones, say: a jitted call takes a numpy
-        argument at ~4x a device array's cost -- 2 against 0.5 us a leaf)."""
+        for its `lights` (numpy or on the device)."""
         if view.kept is not None and pixels is view.pixels and self.texel_source is None:
             key = (self.method, np.dtype(self.dtype))
             return view.kept.model(key, view.used, lambda: self._model(view, pixels, lights))
@@ -287,6 +286,13 @@ class Setup:
                          intensity_index=intensity_index)
 
     def _problem(self, loss, loss_scale) -> Problem:
+        """The device problem. Each view's image model is cut first, its lights still numpy (a jitted
+        call takes them as it takes device arrays: ~45 us hot either way): its device program
+        (`shading._device_model`, ~0.35 ms of XLA's threads for the bench's 24.7k points) then runs
+        beside the rest of the setup, ending before the solve is dispatched -- after the small
+        arrays were moved, it still ran when the solve's dispatch returned, and held the solve
+        back (first fits alternating in one process, /tmp/s16handoff/ab.py, medians of 100, load
+        1.7-2.1: 7.81 -> 7.61, 8.08 -> 7.72 ms; the solve 2.16 -> 2.03, 2.19 -> 2.01)."""
         entries, total, self.unit_weights = [], 0.0, True  # unit weights: the weighted residuals are the plain ones
         for v in self.views:
             entries.append(v.entries.reshape(-1))
@@ -300,11 +306,12 @@ class Setup:
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
         host = [self._view_arrays(v, v.pixels, index["intensity"]) for v in self.views]
+        models = [self._view_model(v, v.pixels, h[0]) for v, h in zip(self.views, host)]
         arrays, table, ambient, index, loss_scale = DEVICE_COPIES.on_device((
             host, MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
             np.asarray(self.scene.ambient, real), {k: v for k, v in index.items() if k != "intensity"},
             np.asarray(loss_scale, real)))
-        views = tuple(self._view(a, self._view_model(v, v.pixels, a[0])) for v, a in zip(self.views, arrays))
+        views = tuple(self._view(a, m) for m, a in zip(models, arrays))
         return assembled(Problem, views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
                          layout=self.layout, loss=loss, smoothness=self.smoothness)
 
