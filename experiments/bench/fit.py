@@ -265,12 +265,14 @@ def difflab_on_mitsuba_target(size: int, targets: list, repeats: int) -> dict:
         return result, time.perf_counter() - t0, which
 
     first_call = run(True, 0)[1]
+    busy0 = others_busy()
     timed, fits = {True: [], False: []}, 1  # fits made so far: fit k is of targets[k % 2], the other one each time
     for _ in range(repeats):  # interleaved: a first fit of the view, then the same view again
         for first_of_view in (True, False):
             timed[first_of_view].append(run(first_of_view, fits % 2))
             fits += 1
     in_row = [run(False, k % 2) for k in range(fits, fits + repeats)]  # a series of targets of one view
+    busy1 = others_busy()
 
     def stages(runs) -> dict:
         return {"wall_s": statistics.median(t for _, t, _ in runs),
@@ -286,7 +288,24 @@ def difflab_on_mitsuba_target(size: int, targets: list, repeats: int) -> dict:
     return {"result": result.result, "steps": result.steps, "first_call_s": first_call,
             "first_fit": stages(timed[True]), "again": stages(timed[False]), "in_row": stages(in_row),
             "kd_times_pi": (np.asarray(result.params["kd"]) * np.pi).tolist(), "kd_max_rel_error": float(kd_error.max()),
-            "ks": result.params["ks"], "at_bound": result.at_bound, "chi2": result.chi2}
+            "ks": result.params["ks"], "at_bound": result.at_bound, "chi2": result.chi2,
+            "others_cores": busy0 and (busy1[0] - busy0[0] - busy1[1] + busy0[1]) / (busy1[2] - busy0[2])}
+
+
+def others_busy() -> tuple[float, float, float] | None:
+    """(CPU seconds the machine spent busy, of which this process's, wall seconds) now, from /proc/stat
+    (None without it). The fits' times depend on a free second core: on the 2-core VM, of 16 processes in a
+    row (20 first / again fits each, medians), those during which other processes used ~1 core took first
+    9.4-11.0 ms, render 2.4-2.7, again 5.4-6.6; those with ~0.1: 7.4-8.7, 1.8-1.9, 4.4-5.0 ms. The 1-min
+    load average does not tell such 4-s runs apart. (/proc/stat counts in ticks of 10 ms: over the ~0.3 s of
+    the bench's fits, +-0.1 core.)"""
+    try:
+        with open("/proc/stat") as f:
+            ticks = [int(x) for x in f.readline().split()[1:]]
+    except OSError:
+        return None
+    busy = sum(ticks[:3]) + sum(ticks[5:7])  # user nice system irq softirq (not idle, iowait, steal)
+    return busy / os.sysconf("SC_CLK_TCK"), time.process_time(), time.perf_counter()
 
 
 TRUTH = {"ka": [0.1, 0.05, 0.02], "kd": [0.7, 0.2, 0.1], "ks": [0.5, 0.4, 0.3], "n": 24.0}
@@ -384,8 +403,10 @@ def print_report(report: dict) -> None:
             print(f"difflab warm, {label}: {w['wall_s'] * 1e3:.1f} ms = {share} (setup {w['setup_s'] * 1e3:.1f} ms "
                   f"of which the Warp render {w['render_s'] * 1e3:.1f} ms, solve {w['solve_s'] * 1e3:.1f} ms, "
                   f"statistics {w['stats_s'] * 1e3:.1f} ms)")
+        others = d.get("others_cores")
+        others = "" if others is None else f"; other processes used {others:.1f} of {os.cpu_count()} cores in the fits"
         print(f"(goal: 1/50 or less; medians, first / again interleaved, then the fits in a row; load average "
-              f"{mitsuba['load_1min']:.1f} after the run; DIFFLAB_JAX_THREADS={mitsuba['xla_threads']})")
+              f"{mitsuba['load_1min']:.1f} after the run; DIFFLAB_JAX_THREADS={mitsuba['xla_threads']}{others})")
     elif mitsuba is not None:
         print(f"Mitsuba: {mitsuba}")
 
