@@ -169,8 +169,9 @@ def run_fit(setup: Setup, options: FitOptions, timings: dict) -> FitResult:
     try:
         start = time.perf_counter()
         with jax.enable_x64(setup.x64):
-            out = run(setup.problem, setup.x0, options, beside=None if ahead is None else ahead.queue.join
-                      if options.solver == "lm" else ahead.queue.start)  # (`noise_ahead`: where they are formed)
+            # the noise picks beside the solve: on this thread for "lm", else on a worker (`noise_ahead`)
+            out = run(setup.problem, setup.x0, options, beside=None if ahead is None else (
+                ahead.queue.join if options.solver == "lm" else ahead.queue.start))
         timings["solve"] = time.perf_counter() - start
         return report(setup, out.x, out.result, out.steps, out.history, options, timings, out.linearised,
                       ahead.take if ahead is not None else None)

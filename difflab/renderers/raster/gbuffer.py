@@ -161,10 +161,10 @@ def _gbuffer(scene, settings, side, grid, samples, out, points, n_points, lit, c
     def host(array):
         return fixed(to_host(array))
 
-    def fixed(out):
+    def fixed(array):
         if geometry_only:
-            out.flags.writeable = False
-        return out
+            array.flags.writeable = False
+        return array
 
     def on_grid(array, *channels):
         return None if geometry_only and array.shape[0] == 0 else host(array).reshape(*grid, *channels)
