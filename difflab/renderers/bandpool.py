@@ -152,20 +152,12 @@ def run_phases(phases: list[tuple], threads: int | None = None) -> None:
     pool in between (a sleeping worker's wake-up: ~0.1 ms on the 2-core machine). A band that
     raises stops the later phases; the error is raised here.
 
-    The workers are handed their part once the caller's work before the first phase is done (the
-    z-buffer's assembly); earlier gained nothing (session 17, the 256^2 bench sphere's fit frames,
-    first fits alternating in one process, paired medians of 150-200 at load ~3-5). A worker handed
-    a task while the caller runs Python gets the GIL only when the caller lets it go (200 us of the
-    caller's Python held a task back 215 us, 0 of 67 started earlier; with a ctypes call every 20 /
-    50 us it started after 33 / 62-135 us), and a frame's preparation lets it go nowhere before the
-    clip's launch: stages 1-2 handed to the worker at the frame's start ran on the caller anyway.
-    Woken right before the assembly's launch to wait for its end, the worker began its half 80 us
-    after the assembly instead of 99, but the caller's Python only moved (+36 us before the clip,
-    -25 us after the assembly) and the assembly took 0.112 ms instead of 0.091 (the woken worker
-    took the GIL from its end): render +0.100 / +0.004 ms. Reading the key arrays and the
-    assembly's outputs on the worker from the clip's launch on (into the cache: its half 0.348 ->
-    0.275 ms) left it late for its half more often (122 instead of 139 of 150): render +0.035 /
-    +0.084 ms."""
+    The workers are handed their part only once the caller's work before the first phase is done
+    (the z-buffer's assembly): a worker handed a task while the caller runs Python gets the GIL only
+    when the caller lets it go, which a frame's preparation does nowhere before the clip's launch
+    (stages 1-2 handed over at the frame's start ran on the caller anyway); woken right before the
+    assembly to wait for it, the worker took the GIL from the assembly's end (render +0.1 ms; the
+    256^2 bench sphere's first fits, paired medians of 150-200)."""
     threads = cpu_threads() if threads is None else max(1, threads)
     queues = [_BandQueue(run_band, bands) for run_band, bands in phases]
     for _ in range(min(threads, max(len(bands) for unused, bands in phases)) - 1):
