@@ -193,8 +193,9 @@ class NoiseAhead(NamedTuple):
 
 def noise_ahead(setup: Setup) -> NoiseAhead | None:
     """The noise estimate's `noise_picks` -- the targets' alone, for silent pixels all black ones
-    (`View.black`) -- and each view's `View.floor`, which `clipping.clipped_band` reads after the fit
-    (there, on a target no longer in cache, ~0.1 ms of first.py's first fit), to be formed beside the
+    (`View.black`) --, the targets' `Setup.statistics` (what only the report reads) and each view's
+    `View.floor`, which `clipping.clipped_band` reads after the fit (there, on a target no longer in
+    cache, ~0.1 ms of first.py's first fit), to be formed beside the
     solve: `run_fit` hands the solve (`solvers.run`'s `beside`, called once "lm"'s compiled solve is
     dispatched, before any other solver) the queue's `join` for "lm" -- formed on the calling thread,
     which only waits for the solve meanwhile (XLA runs its loop without the GIL) -- and its `start`
@@ -216,6 +217,7 @@ def noise_ahead(setup: Setup) -> NoiseAhead | None:
         picks.append(noise_picks(setup.views, [view.black for view in setup.views]))
         for view in setup.views:
             view.floor  # noqa: B018 (a cached property, formed here)
+        setup.statistics  # noqa: B018 (formed on first use: here, off the solve's path)
     return NoiseAhead(start_beside(targets_alone, "cpu", setup.threads, start=False), picks)
 
 
