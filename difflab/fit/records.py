@@ -154,10 +154,7 @@ class View:
 
     @cached_property
     def values(self) -> np.ndarray:
-        values = used_rows(self.image, self.used, np.float64)
-        if self.nonfinite:  # (those at the pixels used)
-            values[~np.isfinite(values)] = 0.0
-        return values
+        return target_values(self.image, self.used, self.nonfinite)
 
     @cached_property
     def zeros(self) -> np.ndarray:
@@ -196,6 +193,15 @@ class View:
         """(U, 3) bool: the entries a fit counts -- weight > 0 and the target below its ceiling (an
         entry at the ceiling is censored: the model need only reach it)."""
         return self.entries & (self.values < self.ceiling) if np.isfinite(self.ceiling) else self.entries
+
+
+def target_values(image, used, nonfinite: int) -> np.ndarray:
+    """`View.values`: the (U, 3) float64 rows of a target `image` at the pixels `used` (H, W), its
+    `nonfinite` values there (a count) set to 0."""
+    values = used_rows(image, used, np.float64)
+    if nonfinite:
+        values[~np.isfinite(values)] = 0.0
+    return values
 
 
 def used_rows(image, used, dtype=None) -> np.ndarray:

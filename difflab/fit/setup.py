@@ -30,7 +30,7 @@ from .noise import quantisation
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
 from .problem import LOSSES, Problem, ViewJ, assembled, to_device, value_index
 from .raytree import TreeModel, tree_influence
-from .records import DEVICE_COPIES, KeptView, View, take_pixels, view_key, view_store
+from .records import DEVICE_COPIES, KeptView, View, take_pixels, target_values, view_key, view_store
 from .shading import GBufferModel, influence
 from .stats import FLOAT_SIGMA
 from .result import ResultCode
@@ -272,14 +272,13 @@ class Setup:
         used, pixels = view.kept.pixels(used) if view.kept is not None else (used, np.flatnonzero(used))
         total = view.nonfinite + view.left_out  # (`_record`'s view: all its non-finite values)
         inside = nonfinite_count(view.image, pixels) if total else 0
-        out = dataclasses.replace(view, weighting=weight, used=used, nonfinite=inside, left_out=total - inside)
-        out.__dict__["pixels"] = pixels  # (View's cached property)
-        values = out.values
+        values = target_values(view.image, used, inside)
         top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
         if top is None:  # float data (`ceiling.py`)
-            top = float_ceiling(values, lambda: primary_objects(view.record).reshape(-1)[out.pixels])
-        seen = dataclasses.replace(out, ceiling=np.inf if top is False else float(top))
-        seen.__dict__.update(pixels=out.pixels, values=values)  # View's cached properties, taken already
+            top = float_ceiling(values, lambda: primary_objects(view.record).reshape(-1)[pixels])
+        seen = dataclasses.replace(view, weighting=weight, used=used, nonfinite=inside, left_out=total - inside,
+                                   ceiling=np.inf if top is False else float(top))
+        seen.__dict__.update(pixels=pixels, values=values)  # View's cached properties, taken already
         return seen
 
     def _compiled_for(self, view_scene, device):
