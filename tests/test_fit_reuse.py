@@ -9,7 +9,7 @@ from test_fit_helpers import TRUTH, make_scene, mirror_scene, perturbed, target_
 
 from difflab import compile_scene
 from difflab.fit import Setup, fit_material
-from difflab.fit.records import KEPT_ARRAYS, KEPT_VIEWS, SMALL, STORE, DeviceCopies
+from difflab.fit.records import KEPT_ARRAYS, KEPT_VIEWS, SMALL, STORE, DeviceCopies, take_pixels, used_rows
 
 SCENE = make_scene(size=16)
 TARGET = target_of(SCENE)
@@ -138,6 +138,7 @@ def test_a_setup_reweighted_keeps_its_pixels_and_fits_as_a_setup_built_afresh(co
     def some_left_out(seed):
         return [first.views[0].weight * (np.random.default_rng(seed).random(TARGET.shape[:2]) > 0.3)[..., None]]
 
+    assert first.weight_total == 3 * first.used_pixels  # (its statistics formed: the reweighted copy forms its own)
     again = first.reweighted(some_left_out(0), OTHER_START)
     fresh = Setup(scene, [noisy], "red", weights=some_left_out(0), init=OTHER_START)
     np.testing.assert_array_equal(again.views[0].pixels, first.views[0].pixels)
@@ -210,3 +211,19 @@ def test_small_device_arrays_are_kept_process_wide():
     expected = np.array(first.table.kd)
     expected[red] = [0.25, 0.5, 0.75]
     np.testing.assert_array_equal(other.table.kd, expected)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_used_rows_are_the_pixels_rows_on_a_64_byte_boundary(dtype):
+    """`records.used_rows` (a boolean selection of whole pixels) gives `take_pixels`' rows at the
+    used pixels, of a strided image too, in the dtype asked for, each on a 64-byte boundary (moved
+    to the device in place)."""
+    rng = np.random.default_rng(4)
+    image = rng.normal(size=(9, 14, 4)).astype(dtype)[:, 1::2, :3]  # (9, 7, 3), not contiguous
+    for used in (rng.random((9, 7)) > 0.4, np.zeros((9, 7), bool), np.ones((9, 7), bool)):
+        for out_dtype in (None, np.float64):
+            rows = used_rows(image, used, out_dtype)
+            expected = take_pixels(np.ascontiguousarray(image), np.flatnonzero(used), out_dtype)
+            assert rows.dtype == expected.dtype and rows.shape == (np.count_nonzero(used), 3)
+            np.testing.assert_array_equal(rows, expected)
+            assert rows.size == 0 or rows.ctypes.data % 64 == 0

@@ -192,11 +192,12 @@ class NoiseAhead(NamedTuple):
 
 def noise_ahead(setup: Setup) -> NoiseAhead | None:
     """The noise estimate's `noise_picks` -- the targets' alone, for silent pixels all black ones
-    (`View.black`) -- and each view's `View.floor`, which `clipping.clipped_band` reads after the fit
-    (there, on a target no longer in cache, ~0.1 ms of first.py's first fit), to be formed beside the
-    solve: `run_fit` hands the solve (`solvers.run`'s `beside`, called once "lm"'s compiled solve is
-    dispatched, before any other solver) the queue's `join` for "lm" -- formed on the calling thread,
-    which only waits for the solve meanwhile (XLA runs its loop without the GIL) -- and its `start`
+    (`View.black`) --, the targets' `Setup.statistics` (what only the report reads) and each view's
+    `View.floor`, which `clipping.clipped_band` reads after the fit (there, on a target no longer in
+    cache, ~0.1 ms of first.py's first fit), to be formed beside the solve: `run_fit` hands the
+    solve (`solvers.run`'s `beside`, called once "lm"'s compiled solve is dispatched, before any
+    other solver) the queue's `join` for "lm" -- formed on the calling thread, which only waits
+    for the solve meanwhile (XLA runs its loop without the GIL) -- and its `start`
     for the others, a pool worker (`bandpool.start_beside`; none with threads=1 or DIFFLAB_THREADS=1:
     on the caller when the report asks). None with sigma given (no estimate). On the caller rather
     than a worker (the bench's Mitsuba sphere, fits alternating with the worker's in one process,
@@ -215,6 +216,7 @@ def noise_ahead(setup: Setup) -> NoiseAhead | None:
         picks.append(noise_picks(setup.views, [view.black for view in setup.views]))
         for view in setup.views:
             view.floor  # noqa: B018 (a cached property, formed here)
+        setup.statistics  # noqa: B018 (formed on first use: here, off the solve's path)
     return NoiseAhead(start_beside(targets_alone, "cpu", setup.threads, start=False), picks)
 
 

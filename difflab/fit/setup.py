@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import time
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -29,7 +30,7 @@ from .noise import quantisation
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
 from .problem import LOSSES, Problem, ViewJ, assembled, to_device, value_index
 from .raytree import TreeModel, tree_influence
-from .records import DEVICE_COPIES, KeptView, View, take_pixels, view_key, view_store
+from .records import DEVICE_COPIES, KeptView, View, take_pixels, target_values, view_key, view_store
 from .shading import GBufferModel, influence
 from .stats import FLOAT_SIGMA
 from .result import ResultCode
@@ -37,14 +38,31 @@ from .targets import empty_detail, nonfinite_count, nonfinite_detail, prepared_t
 from .texels import TexelSource, texture_starts, wants_texels
 
 
+class TargetStatistics(NamedTuple):
+    """What the report reads of a fit's targets: censored (used entries at the ceiling that weigh
+    in), quantisation (`noise.quantisation`), sigma_floor (the noise floor: at least FLOAT_SIGMA),
+    weighted_entries (the residual entries that count, (3 U,) bool over the views' (U, 3) rows),
+    weight_total (the sum of their weights) and unit_weights (every used weight is 1: the weighted
+    residuals are the plain ones)."""
+
+    censored: int
+    quantisation: float
+    sigma_floor: float
+    weighted_entries: np.ndarray
+    weight_total: float
+    unit_weights: bool
+
+
 class Setup:
     """A fit prepared (see the module docstring). Attributes: scene (start values written in),
     materials, method, layout, initial (key -> value), x0 (solver coordinates), views, used_pixels,
-    nonfinite (target values at the pixels used), nonfinite_left_out (elsewhere), censored, sigma_given, quantisation (the rms rounding error of the targets' used values,
-    `noise.quantisation`: 0 for float data), sigma_floor, sigma_fallback (the noise when too few pixels allow an estimate, None:
-    unknown; `engine.without_clipped`), x64, dtype, problem, render_seconds (the Warp
-    renders' wall time), base_scene (before `init`), ceiling_given, loss, loss_scale, threads (CPU threads
-    for the render, as given)."""
+    nonfinite (target values at the pixels used), nonfinite_left_out (elsewhere), sigma_given,
+    sigma_fallback (the noise when too few pixels allow an estimate, None: unknown;
+    `engine.without_clipped`), x64, dtype, problem, render_seconds (the Warp renders' wall time),
+    base_scene (before `init`), ceiling_given, loss, loss_scale, threads (CPU threads for the render,
+    as given); and what only the report reads (`statistics`, formed on first use): censored,
+    quantisation (the rms rounding error of the targets' used values, `noise.quantisation`: 0 for
+    float data), sigma_floor, weighted_entries, weight_total, unit_weights."""
 
     def __init__(self, scene, targets, materials=None, params=DEFAULT_PARAMS, *, method=None,
                  per_channel=True, bounded=False, loss="l2", loss_scale=0.05, masks=None, weights=None, init=None,
@@ -88,7 +106,7 @@ class Setup:
         self.threads = threads  # (the render's; `engine.noise_ahead` takes a worker only where it may)
         self.views = self._record(targets, masks, weights, max_depth, spp, device, threads)
         self.used_pixels = sum(v.pixels.size for v in self.views)
-        self._target_statistics()
+        self._targets_seen()
         self.x64 = x64
         self.dtype = jnp.float64 if x64 else jnp.float32
         self.loss, self.loss_scale = loss, loss_scale
@@ -112,19 +130,47 @@ class Setup:
         out.render_seconds = 0.0
         out.views = [out._seen(view, weight, keep=True) for view, weight in zip(self.views, weights)]
         out.used_pixels = sum(v.pixels.size for v in out.views)
-        out._target_statistics()
+        out._targets_seen()
         with jax.enable_x64(self.x64):
             out.problem = out._problem(self.loss, self.loss_scale)
         return out
 
-    def _target_statistics(self):
-        """nonfinite, censored (used values at the ceiling) and the noise floor of the targets."""
+    def _targets_seen(self):
+        """The targets' non-finite values (the precheck's); their statistics formed afresh on first use."""
         self.nonfinite = int(sum(v.nonfinite for v in self.views))
         self.nonfinite_left_out = int(sum(v.left_out for v in self.views))
-        self.censored = int(sum(np.count_nonzero(v.entries) - np.count_nonzero(v.counted)
-                                for v in self.views if np.isfinite(v.ceiling)))  # over the used pixels
-        self.quantisation = quantisation(self.views)  # 0 for float data
-        self.sigma_floor = max(FLOAT_SIGMA, self.quantisation)
+        self._statistics = None
+
+    @property
+    def statistics(self) -> TargetStatistics:
+        """What only the report reads of the targets (`TargetStatistics`), formed on first use: beside
+        the solve (`engine.noise_ahead`, where the calling thread waits for XLA), else by the report.
+        Formed in the setup, before the solve's dispatch, it cost a first fit of the bench's float
+        target ~0.02 ms, of the same target as an 8-bit PNG ~0.46 ms (`noise.quantisation`).
+        (Formed on a worker beside another solver while the report asks for it, it is formed twice,
+        the same.)"""
+        if self._statistics is None:
+            entries, total, unit_weights = [], 0.0, True  # unit weights: the weighted residuals are the plain ones
+            for v in self.views:
+                entries.append(v.entries.reshape(-1))
+                if v.weighting is None:  # 1 at every pixel used
+                    total += 3 * v.pixels.size
+                else:
+                    total += np.sum(v.weights)
+                    unit_weights &= bool(np.all(v.weights == 1.0))
+            censored = int(sum(np.count_nonzero(v.entries) - np.count_nonzero(v.counted)
+                               for v in self.views if np.isfinite(v.ceiling)))  # over the used pixels
+            rounding = quantisation(self.views)  # 0 for float data
+            self._statistics = TargetStatistics(censored, rounding, max(FLOAT_SIGMA, rounding), np.concatenate(entries),
+                                                float(total), unit_weights)
+        return self._statistics
+
+    censored = property(lambda self: self.statistics.censored)
+    quantisation = property(lambda self: self.statistics.quantisation)
+    sigma_floor = property(lambda self: self.statistics.sigma_floor)
+    weighted_entries = property(lambda self: self.statistics.weighted_entries)
+    weight_total = property(lambda self: self.statistics.weight_total)
+    unit_weights = property(lambda self: self.statistics.unit_weights)
 
     def retarget(self, images, init=None) -> Setup:
         """The same fit (views, image models, compiled solve) for other target images, one (H, W, 3)
@@ -139,7 +185,7 @@ class Setup:
             views[-1].__dict__.update(pixels=view.pixels, weights=view.weights)  # cached properties: the same
         out.views = views
         out.labels = [(f"targets[{i}]", mask) for i, (_, mask) in enumerate(self.labels)]  # another image
-        out._target_statistics()
+        out._targets_seen()
         if init is not None:
             scene = apply_init(self.scene, self.materials, init)
             textures = texture_starts(scene, self.materials, init) if self.textures else {}
@@ -226,14 +272,13 @@ class Setup:
         used, pixels = view.kept.pixels(used) if view.kept is not None else (used, np.flatnonzero(used))
         total = view.nonfinite + view.left_out  # (`_record`'s view: all its non-finite values)
         inside = nonfinite_count(view.image, pixels) if total else 0
-        out = dataclasses.replace(view, weighting=weight, used=used, nonfinite=inside, left_out=total - inside)
-        out.__dict__["pixels"] = pixels  # (View's cached property)
-        values = out.values
+        values = target_values(view.image, used, inside)
         top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
         if top is None:  # float data (`ceiling.py`)
-            top = float_ceiling(values, lambda: primary_objects(view.record).reshape(-1)[out.pixels])
-        seen = dataclasses.replace(out, ceiling=np.inf if top is False else float(top))
-        seen.__dict__.update(pixels=out.pixels, values=values)  # View's cached properties, taken already
+            top = float_ceiling(values, lambda: primary_objects(view.record).reshape(-1)[pixels])
+        seen = dataclasses.replace(view, weighting=weight, used=used, nonfinite=inside, left_out=total - inside,
+                                   ceiling=np.inf if top is False else float(top))
+        seen.__dict__.update(pixels=pixels, values=values)  # View's cached properties, taken already
         return seen
 
     def _compiled_for(self, view_scene, device):
@@ -293,16 +338,6 @@ class Setup:
         arrays were moved, it still ran when the solve's dispatch returned, and held the solve
         back (first fits alternating in one process, /tmp/s16handoff/ab.py, medians of 100, load
         1.7-2.1: 7.81 -> 7.61, 8.08 -> 7.72 ms; the solve 2.16 -> 2.03, 2.19 -> 2.01)."""
-        entries, total, self.unit_weights = [], 0.0, True  # unit weights: the weighted residuals are the plain ones
-        for v in self.views:
-            entries.append(v.entries.reshape(-1))
-            if v.weighting is None:  # 1 at every pixel used
-                total += 3 * v.pixels.size
-            else:
-                total += np.sum(v.weights)
-                self.unit_weights &= bool(np.all(v.weights == 1.0))
-        self.weighted_entries = np.concatenate(entries)  # the residual entries that count
-        self.weight_total = float(total)
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
         host = [self._view_arrays(v, v.pixels, index["intensity"]) for v in self.views]
