@@ -72,14 +72,12 @@ class FitOptions:
     @classmethod
     def make(cls, options=None, **overrides) -> FitOptions:
         """`options` (a FitOptions or None) with keyword fields replaced; FitError for unknown names."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(overrides) - known)
+        unknown = sorted(set(overrides) - FIELD_NAMES)
         if unknown:
-            raise FitError(f"unknown argument(s) {unknown}; fit options are {sorted(known)}")
+            raise FitError(f"unknown argument(s) {unknown}; fit options are {sorted(FIELD_NAMES)}")
         if options is not None and not isinstance(options, FitOptions):
             raise FitError(f"options: expected a FitOptions, got {type(options).__name__}")
-        base = {f.name: getattr(options, f.name) for f in fields(cls)} if options is not None else {}
-        return cls(**{**base, **overrides})
+        return cls(**{**vars(options), **overrides}) if options is not None else cls(**overrides)
 
     def tolerances(self) -> tuple[float, float]:
         default_rtol, default_atol = DEFAULT_TOL[self.x64]
@@ -92,3 +90,6 @@ class FitOptions:
 
     def show_progress(self) -> bool:
         return sys.stderr.isatty() if self.progress is None else self.progress
+
+
+FIELD_NAMES = frozenset(f.name for f in fields(FitOptions))

@@ -177,7 +177,7 @@ class Layout:
         lo, hi = _box(self)
         values = np.asarray(values, np.float64)
         x = np.where(self.entries("log") > 0, np.log(np.maximum(values, 1e-300)), values)
-        return np.clip(x, lo, hi)
+        return np.minimum(np.maximum(x, lo), hi)  # (np.clip, the same bits: ~3x the time on a few entries)
 
     def x_from_free(self, z):
         """Unconstrained z -> x in the box (JAX, differentiable; see the module docstring)."""

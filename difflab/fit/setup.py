@@ -288,6 +288,8 @@ class Setup:
         compiled = self.compiled
         if compiled is None or compiled.device != resolve_device(device):
             return None
+        if view_scene is compiled.scene:  # (a view without overrides: its scene is the compiled one)
+            return compiled
         placed = lambda lights: [(l.type, l.position, l.direction) for l in lights]  # noqa: E731, E741
         if view_scene.camera != compiled.scene.camera or placed(view_scene.lights) != placed(compiled.scene.lights):
             return None

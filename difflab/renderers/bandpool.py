@@ -129,6 +129,9 @@ class _BandQueue:
             raise self.error
 
 
+_NOTHING = _BandQueue(None, [])  # `start_beside`'s handle of no task: done, shared (its calls change nothing)
+
+
 def run_bands(run_band, bands: list[tuple[int, int]], threads: int | None = None) -> None:
     """Call `run_band(begin, end)` for every band, in order, on the calling thread and up to
     `threads` - 1 pool workers (kept between calls), each taking the next band when free: the caller
@@ -192,8 +195,10 @@ def start_beside(task, device: str, threads: int | None = None, start: bool = Tr
     launch): the worker, woken, takes the GIL to start, and a caller that wants it back first waits
     (a G-buffer's clearing started at the frame's start held the 256^2 bench sphere's frame ~90 us
     in its next short call that lets the GIL go: a 50 us launch took 141 us of wall)."""
-    queue = _BandQueue(lambda begin, end: task(), [(0, 0)] if task is not None else [])
-    queue.beside = task is not None and device.startswith("cpu") and (cpu_threads() if threads is None else threads) > 1
+    if task is None:  # (a fit frame's G-buffer clearing: ~15 us of its cold frame to make a queue)
+        return _NOTHING
+    queue = _BandQueue(lambda begin, end: task(), [(0, 0)])
+    queue.beside = device.startswith("cpu") and (cpu_threads() if threads is None else threads) > 1
     if start:
         queue.start()
     return queue

@@ -83,6 +83,8 @@ def compile_notice() -> None:
 
 def resolve_device(device: str = "cpu") -> str:
     """Check that `device` ("cpu", "cuda" or "cuda:N") exists and return Warp's name for it."""
+    if device == "cpu" and _initialised:  # (asked 3 times a fit frame: Warp's lookup ~14 us of the first, cold)
+        return device
     init()
     if not isinstance(device, str) or not (device == "cpu" or device.startswith("cuda")):
         raise RenderError(f"device: expected 'cpu' or 'cuda[:N]', got {device!r}")

@@ -397,7 +397,8 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
         if pixels is None and nonfinite and side > 1:  # count the pixels the non-finite samples reach
             nonfinite = nonfinite_pixels(box_downsample(samples_rgb, side))
     stats = frame_stats(compiled, start, nonfinite, width * height, n_points)
-    stats["covered_samples"] = int(np.count_nonzero(gbuffer.mask))
+    if not geometry_only:  # (a fit frame's stats stay inside the fit, which reads none of them)
+        stats["covered_samples"] = int(np.count_nonzero(gbuffer.mask))
     return Frame(image=pixels, buffers=gbuffer, stats=stats)
 
 
