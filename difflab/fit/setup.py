@@ -298,7 +298,8 @@ class Setup:
     def _model(self, view: View, pixels, lights):
         if self.method == "raytrace":
             return TreeModel.build(view.record, pixels, view.scene.background, self.dtype, self.texel_source)
-        return GBufferModel.build(view.record, pixels, lights, self.dtype, self.texel_source)
+        return GBufferModel.build(view.record, pixels, lights, self.dtype, self.texel_source,
+                                  covered=pixels is view.pixels)  # (in the mask: `influence` saw a material)
 
     def _view_arrays(self, view: View, pixels, index) -> tuple:
         """A view's arrays for `pixels`, numpy: (lights, target, sqrt(weight), ceiling (None: the

@@ -131,12 +131,12 @@ def pass_threads(threads: int | None, n_samples: int) -> tuple[int | None, int]:
     return chosen, BANDS_PER_THREAD
 
 
-def halved_zbuffer(threads: int | None, n_samples: int, device: str) -> bool:
+def halved_zbuffer(chosen: int | None, row_pass: tuple, device: str) -> bool:
     """Whether a rasterized frame's z-buffer is drawn as two halves on two threads (`raster.driver.
-    zbuffer`): where `raster_threads` leaves it on one thread (no binning into bands below
-    RASTER_POOL_MIN_SAMPLES) while `pass_threads` gives the per-sample passes every core."""
-    return device == "cpu" and raster_threads(threads, n_samples) == 1 and pass_threads(threads, n_samples)[0] is None \
-        and cpu_threads() > 1
+    zbuffer`): where `raster_threads` leaves it on one thread (`chosen`: its choice; no binning into
+    bands below RASTER_POOL_MIN_SAMPLES) while `pass_threads` (`row_pass`) gives the per-sample passes
+    every core. (The two choices taken, not asked again: ~5 us of a fit's cold frame.)"""
+    return device == "cpu" and chosen == 1 and row_pass[0] is None and cpu_threads() > 1
 
 
 def row_bands(n_rows: int, n_bands: int) -> list[tuple[int, int]]:

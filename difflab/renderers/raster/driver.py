@@ -302,8 +302,8 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     side = settings.spp_side  # the scene validated spp and the sample budget
     width, height = scene.camera.width * side, scene.camera.height * side
     row_pass = pass_threads(threads, width * height)  # (threads, bands per thread) of the per-sample passes
-    halved = halved_zbuffer(threads, width * height, device)  # the G-buffer's z-buffer in two halves (`zbuffer`)
     threads = raster_threads(threads, width * height)
+    halved = halved_zbuffer(threads, row_pass, device)  # the G-buffer's z-buffer in two halves (`zbuffer`)
     shading = SHADING_MODELS[settings.shading]
     clamp_colors = bool(settings.clamp_vertex_colors and shading == GOURAUD)
     perspective_correct = int(settings.interpolation == "perspective")
