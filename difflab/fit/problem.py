@@ -257,8 +257,7 @@ class Problem(eqx.Module):
             if sqrt_weight.ndim:  # (else every weight is 1: no selection, ~0.2 ms of a first fit)
                 counts = sqrt_weight > 0
                 target, part, sqrt_weight = target[counts], part[counts], sqrt_weight[counts]
-            model = part / sqrt_weight
-            model += target
+            model = target + part / sqrt_weight
             if not np.all(model < np.asarray(view.ceiling)):
                 return False
         return True
