@@ -61,6 +61,20 @@ def test_available_memory_is_read_again_only_after_its_max_age(monkeypatch):
     assert limits.available_bytes() == 3 * 2 ** 30
 
 
+def test_a_small_request_is_checked_against_the_last_reading_a_large_one_against_a_new_one(monkeypatch):
+    readings, clock = iter([64 * 2 ** 30, 2 * 2 ** 30]), [100.0]
+    monkeypatch.delenv("DIFFLAB_MEMORY_BUDGET", raising=False)
+    monkeypatch.setattr(limits, "_read_available", lambda: next(readings))
+    monkeypatch.setattr(limits, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(limits, "_available", (-math.inf, 0))
+    limits.require_memory(2 ** 20, "first")  # read: 64 GiB
+    clock[0] += limits.SMALL_MAX_AGE
+    limits.require_memory(2 ** 30, "small")  # 1 GiB = 1 / 64 of the last reading: not read again
+    assert limits._available == (100.0, 64 * 2 ** 30)
+    with pytest.raises(DifflabError, match=r"^large: needs about 1\.50 GiB, over the memory budget of 1\.00 GiB"):
+        limits.require_memory(1.5 * 2 ** 30, "large")  # read again: 2 GiB, a budget of 1 GiB
+
+
 def test_require_memory_names_the_request_and_the_setting(monkeypatch):
     monkeypatch.setenv("DIFFLAB_MEMORY_BUDGET", "1G")
     limits.require_memory(2 ** 30, "frame")  # exactly the budget is allowed
