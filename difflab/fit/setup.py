@@ -146,7 +146,7 @@ class Setup:
         """What only the report reads of the targets (`TargetStatistics`), formed on first use: beside
         the solve (`engine.noise_ahead`, where the calling thread waits for XLA), else by the report.
         Formed in the setup, before the solve's dispatch, it cost a first fit of the bench's float
-        target ~0.02 ms, of the same target as an 8-bit PNG ~0.46 ms (`noise.quantisation`).
+        target ~0.02 ms, of the same target as an 8-bit PNG ~0.3 ms (`noise.quantisation`).
         (Formed on a worker beside another solver while the report asks for it, it is formed twice,
         the same.)"""
         if self._statistics is None:
