@@ -76,22 +76,23 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and finite_gram(gram))
         picks = ahead() if ahead is not None else None  # (first: the picks are done with the views)
         silent, silent_entries = silent_pixels(setup.views, r)
-        sigma, noise_values, share, sigma_range, levels = (
+        middle = []  # unequal noise: the sandwich's middle (`noise_middle`), started once the noise levels are read
+        same_sum = counted is r and all(part.flags.c_contiguous for part in r)  # (sse summed as noise_middle sums)
+        on_levels = None if matrix_free else lambda levels: middle.append(noise_middle(
+            setup, at, r, levels, count - setup.censored - silent_entries, sse if same_sum else None))
+        sigma, noise_values, share, sigma_range, _ = (
             views_noise(setup.views, planes, silent, setup.sigma_given, setup.sigma_floor, setup.sigma_fallback,
-                        setup.quantisation, picks) if finite else (float("nan"), 0, 1.0, None, None))
+                        setup.quantisation, on_levels, picks) if finite else (float("nan"), 0, 1.0, None, None))
         noise_unknown = finite and sigma is None
         mean_weight = setup.weight_total / count if count else 1.0  # (unit weights: 1)
         sigma = float("nan") if sigma is None else sigma
         if finite:
             unseen = sum(int(np.count_nonzero(~seen[p.key])) * (p.size // seen[p.key].size) for p in layout
                          if p.key in seen)  # texels no pixel reads: no unknowns of the data's
-            same_sum = counted is r and all(part.flags.c_contiguous for part in r)  # (sse summed as noise_middle sums)
-            middle = None if matrix_free else noise_middle(  # unequal noise: the sandwich's middle
-                setup, at, r, levels, count - setup.censored - silent_entries, sse if same_sum else None)
             st = fit_statistics(gram, sse, count, setup.censored, sigma, layout.size - unseen, silent_entries,
                                 sigma_given=setup.sigma_given is not None, skip=skip, noise_values=noise_values, noise_share=share,
                                 mean_weight=mean_weight, rcond=singular_rcond(setup.x64), sigma_range=sigma_range,
-                                middle=middle)
+                                middle=middle[0]() if middle and middle[0] else None)
             errors = standard_errors(st["diag"], st["s2"])
             stderr = layout.unflatten(errors)
             quantised = mean_weight * QUANTISATION_SIGMA ** 2  # (as a rule s2 is above it: the floor's are stderr's)

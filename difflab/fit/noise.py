@@ -257,10 +257,12 @@ def estimate_sigma(images, used_maps, weight_maps=None, *, interior=True, signal
     return None if estimate is None else estimate[:3]
 
 
-def _estimate(views: list, planes):
+def _estimate(views: list, planes, on_levels=None):
     """`estimate_sigma` from the views' `ViewPicks` and residual planes (3, H, W), with the levels it
     read after it: per view (None: none) per channel (None: none) (x, v, n), v the levels at
-    intensities x (in units of 36 times the signal; one level: x = [0]) and n `_count_per_level`."""
+    intensities x (in units of 36 times the signal; one level: x = [0]) and n `_count_per_level`.
+    `on_levels(levels)` is called as soon as they are read, before the sums, when there is an
+    estimate (what depends on them can start: `engine.report` dispatches the sandwich's middle)."""
     read = _read(views, planes)
     channels = [channel for view in read if view is not None for channel in view if channel]
     count, den = 0, 0.0
@@ -270,6 +272,8 @@ def _estimate(views: list, planes):
         return None
     levels = [None if view is None else [None if channel is None else (
         channel[0].x, channel[2], _count_per_level(channel[0])) for channel in view] for view in read]
+    if on_levels is not None:
+        on_levels(levels)
     num, spread, square_spread = _sums(channels)
     share = spread * spread / (count * square_spread) if square_spread > 0 else 1.0
     return math.sqrt(num / (36.0 * CAP_MEAN * den)), count, share, levels
@@ -306,7 +310,8 @@ def silent_pixels(views, r) -> tuple[list[np.ndarray], int]:
 
 
 def views_noise(views, residual_planes, silent, given: float | None, floor: float, fallback=None,
-                quantisation: float = 0.0, picks=None) -> tuple[float | None, int, float, tuple | None, list | None]:
+                quantisation: float = 0.0, on_levels=None,
+                picks=None) -> tuple[float | None, int, float, tuple | None, list | None]:
     """The pixel noise sigma of a fit's views, in the targets' units, the number of Laplacian values M
     it was estimated from (0 when given or taken from `fallback`), their `estimate_sigma` share (1
     for none), the range (low, high) of noise levels the residuals allow when their noise is not
@@ -322,14 +327,15 @@ def views_noise(views, residual_planes, silent, given: float | None, floor: floa
     (U,) bool, `silent_pixels`) and the censored ones -- per channel where a weight of 0 leaves a
     used pixel's channel out -- and at least `floor` (the quantisation's, `Setup.sigma_floor`).
     Where too few pixels allow that: `fallback` when given (a refit's, the first fit's sigma), else
-    None (unknown). `picks`: `noise_picks(views, [view.black ...])` when formed already
+    None (unknown). `on_levels(levels)`: called with the levels as soon as they are read, when they
+    are returned (`_estimate`). `picks`: `noise_picks(views, [view.black ...])` when formed already
     (`engine.run_fit`: beside the solve), taken where the silent pixels are the black ones."""
     if given is not None:
         return (math.hypot(given, quantisation) if quantisation else given), 0, weight_share(views), None, None
     if picks is None or not all(quiet is view.black or np.array_equal(quiet, view.black)
                                 for view, quiet in zip(views, silent)):
         picks = noise_picks(views, silent)
-    estimate = _estimate(picks, residual_planes)
+    estimate = _estimate(picks, residual_planes, on_levels)
     if estimate is None:
         return fallback, 0, 1.0, None, None
     spread = sigma_range(estimate[0], floor, whiteness(picks, residual_planes))

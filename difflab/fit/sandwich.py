@@ -24,19 +24,17 @@ It is formed only where the noise levels that the estimate of sigma read (per vi
 half of the intensity range: the targets' noise, so `weights=` are taken to be inverse variances --
 other weights leave the weighted residuals' noise unequal under the pooled form) differ beyond their
 spread (`unequal`): one more linearisation at the solution (`_scaled_gram`: the problem's
-sqrt(weights) times r; ~0.25 ms of XLA's on the 74k entries of a 256 x 256 sphere, `noise_middle`,
-called once the noise estimate is done). What it adds to a first fit's report (the bench's Mitsuba
-sphere, fits with and without it alternating in one process, medians of 60): 0.30 ms at load
-0.4-0.9, 0.70 ms at load 1.8. Nothing runs beside it: XLA's CPU client runs a program on the
-calling thread when its inputs are ready, and so it ran in 17-26 of 30 first fits a process (the
-call 0.36-0.41 ms, done on return; else 0.13-0.15); where it did run beside the estimate's sums,
-dispatched before them, the report took no less (1.50-1.58 ms against 1.46-1.48, load ~3), and
-dispatched after the estimate the report takes the same (paired medians of 100 first fits, load
-2.3-5: +0.029, -0.003, +0.004 ms; fitted again -0.025, +0.039, +0.002). Elsewhere s^2 (J^T J)^-1
-is within ~15 % of it (`unequal`). Not with sigma given (one number: the noise is declared equal),
-nor where it is unknown, nor for a texture fit, dense or matrix-free (the sparse path of
-`stats.covariance_diagonal` keeps the pooled form, and so does a dense one to stay its equal; a
-texel resting on a few pixels would have a sandwich variance of spread sqrt(2 / K) from them).
+sqrt(weights) times r; ~0.25 ms of XLA's after its dispatch on the 74k entries of a 256 x 256
+sphere, dispatched before the rest of the noise estimate to run beside it, `noise_middle`). What it
+adds to a first fit's report (the bench's Mitsuba sphere, fits with and without it alternating in
+one process, medians of 60): 0.30 ms at load 0.4-0.9 -- `unequal` 0.05, the cold dispatch 0.15-0.17
+(0.04 hot), the sums beside XLA's run 0.035 slower, the middle done when asked -- and 0.70 ms at
+load 1.8 (the dispatch 0.43: XLA's threads take the caller's core); waited for at once, 0.25 ms
+more at load 0.5. Elsewhere s^2 (J^T J)^-1 is within ~15 % of it (`unequal`). Not with sigma given
+(one number: the noise is declared equal), nor where it is unknown, nor for a texture fit, dense or
+matrix-free (the sparse path of `stats.covariance_diagonal` keeps the pooled form, and so does a
+dense one to stay its equal; a texel resting on a few pixels would have a sandwich variance of
+spread sqrt(2 / K) from them).
 """
 
 from __future__ import annotations
@@ -93,7 +91,9 @@ def noise_middle(setup, at, r: tuple, levels, counted: int, total: float | None 
     entries (neither censored nor silent); `total`: sum r^2 when the caller has it (`engine.report`'s
     sum of squares: with unit weights and C-order parts the same bits, a pass over r less). None where
     one level serves (`unequal`) -- s^2 (J^T J)^-1 holds -- and for a texture fit (`texels`: the
-    pooled form, dense or matrix-free alike)."""
+    pooled form, dense or matrix-free alike). Else returns a function that gives it: JAX computes
+    J^T diag(r^2) J from the call on, beside what the caller does until it asks (`engine.report`:
+    the rest of the noise estimate)."""
     if levels is None or any(p.shape is not None for p in setup.layout) or not unequal(levels):
         return None
     scales = [part.astype(view.target.dtype, copy=False)  # (r itself: its rows enter J^T diag(r^2) J squared)
@@ -103,5 +103,5 @@ def noise_middle(setup, at, r: tuple, levels, counted: int, total: float | None 
     if not total > 0:
         return None
     with jax.enable_x64(setup.x64):
-        middle = _scaled_gram(setup.problem, at, scales)
-    return np.asarray(middle, np.float64) * (counted / total)
+        middle = _scaled_gram(setup.problem, at, scales)  # (dispatched: it runs while the caller goes on)
+    return lambda: np.asarray(middle, np.float64) * (counted / total)
