@@ -267,28 +267,39 @@ def _add(a, b):
 
 
 def _sum_of_squares(r, squares, windows):
-    """(sum r^2, squares, windows) for r (3, U): bit for bit the sum XLA's CPU code forms of
-    jax.lax.reduce(r * r, 0, _add, (0, 1)) -- its tree: sums of 3 x WINDOW entries of r^2 padded
-    by (n WINDOW - U) // 2 zeros in front (n = `_windows(U)`), then of WINDOW of those, ... --
-    with its two large steps written in place into the loop's buffers (`scratch`): r^2 into
-    squares (3, n WINDOW), whose padding stays 0, and the first sums into windows[:n] (n + 1,).
-    XLA's CPU code split both steps (a fusion moving > 512 KB) between its two threads, but
-    never an update in place (`_in_place`). r^2 is formed apart from its sums: fused into them,
-    LLVM contracts r * r and the running sum into an FMA (other bits). One update of (3, U): as
-    .at[].set -- a scatter, a select of the old values in each -- it cost +0.7-0.9 ms a solve.
-    The bench's 256^2 sphere (8 steps), old and new alternating in one process (load 3.4-3.9):
-    solve_box alone 2.06 -> 1.62 ms back to back, 2.63 -> 2.23 ms 10 ms apart."""
+    """(sum r^2, squares, windows) for r (3, U): bit for bit jax.lax.reduce(r * r, 0, _add, (0, 1))
+    as XLA's CPU code forms it -- a tree: sums of windows of 3 x WINDOW entries of r^2 (padded by
+    (n WINDOW - U) // 2 zeros in front, n = `_windows(U)`), row-major in each window, then a
+    reduce of those n -- with its large first step written in place into the loop's buffers
+    (`scratch`): r^2 into squares (3, n WINDOW), whose padding stays 0, the window sums into
+    windows[:n] (n + 1,). XLA's CPU code split both (fusions moving > 512 KB) between its two
+    threads, never an update in place (`_in_place`). The window sums are adds in order
+    (`_in_order`): XLA's reduce over a (3, n, WINDOW) view sums in other orders; r^2 is formed
+    apart from them (fused, LLVM contracts r * r and the running sum into an FMA); in one
+    lax.dynamic_update_slice (as .at[].set, a scatter with a select of the old values, a (3, U)
+    update cost +0.7-0.9 ms a solve). Where U <= WINDOW (no tree), or one zero pads the last
+    window (XLA's reduce-window then sums in another order), the plain reduce. Equal bit for bit
+    to it on random r (32 consecutive U from 33, 64, 500, 1000, 2048, 3000, 24743, 65531 and
+    100000; float64, and float32 to 24774) and in 64 fits (moments' test cases at 20^2 and 48^2,
+    float64 / float32, with and without noise). The bench's 256^2 sphere (8 steps), old and new
+    alternating in one process (load 3.4-3.9): solve_box alone 2.06 -> 1.60 ms back to back."""
+    if r.shape[1] <= WINDOW or -r.shape[1] % WINDOW == 1:
+        return jax.lax.reduce(r * r, jnp.zeros((), r.dtype), _add, (0, 1)), squares, windows
     n = _windows(r.shape[1])
     squares = jax.lax.dynamic_update_slice(squares, r * r, (0, (n * WINDOW - r.shape[1]) // 2))
-    first = jax.lax.reduce(squares.reshape(r.shape[0], n, WINDOW), jnp.zeros((), r.dtype), _add, (0, 2))
-    windows = jax.lax.dynamic_update_slice(windows, first, (0,))
-    s = windows[:n]
-    while s.shape[0] > WINDOW:
-        m = _windows(s.shape[0])
-        pad = m * WINDOW - s.shape[0]
-        s = jnp.pad(s, (pad // 2, pad - pad // 2)).reshape(m, WINDOW)
-        s = jax.lax.reduce(s, jnp.zeros((), s.dtype), _add, (1,))
-    return jax.lax.reduce(s, jnp.zeros((), s.dtype), _add, (0,)), squares, windows
+    windows = jax.lax.dynamic_update_slice(windows, _in_order(squares.reshape(r.shape[0], n, WINDOW)), (0,))
+    return jax.lax.reduce(windows[None, :n], jnp.zeros((), r.dtype), _add, (0, 1)), squares, windows
+
+
+def _in_order(blocks):
+    """The sums over axes 0 and 2 of blocks (k, m, w), entry by entry in row-major order (that of
+    XLA's reduce-window in each window)."""
+    out = blocks[0, :, 0]
+    for i in range(blocks.shape[0]):
+        for j in range(blocks.shape[2]):
+            if i or j:
+                out = out + blocks[i, :, j]
+    return out
 
 
 def linearise(prepared: tuple, x, problem, carry=None):
