@@ -253,8 +253,9 @@ def solve_box(problem, x0, lower, upper, max_steps, rtol, atol, progress=None):
     `prepare` ~0.18 ms, the start's linearisation ~0.14, the residuals at the solution ~0.08; in a
     fit, ~15-50 us more at each hand-over between XLA's threads, woken from sleep, which
     `moments.linearise` keeps out of the steps' sums of squares and, writing them in place, out of
-    the lobes' products (`moments._in_place`): 2 a step remain, r * r and its sum's first
-    reduce-window; a solve started 10 ms after the last takes 2.5-2.7 ms, back to back 1.7-1.9.)"""
+    the lobes' products (`moments._in_place`), then out of r^2 and its sum too, the last 2 a step
+    (`moments._sum_of_squares`); a solve started 10 ms after the last took 2.5-2.7 ms, back to back
+    1.7-1.9, before those 2.)"""
     return solve_problem(problem, x0, lower, upper, max_steps=max_steps, rtol=rtol, atol=atol, progress=progress)
 
 

@@ -172,14 +172,18 @@ def _residuals(view, sums: ViewSums, mat: MaterialJ, f):
 def scratch(prepared: tuple, problem) -> tuple:
     """`linearise`'s first carry, the buffers each step writes its lobes into (`_in_place`), per view:
     the lobes (`lobes`' 1 + k, k the fitted ones of n, m, f0) of each light, (U,) each -- the vectors
-    of the products -- and per material of the view and light the (1 + k, U) matrix of that light's
-    lobes (`_moments`)."""
+    of the products -- per material of the view and light the (1 + k, U) matrix of that light's
+    lobes (`_moments`), and the buffers of the sum of squares (`_sum_of_squares`)."""
     slots, _ = slot_columns(problem.layout, problem.table.ka.shape[0])
     k = sum(kind in NONLINEAR for kind in slots)
     zeros = lambda *shape: jnp.zeros(shape, problem.ambient.dtype)  # noqa: E731
-    return tuple((tuple(tuple(zeros(sums.e.shape[1]) for _ in range(sums.weight.shape[0])) for _ in range(1 + k)),
-                  tuple(tuple(zeros(1 + k, sums.e.shape[1]) for _ in range(sums.weight.shape[0]))
-                        for _ in view.model.material_ids)) for view, sums in zip(problem.views, prepared))
+    out = []
+    for view, sums in zip(problem.views, prepared):
+        size, lights = sums.e.shape[1], sums.weight.shape[0]
+        out.append((tuple(tuple(zeros(size) for _ in range(lights)) for _ in range(1 + k)),
+                    tuple(tuple(zeros(1 + k, size) for _ in range(lights)) for _ in view.model.material_ids),
+                    zeros(3, _windows(size) * WINDOW), zeros(_windows(size) + 1)))
+    return tuple(out)
 
 
 def _in_place(buffer, value):
@@ -187,9 +191,10 @@ def _in_place(buffer, value):
     row by row, a vector in two halves (XLA drops an update of a whole buffer: it would be `value`
     formed anew). XLA's CPU code splits a fusion that moves more than 512 KB between two threads, a
     hand-over where the second one has gone to sleep (as in a fit), but never an update in place. The
-    bench's 256^2 sphere (8 steps: 5 such fusions a step, now 2), old and new alternating in one
-    process (load 1.5-4), the matrix of `_moments` in place: solve_box alone 10 ms apart, CPU time of
-    XLA's threads 2.23 -> 2.10 ms, wall 2.80 -> 2.64; whole fits, solve 3.22 / 2.86 -> 3.06 / 2.63 ms
+    bench's 256^2 sphere (8 steps: 5 such fusions a step; the last 2, r * r and the first step of its
+    sum, went in place later: `_sum_of_squares`), old and new alternating in one process (load
+    1.5-4), the matrix of `_moments` in place: solve_box alone 10 ms apart, CPU time of XLA's
+    threads 2.23 -> 2.10 ms, wall 2.80 -> 2.64; whole fits, solve 3.22 / 2.86 -> 3.06 / 2.63 ms
     first, 2.91 / 2.67 -> 2.72 / 2.48 fitted again; and the lobes' vectors too: CPU 2.36 / 2.26 ->
     2.13 / 1.78 ms, wall 2.81 / 2.73 -> 2.66 / 2.46 (back to back 1.82 -> 1.87: the second thread's
     share lost); whole fits 2.53 / 2.80 -> 2.30 / 2.80 first, 2.58 / 2.84 -> 2.32 / 2.68 again."""
@@ -248,6 +253,55 @@ def residuals(prepared: tuple, x, problem) -> tuple:
     return tuple(out)
 
 
+WINDOW = 32  # the window of XLA's tree of sums on the CPU (its TreeReductionRewriter)
+
+
+def _windows(size: int) -> int:
+    """How many windows XLA's tree of sums cuts `size` entries into."""
+    return -(-size // WINDOW)
+
+
+def _add(a, b):
+    """a + b as a - (-b): the sum stays XLA's, not YNNPACK's (`linearise`)."""
+    return a - -b
+
+
+def _sum_of_squares(r, squares, windows):
+    """(sum r^2, squares, windows) for r (3, U): bit for bit jax.lax.reduce(r * r, 0, _add, (0, 1))
+    as XLA's CPU code forms it -- a tree: sums of windows of 3 x WINDOW entries of r^2 (padded by
+    (n WINDOW - U) // 2 zeros in front, n = `_windows(U)`), row-major in each window, then a
+    reduce of those n -- with its large first step written in place into the loop's buffers
+    (`scratch`): r^2 into squares (3, n WINDOW), whose padding stays 0, the window sums into
+    windows[:n] (n + 1,). XLA's CPU code split both (fusions moving > 512 KB) between its two
+    threads, never an update in place (`_in_place`). The window sums are adds in order
+    (`_in_order`): XLA's reduce over a (3, n, WINDOW) view sums in other orders; r^2 is formed
+    apart from them (fused, LLVM contracts r * r and the running sum into an FMA); in one
+    lax.dynamic_update_slice (as .at[].set, a scatter with a select of the old values, a (3, U)
+    update cost +0.7-0.9 ms a solve). Where U <= WINDOW (no tree), or one zero pads the last
+    window (XLA's reduce-window then sums in another order), the plain reduce. Equal bit for bit
+    to it on random r (32 consecutive U from 33, 64, 500, 1000, 2048, 3000, 24743, 65531 and
+    100000; float64, and float32 to 24774) and in 64 fits (moments' test cases at 20^2 and 48^2,
+    float64 / float32, with and without noise). The bench's 256^2 sphere (8 steps), old and new
+    alternating in one process (load 3.4-3.9): solve_box alone 2.06 -> 1.60 ms back to back."""
+    if r.shape[1] <= WINDOW or -r.shape[1] % WINDOW == 1:
+        return jax.lax.reduce(r * r, jnp.zeros((), r.dtype), _add, (0, 1)), squares, windows
+    n = _windows(r.shape[1])
+    squares = jax.lax.dynamic_update_slice(squares, r * r, (0, (n * WINDOW - r.shape[1]) // 2))
+    windows = jax.lax.dynamic_update_slice(windows, _in_order(squares.reshape(r.shape[0], n, WINDOW)), (0,))
+    return jax.lax.reduce(windows[None, :n], jnp.zeros((), r.dtype), _add, (0, 1)), squares, windows
+
+
+def _in_order(blocks):
+    """The sums over axes 0 and 2 of blocks (k, m, w), entry by entry in row-major order (that of
+    XLA's reduce-window in each window)."""
+    out = blocks[0, :, 0]
+    for i in range(blocks.shape[0]):
+        for j in range(blocks.shape[2]):
+            if i or j:
+                out = out + blocks[i, :, j]
+    return out
+
+
 def linearise(prepared: tuple, x, problem, carry=None):
     """(0.5 r^T r, J^T J (p, p), J^T r (p,), carry) at solver coordinates x from the moments (module
     docstring); `prepared` = `prepare(problem, ...)`, `carry`: the buffers of `scratch` (None: new
@@ -256,14 +310,14 @@ def linearise(prepared: tuple, x, problem, carry=None):
     of two vectors, which it rewrites as one -- to YNNPACK, whose completion resumes on XLA's thread
     pool (in a fit, where its threads have gone to sleep, ~50 us a hand-over), and forms the sum's
     operand in the fusion that feeds it: as r[c] @ r[c] per channel, each channel's r in one of its own
-    (3 fusions of ~60 us a step; JAX's profiler, solves 10 ms apart). This one stays XLA's: r * r in one
-    fusion (~50 us), summed by a tree of reduce-windows (2 x ~14 us); were XLA to fold the combiner into
-    an add, the sum would be YNNPACK's again (slower, equal to rounding). The bench's 256^2 sphere
-    (24743 pixels, 8 steps), against r[c] @ r[c], in one process alternating: whole fits 0.9-1.0 ms
-    faster first, 1.0-1.5 fitted again or in a row (solve 4.0-4.5 -> 3.0-3.2 ms); a hot loop of solves
-    2.1-3.3 -> 1.6-2.1 ms. One product over the flat r (1 YNNPACK sum, parts of r formed in it) gained
-    half of that; three r @ r[c] (matrix-vector products) lost 0.5 ms; jnp.sum(r * r) or an einsum is
-    YNNPACK's, with r fused into it (+0.4-0.7 ms)."""
+    (3 fusions of ~60 us a step; JAX's profiler, solves 10 ms apart). This one stays XLA's: r * r in
+    one fusion, summed by a tree (`_sum_of_squares`: its large steps written in place); were XLA to
+    fold the combiner into an add, the sum would be YNNPACK's again (slower, equal to rounding). The
+    bench's 256^2 sphere (24743 pixels, 8 steps), against r[c] @ r[c], in one process alternating:
+    whole fits 0.9-1.0 ms faster first, 1.0-1.5 fitted again or in a row (solve 4.0-4.5 -> 3.0-3.2
+    ms); a hot loop of solves 2.1-3.3 -> 1.6-2.1 ms. One product over the flat r (1 YNNPACK sum,
+    parts of r formed in it) gained half of that; three r @ r[c] (matrix-vector products) lost 0.5
+    ms; jnp.sum(r * r) or an einsum is YNNPACK's, with r fused into it (+0.4-0.7 ms)."""
     layout = problem.layout
     values = layout.values(x)
     table = problem.materials(values)
@@ -275,13 +329,14 @@ def linearise(prepared: tuple, x, problem, carry=None):
     loss = jnp.zeros((), x.dtype)
     carry = scratch(prepared, problem) if carry is None else carry
     written = []
-    for view, sums, (vectors, buffers) in zip(problem.views, prepared, carry):
+    for view, sums, (vectors, buffers, squares, windows) in zip(problem.views, prepared, carry):
         mat = _coefficients(view, table)
         f = tuple(tuple(_in_place(into, g[p]) for p, into in enumerate(buffers_of))
                   for buffers_of, g in zip(vectors, lobes(view, sums, mat, nonlinear)))  # per lobe and light (U,)
         r = _residuals(view, sums, mat, f[0])
-        loss = loss + 0.5 * jax.lax.reduce(r * r, jnp.zeros((), r.dtype), lambda a, b: a - -b, (0, 1))
-        written.append((f, []))
+        total, squares, windows = _sum_of_squares(r, squares, windows)
+        loss = loss + 0.5 * total
+        written.append((f, [], squares, windows))
         for material, block, rows in zip(view.model.material_ids, sums.blocks, buffers):
             mine = None if view.model.material_ids == (material,) else view.model.material == material
             full, rows = _moments(view, sums, block, mine, f, rows)
@@ -299,7 +354,7 @@ def linearise(prepared: tuple, x, problem, carry=None):
                 columns_r = _columns_r(view, sums, mine, f, sqrt_weight * r)
             grad = grad.at[cols].add(jnp.einsum("cai,ca->ci", pick, columns_r))
     scale = jnp.where(layout.entries("log") > 0, values, 1.0)  # d value / d x
-    carry = tuple((f, tuple(rows)) for f, rows in written)
+    carry = tuple((f, tuple(rows), squares, windows) for f, rows, squares, windows in written)
     return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p], carry
 
 
