@@ -272,7 +272,8 @@ def _sum_of_squares(r, squares, windows):
     (n WINDOW - U) // 2 zeros in front, n = `_windows(U)`), row-major in each window, then a
     reduce of those n -- with its large first step written in place into the loop's buffers
     (`scratch`): r^2 into squares (3, n WINDOW), whose padding stays 0, the window sums into
-    windows[:n] (n + 1,). XLA's CPU code split both (fusions moving > 512 KB) between its two
+    windows[:n] (n + 1,: one entry more than written, as an update of a whole buffer would be formed
+    anew, `_in_place`). XLA's CPU code split both (fusions moving > 512 KB) between its two
     threads, never an update in place (`_in_place`). The window sums are adds in order
     (`_in_order`): XLA's reduce over a (3, n, WINDOW) view sums in other orders; r^2 is formed
     apart from them (fused, LLVM contracts r * r and the running sum into an FMA); in one
@@ -282,7 +283,9 @@ def _sum_of_squares(r, squares, windows):
     to it on random r (32 consecutive U from 33, 64, 500, 1000, 2048, 3000, 24743, 65531 and
     100000; float64, and float32 to 24774) and in 64 fits (moments' test cases at 20^2 and 48^2,
     float64 / float32, with and without noise). The bench's 256^2 sphere (8 steps), old and new
-    alternating in one process (load 3.4-3.9): solve_box alone 2.06 -> 1.60 ms back to back."""
+    alternating in one process (load 3.4-3.9): solve_box alone 2.06 -> 1.60 ms back to back;
+    whole fits in processes alternating on a quiet machine (8 rounds of 30 fits, load 1.1-1.3): the
+    solve 2.06 -> 1.85 ms in a first fit, 2.05 -> 1.78 fitted again, 2.05 -> 1.70 in a row."""
     if r.shape[1] <= WINDOW or -r.shape[1] % WINDOW == 1:
         return jax.lax.reduce(r * r, jnp.zeros((), r.dtype), _add, (0, 1)), squares, windows
     n = _windows(r.shape[1])
