@@ -197,7 +197,7 @@ def read_image(path: str | os.PathLike, srgb: bool = True, what: str = "image") 
         image = _as_image(array[..., 0] if grey and array.ndim == 3 else array)
         return LoadedImage(image[..., :3].copy(), None, 1 if grey else 3, None)
     pixels, gamma, bits, channels = read_picture(path)
-    image = np.take(decode_table(np.iinfo(pixels.dtype).max, srgb, gamma), pixels)
+    image = np.take(decode_table(np.iinfo(pixels.dtype).max, srgb, gamma if srgb else None), pixels)
     return LoadedImage(image, bits, channels, gamma if srgb else 1.0)
 
 

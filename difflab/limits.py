@@ -144,7 +144,7 @@ def _vm_size() -> int:
 AVAILABLE_MAX_AGE = 0.5
 #: A request of at most SMALL_SHARE of the memory available at the last reading is checked against
 #: that reading while it is at most SMALL_MAX_AGE seconds old (`require_memory`): such a request fits
-#: unless the available memory has since fallen SMALL_SHARE / BUDGET_FRACTION = 32-fold, while
+#: unless the available memory has since fallen BUDGET_FRACTION / SMALL_SHARE = 32-fold, while
 #: re-reading it cost a fit's first frame after a pause (> AVAILABLE_MAX_AGE: one fit at a time)
 #: ~0.15-0.45 ms for a 256 x 256 frame of ~15 MiB (1 / 1200 of this VM's 18 GiB available).
 SMALL_SHARE = 1 / 64

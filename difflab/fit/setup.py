@@ -339,8 +339,8 @@ class Setup:
         (`shading._device_model`, ~0.35 ms of XLA's threads for the bench's 24.7k points) then runs
         beside the rest of the setup, ending before the solve is dispatched -- after the small
         arrays were moved, it still ran when the solve's dispatch returned, and held the solve
-        back (first fits alternating in one process, /tmp/s16handoff/ab.py, medians of 100, load
-        1.7-2.1: 7.81 -> 7.61, 8.08 -> 7.72 ms; the solve 2.16 -> 2.03, 2.19 -> 2.01)."""
+        back (first fits alternating in one process, medians of 100, load 1.7-2.1: 7.81 -> 7.61,
+        8.08 -> 7.72 ms; the solve 2.16 -> 2.03, 2.19 -> 2.01)."""
         index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
         host = [self._view_arrays(v, v.pixels, index["intensity"]) for v in self.views]
