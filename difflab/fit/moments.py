@@ -156,11 +156,10 @@ def lobes(view, sums: ViewSums, mat: MaterialJ, kinds):
     return jax.lax.optimization_barrier(tuple(out))
 
 
-def _residuals(view, sums: ViewSums, mat: MaterialJ, f):
+def _residuals(view, sums: ViewSums, mat: MaterialJ, f, intensity):
     """The view's weighted residuals (3, U) from its rows and `lobes`' first entry f, (U,) a light
     (sums over the lights as products with their intensities: XLA's CPU product of a (3, P) and a
     (P, U) matrix costs several times as much)."""
-    intensity = view.lights.intensity
     lights = range(intensity.shape[0])
     e = sums.e
     diffuse = sum(intensity[p][:, None] * e[1 + p] for p in lights)
@@ -173,7 +172,16 @@ def scratch(prepared: tuple, problem) -> tuple:
     """`linearise`'s first carry, the buffers each step writes its lobes into (`_in_place`), per view:
     the lobes (`lobes`' 1 + k, k the fitted ones of n, m, f0) of each light, (U,) each -- the vectors
     of the products -- per material of the view and light the (1 + k, U) matrix of that light's
-    lobes (`_moments`), and the buffers of the sum of squares (`_sum_of_squares`)."""
+    lobes (`_moments`), the buffers of the sum of squares (`_sum_of_squares`), the lights'
+    intensities (P, 3), which `linearise` passes on through an optimization barrier -- XLA would
+    otherwise hoist their product with the diffuse rows out of the loop, a (3, U) array of its own --
+    and the (3, U) buffer `residuals` writes r at the solution into: the target's, reshaped (XLA
+    copies an argument it may not write in a copy it never splits; a (3, U) array formed anew is a
+    fusion split between its threads, `_in_place`; likewise a (3, n WINDOW) buffer of zeros, hence
+    the sum of squares' three). The bench's 256^2 sphere: 4 fusions XLA split in a solve -> 1 (the
+    start's rows, `prepare`), solvers.run alone 5 ms apart (medians of 60, 16 pairs of processes
+    alternating, load ~2): 2.13 -> 2.09 ms (paired -0.07, 10 of 16 faster), the process's voluntary
+    context switches a solve 6.6 -> 5.0 (one XLA thread, DIFFLAB_JAX_THREADS=1: 4.6)."""
     slots, _ = slot_columns(problem.layout, problem.table.ka.shape[0])
     k = sum(kind in NONLINEAR for kind in slots)
     zeros = lambda *shape: jnp.zeros(shape, problem.ambient.dtype)  # noqa: E731
@@ -182,7 +190,8 @@ def scratch(prepared: tuple, problem) -> tuple:
         size, lights = sums.e.shape[1], sums.weight.shape[0]
         out.append((tuple(tuple(zeros(size) for _ in range(lights)) for _ in range(1 + k)),
                     tuple(tuple(zeros(1 + k, size) for _ in range(lights)) for _ in view.model.material_ids),
-                    zeros(3, _windows(size) * WINDOW), zeros(_windows(size) + 1)))
+                    tuple(zeros(_windows(size) * WINDOW) for _ in range(3)), zeros(_windows(size) + 1),
+                    view.lights.intensity, view.target.reshape(3, size)))
     return tuple(out)
 
 
@@ -241,15 +250,17 @@ def _columns_r(view, sums: ViewSums, mine, f, v):
     return jnp.concatenate([jnp.einsum("cae,ce->ca", sums.t, ev), fv], axis=1)
 
 
-def residuals(prepared: tuple, x, problem) -> tuple:
+def residuals(prepared: tuple, x, problem, carry=None) -> tuple:
     """The weighted residuals at solver coordinates x, per view (3, U), channel-major: the layout
     the report reads them in (`Problem.view_residuals`; XLA's CPU code would transpose them at a
-    fraction of numpy's speed); `prepared` = `prepare(problem, ...)`."""
+    fraction of numpy's speed); `prepared` = `prepare(problem, ...)`; `carry`: `linearise`'s (the
+    solve's last), whose (3, U) buffers they are written into (`scratch`), or None."""
     table = problem.materials(problem.layout.values(x))
     out = []
-    for view, sums in zip(problem.views, prepared):
+    for i, (view, sums) in enumerate(zip(problem.views, prepared)):
         mat = _coefficients(view, table)
-        out.append(_residuals(view, sums, mat, lobes(view, sums, mat, ())[0]))
+        r = _residuals(view, sums, mat, lobes(view, sums, mat, ())[0], view.lights.intensity)
+        out.append(r if carry is None else _in_place(carry[i][-1], r))
     return tuple(out)
 
 
@@ -271,13 +282,13 @@ def _sum_of_squares(r, squares, windows):
     as XLA's CPU code forms it -- a tree: sums of windows of 3 x WINDOW entries of r^2 (padded by
     (n WINDOW - U) // 2 zeros in front, n = `_windows(U)`), row-major in each window, then a
     reduce of those n -- with its large first step written in place into the loop's buffers
-    (`scratch`): r^2 into squares (3, n WINDOW), whose padding stays 0, the window sums into
-    windows[:n] (n + 1,: one entry more than written, as an update of a whole buffer would be formed
-    anew, `_in_place`). XLA's CPU code split both (fusions moving > 512 KB) between its two
+    (`scratch`): r^2 into squares (3 of (n WINDOW,), one a channel), whose padding stays 0, the
+    window sums into windows[:n] (n + 1,: one entry more than written, as an update of a whole
+    buffer would be formed anew, `_in_place`). XLA's CPU code split both (fusions moving > 512 KB) between its two
     threads, never an update in place (`_in_place`). The window sums are adds in order
     (`_in_order`): XLA's reduce over a (3, n, WINDOW) view sums in other orders; r^2 is formed
     apart from them (fused, LLVM contracts r * r and the running sum into an FMA); in one
-    lax.dynamic_update_slice (as .at[].set, a scatter with a select of the old values, a (3, U)
+    lax.dynamic_update_slice a channel (as .at[].set, a scatter with a select of the old values, a (3, U)
     update cost +0.7-0.9 ms a solve). Where U <= WINDOW (no tree), or one zero pads the last
     window (XLA's reduce-window then sums in another order), the plain reduce. Equal bit for bit
     to it on random r (32 consecutive U from 33, 64, 500, 1000, 2048, 3000, 24743, 65531 and
@@ -289,19 +300,20 @@ def _sum_of_squares(r, squares, windows):
     if r.shape[1] <= WINDOW or -r.shape[1] % WINDOW == 1:
         return jax.lax.reduce(r * r, jnp.zeros((), r.dtype), _add, (0, 1)), squares, windows
     n = _windows(r.shape[1])
-    squares = jax.lax.dynamic_update_slice(squares, r * r, (0, (n * WINDOW - r.shape[1]) // 2))
-    windows = jax.lax.dynamic_update_slice(windows, _in_order(squares.reshape(r.shape[0], n, WINDOW)), (0,))
+    squares = tuple(jax.lax.dynamic_update_slice(into, r[c] * r[c], ((n * WINDOW - r.shape[1]) // 2,))
+                    for c, into in enumerate(squares))
+    windows = jax.lax.dynamic_update_slice(windows, _in_order([into.reshape(n, WINDOW) for into in squares]), (0,))
     return jax.lax.reduce(windows[None, :n], jnp.zeros((), r.dtype), _add, (0, 1)), squares, windows
 
 
 def _in_order(blocks):
-    """The sums over axes 0 and 2 of blocks (k, m, w), entry by entry in row-major order (that of
-    XLA's reduce-window in each window)."""
-    out = blocks[0, :, 0]
-    for i in range(blocks.shape[0]):
-        for j in range(blocks.shape[2]):
+    """The sums over the k blocks (m, w) and their axis 1, entry by entry: block by block, each
+    in row-major order (that of XLA's reduce-window in each window)."""
+    out = blocks[0][:, 0]
+    for i, block in enumerate(blocks):
+        for j in range(block.shape[1]):
             if i or j:
-                out = out + blocks[i, :, j]
+                out = out + block[:, j]
     return out
 
 
@@ -332,14 +344,15 @@ def linearise(prepared: tuple, x, problem, carry=None):
     loss = jnp.zeros((), x.dtype)
     carry = scratch(prepared, problem) if carry is None else carry
     written = []
-    for view, sums, (vectors, buffers, squares, windows) in zip(problem.views, prepared, carry):
+    for view, sums, (vectors, buffers, squares, windows, intensity, solution) in zip(problem.views, prepared, carry):
         mat = _coefficients(view, table)
         f = tuple(tuple(_in_place(into, g[p]) for p, into in enumerate(buffers_of))
                   for buffers_of, g in zip(vectors, lobes(view, sums, mat, nonlinear)))  # per lobe and light (U,)
-        r = _residuals(view, sums, mat, f[0])
+        intensity, solution = jax.lax.optimization_barrier((intensity, solution))  # (`scratch`)
+        r = _residuals(view, sums, mat, f[0], intensity)
         total, squares, windows = _sum_of_squares(r, squares, windows)
         loss = loss + 0.5 * total
-        written.append((f, [], squares, windows))
+        written.append((f, [], squares, windows, intensity, solution))
         for material, block, rows in zip(view.model.material_ids, sums.blocks, buffers):
             mine = None if view.model.material_ids == (material,) else view.model.material == material
             full, rows = _moments(view, sums, block, mine, f, rows)
@@ -357,7 +370,7 @@ def linearise(prepared: tuple, x, problem, carry=None):
                 columns_r = _columns_r(view, sums, mine, f, sqrt_weight * r)
             grad = grad.at[cols].add(jnp.einsum("cai,ca->ci", pick, columns_r))
     scale = jnp.where(layout.entries("log") > 0, values, 1.0)  # d value / d x
-    carry = tuple((f, tuple(rows), squares, windows) for f, rows, squares, windows in written)
+    carry = tuple((f, tuple(rows), *rest) for f, rows, *rest in written)
     return loss, scale[:, None] * gram[:p, :p] * scale[None, :], scale * grad[:p], carry
 
 
