@@ -141,8 +141,8 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
         x0: (p,) start (clipped into the box); lower, upper: (p,) bounds (+-inf allowed).
         max_steps: the most steps (static); rtol, atol: the stopping tolerances above.
         progress: None, or a host callable (step, loss) called after each step.
-        residuals: (x, args, carry) -> r (N,; any pytree: `moments.residuals`), formed at the solution
-            from the loop's last carry (None: r is not returned).
+        residuals: (x, args) -> r (N,; any pytree: `moments.residuals`), formed at the solution
+            (None: r is not returned).
         exact: None, or (x, args) -> (r, J^T J, ...) whose J^T J is exact where `linearise`'s only
             steers the steps: r and J^T J at the solution are taken from it instead.
         lambda0: the starting damping (relative to diag(J^T J)): LAMBDA0, Marquardt's; the solves
@@ -217,13 +217,12 @@ def box_lm(linearise, x0, lower, upper, args, *, max_steps: int, rtol, atol, pro
     out = jax.lax.while_loop(running, body, state)
     code = jnp.where(out.code == RUNNING, SUCCESSFUL, out.code)
     if exact is None:  # the loop's J^T J at the solution
-        r = None if residuals is None else residuals(out.x, args, out.carry)
-        return out.x, code, out.step, out.history, r, out.a
+        return out.x, code, out.step, out.history, None if residuals is None else residuals(out.x, args), out.a
     r, a = exact(out.x, args)[:2]
     return out.x, code, out.step, out.history, r, a
 
 
-def _residuals(x, problem, carry):
+def _residuals(x, problem):
     return problem.residuals(x)
 
 

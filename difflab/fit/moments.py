@@ -172,16 +172,17 @@ def scratch(prepared: tuple, problem) -> tuple:
     """`linearise`'s first carry, the buffers each step writes its lobes into (`_in_place`), per view:
     the lobes (`lobes`' 1 + k, k the fitted ones of n, m, f0) of each light, (U,) each -- the vectors
     of the products -- per material of the view and light the (1 + k, U) matrix of that light's
-    lobes (`_moments`), the buffers of the sum of squares (`_sum_of_squares`), the lights'
-    intensities (P, 3), which `linearise` passes on through an optimization barrier -- XLA would
-    otherwise hoist their product with the diffuse rows out of the loop, a (3, U) array of its own --
-    and the (3, U) buffer `residuals` writes r at the solution into: the target's, reshaped (XLA
-    copies an argument it may not write in a copy it never splits; a (3, U) array formed anew is a
-    fusion split between its threads, `_in_place`; likewise a (3, n WINDOW) buffer of zeros, hence
-    the sum of squares' three). The bench's 256^2 sphere: 4 fusions XLA split in a solve -> 1 (the
-    start's rows, `prepare`), solvers.run alone 5 ms apart (medians of 60, 16 pairs of processes
-    alternating, load ~2): 2.13 -> 2.09 ms (paired -0.07, 10 of 16 faster), the process's voluntary
-    context switches a solve 6.6 -> 5.0 (one XLA thread, DIFFLAB_JAX_THREADS=1: 4.6)."""
+    lobes (`_moments`), the buffers of the sum of squares (`_sum_of_squares`; three, one a channel:
+    a (3, n WINDOW) buffer's zeros were a fusion XLA's CPU code split between its threads, as it
+    does any that moves more than 512 KB, `_in_place`) and the lights' intensities (P, 3), which
+    `linearise` passes on through an optimization barrier: XLA would otherwise hoist their product
+    with the diffuse rows out of the loop, a (3, U) array of its own, split likewise. The bench's
+    256^2 sphere: the solve's fusions split 4 -> 2 (left: the start's rows `e`, and r at the
+    solution), bit for bit the same; old and new solves alternating in one process (medians of 80
+    first fits, load 1.4): the solve 1.949 -> 1.902 and 1.913 -> 1.856 ms (paired -0.025, -0.045),
+    fitted again 2.616 -> 2.527; solves alone 5 ms apart, 2 runs of 100: paired -0.071, -0.013 ms;
+    voluntary context switches a solve 6.5 -> 6.3. (r at the solution written in place too, into a
+    carried copy of the target: no further gain -- the copy is 26 us on the start's path.)"""
     slots, _ = slot_columns(problem.layout, problem.table.ka.shape[0])
     k = sum(kind in NONLINEAR for kind in slots)
     zeros = lambda *shape: jnp.zeros(shape, problem.ambient.dtype)  # noqa: E731
@@ -191,7 +192,7 @@ def scratch(prepared: tuple, problem) -> tuple:
         out.append((tuple(tuple(zeros(size) for _ in range(lights)) for _ in range(1 + k)),
                     tuple(tuple(zeros(1 + k, size) for _ in range(lights)) for _ in view.model.material_ids),
                     tuple(zeros(_windows(size) * WINDOW) for _ in range(3)), zeros(_windows(size) + 1),
-                    view.lights.intensity, view.target.reshape(3, size)))
+                    view.lights.intensity))
     return tuple(out)
 
 
@@ -250,17 +251,15 @@ def _columns_r(view, sums: ViewSums, mine, f, v):
     return jnp.concatenate([jnp.einsum("cae,ce->ca", sums.t, ev), fv], axis=1)
 
 
-def residuals(prepared: tuple, x, problem, carry=None) -> tuple:
+def residuals(prepared: tuple, x, problem) -> tuple:
     """The weighted residuals at solver coordinates x, per view (3, U), channel-major: the layout
     the report reads them in (`Problem.view_residuals`; XLA's CPU code would transpose them at a
-    fraction of numpy's speed); `prepared` = `prepare(problem, ...)`; `carry`: `linearise`'s (the
-    solve's last), whose (3, U) buffers they are written into (`scratch`), or None."""
+    fraction of numpy's speed); `prepared` = `prepare(problem, ...)`."""
     table = problem.materials(problem.layout.values(x))
     out = []
-    for i, (view, sums) in enumerate(zip(problem.views, prepared)):
+    for view, sums in zip(problem.views, prepared):
         mat = _coefficients(view, table)
-        r = _residuals(view, sums, mat, lobes(view, sums, mat, ())[0], view.lights.intensity)
-        out.append(r if carry is None else _in_place(carry[i][-1], r))
+        out.append(_residuals(view, sums, mat, lobes(view, sums, mat, ())[0], view.lights.intensity))
     return tuple(out)
 
 
@@ -284,12 +283,12 @@ def _sum_of_squares(r, squares, windows):
     reduce of those n -- with its large first step written in place into the loop's buffers
     (`scratch`): r^2 into squares (3 of (n WINDOW,), one a channel), whose padding stays 0, the
     window sums into windows[:n] (n + 1,: one entry more than written, as an update of a whole
-    buffer would be formed anew, `_in_place`). XLA's CPU code split both (fusions moving > 512 KB) between its two
-    threads, never an update in place (`_in_place`). The window sums are adds in order
-    (`_in_order`): XLA's reduce over a (3, n, WINDOW) view sums in other orders; r^2 is formed
+    buffer would be formed anew, `_in_place`). XLA's CPU code split both (fusions moving > 512 KB)
+    between its two threads, never an update in place (`_in_place`). The window sums are adds in
+    order (`_in_order`): XLA's reduce over a (3, n, WINDOW) view sums in other orders; r^2 is formed
     apart from them (fused, LLVM contracts r * r and the running sum into an FMA); in one
-    lax.dynamic_update_slice a channel (as .at[].set, a scatter with a select of the old values, a (3, U)
-    update cost +0.7-0.9 ms a solve). Where U <= WINDOW (no tree), or one zero pads the last
+    lax.dynamic_update_slice a channel (as .at[].set, a scatter with a select of the old values, a
+    (3, U) update cost +0.7-0.9 ms a solve). Where U <= WINDOW (no tree), or one zero pads the last
     window (XLA's reduce-window then sums in another order), the plain reduce. Equal bit for bit
     to it on random r (32 consecutive U from 33, 64, 500, 1000, 2048, 3000, 24743, 65531 and
     100000; float64, and float32 to 24774) and in 64 fits (moments' test cases at 20^2 and 48^2,
@@ -344,15 +343,15 @@ def linearise(prepared: tuple, x, problem, carry=None):
     loss = jnp.zeros((), x.dtype)
     carry = scratch(prepared, problem) if carry is None else carry
     written = []
-    for view, sums, (vectors, buffers, squares, windows, intensity, solution) in zip(problem.views, prepared, carry):
+    for view, sums, (vectors, buffers, squares, windows, intensity) in zip(problem.views, prepared, carry):
         mat = _coefficients(view, table)
         f = tuple(tuple(_in_place(into, g[p]) for p, into in enumerate(buffers_of))
                   for buffers_of, g in zip(vectors, lobes(view, sums, mat, nonlinear)))  # per lobe and light (U,)
-        intensity, solution = jax.lax.optimization_barrier((intensity, solution))  # (`scratch`)
+        intensity = jax.lax.optimization_barrier(intensity)  # (`scratch`)
         r = _residuals(view, sums, mat, f[0], intensity)
         total, squares, windows = _sum_of_squares(r, squares, windows)
         loss = loss + 0.5 * total
-        written.append((f, [], squares, windows, intensity, solution))
+        written.append((f, [], squares, windows, intensity))
         for material, block, rows in zip(view.model.material_ids, sums.blocks, buffers):
             mine = None if view.model.material_ids == (material,) else view.model.material == material
             full, rows = _moments(view, sums, block, mine, f, rows)
