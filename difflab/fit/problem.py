@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 import math
 
 import equinox as eqx
@@ -141,7 +142,7 @@ def on_boundary(array: np.ndarray) -> np.ndarray:
 def carved(shapes, dtypes) -> list[np.ndarray]:
     """Empty arrays of these shapes and dtypes carved from one buffer, each from a 64-byte boundary."""
     sizes = [math.prod(shape) * np.dtype(kind).itemsize for shape, kind in zip(shapes, dtypes)]
-    starts = np.cumsum([0] + [-(-size // 64) * 64 for size in sizes]).tolist()
+    starts = list(itertools.accumulate([-(-size // 64) * 64 for size in sizes], initial=0))  # (np.cumsum: ~2 us more)
     raw = np.empty(starts[-1] + 64, np.uint8)
     base = -raw.ctypes.data % 64
     return [raw[base + start:base + start + size].view(kind).reshape(shape)

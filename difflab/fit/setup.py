@@ -306,9 +306,11 @@ class Setup:
         target is not clipped), intensity_index) (see `ViewJ`)."""
         lights = lights_to_jax(view.scene.lights, self.dtype, host=True)
         count = lights.intensity.shape[0]
-        intensity_index = np.full((count, 3), -1, np.int32)
-        shared = min(count, index.shape[0])
-        intensity_index[:shared] = index[:shared]
+        intensity_index = index  # (the scene's lights: `value_index`'s own, read-only)
+        if count != index.shape[0]:
+            intensity_index = np.full((count, 3), -1, np.int32)
+            shared = min(count, index.shape[0])
+            intensity_index[:shared] = index[:shared]
         real = np.dtype(self.dtype)
         used = pixels is view.pixels  # its rows are taken once (`View.values`, `View.weights`)
         if used and view.weighting is None:

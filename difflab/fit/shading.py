@@ -130,7 +130,8 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32, covered: bool = False
         i is point i).
     """
     side = int(gbuffer.spp_side)
-    height, width = gbuffer.mask.shape[0] // side, gbuffer.mask.shape[1] // side
+    height, width = gbuffer.material.shape[0] // side, gbuffer.material.shape[1] // side  # (not the mask: a fit
+    # frame's is formed on first read, `raster.gbuffer._FitGBuffer`)
     pixels = np.arange(height * width) if pixels is None else np.asarray(pixels, np.int64).reshape(-1)
     pts = gbuffer.points
     mode, color, start, end, density = gbuffer.fog
