@@ -8,7 +8,6 @@ The image model is chosen, and the arguments checked, in `arguments.py`.
 from __future__ import annotations
 
 import copy
-import dataclasses
 import time
 from typing import NamedTuple
 
@@ -181,7 +180,7 @@ class Setup:
         for view, image in zip(self.views, images):
             total = nonfinite_count(image)
             inside = nonfinite_count(image, view.pixels) if total else 0
-            views.append(dataclasses.replace(view, image=image, nonfinite=inside, left_out=total - inside))
+            views.append(view.replaced(image=image, nonfinite=inside, left_out=total - inside))
             views[-1].__dict__.update(pixels=view.pixels, weights=view.weights)  # cached properties: the same
         out.views = views
         out.labels = [(f"targets[{i}]", mask) for i, (_, mask) in enumerate(self.labels)]  # another image
@@ -262,7 +261,7 @@ class Setup:
         which saturate there; for float data, ties at the maximum of the used values: `ceiling.py`);
         `keep`: the view's own pixels and ceiling."""
         if keep:  # the same pixels, rows and ceiling
-            out = dataclasses.replace(view, weighting=weight)
+            out = view.replaced(weighting=weight)
             out.__dict__.update(pixels=view.pixels, values=view.values, zeros=view.zeros)
             return out
         used = view.mask & view.touched
@@ -276,8 +275,8 @@ class Setup:
         top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
         if top is None:  # float data (`ceiling.py`)
             top = float_ceiling(values, lambda: primary_objects(view.record).reshape(-1)[pixels])
-        seen = dataclasses.replace(view, weighting=weight, used=used, nonfinite=inside, left_out=total - inside,
-                                   ceiling=np.inf if top is False else float(top))
+        seen = view.replaced(weighting=weight, used=used, nonfinite=inside, left_out=total - inside,
+                             ceiling=np.inf if top is False else float(top))
         seen.__dict__.update(pixels=pixels, values=values)  # View's cached properties, taken already
         return seen
 
