@@ -27,7 +27,7 @@ from .ceiling import float_ceiling, primary_objects, refuse_values_above
 from .materials import MaterialTable
 from .noise import quantisation
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
-from .problem import LOSSES, Problem, ViewJ, assembled, to_device, value_index
+from .problem import LOSSES, Problem, ViewJ, assembled, device_index, to_device, value_index
 from .raytree import TreeModel, tree_influence
 from .records import DEVICE_COPIES, KeptView, View, take_pixels, target_values, view_key, view_store
 from .shading import GBufferModel, influence
@@ -342,14 +342,15 @@ class Setup:
         arrays were moved, it still ran when the solve's dispatch returned, and held the solve
         back (first fits alternating in one process, medians of 100, load 1.7-2.1: 7.81 -> 7.61,
         8.08 -> 7.72 ms; the solve 2.16 -> 2.03, 2.19 -> 2.01)."""
-        index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
+        counts = (self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
-        host = [self._view_arrays(v, v.pixels, index["intensity"]) for v in self.views]
+        intensity = value_index(*counts)["intensity"]
+        host = [self._view_arrays(v, v.pixels, intensity) for v in self.views]
         models = [self._view_model(v, v.pixels, h[0]) for v, h in zip(self.views, host)]
-        arrays, table, ambient, index, loss_scale = DEVICE_COPIES.on_device((
+        arrays, table, ambient, loss_scale = DEVICE_COPIES.on_device((
             host, MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
-            np.asarray(self.scene.ambient, real), {k: v for k, v in index.items() if k != "intensity"},
-            np.asarray(loss_scale, real)))
+            np.asarray(self.scene.ambient, real), np.asarray(loss_scale, real)))
+        index = device_index(*counts, jax.config.jax_default_device)
         views = tuple(self._view(a, m) for m, a in zip(models, arrays))
         return assembled(Problem, views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
                          layout=self.layout, loss=loss, smoothness=self.smoothness)
