@@ -278,16 +278,19 @@ def test_run_bands_keeps_one_pool_per_thread_count():
 
 
 class _FirstWaitInterrupted:
-    """A band queue's `wait` whose first call is interrupted (Ctrl-C), as the caller's wait in `join` may be."""
+    """An event whose first wait is interrupted (Ctrl-C), as the caller's wait in `join` may be."""
 
-    def __init__(self, wait):
-        self.wait, self.waits = wait, 0
+    def __init__(self, event):
+        self.event, self.waits = event, 0
 
-    def __call__(self):
+    def wait(self, timeout=None):
         self.waits += 1
         if self.waits == 1:
             raise KeyboardInterrupt
-        return self.wait()
+        return self.event.wait(timeout)
+
+    def set(self):
+        self.event.set()
 
 
 def test_an_interrupt_while_waiting_stops_bands_from_starting_and_lets_running_ones_end():
@@ -303,7 +306,7 @@ def test_an_interrupt_while_waiting_stops_bands_from_starting_and_lets_running_o
             started.append("end")
 
     queue = bandpool._BandQueue(band, [(0, 1), (1, 2), (2, 3)])
-    queue.wait = _FirstWaitInterrupted(queue.wait)
+    queue.finished = _FirstWaitInterrupted(queue.finished)
     bandpool._pool(1).submit(queue.work)
     assert running.wait(60)
     queue.work = lambda: None  # the caller is interrupted before it took a band
@@ -335,7 +338,7 @@ def test_a_task_started_beside_runs_once_and_join_hands_back_its_error(threads):
     with pytest.raises(RenderError, match="^cleared nothing$"):
         bandpool.start_beside(fail, "cpu", threads).join()
     nothing = bandpool.start_beside(None, "cpu", threads)
-    assert not nothing.done.locked()  # nothing to do: done at once, no worker woken
+    assert nothing.finished.is_set()  # nothing to do: done at once, no worker woken
     nothing.join()
 
 

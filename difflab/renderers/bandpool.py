@@ -71,26 +71,10 @@ class _BandQueue:
 
     def __init__(self, run_band, bands: list[tuple[int, int]]):
         self.run_band, self.todo = run_band, list(reversed(bands))  # popped from the end: first band first
-        self.lock, self.done = threading.Lock(), threading.Lock()
+        self.lock, self.finished = threading.Lock(), threading.Event()
         self.left, self.error = len(bands), None
-        if bands:
-            self.done.acquire()  # held until every band is done (`_count`)
-
-    def _count(self, bands: int) -> None:
-        """`bands` more bands done or dropped (under `lock`): `done` is let go when the last is.
-        (A lock as the latch, not an Event, whose Condition is Python to make, set and wait on: a
-        first fit makes 3 queues; `engine.noise_ahead` 19 -> 14 us, and first fits alternating
-        with the Event in one process, medians of 200 at load 2: the frame -0.01 to -0.03 ms, the
-        solve dispatched 0.04-0.10 ms sooner.)"""
-        if bands:
-            self.left -= bands
-            if self.left == 0:
-                self.done.release()
-
-    def wait(self) -> None:
-        """Return once every band is done (or dropped)."""
-        with self.done:
-            pass
+        if not bands:
+            self.finished.set()
 
     def work(self) -> None:
         while True:
@@ -105,19 +89,23 @@ class _BandQueue:
                     self.error = self.error or exc
                 self.drop()
             with self.lock:
-                self._count(1)
+                self.left -= 1
+                if self.left == 0:
+                    self.finished.set()
 
     def drop(self) -> None:
         """Leave the bands not started yet undone (they never will be)."""
         with self.lock:
-            self._count(len(self.todo))
+            self.left -= len(self.todo)
             self.todo.clear()
+            if self.left == 0:
+                self.finished.set()
 
     def cancel(self) -> None:
         """Leave the bands not started undone and wait for those running, their errors dropped (for a
         caller that is passing on an error of its own); after `join`, nothing."""
         self.drop()
-        self.wait()
+        self.finished.wait()
         self.run_band = None
 
     def start(self) -> None:
@@ -129,10 +117,10 @@ class _BandQueue:
     def join(self) -> None:
         try:
             self.work()
-            self.wait()
+            self.finished.wait()
         except BaseException:  # interrupted waiting (Ctrl-C): no band starts now; those running end first
             self.drop()
-            self.wait()
+            self.finished.wait()
             raise
         finally:
             self.run_band = None  # a pool worker may hold this queue a moment longer: not what the bands
@@ -192,7 +180,7 @@ def _follow_phases(queues: list[_BandQueue]) -> None:
     their end, it took the GIL from the caller's code that follows (~10-15 us a frame)."""
     for queue in queues[:-1]:
         queue.work()
-        queue.wait()
+        queue.finished.wait()
         if queue.error is not None:
             return
     queues[-1].work()
