@@ -141,7 +141,7 @@ class Layout:
         return found
 
     def __reduce__(self):  # (a pickled layout is interned where it is loaded; its hash is that process's)
-        return _interned, (self.params,)
+        return _interned, (tuple(dataclasses.astuple(p) for p in self.params),)
 
     def __iter__(self):
         return iter(self.params)
@@ -345,10 +345,10 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
                                    "the scene (its file sets the texel grid and the start values)")
                 shape = tuple(texture_shapes[name]) if spec.texels else None
                 size = 3 * shape[0] * shape[1] if spec.texels else 3 if spec.rgb and per_channel else 1
-                layout.append(Param(f"{name}.{kind}" if qualify else kind, kind, scene.material_names.index(name),
-                                    size, spec.lower, upper, shape))
+                layout.append((f"{name}.{kind}" if qualify else kind, kind, scene.material_names.index(name),
+                               size, spec.lower, upper, shape))
     for i in sorted(set(lights)):
-        layout.append(Param(f"lights[{i}].intensity", "intensity", i, 3 if per_channel else 1, 0.0, INF))
+        layout.append((f"lights[{i}].intensity", "intensity", i, 3 if per_channel else 1, 0.0, INF, None))
     if not layout:
         raise FitError(f"params: nothing to fit in {list(params)} for materials {list(materials)} and "
                        f"{len(scene.lights)} light(s)")
@@ -357,11 +357,12 @@ def build_layout(scene, materials, params, *, tree: bool, per_channel=True, boun
 
 @functools.lru_cache(maxsize=64)
 def _interned(params: tuple) -> Layout:
-    """One `Layout` per parameter list: a fit's layout is then the one its earlier fits used, found
-    equal by identity where the problem's static fields are compared (each jitted call's dispatch;
-    `_box`, `_entries`) rather than by comparing its `Param`s (16 such hashes and compares in a
-    first fit: ~100 us)."""
-    return Layout(params)
+    """One `Layout` per parameter list, given as tuples of each `Param`'s fields: a fit's layout is
+    then the one its earlier fits used, found equal by identity where the problem's static fields
+    are compared (each jitted call's dispatch; `_box`, `_entries`) rather than by comparing its
+    `Param`s (16 such hashes and compares in a first fit: ~100 us); the list is hashed and compared
+    here as plain tuples, its Params made only for a new one (a dataclass's hash and == are Python)."""
+    return Layout(tuple(Param(*p) for p in params))
 
 
 def scene_value(scene, param: Param, textures=None) -> np.ndarray:

@@ -137,6 +137,13 @@ class View:
     touched: np.ndarray | None = None
     left_out: int = 0
 
+    def replaced(self, **changes) -> View:
+        """`dataclasses.replace(self, **changes)` without its checks and `__init__` (~15 us of a first
+        fit's setup); the cached properties stay behind."""
+        out = object.__new__(View)
+        out.__dict__.update({name: self.__dict__[name] for name in VIEW_FIELDS}, **changes)
+        return out
+
     @cached_property
     def target(self) -> np.ndarray:
         inside = np.isfinite(self.image) & self.mask[..., None]
@@ -193,6 +200,9 @@ class View:
         """(U, 3) bool: the entries a fit counts -- weight > 0 and the target below its ceiling (an
         entry at the ceiling is censored: the model need only reach it)."""
         return self.entries & (self.values < self.ceiling) if np.isfinite(self.ceiling) else self.entries
+
+
+VIEW_FIELDS = tuple(f.name for f in fields(View))
 
 
 def target_values(image, used, nonfinite: int) -> np.ndarray:

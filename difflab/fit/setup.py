@@ -8,7 +8,6 @@ The image model is chosen, and the arguments checked, in `arguments.py`.
 from __future__ import annotations
 
 import copy
-import dataclasses
 import time
 from typing import NamedTuple
 
@@ -28,7 +27,7 @@ from .ceiling import float_ceiling, primary_objects, refuse_values_above
 from .materials import MaterialTable
 from .noise import quantisation
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
-from .problem import LOSSES, Problem, ViewJ, assembled, to_device, value_index
+from .problem import LOSSES, Problem, ViewJ, assembled, device_index, to_device, value_index
 from .raytree import TreeModel, tree_influence
 from .records import DEVICE_COPIES, KeptView, View, take_pixels, target_values, view_key, view_store
 from .shading import GBufferModel, influence
@@ -181,7 +180,7 @@ class Setup:
         for view, image in zip(self.views, images):
             total = nonfinite_count(image)
             inside = nonfinite_count(image, view.pixels) if total else 0
-            views.append(dataclasses.replace(view, image=image, nonfinite=inside, left_out=total - inside))
+            views.append(view.replaced(image=image, nonfinite=inside, left_out=total - inside))
             views[-1].__dict__.update(pixels=view.pixels, weights=view.weights)  # cached properties: the same
         out.views = views
         out.labels = [(f"targets[{i}]", mask) for i, (_, mask) in enumerate(self.labels)]  # another image
@@ -262,7 +261,7 @@ class Setup:
         which saturate there; for float data, ties at the maximum of the used values: `ceiling.py`);
         `keep`: the view's own pixels and ceiling."""
         if keep:  # the same pixels, rows and ceiling
-            out = dataclasses.replace(view, weighting=weight)
+            out = view.replaced(weighting=weight)
             out.__dict__.update(pixels=view.pixels, values=view.values, zeros=view.zeros)
             return out
         used = view.mask & view.touched
@@ -276,8 +275,8 @@ class Setup:
         top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
         if top is None:  # float data (`ceiling.py`)
             top = float_ceiling(values, lambda: primary_objects(view.record).reshape(-1)[pixels])
-        seen = dataclasses.replace(view, weighting=weight, used=used, nonfinite=inside, left_out=total - inside,
-                                   ceiling=np.inf if top is False else float(top))
+        seen = view.replaced(weighting=weight, used=used, nonfinite=inside, left_out=total - inside,
+                             ceiling=np.inf if top is False else float(top))
         seen.__dict__.update(pixels=pixels, values=values)  # View's cached properties, taken already
         return seen
 
@@ -306,9 +305,11 @@ class Setup:
         target is not clipped), intensity_index) (see `ViewJ`)."""
         lights = lights_to_jax(view.scene.lights, self.dtype, host=True)
         count = lights.intensity.shape[0]
-        intensity_index = np.full((count, 3), -1, np.int32)
-        shared = min(count, index.shape[0])
-        intensity_index[:shared] = index[:shared]
+        intensity_index = index  # (the scene's lights: `value_index`'s own, read-only)
+        if count != index.shape[0]:
+            intensity_index = np.full((count, 3), -1, np.int32)
+            shared = min(count, index.shape[0])
+            intensity_index[:shared] = index[:shared]
         real = np.dtype(self.dtype)
         used = pixels is view.pixels  # its rows are taken once (`View.values`, `View.weights`)
         if used and view.weighting is None:
@@ -341,14 +342,15 @@ class Setup:
         arrays were moved, it still ran when the solve's dispatch returned, and held the solve
         back (first fits alternating in one process, medians of 100, load 1.7-2.1: 7.81 -> 7.61,
         8.08 -> 7.72 ms; the solve 2.16 -> 2.03, 2.19 -> 2.01)."""
-        index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
+        counts = (self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
-        host = [self._view_arrays(v, v.pixels, index["intensity"]) for v in self.views]
+        intensity = value_index(*counts)["intensity"]
+        host = [self._view_arrays(v, v.pixels, intensity) for v in self.views]
         models = [self._view_model(v, v.pixels, h[0]) for v, h in zip(self.views, host)]
-        arrays, table, ambient, index, loss_scale = DEVICE_COPIES.on_device((
+        arrays, table, ambient, loss_scale = DEVICE_COPIES.on_device((
             host, MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
-            np.asarray(self.scene.ambient, real), {k: v for k, v in index.items() if k != "intensity"},
-            np.asarray(loss_scale, real)))
+            np.asarray(self.scene.ambient, real), np.asarray(loss_scale, real)))
+        index = device_index(*counts, jax.config.jax_default_device)
         views = tuple(self._view(a, m) for m, a in zip(models, arrays))
         return assembled(Problem, views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
                          layout=self.layout, loss=loss, smoothness=self.smoothness)

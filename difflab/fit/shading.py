@@ -130,19 +130,20 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32, covered: bool = False
         i is point i).
     """
     side = int(gbuffer.spp_side)
-    height, width = gbuffer.mask.shape[0] // side, gbuffer.mask.shape[1] // side
+    height, width = gbuffer.material.shape[0] // side, gbuffer.material.shape[1] // side  # (not the mask: a fit
+    # frame's is formed on first read, `raster.gbuffer._FitGBuffer`)
     pixels = np.arange(height * width) if pixels is None else np.asarray(pixels, np.int64).reshape(-1)
     pts = gbuffer.points
     mode, color, start, end, density = gbuffer.fog
-    formation = Formation(specular=SPECULAR_MODELS[gbuffer.specular], fog_mode=int(mode),
-                          clamp_colors=bool(gbuffer.clamp_vertex_colors))
+    fog_mode, clamp_colors = int(mode), bool(gbuffer.clamp_vertex_colors)
     point_ids = None
-    if side == 1 and formation.fog_mode == FOG_NONE and not formation.clamp_colors:
+    if side == 1 and fog_mode == FOG_NONE and not clamp_colors:
         point_ids = own_points(gbuffer, pixels, covered)
+    # direct: each pixel is one point's colour (the points, in pixel order, are the pixels)
+    formation = Formation(specular=SPECULAR_MODELS[gbuffer.specular], fog_mode=fog_mode, clamp_colors=clamp_colors,
+                          direct=point_ids is not None)
     comp = None
-    if point_ids is not None:  # each pixel is one point's colour: the points, in pixel order, are the pixels
-        formation = formation._replace(direct=True)
-    else:
+    if point_ids is None:
         if side == 1:
             samples = pixels[:, None]  # (U, S) flat sample indices
         else:
@@ -329,7 +330,7 @@ class GBufferModel(eqx.Module):
         `covered`: see `pixel_arrays`."""
         points, comp, formation, point_ids = pixel_arrays(gbuffer, pixels, dtype, covered)
         kinds = tuple(sorted(set(np.asarray(lights.kind).tolist())))  # the terms the geometry needs
-        flat = points._replace(rows=points.rows.reshape(-1))  # (see `_device_model`)
+        flat = PointRows(points.rows.reshape(-1), points.material)  # (see `_device_model`)
         material, cell, geometry, comp = _device_model(flat, comp, lights, formation.specular, kinds)
         taps = tap_weight = None
         if texels is not None:

@@ -109,6 +109,29 @@ def cleared_key(compiled, n_samples: int, name: str = "key") -> wp.array:
     return key
 
 
+def host_view(compiled, name: str, array: wp.array) -> np.ndarray:
+    """`to_host(array)` of the scratch array `name`: on the CPU its numpy view, kept with it (Warp's
+    array interface: ~10 us of a fit's cold frame for a one-int flag)."""
+    if compiled.device != "cpu":
+        return to_host(array)
+    pool = compiled.scratch_pool()
+    kept = pool.get(("view", name))
+    if kept is None or kept[0] is not array:
+        kept = pool[("view", name)] = (array, to_host(array))
+    return kept[1]
+
+
+def zeroed_scratch(compiled, name: str, shape, dtype) -> wp.array:
+    """`compiled.scratch(name, shape, dtype)` set to zero, on the CPU through its `host_view` (Warp's
+    `zero_`: ~20 us of a fit's cold frame for a one-int flag)."""
+    array = compiled.scratch(name, shape, dtype)
+    if compiled.device == "cpu":
+        host_view(compiled, name, array).fill(0)
+    else:
+        array.zero_()
+    return array
+
+
 def mark_key_cleared(compiled, key: wp.array, name: str = "key") -> None:
     compiled.scratch_pool()[("cleared", name)] = key
 
@@ -186,15 +209,14 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
                                                            (band_plan(height, device, threads), threads)))
         return tris, key
     p_clip, p_screen = scratch("clip", n_vertices, wp.vec4), scratch("screen", n_vertices, wp.vec4d)
-    behind = scratch("behind", 1, wp.int32)
-    behind.zero_()
+    behind = zeroed_scratch(compiled, "behind", 1, wp.int32)
     kept = compiled.scratch_pool()  # the launches of scratch arrays, recorded (`launch_kept`)
     launch_chunks(clip.clip_vertices_kernel, n_vertices, [arrays["vertices"], cam.view_proj, width, height, p_clip,
                                                           p_screen, behind], device, threads, kept)
     extra = none = scratch("no slots", 0, wp.int32)  # only a vertex behind the near plane can split a face
     n_split = 0
     near = scratch("no vertices", 0, wp.vec4)  # (`clip.assemble_face`: no face is clipped)
-    if to_host(behind)[0]:
+    if host_view(compiled, "behind", behind)[0]:
         extra, n_split = split_slots(compiled, p_clip, threads)
         near = p_clip
     n_slots = n_faces + n_split
@@ -203,21 +225,20 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     bands = band_plan(height, device, threads)
     band_of_row = band_rows(bands, height, device)
     parts = part_count(n_faces, device, threads)
-    counts = scratch("bin counts", (parts, len(bands)) if len(bands) > 1 else (0, 1), wp.int32)  # (1 band: no bins)
-    tests = scratch("bin tests", parts, wp.int64)
-    counts.zero_()
-    tests.zero_()
+    counts = zeroed_scratch(compiled, "bin counts", (parts, len(bands)) if len(bands) > 1 else (0, 1),  # (1 band:
+                            wp.int32)  # no bins)
+    tests = zeroed_scratch(compiled, "bin tests", parts, wp.int64)
     if beside is not None:
         beside()
     launch_parts(clip.assemble_kernel, n_faces, [
         arrays["faces"], near, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
         tris.face, band_of_row, counts, tests], device, threads, kept)
-    check_raster_work(int(to_host(tests).sum()), n_slots, "render", RenderError)
+    check_raster_work(int(host_view(compiled, "bin tests", tests).sum()), n_slots, "render", RenderError)
     band_index = {band: k for k, band in enumerate(bands)}
     binned = none  # one band: it draws every slot, nothing is binned
     starts = np.array([0, n_slots])
     if len(bands) > 1:
-        starts, cursor = bin_starts(to_host(counts))
+        starts, cursor = bin_starts(host_view(compiled, "bin counts", counts))
         binned = scratch("binned", 1 << int(starts[-1]).bit_length(), wp.int32)  # a power of two: kept between frames
         launch_parts(coverage.bin_kernel, n_faces, [
             extra, rows, width, height, band_of_row, wp.array(cursor, dtype=wp.int32, device=device), binned], device,
