@@ -55,9 +55,9 @@ def normalise_targets(targets) -> list[tuple[object, dict]]:
 
 
 def load_target(item, where: str) -> tuple[np.ndarray, float | None, float | None]:
-    """(image (H, W, 3) linear floats -- a copy of an array, in its own precision; from a file its float32
-    values as decoded (`io.read_image`; as float64 they cost a first fit of a 256 x 256 8-bit PNG ~0.04 ms more) --, its
-    sample step: 1 / 255 for 8-bit image files, 1 / 65535 for 16-bit ones (their ceiling is 1.0),
+    """(image (H, W, 3) linear floats -- a copy of an array, in its own precision; from a file its
+    float32 values as decoded (`io.read_image`; as float64 they cost a first fit of a 256 x 256 8-bit
+    PNG ~0.04 ms more) --, its sample step: 1 / 255 for 8-bit image files, 1 / 65535 for 16-bit ones (their ceiling is 1.0),
     None for float data, and the file's gamma as `io.read_image` decoded it: None for sRGB (or float
     data), 1.0 for linear samples -- with the step, what `io.code_step` needs)."""
     if _is_path(item):

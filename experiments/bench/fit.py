@@ -404,7 +404,8 @@ def print_report(report: dict) -> None:
                   f"of which the Warp render {w['render_s'] * 1e3:.1f} ms, solve {w['solve_s'] * 1e3:.1f} ms, "
                   f"statistics {w['stats_s'] * 1e3:.1f} ms)")
         others = d.get("others_cores")
-        others = "" if others is None else f"; other processes used {max(others, 0.0):.1f} of {os.cpu_count()} cores in the fits"
+        others = "" if others is None else \
+            f"; other processes used {max(others, 0.0):.1f} of {os.cpu_count()} cores in the fits"
         print(f"(goal: 1/50 or less; medians, first / again interleaved, then the fits in a row; load average "
               f"{mitsuba['load_1min']:.1f} after the run; DIFFLAB_JAX_THREADS={mitsuba['xla_threads']}{others})")
     elif mitsuba is not None:
