@@ -94,7 +94,14 @@ def _products(sums: ViewSums, square, rows, vector):
 
 def prepare(problem, x) -> tuple:
     """The constant rows and moments of `problem`, a `ViewSums` per view (read at solver coordinates
-    x: only what no fitted value changes -- the checker's second cells -- is used)."""
+    x: only what no fitted value changes -- the checker's second cells -- is used). The constant
+    blocks are E products of e and a copy of each of its rows (`_products`): ~0.1 ms of a first fit's
+    solve on the bench's 256^2 sphere (JAX's profiler, medians of 30 first fits: with 1 row's product
+    for all 5, the solve's start 327 / 400 -> 215 / 255 us). Measured and not taken: one product
+    e e^T (YNNPACK's, 2e-15 apart: 230-250 us in a fit, split between XLA's threads); the rows formed
+    apart from e (bit for bit, but XLA's CPU code splits each row's fusion there: `_in_place`); e with
+    rows for the steps' lobes, one product a lobe for both e f and f f (bit for bit, 2 products fewer
+    a step: ~30-40 us of XLA's time a solve, lost to the longer e and products of its rows)."""
     table = problem.materials(problem.layout.values(x))
     views = []
     for view in problem.views:
@@ -200,7 +207,9 @@ def _in_place(buffer, value):
     """`buffer` (carried by the solve's loop: `scratch`) holding `value`, written in place: a matrix
     row by row, a vector in two halves (XLA drops an update of a whole buffer: it would be `value`
     formed anew). XLA's CPU code splits a fusion that moves more than 512 KB between two threads, a
-    hand-over where the second one has gone to sleep (as in a fit), but never an update in place. The
+    hand-over where the second one has gone to sleep (as in a fit), but never an update in place (and
+    outside the loop also smaller ones it counts more flops than bytes for: each (U,) row of the
+    start's e, or each channel of r at the solution, formed on its own). The
     bench's 256^2 sphere (8 steps: 5 such fusions a step; the last 2, r * r and the first step of its
     sum, went in place later: `_sum_of_squares`), old and new alternating in one process (load
     1.5-4), the matrix of `_moments` in place: solve_box alone 10 ms apart, CPU time of XLA's
@@ -254,7 +263,10 @@ def _columns_r(view, sums: ViewSums, mine, f, v):
 def residuals(prepared: tuple, x, problem) -> tuple:
     """The weighted residuals at solver coordinates x, per view (3, U), channel-major: the layout
     the report reads them in (`Problem.view_residuals`; XLA's CPU code would transpose them at a
-    fraction of numpy's speed); `prepared` = `prepare(problem, ...)`."""
+    fraction of numpy's speed); `prepared` = `prepare(problem, ...)`. (One fusion that XLA's CPU code
+    splits between its threads: ~85 us of a solve's XLA time. Written in place instead, row by row,
+    into the sum of squares' buffers made one (3, n WINDOW): 60 us, but those buffers' zeros split
+    again and the report reads strided rows -- whole fits in ABBA order no faster.)"""
     table = problem.materials(problem.layout.values(x))
     out = []
     for view, sums in zip(problem.views, prepared):
