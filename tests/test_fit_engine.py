@@ -298,8 +298,9 @@ print(names.count("tf_XLAEigen"), os.environ.get("NPROC"))
 def test_xla_cpu_threads_follow_the_environment(monkeypatch):
     """$DIFFLAB_JAX_THREADS sets XLA's intra-op (Eigen) threads of a fitting process: 1 with 1 --
     NPROC, through which it is set, is left as it was (here 5, which XLA would otherwise have
-    taken) --, one per core unset or with `all`; an invalid value is a DifflabError naming the
-    variable."""
+    taken) --, one per core unset or with `all`, and then one more, the closed-form fits' client
+    of one thread (`cache.register_serial_cpu`, on more than one core); an invalid value is a
+    DifflabError naming the variable."""
     from difflab.fit.cache import limit_xla_threads
 
     def threads(value, **nproc):
@@ -310,12 +311,43 @@ def test_xla_cpu_threads_follow_the_environment(monkeypatch):
         return done.stdout.split()
 
     assert threads("1", NPROC="5") == ["1", "5"]
-    cores = str(len(os.sched_getaffinity(0)))
-    assert threads("") == threads("all") == [cores, "None"]
+    cores = len(os.sched_getaffinity(0))
+    assert threads("") == threads("all") == [str(cores + ((os.cpu_count() or 1) > 1)), "None"]
     for value in ("many", "-1", "1.5"):
         monkeypatch.setenv("DIFFLAB_JAX_THREADS", value)
         with pytest.raises(DifflabError, match="DIFFLAB_JAX_THREADS"):
             limit_xla_threads()
+
+
+def test_closed_form_fits_run_on_the_one_thread_client_with_the_same_results(monkeypatch):
+    """A fit whose normal equations are formed in closed form (the G-buffer's Phong points, the l2
+    loss, material coefficients and lobes) makes its arrays and runs its solve on the CPU client of
+    one thread (`Setup.jax_device`: `cache.serial_cpu_device`, None on one core), with every result
+    the same, bit for bit, as on JAX's default device; fits by forward mode (a robust loss, a
+    light's intensity) keep the default device."""
+    from difflab.fit import setup as setup_module
+    from difflab.fit.cache import serial_cpu_device
+    from difflab.fit.engine import solve
+
+    scene = make_scene(size=24)
+    target = target_of(scene) + np.random.default_rng(3).normal(0.0, 0.01, (24, 24, 3))
+    start = {"ka": [0.2] * 3, "kd": [0.4] * 3, "ks": [0.3] * 3, "n": 12.0}
+    closed = setup_module.Setup(scene, [target], "red", init=start)
+    device = serial_cpu_device()
+    assert closed.jax_device is device
+    if device is not None:
+        leaves = [leaf for leaf in jax.tree_util.tree_leaves(closed.problem) if isinstance(leaf, jax.Array)]
+        assert leaves and all(next(iter(leaf.devices())).client is device.client for leaf in leaves)
+    monkeypatch.setattr(setup_module, "serial_cpu_device", lambda: None)
+    default = setup_module.Setup(scene, [target], "red", init=start)
+    assert default.jax_device is None
+    a, b = solve(closed), solve(default)
+    assert a.converged and a.steps == b.steps and a.history == b.history and a.chi2 == b.chi2 and a.sigma == b.sigma
+    for key in a.params:
+        assert np.array_equal(a.params[key], b.params[key]) and np.array_equal(a.stderr[key], b.stderr[key])
+    monkeypatch.undo()
+    assert setup_module.Setup(scene, [target], "red", loss="huber").jax_device is None
+    assert setup_module.Setup(scene, [target], "red", ("kd", "intensity")).jax_device is None
 
 
 def test_a_target_no_material_can_reach_puts_every_coefficient_on_its_bound():

@@ -82,7 +82,7 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
     t0 = time.perf_counter()
     solved = [None] * count
     todo = [b for b in range(count) if elements[b].precheck() is None]
-    with jax.enable_x64(setup.x64):
+    with jax.enable_x64(setup.x64), setup.on_device():
         if vmap and options.solver == "lm" and not options.matrix_free(setup.layout.size) and todo:
             rtol, atol = options.tolerances()
             lower, upper = (jnp.asarray(v, setup.dtype) for v in setup.layout.bounds())
@@ -114,7 +114,8 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
             results.append(report(elements[b], None, elements[b].precheck(), 0, [], options, each))
         else:
             s = solved[b]
-            out = report(elements[b], s.x, s.result, s.steps, s.history, options, each, s.linearised)
+            with setup.on_device():  # (the report's JAX work where the solve ran, as `engine.run_fit`'s)
+                out = report(elements[b], s.x, s.result, s.steps, s.history, options, each, s.linearised)
             results.append(without_clipped(elements[b], out, options))
     return results
 

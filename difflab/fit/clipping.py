@@ -52,7 +52,7 @@ def clipped_band(setup, result) -> list[np.ndarray] | None:
         return None  # (the model images are formed only for a view clipped at a bound)
     flat = setup.layout.flatten({p.key: np.asarray(result.params[p.key], np.float64).reshape(-1)
                                  for p in setup.layout})
-    with jax.enable_x64(setup.x64):
+    with jax.enable_x64(setup.x64), setup.on_device():
         images = images_jit(setup.problem, np.asarray(flat, setup.dtype))  # numpy: moved with the call
     bands = []
     for view, image, (floor, top) in zip(setup.views, images, bounds):

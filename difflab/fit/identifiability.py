@@ -124,7 +124,7 @@ def identifiability(setup: Setup, values: dict | None = None, *, sigma=None, rel
                        f"{DENSE_MAX} entries (a smaller texture, or fewer params)")
     values = {k: np.asarray(v, np.float64).reshape(-1) for k, v in (values or setup.initial).items()}
     sigma = QUANTISATION_SIGMA if sigma is None else float(sigma)
-    with jax.enable_x64(setup.x64):
+    with jax.enable_x64(setup.x64), setup.on_device():
         gram, r = normal_matrix(setup.problem, jnp.asarray(layout.flatten(values), setup.dtype))
     rcond = singular_rcond(setup.x64)
     eigval, eigvec, _, _, singular = unit_spectrum(gram, rcond=rcond)  # a zero column (a parameter no pixel sees) is singular

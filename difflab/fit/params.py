@@ -30,10 +30,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import DifflabError, FitError
-from .cache import enable_compilation_cache, limit_xla_threads
+from .cache import enable_compilation_cache, limit_xla_threads, register_serial_cpu
 
 enable_compilation_cache()  # here, as every fit module imports this one before any makes a JAX array
 limit_xla_threads()
+register_serial_cpu()
 
 INF = math.inf
 LOG_RANGE = (-12.0, 12.0)

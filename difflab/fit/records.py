@@ -93,8 +93,8 @@ class KeptView:
         return found
 
     def model(self, key, used: np.ndarray, build):
-        """The image model for the pixels `used` (H, W) bool and `key` (precision), cut by `build()`
-        on first use."""
+        """The image model for the pixels `used` (H, W) bool and `key` (method, precision, device), cut
+        by `build()` on first use."""
         with self._lock:
             for kept_key, kept_used, model in self._models:
                 if kept_key == key and (kept_used is used or np.array_equal(kept_used, used)):

@@ -7,6 +7,7 @@ The image model is chosen, and the arguments checked, in `arguments.py`.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import time
 from typing import NamedTuple
@@ -23,14 +24,16 @@ from ..renderers.compile import CompiledScene
 from ..renderers.launch import resolve_device
 from ..scene import RenderSettings
 from .arguments import check_ceiling, check_number, check_smoothness, choose_method
+from .cache import serial_cpu_device
 from .ceiling import float_ceiling, primary_objects, refuse_values_above
 from .materials import MaterialTable
 from .noise import quantisation
+from .normal_equations import SLOTS
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
 from .problem import LOSSES, Problem, ViewJ, assembled, device_index, to_device, value_index
 from .raytree import TreeModel, tree_influence
 from .records import DEVICE_COPIES, KeptView, View, take_pixels, target_values, view_key, view_store
-from .shading import GBufferModel, influence
+from .shading import GBufferModel, influence, points_may_be_pixels
 from .stats import FLOAT_SIGMA
 from .result import ResultCode
 from .targets import empty_detail, nonfinite_count, nonfinite_detail, prepared_targets
@@ -57,7 +60,8 @@ class Setup:
     materials, method, layout, initial (key -> value), x0 (solver coordinates), views, used_pixels,
     nonfinite (target values at the pixels used), nonfinite_left_out (elsewhere), sigma_given,
     sigma_fallback (the noise when too few pixels allow an estimate, None: unknown;
-    `engine.without_clipped`), x64, dtype, problem, render_seconds (the Warp renders' wall time),
+    `engine.without_clipped`), x64, dtype, problem, jax_device (the JAX device its arrays and programs
+    are on, `on_device`; None: JAX's default), render_seconds (the Warp renders' wall time),
     base_scene (before `init`), ceiling_given, loss, loss_scale, threads (CPU threads for the render,
     as given); and what only the report reads (`statistics`, formed on first use): censored,
     quantisation (the rms rounding error of the targets' used values, `noise.quantisation`: 0 for
@@ -109,8 +113,28 @@ class Setup:
         self.x64 = x64
         self.dtype = jnp.float64 if x64 else jnp.float32
         self.loss, self.loss_scale = loss, loss_scale
-        with jax.enable_x64(x64):
+        self.jax_device = self._closed_form_device()
+        with jax.enable_x64(x64), self.on_device():
             self.problem = self._problem(loss, loss_scale)
+
+    def _closed_form_device(self):
+        """`cache.serial_cpu_device()` -- the CPU client of one thread -- for a fit whose normal
+        equations are formed in closed form (`normal_equations.by_parts_applies`: the G-buffer model,
+        each pixel its own Phong point, the l2 loss, no smoothness prior, only material coefficients
+        and lobes fitted), else None (JAX's default device: forward-mode Jacobians use every core)."""
+        if self.method != "raster" or self.loss != "l2" or self.smoothness or self.texel_source is not None:
+            return None
+        if any(p.kind not in SLOTS for p in self.layout):
+            return None
+        if not all(view.record.shading == "phong" and points_may_be_pixels(view.record) for view in self.views):
+            return None
+        return serial_cpu_device()
+
+    def on_device(self):
+        """A context in which the fit's arrays are made and its programs run: on `jax_device`, the
+        device `_closed_form_device` chose (nothing to set where it is None). Arrays of the fit met
+        outside it are moved where the context's computation runs (correct, a copy slower)."""
+        return contextlib.nullcontext() if self.jax_device is None else jax.default_device(self.jax_device)
 
     def reweighted(self, weights, init) -> Setup:
         """The fit with other `weights` -- per view (H, W, 3) >= 0, 0 outside its mask -- and `init`,
@@ -130,7 +154,7 @@ class Setup:
         out.views = [out._seen(view, weight, keep=True) for view, weight in zip(self.views, weights)]
         out.used_pixels = sum(v.pixels.size for v in out.views)
         out._targets_seen()
-        with jax.enable_x64(self.x64):
+        with jax.enable_x64(self.x64), self.on_device():
             out.problem = out._problem(self.loss, self.loss_scale)
         return out
 
@@ -194,7 +218,7 @@ class Setup:
                                    f"{self.textures[name].shape}")
             out.initial = {p.key: scene_value(scene, p, textures) for p in self.layout}
             out.x0 = self.layout.x_of(self.layout.flatten(out.initial))
-        with jax.enable_x64(self.x64):
+        with jax.enable_x64(self.x64), self.on_device():
             out.problem = self.problem.with_targets(
                 [jnp.asarray(v.values, self.dtype) for v in views])
         return out
@@ -323,7 +347,7 @@ class Setup:
         """The image model of a view's `pixels` (kept with the record when they are the pixels used),
         for its `lights` (numpy or on the device)."""
         if view.kept is not None and pixels is view.pixels and self.texel_source is None:
-            key = (self.method, np.dtype(self.dtype))
+            key = (self.method, np.dtype(self.dtype), self.jax_device)  # (the device its arrays are on)
             return view.kept.model(key, view.used, lambda: self._model(view, pixels, lights))
         return self._model(view, pixels, lights)
 
@@ -395,7 +419,7 @@ class Setup:
         scene units; default: the start), pixels outside the masks included."""
         flat = self.layout.flatten(self.initial if values is None else values)
         out = []
-        with jax.enable_x64(self.x64):
+        with jax.enable_x64(self.x64), self.on_device():
             index = value_index(self.layout, len(self.scene.materials), len(self.scene.lights))
             for view in self.views:
                 every = np.arange(view.used.size)

@@ -137,7 +137,7 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32, covered: bool = False
     mode, color, start, end, density = gbuffer.fog
     fog_mode, clamp_colors = int(mode), bool(gbuffer.clamp_vertex_colors)
     point_ids = None
-    if side == 1 and fog_mode == FOG_NONE and not clamp_colors:
+    if points_may_be_pixels(gbuffer):
         point_ids = own_points(gbuffer, pixels, covered)
     # direct: each pixel is one point's colour (the points, in pixel order, are the pixels)
     formation = Formation(specular=SPECULAR_MODELS[gbuffer.specular], fog_mode=fog_mode, clamp_colors=clamp_colors,
@@ -178,6 +178,12 @@ def pixel_arrays(gbuffer, pixels=None, dtype=jnp.float32, covered: bool = False
         rows[:, point_row_columns(rows.shape[1])["light_dist"]] = 1.0
         points = PointRows(rows=rows, material=np.full(1, -1, np.int32))
     return points, comp, formation, point_ids
+
+
+def points_may_be_pixels(gbuffer) -> bool:
+    """Whether a pixel of the G-buffer can be exactly one point's colour (`own_points`; then
+    `Formation.direct`): one sample a pixel, no fog, no vertex colours clamped."""
+    return int(gbuffer.spp_side) == 1 and int(gbuffer.fog[0]) == FOG_NONE and not bool(gbuffer.clamp_vertex_colors)
 
 
 def own_points(gbuffer, pixels, covered: bool = False) -> np.ndarray | None:

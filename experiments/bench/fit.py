@@ -108,9 +108,11 @@ def per_step(scene, target, start, repeats: int) -> list[dict]:
         return out.seconds, out.steps
 
     def plain_time(setup):
-        with jax.enable_x64(setup.x64):
-            x0 = jnp.asarray(setup.x0, setup.dtype)
-            return median_seconds(lambda: jax.block_until_ready(plain(setup.problem, x0)), 3)
+        with jax.enable_x64(setup.x64):  # (on JAX's default device, every core: the engine's closed-form
+            # fits run on a client of one thread, `Setup.jax_device`, where a forward-mode step is slower)
+            default = jax.devices()[0]
+            problem, x0 = jax.device_put((setup.problem, jnp.asarray(setup.x0, setup.dtype)), default)
+            return median_seconds(lambda: jax.block_until_ready(plain(problem, x0)), 3)
 
     for run in runs.values():  # compile every length
         timed(run["setup"], 1), timed(run["setup"], 12), plain_time(run["setup"])
