@@ -122,10 +122,11 @@ def serial_cpu_device():
     such a solve's operations on ~25k pixels are too small to gain from a second thread, and each one
     XLA hands to its pool wakes a sleeping thread -- tens of microseconds each on a shared virtual
     machine -- while fits that take their Jacobian by forward mode need every core (1.5-1.8x slower on
-    one thread: `limit_xla_threads`). The bench's Mitsuba sphere (kd, ks, n, 256^2), this client
-    against the default one, processes alternating in ABBA order (12 rounds, medians of 25 fits,
-    load 0.7-0.9): first fit of the view 6.21 -> 6.04 ms (paired -0.48 ms, 10 of 12 faster), fitted
-    again 3.35 -> 3.18 (-0.32, 11 of 12), fits in a row 3.44 -> 3.31 (-0.23, 9 of 12)."""
+    one thread: `limit_xla_threads`). The bench's Mitsuba sphere (kd, ks, n, 256^2) against the
+    default client, processes alternating in ABBA order (three runs of 10-12 rounds, medians of 25
+    fits, load 0.3-0.9): the solve 1.77-1.84 -> 1.58-1.68 ms; first fit of the view paired -0.35,
+    -0.03 and -0.24 ms (faster in 7 of 10, 6 of 10, 8 of 12), fitted again -0.18, 0.00, -0.13, in a
+    row -0.11, +0.11, -0.02 (the report, whose JAX work runs there too, is no faster)."""
     if not _serial["registered"]:
         return None
     if "device" not in _serial:
