@@ -335,6 +335,7 @@ def test_closed_form_fits_run_on_the_one_thread_client_with_the_same_results(mon
     closed = setup_module.Setup(scene, [target], "red", init=start)
     device = serial_cpu_device()
     assert closed.jax_device is device
+    assert (device is not None) == ((os.cpu_count() or 1) > 1)  # (registered wherever there are 2 cores)
     if device is not None:
         leaves = [leaf for leaf in jax.tree_util.tree_leaves(closed.problem) if isinstance(leaf, jax.Array)]
         assert leaves and all(next(iter(leaf.devices())).client is device.client for leaf in leaves)

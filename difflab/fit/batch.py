@@ -108,15 +108,15 @@ def fit_batch(scene, images, material=None, params=DEFAULT_PARAMS, *, overrides=
                 bar.close()
     timings["solve"] = time.perf_counter() - t0
     results = []
-    for b in range(count):
-        each = {**timings, "solve": timings["solve"] / count}
-        if solved[b] is None:
-            results.append(report(elements[b], None, elements[b].precheck(), 0, [], options, each))
-        else:
-            s = solved[b]
-            with setup.on_device():  # (the report's JAX work where the solve ran, as `engine.run_fit`'s)
+    with setup.on_device():  # (the reports' JAX work where the solve ran, as `engine.run_fit`'s)
+        for b in range(count):
+            each = {**timings, "solve": timings["solve"] / count}
+            if solved[b] is None:
+                results.append(report(elements[b], None, elements[b].precheck(), 0, [], options, each))
+            else:
+                s = solved[b]
                 out = report(elements[b], s.x, s.result, s.steps, s.history, options, each, s.linearised)
-            results.append(without_clipped(elements[b], out, options))
+                results.append(without_clipped(elements[b], out, options))
     return results
 
 

@@ -167,13 +167,13 @@ def run_fit(setup: Setup, options: FitOptions, timings: dict) -> FitResult:
         return report(setup, None, code, 0, [], options, timings)
     ahead = noise_ahead(setup)
     try:
-        start = time.perf_counter()
-        with jax.enable_x64(setup.x64), setup.on_device():
-            # the noise picks beside the solve: on this thread for "lm", else on a worker (`noise_ahead`)
-            out = run(setup.problem, setup.x0, options, beside=None if ahead is None else (
-                ahead.queue.join if options.solver == "lm" else ahead.queue.start))
-        timings["solve"] = time.perf_counter() - start
-        with setup.on_device():  # (the report's JAX work beside the solve's arrays)
+        with setup.on_device():  # (the solve's and the report's JAX work where the problem's arrays are)
+            start = time.perf_counter()
+            with jax.enable_x64(setup.x64):
+                # the noise picks beside the solve: on this thread for "lm", else on a worker (`noise_ahead`)
+                out = run(setup.problem, setup.x0, options, beside=None if ahead is None else (
+                    ahead.queue.join if options.solver == "lm" else ahead.queue.start))
+            timings["solve"] = time.perf_counter() - start
             return report(setup, out.x, out.result, out.steps, out.history, options, timings, out.linearised,
                           ahead.take if ahead is not None else None)
     finally:

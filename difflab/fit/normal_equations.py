@@ -49,11 +49,16 @@ def dense(fn, x, args):
     return r, jac.T @ jac, jac.T @ r
 
 
+def by_parts_terms(loss: str, smoothness, layout) -> bool:
+    """Whether the loss, the prior and the fitted kinds allow `by_parts`: the l2 loss, no smoothness
+    prior, only material coefficients and lobes (`SLOTS`) -- its image model aside."""
+    return loss == "l2" and not smoothness and all(p.kind in SLOTS for p in layout)
+
+
 def by_parts_applies(problem) -> bool:
     """Whether `by_parts` can linearise the problem (see the module docstring)."""
-    return (problem.loss == "l2" and not problem.smoothness and all(p.kind in SLOTS for p in problem.layout)
-            and all(isinstance(v.model, GBufferModel) and v.model.formation.direct and v.model.taps is None
-                    for v in problem.views))
+    return by_parts_terms(problem.loss, problem.smoothness, problem.layout) and all(
+        isinstance(v.model, GBufferModel) and v.model.formation.direct and v.model.taps is None for v in problem.views)
 
 
 def slot_columns(layout, n_materials: int) -> tuple[tuple, dict]:

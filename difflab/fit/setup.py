@@ -28,7 +28,7 @@ from .cache import serial_cpu_device
 from .ceiling import float_ceiling, primary_objects, refuse_values_above
 from .materials import MaterialTable
 from .noise import quantisation
-from .normal_equations import SLOTS
+from .normal_equations import by_parts_terms
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
 from .problem import LOSSES, Problem, ViewJ, assembled, device_index, to_device, value_index
 from .raytree import TreeModel, tree_influence
@@ -119,12 +119,10 @@ class Setup:
 
     def _closed_form_device(self):
         """`cache.serial_cpu_device()` -- the CPU client of one thread -- for a fit whose normal
-        equations are formed in closed form (`normal_equations.by_parts_applies`: the G-buffer model,
-        each pixel its own Phong point, the l2 loss, no smoothness prior, only material coefficients
-        and lobes fitted), else None (JAX's default device: forward-mode Jacobians use every core)."""
-        if self.method != "raster" or self.loss != "l2" or self.smoothness or self.texel_source is not None:
-            return None
-        if any(p.kind not in SLOTS for p in self.layout):
+        equations are formed in closed form (`normal_equations.by_parts_applies`, asked before the
+        problem is made: `by_parts_terms`, and the G-buffer model with each pixel its own Phong
+        point), else None (JAX's default device: forward-mode Jacobians use every core)."""
+        if self.method != "raster" or not by_parts_terms(self.loss, self.smoothness, self.layout):
             return None
         if not all(view.record.shading == "phong" and points_may_be_pixels(view.record) for view in self.views):
             return None

@@ -100,27 +100,28 @@ def per_step(scene, target, start, repeats: int) -> list[dict]:
         setup = Setup(scene, [target], "red", init=start, x64=x64)
         first = time.perf_counter()
         result = solve(setup, history=False, progress=False)
-        runs[x64] = {"setup": setup, "result": result, "first": time.perf_counter() - first, "short": [],
-                     "long": [], "base": [], "solves": []}
+        first = time.perf_counter() - first
+        with jax.enable_x64(x64):  # the plain step's inputs on JAX's default device, every core (the engine's
+            # closed-form fits run on a client of one thread, `Setup.jax_device`, where a forward-mode step is slower)
+            plain_inputs = jax.device_put((setup.problem, jnp.asarray(setup.x0, setup.dtype)), jax.devices()[0])
+        runs[x64] = {"setup": setup, "plain": plain_inputs, "result": result, "first": first,
+                     "short": [], "long": [], "base": [], "solves": []}
 
     def timed(setup, steps):
         out = solve(setup, max_steps=steps, rtol=0.0, atol=0.0, history=False, progress=False)
         return out.seconds, out.steps
 
-    def plain_time(setup):
-        with jax.enable_x64(setup.x64):  # (on JAX's default device, every core: the engine's closed-form
-            # fits run on a client of one thread, `Setup.jax_device`, where a forward-mode step is slower)
-            default = jax.devices()[0]
-            problem, x0 = jax.device_put((setup.problem, jnp.asarray(setup.x0, setup.dtype)), default)
-            return median_seconds(lambda: jax.block_until_ready(plain(problem, x0)), 3)
+    def plain_time(run):
+        with jax.enable_x64(run["setup"].x64):
+            return median_seconds(lambda: jax.block_until_ready(plain(*run["plain"])), 3)
 
     for run in runs.values():  # compile every length
-        timed(run["setup"], 1), timed(run["setup"], 12), plain_time(run["setup"])
+        timed(run["setup"], 1), timed(run["setup"], 12), plain_time(run)
     for _ in range(max(repeats, 7)):
         for run in runs.values():
             run["short"].append(timed(run["setup"], 1))
             run["long"].append(timed(run["setup"], 12))
-            run["base"].append(plain_time(run["setup"]))
+            run["base"].append(plain_time(run))
             run["solves"].append(solve(run["setup"], history=False, progress=False).seconds)
     out = []
     for x64, run in runs.items():
