@@ -40,7 +40,8 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
     """The FitResult of a solve at solver coordinates x (None: no fit was made): values in scene
     units, standard errors, noise, chi-square, flags; raises FitError for a failure when
     `options.throw`. `solved`: the solver's (r, J^T J) at x, when it has them; `ahead`: the `take` of the
-    `NoiseAhead` that `run_fit` started beside the solve (None: the picks are formed here)."""
+    `NoiseAhead` that `run_fit` started beside the solve (None: the picks and the residual planes' memory
+    are formed here)."""
     layout = setup.layout
     public = lambda values: {p.key: public_value(p, values[p.key]) for p in layout}  # noqa: E731
     common = dict(steps=steps, solver=options.solver, initial=public(setup.initial), scene=setup.scene, layout=layout,
@@ -71,10 +72,10 @@ def report(setup: Setup, x, result: str, steps: int, history: list, options: Fit
         count = sum(part.size for part in counted)
         sse = sum_of_squares(counted)
         loss = 0.5 * sse if rho is counted else 0.5 * sum_of_squares(rho)
-        planes = setup.residual_planes(r)
+        picks, zeros = ahead() if ahead is not None else (None, None)  # (first: the picks are done with the views)
+        planes = setup.residual_planes(r, zeros)  # (into memory written beside the solve: `Setup.zero_planes`)
         residuals = [p.transpose(1, 2, 0) for p in planes]  # (H, W, 3) views (np.moveaxis: 2 us more each)
         finite = bool(np.all(np.isfinite(flat)) and math.isfinite(loss) and finite_gram(gram))
-        picks = ahead() if ahead is not None else None  # (first: the picks are done with the views)
         silent, silent_entries = silent_pixels(setup.views, r)
         middle = []  # unequal noise: the sandwich's middle (`noise_middle`), started once the noise levels are read
         same_sum = counted is r and all(part.flags.c_contiguous for part in r)  # (sse summed as noise_middle sums)
@@ -182,21 +183,24 @@ def run_fit(setup: Setup, options: FitOptions, timings: dict) -> FitResult:
 
 
 class NoiseAhead(NamedTuple):
-    """The noise estimate's picks under way beside the solve: `take()` gives them once done."""
+    """The noise estimate's picks and the residual planes' memory under way beside the solve: `take()`
+    gives them, (picks, zeros), once done."""
 
     queue: object  # `bandpool.start_beside`'s handle
-    picks: list
+    formed: list
 
     def take(self):
         self.queue.join()
-        return self.picks[0]
+        return self.formed[0]
 
 
 def noise_ahead(setup: Setup) -> NoiseAhead | None:
     """The noise estimate's `noise_picks` -- the targets' alone, for silent pixels all black ones
-    (`View.black`) --, the targets' `Setup.statistics` (what only the report reads) and each view's
-    `View.floor`, which `clipping.clipped_band` reads after the fit (there, on a target no longer in
-    cache, ~0.1 ms of first.py's first fit), to be formed beside the solve: `run_fit` hands the
+    (`View.black`) --, the residual planes' memory, zeros with its pages written (`Setup.zero_planes`:
+    ~0.2 ms of page faults out of the report), the targets' `Setup.statistics` (what only the report
+    reads) and each view's `View.floor`, which `clipping.clipped_band` reads after the fit (there,
+    on a target no longer in cache, ~0.1 ms of first.py's first fit), to be formed beside the
+    solve: `run_fit` hands the
     solve (`solvers.run`'s `beside`, called once "lm"'s compiled solve is dispatched, before any
     other solver) the queue's `join` for "lm" -- formed on the calling thread, which only waits
     for the solve meanwhile (XLA runs its loop without the GIL) -- and its `start`
@@ -212,14 +216,14 @@ def noise_ahead(setup: Setup) -> NoiseAhead | None:
     ms of Python were done.)"""
     if setup.sigma_given is not None:
         return None
-    picks = []
+    formed = []
 
     def targets_alone():
-        picks.append(noise_picks(setup.views, [view.black for view in setup.views]))
+        formed.append((noise_picks(setup.views, [view.black for view in setup.views]), setup.zero_planes()))
         for view in setup.views:
             view.floor  # noqa: B018 (a cached property, formed here)
         setup.statistics  # noqa: B018 (formed on first use: here, off the solve's path)
-    return NoiseAhead(start_beside(targets_alone, "cpu", setup.threads, start=False), picks)
+    return NoiseAhead(start_beside(targets_alone, "cpu", setup.threads, start=False), formed)
 
 
 def solve(setup: Setup, options=None, **option_fields) -> FitResult:
