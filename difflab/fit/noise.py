@@ -176,7 +176,13 @@ def _read(views: list, planes) -> list:
     """Per view (None: none) per channel (None: no Laplacian picked) what `estimate_sigma` reads of
     its residuals, as (picks, values, level): the channel's `Picks` (without a non-finite value), its
     squared Laplacians there in float64 -- from the view's residuals as (3, H, W) planes, in their
-    own precision (float32 residual images), over the box -- and their levels (`_levels`)."""
+    own precision (float32 residual images), over the box -- and their levels (`_levels`). (The
+    Laplacian by XLA on the one-thread client, dispatched after `Setup.residual_planes` and taken
+    here -- the same bits: a b + c with b times -2 exact --: the bench's fits alternating in one
+    process, results dropped, the report -59 us first, -35 again (medians of 80); but processes
+    alternating ABBA with the results kept, 3 runs of 10-12 rounds, the report +0.1-0.3 ms in fits
+    again and in a row: its dispatch 0.04 ms, and in fits again XLA's run not done when read in 21
+    of 40, a median wait of 0.1 ms. Not taken.)"""
     read = []
     for view, image in zip(views, planes):
         read.append(None if view is None else [None, None, None])

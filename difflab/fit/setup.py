@@ -396,9 +396,11 @@ class Setup:
         """Per view (3, H W) float32 zeros with every page written: the memory `residual_planes`
         fills, formed beside the solve (`engine.noise_ahead`). The planes are new memory in every
         fit -- its result keeps them (its residual images) --, and a new array's pages fault in on
-        first write: the bench's first fit with the results kept (tools/mfirst.py's loop, medians
-        of 120 fits, 2 cores, load ~1.3), `residual_planes` 88 page faults and 0.25 ms in the
-        report; written beside the solve, where the calling thread waits for XLA, 0 and 0.065 ms."""
+        first write, ~2 us each on this 2-core VM: the bench's fits with their results kept
+        (tools/mfirst.py's loop, 40 first fits, 40 again, 40 in a row), `residual_planes` in a first
+        fit 97-132 page faults and 0.28 ms, in a row 135 and 0.28 ms; written here beside the solve
+        (its 190 faults there, where the calling thread waits for XLA: the solve no slower), 0 and
+        0.065 ms."""
         out = []
         for view in self.views:
             planes = np.empty((3, view.used.size), np.float32)
