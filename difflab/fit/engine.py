@@ -196,8 +196,8 @@ class NoiseAhead(NamedTuple):
 
 def noise_ahead(setup: Setup) -> NoiseAhead | None:
     """The noise estimate's `noise_picks` -- the targets' alone, for silent pixels all black ones
-    (`View.black`) --, the residual planes' memory, zeros with its pages written (`Setup.zero_planes`:
-    ~0.2 ms of page faults out of the report), the targets' `Setup.statistics` (what only the report
+    (`View.black`) --, the residual planes' memory, its pages written (`Setup.zero_planes`: ~0.2 ms
+    of page faults out of the report), the targets' `Setup.statistics` (what only the report
     reads) and each view's `View.floor`, which `clipping.clipped_band` reads after the fit (there,
     on a target no longer in cache, ~0.1 ms of first.py's first fit), to be formed beside the
     solve: `run_fit` hands the
@@ -219,7 +219,10 @@ def noise_ahead(setup: Setup) -> NoiseAhead | None:
     formed = []
 
     def targets_alone():
-        formed.append((noise_picks(setup.views, [view.black for view in setup.views]), setup.zero_planes()))
+        zeros = setup.zero_planes()
+        for planes in zeros:
+            planes.fill(0.0)  # (their pages written here)
+        formed.append((noise_picks(setup.views, [view.black for view in setup.views]), zeros))
         for view in setup.views:
             view.floor  # noqa: B018 (a cached property, formed here)
         setup.statistics  # noqa: B018 (formed on first use: here, off the solve's path)

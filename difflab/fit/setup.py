@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import mmap
 import time
 from typing import NamedTuple
 
@@ -38,6 +39,9 @@ from .stats import FLOAT_SIGMA
 from .result import ResultCode
 from .targets import empty_detail, nonfinite_count, nonfinite_detail, prepared_targets
 from .texels import TexelSource, texture_starts, wants_texels
+
+PRIVATE_MAP = {"flags": mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS} if hasattr(mmap, "MAP_ANONYMOUS") else {}  # (an
+# anonymous map of the process's own, not shared memory: its pages written 0.25 ms for 786 kB, shared 0.39)
 
 
 class TargetStatistics(NamedTuple):
@@ -393,31 +397,30 @@ class Setup:
         return None
 
     def zero_planes(self) -> list[np.ndarray]:
-        """Per view (3, H W) float32 zeros with every page written: the memory `residual_planes`
-        fills, formed beside the solve (`engine.noise_ahead`). The planes are new memory in every
-        fit -- its result keeps them (its residual images) --, and a new array's pages fault in on
-        first write, ~2 us each on this 2-core VM: the bench's fits with their results kept
-        (tools/mfirst.py's loop, 40 first fits, 40 again, 40 in a row), `residual_planes` in a first
-        fit 97-132 page faults and 0.28 ms, in a row 135 and 0.28 ms; written here beside the solve
-        (its 190 faults there, where the calling thread waits for XLA: the solve no slower), 0 and
-        0.065 ms."""
-        out = []
-        for view in self.views:
-            planes = np.empty((3, view.used.size), np.float32)
-            planes.fill(0.0)
-            out.append(planes)
-        return out
+        """Per view (3, H W) float32 zeros, the memory `residual_planes` fills, each in an anonymous
+        memory map of its own (zero-filled by the system). A fit's result keeps its planes (its
+        residual images), so they are new memory in every fit; from the heap they took the memory
+        the next first fit's G-buffer rows would reuse, and those faulted in anew. The bench's fits
+        with their results kept (tools/mfirst.py's loop, as bench/fit.py keeps them; a page fault
+        ~1.5-2 us on this 2-core VM): in a first fit `shading.pixel_arrays` 291 page faults and 0.55
+        ms, here 1 and 0.14; `residual_planes` 111 and 0.26 ms, in a row 137 and 0.27, here 0 and
+        0.06 -- `engine.noise_ahead` writes their pages beside the solve, where the calling thread
+        waits for XLA (~195 faults, 0.25 ms of its time: at load ~1.5 the solve no slower; at ~2 and
+        more it competes with XLA's thread). With the results dropped at once the heap's planes were
+        reused without a fault, the maps' pages are faulted in anew each fit."""
+        return [np.frombuffer(mmap.mmap(-1, 3 * view.used.size * 4, **PRIVATE_MAP), np.float32).reshape(3, -1)
+                for view in self.views]
 
     def residual_planes(self, r, zeros=None) -> list[np.ndarray]:
         """Per view (3, H, W) float32 plain residuals min(model, ceiling) - target, channel-major,
         from the weighted residuals r, per view (3, U) (`Problem.view_residuals`; 0 outside the
-        pixels used and where the weight is 0), written into `zeros` when given (`zero_planes`)."""
+        pixels used and where the weight is 0), written into `zeros` (default: `zero_planes()`)."""
+        zeros = self.zero_planes() if zeros is None else zeros
         out = []
-        for k, (view, part) in enumerate(zip(self.views, r)):
+        for view, part, planes in zip(self.views, r, zeros):
             if not self.unit_weights:
                 sqrt_w = np.sqrt(view.weights).T
                 part = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w, 1.0), 0.0)
-            planes = np.zeros((3, view.used.size), np.float32) if zeros is None else zeros[k]
             used = view.used.reshape(-1)  # (its pixels: `View.pixels`)
             for c in range(3):
                 planes[c][used] = part[c]  # (a boolean mask: ~3x the speed of the pixels' indices)
