@@ -9,7 +9,7 @@ from test_fit_helpers import TRUTH, make_scene, mirror_scene, perturbed, target_
 
 from difflab import compile_scene
 from difflab.fit import Setup, fit_material
-from difflab.fit.records import KEPT_ARRAYS, KEPT_VIEWS, SMALL, STORE, DeviceCopies, take_pixels, used_rows
+from difflab.fit.records import KEPT_ARRAYS, KEPT_VIEWS, STORE, DeviceCopies, take_pixels, used_rows
 
 SCENE = make_scene(size=16)
 TARGET = target_of(SCENE)
@@ -158,29 +158,24 @@ def test_a_setup_reweighted_keeps_its_pixels_and_fits_as_a_setup_built_afresh(co
     assert other.converged and solve_box._cache_size() == compiled_solves
 
 
-def test_small_device_arrays_are_reused_only_for_equal_contents():
-    """`DeviceCopies.on_device`: an equal small array (same bytes, dtype, shape, place in the tree) is
-    the device copy made before; any difference, or a large array, is moved afresh with its values."""
+def test_device_copies_are_reused_only_for_an_equal_key():
+    """`DeviceCopies.kept`: for a key equal to one kept, the device copies made before (its arrays not
+    formed again); for another key, the arrays formed and moved afresh with their values."""
     store = DeviceCopies()
+    formed = []
+
+    def host(lights):
+        formed.append(lights)
+        return {"lights": np.array(lights), "index": np.array([0, -1], np.int32)}
+
     with jax.enable_x64(True):
-        lights, index = np.array([0.5, 0.25, 1.0]), np.array([0, -1], np.int32)
-        large = np.arange(SMALL + 1, dtype=np.float64)
-        first = store.on_device({"lights": lights, "index": index, "target": large})
-        again = store.on_device({"lights": lights.copy(), "index": index.copy(), "target": large + 1.0})
-        assert again["lights"] is first["lights"] and again["index"] is first["index"]
-        assert again["target"] is not first["target"]
-        np.testing.assert_array_equal(again["target"], large + 1.0)
-        for other in ({"lights": np.array([0.5, 0.25, 1.5]), "index": index, "target": large},  # another value
-                      {"lights": lights.astype(np.float32), "index": index, "target": large},  # another dtype
-                      {"lights": lights, "index": index.reshape(2, 1), "target": large},  # another shape
-                      {"index": lights, "lights": index, "target": large}):  # other places in the tree
-            moved = store.on_device(other)
-            assert moved["lights"] is not first["lights"]
-            for key, value in other.items():
-                assert moved[key].dtype == value.dtype and moved[key].shape == value.shape
-                np.testing.assert_array_equal(moved[key], value)
-    with jax.enable_x64(False):  # the same bytes in the other precision: moved afresh (float32 there)
-        assert store.on_device({"lights": lights, "index": index, "target": large})["lights"].dtype == np.float32
+        first = store.kept(("lights", [0.5, 0.25, 1.0]), lambda: host([0.5, 0.25, 1.0]))
+        again = store.kept(("lights", [0.5, 0.25, 1.0]), lambda: host([0.5, 0.25, 1.0]))
+        assert again is first and len(formed) == 1
+        other = store.kept(("lights", [0.5, 0.25, 1.5]), lambda: host([0.5, 0.25, 1.5]))
+        assert other["lights"] is not first["lights"] and len(formed) == 2
+        np.testing.assert_array_equal(other["lights"], [0.5, 0.25, 1.5])
+        assert other["lights"].dtype == np.float64 and other["index"].dtype == np.int32
 
 
 def test_the_device_copies_used_last_are_kept():
@@ -188,10 +183,10 @@ def test_the_device_copies_used_last_are_kept():
     its copies (it was let go as the oldest moved, KEPT_ARRAYS new sets after it was first moved)."""
     store = DeviceCopies()
     with jax.enable_x64(True):
-        often = store.on_device({"lights": np.array([0.5, 0.25, 1.0])})["lights"]
+        often = store.kept("often", lambda: np.array([0.5, 0.25, 1.0]))
         for k in range(2 * KEPT_ARRAYS):
-            store.on_device({"lights": np.array([float(k), 0.0, 0.0])})
-            assert store.on_device({"lights": np.array([0.5, 0.25, 1.0])})["lights"] is often
+            store.kept(k, lambda: np.array([float(k), 0.0, 0.0]))
+            assert store.kept("often", lambda: np.array([0.5, 0.25, 1.0])) is often
 
 
 def test_small_device_arrays_are_kept_process_wide():
@@ -207,6 +202,9 @@ def test_small_device_arrays_are_kept_process_wide():
         assert again.views[0].lights.position is first.views[0].lights.position
     other = Setup(SCENE, [TARGET], "red", init={"kd": [0.25, 0.5, 0.75]}, x64=True).problem
     assert other.table.kd is not first.table.kd
+    single = Setup(SCENE, [TARGET], "red", x64=False).problem  # the same values in float32: moved afresh
+    assert single.table.kd.dtype == np.float32 and single.ambient.dtype == np.float32
+    np.testing.assert_array_equal(single.table.kd, np.asarray(first.table.kd, np.float32))
     red = SCENE.material_index("red")
     expected = np.array(first.table.kd)
     expected[red] = [0.25, 0.5, 0.75]

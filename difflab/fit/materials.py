@@ -48,11 +48,18 @@ class MaterialTable(NamedTuple):
     texels: jnp.ndarray | None = None
 
     @classmethod
-    def from_scene(cls, materials, dtype=jnp.float32, *, host: bool = False) -> MaterialTable:
+    def from_scene(cls, materials, dtype=jnp.float32, *, host: bool = False, records=None) -> MaterialTable:
         """From scene `Material`s in material-id order, moved to the device in one transfer (`host`:
-        numpy arrays, for a caller that moves them with others)."""
-        materials = list(materials)
-        fields = stack_fields([[_field(mat, name) for name in FIELDS] for mat in materials], FIELDS, dtype)
-        targets = [TEXTURE_TARGET_IDS[m.texture_target] if m.texture is not None else -1 for m in materials]
-        table = cls(**fields, texture_target=np.asarray(targets, np.int32).reshape(-1))
+        numpy arrays, for a caller that moves them with others); `records`: their `material_records`,
+        where the caller formed them already."""
+        records = material_records(materials) if records is None else records
+        fields = stack_fields([values for values, _ in records], FIELDS, dtype)
+        table = cls(**fields, texture_target=np.asarray([target for _, target in records], np.int32).reshape(-1))
         return table if host else jax.device_put(table)
+
+
+def material_records(materials) -> list:
+    """What `MaterialTable.from_scene` stacks of each material: (its FIELDS values, the TARGET_* id of
+    its texture's coefficient, -1: none) -- plain Python values, compared with == (`Setup._problem`)."""
+    return [([_field(mat, name) for name in FIELDS], TEXTURE_TARGET_IDS[mat.texture_target] if mat.texture is not None
+             else -1) for mat in materials]

@@ -15,9 +15,9 @@ on the target:
 So a fit of a `CompiledScene` keeps, in `CompiledScene.built` (shared by its `with_scene` copies),
 the records of its latest KEPT_VIEWS views, with the influence maps found on them and the image
 models of their latest KEPT_MODELS pixel sets; a fit of a plain scene keeps no view. The device
-copies of a problem's small arrays (lights, material table, indices) are kept process-wide by their
-contents (`DEVICE_COPIES`): they depend on no view, and any fit with the same values uses them --
-the first fit of another view or scene too.
+copies of a problem's small arrays (lights, material table, indices) are kept process-wide by the
+values they are made of (`DEVICE_COPIES`, `setup.Setup._problem`): they depend on no view, and any
+fit with the same values uses them -- the first fit of another view or scene too.
 """
 
 from __future__ import annotations
@@ -26,16 +26,14 @@ import threading
 from dataclasses import dataclass, fields
 from functools import cache, cached_property
 
-import jax
 import numpy as np
 
-from .problem import carved, on_boundary, take_rows, to_device
+from .problem import carved, take_rows, to_device
 from .targets import in_channels
 
 KEPT_VIEWS = 4
 KEPT_MODELS = 2  # per view
-KEPT_ARRAYS = 4  # device copies of small arrays, by contents
-SMALL = 1024  # entries: an array this small is looked up by its contents, not moved again
+KEPT_ARRAYS = 8  # sets of device copies of small arrays (a fit's: its lights' and its problem's others)
 EVALUATED = frozenset(("ka", "kd", "ks", "n", "m", "f0"))  # what the image models evaluate afresh
 UNPLACED = frozenset(("intensity",))  # a light's fields that the record does not depend on
 STORE = "fit views"  # the key in CompiledScene.built
@@ -117,7 +115,7 @@ class View:
     scene: the scene of this view; used (H, W) bool: the pixels the fit reads (`pixels`: their flat
     indices, in order; `values` and `weights`: the target's and the weight's (U, 3) float64 rows
     there, `zeros`: values == 0, `black` (U,): 0 in every channel, `floor`: the zeros that weigh in --
-    each computed once, on first use, or handed over by `Setup._seen`,
+    each computed once, on first use, or handed over by `Setup._ceiling`,
     which took them already); kept: the `KeptView` of the record when it is kept with the compiled
     scene, else None; touched (H, W) bool: the pixels the fitted parameters influence. The
     whole-image `target` and `weight` are formed only when asked for: a fit reads the used pixels'
@@ -258,37 +256,26 @@ class ViewStore:
 
 
 class DeviceCopies:
-    """The device copies of the KEPT_ARRAYS sets of small arrays used last, by their contents."""
+    """The device copies of the KEPT_ARRAYS sets of small arrays used last, by what they are made of."""
 
     def __init__(self):
         self._lock = threading.Lock()
         self._arrays: list = []  # [(key, device arrays)], the latest used first
 
-    def on_device(self, tree):
-        """A pytree of numpy arrays for the device: its small leaves (<= SMALL entries) as device
-        arrays (`to_device`), taken from the KEPT_ARRAYS copies used last when they were moved before
-        with the same structure, precision, default device, dtypes, shapes and bytes (device arrays
-        are immutable; one jitted dispatch costs some 8 us a leaf); the large ones (targets) left
-        numpy, on a 64-byte boundary (`problem.on_boundary`), never written to: each jitted call
-        takes them in place (~1 us), where moving them cost a copy (`to_device`'s dispatch of a 24768
-        x 3 target ~0.1 ms in a first fit; the bench's first fit -0.14 ms, wall 6.43 -> 6.28 and
-        6.29 -> 6.15 ms, medians of 80 alternating in one process, load 0.9)."""
-        leaves, structure = jax.tree_util.tree_flatten(tree)
-        small = [leaf.size <= SMALL for leaf in leaves]
-        key = (structure, jax.config.jax_enable_x64, jax.config.jax_default_device,
-               tuple((leaf.dtype, leaf.shape, leaf.tobytes()) for leaf, is_small in zip(leaves, small) if is_small))
-        with self._lock:  # (each kept key compared once: ~30 small leaves a fit)
+    def kept(self, key, host):
+        """The device copies (`to_device`, one dispatch) of the pytree of numpy arrays `host()` for
+        `key`, a value compared with == that determines them (device arrays are immutable): the
+        copies kept for an equal key among the KEPT_ARRAYS used last, else `host()` formed and moved
+        now (one jitted dispatch costs some 8 us a leaf)."""
+        with self._lock:  # (each kept key compared once)
             found = next((i for i, (kept_key, _) in enumerate(self._arrays) if kept_key == key), None)
             if found is not None:  # used now: the last to be let go
                 self._arrays.insert(0, self._arrays.pop(found))
-                kept = self._arrays[0][1]
-        if found is None:
-            kept = to_device([leaf for leaf, is_small in zip(leaves, small) if is_small])
-            with self._lock:
-                self._arrays = [(key, kept)] + self._arrays[:KEPT_ARRAYS - 1]
-        kept = iter(kept)
-        moved = [next(kept) if is_small else on_boundary(np.asarray(leaf)) for leaf, is_small in zip(leaves, small)]
-        return jax.tree_util.tree_unflatten(structure, moved)
+                return self._arrays[0][1]
+        kept = to_device(host())
+        with self._lock:
+            self._arrays = [(key, kept)] + self._arrays[:KEPT_ARRAYS - 1]
+        return kept
 
 
 DEVICE_COPIES = DeviceCopies()  # one for the process (device arrays are immutable)

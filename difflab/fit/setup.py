@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import DifflabError, FitError
-from ..lighting.jax_model import lights_to_jax
+from ..lighting.jax_model import light_records, lights_to_jax
 from ..renderers.api import as_scene, fit_frame
 from ..renderers.compile import CompiledScene
 from ..renderers.launch import resolve_device
@@ -27,11 +27,11 @@ from ..scene import RenderSettings
 from .arguments import check_ceiling, check_number, check_smoothness, choose_method
 from .cache import serial_cpu_device
 from .ceiling import float_ceiling, primary_objects, refuse_values_above
-from .materials import MaterialTable
+from .materials import MaterialTable, material_records
 from .noise import quantisation
 from .normal_equations import by_parts_terms
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
-from .problem import LOSSES, Problem, ViewJ, assembled, device_index, to_device, value_index
+from .problem import LOSSES, Problem, ViewJ, assembled, device_index, on_boundary, to_device, value_index
 from .raytree import TreeModel, tree_influence
 from .records import DEVICE_COPIES, KeptView, View, take_pixels, target_values, view_key, view_store
 from .shading import GBufferModel, influence, points_may_be_pixels
@@ -111,15 +111,23 @@ class Setup:
         self.initial = {p.key: scene_value(scene, p, self.textures) for p in self.layout}
         self.x0 = self.layout.x_of(self.layout.flatten(self.initial))
         self.threads = threads  # (the render's; `engine.noise_ahead` takes a worker only where it may)
-        self.views = self._record(targets, masks, weights, max_depth, spp, device, threads)
-        self.used_pixels = sum(v.pixels.size for v in self.views)
-        self._targets_seen()
         self.x64 = x64
         self.dtype = jnp.float64 if x64 else jnp.float32
         self.loss, self.loss_scale = loss, loss_scale
+        self.views = self._record(targets, masks, weights, max_depth, spp, device, threads)  # (their pixels)
         self.jax_device = self._closed_form_device()
         with jax.enable_x64(x64), self.on_device():
-            self.problem = self._problem(loss, loss_scale)
+            # the image models first: each device program (`shading._device_model`, ~0.3 ms of XLA's
+            # thread for the bench's 24.7k points, which the solve waits for) then runs while the targets'
+            # rows are taken and their ceilings found (`_ceiling`, ~0.1 ms of the bench's first fit)
+            models = [self._view_model(v, v.pixels, self._lights(v)) for v in self.views]
+            self.views = [self._ceiling(v) for v in self.views]
+            if self.ceiling_given:  # (a number; False: none)
+                for view, (target, _) in zip(self.views, self.labels):
+                    refuse_values_above(self.ceiling_given, view.values, view.entries, target)
+            self.used_pixels = sum(v.pixels.size for v in self.views)
+            self._targets_seen()
+            self.problem = self._problem(loss, loss_scale, models)
 
     def _closed_form_device(self):
         """`cache.serial_cpu_device()` -- the CPU client of one thread -- for a fit whose normal
@@ -153,7 +161,7 @@ class Setup:
         out.initial = {p.key: scene_value(out.scene, p, out.textures) for p in self.layout}
         out.x0 = self.layout.x_of(self.layout.flatten(out.initial))
         out.render_seconds = 0.0
-        out.views = [out._seen(view, weight, keep=True) for view, weight in zip(self.views, weights)]
+        out.views = [self._weighted(view, weight) for view, weight in zip(self.views, weights)]
         out.used_pixels = sum(v.pixels.size for v in out.views)
         out._targets_seen()
         with jax.enable_x64(self.x64), self.on_device():
@@ -274,22 +282,22 @@ class Setup:
                 touched = kept.touched((tree_ids, tuple(crossing)), lambda: tree_influence(record, tree_ids, crossing))
             else:
                 touched = kept.touched((tuple(ids), all_surfaces), lambda: influence(record, ids, all_surfaces))
-            views.append(self._seen(View(image=image, mask=mask, weighting=weight, ceiling=np.inf, step=step or 0.0,
+            views.append(self._used(View(image=image, mask=mask, weighting=weight, ceiling=np.inf, step=step or 0.0,
                                          gamma=gamma, nonfinite=nonfinite, record=record, scene=view_scene, used=touched,
                                          kept=kept if store is not None else None, touched=touched), weight))
-            if self.ceiling_given:  # (a number; False: none)
-                refuse_values_above(self.ceiling_given, views[-1].values, views[-1].entries, labels[0])
         return views
 
-    def _seen(self, view: View, weight, keep: bool = False) -> View:
-        """The view with `weight` (None: 1 inside the mask), the pixels it uses (in the mask, weight >
-        0, influenced by the fitted parameters) and its target's ceiling (given; 1 for image files,
-        which saturate there; for float data, ties at the maximum of the used values: `ceiling.py`);
-        `keep`: the view's own pixels and ceiling."""
-        if keep:  # the same pixels, rows and ceiling
-            out = view.replaced(weighting=weight)
-            out.__dict__.update(pixels=view.pixels, values=view.values, zeros=view.zeros)
-            return out
+    @staticmethod
+    def _weighted(view: View, weight) -> View:
+        """The view with `weight` (None: 1 inside the mask), its own pixels, rows and ceiling
+        (`reweighted`)."""
+        out = view.replaced(weighting=weight)
+        out.__dict__.update(pixels=view.pixels, values=view.values, zeros=view.zeros)
+        return out
+
+    def _used(self, view: View, weight) -> View:
+        """The view with `weight` (None: 1 inside the mask) and the pixels it uses (in the mask,
+        weight > 0, influenced by the fitted parameters); its ceiling found later (`_ceiling`)."""
         used = view.mask & view.touched
         if weight is not None:
             positive = weight > 0
@@ -297,14 +305,21 @@ class Setup:
         used, pixels = view.kept.pixels(used) if view.kept is not None else (used, np.flatnonzero(used))
         total = view.nonfinite + view.left_out  # (`_record`'s view: all its non-finite values)
         inside = nonfinite_count(view.image, pixels) if total else 0
-        values = target_values(view.image, used, inside)
+        out = view.replaced(weighting=weight, used=used, nonfinite=inside, left_out=total - inside)
+        out.__dict__.update(pixels=pixels)  # (View's cached property, taken already)
+        return out
+
+    def _ceiling(self, view: View) -> View:
+        """The view (`_used`'s) with its target's rows at its pixels (`View.values`) and its ceiling
+        (given; 1 for image files, which saturate there; for float data, ties at the maximum of the
+        used values: `ceiling.py`)."""
+        values = target_values(view.image, view.used, view.nonfinite)
         top = self.ceiling_given if self.ceiling_given is not None else (1.0 if view.step else None)
         if top is None:  # float data (`ceiling.py`)
-            top = float_ceiling(values, lambda: primary_objects(view.record).reshape(-1)[pixels])
-        seen = view.replaced(weighting=weight, used=used, nonfinite=inside, left_out=total - inside,
-                             ceiling=np.inf if top is False else float(top))
-        seen.__dict__.update(pixels=pixels, values=values)  # View's cached properties, taken already
-        return seen
+            top = float_ceiling(values, lambda: primary_objects(view.record).reshape(-1)[view.pixels])
+        out = view.replaced(ceiling=np.inf if top is False else float(top))
+        out.__dict__.update(pixels=view.pixels, values=values)  # View's cached properties, taken already
+        return out
 
     def _compiled_for(self, view_scene, device):
         """The compiled scene given, under the view's scene, when it holds the view's geometry (same
@@ -329,21 +344,38 @@ class Setup:
     def _view_arrays(self, view: View, pixels, index) -> tuple:
         """A view's arrays for `pixels`, numpy: (lights, target, sqrt(weight), ceiling (None: the
         target is not clipped), intensity_index) (see `ViewJ`)."""
-        lights = lights_to_jax(view.scene.lights, self.dtype, host=True)
-        count = lights.intensity.shape[0]
+        return (lights_to_jax(view.scene.lights, self.dtype, host=True), *self._view_rows(view, pixels),
+                *self._view_small(view, index))
+
+    def _view_small(self, view: View, index) -> tuple:
+        """`_view_arrays`' (ceiling, intensity_index), numpy: small, and of no pixel."""
+        count = len(view.scene.lights)
         intensity_index = index  # (the scene's lights: `value_index`'s own, read-only)
         if count != index.shape[0]:
             intensity_index = np.full((count, 3), -1, np.int32)
             shared = min(count, index.shape[0])
             intensity_index[:shared] = index[:shared]
+        ceiling = np.asarray(view.ceiling, np.dtype(self.dtype)) if np.isfinite(view.ceiling) else None
+        return ceiling, intensity_index
+
+    def _lights(self, view: View):
+        """A view's lights (`LightsJ`) on the device: `records.DEVICE_COPIES`' by their
+        `light_records` (see `_problem`)."""
+        records = light_records(view.scene.lights)
+        return DEVICE_COPIES.kept(
+            ("lights", np.dtype(self.dtype), jax.config.jax_enable_x64, jax.config.jax_default_device, records),
+            lambda: lights_to_jax(view.scene.lights, self.dtype, host=True, records=records))
+
+    def _view_rows(self, view: View, pixels) -> tuple:
+        """`_view_arrays`' (target, sqrt(weight)) of the `pixels`: rows (U, 3), sqrt(weight) a scalar 1
+        where every weight is (the pixels used without weights)."""
         real = np.dtype(self.dtype)
         used = pixels is view.pixels  # its rows are taken once (`View.values`, `View.weights`)
         if used and view.weighting is None:
             sqrt_weight = np.ones((), real)  # (`ViewJ`: 1, broadcast)
         else:
             sqrt_weight = np.sqrt(view.weights if used else take_pixels(view.weight, pixels)).astype(real, copy=False)
-        return (lights, (view.values if used else take_pixels(view.target, pixels)).astype(real, copy=False),
-                sqrt_weight, np.asarray(view.ceiling, real) if np.isfinite(view.ceiling) else None, intensity_index)
+        return (view.values if used else take_pixels(view.target, pixels)).astype(real, copy=False), sqrt_weight
 
     def _view_model(self, view: View, pixels, lights):
         """The image model of a view's `pixels` (kept with the record when they are the pixels used),
@@ -360,25 +392,39 @@ class Setup:
         return assembled(ViewJ, model=model, lights=lights, target=target, sqrt_weight=sqrt_weight, ceiling=ceiling,
                          intensity_index=intensity_index)
 
-    def _problem(self, loss, loss_scale) -> Problem:
-        """The device problem. Each view's image model is cut first, its lights still numpy (a jitted
-        call takes them as it takes device arrays: ~45 us hot either way): its device program
-        (`shading._device_model`, ~0.35 ms of XLA's threads for the bench's 24.7k points) then runs
-        beside the rest of the setup, ending before the solve is dispatched -- after the small
-        arrays were moved, it still ran when the solve's dispatch returned, and held the solve
-        back (first fits alternating in one process, medians of 100, load 1.7-2.1: 7.81 -> 7.61,
-        8.08 -> 7.72 ms; the solve 2.16 -> 2.03, 2.19 -> 2.01)."""
+    def _problem(self, loss, loss_scale, models=None) -> Problem:
+        """The device problem, of the views' image `models` where built already (`__init__`: before
+        the targets' rows are taken). Its small arrays (lights: `_lights`; each view's ceiling and
+        intensity index, the material table, ambient, loss scale and a unit weight) are
+        `records.DEVICE_COPIES`' by the values they are made of, as the scene holds them
+        (`light_records`, `material_records`) -- compared as Python values (0.0 and -0.0 as one),
+        numpy arrays formed and moved only for values met first: keyed by the arrays' bytes, formed
+        each fit, they held the bench's first fit's setup ~0.1 ms longer from the render's end to
+        the solve's dispatch (medians of 100 first fits, processes alternating, load 1.2-1.6) --;
+        the targets' and weights' rows are numpy, on a 64-byte boundary (`problem.on_boundary`),
+        never written to: each jitted call takes them in place (~1 us), where moving them cost a
+        copy (`to_device`'s dispatch of a 24768 x 3 target ~0.1 ms in a first fit; the bench's first
+        fit -0.14 ms, wall 6.43 -> 6.28 and 6.29 -> 6.15 ms, medians of 80, load 0.9)."""
         counts = (self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
         intensity = value_index(*counts)["intensity"]
-        host = [self._view_arrays(v, v.pixels, intensity) for v in self.views]
-        models = [self._view_model(v, v.pixels, h[0]) for v, h in zip(self.views, host)]
-        arrays, table, ambient, loss_scale = DEVICE_COPIES.on_device((
-            host, MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True),
-            np.asarray(self.scene.ambient, real), np.asarray(loss_scale, real)))
+        lights = [self._lights(v) for v in self.views]
+        if models is None:
+            models = [self._view_model(v, v.pixels, view_lights) for v, view_lights in zip(self.views, lights)]
+        materials = material_records(self.scene.materials.values())
+        key = (real, jax.config.jax_enable_x64, jax.config.jax_default_device, counts, materials, self.scene.ambient,
+               float(loss_scale), [(v.ceiling, len(v.scene.lights)) for v in self.views])
+        small, table, ambient, loss_scale, one = DEVICE_COPIES.kept(key, lambda: (
+            [self._view_small(v, intensity) for v in self.views],
+            MaterialTable.from_scene(self.scene.materials.values(), self.dtype, host=True, records=materials),
+            np.asarray(self.scene.ambient, real), np.asarray(loss_scale, real), np.ones((), real)))
+        views = []
+        for view, view_lights, model, (ceiling, intensity_index) in zip(self.views, lights, models, small):
+            target, sqrt_weight = self._view_rows(view, view.pixels)
+            views.append(self._view((view_lights, on_boundary(target), one if view.weighting is None else
+                                     on_boundary(sqrt_weight), ceiling, intensity_index), model))
         index = device_index(*counts, jax.config.jax_default_device)
-        views = tuple(self._view(a, m) for m, a in zip(models, arrays))
-        return assembled(Problem, views=views, table=table, ambient=ambient, index=index, loss_scale=loss_scale,
+        return assembled(Problem, views=tuple(views), table=table, ambient=ambient, index=index, loss_scale=loss_scale,
                          layout=self.layout, loss=loss, smoothness=self.smoothness)
 
     def precheck(self) -> ResultCode | None:

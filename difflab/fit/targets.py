@@ -201,7 +201,7 @@ def nonfinite_count(image, pixels=None) -> int:
 def prepared_targets(scene, targets, masks, weights, render: dict):
     """For each target: (its view's scene, target image (`load_target`: a copy, in its own precision),
     sample step and gamma (`load_target`), mask, weight, count of its non-finite values (all: which
-    of them the fit would read is known once the pixels it uses are, `Setup._seen`), labels: (the
+    of them the fit would read is known once the pixels it uses are, `Setup._used`), labels: (the
     target's, e.g. "targets[0] (a.png)"; the mask's, e.g. "masks[0] (m.png)", or None without one)).
     A view's scene is
     `scene` with the target's camera / lights override and the `render` settings; the target must have

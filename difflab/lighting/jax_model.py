@@ -324,7 +324,7 @@ def stack_fields(records: list, widths: dict, dtype) -> dict:
             else:
                 flat.append(value)
     columns = sum(max(width, 1) for width in widths.values())
-    rows = np.array(flat, np.float64).reshape(len(records), columns).astype(np.dtype(dtype))
+    rows = np.array(flat, np.dtype(dtype)).reshape(len(records), columns)  # (each value rounded once, as by astype)
     out, start = {}, 0
     for name, width in widths.items():
         out[name] = rows[:, start] if width == 0 else rows[:, start:start + width]
@@ -335,13 +335,20 @@ def stack_fields(records: list, widths: dict, dtype) -> dict:
 LIGHT_FIELDS = {"position": 3, "direction": 3, "intensity": 3, "attenuation": 3, "cos_cutoff": 0, "exponent": 0}
 
 
-def lights_to_jax(lights, dtype=jnp.float32, *, host: bool = False) -> LightsJ:
+def lights_to_jax(lights, dtype=jnp.float32, *, host: bool = False, records=None) -> LightsJ:
     """Scene lights as a `LightsJ` of arrays (P may be 0), moved to the device in one transfer
-    (`host`: numpy arrays, for a caller that moves them with others)."""
-    fields = stack_fields([(light.position or (0.0, 0.0, 0.0), light.direction or (0.0, -1.0, 0.0), light.intensity,
-                            light.attenuation,
-                            math.cos(math.radians(light.cutoff_deg)) if light.type == "spot" else -2.0, light.exponent)
-                           for light in lights], LIGHT_FIELDS, dtype)
-    kind = np.asarray([LIGHT_TYPES[light.type] for light in lights], dtype=np.int32).reshape(len(lights))
+    (`host`: numpy arrays, for a caller that moves them with others); `records`: their
+    `light_records`, where the caller formed them already."""
+    records = light_records(lights) if records is None else records
+    fields = stack_fields([values for values, _ in records], LIGHT_FIELDS, dtype)
+    kind = np.asarray([kind for _, kind in records], dtype=np.int32).reshape(len(records))
     arrays = LightsJ(kind=kind, **fields)
     return arrays if host else jax.device_put(arrays)
+
+
+def light_records(lights) -> list:
+    """What `lights_to_jax` stacks of each light: (its LIGHT_FIELDS values, its LIGHT_TYPES id) --
+    plain Python values, compared with == (`fit.setup.Setup._problem`)."""
+    return [((light.position or (0.0, 0.0, 0.0), light.direction or (0.0, -1.0, 0.0), light.intensity,
+              light.attenuation, math.cos(math.radians(light.cutoff_deg)) if light.type == "spot" else -2.0,
+              light.exponent), LIGHT_TYPES[light.type]) for light in lights]
