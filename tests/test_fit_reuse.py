@@ -225,3 +225,31 @@ def test_used_rows_are_the_pixels_rows_on_a_64_byte_boundary(dtype):
             assert rows.dtype == expected.dtype and rows.shape == (np.count_nonzero(used), 3)
             np.testing.assert_array_equal(rows, expected)
             assert rows.size == 0 or rows.ctypes.data % 64 == 0
+
+
+@pytest.mark.parametrize("size", [16, 112])  # 12 x 16^2 bytes of planes from the heap, 12 x 112^2 in a map
+def test_residual_images_are_each_results_own_memory(size):
+    """A result's residual images (`Setup.zero_planes`: from the heap, or from a memory map of their
+    own once MAPPED_PLANES or more) are model - target at the used pixels, 0 elsewhere, writable,
+    shared with no other result, and survive a pickle round trip."""
+    import mmap
+    import pickle
+
+    from difflab.fit.setup import MAPPED_PLANES
+
+    scene = make_scene(size=size)
+    target = target_of(scene)
+    noisy = target + np.random.default_rng(1).normal(0, 0.01, target.shape).astype(np.float32)
+    first, second = (fit(scene, [image], init=START) for image in (noisy, target))
+    planes = memory = first.residuals[0]
+    while isinstance(memory, np.ndarray):
+        memory = memory.base
+    assert (12 * size * size >= MAPPED_PLANES) == isinstance(getattr(memory, "obj", None), mmap.mmap)
+    model = Setup(scene, [noisy], "red", init=first.params).render()[0]
+    used = planes.any(axis=-1)
+    assert used.sum() > 0.3 * size * size and not np.shares_memory(planes, second.residuals[0])
+    np.testing.assert_allclose(planes[used], (model - noisy)[used], atol=1e-5)
+    assert not planes[~used].any() and planes.flags.writeable
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(planes)), planes)
+    planes[:] = 7.0
+    assert not (second.residuals[0] == 7.0).any()

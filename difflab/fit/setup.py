@@ -42,6 +42,8 @@ from .texels import TexelSource, texture_starts, wants_texels
 
 PRIVATE_MAP = {"flags": mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS} if hasattr(mmap, "MAP_ANONYMOUS") else {}  # (an
 # anonymous map of the process's own, not shared memory: its pages written 0.25 ms for 786 kB, shared 0.39)
+MAPPED_PLANES = 1 << 17  # bytes: smaller residual planes come from the heap (a map is a page or more, and a
+# process may hold ~65k maps: results of many small fits kept would exhaust them; glibc maps from 128 kB too)
 
 
 class TargetStatistics(NamedTuple):
@@ -443,8 +445,8 @@ class Setup:
         return None
 
     def zero_planes(self) -> list[np.ndarray]:
-        """Per view (3, H W) float32 zeros, the memory `residual_planes` fills, each in an anonymous
-        memory map of its own (zero-filled by the system). A fit's result keeps its planes (its
+        """Per view (3, H W) float32 zeros, the memory `residual_planes` fills, each of MAPPED_PLANES
+        bytes or more in an anonymous memory map of its own (zero-filled by the system). A fit's result keeps its planes (its
         residual images), so they are new memory in every fit; from the heap they took the memory
         the next first fit's G-buffer rows would reuse, and those faulted in anew. The bench's fits
         with their results kept (tools/mfirst.py's loop, as bench/fit.py keeps them; a page fault
@@ -454,7 +456,8 @@ class Setup:
         waits for XLA (~195 faults, 0.25 ms of its time: at load ~1.5 the solve no slower; at ~2 and
         more it competes with XLA's thread). With the results dropped at once the heap's planes were
         reused without a fault, the maps' pages are faulted in anew each fit."""
-        return [np.frombuffer(mmap.mmap(-1, 3 * view.used.size * 4, **PRIVATE_MAP), np.float32).reshape(3, -1)
+        return [np.frombuffer(mmap.mmap(-1, 12 * view.used.size, **PRIVATE_MAP), np.float32).reshape(3, -1)
+                if 12 * view.used.size >= MAPPED_PLANES else np.zeros((3, view.used.size), np.float32)
                 for view in self.views]
 
     def residual_planes(self, r, zeros=None) -> list[np.ndarray]:
