@@ -175,3 +175,36 @@ def test_the_sample_is_ordered_as_argsort_with_ties_by_position():
     assert np.array_equal(noise._order(distinct), np.argsort(distinct))
     ties = (rng.integers(0, 40, 8191) * 0.125).astype(np.float32)  # (the largest sample: 2 NOISE_SAMPLE - 1)
     assert np.array_equal(noise._order(ties), np.argsort(ties, kind="stable"))
+
+
+def test_the_kernels_squared_laplacians_are_numpys_bit_for_bit():
+    """`noise._squares` (a Warp CPU kernel: C-contiguous float32 planes, the index shared by the
+    channels) against np.square(np.take(`_stencil`(...))) on random float32 planes with NaN, +-inf,
+    values whose double overflows (2^127: an FMA would keep a finite sum where numpy's is inf) and
+    neighbours that cancel it, over non-square boxes inside and at the image's edges, every centre
+    Laplacian, a sparse pick of them, one or none: the same bits, NaN at the same places. And a noise
+    estimate over such planes (the non-finite ones left out per channel) is the one numpy's planes
+    give, a non-contiguous copy of them."""
+    rng = np.random.default_rng(11)
+    for h, w, box in [(64, 80, (slice(5, 47), slice(9, 70))), (40, 70, (slice(0, 40), slice(3, 70))),
+                      (9, 5, (slice(2, 7), slice(0, 5))), (3, 12, (slice(0, 3), slice(0, 12)))]:
+        planes = rng.normal(0.0, 1.0, (3, h, w)).astype(np.float32)
+        for value in (np.nan, np.inf, -np.inf, 2.0 ** 127, 3e38, -3e38):
+            planes[rng.random(planes.shape) < 0.01] = value
+        grid = (box[0].stop - box[0].start - 2) * (box[1].stop - box[1].start - 2)
+        for index in (np.arange(grid), np.flatnonzero(rng.random(grid) < 0.3), np.array([grid - 1]),
+                      np.zeros(0, np.int64)):
+            with np.errstate(invalid="ignore", over="ignore"):
+                want = np.square(np.take(noise._stencil(planes[:, box[0], box[1]], -2.0).reshape(3, -1), index,
+                                         axis=1), dtype=np.float64)
+            got = noise._squares(planes, box, index)
+            assert got.dtype == np.float64 and np.array_equal(np.isnan(got), np.isnan(want))
+            assert np.array_equal(got, want, equal_nan=True)
+    image = residual(rng, 71, 90, np.float32, 0.03, 0.01)
+    used = mask(rng, 71, 90, "disc")
+    planes = np.ascontiguousarray(np.moveaxis(image, -1, 0))
+    views = [noise._view_picks(used, None, None, True)]
+    got, want = noise._estimate(views, [planes]), noise._estimate(views, [np.moveaxis(image, -1, 0)])
+    assert planes.flags.c_contiguous and not np.moveaxis(image, -1, 0).flags.c_contiguous
+    assert got[:3] == want[:3] and np.isfinite(got[0])
+    assert all(np.array_equal(a[1], b[1]) for a, b in zip(got[3][0], want[3][0]))

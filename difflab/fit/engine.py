@@ -28,7 +28,7 @@ from .clipping import clipped_band
 from .matfree import check_solver
 from .solvers import SUCCESSFUL, run
 from .sparse_jacobian import sparse_normal_matrix
-from .noise import noise_picks, silent_pixels, views_noise
+from .noise import load_noise_kernels, noise_picks, silent_pixels, views_noise
 from .sandwich import noise_middle
 from .stats import (PRIOR_PULL_MAX, QUANTISATION_SIGMA, degenerate, finite_gram, fit_statistics, normal_matrix,
                     poorly_determined, prior_pull, psnr, singular_rcond, standard_errors, unreached)
@@ -197,7 +197,8 @@ class NoiseAhead(NamedTuple):
 def noise_ahead(setup: Setup) -> NoiseAhead | None:
     """The noise estimate's `noise_picks` -- the targets' alone, for silent pixels all black ones
     (`View.black`) --, the residual planes' memory, its pages written (`Setup.zero_planes`: ~0.2 ms
-    of page faults out of the report), the targets' `Setup.statistics` (what only the report
+    of page faults out of the report), the report's Warp kernels loaded (`noise.load_noise_kernels`:
+    ~3 ms from Warp's cache, once a process), the targets' `Setup.statistics` (what only the report
     reads) and each view's `View.floor`, which `clipping.clipped_band` reads after the fit (there,
     on a target no longer in cache, ~0.1 ms of first.py's first fit), to be formed beside the
     solve: `run_fit` hands the
@@ -220,6 +221,7 @@ def noise_ahead(setup: Setup) -> NoiseAhead | None:
 
     def targets_alone():
         zeros = setup.zero_planes()
+        load_noise_kernels()
         for planes in zeros:
             planes.fill(0.0)  # (their pages written here)
         formed.append((noise_picks(setup.views, [view.black for view in setup.views]), zeros))

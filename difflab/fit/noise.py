@@ -6,11 +6,14 @@ correct model (`chi2_spread`). `fit.stats` describes what the fit reports with t
 from __future__ import annotations
 
 import math
+import threading
 from typing import NamedTuple
 
 import numpy as np
 
+from .._warp import wp
 from ..io import code_step
+from ..renderers.launch import init, load_kernels
 from .targets import in_channels
 from .whiteness import Lattice, lattice, sigma_range, whiteness
 
@@ -21,6 +24,8 @@ CAP_Z2 = 9.0  # an L^2 above 9 times its noise level (three standard deviations)
 MEDIAN_CHI2_1 = 0.454936423119572  # the median of a chi-square of 1 degree of freedom
 CAP_MEAN = 0.97340891  # E[z^2 if z^2 <= 9 else 1], z ~ N(0, 1): P(chi2_3 <= 9) + P(chi2_1 > 9)
 LAPLACIAN_CORRELATION = 2.0 * (70.0 / 36.0) ** 2  # 7.56: a mean of (L / 6)^2 has variance this / M
+
+wp.set_module_options({"enable_backward": False})
 
 
 def _stencil(planes: np.ndarray, middle: float) -> np.ndarray:
@@ -33,6 +38,132 @@ def _stencil(planes: np.ndarray, middle: float) -> np.ndarray:
     out = rows[..., 1:-1] * middle
     out += rows[..., :-2]
     out += rows[..., 2:]
+    return out
+
+
+@wp.func_native("""
+const float* p = (const float*)planes + (long long)top * cols + left;  // the box's top left, channel 0
+const long long* at = (const long long*)index;
+double* o = (double*)out;
+float* v = (float*)scratch;  // a box row's vertical sums (width + 2), then the 3 channels' L (3 width)
+float* l = v + width + 2;
+long long i = 0;
+for (int r = 0; r < rows && i < n; ++r, p += cols) {
+    long long end = (long long)(r + 1) * width;  // the centre grid's flat index past this row
+    if (at[i] >= end)
+        continue;
+    for (int c = 0; c < 3; ++c) {
+        const float* q = p + c * size;
+        float* lc = l + c * width;
+        for (int x = 0; x < width + 2; ++x) {  // (one operation a statement: clang contracts none into an FMA)
+            float s = q[cols + x] * -2.0f;
+            s += q[x];
+            v[x] = s + q[2 * cols + x];
+        }
+        for (int x = 0; x < width; ++x) {
+            float s = v[x + 1] * -2.0f;
+            s += v[x];
+            lc[x] = s + v[x + 2];
+        }
+    }
+    for (long long base = end - width; i < n && at[i] < end; ++i) {
+        const float* lk = l + (at[i] - base);
+        for (int c = 0; c < 3; ++c)
+            o[c * n + i] = (double)lk[c * width] * (double)lk[c * width];
+    }
+}
+""")
+def _squares_native(planes: wp.uint64, size: int, cols: int, top: int, left: int, width: int, rows: int,
+                    index: wp.uint64, n: int, scratch: wp.uint64, out: wp.uint64):
+    ...
+
+
+@wp.kernel
+def _squares_kernel(planes: wp.uint64, size: int, cols: int, top: int, left: int, width: int, rows: int,
+                    index: wp.uint64, n: int, scratch: wp.uint64, out: wp.uint64):
+    """`_squares`' one thread (CPU memory: numpy's)."""
+    _squares_native(planes, size, cols, top, left, width, rows, index, n, scratch, out)
+
+
+_recorded = threading.local()  # (each thread's recorded launches, by kernel)
+
+
+def load_noise_kernels() -> None:
+    """Load this module's Warp kernels (`renderers.launch.load_kernels`), beside the solve
+    (`engine.noise_ahead`): a fit's report launches them."""
+    init()
+    load_kernels("cpu", _squares_kernel, _scatter_kernel)
+
+
+def _launch(kernel, inputs: list) -> None:
+    """Launch a one-thread CPU `kernel` of `inputs` (pointers and sizes): a recorded launch per thread,
+    its arguments set anew (wp.launch packs them: ~13 us more)."""
+    launch = _recorded.__dict__.get(kernel.key)
+    if launch is None:
+        load_noise_kernels()
+        launch = _recorded.__dict__[kernel.key] = wp.launch(kernel, dim=1, inputs=inputs, device="cpu",
+                                                           record_cmd=True)
+    else:
+        for k, value in enumerate(inputs):
+            launch.set_param_at_index_from_ctype(k, value)
+    launch.launch()
+
+
+@wp.func_native("""
+const long long* at = (const long long*)pixels;
+const double* r = (const double*)part;
+float* p = (float*)planes;
+for (long long u = 0; u < n; ++u) {
+    long long k = at[u];
+    p[k] = (float)r[u];
+    p[size + k] = (float)r[n + u];
+    p[2 * size + k] = (float)r[2 * n + u];
+}
+""")
+def _scatter_native(planes: wp.uint64, size: int, pixels: wp.uint64, n: int, part: wp.uint64):
+    ...
+
+
+@wp.kernel
+def _scatter_kernel(planes: wp.uint64, size: int, pixels: wp.uint64, n: int, part: wp.uint64):
+    """`scatter`'s one thread."""
+    _scatter_native(planes, size, pixels, n, part)
+
+
+def scatter(planes: np.ndarray, used: np.ndarray, pixels: np.ndarray, part: np.ndarray) -> None:
+    """planes[c][used] = part[c] (rounded to float32) for the 3 channels of C-contiguous (3, H W)
+    float32 planes, `pixels` (U,) the flat positions of `used` (H, W) in order and part (3, U): in a
+    Warp CPU kernel (`_squares`) where part is C-contiguous float64 and pixels int64 -- the bench's
+    24729 pixels hot 24 us, numpy's 3 boolean-mask passes 48 --, else by numpy."""
+    if part.dtype == np.float64 and part.flags.c_contiguous and pixels.dtype == np.int64:
+        _launch(_scatter_kernel, [planes.ctypes.data, planes.shape[1], pixels.ctypes.data, pixels.size,
+                                  part.ctypes.data])
+        return
+    used = used.reshape(-1)
+    for c in range(3):
+        planes[c][used] = part[c]  # (a boolean mask: ~3x the speed of the pixels' indices)
+
+
+def _squares(planes: np.ndarray, box: tuple, index: np.ndarray) -> np.ndarray:
+    """(3, M) float64 squared Laplacians of C-contiguous (3, H, W) float32 planes over the `box`
+    (`ViewPicks.box`) at the sorted flat positions `index` (M,) int64 of its centre grid: the bits of
+    np.square(np.take(`_stencil`(planes[:, box], -2.0), index), dtype=float64) -- the same float32
+    operations in the same order (x -2 exact; no FMA: one operation a C statement) -- in one Warp
+    CPU kernel (a C snippet: Warp's own array indexing, with its negative-index checks, compiled to
+    scalar code that took 190-240 us here; its floor division per pick, 80 us more), a box row at a
+    time: the row's 3 channels' L vectorised into a scratch row, then its picks. The bench's
+    (3, 166, 164) box, 23960 picks, hot: 53 us, numpy's 6 passes, take and square 133; it reads the
+    planes once and writes nothing but the result (numpy: two 320 kB temporaries and the taken
+    float32 values). With `scatter`, processes alternating ABBA with the bench's fits (results kept, as
+    tools/mfirst.py keeps them; 5 runs of 10 rounds, load 1.1-1.6), paired medians: first fit of the
+    view -0.115 ms (faster in 33 of 50), fitted again -0.095, in a row -0.105; the report -0.08 to
+    -0.095 (40 of 50). (Warp compiles this module once, ~1.5 s, then cached on disk.)"""
+    out = np.empty((3, index.size))
+    width, rows = box[1].stop - box[1].start - 2, box[0].stop - box[0].start - 2
+    scratch = np.empty(4 * width + 2, np.float32)
+    inputs = [planes.ctypes.data, planes.shape[1] * planes.shape[2], planes.shape[2], box[0].start, box[1].start,
+              width, rows, index.ctypes.data, index.size, scratch.ctypes.data, out.ctypes.data]
+    _launch(_squares_kernel, inputs)
     return out
 
 
@@ -176,7 +307,10 @@ def _read(views: list, planes) -> list:
     """Per view (None: none) per channel (None: no Laplacian picked) what `estimate_sigma` reads of
     its residuals, as (picks, values, level): the channel's `Picks` (without a non-finite value), its
     squared Laplacians there in float64 -- from the view's residuals as (3, H, W) planes, in their
-    own precision (float32 residual images), over the box -- and their levels (`_levels`). (The
+    own precision (float32 residual images), over the box: `_squares` where every channel's are at
+    one index and the planes are C-contiguous float32 (a fit's), else, and for the picks without a
+    non-finite value, numpy's `_stencil` (the reference: `estimate_sigma`'s planes of (H, W, 3)
+    images are neither; per-channel picks are rare) -- and their levels (`_levels`). (The
     Laplacian by XLA on the one-thread client, dispatched after `Setup.residual_planes` and taken
     here -- the same bits: a b + c with b times -2 exact --: the bench's fits alternating in one
     process, results dropped, the report -59 us first, -35 again (medians of 80); but processes
@@ -188,21 +322,29 @@ def _read(views: list, planes) -> list:
         read.append(None if view is None else [None, None, None])
         if view is None:
             continue
-        with np.errstate(invalid="ignore", over="ignore"):  # (inf - inf: NaN; either is left out)
-            laplacian = _stencil(image[:, view.box[0], view.box[1]], -2.0).reshape(3, -1)
         shared = view.centre.ndim == 2 and view.picks[0] is not None  # (every channel's at one index: one take)
-        squared = np.square(np.take(laplacian, view.picks[0].index, axis=1), dtype=np.float64) if shared else None
+        laplacian = None if shared and image.dtype == np.float32 and image.flags.c_contiguous else \
+            _laplacian(image, view.box)
+        squared = None if not shared else _squares(image, view.box, view.picks[0].index) if laplacian is None else \
+            np.square(np.take(laplacian, view.picks[0].index, axis=1), dtype=np.float64)
         finite = shared and np.isfinite(squared.max())  # (as a rule, every channel's at once: no check per channel)
         for c, picks in enumerate(view.picks):
             values = None if picks is None else squared[c] if shared else \
                 np.square(np.take(laplacian[c], picks.index), dtype=np.float64)
             if values is not None and not finite and not np.isfinite(values.max()):  # (rare: a NaN or inf) the
+                laplacian = _laplacian(image, view.box) if laplacian is None else laplacian
                 centre = (view.centre if view.centre.ndim == 2 else view.centre[c]).reshape(-1)  # picks without them
                 picks = _channel(np.flatnonzero(centre & np.isfinite(laplacian[c])), view.bright, view.weights, c)
                 values = None if picks is None else np.square(np.take(laplacian[c], picks.index), dtype=np.float64)
             if picks is not None:
                 read[-1][c] = (picks, values, _levels(values, picks))
     return read
+
+
+def _laplacian(image: np.ndarray, box: tuple) -> np.ndarray:
+    """(3, (h - 2) (w - 2)) Laplacians of (3, H, W) planes over the box (`_stencil`)."""
+    with np.errstate(invalid="ignore", over="ignore"):  # (inf - inf: NaN; either is left out)
+        return _stencil(image[:, box[0], box[1]], -2.0).reshape(3, -1)
 
 
 def _sums(channels: list) -> tuple[float, float, float]:

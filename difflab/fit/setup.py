@@ -28,7 +28,7 @@ from .arguments import check_ceiling, check_number, check_smoothness, choose_met
 from .cache import serial_cpu_device
 from .ceiling import float_ceiling, primary_objects, refuse_values_above
 from .materials import MaterialTable, material_records
-from .noise import quantisation
+from .noise import quantisation, scatter
 from .normal_equations import by_parts_terms
 from .params import DEFAULT_PARAMS, SCENE_PARAMS, Layout, apply_init, build_layout, fitted_materials, scene_value
 from .problem import LOSSES, Problem, ViewJ, assembled, device_index, on_boundary, to_device, value_index
@@ -470,9 +470,7 @@ class Setup:
             if not self.unit_weights:
                 sqrt_w = np.sqrt(view.weights).T
                 part = np.where(sqrt_w > 0, part / np.where(sqrt_w > 0, sqrt_w, 1.0), 0.0)
-            used = view.used.reshape(-1)  # (its pixels: `View.pixels`)
-            for c in range(3):
-                planes[c][used] = part[c]  # (a boolean mask: ~3x the speed of the pixels' indices)
+            scatter(planes, view.used, view.pixels, part)
             out.append(planes.reshape(3, *view.used.shape))
         return out
 
