@@ -192,15 +192,11 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     of n, `launch.dealt_bands`) as soon as both halves are drawn (`bandpool.run_phases`).
 
     `beside`: called right before the assembly's launch, the longest on this thread before the
-    z-buffer (it starts the G-buffer's clearing on a pool worker: `bandpool.start_beside`). Without
-    it, with `halves` (a fit's frame: nothing to clear), a pool worker writes NO_HIT over `partial`
-    there instead (all NO_HIT already: the last frame's reader reset it), so that the thread that
-    draws it finds it in its cache, not in memory the fit's other work pushed it out to, and is
-    awake when its half starts. The 256^2 bench sphere's first fits (medians of 60, alternating
-    processes): the worker's raster half 307-320 -> 239-246 us, it starts 70 us after the assembly
-    instead of 91, the main thread's 49 instead of 60 (its own half 322 -> 305: the memset's
-    ~40 us end before the assembly's ~90), the G-buffer done ~0.1 ms sooner. Both key arrays written
-    there (1 MB, ~90 us) ended after the assembly, which the raster then waited for: no gain."""
+    z-buffer (it starts the G-buffer's clearing on a pool worker: `bandpool.start_beside`). A fit
+    frame's (nothing to clear) with the worker writing NO_HIT over `partial` there instead (already
+    NO_HIT), to draw its half from its cache: that half 317 -> 245 us and its Phong pass 684 -> 658,
+    but the assembly beside it +7 us and the first fit's wall +0.1-0.2 ms (the 256^2 bench sphere,
+    medians of 60, 8 alternating pairs of processes; ABBA of first fits -0.25 to +0.41 ms): dropped."""
     device, arrays = compiled.device, compiled.arrays
     load_kernels(device, clip.assemble_kernel, coverage.raster_kernel)  # before two threads launch them
     n_faces, n_vertices = compiled.faces.shape[0], compiled.vertices.shape[0]
@@ -236,18 +232,11 @@ def zbuffer(compiled, cam, cull: int, threads: int | None = None, then=None, hal
     counts = zeroed_scratch(compiled, "bin counts", (parts, len(bands)) if len(bands) > 1 else (0, 1),  # (1 band:
                             wp.int32)  # no bins)
     tests = zeroed_scratch(compiled, "bin tests", parts, wp.int64)
-    warm = None
-    if halves and beside is None:
-        warm = start_beside(lambda: partial.fill_(coverage.NO_HIT), device, pass_pool)
-    elif beside is not None:
+    if beside is not None:
         beside()
-    try:
-        launch_parts(clip.assemble_kernel, n_faces, [
-            arrays["faces"], near, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
-            tris.face, band_of_row, counts, tests], device, threads, kept)
-    finally:  # (no frame's keys are written before it is done)
-        if warm is not None:
-            warm.join()
+    launch_parts(clip.assemble_kernel, n_faces, [
+        arrays["faces"], near, p_screen, cull, width, height, extra, tris.screen, tris.weight, tris.facing, rows,
+        tris.face, band_of_row, counts, tests], device, threads, kept)
     check_raster_work(int(host_view(compiled, "bin tests", tests).sum()), n_slots, "render", RenderError)
     band_index = {band: k for k, band in enumerate(bands)}
     binned = none  # one band: it draws every slot, nothing is binned
@@ -402,7 +391,7 @@ def rasterize(compiled, settings, threads: int | None = None, *, gbuffer: bool =
     try:
         tris, key = zbuffer(compiled, cam, int(settings.cull_backfaces), threads,  # stages 1-3 (and 4 when halved)
                             then=sample_pass if halved else None, halves=(partial, row_pass) if halved else None,
-                            beside=clearing.start if stale is not None else None)
+                            beside=clearing.start)
     finally:
         clearing.join()
     if not halved:
