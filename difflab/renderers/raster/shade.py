@@ -222,12 +222,23 @@ def phong_gbuffer_kernel(row0: int, row_step: int, span: int, key: wp.array(dtyp
     The row loop (`gbuffer_row`) is written twice, with shadows and without: the compiler then drops
     the inlined shadow rays (`trace.light_visibility`) from the loop of a scene without them, which
     they slowed ~3 % (the bench sphere's fit frame alone, interleaved at load ~3: 592 -> 612 us of
-    CPU a band with them in it, 587 without)."""
+    CPU a band with them in it, 587 without). Without shadows it is written once more for a fit's
+    G-buffer, `record` the constant GEOMETRY_ONLY there: the compiler drops the lighting (`light_into`)
+    from that loop (the bench sphere's first fits, medians of 60 a process, alternating: 613 -> 605
+    and 633 -> 614 us a half; in a slow phase 657 -> 639 and 720 -> 689, 9 of 12 pairs lower; ABBA
+    of whole fits: within their noise, render -0.01/+0.02 ms; the module's compile 16 -> 17 s,
+    its object 466 -> 589 kB). Its time is its float32 square roots and divisions (a
+    profile of first fits: ~40 % of it in `sphere_rays`' chain, most of the rest in the
+    normalisations of the sphere's normal and of the light vector), which results bitwise the same
+    keep as they are."""
     i, j0, j1, slot = dealt_span(row0, row_step, span, cam.width, wp.tid())
     weights = int(sphere_rays(key, partial, tris, mesh, cam, found, i, j0, j1) == 0 or out.bary.shape[0] > 0)
     if lighting.shadows == 1:
         nonfinite[slot] = gbuffer_row(key, partial, tris, mesh, cam, perspective_correct, out, samples, found,
                                       lighting, lit, record, weights, i, j0, j1)
+    elif record == GEOMETRY_ONLY:
+        nonfinite[slot] = gbuffer_row(key, partial, tris, mesh, cam, perspective_correct, out, samples, found,
+                                      lighting, lit, GEOMETRY_ONLY, weights, i, j0, j1)
     else:
         nonfinite[slot] = gbuffer_row(key, partial, tris, mesh, cam, perspective_correct, out, samples, found,
                                       lighting, lit, record, weights, i, j0, j1)
