@@ -133,9 +133,11 @@ def _scatter_kernel(planes: wp.uint64, size: int, pixels: wp.uint64, n: int, par
 def scatter(planes: np.ndarray, used: np.ndarray, pixels: np.ndarray, part: np.ndarray) -> None:
     """planes[c][used] = part[c] (rounded to float32) for the 3 channels of C-contiguous (3, H W)
     float32 planes, `pixels` (U,) the flat positions of `used` (H, W) in order and part (3, U): in a
-    Warp CPU kernel (`_squares`) where part is C-contiguous float64 and pixels int64 -- the bench's
-    24729 pixels hot 24 us, numpy's 3 boolean-mask passes 48 --, else by numpy."""
-    if part.dtype == np.float64 and part.flags.c_contiguous and pixels.dtype == np.int64:
+    Warp CPU kernel (`_scatter_kernel`) where part is float64 and pixels int64, both C-contiguous as
+    the planes -- the bench's 24729 pixels hot 24 us, numpy's 3 boolean-mask passes 48 --, else by
+    numpy."""
+    contiguous = all(a.flags.c_contiguous for a in (part, pixels, planes))  # (the kernel reads them flat)
+    if part.dtype == np.float64 and pixels.dtype == np.int64 and contiguous:
         _launch(_scatter_kernel, [planes.ctypes.data, planes.shape[1], pixels.ctypes.data, pixels.size,
                                   part.ctypes.data])
         return
@@ -158,6 +160,7 @@ def _squares(planes: np.ndarray, box: tuple, index: np.ndarray) -> np.ndarray:
     tools/mfirst.py keeps them; 5 runs of 10 rounds, load 1.1-1.6), paired medians: first fit of the
     view -0.115 ms (faster in 33 of 50), fitted again -0.095, in a row -0.105; the report -0.08 to
     -0.095 (40 of 50). (Warp compiles this module once, ~1.5 s, then cached on disk.)"""
+    index = np.ascontiguousarray(index, np.int64)  # (what the kernel reads: as a rule the picks' own)
     out = np.empty((3, index.size))
     width, rows = box[1].stop - box[1].start - 2, box[0].stop - box[0].start - 2
     scratch = np.empty(4 * width + 2, np.float32)
