@@ -122,14 +122,15 @@ class Setup:
             # the image models first: each device program (`shading._device_model`, ~0.3 ms of XLA's
             # thread for the bench's 24.7k points, which the solve waits for) then runs while the targets'
             # rows are taken and their ceilings found (`_ceiling`, ~0.1 ms of the bench's first fit)
-            models = [self._view_model(v, v.pixels, self._lights(v)) for v in self.views]
+            lights = [self._lights(v) for v in self.views]
+            models = [self._view_model(v, v.pixels, view_lights) for v, view_lights in zip(self.views, lights)]
             self.views = [self._ceiling(v) for v in self.views]
             if self.ceiling_given:  # (a number; False: none)
                 for view, (target, _) in zip(self.views, self.labels):
                     refuse_values_above(self.ceiling_given, view.values, view.entries, target)
             self.used_pixels = sum(v.pixels.size for v in self.views)
             self._targets_seen()
-            self.problem = self._problem(loss, loss_scale, models)
+            self.problem = self._problem(loss, loss_scale, (lights, models))
 
     def _closed_form_device(self):
         """`cache.serial_cpu_device()` -- the CPU client of one thread -- for a fit whose normal
@@ -394,9 +395,9 @@ class Setup:
         return assembled(ViewJ, model=model, lights=lights, target=target, sqrt_weight=sqrt_weight, ceiling=ceiling,
                          intensity_index=intensity_index)
 
-    def _problem(self, loss, loss_scale, models=None) -> Problem:
-        """The device problem, of the views' image `models` where built already (`__init__`: before
-        the targets' rows are taken). Its small arrays (lights: `_lights`; each view's ceiling and
+    def _problem(self, loss, loss_scale, built=None) -> Problem:
+        """The device problem, of the views' (lights, image models) `built` already (`__init__`: the
+        models before the targets' rows are taken; else built here). Its small arrays (lights: `_lights`; each view's ceiling and
         intensity index, the material table, ambient, loss scale and a unit weight) are
         `records.DEVICE_COPIES`' by the values they are made of, as the scene holds them
         (`light_records`, `material_records`) -- compared as Python values (0.0 and -0.0 as one),
@@ -410,9 +411,10 @@ class Setup:
         counts = (self.layout, len(self.scene.materials), len(self.scene.lights))
         real = np.dtype(self.dtype)
         intensity = value_index(*counts)["intensity"]
-        lights = [self._lights(v) for v in self.views]
-        if models is None:
-            models = [self._view_model(v, v.pixels, view_lights) for v, view_lights in zip(self.views, lights)]
+        if built is None:
+            lights = [self._lights(v) for v in self.views]
+            built = lights, [self._view_model(v, v.pixels, view_lights) for v, view_lights in zip(self.views, lights)]
+        lights, models = built
         materials = material_records(self.scene.materials.values())
         key = (real, jax.config.jax_enable_x64, jax.config.jax_default_device, counts, materials, self.scene.ambient,
                float(loss_scale), [(v.ceiling, len(v.scene.lights)) for v in self.views])
